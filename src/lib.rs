@@ -1,0 +1,15 @@
+//! instantmimic: physics-based humanoid skills trained in seconds on one GPU.
+//!
+//! The physics is MuJoCo Warp, captured once at build time as replayable plans (`.wrp`) and
+//! replayed here through CUDA graphs. Layout:
+//! - [`cuda`]: the driver (context, modules, launches, graphs). The only place with `unsafe` CUDA calls.
+//! - [`plan`]: the `.wrp` plan format: reader, validation, packing, replay into CUDA graphs.
+//! - [`motion`]: DeepMimic reference motions and their kinematics.
+//! - [`assets`]: PTX and plans embedded in the binary at build time.
+//! - [`cli`]: the command line.
+
+pub mod assets;
+pub mod cli;
+pub mod cuda;
+pub mod motion;
+pub mod plan;

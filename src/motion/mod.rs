@@ -1,0 +1,1 @@
+//! Reference motions: DeepMimic clips, their conversion to the humanoid's qpos, and kinematics.
