@@ -1,5 +1,7 @@
 //! The command line: `instantmimic <command> ...`.
 
+mod plan;
+
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
@@ -11,10 +13,15 @@ struct Cli {
 }
 
 #[derive(Subcommand, Debug)]
-enum Command {}
+enum Command {
+    /// Inspect or pack physics plans (.wrp / .wrp.zst).
+    Plan(plan::PlanArgs),
+}
 
 /// Parses the command line and runs the command.
 pub fn run() -> Result<()> {
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Plan(args) => plan::run(args),
+    }
 }
