@@ -1,5 +1,7 @@
 //! The command line: `instantmimic <command> ...`.
 
+mod motion;
+
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
@@ -11,10 +13,15 @@ struct Cli {
 }
 
 #[derive(Subcommand, Debug)]
-enum Command {}
+enum Command {
+    /// Reference motions: inspect DeepMimic clips and their kinematics.
+    Motion(motion::MotionArgs),
+}
 
 /// Parses the command line and runs the command.
 pub fn run() -> Result<()> {
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Motion(args) => motion::run(args),
+    }
 }
