@@ -3,10 +3,10 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::{Args, Subcommand};
 
-use crate::motion::library::{MOTIONS_ENV, motions_dir_from_env, resolve_motion};
+use crate::motion::library::{motions_dir_from_env, resolve_motion};
 use crate::motion::summary::JointRange;
 use crate::motion::{Character, ClipSummary, ReferenceMotion};
 
@@ -56,13 +56,8 @@ impl MotionSource {
         };
         let dir = self.motions_dir.clone().or_else(motions_dir_from_env);
         let path = resolve_motion(&self.motion, dir.as_deref())?;
-        let motion = ReferenceMotion::load(&path, &character).with_context(|| {
-            format!(
-                "loading motion {:?} (set {MOTIONS_ENV} or --motions-dir for names)",
-                self.motion
-            )
-        })?;
-        Ok(motion)
+        // The error names the file (and frame and column): no context to add.
+        Ok(ReferenceMotion::load(&path, &character)?)
     }
 }
 
@@ -88,9 +83,14 @@ pub fn run(args: MotionArgs) -> Result<()> {
     Ok(())
 }
 
+/// `x` with -0 turned into 0, so that tables do not print "-0.0".
+fn unsigned_zero(x: f64) -> f64 {
+    x + 0.0
+}
+
 fn inspect_report(s: &ClipSummary) -> String {
     let mut out = String::new();
-    let d = s.cycle_displacement;
+    let d = s.cycle_displacement.map(unsigned_zero);
     let norms = s.quaternion_norms;
     let _ = writeln!(out, "file                 {}", s.name);
     let _ = writeln!(out, "frames               {}", s.frames);
@@ -137,7 +137,7 @@ fn inspect_report(s: &ClipSummary) -> String {
         "joint ranges (degrees; ball joints: rotation vector x, y, z and largest angle)"
     );
     for joint in &s.joints {
-        let deg = f64::to_degrees;
+        let deg = |x: f64| unsigned_zero(x.to_degrees());
         match joint.range {
             JointRange::Hinge { min, max } => {
                 let _ = writeln!(
@@ -200,7 +200,8 @@ fn fk_report(
         .zip(&state.body_quat)
         .enumerate()
     {
-        let q = q.quaternion();
+        let p = p.map(unsigned_zero);
+        let q = q.quaternion().coords.map(unsigned_zero); // (x, y, z, w)
         let _ = writeln!(
             out,
             "{:>2}  {:<16} {:>10.6} {:>10.6} {:>10.6}   {:>9.6} {:>9.6} {:>9.6} {:>9.6}",
@@ -210,12 +211,12 @@ fn fk_report(
             p.y,
             p.z,
             q.w,
-            q.i,
-            q.j,
-            q.k
+            q.x,
+            q.y,
+            q.z
         );
     }
-    let c = state.com_pos;
+    let c = state.com_pos.map(unsigned_zero);
     let _ = writeln!(
         out,
         "    {:<16} {:>10.6} {:>10.6} {:>10.6}",

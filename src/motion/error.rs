@@ -136,7 +136,7 @@ pub enum MotionError {
         max: usize,
     },
     #[error(
-        "no motion named {name:?}: {tried}; pass a path to a DeepMimic motion file, or a name \
+        "no motion file for {name:?} (looked for: {tried}); pass a path to a DeepMimic motion file, or a name \
          (e.g. `walk` for humanoid3d_walk.txt) with --motions-dir or {env} set to the \
          directory of the clips",
         env = super::library::MOTIONS_ENV

@@ -41,7 +41,7 @@ pub fn resolve_motion(motion: &str, motions_dir: Option<&Path>) -> Result<PathBu
                 tried.push(path.display().to_string());
             }
         }
-        None => tried.push("no motions directory given".to_string()),
+        None => tried.push("no motions directory given for names".to_string()),
     }
     Err(MotionError::NotFound {
         name: motion.to_string(),
