@@ -35,6 +35,16 @@ fn quat(v: &[f64], at: usize) -> UnitQuaternion<f64> {
     UnitQuaternion::new_normalize(Quaternion::new(v[at], v[at + 1], v[at + 2], v[at + 3]))
 }
 
+/// Row `r` of the table, in f64.
+fn row_f64(table: &ReferenceTable, r: usize) -> Vec<f64> {
+    table
+        .row(r)
+        .expect("row exists")
+        .iter()
+        .map(|&v| f64::from(v))
+        .collect()
+}
+
 /// The state flattened in the table's layout, in f64.
 fn flatten(layout: &TableLayout, s: &ReferenceState) -> Vec<f64> {
     let mut row = vec![0.0; layout.stride];
@@ -149,22 +159,12 @@ fn rows_hold_the_reference_state_at_control_times() {
         let state = r
             .state_at_clip_time(r.clip().locate_in_cycle(tau))
             .expect("state");
-        let stored: Vec<f64> = table
-            .row(row)
-            .expect("row")
-            .iter()
-            .map(|&v| f64::from(v))
-            .collect();
+        let stored = row_f64(&table, row);
         let err = row_error(&table, &stored, &flatten(&layout, &state));
         assert!(err < 1e-6, "row {row}: off by {err}");
     }
     // The last row of a wrapped clip is the last key frame (cycle 0), not the next cycle's start.
-    let last: Vec<f64> = table
-        .row(15)
-        .expect("row")
-        .iter()
-        .map(|&v| f64::from(v))
-        .collect();
+    let last = row_f64(&table, 15);
     let key = r.frames().last().expect("frames");
     assert!(row_error(&table, &last, &flatten(&layout, key)) < 1e-6);
 }
@@ -177,12 +177,7 @@ fn lookup_at_row_times_returns_the_rows() {
     });
     let table = ReferenceTable::build(&r, CONTROL_DT).expect("table");
     for row in 0..table.num_rows() - 1 {
-        let stored: Vec<f64> = table
-            .row(row)
-            .expect("row")
-            .iter()
-            .map(|&v| f64::from(v))
-            .collect();
+        let stored = row_f64(&table, row);
         let looked_up = table.lookup(table.row_time(row));
         let err = row_error(&table, &looked_up, &stored);
         assert!(err < 1e-6, "row {row}: off by {err}");
@@ -197,18 +192,8 @@ fn lookup_between_rows_blends_them() {
     let at = table.locate(12.4 * CONTROL_DT);
     assert_eq!((at.cycle, at.row), (0, 12));
     assert!((at.alpha - 0.4).abs() < 1e-5);
-    let a: Vec<f64> = table
-        .row(12)
-        .expect("row")
-        .iter()
-        .map(|&v| f64::from(v))
-        .collect();
-    let b: Vec<f64> = table
-        .row(13)
-        .expect("row")
-        .iter()
-        .map(|&v| f64::from(v))
-        .collect();
+    let a = row_f64(&table, 12);
+    let b = row_f64(&table, 13);
     let out = table.lookup(12.4 * CONTROL_DT);
     for i in [
         layout.qvel + 5,
@@ -294,19 +279,9 @@ fn clamped_lookup_holds_the_end_rows() {
         ..SyntheticMotion::default()
     });
     let table = ReferenceTable::build(&r, CONTROL_DT).expect("table");
-    let first: Vec<f64> = table
-        .row(0)
-        .expect("row")
-        .iter()
-        .map(|&v| f64::from(v))
-        .collect();
+    let first = row_f64(&table, 0);
     let n = table.num_rows();
-    let last: Vec<f64> = table
-        .row(n - 1)
-        .expect("row")
-        .iter()
-        .map(|&v| f64::from(v))
-        .collect();
+    let last = row_f64(&table, n - 1);
     assert!(row_error(&table, &table.lookup(-1.0), &first) < 1e-9);
     assert!(row_error(&table, &table.lookup(table.duration()), &last) < 1e-9);
     assert!(row_error(&table, &table.lookup(table.duration() + 3.0), &last) < 1e-9);

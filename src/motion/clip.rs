@@ -16,7 +16,7 @@ use super::deepmimic::{
     self, COLUMN_NAMES, DeepMimicFrame, QUATERNION_NORM_TOLERANCE, QposMapping,
 };
 use super::error::MotionError;
-use super::rotation::{read_wxyz, slerp};
+use super::rotation::blend;
 
 /// What happens past the end of a clip.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -34,6 +34,26 @@ impl LoopMode {
             LoopMode::Wrap => "wrap",
             LoopMode::Clamp => "none",
         }
+    }
+}
+
+/// Splits time `t` (s) into a loop cycle and a time within it, for a clip of duration `d`:
+/// wrapped, `t = cycle * d + tau` with `tau` in [0, d); clamped, cycle 0 and `tau` = `t` clamped
+/// to [0, d]. A non-finite `t` reads as 0. The reference table's lookup uses the same split.
+pub fn cycle_and_phase(t: f64, d: f64, loop_mode: LoopMode) -> (i64, f64) {
+    let t = if t.is_finite() { t } else { 0.0 };
+    match loop_mode {
+        LoopMode::Wrap => {
+            let mut cycle = (t / d).floor();
+            let mut tau = t - cycle * d;
+            // Rounding can leave tau a hair outside [0, d).
+            if tau >= d {
+                tau -= d;
+                cycle += 1.0;
+            }
+            (cycle as i64, tau.max(0.0))
+        }
+        LoopMode::Clamp => (0, t.clamp(0.0, d)),
     }
 }
 
@@ -261,23 +281,10 @@ impl MotionClip {
 
     /// Where time `t` (s) falls: cycle, key frame and blend weight. A non-finite `t` reads as 0.
     pub fn locate(&self, t: f64) -> ClipTime {
-        let t = if t.is_finite() { t } else { 0.0 };
-        let d = self.duration();
-        match self.loop_mode {
-            LoopMode::Wrap => {
-                let mut cycle = (t / d).floor();
-                let mut tau = t - cycle * d;
-                // Rounding can leave tau a hair outside [0, D).
-                if tau >= d {
-                    tau -= d;
-                    cycle += 1.0;
-                }
-                ClipTime {
-                    cycle: cycle as i64,
-                    ..self.locate_in_cycle(tau.max(0.0))
-                }
-            }
-            LoopMode::Clamp => self.locate_in_cycle(t),
+        let (cycle, tau) = cycle_and_phase(t, self.duration(), self.loop_mode);
+        ClipTime {
+            cycle,
+            ..self.locate_in_cycle(tau)
         }
     }
 
@@ -315,14 +322,7 @@ impl MotionClip {
         let (Some(a), Some(b)) = (self.frame_qpos(at.frame), self.frame_qpos(at.frame + 1)) else {
             return out;
         };
-        for ((o, &x), &y) in out.iter_mut().zip(a).zip(b) {
-            *o = x + at.alpha * (y - x);
-        }
-        for &adr in &self.quaternion_addresses {
-            if let (Some(qa), Some(qb)) = (read_wxyz(a, adr), read_wxyz(b, adr)) {
-                out[adr..adr + 4].copy_from_slice(&slerp(qa, qb, at.alpha));
-            }
-        }
+        blend(a, b, at.alpha, &self.quaternion_addresses, &mut out);
         let shift = self.cycle_displacement * at.cycle as f64;
         for (o, s) in out[self.root_position..self.root_position + 3]
             .iter_mut()

@@ -13,7 +13,7 @@
 use nalgebra::Vector3;
 
 use super::character::Character;
-use super::clip::LoopMode;
+use super::clip::{LoopMode, cycle_and_phase};
 use super::error::MotionError;
 use super::reference::{ReferenceMotion, ReferenceState};
 use super::rotation::blend;
@@ -274,20 +274,8 @@ impl ReferenceTable {
     /// Where time `t` (s) falls; the GPU computes the same from the header. Non-finite `t` reads
     /// as 0.
     pub fn locate(&self, t: f64) -> TableTime {
-        let t = if t.is_finite() { t } else { 0.0 };
         let (n, dt, d) = (self.num_rows(), self.row_dt(), self.duration());
-        let (cycle, tau) = match self.loop_mode() {
-            LoopMode::Wrap => {
-                let mut k = (t / d).floor();
-                let mut tau = t - k * d;
-                if tau >= d {
-                    tau -= d;
-                    k += 1.0;
-                }
-                (k as i64, tau.max(0.0))
-            }
-            LoopMode::Clamp => (0, t.clamp(0.0, d)),
-        };
+        let (cycle, tau) = cycle_and_phase(t, d, self.loop_mode());
         let row = ((tau / dt).floor() as usize).min(n - 2);
         let (t0, t1) = (self.row_time(row), self.row_time(row + 1));
         let alpha = if t1 > t0 {
