@@ -1,6 +1,7 @@
 //! The command line: `instantmimic <command> ...`.
 
 mod plan;
+mod motion;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -16,6 +17,8 @@ struct Cli {
 enum Command {
     /// Inspect or pack physics plans (.wrp / .wrp.zst).
     Plan(plan::PlanArgs),
+    /// Reference motions: inspect DeepMimic clips and their kinematics.
+    Motion(motion::MotionArgs),
 }
 
 /// Parses the command line and runs the command.
@@ -23,5 +26,6 @@ pub fn run() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Plan(args) => plan::run(args),
+        Command::Motion(args) => motion::run(args),
     }
 }

@@ -1,1 +1,38 @@
 //! Reference motions: DeepMimic clips, their conversion to the humanoid's qpos, and kinematics.
+//!
+//! The pipeline, file by file:
+//! - [`character`]: the simulated character as MuJoCo compiles it (from `configs/characters/*.json`).
+//! - [`deepmimic`]: the DeepMimic motion file reader and the frame-to-qpos conversion.
+//! - [`clip`]: a clip as qpos key frames; looping and sampling at any time.
+//! - [`kinematics`], [`velocity`]: body frames, center of mass, `mj_differentiatePos`, body
+//!   velocities, as MuJoCo computes them.
+//! - [`reference`]: a clip with its velocities and full reference state at any time.
+//! - [`table`]: the reference resampled at the control rate into the GPU table.
+//! - [`summary`]: what `motion inspect` reports.
+//! - [`synthetic`]: generated clips for tests.
+//! - [`library`]: finding motion files by name.
+//!
+//! `docs/motions.md` and `docs/reference_table.md` describe the conventions.
+
+pub mod character;
+pub mod clip;
+pub mod deepmimic;
+pub mod error;
+pub mod kinematics;
+pub mod library;
+pub mod reference;
+pub mod rotation;
+pub mod summary;
+pub mod synthetic;
+pub mod table;
+pub mod velocity;
+
+pub use character::Character;
+pub use clip::{ClipTime, LoopMode, MotionClip};
+pub use error::{CharacterError, MotionError};
+pub use kinematics::{BodyKinematics, forward_kinematics};
+pub use reference::{ReferenceMotion, ReferenceState};
+pub use summary::ClipSummary;
+pub use synthetic::SyntheticMotion;
+pub use table::{ReferenceTable, TableLayout};
+pub use velocity::{BodyVelocities, body_velocities, differentiate_pos};

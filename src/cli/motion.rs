@@ -1,0 +1,226 @@
+//! `instantmimic motion ...`: look at reference motions.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use clap::{Args, Subcommand};
+
+use crate::motion::library::{motions_dir_from_env, resolve_motion};
+use crate::motion::summary::JointRange;
+use crate::motion::{Character, ClipSummary, ReferenceMotion};
+
+#[derive(Args, Debug)]
+pub struct MotionArgs {
+    #[command(subcommand)]
+    command: MotionCommand,
+}
+
+#[derive(Subcommand, Debug)]
+enum MotionCommand {
+    /// Print frames, fps, duration, loop mode, per-cycle root displacement, joint ranges and the
+    /// lowest foot point of a clip.
+    Inspect {
+        #[command(flatten)]
+        source: MotionSource,
+    },
+    /// Print the body positions and orientations of one key frame.
+    Fk {
+        #[command(flatten)]
+        source: MotionSource,
+        /// Key frame index (0-based).
+        #[arg(long)]
+        frame: usize,
+    },
+}
+
+/// Which clip, for which character.
+#[derive(Args, Debug)]
+struct MotionSource {
+    /// A DeepMimic motion file, or a clip name (e.g. `walk` for humanoid3d_walk.txt) in the
+    /// motions directory.
+    motion: String,
+    /// Directory of DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
+    #[arg(long)]
+    motions_dir: Option<PathBuf>,
+    /// Character description written by kernels_py/export_character.py (default: the humanoid).
+    #[arg(long)]
+    character: Option<PathBuf>,
+}
+
+impl MotionSource {
+    fn load(&self) -> Result<ReferenceMotion> {
+        let character = match &self.character {
+            Some(path) => Character::load(path)?,
+            None => Character::humanoid()?,
+        };
+        let dir = self.motions_dir.clone().or_else(motions_dir_from_env);
+        let path = resolve_motion(&self.motion, dir.as_deref())?;
+        // The error names the file (and frame and column): no context to add.
+        Ok(ReferenceMotion::load(&path, &character)?)
+    }
+}
+
+/// Runs `motion <subcommand>`.
+pub fn run(args: MotionArgs) -> Result<()> {
+    match args.command {
+        MotionCommand::Inspect { source } => {
+            let motion = source.load()?;
+            print!("{}", inspect_report(&ClipSummary::of(&motion)));
+        }
+        MotionCommand::Fk { source, frame } => {
+            let motion = source.load()?;
+            let frames = motion.frames().len();
+            let Some(state) = motion.frames().get(frame) else {
+                bail!(
+                    "--frame {frame} is out of range: the clip has frames 0..={}",
+                    frames.saturating_sub(1)
+                );
+            };
+            print!("{}", fk_report(&motion, frame, state));
+        }
+    }
+    Ok(())
+}
+
+/// `x` with -0 turned into 0, so that tables do not print "-0.0".
+fn unsigned_zero(x: f64) -> f64 {
+    x + 0.0
+}
+
+fn inspect_report(s: &ClipSummary) -> String {
+    let mut out = String::new();
+    let d = s.cycle_displacement.map(unsigned_zero);
+    let norms = s.quaternion_norms;
+    let _ = writeln!(out, "file                 {}", s.name);
+    let _ = writeln!(out, "frames               {}", s.frames);
+    let _ = writeln!(
+        out,
+        "fps                  {:.3} (frame dt {:.6} s)",
+        s.frame_rate,
+        1.0 / s.frame_rate
+    );
+    let _ = writeln!(out, "duration             {:.6} s", s.duration);
+    let _ = writeln!(out, "loop                 {}", s.loop_mode.deepmimic_name());
+    let _ = writeln!(
+        out,
+        "cycle displacement   ({:+.4}, {:+.4}, {:+.4}) m  (root, last frame - first, z zeroed)",
+        d.x, d.y, d.z
+    );
+    let _ = writeln!(
+        out,
+        "root height          {:.4} .. {:.4} m",
+        s.root_height.0, s.root_height.1
+    );
+    match &s.lowest_foot {
+        Some(p) => {
+            let _ = writeln!(
+                out,
+                "lowest foot point    {:+.4} m (frame {}, {})",
+                p.height, p.frame, p.body
+            );
+        }
+        None => {
+            let _ = writeln!(
+                out,
+                "lowest foot point    (the character has no foot geoms)"
+            );
+        }
+    }
+    let _ = writeln!(
+        out,
+        "quaternion lengths   max |len - 1| = {:.2e} (frame {}, column {}); {} beyond 1e-6; all renormalized",
+        norms.worst_deviation, norms.worst_frame, norms.worst_column, norms.beyond_rounding
+    );
+    let _ = writeln!(
+        out,
+        "joint ranges (degrees; ball joints: rotation vector x, y, z and largest angle)"
+    );
+    for joint in &s.joints {
+        let deg = |x: f64| unsigned_zero(x.to_degrees());
+        match joint.range {
+            JointRange::Hinge { min, max } => {
+                let _ = writeln!(
+                    out,
+                    "  {:<15} hinge  {:>7.1} .. {:>6.1}",
+                    joint.name,
+                    deg(min),
+                    deg(max)
+                );
+            }
+            JointRange::Ball {
+                min,
+                max,
+                max_angle,
+            } => {
+                let _ = writeln!(
+                    out,
+                    "  {:<15} ball   x {:>7.1} .. {:>6.1}   y {:>7.1} .. {:>6.1}   z {:>7.1} .. {:>6.1}   max {:>5.1}",
+                    joint.name,
+                    deg(min.x),
+                    deg(max.x),
+                    deg(min.y),
+                    deg(max.y),
+                    deg(min.z),
+                    deg(max.z),
+                    deg(max_angle)
+                );
+            }
+        }
+    }
+    out
+}
+
+fn fk_report(
+    motion: &ReferenceMotion,
+    frame: usize,
+    state: &crate::motion::ReferenceState,
+) -> String {
+    let mut out = String::new();
+    let time = motion
+        .clip()
+        .frame_times()
+        .get(frame)
+        .copied()
+        .unwrap_or(0.0);
+    let _ = writeln!(
+        out,
+        "{} frame {frame} (t = {time:.6} s), world frame, Z up",
+        motion.clip().name()
+    );
+    let _ = writeln!(
+        out,
+        "{:>2}  {:<16} {:>10} {:>10} {:>10}   {:>9} {:>9} {:>9} {:>9}",
+        "id", "body", "x", "y", "z", "qw", "qx", "qy", "qz"
+    );
+    let bodies = &motion.character().bodies()[1..];
+    for (b, ((body, p), q)) in bodies
+        .iter()
+        .zip(&state.body_pos)
+        .zip(&state.body_quat)
+        .enumerate()
+    {
+        let p = p.map(unsigned_zero);
+        let q = q.quaternion().coords.map(unsigned_zero); // (x, y, z, w)
+        let _ = writeln!(
+            out,
+            "{:>2}  {:<16} {:>10.6} {:>10.6} {:>10.6}   {:>9.6} {:>9.6} {:>9.6} {:>9.6}",
+            b + 1,
+            body.name,
+            p.x,
+            p.y,
+            p.z,
+            q.w,
+            q.x,
+            q.y,
+            q.z
+        );
+    }
+    let c = state.com_pos.map(unsigned_zero);
+    let _ = writeln!(
+        out,
+        "    {:<16} {:>10.6} {:>10.6} {:>10.6}",
+        "center of mass", c.x, c.y, c.z
+    );
+    out
+}

@@ -1,0 +1,292 @@
+//! DeepMimic motion files: the JSON reader, the checks on every value, and the conversion of a
+//! frame to the humanoid's qpos (`../shared/data/README.md` and `docs/motions.md` give the layout).
+//!
+//! A file is a JSON object with `"Loop"` (`"wrap"` or `"none"`) and `"Frames"`, a list of
+//! 44-number rows: frame duration, root position, root rotation (w, x, y, z), then the joints.
+//! DeepMimic is Y-up (+X forward, +Z to the character's right); MuJoCo is Z-up. The conversion is
+//! conjugation by +90 degrees about X: positions (x, y, z) -> (x, -z, y), quaternions
+//! (w, x, y, z) -> (w, x, -z, y), and revolute angles about DeepMimic's +Z change sign for a hinge
+//! about MuJoCo's +Y.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde_json::value::RawValue;
+
+use super::character::{Character, JointType};
+use super::clip::LoopMode;
+use super::error::MotionError;
+
+/// Columns of a DeepMimic humanoid frame.
+pub const FRAME_LEN: usize = 44;
+
+/// A quaternion whose length is within this distance of 1 is renormalized; a longer or shorter
+/// one is an error. DeepMimic's own clips need the slack: hand-edited key frames of the backflip
+/// are up to 0.12 off (norm 1.118, left shoulder), the cartwheel's up to 0.034.
+pub const QUATERNION_NORM_TOLERANCE: f64 = 0.2;
+
+/// One DeepMimic humanoid frame, columns as in the file.
+pub type DeepMimicFrame = [f64; FRAME_LEN];
+
+/// What a column holds, for error messages (0-based column index).
+pub const COLUMN_NAMES: [&str; FRAME_LEN] = [
+    "frame duration",
+    "root position x",
+    "root position y",
+    "root position z",
+    "root rotation w",
+    "root rotation x",
+    "root rotation y",
+    "root rotation z",
+    "chest rotation w",
+    "chest rotation x",
+    "chest rotation y",
+    "chest rotation z",
+    "neck rotation w",
+    "neck rotation x",
+    "neck rotation y",
+    "neck rotation z",
+    "right_hip rotation w",
+    "right_hip rotation x",
+    "right_hip rotation y",
+    "right_hip rotation z",
+    "right_knee angle",
+    "right_ankle rotation w",
+    "right_ankle rotation x",
+    "right_ankle rotation y",
+    "right_ankle rotation z",
+    "right_shoulder rotation w",
+    "right_shoulder rotation x",
+    "right_shoulder rotation y",
+    "right_shoulder rotation z",
+    "right_elbow angle",
+    "left_hip rotation w",
+    "left_hip rotation x",
+    "left_hip rotation y",
+    "left_hip rotation z",
+    "left_knee angle",
+    "left_ankle rotation w",
+    "left_ankle rotation x",
+    "left_ankle rotation y",
+    "left_ankle rotation z",
+    "left_shoulder rotation w",
+    "left_shoulder rotation x",
+    "left_shoulder rotation y",
+    "left_shoulder rotation z",
+    "left_elbow angle",
+];
+
+/// The column where the root position starts.
+pub const ROOT_POSITION_COLUMN: usize = 1;
+
+/// DeepMimic's spherical joints: (first column of the quaternion, joint name in the character).
+/// The root rotation is the free joint's.
+pub const ROTATION_COLUMNS: [(usize, &str); 9] = [
+    (4, "root"),
+    (8, "chest"),
+    (12, "neck"),
+    (16, "right_hip"),
+    (21, "right_ankle"),
+    (25, "right_shoulder"),
+    (30, "left_hip"),
+    (35, "left_ankle"),
+    (39, "left_shoulder"),
+];
+
+/// DeepMimic's revolute joints (about their local +Z): (column, joint name in the character).
+pub const ANGLE_COLUMNS: [(usize, &str); 4] = [
+    (20, "right_knee"),
+    (29, "right_elbow"),
+    (34, "left_knee"),
+    (43, "left_elbow"),
+];
+
+/// A motion file as read: loop mode and checked rows (right length, finite values).
+#[derive(Debug, Clone)]
+pub struct DeepMimicFile {
+    pub loop_mode: LoopMode,
+    pub frames: Vec<DeepMimicFrame>,
+}
+
+/// Reads a DeepMimic motion file.
+pub fn read_file(path: &Path) -> Result<DeepMimicFile, MotionError> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|source| MotionError::Read {
+        file: file.clone(),
+        source,
+    })?;
+    parse(&text, &file)
+}
+
+/// Parses the text of a DeepMimic motion file; `file` names it in errors.
+///
+/// Numbers are read from their JSON text, so a number too large for f64 (e.g. `1e999`) is
+/// reported as a non-finite value at its frame and column rather than as a JSON error.
+pub fn parse(text: &str, file: &str) -> Result<DeepMimicFile, MotionError> {
+    let json_error = |source| MotionError::Json {
+        file: file.to_string(),
+        source,
+    };
+    let top: BTreeMap<String, &RawValue> = serde_json::from_str(text).map_err(json_error)?;
+    let key = |key: &'static str| {
+        top.get(key).copied().ok_or(MotionError::MissingKey {
+            file: file.to_string(),
+            key,
+        })
+    };
+
+    let loop_text: String =
+        serde_json::from_str(key("Loop")?.get()).map_err(|_| MotionError::KeyType {
+            file: file.to_string(),
+            key: "Loop",
+            expected: "a string, \"wrap\" or \"none\"",
+        })?;
+    let loop_mode = match loop_text.as_str() {
+        "wrap" => LoopMode::Wrap,
+        "none" => LoopMode::Clamp,
+        _ => {
+            return Err(MotionError::LoopMode {
+                file: file.to_string(),
+                value: loop_text,
+            });
+        }
+    };
+
+    let frames_type = || MotionError::KeyType {
+        file: file.to_string(),
+        key: "Frames",
+        expected: "a list of frames, each a list of numbers",
+    };
+    let rows: Vec<&RawValue> =
+        serde_json::from_str(key("Frames")?.get()).map_err(|_| frames_type())?;
+    let mut frames = Vec::with_capacity(rows.len());
+    for (frame, row) in rows.iter().enumerate() {
+        let values: Vec<&RawValue> =
+            serde_json::from_str(row.get()).map_err(|_| MotionError::RowType {
+                file: file.to_string(),
+                frame,
+            })?;
+        if values.len() != FRAME_LEN {
+            return Err(MotionError::RowLength {
+                file: file.to_string(),
+                frame,
+                len: values.len(),
+                expected: FRAME_LEN,
+            });
+        }
+        let mut out = [0.0; FRAME_LEN];
+        for (column, (dst, raw)) in out.iter_mut().zip(&values).enumerate() {
+            let text = raw.get();
+            *dst = text.parse::<f64>().map_err(|_| MotionError::NotANumber {
+                file: file.to_string(),
+                frame,
+                column,
+                field: COLUMN_NAMES[column],
+                text: text.to_string(),
+            })?;
+        }
+        frames.push(out);
+    }
+    Ok(DeepMimicFile { loop_mode, frames })
+}
+
+/// Where each DeepMimic field goes in the character's qpos.
+#[derive(Debug, Clone)]
+pub(crate) struct QposMapping {
+    root_position: usize,
+    /// (DeepMimic column, qpos address of the quaternion, joint name).
+    rotations: Vec<(usize, usize, &'static str)>,
+    /// (DeepMimic column, qpos address, sign).
+    angles: Vec<(usize, usize, f64)>,
+}
+
+impl QposMapping {
+    /// Maps DeepMimic's joints to the character's by name; every character joint must be covered.
+    pub(crate) fn new(character: &Character, file: &str) -> Result<QposMapping, MotionError> {
+        let mismatch = |problem: String| MotionError::CharacterMismatch {
+            file: file.to_string(),
+            problem,
+        };
+        let find = |name: &str, kind: JointType| {
+            let id = character
+                .joint_id(name)
+                .ok_or_else(|| mismatch(format!("it has no joint named {name}")))?;
+            let joint = &character.joints()[id];
+            if joint.kind != kind {
+                return Err(mismatch(format!(
+                    "joint {name} is {:?}, expected {kind:?}",
+                    joint.kind
+                )));
+            }
+            Ok(joint)
+        };
+        let root = find("root", JointType::Free)?;
+        let mut rotations = Vec::with_capacity(ROTATION_COLUMNS.len());
+        for (column, name) in ROTATION_COLUMNS {
+            let adr = if name == "root" {
+                root.qposadr + 3
+            } else {
+                find(name, JointType::Ball)?.qposadr
+            };
+            rotations.push((column, adr, name));
+        }
+        let mut angles = Vec::with_capacity(ANGLE_COLUMNS.len());
+        for (column, name) in ANGLE_COLUMNS {
+            let joint = find(name, JointType::Hinge)?;
+            // DeepMimic's revolute axis (its local +Z) is MuJoCo's -Y.
+            let sign = -joint.axis.y;
+            if (joint.axis.x.abs() + joint.axis.z.abs()) > 1e-9 || (sign.abs() - 1.0).abs() > 1e-9 {
+                return Err(mismatch(format!(
+                    "hinge {name} has the axis {:?}; a DeepMimic revolute joint needs +Y or -Y",
+                    joint.axis
+                )));
+            }
+            angles.push((column, joint.qposadr, sign.signum()));
+        }
+        // The names are distinct and all found, so equal counts mean every joint is covered.
+        let covered = ROTATION_COLUMNS.len() + ANGLE_COLUMNS.len();
+        if character.joints().len() != covered {
+            return Err(mismatch(format!(
+                "it has {} joints, DeepMimic's humanoid has {covered}",
+                character.joints().len()
+            )));
+        }
+        Ok(QposMapping {
+            root_position: root.qposadr,
+            rotations,
+            angles,
+        })
+    }
+
+    /// The first column of every quaternion in a frame, with its joint's name.
+    pub(crate) fn rotation_columns(&self) -> impl Iterator<Item = (usize, &'static str)> + '_ {
+        self.rotations
+            .iter()
+            .map(|&(column, _, name)| (column, name))
+    }
+
+    /// Writes the qpos of `frame` (quaternions already normalized in the frame) into `qpos`.
+    pub(crate) fn convert(&self, frame: &DeepMimicFrame, qpos: &mut [f64]) {
+        let p = ROOT_POSITION_COLUMN;
+        let (x, y, z) = (frame[p], frame[p + 1], frame[p + 2]);
+        if let Some(dst) = qpos.get_mut(self.root_position..self.root_position + 3) {
+            dst.copy_from_slice(&[x, -z, y]);
+        }
+        for &(column, adr, _) in &self.rotations {
+            let (w, x, y, z) = (
+                frame[column],
+                frame[column + 1],
+                frame[column + 2],
+                frame[column + 3],
+            );
+            if let Some(dst) = qpos.get_mut(adr..adr + 4) {
+                dst.copy_from_slice(&[w, x, -z, y]);
+            }
+        }
+        for &(column, adr, sign) in &self.angles {
+            if let Some(dst) = qpos.get_mut(adr) {
+                *dst = sign * frame[column];
+            }
+        }
+    }
+}

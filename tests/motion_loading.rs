@@ -1,0 +1,387 @@
+//! Reading DeepMimic motion files: the conversion to qpos, and every kind of bad input
+//! (each error names the file, and the frame and column where there is one).
+
+use std::path::{Path, PathBuf};
+
+use instantmimic::motion::deepmimic::{self, DeepMimicFrame, FRAME_LEN};
+use instantmimic::motion::rotation::{angle_between, heading};
+use instantmimic::motion::{
+    Character, LoopMode, MotionClip, MotionError, ReferenceMotion, SyntheticMotion,
+};
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+
+fn humanoid() -> Character {
+    Character::humanoid().expect("the embedded humanoid loads")
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).expect("write a temporary motion file");
+    path
+}
+
+/// A synthetic clip's file text with one number replaced (frame, column, new text).
+fn edited_json(frames: &[DeepMimicFrame], frame: usize, column: usize, text: &str) -> String {
+    let rows: Vec<String> = frames
+        .iter()
+        .enumerate()
+        .map(|(f, row)| {
+            let cols: Vec<String> = row
+                .iter()
+                .enumerate()
+                .map(|(c, v)| {
+                    if (f, c) == (frame, column) {
+                        text.to_string()
+                    } else {
+                        format!("{v:?}")
+                    }
+                })
+                .collect();
+            format!("[{}]", cols.join(", "))
+        })
+        .collect();
+    format!("{{\"Loop\": \"wrap\", \"Frames\": [{}]}}", rows.join(",\n"))
+}
+
+fn load_text(text: &str) -> (Result<MotionClip, MotionError>, String) {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let path = write(dir.path(), "clip.txt", text);
+    (
+        MotionClip::load(&path, &humanoid()),
+        path.display().to_string(),
+    )
+}
+
+fn expect_error(text: &str) -> (MotionError, String) {
+    let (result, path) = load_text(text);
+    let err = result.expect_err("the file is malformed");
+    let msg = err.to_string();
+    assert!(msg.contains(&path), "the error names the file: {msg}");
+    (err, msg)
+}
+
+#[test]
+fn synthetic_file_round_trips_exactly() {
+    let motion = SyntheticMotion::default();
+    let character = humanoid();
+    let (loaded, _) = load_text(&motion.to_json());
+    let loaded = loaded.expect("a synthetic clip loads");
+    let direct = MotionClip::from_deepmimic_frames(
+        "synthetic",
+        &motion.deepmimic_frames(),
+        LoopMode::Wrap,
+        &character,
+    )
+    .expect("synthetic frames are valid");
+    assert_eq!(loaded.num_frames(), 31);
+    assert_eq!(loaded.loop_mode(), LoopMode::Wrap);
+    assert!((loaded.duration() - 1.0).abs() < 1e-12);
+    for f in 0..loaded.num_frames() {
+        assert_eq!(loaded.frame_qpos(f), direct.frame_qpos(f), "frame {f}");
+    }
+}
+
+#[test]
+fn conversion_maps_y_up_to_z_up() {
+    let character = humanoid();
+    let frames = SyntheticMotion::default().deepmimic_frames();
+    let clip = MotionClip::from_deepmimic_frames("synthetic", &frames, LoopMode::Wrap, &character)
+        .expect("synthetic frames are valid");
+    let f = &frames[7];
+    let q = clip.frame_qpos(7).expect("frame 7 exists");
+    // Root position (x, y, z) -> (x, -z, y).
+    assert_eq!(&q[0..3], &[f[1], -f[3], f[2]]);
+    // Quaternions (w, x, y, z) -> (w, x, -z, y), after renormalization (already unit here).
+    let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-15);
+    assert!(close(&q[3..7], &[f[4], f[5], -f[7], f[6]]), "root");
+    assert!(
+        close(&q[25..29], &[f[16], f[17], -f[19], f[18]]),
+        "right hip"
+    );
+    assert!(
+        close(&q[20..24], &[f[39], f[40], -f[42], f[41]]),
+        "left shoulder"
+    );
+    // Revolute angles change sign (hinges about +Y).
+    assert_eq!(q[29], -f[20], "right knee");
+    assert_eq!(q[24], -f[43], "left elbow");
+    assert!(
+        q[29] >= 0.0 && q[24] <= 0.0,
+        "knee bends positive, elbow negative in MuJoCo"
+    );
+}
+
+#[test]
+fn turning_about_deepmimic_up_turns_the_heading() {
+    // DeepMimic's up axis is +Y; after conversion the root must turn about MuJoCo's +Z.
+    let character = humanoid();
+    let motion = SyntheticMotion {
+        turn_rate: 0.9,
+        amplitude: 0.0,
+        ..SyntheticMotion::default()
+    };
+    let clip = MotionClip::from_deepmimic_frames(
+        "turning",
+        &motion.deepmimic_frames(),
+        LoopMode::Clamp,
+        &character,
+    )
+    .expect("valid frames");
+    let reference = ReferenceMotion::new(clip, &character).expect("kinematics");
+    for (i, state) in reference.frames().iter().enumerate() {
+        let t = i as f64 * motion.frame_dt;
+        let phase = std::f64::consts::TAU * t / motion.duration();
+        let yaw = 0.9 * t + 0.1 * phase.sin();
+        let got = heading(&state.body_quat[0]);
+        assert!(
+            (got - yaw).abs() < 1e-12,
+            "frame {i}: heading {got}, yaw {yaw}"
+        );
+        assert!(
+            angle_between(
+                &state.heading,
+                &UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw)
+            ) < 1e-12
+        );
+    }
+}
+
+#[test]
+fn nearly_unit_quaternions_are_renormalized() {
+    let mut frames = SyntheticMotion::default().deepmimic_frames();
+    for v in &mut frames[3][39..43] {
+        *v *= 1.15; // like the backflip's hand-edited key frames
+    }
+    let clip = MotionClip::from_deepmimic_frames("scaled", &frames, LoopMode::Wrap, &humanoid())
+        .expect("a quaternion 15% long is accepted");
+    let q = clip.frame_qpos(3).expect("frame 3 exists");
+    let norm = Quaternion::new(q[20], q[21], q[22], q[23]).norm();
+    assert!((norm - 1.0).abs() < 1e-15);
+    let norms = clip.quaternion_norms();
+    assert_eq!((norms.worst_frame, norms.worst_column), (3, 39));
+    assert!((norms.worst_deviation - 0.15).abs() < 1e-12);
+}
+
+#[test]
+fn quaternion_far_from_unit_is_an_error() {
+    let mut frames = SyntheticMotion::default().deepmimic_frames();
+    for v in &mut frames[5][21..25] {
+        *v *= 0.5;
+    }
+    let err = MotionClip::from_deepmimic_frames("half.txt", &frames, LoopMode::Wrap, &humanoid())
+        .expect_err("a half-length quaternion is not a rotation");
+    assert!(
+        matches!(
+            err,
+            MotionError::QuaternionNorm {
+                frame: 5,
+                column: 21,
+                joint: "right_ankle",
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    let msg = err.to_string();
+    assert!(
+        msg.contains("half.txt") && msg.contains("frame 5") && msg.contains("columns 21-24"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn wrong_row_length_is_an_error() {
+    let frames = SyntheticMotion::default().deepmimic_frames();
+    let mut text = edited_json(&frames, 0, 0, "0.0333");
+    // Drop the last column of frame 2.
+    let row2 = frames[2]
+        .iter()
+        .map(|v| format!("{v:?}"))
+        .collect::<Vec<_>>();
+    let short = format!("[{}]", row2[..FRAME_LEN - 1].join(", "));
+    text = text.replacen(&format!("[{}]", row2.join(", ")), &short, 1);
+    let (err, msg) = expect_error(&text);
+    assert!(
+        matches!(
+            err,
+            MotionError::RowLength {
+                frame: 2,
+                len: 43,
+                expected: 44,
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    assert!(msg.contains("frame 2"), "{msg}");
+}
+
+#[test]
+fn non_finite_value_is_an_error() {
+    let frames = SyntheticMotion::default().deepmimic_frames();
+    // A number too large for f64 in the file.
+    let (err, msg) = expect_error(&edited_json(&frames, 4, 9, "1e999"));
+    assert!(
+        matches!(
+            err,
+            MotionError::NonFinite {
+                frame: 4,
+                column: 9,
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    assert!(
+        msg.contains("frame 4, column 9 (chest rotation x)"),
+        "{msg}"
+    );
+    // NaN given directly.
+    let mut frames = frames;
+    frames[6][20] = f64::NAN;
+    let err = MotionClip::from_deepmimic_frames("nan.txt", &frames, LoopMode::Wrap, &humanoid())
+        .expect_err("NaN is rejected");
+    assert!(
+        matches!(
+            err,
+            MotionError::NonFinite {
+                frame: 6,
+                column: 20,
+                field: "right_knee angle",
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    // NaN is not JSON: a syntax error with line and column, naming the file.
+    let (err, _) = expect_error(&edited_json(
+        &SyntheticMotion::default().deepmimic_frames(),
+        1,
+        3,
+        "NaN",
+    ));
+    assert!(matches!(err, MotionError::Json { .. }), "{err:?}");
+}
+
+#[test]
+fn a_value_that_is_not_a_number_is_an_error() {
+    let frames = SyntheticMotion::default().deepmimic_frames();
+    let (err, msg) = expect_error(&edited_json(&frames, 3, 43, "\"bent\""));
+    assert!(
+        matches!(
+            err,
+            MotionError::NotANumber {
+                frame: 3,
+                column: 43,
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    assert!(msg.contains("left_elbow angle"), "{msg}");
+    let (err, _) = expect_error("{\"Loop\": \"wrap\", \"Frames\": [[0.1, 0, 0], 7]}");
+    assert!(
+        matches!(
+            err,
+            MotionError::RowLength {
+                frame: 0,
+                len: 3,
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    let (err, _) = expect_error("{\"Loop\": \"wrap\", \"Frames\": [7]}");
+    assert!(
+        matches!(err, MotionError::RowType { frame: 0, .. }),
+        "{err:?}"
+    );
+}
+
+#[test]
+fn empty_and_zero_duration_clips_are_errors() {
+    let (err, _) = expect_error("{\"Loop\": \"wrap\", \"Frames\": []}");
+    assert!(matches!(err, MotionError::Empty { .. }), "{err:?}");
+
+    let frames = SyntheticMotion::default().deepmimic_frames();
+    let character = humanoid();
+    let err =
+        MotionClip::from_deepmimic_frames("one.txt", &frames[..1], LoopMode::Wrap, &character)
+            .expect_err("one frame lasts no time");
+    assert!(
+        matches!(err, MotionError::ZeroDuration { frames: 1, .. }),
+        "{err:?}"
+    );
+
+    let mut still = frames[..3].to_vec();
+    still.iter_mut().for_each(|f| f[0] = 0.0);
+    let err = MotionClip::from_deepmimic_frames("still.txt", &still, LoopMode::Wrap, &character)
+        .expect_err("frames of zero duration");
+    assert!(
+        matches!(err, MotionError::ZeroDuration { frames: 3, .. }),
+        "{err:?}"
+    );
+    assert!(err.to_string().contains("still.txt"));
+
+    let mut gap = frames.clone();
+    gap[4][0] = -0.01;
+    let err = MotionClip::from_deepmimic_frames("gap.txt", &gap, LoopMode::Wrap, &character)
+        .expect_err("a negative frame duration");
+    assert!(
+        matches!(err, MotionError::FrameDuration { frame: 4, .. }),
+        "{err:?}"
+    );
+    assert!(err.to_string().contains("frame 4, column 0"));
+}
+
+#[test]
+fn missing_keys_and_bad_loop_modes_are_errors() {
+    let frames_only = "{\"Frames\": [[0.1]]}";
+    let (err, msg) = expect_error(frames_only);
+    assert!(
+        matches!(err, MotionError::MissingKey { key: "Loop", .. }),
+        "{err:?}"
+    );
+    assert!(msg.contains("\"Loop\""), "{msg}");
+    let (err, _) = expect_error("{\"Loop\": \"wrap\"}");
+    assert!(
+        matches!(err, MotionError::MissingKey { key: "Frames", .. }),
+        "{err:?}"
+    );
+    let (err, _) = expect_error("{\"Loop\": \"bounce\", \"Frames\": []}");
+    assert!(matches!(err, MotionError::LoopMode { .. }), "{err:?}");
+    let (err, _) = expect_error("{\"Loop\": 1, \"Frames\": []}");
+    assert!(
+        matches!(err, MotionError::KeyType { key: "Loop", .. }),
+        "{err:?}"
+    );
+    let (err, _) = expect_error("{\"Loop\": \"none\", \"Frames\": {}}");
+    assert!(
+        matches!(err, MotionError::KeyType { key: "Frames", .. }),
+        "{err:?}"
+    );
+    let (err, _) = expect_error("[1, 2]");
+    assert!(matches!(err, MotionError::Json { .. }), "{err:?}");
+}
+
+#[test]
+fn loop_none_clamps_and_extra_keys_are_ignored() {
+    let motion = SyntheticMotion {
+        loop_mode: LoopMode::Clamp,
+        ..SyntheticMotion::default()
+    };
+    let text = motion
+        .to_json()
+        .replacen('{', "{\"RightJoints\": [3, 4, 5],", 1);
+    let parsed = deepmimic::parse(&text, "extra.txt").expect("extra keys are fine");
+    assert_eq!(parsed.loop_mode, LoopMode::Clamp);
+    assert_eq!(parsed.frames.len(), motion.frames);
+}
+
+#[test]
+fn missing_file_is_an_error_naming_it() {
+    let err = MotionClip::load(Path::new("/nonexistent/humanoid3d_walk.txt"), &humanoid())
+        .expect_err("no such file");
+    assert!(matches!(err, MotionError::Read { .. }));
+    assert!(err.to_string().contains("/nonexistent/humanoid3d_walk.txt"));
+}
