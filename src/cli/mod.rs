@@ -1,5 +1,7 @@
 //! The command line: `instantmimic <command> ...`.
 
+mod gpu;
+
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
@@ -11,10 +13,15 @@ struct Cli {
 }
 
 #[derive(Subcommand, Debug)]
-enum Command {}
+enum Command {
+    /// Show the GPU, its driver and the PTX ISA it accepts.
+    Gpu(gpu::GpuArgs),
+}
 
 /// Parses the command line and runs the command.
 pub fn run() -> Result<()> {
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Gpu(args) => gpu::run(&args),
+    }
 }
