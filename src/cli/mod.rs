@@ -2,6 +2,7 @@
 
 mod plan;
 mod motion;
+mod gpu;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -19,6 +20,8 @@ enum Command {
     Plan(plan::PlanArgs),
     /// Reference motions: inspect DeepMimic clips and their kinematics.
     Motion(motion::MotionArgs),
+    /// Show the GPU, its driver and the PTX ISA it accepts.
+    Gpu(gpu::GpuArgs),
 }
 
 /// Parses the command line and runs the command.
@@ -27,5 +30,6 @@ pub fn run() -> Result<()> {
     match cli.command {
         Command::Plan(args) => plan::run(args),
         Command::Motion(args) => motion::run(args),
+        Command::Gpu(args) => gpu::run(&args),
     }
 }

@@ -1,3 +1,36 @@
 //! The CUDA driver surface: context, PTX modules, packed-argument launches, stream capture and
 //! CUDA graphs (with conditional nodes). Every `unsafe` CUDA call of the crate lives in this
 //! folder, each with a `// SAFETY:` line; the rest of the crate uses the safe types here.
+//!
+//! - [`Gpu`] opens a device (never panics without a driver) and owns a capture-ready stream.
+//! - [`ptx`] prepares PTX text for the driver (pure, CPU-tested).
+//! - [`Module`]/[`Function`]: loaded PTX and its kernels.
+//! - [`DeviceMemory`]/[`PinnedHostMemory`]: raw allocations addressed by graphs.
+//! - [`Stream`]: launches, memsets, copies, and [`Stream::capture`] into a [`Graph`], with
+//!   [`Stream::capture_while`] and [`Stream::capture_if`] for conditional nodes.
+//! - [`Event`] timing and [`NvtxRange`] profiler ranges.
+
+mod conditional;
+mod context;
+mod error;
+mod event;
+mod graph;
+mod memory;
+mod module;
+mod nvtx;
+pub mod ptx;
+mod stream;
+
+pub use conditional::{
+    Branch, GRAPH_CONDITIONAL_ENTRIES, GRAPH_CONDITIONAL_MODULE, GRAPH_CONDITIONAL_PTX,
+    SET_FROM_NEGATION_ENTRY, SET_FROM_VALUE_ENTRY, SET_PAIR_ENTRY,
+};
+pub use context::{Gpu, GpuInfo, MIN_DRIVER_VERSION, driver_library_present};
+pub use error::CudaError;
+pub use event::Event;
+pub use graph::Graph;
+pub use memory::{DeviceMemory, PinnedHostMemory};
+pub use module::{Function, Module};
+pub use nvtx::NvtxRange;
+pub use ptx::{PtxIsa, lower_ptx_version, prepare_ptx};
+pub use stream::Stream;

@@ -1,0 +1,53 @@
+//! Timing events.
+
+use cudarc::driver::{CudaEvent, sys};
+
+use super::error::from_cudarc;
+use super::{CudaError, Gpu, Stream};
+
+/// A CUDA event with timing enabled.
+pub struct Event {
+    inner: CudaEvent,
+}
+
+impl std::fmt::Debug for Event {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Event({:p})", self.inner.cu_event())
+    }
+}
+
+impl Gpu {
+    /// A new timing event.
+    pub fn new_event(&self) -> Result<Event, CudaError> {
+        let inner = self
+            .shared
+            .ctx
+            .new_event(Some(sys::CUevent_flags::CU_EVENT_DEFAULT))
+            .map_err(from_cudarc("cuEventCreate"))?;
+        Ok(Event { inner })
+    }
+}
+
+impl Event {
+    /// Records the point after all work queued so far on `stream`.
+    pub fn record(&self, stream: &Stream) -> Result<(), CudaError> {
+        self.inner
+            .record(&stream.inner.cu)
+            .map_err(from_cudarc("cuEventRecord"))
+    }
+
+    /// Waits for the recorded work to finish.
+    pub fn synchronize(&self) -> Result<(), CudaError> {
+        self.inner
+            .synchronize()
+            .map_err(from_cudarc("cuEventSynchronize"))
+    }
+
+    /// Milliseconds from `self` (start) to `end`, after waiting for both. Call as
+    /// `start.elapsed_ms(&end)` or `Event::elapsed_ms(&start, &end)`.
+    pub fn elapsed_ms(&self, end: &Event) -> Result<f32, CudaError> {
+        self.inner
+            .elapsed_ms(&end.inner)
+            .map_err(from_cudarc("cuEventElapsedTime"))
+    }
+}
