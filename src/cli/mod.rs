@@ -1,14 +1,18 @@
 //! The command line: `instantmimic <command> ...`.
 
-mod plan;
-mod motion;
 mod gpu;
+mod motion;
+mod plan;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser, Debug)]
-#[command(name = "instantmimic", version, about = "Physics-based humanoid skills trained in seconds on one GPU")]
+#[command(
+    name = "instantmimic",
+    version,
+    about = "Physics-based humanoid skills trained in seconds on one GPU"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
