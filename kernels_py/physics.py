@@ -1,0 +1,181 @@
+"""The physics model and plan definitions shared by `capture.py` (GPU) and `compile.py` (CPU).
+
+Both scripts must build the *same* MuJoCo Warp modules: Warp names each module by a hash of its
+source and options, and the Rust runtime finds a plan's PTX by that name. So every Warp setting
+that changes generated code is set here, once, before Warp initializes (`configure_warp`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import pathlib
+import tomllib
+
+REPO = pathlib.Path(__file__).resolve().parent.parent
+
+# PTX is generated for the oldest supported GPU (Ampere, sm_80). The driver JIT-compiles it for
+# the GPU it runs on, so one set of PTX serves sm_80 .. sm_120 (CI assembles it for each).
+PTX_ARCH = 80
+
+# Keys of configs/physics/*.toml, with their types. Unknown keys are an error.
+PHYSICS_KEYS = {
+    "character": str,
+    "timestep": float,
+    "solver": str,
+    "iterations": int,
+    "ls_iterations": int,
+    "cone": str,
+    "integrator": str,
+    "nconmax": int,
+    "njmax": int,
+    "graph_conditional": bool,
+}
+
+# The plans the runtime needs. `step` is one mj_step; `kinematics` is what a reset needs before
+# observations are built: body poses (kinematics), centers of mass and inertias (com_pos), and
+# body velocities (com_vel).
+PLAN_NAMES = ("step", "kinematics")
+
+
+class ConfigError(ValueError):
+    """A physics config that cannot be used; the message names the file and the key."""
+
+
+def load_physics_config(path: str | pathlib.Path) -> dict:
+    path = pathlib.Path(path)
+    try:
+        with open(path, "rb") as f:
+            raw = tomllib.load(f)
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise ConfigError(f"{path}: {e}") from e
+    for key in raw:
+        if key not in PHYSICS_KEYS:
+            raise ConfigError(f"{path}: unknown key `{key}` (known: {', '.join(PHYSICS_KEYS)})")
+    for key, typ in PHYSICS_KEYS.items():
+        if key not in raw:
+            raise ConfigError(f"{path}: missing key `{key}`")
+        value = raw[key]
+        if typ is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if not isinstance(value, typ) or (typ is int and isinstance(value, bool)):
+            raise ConfigError(f"{path}: `{key}` must be a {typ.__name__}, got {value!r}")
+        raw[key] = value
+    choices = {
+        "solver": ("newton", "cg"),
+        "cone": ("pyramidal", "elliptic"),
+        "integrator": ("euler", "implicitfast", "implicit", "rk4"),
+    }
+    for key, allowed in choices.items():
+        if raw[key] not in allowed:
+            raise ConfigError(f"{path}: `{key}` must be one of {allowed}, got {raw[key]!r}")
+    for key in ("iterations", "ls_iterations", "nconmax", "njmax"):
+        if raw[key] <= 0:
+            raise ConfigError(f"{path}: `{key}` must be positive, got {raw[key]}")
+    if not 0.0 < raw["timestep"] <= 0.05:
+        raise ConfigError(f"{path}: `timestep` must be in (0, 0.05] s, got {raw['timestep']}")
+    return raw
+
+
+def configure_warp():
+    """Warp settings that change generated code. Call before anything creates a Warp module."""
+    import warp as wp
+
+    wp.config.quiet = True
+    # Capture exports PTX (not CUBIN) for PTX_ARCH, the same text compile.py writes.
+    wp.config.cuda_output = "ptx"
+    wp.config.ptx_target_arch = PTX_ARCH
+    # libmathdx tile kernels link LTO code and come out as CUBIN only; Warp's own tile
+    # implementations give portable PTX.
+    wp.config.enable_mathdx_gemm = False
+    wp.config.enable_mathdx_solver = False
+    wp.config.enable_mathdx_fft = False
+    return wp
+
+
+def build_mjmodel(config: dict):
+    import mujoco
+
+    mjm = mujoco.MjModel.from_xml_path(str(REPO / config["character"]))
+    mjm.opt.timestep = config["timestep"]
+    mjm.opt.iterations = config["iterations"]
+    mjm.opt.ls_iterations = config["ls_iterations"]
+    mjm.opt.solver = {"newton": mujoco.mjtSolver.mjSOL_NEWTON, "cg": mujoco.mjtSolver.mjSOL_CG}[config["solver"]]
+    mjm.opt.cone = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}[
+        config["cone"]
+    ]
+    mjm.opt.integrator = {
+        "euler": mujoco.mjtIntegrator.mjINT_EULER,
+        "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
+        "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
+        "rk4": mujoco.mjtIntegrator.mjINT_RK4,
+    }[config["integrator"]]
+    return mjm
+
+
+def make_model_data(config: dict, nworld: int):
+    """Model and Data on the current Warp device, in the reset state."""
+    import mujoco
+    import mujoco_warp as mjw
+
+    mjm = build_mjmodel(config)
+    mjd = mujoco.MjData(mjm)
+    mujoco.mj_forward(mjm, mjd)
+    m = mjw.put_model(mjm)
+    m.opt.graph_conditional = config["graph_conditional"]
+    d = mjw.put_data(mjm, mjd, nworld=nworld, nconmax=config["nconmax"], njmax=config["njmax"])
+    return mjm, m, d
+
+
+def run_plan(name: str, m, d):
+    """The MuJoCo Warp calls one plan records."""
+    import mujoco_warp as mjw
+    from mujoco_warp._src import smooth
+
+    if name == "step":
+        mjw.step(m, d)
+    elif name == "kinematics":
+        mjw.fwd_kinematics(m, d)
+        smooth.com_vel(m, d)
+    else:
+        raise ValueError(f"unknown plan {name!r} (known: {', '.join(PLAN_NAMES)})")
+
+
+def named_arrays(m, d) -> dict:
+    """Every Warp array of Model and Data, by a stable dotted name ("m.body_pos", "d.efc.J").
+
+    Plans bind every array by name, so several plans share one buffer per name and the Rust
+    runtime finds `d.qpos`, `d.xpos`, ... without knowing region ids.
+    """
+    import warp as wp
+
+    out = {}
+
+    def walk(prefix, obj, depth):
+        if depth > 4 or not dataclasses.is_dataclass(obj):
+            return
+        for field in dataclasses.fields(obj):
+            value = getattr(obj, field.name, None)
+            name = f"{prefix}.{field.name}"
+            if isinstance(value, wp.array):
+                if value.ptr is not None and value.size > 0:
+                    out[name] = value
+            elif dataclasses.is_dataclass(value):
+                walk(name, value, depth + 1)
+
+    walk("m", m, 0)
+    walk("d", d, 0)
+    return out
+
+
+def physics_info(config: dict, mjm) -> dict:
+    """What a plan's consumer needs to know about the model it was captured from."""
+    import hashlib
+
+    return {
+        "config": config,
+        "character_sha256": hashlib.sha256((REPO / config["character"]).read_bytes()).hexdigest(),
+        "nq": int(mjm.nq),
+        "nv": int(mjm.nv),
+        "nu": int(mjm.nu),
+        "nbody": int(mjm.nbody),
+    }
