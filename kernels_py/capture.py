@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import pathlib
 import shutil
 import sys
@@ -94,7 +95,10 @@ def main(argv=None) -> int:
 
     wp = physics.configure_warp()
     # A private kernel cache: every module is compiled by this run, with the settings above.
-    wp.config.kernel_cache_dir = tempfile.mkdtemp(prefix="instantmimic-warp-cache-")
+    # A private kernel cache unless INSTANTMIMIC_WARP_CACHE names one to share between runs.
+    wp.config.kernel_cache_dir = os.environ.get("INSTANTMIMIC_WARP_CACHE") or tempfile.mkdtemp(
+        prefix="instantmimic-warp-cache-"
+    )
     wp.init()
     if not wp.is_cuda_available():
         print("error: capture needs a CUDA GPU (plans recorded on the CPU do not describe CUDA launches)",
@@ -120,7 +124,8 @@ def main(argv=None) -> int:
         "plans": plans,
     }
     (out / "manifest.json").write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
-    shutil.rmtree(wp.config.kernel_cache_dir, ignore_errors=True)
+    if not os.environ.get("INSTANTMIMIC_WARP_CACHE"):
+        shutil.rmtree(wp.config.kernel_cache_dir, ignore_errors=True)
     print(f"captured {len(plans)} plans in {time.time() - started:.1f} s -> {out}", flush=True)
     return 0
 

@@ -5,10 +5,12 @@
 //! - [`cuda`]: the driver (context, modules, launches, graphs). The only place with `unsafe` CUDA calls.
 //! - [`plan`]: the `.wrp` plan format: reader, validation, packing, replay into CUDA graphs.
 //! - [`motion`]: DeepMimic reference motions and their kinematics.
+//! - [`bench`]: benchmarks of physics (and later the whole loop), for `instantmimic bench`.
 //! - [`assets`]: PTX and plans embedded in the binary at build time.
 //! - [`cli`]: the command line.
 
 pub mod assets;
+pub mod bench;
 pub mod cli;
 pub mod cuda;
 pub mod motion;

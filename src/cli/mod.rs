@@ -2,6 +2,7 @@
 
 mod gpu;
 mod motion;
+mod bench;
 mod plan;
 
 use anyhow::Result;
@@ -20,6 +21,8 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Throughput benchmarks on the GPU.
+    Bench(bench::BenchArgs),
     /// Inspect or pack physics plans (.wrp / .wrp.zst).
     Plan(plan::PlanArgs),
     /// Reference motions: inspect DeepMimic clips and their kinematics.
@@ -32,6 +35,7 @@ enum Command {
 pub fn run() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
+        Command::Bench(args) => bench::run(args),
         Command::Plan(args) => plan::run(args),
         Command::Motion(args) => motion::run(args),
         Command::Gpu(args) => gpu::run(&args),

@@ -210,6 +210,30 @@ impl Stream {
             .check_with(|| format!("cuMemsetD32Async ({count} words at {dst:#x})"))
     }
 
+    /// Sets the first 32-bit word of each of `rows` rows, `pitch` bytes apart, starting at `dst`
+    /// (4-byte aligned) to `value`. With one call per word of an element, this fills an array
+    /// of multi-word elements with one value (Warp's `memtile`) using memset nodes only.
+    pub fn memset_u32_strided(
+        &self,
+        dst: u64,
+        pitch: usize,
+        value: u32,
+        rows: usize,
+    ) -> Result<(), CudaError> {
+        check_aligned("Stream::memset_u32_strided", dst, 4)?;
+        if !pitch.is_multiple_of(4) || pitch == 0 {
+            return Err(CudaError::InvalidArgument {
+                operation: "Stream::memset_u32_strided",
+                reason: format!("pitch {pitch} must be a positive multiple of 4 bytes"),
+            });
+        }
+        self.bind()?;
+        // SAFETY: as in memset_u8; the address is 4-byte aligned and the pitch a multiple of 4,
+        // as cuMemsetD2D32Async requires; width 1 word per row.
+        unsafe { sys::cuMemsetD2D32Async(dst, pitch, value, 1, rows, self.cu_stream()) }
+            .check_with(|| format!("cuMemsetD2D32Async ({rows} rows of pitch {pitch} at {dst:#x})"))
+    }
+
     /// Copies `bytes` from device address `src` to device address `dst`.
     pub fn memcpy_dtod(&self, dst: u64, src: u64, bytes: usize) -> Result<(), CudaError> {
         self.bind()?;

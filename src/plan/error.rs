@@ -121,6 +121,10 @@ pub enum PlanError {
     #[error("launch of kernel {kernel_key:?}: {problem}")]
     Launch { kernel_key: String, problem: String },
 
+    /// A plan, manifest or module file that cannot be found or read.
+    #[error("{0}")]
+    Asset(String),
+
     /// The caller's resolver has no device address for a region pointer.
     #[error("no device address for region {region} at offset {offset}: {reason}")]
     UnresolvedPointer {

@@ -154,12 +154,29 @@ fn put_u64(buf: &mut [u8], at: usize, value: u64) -> bool {
     }
 }
 
+/// A packed parameter buffer and where each parameter starts in it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PackedLaunchArgs {
+    pub bytes: Vec<u8>,
+    /// Byte offset of each parameter: the launch bounds (always 0), then each argument blob.
+    /// Replay compares these with the loaded kernel's parameter layout.
+    pub offsets: Vec<usize>,
+}
+
 /// The parameter buffer for `CU_LAUNCH_PARAM_BUFFER_POINTER`. `resolve(region, offset)` gives
 /// the device address of a byte of a region (or an error). Mesh handles are refused.
 pub fn pack_launch_args(
     launch: &KernelLaunch,
     resolve: impl Fn(u32, u64) -> Result<u64>,
 ) -> Result<Vec<u8>> {
+    packed_launch_args(launch, resolve).map(|packed| packed.bytes)
+}
+
+/// [`pack_launch_args`], also reporting where each parameter starts.
+pub fn packed_launch_args(
+    launch: &KernelLaunch,
+    resolve: impl Fn(u32, u64) -> Result<u64>,
+) -> Result<PackedLaunchArgs> {
     let ndim = (launch.ndim as usize).clamp(1, LAUNCH_MAX_DIMS);
     let (size_offset, coord_mult_offset, bounds_size) = launch_bounds_layout(ndim);
     let mut buf = vec![0u8; bounds_size];
@@ -180,6 +197,7 @@ pub fn pack_launch_args(
     };
     put_u64(&mut buf, size_offset, launch.size);
     put_u64(&mut buf, coord_mult_offset, coord_mult);
+    let mut offsets = vec![0];
 
     let params: Vec<_> = if launch.is_forward {
         launch.params.iter().collect()
@@ -201,6 +219,7 @@ pub fn pack_launch_args(
         }
         let start = align_up(buf.len(), align);
         buf.resize(start, 0);
+        offsets.push(start);
         let blob = launch.value(param).ok_or_else(|| {
             launch_error(
                 launch,
@@ -228,7 +247,10 @@ pub fn pack_launch_args(
             }
         }
     }
-    Ok(buf)
+    Ok(PackedLaunchArgs {
+        bytes: buf,
+        offsets,
+    })
 }
 
 #[cfg(test)]

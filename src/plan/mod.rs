@@ -19,6 +19,9 @@ mod model;
 mod ops;
 mod pack;
 mod reader;
+pub mod replay;
+mod simulation;
+mod store;
 mod summary;
 mod validate;
 mod writer;
@@ -27,7 +30,9 @@ pub use error::{PlanError, Result};
 pub use format::{
     ArchSuffix, BinaryKind, DeviceType, FallbackReason, OpKind, ReductionKind, ScalarType,
 };
-pub use launch_args::{LaunchDims, launch_dims, pack_launch_args};
+pub use launch_args::{
+    LaunchDims, PackedLaunchArgs, launch_dims, pack_launch_args, packed_launch_args,
+};
 pub use model::{
     Binding, CompileRecipe, HandleLocation, Kernel, Mesh, Module, Plan, PlanHeader, PlanInfo,
     Region,
@@ -42,4 +47,6 @@ pub use pack::{
     load_plan_with_limit, pack,
 };
 pub use reader::MAX_NESTING_DEPTH;
+pub use simulation::{Buffer, Element, Simulation, SimulationError};
+pub use store::{MANIFEST_PATH, MJWARP_PTX_DIR, PlanEntry, PlanManifest, PlanStore};
 pub use summary::{BindingSummary, PlanSummary};

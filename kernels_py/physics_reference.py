@@ -1,0 +1,176 @@
+"""References for the Rust replay of the physics plans (needs a CUDA GPU and warp-lang).
+
+    python kernels_py/physics_reference.py exact  --nworld 4096 --out DIR
+    python kernels_py/physics_reference.py timing --nworld 4096 16384 --steps 1000 --warmup 200
+
+`exact` builds the simulation exactly as capture.py does before capturing (same model, same
+warm-up, then mjw.reset_data: the state a plan snapshots), sets seeded initial states and
+controls, steps it with MuJoCo Warp and writes the initial state and qpos/qvel after chosen
+step counts as little-endian f32 files with `reference.json`. Cases: `contact` (the humanoid
+touching the floor, perturbed pose and velocities) and `freefall` (high above the floor, no
+contact). tests/gpu_physics.rs replays the committed plan from the same state and compares.
+
+`timing` measures Warp's own replay of one mjw.step (wp.capture_launch of a captured graph),
+in steps per second (worlds x graph launches / seconds), the number the Rust bench is held to.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import sys
+import tempfile
+
+import numpy as np
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import physics  # noqa: E402
+
+
+def setup(config: dict, nworld: int):
+    """Model and Data in the state a captured plan starts from (see capture.capture_plans)."""
+    import mujoco_warp as mjw
+    import warp as wp
+
+    mjm, m, d = physics.make_model_data(config, nworld)
+    for name in physics.PLAN_NAMES:
+        physics.run_plan(name, m, d)
+    mjw.reset_data(m, d)
+    wp.synchronize()
+    return mjm, m, d
+
+
+def initial_state(mjm, nworld: int, case: str, seed: int):
+    rng = np.random.default_rng(seed)
+    qpos = np.tile(mjm.qpos0.astype(np.float64), (nworld, 1))
+    qpos[:, 2] = 0.87 if case == "contact" else 5.0
+    # Perturb every ball/free quaternion and hinge a little, and renormalize.
+    for j in range(mjm.njnt):
+        adr = mjm.jnt_qposadr[j]
+        if mjm.jnt_type[j] in (0, 1):  # free (quaternion after position), ball
+            q0 = adr + (3 if mjm.jnt_type[j] == 0 else 0)
+            qpos[:, q0:q0 + 4] += rng.normal(0.0, 0.05, (nworld, 4))
+            qpos[:, q0:q0 + 4] /= np.linalg.norm(qpos[:, q0:q0 + 4], axis=1, keepdims=True)
+        else:
+            lo, hi = mjm.jnt_range[j]
+            qpos[:, adr] = np.clip(qpos[:, adr] + rng.normal(0.0, 0.2, nworld), lo, hi)
+    qvel = rng.normal(0.0, 0.5, (nworld, mjm.nv))
+    ctrl = rng.uniform(-0.3, 0.3, (nworld, mjm.nu)) * mjm.actuator_ctrlrange[:, 1]
+    return qpos.astype(np.float32), qvel.astype(np.float32), ctrl.astype(np.float32)
+
+
+def run_exact(config: dict, nworld: int, out: pathlib.Path, seed: int) -> dict:
+    import mujoco_warp as mjw
+    import warp as wp
+
+    cases = {"contact": [1, 100], "freefall": [1, 20]}
+    summary = {"nworld": nworld, "seed": seed, "cases": []}
+    for case, checkpoints in cases.items():
+        mjm, m, d = setup(config, nworld)
+        qpos, qvel, ctrl = initial_state(mjm, nworld, case, seed)
+        wp.copy(d.qpos, wp.array(qpos, dtype=float))
+        wp.copy(d.qvel, wp.array(qvel, dtype=float))
+        wp.copy(d.ctrl, wp.array(ctrl, dtype=float))
+        files = {}
+        for name, arr in (("qpos", qpos), ("qvel", qvel), ("ctrl", ctrl)):
+            path = out / f"{case}_init_{name}.f32"
+            arr.astype("<f4").tofile(path)
+            files[f"init_{name}"] = path.name
+        with wp.ScopedCapture() as capture:
+            mjw.step(m, d)
+        done = 0
+        steps = []
+        for target in checkpoints:
+            while done < target:
+                wp.capture_launch(capture.graph)
+                done += 1
+            wp.synchronize()
+            entry = {"steps": target}
+            for name in ("qpos", "qvel"):
+                path = out / f"{case}_step{target}_{name}.f32"
+                getattr(d, name).numpy().astype("<f4").tofile(path)
+                entry[name] = path.name
+            entry["ncon"] = int(d.nacon.numpy()[0]) if hasattr(d, "nacon") else None
+            steps.append(entry)
+        summary["cases"].append({"name": case, "files": files, "checkpoints": steps})
+        print(f"exact reference {case}: {nworld} worlds, checkpoints {checkpoints}, "
+              f"contacts at the end: {steps[-1]['ncon']}", flush=True)
+    return summary
+
+
+def run_timing(config: dict, nworlds: list[int], steps: int, warmup: int) -> list[dict]:
+    import mujoco_warp as mjw
+    import warp as wp
+
+    rows = []
+    for nworld in nworlds:
+        for conditional in (True, False):
+            cfg = dict(config, graph_conditional=conditional)
+            _, m, d = setup(cfg, nworld)
+            with wp.ScopedCapture() as capture:
+                mjw.step(m, d)
+            for _ in range(warmup):
+                wp.capture_launch(capture.graph)
+            start = wp.Event(enable_timing=True)
+            end = wp.Event(enable_timing=True)
+            wp.record_event(start)
+            for _ in range(steps):
+                wp.capture_launch(capture.graph)
+            wp.record_event(end)
+            wp.synchronize()
+            seconds = wp.get_event_elapsed_time(start, end) / 1000.0
+            row = {
+                "nworld": nworld,
+                "graph_conditional": conditional,
+                "steps": steps,
+                "seconds": seconds,
+                "steps_per_s": nworld * steps / seconds,
+            }
+            rows.append(row)
+            print(f"warp capture_launch: {nworld:6d} worlds, graph_conditional={conditional!s:5}: "
+                  f"{row['steps_per_s'] / 1e6:.3f} M steps/s ({seconds * 1e3 / steps:.3f} ms/step)", flush=True)
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("mode", choices=("exact", "timing"))
+    parser.add_argument("--physics", default=str(physics.REPO / "configs/physics/default.toml"))
+    parser.add_argument("--nworld", type=int, nargs="+", default=[4096])
+    parser.add_argument("--out", help="output directory (exact)")
+    parser.add_argument("--json", help="write the timing rows here (timing)")
+    parser.add_argument("--seed", type=int, default=7)
+    parser.add_argument("--steps", type=int, default=1000)
+    parser.add_argument("--warmup", type=int, default=200)
+    args = parser.parse_args(argv)
+
+    config = physics.load_physics_config(args.physics)
+    wp = physics.configure_warp()
+    # A private kernel cache unless INSTANTMIMIC_WARP_CACHE names one to share between runs.
+    wp.config.kernel_cache_dir = os.environ.get("INSTANTMIMIC_WARP_CACHE") or tempfile.mkdtemp(
+        prefix="instantmimic-warp-cache-"
+    )
+    wp.init()
+    if not wp.is_cuda_available():
+        print("error: this script needs a CUDA GPU", file=sys.stderr)
+        return 1
+    with wp.ScopedDevice("cuda:0"):
+        if args.mode == "exact":
+            if not args.out:
+                print("error: exact needs --out", file=sys.stderr)
+                return 2
+            out = pathlib.Path(args.out)
+            out.mkdir(parents=True, exist_ok=True)
+            summary = run_exact(config, args.nworld[0], out, args.seed)
+            (out / "reference.json").write_text(json.dumps(summary, indent=1) + "\n")
+        else:
+            rows = run_timing(config, args.nworld, args.steps, args.warmup)
+            if args.json:
+                pathlib.Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

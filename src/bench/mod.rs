@@ -1,0 +1,5 @@
+//! Benchmarks of the real thing, shared by `instantmimic bench ...` and `benches/`.
+
+mod physics;
+
+pub use physics::{PhysicsBench, bench_physics};

@@ -1,0 +1,74 @@
+//! Physics throughput: replays of the step plan's CUDA graph, timed with CUDA events.
+//!
+//! Measured the way Warp's own replay is measured (kernels_py/physics_reference.py timing) so
+//! the two compare: from the plan's initial state (the model's reset pose, falling to the floor
+//! with zero controls), `warmup` graph launches, then `steps` launches between two events.
+//! One launch is one `mj_step` of every world; steps/s counts world-steps.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::cuda::{Gpu, NvtxRange};
+use crate::plan::{PlanStore, Simulation, SimulationError};
+
+/// The result of [`bench_physics`].
+#[derive(Clone, Debug, Serialize)]
+pub struct PhysicsBench {
+    pub gpu: String,
+    pub nworld: u32,
+    pub steps: u32,
+    pub warmup: u32,
+    /// Loading the plan (allocation, upload, module JIT, graph capture and instantiation).
+    pub load_seconds: f64,
+    pub seconds: f64,
+    pub steps_per_s: f64,
+    /// Node kinds of the step graph, conditional bodies included.
+    pub graph_nodes: BTreeMap<String, usize>,
+}
+
+/// Times `steps` replays of the `step` plan for `nworld` worlds after `warmup` replays.
+pub fn bench_physics(
+    gpu: &Gpu,
+    store: &PlanStore,
+    nworld: u32,
+    steps: u32,
+    warmup: u32,
+) -> Result<PhysicsBench, SimulationError> {
+    let started = Instant::now();
+    let sim = Simulation::load(gpu, store, nworld, &["step"])?;
+    gpu.stream().synchronize()?;
+    let load_seconds = started.elapsed().as_secs_f64();
+    let graph_nodes = sim.graph("step")?.node_counts()?;
+
+    let stream = gpu.stream();
+    {
+        let _range = NvtxRange::push("physics warmup");
+        for _ in 0..warmup {
+            sim.run("step")?;
+        }
+    }
+    let start = gpu.new_event()?;
+    let end = gpu.new_event()?;
+    {
+        let _range = NvtxRange::push("physics timed");
+        start.record(stream)?;
+        for _ in 0..steps {
+            sim.run("step")?;
+        }
+        end.record(stream)?;
+    }
+    end.synchronize()?;
+    let seconds = f64::from(start.elapsed_ms(&end)?) / 1000.0;
+    Ok(PhysicsBench {
+        gpu: gpu.info().name.clone(),
+        nworld,
+        steps,
+        warmup,
+        load_seconds,
+        seconds,
+        steps_per_s: f64::from(nworld) * f64::from(steps) / seconds,
+        graph_nodes,
+    })
+}

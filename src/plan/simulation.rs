@@ -1,0 +1,391 @@
+//! [`Simulation`]: MuJoCo Warp physics for `nworld` worlds, replayed from plans.
+//!
+//! Loading a plan allocates its memory regions and uploads their initial contents. Regions
+//! bound to a name (every Model and Data array: `m.body_pos`, `d.qpos`, `d.efc.J`, ...) are
+//! shared by name across the plans of one simulation, so the `kinematics` plan reads the state
+//! the `step` plan writes. The first plan to bind a name allocates it and provides its initial
+//! contents; later plans must agree on its size. Unnamed regions (scratch, in-graph
+//! allocations) are private to their plan. Each plan is prepared once (see [`super::replay`])
+//! and captured into its own CUDA graph.
+
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::sync::Arc;
+
+use thiserror::Error;
+
+use crate::cuda::{
+    CudaError, DeviceMemory, Function, Gpu, Graph, Module, PinnedHostMemory, Stream,
+};
+
+use super::error::PlanError;
+use super::format::DeviceType;
+use super::model::{Plan, PlanInfo};
+use super::replay::{PreparedOp, ReplayContext, prepare_ops, record_ops};
+use super::store::PlanStore;
+
+/// Errors of loading and running plans on a GPU.
+#[derive(Debug, Error)]
+pub enum SimulationError {
+    #[error(transparent)]
+    Plan(#[from] PlanError),
+    #[error(transparent)]
+    Cuda(#[from] CudaError),
+    #[error("plan `{plan}`: {problem}")]
+    Incompatible { plan: String, problem: String },
+    #[error(
+        "no buffer named `{name}` (names look like `d.qpos` or `m.body_pos`; `instantmimic plan inspect` lists them)"
+    )]
+    NoBuffer { name: String },
+    #[error("buffer `{name}` has {bytes} bytes, not a whole number of {elem}-byte elements")]
+    BufferElement {
+        name: String,
+        bytes: usize,
+        elem: usize,
+    },
+    #[error("buffer `{name}` holds {len} elements; writing {count} at {offset} does not fit")]
+    BufferRange {
+        name: String,
+        len: usize,
+        offset: usize,
+        count: usize,
+    },
+    #[error("no plan `{0}` is loaded in this simulation")]
+    NoPlan(String),
+}
+
+/// A plan ready to run: its prepared operations, its graph and what they point into.
+struct LoadedPlan {
+    info: Option<PlanInfo>,
+    ops: Vec<PreparedOp>,
+    pinned: Vec<PinnedHostMemory>,
+    graph: Graph,
+    /// Every region's memory (shared named ones included), kept alive as long as the graph.
+    _regions: Vec<Arc<DeviceMemory>>,
+}
+
+/// Physics for `nworld` worlds: shared named buffers and the loaded plans.
+pub struct Simulation {
+    gpu: Gpu,
+    nworld: u32,
+    named: BTreeMap<String, Arc<DeviceMemory>>,
+    modules: HashMap<String, Module>,
+    functions: HashMap<(String, String), Function>,
+    plans: BTreeMap<String, LoadedPlan>,
+}
+
+/// A scalar type a buffer can be read and written as (little-endian, as on every CUDA device).
+pub trait Element: Copy + Default {
+    const SIZE: usize;
+    fn from_le(bytes: &[u8]) -> Self;
+    fn write_le(self, out: &mut Vec<u8>);
+}
+
+macro_rules! element {
+    ($($t:ty),*) => {$(
+        impl Element for $t {
+            const SIZE: usize = std::mem::size_of::<$t>();
+            fn from_le(bytes: &[u8]) -> Self {
+                let mut raw = [0u8; std::mem::size_of::<$t>()];
+                raw.copy_from_slice(&bytes[..Self::SIZE]);
+                <$t>::from_le_bytes(raw)
+            }
+            fn write_le(self, out: &mut Vec<u8>) {
+                out.extend_from_slice(&self.to_le_bytes());
+            }
+        }
+    )*};
+}
+element!(f32, f64, i32, u32, i64, u64, u8, i8, u16, i16);
+
+/// A named device buffer viewed as elements of `T`.
+pub struct Buffer<'a, T: Element> {
+    name: &'a str,
+    memory: &'a DeviceMemory,
+    _t: std::marker::PhantomData<T>,
+}
+
+impl<T: Element> Buffer<'_, T> {
+    /// Number of elements.
+    pub fn len(&self) -> usize {
+        self.memory.len() / T::SIZE
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Device address of element 0, for kernels of our own that read or write the buffer.
+    pub fn device_ptr(&self) -> u64 {
+        self.memory.device_ptr()
+    }
+
+    /// Copies the whole buffer to the host (waits for the simulation's stream).
+    pub fn read(&self) -> Result<Vec<T>, SimulationError> {
+        let bytes = self.memory.to_vec()?;
+        Ok(bytes.chunks_exact(T::SIZE).map(T::from_le).collect())
+    }
+
+    /// Writes `values` at element `offset` (waits for the simulation's stream).
+    pub fn write_at(&self, offset: usize, values: &[T]) -> Result<(), SimulationError> {
+        if offset
+            .checked_add(values.len())
+            .is_none_or(|end| end > self.len())
+        {
+            return Err(SimulationError::BufferRange {
+                name: self.name.to_string(),
+                len: self.len(),
+                offset,
+                count: values.len(),
+            });
+        }
+        let mut bytes = Vec::with_capacity(values.len() * T::SIZE);
+        for v in values {
+            v.write_le(&mut bytes);
+        }
+        self.memory.copy_from_host(offset * T::SIZE, &bytes)?;
+        Ok(())
+    }
+
+    /// Writes the whole buffer.
+    pub fn write(&self, values: &[T]) -> Result<(), SimulationError> {
+        if values.len() != self.len() {
+            return Err(SimulationError::BufferRange {
+                name: self.name.to_string(),
+                len: self.len(),
+                offset: 0,
+                count: values.len(),
+            });
+        }
+        self.write_at(0, values)
+    }
+}
+
+impl Simulation {
+    /// Loads the plans `names` captured for `nworld` worlds from `store`, in order (the first
+    /// provides the initial contents of shared buffers), and captures a graph for each.
+    pub fn load(
+        gpu: &Gpu,
+        store: &PlanStore,
+        nworld: u32,
+        names: &[&str],
+    ) -> Result<Simulation, SimulationError> {
+        let mut sim = Simulation {
+            gpu: gpu.clone(),
+            nworld,
+            named: BTreeMap::new(),
+            modules: HashMap::new(),
+            functions: HashMap::new(),
+            plans: BTreeMap::new(),
+        };
+        for name in names {
+            let plan = store.plan(name, nworld)?;
+            sim.add_plan(name, plan, store)?;
+        }
+        Ok(sim)
+    }
+
+    pub fn gpu(&self) -> &Gpu {
+        &self.gpu
+    }
+
+    pub fn nworld(&self) -> u32 {
+        self.nworld
+    }
+
+    /// Names of the shared buffers.
+    pub fn buffer_names(&self) -> impl Iterator<Item = &str> {
+        self.named.keys().map(String::as_str)
+    }
+
+    /// The buffer bound to `name` (e.g. `d.qpos`), as elements of `T`.
+    pub fn buffer<'a, T: Element>(
+        &'a self,
+        name: &'a str,
+    ) -> Result<Buffer<'a, T>, SimulationError> {
+        let memory = self
+            .named
+            .get(name)
+            .ok_or_else(|| SimulationError::NoBuffer {
+                name: name.to_string(),
+            })?;
+        if memory.len() % T::SIZE != 0 {
+            return Err(SimulationError::BufferElement {
+                name: name.to_string(),
+                bytes: memory.len(),
+                elem: T::SIZE,
+            });
+        }
+        Ok(Buffer {
+            name,
+            memory,
+            _t: std::marker::PhantomData,
+        })
+    }
+
+    /// The [`PlanInfo`] a loaded plan was packed with.
+    pub fn plan_info(&self, plan: &str) -> Option<&PlanInfo> {
+        self.plans.get(plan).and_then(|p| p.info.as_ref())
+    }
+
+    fn loaded(&self, plan: &str) -> Result<&LoadedPlan, SimulationError> {
+        self.plans
+            .get(plan)
+            .ok_or_else(|| SimulationError::NoPlan(plan.to_string()))
+    }
+
+    /// Runs one replay of `plan` (its graph) on the GPU's stream. Asynchronous.
+    pub fn run(&self, plan: &str) -> Result<(), SimulationError> {
+        self.loaded(plan)?.graph.launch(self.gpu.stream())?;
+        Ok(())
+    }
+
+    /// The plan's own CUDA graph.
+    pub fn graph(&self, plan: &str) -> Result<&Graph, SimulationError> {
+        Ok(&self.loaded(plan)?.graph)
+    }
+
+    /// Queues `plan`'s operations on `stream`, typically inside a larger capture (a rollout
+    /// records the step plan once per substep). The simulation must outlive that graph.
+    pub fn record(&self, plan: &str, stream: &Stream) -> Result<(), SimulationError> {
+        let loaded = self.loaded(plan)?;
+        record_ops(&loaded.ops, stream, &loaded.pinned)?;
+        Ok(())
+    }
+
+    fn function(
+        &mut self,
+        store: &PlanStore,
+        file: &str,
+        entry: &str,
+    ) -> Result<Function, PlanError> {
+        let key = (file.to_string(), entry.to_string());
+        if let Some(f) = self.functions.get(&key) {
+            return Ok(f.clone());
+        }
+        if !self.modules.contains_key(file) {
+            let ptx = store.module_ptx(file)?;
+            let module = self
+                .gpu
+                .load_ptx(file, &ptx)
+                .map_err(|e| PlanError::Asset(format!("loading module {file}: {e}")))?;
+            self.modules.insert(file.to_string(), module);
+        }
+        let f = self.modules[file]
+            .function(entry)
+            .map_err(|e| PlanError::Asset(format!("module {file}: {e}")))?;
+        self.functions.insert(key, f.clone());
+        Ok(f)
+    }
+
+    fn add_plan(
+        &mut self,
+        name: &str,
+        mut plan: Plan,
+        store: &PlanStore,
+    ) -> Result<(), SimulationError> {
+        let incompatible = |problem: String| SimulationError::Incompatible {
+            plan: name.to_string(),
+            problem,
+        };
+        if plan.header.device != DeviceType::Cuda {
+            return Err(incompatible(
+                "it was captured on the CPU; plans must be captured on a CUDA device".into(),
+            ));
+        }
+        if let Some(info) = plan.info()
+            && info.nworld != self.nworld
+        {
+            return Err(incompatible(format!(
+                "it was captured for {} worlds, not {}",
+                info.nworld, self.nworld
+            )));
+        }
+        if self.plans.contains_key(name) {
+            return Err(incompatible("it is already loaded".into()));
+        }
+
+        // Names bound to each region of this plan.
+        let mut names_of: HashMap<u32, Vec<String>> = HashMap::new();
+        for b in &plan.bindings {
+            names_of.entry(b.region).or_default().push(b.name.clone());
+        }
+        let mut memories: HashMap<u32, Arc<DeviceMemory>> = HashMap::new();
+        for region in &mut plan.regions {
+            let names = names_of.get(&region.id).map(Vec::as_slice).unwrap_or(&[]);
+            let size = usize::try_from(region.size)
+                .map_err(|_| incompatible(format!("region {} is too large", region.id)))?;
+            let existing: Vec<&Arc<DeviceMemory>> =
+                names.iter().filter_map(|n| self.named.get(n)).collect();
+            let memory = match existing.first() {
+                Some(&shared) => {
+                    if existing.len() != names.len()
+                        || existing.iter().any(|m| !Arc::ptr_eq(m, shared))
+                    {
+                        return Err(incompatible(format!(
+                            "names {names:?} share one buffer in this plan but not in the \
+                             plans loaded before it"
+                        )));
+                    }
+                    if shared.len() != size {
+                        return Err(incompatible(format!(
+                            "it binds `{}` with {size} bytes, an earlier plan with {} bytes \
+                             (plans of one simulation must come from one capture)",
+                            names[0],
+                            shared.len()
+                        )));
+                    }
+                    shared.clone()
+                }
+                None => {
+                    let memory = Arc::new(self.gpu.alloc_zeroed(size)?);
+                    if let Some(data) = region.initial_data.take() {
+                        memory.copy_from_host(0, &data)?;
+                    }
+                    for n in names {
+                        self.named.insert(n.clone(), memory.clone());
+                    }
+                    memory
+                }
+            };
+            // Initial bytes are uploaded (or superseded by the first plan's): free the host copy.
+            region.initial_data = None;
+            memories.insert(region.id, memory);
+        }
+
+        let addresses: HashMap<u32, (u64, u64)> = memories
+            .iter()
+            .map(|(&id, m)| (id, (m.device_ptr(), m.len() as u64)))
+            .collect();
+        let (major, minor) = self.gpu.info().compute_capability;
+        let gpu = self.gpu.clone();
+        let mut pinned = Vec::new();
+        let ops = {
+            let mut loader = |file: &str, entry: &str| self.function(store, file, entry);
+            let alloc_pinned = |bytes: usize| gpu.alloc_pinned(bytes);
+            let mut ctx = ReplayContext {
+                plan: &plan,
+                device_arch: major * 10 + minor,
+                regions: &addresses,
+                function: &mut loader,
+                pinned: &mut pinned,
+                alloc_pinned: &alloc_pinned,
+                raised_smem: HashSet::new(),
+            };
+            prepare_ops(&mut ctx, &plan.ops, "")?
+        };
+        let stream = self.gpu.stream();
+        let graph = stream.capture(|s| record_ops(&ops, s, &pinned))?;
+        graph.upload(stream)?;
+        self.plans.insert(
+            name.to_string(),
+            LoadedPlan {
+                info: plan.info.take(),
+                ops,
+                pinned,
+                graph,
+                _regions: memories.into_values().collect(),
+            },
+        );
+        Ok(())
+    }
+}

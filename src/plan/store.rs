@@ -1,0 +1,145 @@
+//! Where plans and their PTX come from: the copies embedded in the binary at build time, or a
+//! directory with the same layout as the repository's `ptx/` (for plans captured by a user, e.g.
+//! for another world count):
+//!
+//! ```text
+//! plans/manifest.json      the captured plans: name, world count, file, modules
+//! plans/<name>_<N>.wrp.zst a packed plan (a raw .wrp is accepted too)
+//! mjwarp/<module>.ptx      the PTX of each MuJoCo Warp module, named as the plan records it
+//! ```
+
+use std::borrow::Cow;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use super::error::PlanError;
+use super::model::Plan;
+use super::pack::load_plan;
+
+/// Directory of MuJoCo Warp module PTX, relative to the store's root.
+pub const MJWARP_PTX_DIR: &str = "mjwarp";
+/// The plan manifest, relative to the store's root.
+pub const MANIFEST_PATH: &str = "plans/manifest.json";
+
+/// `plans/manifest.json`, as `kernels_py/capture.py` writes it.
+#[derive(Clone, Debug, Deserialize)]
+pub struct PlanManifest {
+    pub format: u32,
+    /// warp-lang version that captured the plans.
+    pub warp: String,
+    /// Physics options and model sizes the plans were captured with.
+    pub physics: serde_json::Value,
+    pub plans: Vec<PlanEntry>,
+}
+
+/// One captured plan.
+#[derive(Clone, Debug, Deserialize)]
+pub struct PlanEntry {
+    pub name: String,
+    pub nworld: u32,
+    /// File name under `plans/`.
+    pub file: String,
+}
+
+/// Embedded assets or a directory.
+#[derive(Clone, Debug)]
+pub enum PlanStore {
+    Embedded,
+    Directory(PathBuf),
+}
+
+impl PlanStore {
+    /// The embedded assets, or `dir` when given.
+    pub fn new(dir: Option<&Path>) -> PlanStore {
+        match dir {
+            Some(dir) => PlanStore::Directory(dir.to_path_buf()),
+            None => PlanStore::Embedded,
+        }
+    }
+
+    fn describe(&self) -> String {
+        match self {
+            PlanStore::Embedded => "the plans built into this binary".to_string(),
+            PlanStore::Directory(dir) => dir.display().to_string(),
+        }
+    }
+
+    /// A file by its path relative to the store's root.
+    pub fn read(&self, rel: &str) -> Result<Cow<'static, [u8]>, PlanError> {
+        match self {
+            PlanStore::Embedded => crate::assets::get(rel)
+                .map(Cow::Borrowed)
+                .ok_or_else(|| PlanError::Asset(format!("{rel} is not built into this binary"))),
+            PlanStore::Directory(dir) => {
+                let path = dir.join(rel);
+                std::fs::read(&path)
+                    .map(Cow::Owned)
+                    .map_err(|e| PlanError::Asset(format!("{}: {e}", path.display())))
+            }
+        }
+    }
+
+    /// The plan manifest.
+    pub fn manifest(&self) -> Result<PlanManifest, PlanError> {
+        let bytes = self.read(MANIFEST_PATH)?;
+        serde_json::from_slice(&bytes).map_err(|e| {
+            PlanError::Asset(format!(
+                "{MANIFEST_PATH} in {}: not a plan manifest: {e}",
+                self.describe()
+            ))
+        })
+    }
+
+    /// The plan `name` captured for `nworld` worlds.
+    pub fn plan(&self, name: &str, nworld: u32) -> Result<Plan, PlanError> {
+        let manifest = self.manifest()?;
+        let entry = manifest
+            .plans
+            .iter()
+            .find(|p| p.name == name && p.nworld == nworld)
+            .ok_or_else(|| {
+                let mut have: Vec<String> = manifest
+                    .plans
+                    .iter()
+                    .filter(|p| p.name == name)
+                    .map(|p| p.nworld.to_string())
+                    .collect();
+                have.dedup();
+                PlanError::Asset(format!(
+                    "no `{name}` plan for {nworld} worlds in {} (it has {}); capture one with \
+                     kernels_py/capture.py --nworld {nworld} and pass its directory",
+                    self.describe(),
+                    if have.is_empty() {
+                        "none".to_string()
+                    } else {
+                        format!("{} worlds", have.join(", "))
+                    }
+                ))
+            })?;
+        if entry.file.contains('/') || entry.file.contains("..") {
+            return Err(PlanError::Asset(format!(
+                "plan file name {:?} in the manifest must be a plain file name",
+                entry.file
+            )));
+        }
+        let rel = format!("plans/{}", entry.file);
+        let bytes = self.read(&rel)?;
+        load_plan(&bytes).map_err(|e| PlanError::Asset(format!("{rel}: {e}")))
+    }
+
+    /// The PTX of a MuJoCo Warp module, by the binary file name a plan records.
+    pub fn module_ptx(&self, binary_filename: &str) -> Result<Cow<'static, [u8]>, PlanError> {
+        if binary_filename.contains('/') || binary_filename.contains("..") {
+            return Err(PlanError::Asset(format!(
+                "module file name {binary_filename:?} must be a plain file name"
+            )));
+        }
+        self.read(&format!("{MJWARP_PTX_DIR}/{binary_filename}"))
+            .map_err(|e| {
+                PlanError::Asset(format!(
+                    "{e} (regenerate ptx/ with kernels_py/compile.py after capturing plans)"
+                ))
+            })
+    }
+}

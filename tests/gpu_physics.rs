@@ -1,0 +1,136 @@
+//! The Rust replay of the step plan against MuJoCo Warp itself (GPU; `--features gpu`).
+//!
+//! `kernels_py/physics_reference.py exact --nworld N --out DIR` (on the GPU machine, with
+//! warp-lang) writes seeded initial states and MuJoCo Warp's qpos/qvel after a few step counts.
+//! Point `INSTANTMIMIC_PHYSICS_REFERENCE` at DIR; `INSTANTMIMIC_ASSETS` may point at a directory
+//! laid out like ptx/ (default: the plans built into the binary). Without the reference the
+//! test prints why and passes, since it cannot check anything.
+#![cfg(feature = "gpu")]
+
+use std::path::{Path, PathBuf};
+
+use instantmimic::cuda::Gpu;
+use instantmimic::plan::{PlanStore, Simulation};
+
+fn read_f32(path: &Path) -> Vec<f32> {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert_eq!(bytes.len() % 4, 0, "{}: not a whole number of f32", path.display());
+    bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect()
+}
+
+fn max_abs_diff(a: &[f32], b: &[f32]) -> (f32, usize) {
+    assert_eq!(a.len(), b.len());
+    let mut worst = (0.0f32, 0usize);
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        let d = (x - y).abs();
+        if d.is_nan() {
+            return (f32::NAN, i);
+        }
+        if d > worst.0 {
+            worst = (d, i);
+        }
+    }
+    worst
+}
+
+#[test]
+fn step_plan_matches_mujoco_warp() {
+    let Some(dir) = std::env::var_os("INSTANTMIMIC_PHYSICS_REFERENCE").map(PathBuf::from) else {
+        println!("skipped: INSTANTMIMIC_PHYSICS_REFERENCE is not set (see the file's header)");
+        return;
+    };
+    let summary: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(dir.join("reference.json")).expect("reference.json"),
+    )
+    .expect("reference.json parses");
+    let nworld = summary["nworld"].as_u64().expect("nworld") as u32;
+    let assets = std::env::var_os("INSTANTMIMIC_ASSETS").map(PathBuf::from);
+    let store = PlanStore::new(assets.as_deref());
+    let gpu = Gpu::open(0).expect("a GPU");
+
+    for case in summary["cases"].as_array().expect("cases") {
+        let name = case["name"].as_str().expect("case name");
+        let sim = Simulation::load(&gpu, &store, nworld, &["step", "kinematics"])
+            .unwrap_or_else(|e| panic!("loading plans: {e}"));
+        for field in ["qpos", "qvel", "ctrl"] {
+            let file = case["files"][format!("init_{field}")].as_str().expect("file");
+            let values = read_f32(&dir.join(file));
+            sim.buffer::<f32>(&format!("d.{field}"))
+                .expect("buffer")
+                .write(&values)
+                .unwrap_or_else(|e| panic!("writing d.{field}: {e}"));
+        }
+        let mut done = 0u64;
+        for checkpoint in case["checkpoints"].as_array().expect("checkpoints") {
+            let target = checkpoint["steps"].as_u64().expect("steps");
+            while done < target {
+                sim.run("step").expect("step");
+                done += 1;
+            }
+            gpu.stream().synchronize().expect("synchronize");
+            for field in ["qpos", "qvel"] {
+                let expected = read_f32(&dir.join(checkpoint[field].as_str().expect("file")));
+                let got = sim.buffer::<f32>(&format!("d.{field}")).unwrap().read().unwrap();
+                let (diff, at) = max_abs_diff(&got, &expected);
+                let identical = got
+                    .iter()
+                    .zip(&expected)
+                    .all(|(a, b)| a.to_bits() == b.to_bits());
+                println!(
+                    "{name}: after {target} steps max |d{field}| = {diff:.3e} (at element {at}, world {}); bit-identical: {identical}",
+                    at / (got.len() / nworld as usize).max(1)
+                );
+                if name == "freefall" {
+                    assert!(identical, "{name}: {field} after {target} steps differs from MuJoCo Warp (max {diff:e})");
+                } else if target == 1 {
+                    assert!(diff <= 1e-5, "{name}: max |d{field}| after 1 step is {diff:e} > 1e-5");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn kinematics_plan_reads_the_state_the_step_plan_writes() {
+    let assets = std::env::var_os("INSTANTMIMIC_ASSETS").map(PathBuf::from);
+    let store = PlanStore::new(assets.as_deref());
+    let Ok(manifest) = store.manifest() else {
+        println!("skipped: no plan manifest in the store");
+        return;
+    };
+    let Some(nworld) = manifest.plans.iter().map(|p| p.nworld).min() else {
+        println!("skipped: the manifest lists no plans");
+        return;
+    };
+    let gpu = Gpu::open(0).expect("a GPU");
+    let sim = Simulation::load(&gpu, &store, nworld, &["step", "kinematics"]).expect("plans load");
+    // Raise every world's root by 1 m: after the kinematics plan, every body is 1 m higher.
+    let qpos = sim.buffer::<f32>("d.qpos").unwrap();
+    let before = {
+        sim.run("kinematics").unwrap();
+        sim.buffer::<f32>("d.xpos").unwrap().read().unwrap()
+    };
+    let mut q = qpos.read().unwrap();
+    let nq = q.len() / nworld as usize;
+    for w in 0..nworld as usize {
+        q[w * nq + 2] += 1.0;
+    }
+    qpos.write(&q).unwrap();
+    sim.run("kinematics").unwrap();
+    let after = sim.buffer::<f32>("d.xpos").unwrap().read().unwrap();
+    let nbody = after.len() / 3 / nworld as usize;
+    let mut checked = 0;
+    for w in 0..nworld as usize {
+        for b in 1..nbody {
+            let i = (w * nbody + b) * 3;
+            let dz = after[i + 2] - before[i + 2];
+            assert!((dz - 1.0).abs() < 1e-5, "world {w} body {b}: z moved by {dz}, expected 1");
+            assert!((after[i] - before[i]).abs() < 1e-6);
+            checked += 1;
+        }
+    }
+    println!("kinematics plan moved all {checked} bodies by the root offset");
+}
