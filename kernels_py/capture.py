@@ -5,7 +5,8 @@
 For each world count and each plan in physics.PLAN_NAMES this writes, under WORK:
   raw/<plan>_<nworld>.wrp             Warp's APIC recording (uncompressed, with every Model and
                                       Data array bound by name, see physics.named_arrays)
-  raw/<plan>_<nworld>_modules/*.ptx   the PTX Warp compiled on the GPU (for PTX_ARCH)
+  raw/<plan>_<nworld>_modules/        the binaries Warp compiled on the GPU (CUBIN: driver 580
+                                      refuses the PTX 9.4 that Warp's NVRTC writes)
   manifest.json                       plans, their modules (name, hash, PTX file, block dims) and
                                       the physics they were captured with
 Then `instantmimic plan pack` compresses each plan into ptx/plans/ and `compile.py` regenerates
@@ -60,7 +61,7 @@ def capture_plans(config: dict, nworld: int, out: pathlib.Path) -> tuple[list[di
                 {
                     "name": info["module_name"],
                     "hash": module_hash,
-                    "ptx": info["binary_filename"],
+                    "ptx": physics.ptx_file_name(info["binary_filename"]),
                     "block_dims": sorted(block_dims.get(module_hash, ())),
                 }
             )

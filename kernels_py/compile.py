@@ -102,7 +102,7 @@ def generate(manifest: dict) -> dict[str, bytes]:
                 )
                 continue
             name, data = compile_module(module, block_dim, pathlib.Path(tmp))
-            if name != ptx_name:
+            if physics.ptx_file_name(name) != ptx_name:
                 problems.append(f"{ptx_name}: Warp named the compiled module {name}")
                 continue
             out[f"{MJWARP_DIR}/{ptx_name}"] = data

@@ -37,7 +37,6 @@ capture() {
   t0=$SECONDS
   python kernels_py/compile.py --manifest "$WORK/assets/plans/manifest.json" --out "$WORK/assets" 2>&1 | grep -v '^Module ' | tail -3 | tee "$OUT/compile.log"
   echo "compile: $((SECONDS - t0)) s"
-  python kernels_py/pack_plans.py --capture "$WORK/capture" --out "$WORK/assets" --packer "$BIN/instantmimic" --check-gpu-ptx 2>&1 | tail -5 | tee -a "$OUT/compile.log" || true
   cp -r "$WORK/assets/mjwarp" "$WORK/committed/"
   for p in "$WORK"/committed/plans/*.wrp.zst; do "$BIN/instantmimic" plan inspect "$p" > "$OUT/inspect_$(basename "$p" .wrp.zst).txt"; done
   t0=$SECONDS
@@ -51,6 +50,7 @@ verify() {
   export INSTANTMIMIC_ASSETS="$WORK/assets" INSTANTMIMIC_PHYSICS_REFERENCE="$WORK/reference"
   "$BIN/gpu_physics" --nocapture --test-threads 1 2>&1 | tee "$OUT/gpu_physics.log"
   python kernels_py/physics_reference.py timing --nworld 4096 16384 --steps "$STEPS" --warmup "$WARMUP" --json "$OUT/warp_timing.json" 2>&1 | grep -v '^Module ' | tee "$OUT/warp_timing.log"
+  python kernels_py/physics_reference.py timing --shipped-ptx --nworld 4096 16384 --steps "$STEPS" --warmup "$WARMUP" --json "$OUT/warp_timing_shipped.json" 2>&1 | grep -v '^Module ' | tee -a "$OUT/warp_timing.log"
   for run in 1 2; do
     for n in 4096 16384; do
       "$BIN/instantmimic" bench physics --envs "$n" --steps "$STEPS" --warmup "$WARMUP" --assets "$WORK/assets" --json > "$OUT/rust_bench_${n}_$run.json"

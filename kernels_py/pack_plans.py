@@ -5,9 +5,7 @@
 WORK is capture.py's output. Each raw plan is packed by `instantmimic plan pack` (zero initial
 bytes dropped, our PlanInfo section added, zstd), and the manifest is rewritten to list the packed
 files. Plans whose world count is in --raw are copied uncompressed instead (packing a 16384-world
-plan at zstd level 19 takes minutes; a raw plan loads the same). --check-gpu-ptx compares the PTX
-Warp compiled on the GPU during capture with compile.py's output under --out/mjwarp, after the same
-register renumbering, and reports any difference.
+plan at zstd level 19 takes minutes; a raw plan loads the same).
 """
 
 from __future__ import annotations
@@ -20,8 +18,6 @@ import subprocess
 import sys
 import tempfile
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-import ptx_canon  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -31,15 +27,11 @@ def main(argv=None) -> int:
     parser.add_argument("--packer", required=True, help="the instantmimic binary")
     parser.add_argument("--raw", type=int, nargs="*", default=[], help="world counts to copy unpacked")
     parser.add_argument("--only", type=int, nargs="*", help="keep only these world counts")
-    parser.add_argument("--check-gpu-ptx", action="store_true")
     args = parser.parse_args(argv)
 
     cap = pathlib.Path(args.capture)
     out = pathlib.Path(args.out)
     manifest = json.loads((cap / "manifest.json").read_text())
-    if args.check_gpu_ptx:
-        return check_gpu_ptx(cap, manifest, out)
-
     plans_dir = out / "plans"
     plans_dir.mkdir(parents=True, exist_ok=True)
     kept = []
@@ -62,26 +54,6 @@ def main(argv=None) -> int:
     (plans_dir / "manifest.json").write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
     print(f"packed {len(kept)} plans into {plans_dir}")
     return 0
-
-
-def check_gpu_ptx(cap: pathlib.Path, manifest: dict, out: pathlib.Path) -> int:
-    same = differ = missing = 0
-    for plan in manifest["plans"]:
-        modules_dir = cap / (plan["raw"][: -len(".wrp")] + "_modules")
-        for mod in plan["modules"]:
-            gpu = modules_dir / mod["ptx"]
-            cpu = out / "mjwarp" / mod["ptx"]
-            if not gpu.is_file() or not cpu.is_file():
-                missing += 1
-                print(f"missing: {mod['ptx']} (gpu {gpu.is_file()}, compile.py {cpu.is_file()})")
-                continue
-            if ptx_canon.canonicalize(gpu.read_bytes()) == cpu.read_bytes():
-                same += 1
-            else:
-                differ += 1
-                print(f"differs: {mod['ptx']}")
-    print(f"GPU-compiled vs compile.py PTX: {same} identical, {differ} differ, {missing} missing")
-    return 0 if differ == 0 and missing == 0 else 1
 
 
 if __name__ == "__main__":

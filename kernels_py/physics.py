@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import dataclasses
 import pathlib
+import re
 import tomllib
 
 REPO = pathlib.Path(__file__).resolve().parent.parent
 
 # PTX is generated for the oldest supported GPU (Ampere, sm_80). The driver JIT-compiles it for
 # the GPU it runs on, so one set of PTX serves sm_80 .. sm_120 (CI assembles it for each).
+# (compile.py passes it to Warp's AOT compiler; run_shipped_ptx() makes a live Warp use it.)
 PTX_ARCH = 80
 
 # Keys of configs/physics/*.toml, with their types. Unknown keys are an error.
@@ -77,18 +79,74 @@ def load_physics_config(path: str | pathlib.Path) -> dict:
 
 
 def configure_warp():
-    """Warp settings that change generated code. Call before anything creates a Warp module."""
+    """Warp settings that change generated code. Call before anything creates a Warp module.
+
+    Output format and target arch are not among them: Warp hashes neither into module names,
+    so a capture that runs Warp's default CUBIN path names the same modules compile.py turns
+    into PTX.
+    """
     import warp as wp
 
     wp.config.quiet = True
-    # Capture exports PTX (not CUBIN) for PTX_ARCH, the same text compile.py writes.
-    wp.config.cuda_output = "ptx"
-    wp.config.ptx_target_arch = PTX_ARCH
     # libmathdx tile kernels link LTO code and come out as CUBIN only; Warp's own tile
-    # implementations give portable PTX.
+    # implementations give portable PTX. (These options are part of each module's hash.)
     wp.config.enable_mathdx_gemm = False
     wp.config.enable_mathdx_solver = False
     wp.config.enable_mathdx_fft = False
+    return wp
+
+
+def ptx_file_name(binary_filename: str) -> str:
+    """ptx/mjwarp/ file of a module: Warp's binary name without its arch and format suffix
+    (`wp_smooth_0b7e74a.sm90.cubin` -> `wp_smooth_0b7e74a.ptx`); one PTX serves every arch."""
+    stem = re.sub(r"\.sm\d+[af]?\.(ptx|cubin)$", "", binary_filename)
+    if stem == binary_filename:
+        raise ValueError(f"unexpected Warp module binary name {binary_filename!r}")
+    return stem + ".ptx"
+
+
+def run_shipped_ptx():
+    """Make this process's Warp run the PTX the Rust runtime loads, for bit-for-bit comparisons.
+
+    Warp would otherwise compile CUBIN for the device's own arch, whose floating-point code can
+    differ from the driver's JIT of our sm_80 PTX. With this hook Warp compiles every module to
+    PTX for PTX_ARCH and, at its one CUDA module load site, loads that PTX after the two
+    rewrites the shipped files and the runtime apply: canonical register numbering
+    (compile.py) and `.version` lowered to what the driver accepts (src/cuda/ptx.rs). Warp's
+    own conditional-node kernels keep their CUBIN path. Uses Warp internals (warp-lang 1.19).
+    """
+    import tempfile
+
+    import warp as wp
+    from warp._src import build, context
+
+    import ptx_canon
+
+    context.Module._use_ptx = lambda self, device: True
+    original_arch = context.Module._get_compile_arch
+
+    def compile_arch(self, device=None):
+        arch = original_arch(self, device)
+        return PTX_ARCH if arch is not None else None
+
+    context.Module._get_compile_arch = compile_arch
+    driver = context.runtime.driver_version  # e.g. 13000
+    major, minor = driver // 1000, (driver % 1000) // 10
+    isa = f"{major - 4}.{minor}" if major >= 13 else None
+    original_load = build.load_cuda
+    scratch = tempfile.mkdtemp(prefix="instantmimic-shipped-ptx-")
+
+    def load_cuda(input_path, device):
+        if not str(input_path).endswith(".ptx"):
+            return original_load(input_path, device)
+        text = ptx_canon.canonicalize(pathlib.Path(input_path).read_bytes()).rstrip(b"\0").decode()
+        if isa is not None:
+            text = re.sub(r"^\.version \d+\.\d+", f".version {isa}", text, count=1, flags=re.MULTILINE)
+        out = pathlib.Path(scratch) / pathlib.Path(input_path).name
+        out.write_text(text)
+        return original_load(str(out), device)
+
+    build.load_cuda = load_cuda
     return wp
 
 

@@ -14,7 +14,12 @@ use instantmimic::plan::{PlanStore, Simulation};
 
 fn read_f32(path: &Path) -> Vec<f32> {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    assert_eq!(bytes.len() % 4, 0, "{}: not a whole number of f32", path.display());
+    assert_eq!(
+        bytes.len() % 4,
+        0,
+        "{}: not a whole number of f32",
+        path.display()
+    );
     bytes
         .chunks_exact(4)
         .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
@@ -42,10 +47,9 @@ fn step_plan_matches_mujoco_warp() {
         println!("skipped: INSTANTMIMIC_PHYSICS_REFERENCE is not set (see the file's header)");
         return;
     };
-    let summary: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(dir.join("reference.json")).expect("reference.json"),
-    )
-    .expect("reference.json parses");
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("reference.json")).expect("reference.json"))
+            .expect("reference.json parses");
     let nworld = summary["nworld"].as_u64().expect("nworld") as u32;
     let assets = std::env::var_os("INSTANTMIMIC_ASSETS").map(PathBuf::from);
     let store = PlanStore::new(assets.as_deref());
@@ -56,7 +60,9 @@ fn step_plan_matches_mujoco_warp() {
         let sim = Simulation::load(&gpu, &store, nworld, &["step", "kinematics"])
             .unwrap_or_else(|e| panic!("loading plans: {e}"));
         for field in ["qpos", "qvel", "ctrl"] {
-            let file = case["files"][format!("init_{field}")].as_str().expect("file");
+            let file = case["files"][format!("init_{field}")]
+                .as_str()
+                .expect("file");
             let values = read_f32(&dir.join(file));
             sim.buffer::<f32>(&format!("d.{field}"))
                 .expect("buffer")
@@ -73,7 +79,11 @@ fn step_plan_matches_mujoco_warp() {
             gpu.stream().synchronize().expect("synchronize");
             for field in ["qpos", "qvel"] {
                 let expected = read_f32(&dir.join(checkpoint[field].as_str().expect("file")));
-                let got = sim.buffer::<f32>(&format!("d.{field}")).unwrap().read().unwrap();
+                let got = sim
+                    .buffer::<f32>(&format!("d.{field}"))
+                    .unwrap()
+                    .read()
+                    .unwrap();
                 let (diff, at) = max_abs_diff(&got, &expected);
                 let identical = got
                     .iter()
@@ -84,9 +94,15 @@ fn step_plan_matches_mujoco_warp() {
                     at / (got.len() / nworld as usize).max(1)
                 );
                 if name == "freefall" {
-                    assert!(identical, "{name}: {field} after {target} steps differs from MuJoCo Warp (max {diff:e})");
+                    assert!(
+                        identical,
+                        "{name}: {field} after {target} steps differs from MuJoCo Warp (max {diff:e})"
+                    );
                 } else if target == 1 {
-                    assert!(diff <= 1e-5, "{name}: max |d{field}| after 1 step is {diff:e} > 1e-5");
+                    assert!(
+                        diff <= 1e-5,
+                        "{name}: max |d{field}| after 1 step is {diff:e} > 1e-5"
+                    );
                 }
             }
         }
@@ -127,7 +143,10 @@ fn kinematics_plan_reads_the_state_the_step_plan_writes() {
         for b in 1..nbody {
             let i = (w * nbody + b) * 3;
             let dz = after[i + 2] - before[i + 2];
-            assert!((dz - 1.0).abs() < 1e-5, "world {w} body {b}: z moved by {dz}, expected 1");
+            assert!(
+                (dz - 1.0).abs() < 1e-5,
+                "world {w} body {b}: z moved by {dz}, expected 1"
+            );
             assert!((after[i] - before[i]).abs() < 1e-6);
             checked += 1;
         }

@@ -1,8 +1,8 @@
 //! The command line: `instantmimic <command> ...`.
 
+mod bench;
 mod gpu;
 mod motion;
-mod bench;
 mod plan;
 
 use anyhow::Result;

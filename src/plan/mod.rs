@@ -48,5 +48,5 @@ pub use pack::{
 };
 pub use reader::MAX_NESTING_DEPTH;
 pub use simulation::{Buffer, Element, Simulation, SimulationError};
-pub use store::{MANIFEST_PATH, MJWARP_PTX_DIR, PlanEntry, PlanManifest, PlanStore};
+pub use store::{MANIFEST_PATH, MJWARP_PTX_DIR, PlanEntry, PlanManifest, PlanStore, ptx_file_name};
 pub use summary::{BindingSummary, PlanSummary};

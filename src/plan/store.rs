@@ -128,18 +128,69 @@ impl PlanStore {
         load_plan(&bytes).map_err(|e| PlanError::Asset(format!("{rel}: {e}")))
     }
 
-    /// The PTX of a MuJoCo Warp module, by the binary file name a plan records.
+    /// The PTX of a MuJoCo Warp module, by the binary file name a plan records (e.g.
+    /// `wp_smooth_0b7e74a.sm90.cubin`: the capture ran Warp's own CUBIN path). One PTX serves
+    /// every arch, so files are named without the arch: `mjwarp/wp_smooth_0b7e74a.ptx`.
     pub fn module_ptx(&self, binary_filename: &str) -> Result<Cow<'static, [u8]>, PlanError> {
-        if binary_filename.contains('/') || binary_filename.contains("..") {
-            return Err(PlanError::Asset(format!(
-                "module file name {binary_filename:?} must be a plain file name"
-            )));
+        let file = ptx_file_name(binary_filename)?;
+        self.read(&format!("{MJWARP_PTX_DIR}/{file}")).map_err(|e| {
+            PlanError::Asset(format!(
+                "{e} (regenerate ptx/ with kernels_py/compile.py after capturing plans)"
+            ))
+        })
+    }
+}
+
+/// The `mjwarp/` file name of a module binary name: `<stem>.sm<NN>[a|f].<ptx|cubin>` ->
+/// `<stem>.ptx` (kernels_py/physics.py `ptx_file_name` does the same).
+pub fn ptx_file_name(binary_filename: &str) -> Result<String, PlanError> {
+    let bad = || {
+        PlanError::Asset(format!(
+            "unexpected module binary name {binary_filename:?} (expected <module>.sm<arch>.ptx or .cubin)"
+        ))
+    };
+    if binary_filename.contains('/') || binary_filename.contains("..") {
+        return Err(bad());
+    }
+    let stem = binary_filename
+        .strip_suffix(".ptx")
+        .or_else(|| binary_filename.strip_suffix(".cubin"))
+        .ok_or_else(bad)?;
+    let (stem, arch) = stem.rsplit_once(".sm").ok_or_else(bad)?;
+    let digits = arch.trim_end_matches(['a', 'f']);
+    if stem.is_empty() || digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return Err(bad());
+    }
+    Ok(format!("{stem}.ptx"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ptx_file_name;
+
+    #[test]
+    fn module_binary_names_map_to_arch_free_ptx_names() {
+        for (binary, ptx) in [
+            (
+                "wp_mujoco_warp._src.smooth_0b7e74a.sm90.cubin",
+                "wp_mujoco_warp._src.smooth_0b7e74a.ptx",
+            ),
+            (
+                "wp__k__locals__kernel_5_6622bd1.sm80.ptx",
+                "wp__k__locals__kernel_5_6622bd1.ptx",
+            ),
+            ("wp_a_1234567.sm90a.cubin", "wp_a_1234567.ptx"),
+        ] {
+            assert_eq!(ptx_file_name(binary).unwrap(), ptx);
         }
-        self.read(&format!("{MJWARP_PTX_DIR}/{binary_filename}"))
-            .map_err(|e| {
-                PlanError::Asset(format!(
-                    "{e} (regenerate ptx/ with kernels_py/compile.py after capturing plans)"
-                ))
-            })
+        for bad in [
+            "wp_a.cubin",
+            "wp_a.smx.ptx",
+            "../x.sm80.ptx",
+            "wp_a.sm80.o",
+            ".sm80.ptx",
+        ] {
+            assert!(ptx_file_name(bad).is_err(), "{bad} accepted");
+        }
     }
 }
