@@ -130,8 +130,7 @@ def run_shipped_ptx():
         return PTX_ARCH if arch is not None else None
 
     context.Module._get_compile_arch = compile_arch
-    driver = context.runtime.driver_version  # e.g. 13000
-    major, minor = driver // 1000, (driver % 1000) // 10
+    major, minor = context.runtime.driver_version[:2]  # e.g. (13, 0)
     isa = f"{major - 4}.{minor}" if major >= 13 else None
     original_load = build.load_cuda
     scratch = tempfile.mkdtemp(prefix="instantmimic-shipped-ptx-")
