@@ -5,11 +5,13 @@
 //! - [`cuda`]: the driver (context, modules, launches, graphs). The only place with `unsafe` CUDA calls.
 //! - [`plan`]: the `.wrp` plan format: reader, validation, packing, replay into CUDA graphs.
 //! - [`motion`]: DeepMimic reference motions and their kinematics.
+//! - [`hpo`]: hyperparameter search by an agent (plan → propose → experiment).
 //! - [`assets`]: PTX and plans embedded in the binary at build time.
 //! - [`cli`]: the command line.
 
 pub mod assets;
 pub mod cli;
 pub mod cuda;
+pub mod hpo;
 pub mod motion;
 pub mod plan;

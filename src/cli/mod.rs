@@ -1,6 +1,7 @@
 //! The command line: `instantmimic <command> ...`.
 
 mod gpu;
+mod hpo;
 mod motion;
 mod plan;
 
@@ -26,6 +27,8 @@ enum Command {
     Motion(motion::MotionArgs),
     /// Show the GPU, its driver and the PTX ISA it accepts.
     Gpu(gpu::GpuArgs),
+    /// Hyperparameter search by an agent: plan, propose, experiment (see docs/hpo.md).
+    Hpo(hpo::HpoArgs),
 }
 
 /// Parses the command line and runs the command.
@@ -35,5 +38,6 @@ pub fn run() -> Result<()> {
         Command::Plan(args) => plan::run(args),
         Command::Motion(args) => motion::run(args),
         Command::Gpu(args) => gpu::run(&args),
+        Command::Hpo(args) => hpo::run_hpo(args),
     }
 }
