@@ -78,6 +78,10 @@ pub fn extract_json_object(reply: &str) -> Result<serde_json::Value, String> {
     let mut candidates: Vec<&str> = vec![trimmed];
     candidates.extend(fenced_blocks(trimmed));
     candidates.extend(balanced_objects(trimmed));
+    // An object cut short has no balanced end: parse from its `{` to report why.
+    if let Some(start) = trimmed.find('{') {
+        candidates.push(&trimmed[start..]);
+    }
     let mut first_object = None;
     let mut first_error = None;
     for text in candidates {
