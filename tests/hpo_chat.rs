@@ -89,14 +89,20 @@ fn scripted_replies_are_validated_fed_back_and_never_stop_the_search() {
         .unwrap();
     let stdout = String::from_utf8_lossy(&output.stdout);
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    assert!(
+        output.status.success(),
+        "stdout:\n{stdout}\nstderr:\n{stderr}"
+    );
 
     // Every request carried the key and the model, at the chat-completions path.
     let seen = server.seen();
     assert_eq!(seen.len(), 11, "one request per scripted reply");
     for request in &seen {
         assert_eq!(request.path, "/v1/chat/completions");
-        assert_eq!(request.authorization.as_deref(), Some(format!("Bearer {KEY}").as_str()));
+        assert_eq!(
+            request.authorization.as_deref(),
+            Some(format!("Bearer {KEY}").as_str())
+        );
         assert_eq!(request.body["model"], "test-model");
         assert_eq!(request.body["temperature"], 0.2);
     }
@@ -120,22 +126,48 @@ fn scripted_replies_are_validated_fed_back_and_never_stop_the_search() {
     );
     let rejections = &history[1].rejections;
     assert_eq!(rejections.len(), 3, "{rejections:?}");
-    assert!(rejections[0].contains("does not parse"), "{}", rejections[0]);
-    assert!(rejections[1].contains("unknown parameter \"ppo.gamma\""), "{}", rejections[1]);
-    assert!(rejections[2].contains("outside the bounds"), "{}", rejections[2]);
+    assert!(
+        rejections[0].contains("does not parse"),
+        "{}",
+        rejections[0]
+    );
+    assert!(
+        rejections[1].contains("unknown parameter \"ppo.gamma\""),
+        "{}",
+        rejections[1]
+    );
+    assert!(
+        rejections[2].contains("outside the bounds"),
+        "{}",
+        rejections[2]
+    );
     assert!(history[3].rejections[0].contains("missing: ## Best Baseline"));
 
     // Feedback: each rejection reaches the next propose prompt, across the skipped cycle too.
-    let exchange = |cycle: &str, file: &str| read(&run_dir.join("exchanges").join(cycle).join(file));
-    assert!(exchange("cycle_001", "propose_1.prompt.md").contains("Validation feedback, if present:\nnone"));
+    let exchange =
+        |cycle: &str, file: &str| read(&run_dir.join("exchanges").join(cycle).join(file));
+    assert!(
+        exchange("cycle_001", "propose_1.prompt.md")
+            .contains("Validation feedback, if present:\nnone")
+    );
     assert!(exchange("cycle_001", "propose_2.prompt.md").contains("does not parse"));
-    assert!(exchange("cycle_001", "propose_3.prompt.md").contains("unknown parameter \"ppo.gamma\""));
+    assert!(
+        exchange("cycle_001", "propose_3.prompt.md").contains("unknown parameter \"ppo.gamma\"")
+    );
     assert!(exchange("cycle_002", "propose_1.prompt.md").contains("cannot widen"));
-    assert!(exchange("cycle_003", "plan_2.prompt.md").contains("Your previous reply could not be used"));
-    assert!(exchange("cycle_003", "propose_1.prompt.md").contains("Validation feedback, if present:\nnone"));
+    assert!(
+        exchange("cycle_003", "plan_2.prompt.md").contains("Your previous reply could not be used")
+    );
+    assert!(
+        exchange("cycle_003", "propose_1.prompt.md")
+            .contains("Validation feedback, if present:\nnone")
+    );
 
     // The widening is recorded in the cycle and in the state.
-    let widened = history[3].widened.as_ref().expect("cycle 3 widened a bound");
+    let widened = history[3]
+        .widened
+        .as_ref()
+        .expect("cycle 3 widened a bound");
     assert_eq!(widened.name, "ppo.kl_threshold");
     assert_eq!((widened.from.lo, widened.from.hi), (0.002, 0.03));
     assert_eq!((widened.to.lo, widened.to.hi), (0.002, 0.12));
@@ -200,7 +232,11 @@ fn scripted_replies_are_validated_fed_back_and_never_stop_the_search() {
 fn a_missing_key_variable_and_a_refused_key_stop_with_a_clear_message() {
     let dir = tempfile::tempdir().unwrap();
     let config_path = dir.path().join("hpo.toml");
-    std::fs::write(&config_path, config_text(&chat_agent("http://127.0.0.1:9/v1"), "", "")).unwrap();
+    std::fs::write(
+        &config_path,
+        config_text(&chat_agent("http://127.0.0.1:9/v1"), "", ""),
+    )
+    .unwrap();
     let output = Command::new(binary())
         .args(["hpo", "--config"])
         .arg(&config_path)
@@ -211,8 +247,14 @@ fn a_missing_key_variable_and_a_refused_key_stop_with_a_clear_message() {
         .unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success());
-    assert!(stderr.contains(KEY_VAR) && stderr.contains("not set"), "{stderr}");
-    assert!(!dir.path().join("run").exists(), "nothing is created for a search that cannot run");
+    assert!(
+        stderr.contains(KEY_VAR) && stderr.contains("not set"),
+        "{stderr}"
+    );
+    assert!(
+        !dir.path().join("run").exists(),
+        "nothing is created for a search that cannot run"
+    );
 
     // HTTP 401 is not retried and stops the search after the baseline; the key stays out.
     let server = MockServer::start(vec![Scripted::status(401, "{\"error\": \"bad key\"}")]);

@@ -34,14 +34,27 @@ fn results_are_the_same_on_one_and_three_workers() {
     for workers in [1, 3] {
         let mut settings = config.runner.clone();
         settings.workers = Some(workers);
-        let mut pool = RunnerPool::new(build_runners(&settings, config.objective).unwrap()).unwrap();
+        let mut pool =
+            RunnerPool::new(build_runners(&settings, config.objective).unwrap()).unwrap();
         assert_eq!(pool.workers(), workers);
-        results.push(run_experiment(&mut pool, &config.base, &candidates, &seeds, config.objective.budget_s).unwrap());
+        results.push(
+            run_experiment(
+                &mut pool,
+                &config.base,
+                &candidates,
+                &seeds,
+                config.objective.budget_s,
+            )
+            .unwrap(),
+        );
     }
     assert_eq!(results[0], results[1]);
     let one = &results[0];
     assert_eq!(one.len(), 6);
-    assert!(one.iter().all(|c| c.trials.iter().map(|t| t.seed).eq(seeds)));
+    assert!(
+        one.iter()
+            .all(|c| c.trials.iter().map(|t| t.seed).eq(seeds))
+    );
     // The failure region of the synthetic objective (learning rate far above its optimum).
     assert_eq!(one[5].successes, 0);
     assert_eq!(one[5].objective_s, config.objective.budget_s);
@@ -88,7 +101,10 @@ fn a_trial_that_cannot_run_stops_the_experiment() {
     let err = run_experiment(&mut pool, &config.base, &candidates, &[0, 1, 2], 20.0)
         .err()
         .map(|e| e.to_string());
-    assert!(err.as_deref().is_some_and(|e| e.contains("device lost")), "{err:?}");
+    assert!(
+        err.as_deref().is_some_and(|e| e.contains("device lost")),
+        "{err:?}"
+    );
     assert!(RunnerPool::new(Vec::new()).is_none());
 }
 
@@ -115,7 +131,8 @@ fn incumbent_follows_the_search_base_and_best_is_the_global_minimum() {
     let config = offline_config("", "");
     let tmp = tempfile::tempdir().unwrap();
     let mut search = Search::new(config.clone(), tmp.path()).unwrap();
-    let mut pool = RunnerPool::new(build_runners(&config.runner, config.objective).unwrap()).unwrap();
+    let mut pool =
+        RunnerPool::new(build_runners(&config.runner, config.objective).unwrap()).unwrap();
     let mut backend = Scripted(
         [
             // 1: a big improvement (KL threshold towards its optimum).
@@ -133,32 +150,56 @@ fn incumbent_follows_the_search_base_and_best_is_the_global_minimum() {
         .into_iter()
         .collect(),
     );
-    search.run(&mut backend, &mut pool, 3, &mut std::io::sink()).unwrap();
+    search
+        .run(&mut backend, &mut pool, 3, &mut std::io::sink())
+        .unwrap();
     let h = search.history();
     let objective = |cycle: usize| h[cycle].winner().unwrap().objective_s;
     assert!(objective(1) < objective(0));
     assert_eq!((h[1].incumbent.cycle, h[1].best.cycle), (1, 1));
 
-    assert!(objective(2) > objective(0), "a learning rate of 2e-4 is worse");
+    assert!(
+        objective(2) > objective(0),
+        "a learning rate of 2e-4 is worse"
+    );
     assert_eq!(h[2].base_cycle, Some(0));
-    assert_eq!(h[2].incumbent.cycle, 0, "building on cycle_000 made it the incumbent");
+    assert_eq!(
+        h[2].incumbent.cycle, 0,
+        "building on cycle_000 made it the incumbent"
+    );
     assert_eq!(h[2].best.cycle, 1);
 
-    assert_eq!(h[3].base_cycle, Some(0), "\"incumbent\" names cycle_000 now");
+    assert_eq!(
+        h[3].base_cycle,
+        Some(0),
+        "\"incumbent\" names cycle_000 now"
+    );
     assert!(objective(3) < objective(0) && objective(3) > objective(1));
     assert_eq!((h[3].incumbent.cycle, h[3].best.cycle), (3, 1));
     let state = search.state().unwrap();
     assert_eq!(state.best.objective_s, objective(1));
-    assert_eq!(state.incumbent.assignment["ppo.horizon"], ParamValue::Int(8));
-    assert_eq!(state.incumbent.assignment["ppo.kl_threshold"], ParamValue::Float(0.008));
+    assert_eq!(
+        state.incumbent.assignment["ppo.horizon"],
+        ParamValue::Int(8)
+    );
+    assert_eq!(
+        state.incumbent.assignment["ppo.kl_threshold"],
+        ParamValue::Float(0.008)
+    );
     assert!(h.iter().skip(1).all(|r| r.status == CycleStatus::Completed));
 
     // The state files agree.
     let best = std::fs::read_to_string(tmp.path().join("best.toml")).unwrap();
-    assert!(best.contains("cycle_001") && best.contains("kl_threshold = 0.03"), "{best}");
+    assert!(
+        best.contains("cycle_001") && best.contains("kl_threshold = 0.03"),
+        "{best}"
+    );
     let incumbent = std::fs::read_to_string(tmp.path().join("incumbent.toml")).unwrap();
     assert!(incumbent.contains("horizon = 8"), "{incumbent}");
-    assert!(incumbent.contains("clip = 0.2"), "parameters outside the space are kept");
+    assert!(
+        incumbent.contains("clip = 0.2"),
+        "parameters outside the space are kept"
+    );
 }
 
 #[test]
@@ -166,12 +207,18 @@ fn a_failed_trial_leaves_the_last_complete_cycle_on_disk() {
     let config = offline_config("", "");
     let tmp = tempfile::tempdir().unwrap();
     let mut search = Search::new(config.clone(), tmp.path()).unwrap();
-    let mut pool = RunnerPool::new(build_runners(&config.runner, config.objective).unwrap()).unwrap();
+    let mut pool =
+        RunnerPool::new(build_runners(&config.runner, config.objective).unwrap()).unwrap();
     let mut offline = instantmimic::hpo::backend::offline::OfflineProposer;
-    search.run(&mut offline, &mut pool, 2, &mut std::io::sink()).unwrap();
+    search
+        .run(&mut offline, &mut pool, 2, &mut std::io::sink())
+        .unwrap();
     let runners: Vec<BoxedRunner> = vec![Box::new(FailingRunner { fail_seed: 1 })];
     let mut failing = RunnerPool::new(runners).unwrap();
-    let err = search.run(&mut offline, &mut failing, 4, &mut std::io::sink()).err().unwrap();
+    let err = search
+        .run(&mut offline, &mut failing, 4, &mut std::io::sink())
+        .err()
+        .unwrap();
     assert!(err.to_string().contains("device lost"));
     assert_eq!(search.cycles_done(), 2);
     let resumed = Search::resume(tmp.path(), None).unwrap();

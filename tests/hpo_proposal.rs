@@ -17,8 +17,11 @@ fn history() -> (SearchSpace, Vec<CycleRecord>) {
     let config = offline_config("", "");
     let tmp = tempfile::tempdir().unwrap();
     let mut search = Search::new(config.clone(), tmp.path()).unwrap();
-    let mut pool = RunnerPool::new(build_runners(&config.runner, config.objective).unwrap()).unwrap();
-    search.run(&mut OfflineProposer, &mut pool, 1, &mut std::io::sink()).unwrap();
+    let mut pool =
+        RunnerPool::new(build_runners(&config.runner, config.objective).unwrap()).unwrap();
+    search
+        .run(&mut OfflineProposer, &mut pool, 1, &mut std::io::sink())
+        .unwrap();
     let mut history = search.history().to_vec();
     let mut skipped = history[1].clone();
     skipped.cycle = 2;
@@ -68,8 +71,16 @@ fn json_is_found_bare_fenced_or_in_prose() {
         assert!(value.get("params").is_some(), "{reply}");
     }
     assert!(extract_json_object("").unwrap_err().contains("empty"));
-    assert!(extract_json_object("no braces here").unwrap_err().contains("no JSON object"));
-    assert!(extract_json_object("{\"params\": [1,").unwrap_err().contains("does not parse"));
+    assert!(
+        extract_json_object("no braces here")
+            .unwrap_err()
+            .contains("no JSON object")
+    );
+    assert!(
+        extract_json_object("{\"params\": [1,")
+            .unwrap_err()
+            .contains("does not parse")
+    );
     // Many braces cost little and find nothing.
     let hostile = "{".repeat(100_000);
     assert!(extract_json_object(&hostile).is_err());
@@ -88,9 +99,20 @@ fn a_valid_proposal_is_typed_and_deduplicated() {
     assert_eq!(p.base_cycle, 1);
     assert_eq!(p.rationale, "why");
     assert_eq!(p.widen_to, None);
-    let p = parse_proposal(&json("obs.root_target", "[true]", "best"), &rules(&space, &history)).unwrap();
-    assert_eq!((p.base_cycle, p.values.clone()), (0, vec![ParamValue::Bool(true)]));
-    let p = parse_proposal(&json("ppo.learning_rate", "[1e-3]", "incumbent"), &rules(&space, &history)).unwrap();
+    let p = parse_proposal(
+        &json("obs.root_target", "[true]", "best"),
+        &rules(&space, &history),
+    )
+    .unwrap();
+    assert_eq!(
+        (p.base_cycle, p.values.clone()),
+        (0, vec![ParamValue::Bool(true)])
+    );
+    let p = parse_proposal(
+        &json("ppo.learning_rate", "[1e-3]", "incumbent"),
+        &rules(&space, &history),
+    )
+    .unwrap();
     assert_eq!(p.values, vec![ParamValue::Float(1e-3)]);
 }
 
@@ -102,11 +124,23 @@ fn bounds_widen_only_within_the_hard_limits() {
         &rules(&space, &history),
     )
     .unwrap();
-    assert_eq!(p.widen_to, Some(Range { lo: 0.001, hi: 0.12 }));
+    assert_eq!(
+        p.widen_to,
+        Some(Range {
+            lo: 0.001,
+            hi: 0.12
+        })
+    );
     let err = rejected(&json("ppo.kl_threshold", "[0.9]", "cycle_000"));
-    assert!(err.contains("beyond the widening limit [0.0005, 0.5]"), "{err}");
+    assert!(
+        err.contains("beyond the widening limit [0.0005, 0.5]"),
+        "{err}"
+    );
     let err = rejected(&json("ppo.learning_rate", "[0.05]", "cycle_000"));
-    assert!(err.contains("outside the bounds [0.0001, 0.01], which this parameter cannot widen"), "{err}");
+    assert!(
+        err.contains("outside the bounds [0.0001, 0.01], which this parameter cannot widen"),
+        "{err}"
+    );
     assert!(matches!(
         space.get("ppo.kl_threshold").map(|p| &p.kind),
         Some(ParamKind::Numeric { bounds, .. }) if bounds.hi == 0.03
@@ -135,11 +169,19 @@ fn each_rule_has_its_message() {
     ];
     for (reply, expected) in cases {
         let err = rejected(&reply);
-        assert!(err.contains(expected), "{reply}\n-> {err}\nexpected: {expected}");
+        assert!(
+            err.contains(expected),
+            "{reply}\n-> {err}\nexpected: {expected}"
+        );
     }
     // Several problems are reported together.
     let err = rejected(&json("ppo.horizon", "[8.5, 1000]", "cycle_042"));
-    assert!(err.contains("not a whole number") && err.contains("outside the bounds") && err.contains("cycle_042"), "{err}");
+    assert!(
+        err.contains("not a whole number")
+            && err.contains("outside the bounds")
+            && err.contains("cycle_042"),
+        "{err}"
+    );
     // A hostile, long name is quoted back shortened.
     let err = rejected(&json(&"x".repeat(5000), "[1]", "cycle_000"));
     assert!(err.len() < 600, "{}", err.len());

@@ -24,9 +24,15 @@ const STATE_FILES: [&str; 5] = [
 
 fn run_to(search: &mut Search, last_cycle: u32) {
     let config = search.config().clone();
-    let mut pool = RunnerPool::new(build_runners(&config.runner, config.objective).unwrap()).unwrap();
+    let mut pool =
+        RunnerPool::new(build_runners(&config.runner, config.objective).unwrap()).unwrap();
     search
-        .run(&mut OfflineProposer, &mut pool, last_cycle, &mut std::io::sink())
+        .run(
+            &mut OfflineProposer,
+            &mut pool,
+            last_cycle,
+            &mut std::io::sink(),
+        )
         .unwrap();
 }
 
@@ -46,10 +52,23 @@ fn assert_same_state(a: &Path, b: &Path) {
             .find(|(_, (l, r))| l != r)
         {
             let at = l.bytes().zip(r.bytes()).take_while(|(x, y)| x == y).count();
-            let cut = |s: &str| s.get(at.saturating_sub(80)..(at + 80).min(s.len())).unwrap_or_default().to_string();
-            panic!("{file} line {} differs near byte {at}:\n{}\n{}", i + 1, cut(l), cut(r));
+            let cut = |s: &str| {
+                s.get(at.saturating_sub(80)..(at + 80).min(s.len()))
+                    .unwrap_or_default()
+                    .to_string()
+            };
+            panic!(
+                "{file} line {} differs near byte {at}:\n{}\n{}",
+                i + 1,
+                cut(l),
+                cut(r)
+            );
         }
-        assert_eq!(left.lines().count(), right.lines().count(), "{file}: line counts differ");
+        assert_eq!(
+            left.lines().count(),
+            right.lines().count(),
+            "{file}: line counts differ"
+        );
     }
 }
 
@@ -93,7 +112,10 @@ fn a_half_written_cycle_is_run_again() {
     assert_eq!(search.cycles_done(), 4, "cycle 5 was not committed");
     run_to(&mut search, 5);
     assert_same_state(&straight, &resumed);
-    assert!(!stale.join("propose_9.prompt.md").exists(), "stale exchanges are cleared");
+    assert!(
+        !stale.join("propose_9.prompt.md").exists(),
+        "stale exchanges are cleared"
+    );
 }
 
 #[test]
@@ -122,10 +144,8 @@ fn a_killed_command_resumes_where_it_stopped() {
     let config_path = tmp.path().join("hpo.toml");
     // Trials take 15 ms, so 8 cycles of 9-12 trials take over a second: the kill lands
     // mid-search.
-    let text = config_text("[agent]\nbackend = \"offline\"\n", "", "").replace(
-        "noise = 0.05",
-        "noise = 0.05\ntrial_delay_ms = 15",
-    );
+    let text = config_text("[agent]\nbackend = \"offline\"\n", "", "")
+        .replace("noise = 0.05", "noise = 0.05\ntrial_delay_ms = 15");
     std::fs::write(&config_path, &text).unwrap();
     let killed = tmp.path().join("killed");
     let mut child = Command::new(binary())
@@ -159,7 +179,11 @@ fn a_killed_command_resumes_where_it_stopped() {
         .args(["--cycles", "8"])
         .output()
         .unwrap();
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
 
     let config = HpoConfig::parse(&text, "test", tmp.path(), "test").unwrap();
     let straight = tmp.path().join("straight");

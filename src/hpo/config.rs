@@ -553,7 +553,7 @@ impl RawRunner {
         let kind = match (self.kind.as_str(), self.synthetic) {
             ("train", _) => RunnerKind::Train,
             ("synthetic", Some(spec)) => {
-                if spec.terms.is_empty() || !(spec.base_s > 0.0) {
+                if spec.terms.is_empty() || spec.base_s.is_nan() || spec.base_s <= 0.0 {
                     return Err(HpoError::config(
                         origin,
                         "[runner.synthetic] needs base_s > 0 and at least one [[runner.synthetic.term]]",

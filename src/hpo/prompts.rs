@@ -392,6 +392,9 @@ fn seed_diagnostics(view: &SearchView<'_>) -> String {
     }
 }
 
+/// A parameter's sweeps: cycles, values tried, and the best (objective, value, cycle).
+type ParamHistory = (Vec<String>, Vec<String>, Option<(f64, String, u32)>);
+
 fn earlier_summary(earlier: &[CycleRecord]) -> String {
     let (Some(first), Some(last)) = (earlier.first(), earlier.last()) else {
         return "none (every cycle so far is listed under recent experiments)".to_string();
@@ -420,8 +423,7 @@ fn earlier_summary(earlier: &[CycleRecord]) -> String {
         lines.push(format!("New bests: {}.", improvements.join(", ")));
     }
     // Per parameter: cycles, values tried, best result.
-    let mut per_param: BTreeMap<&str, (Vec<String>, Vec<String>, Option<(f64, String, u32)>)> =
-        BTreeMap::new();
+    let mut per_param: BTreeMap<&str, ParamHistory> = BTreeMap::new();
     for record in earlier
         .iter()
         .filter(|r| r.status == CycleStatus::Completed)

@@ -73,7 +73,7 @@ impl SyntheticObjective {
     fn distance(&self, config: &toml::Table, seed: u64) -> Result<(f64, bool, u64), HpoError> {
         let mut sum = 0.0;
         let mut failed = false;
-        let mut hash = splitmix64(seed ^ 0x5eed_0f_5eed);
+        let mut hash = splitmix64(seed ^ 0x005e_ed0f_5eed);
         for term in &self.spec.terms {
             let value = get_path(config, &term.name)
                 .and_then(ParamValue::from_toml)
@@ -194,7 +194,7 @@ mod tests {
         assert!(at.success && (at.active_time_s - 2.0).abs() < 1e-12);
         let off = obj.run(&config(1e-3, false), 0).unwrap();
         assert!((off.active_time_s - 3.0).abs() < 1e-12);
-        let far = obj.run(&config(1e-3 * (2.0f64).exp(), true), 0).unwrap();
+        let far = obj.run(&config(1e-3 * (1.2f64).exp(), true), 0).unwrap();
         assert!(far.active_time_s > 10.0 && far.success);
         let fail = obj.run(&config(1.0, true), 0).unwrap();
         assert!(!fail.success && fail.active_time_s == 30.0);

@@ -100,7 +100,11 @@ root_target = false
 }
 
 pub fn offline_config(search_extra: &str, runner_extra: &str) -> HpoConfig {
-    let text = config_text("[agent]\nbackend = \"offline\"\n", search_extra, runner_extra);
+    let text = config_text(
+        "[agent]\nbackend = \"offline\"\n",
+        search_extra,
+        runner_extra,
+    );
     HpoConfig::parse(&text, "test", Path::new("."), "test").expect("the test configuration loads")
 }
 
@@ -203,7 +207,9 @@ pub struct MockServer {
 impl MockServer {
     pub fn start(script: Vec<Scripted>) -> Self {
         let listener = TcpListener::bind("127.0.0.1:0").expect("bind 127.0.0.1:0");
-        listener.set_nonblocking(true).expect("non-blocking listener");
+        listener
+            .set_nonblocking(true)
+            .expect("non-blocking listener");
         let url = format!("http://{}/v1", listener.local_addr().expect("address"));
         let seen = Arc::new(Mutex::new(Vec::new()));
         let stop = Arc::new(AtomicBool::new(false));
@@ -250,7 +256,11 @@ fn serve(stream: TcpStream, script: &Script, seen: &Mutex<Vec<Seen>>) {
     if reader.read_line(&mut request_line).is_err() {
         return;
     }
-    let path = request_line.split_whitespace().nth(1).unwrap_or_default().to_string();
+    let path = request_line
+        .split_whitespace()
+        .nth(1)
+        .unwrap_or_default()
+        .to_string();
     let mut length = 0usize;
     let mut authorization = None;
     loop {
