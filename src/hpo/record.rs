@@ -80,9 +80,26 @@ pub struct CycleRecord {
     pub best: Standing,
 }
 
+impl CandidateResult {
+    /// The value as text; empty for the baseline.
+    pub fn value_text(&self) -> String {
+        self.value
+            .as_ref()
+            .map_or_else(String::new, ToString::to_string)
+    }
+}
+
 impl CycleRecord {
     pub fn winner(&self) -> Option<&CandidateResult> {
         self.winner.and_then(|i| self.candidates.get(i))
+    }
+
+    /// The candidate values as text, in order.
+    pub fn values_text(&self) -> Vec<String> {
+        self.candidates
+            .iter()
+            .map(CandidateResult::value_text)
+            .collect()
     }
 }
 

@@ -32,15 +32,7 @@ pub fn summary_table(history: &[CycleRecord], state: &SearchState) -> String {
                 String::new(),
             ),
             CycleStatus::Completed => {
-                let values: Vec<String> = record
-                    .candidates
-                    .iter()
-                    .map(|c| {
-                        c.value
-                            .as_ref()
-                            .map_or_else(String::new, ToString::to_string)
-                    })
-                    .collect();
+                let values = record.values_text();
                 let w = record.winner();
                 (
                     record.param.clone().unwrap_or_default(),

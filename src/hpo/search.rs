@@ -19,7 +19,7 @@ use crate::hpo::objective::winner;
 use crate::hpo::prompts::{SearchView, inputs, render, truncate};
 use crate::hpo::proposal::{Proposal, ProposalRules, parse_proposal};
 use crate::hpo::record::{
-    CycleRecord, CycleStatus, Kept, PlanNote, SearchState, Widening, cycle_name,
+    CandidateResult, CycleRecord, CycleStatus, Kept, PlanNote, SearchState, Widening, cycle_name,
 };
 use crate::hpo::space::{ParamKind, SearchSpace};
 use crate::hpo::state::RunDir;
@@ -157,13 +157,7 @@ impl Search {
             value: None,
             assignment: assignment.clone(),
         }];
-        let results = run_experiment(
-            pool,
-            &self.config.base,
-            &candidates,
-            &self.config.search.seeds,
-            self.config.objective.budget_s,
-        )?;
+        let results = self.experiment(pool, &candidates)?;
         let objective_s = results
             .first()
             .map_or(self.config.objective.budget_s, |r| r.objective_s);
@@ -297,13 +291,7 @@ impl Search {
             };
         }
         let candidates = candidates_of(&base_assignment, &proposal.param, &proposal.values);
-        let results = run_experiment(
-            pool,
-            &self.config.base,
-            &candidates,
-            &self.config.search.seeds,
-            self.config.objective.budget_s,
-        )?;
+        let results = self.experiment(pool, &candidates)?;
         let won = winner(&results);
         let won_assignment = won
             .and_then(|i| candidates.get(i))
@@ -362,6 +350,21 @@ impl Search {
             progress_line(self.history.last(), last_cycle)
         );
         Ok(())
+    }
+
+    /// Every candidate × every seed of the configuration.
+    fn experiment(
+        &self,
+        pool: &mut RunnerPool,
+        candidates: &[Candidate],
+    ) -> Result<Vec<CandidateResult>, HpoError> {
+        run_experiment(
+            pool,
+            &self.config.base,
+            candidates,
+            &self.config.search.seeds,
+            self.config.objective.budget_s,
+        )
     }
 
     fn view<'a>(&'a self, state: &'a SearchState, cycle: u32, last_cycle: u32) -> SearchView<'a> {
@@ -529,15 +532,7 @@ fn progress_line(record: Option<&CycleRecord>, last_cycle: u32) -> String {
             r.rejections.len()
         ),
         CycleStatus::Completed => {
-            let values: Vec<String> = r
-                .candidates
-                .iter()
-                .map(|c| {
-                    c.value
-                        .as_ref()
-                        .map_or_else(String::new, ToString::to_string)
-                })
-                .collect();
+            let values = r.values_text();
             let winner = r.winner().map_or_else(String::new, |w| {
                 format!(
                     "{} at {:.3} s",
