@@ -88,7 +88,7 @@ pub fn run(request: &HpoRequest, progress: &mut dyn Write) -> Result<HpoSummary,
     let config = search.config().clone();
     let mut backend = backend::build_backend(&config.agent)?;
     let mut pool = RunnerPool::new(trial::build_runners(&config.runner, config.objective)?)
-        .ok_or(HpoError::TrainerMissing)?;
+        .ok_or_else(|| HpoError::config(&config.name, "[runner] gave no trial runner"))?;
     let last_cycle = request.cycles.unwrap_or(config.search.cycles);
     let _ = writeln!(
         progress,
