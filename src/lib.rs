@@ -6,6 +6,7 @@
 //! - [`plan`]: the `.wrp` plan format: reader, validation, packing, replay into CUDA graphs.
 //! - [`motion`]: DeepMimic reference motions and their kinematics.
 //! - [`bench`]: benchmarks of physics (and later the whole loop), for `instantmimic bench`.
+//! - [`hpo`]: hyperparameter search by an agent (plan → propose → experiment).
 //! - [`assets`]: PTX and plans embedded in the binary at build time.
 //! - [`cli`]: the command line.
 
@@ -13,5 +14,6 @@ pub mod assets;
 pub mod bench;
 pub mod cli;
 pub mod cuda;
+pub mod hpo;
 pub mod motion;
 pub mod plan;

@@ -2,6 +2,7 @@
 
 mod bench;
 mod gpu;
+mod hpo;
 mod motion;
 mod plan;
 
@@ -29,6 +30,8 @@ enum Command {
     Motion(motion::MotionArgs),
     /// Show the GPU, its driver and the PTX ISA it accepts.
     Gpu(gpu::GpuArgs),
+    /// Hyperparameter search by an agent: plan, propose, experiment (see docs/hpo.md).
+    Hpo(hpo::HpoArgs),
 }
 
 /// Parses the command line and runs the command.
@@ -39,5 +42,6 @@ pub fn run() -> Result<()> {
         Command::Plan(args) => plan::run(args),
         Command::Motion(args) => motion::run(args),
         Command::Gpu(args) => gpu::run(&args),
+        Command::Hpo(args) => hpo::run_hpo(args),
     }
 }

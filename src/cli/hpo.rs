@@ -1,0 +1,41 @@
+//! `instantmimic hpo`: the agent's hyperparameter search (plan → propose → experiment).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::Args;
+
+use crate::hpo::{HpoRequest, run};
+
+#[derive(Args, Debug)]
+pub struct HpoArgs {
+    /// The HPO configuration, e.g. configs/hpo/backflip.toml (required for a new search; on
+    /// --resume it must describe the same search, and its agent and prompts take over).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Continue the search in this run directory from its last complete cycle.
+    #[arg(long)]
+    resume: Option<PathBuf>,
+    /// Run until this cycle is done (default: [search] cycles of the configuration).
+    #[arg(long)]
+    cycles: Option<u32>,
+    /// Run directory of a new search (default: runs/hpo/<name>-<UTC time>).
+    #[arg(long, conflicts_with = "resume")]
+    out: Option<PathBuf>,
+}
+
+/// Runs `hpo`: progress on stderr, the summary table on stdout.
+pub fn run_hpo(args: HpoArgs) -> Result<()> {
+    let request = HpoRequest {
+        config: args.config,
+        resume: args.resume,
+        cycles: args.cycles,
+        out: args.out,
+    };
+    let mut progress = std::io::stderr();
+    let summary = run(&request, &mut progress).context("hyperparameter search")?;
+    print!("{}", summary.table);
+    println!("\nRun directory: {}", summary.dir.display());
+    println!("Trajectory: {}", summary.plot.display());
+    Ok(())
+}
