@@ -4,6 +4,7 @@
 //! replayed here through CUDA graphs. Layout:
 //! - [`cuda`]: the driver (context, modules, launches, graphs). The only place with `unsafe` CUDA calls.
 //! - [`plan`]: the `.wrp` plan format: reader, validation, packing, replay into CUDA graphs.
+//! - [`env`]: our own kernels (env, PPO): AOT-compiled Warp PTX and typed launchers.
 //! - [`motion`]: DeepMimic reference motions and their kinematics.
 //! - [`assets`]: PTX and plans embedded in the binary at build time.
 //! - [`cli`]: the command line.
@@ -11,5 +12,6 @@
 pub mod assets;
 pub mod cli;
 pub mod cuda;
+pub mod env;
 pub mod motion;
 pub mod plan;
