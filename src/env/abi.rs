@@ -9,7 +9,9 @@
 
 use super::error::EnvError;
 pub use super::manifest::ScalarType;
-use super::manifest::{ARRAY_LAYOUT, MAX_DIMS, launch_bounds_layout};
+use super::manifest::{
+    ARRAY_LAYOUT, MAX_DIMS, kernel_param_layout, launch_bounds_layout, packed_len,
+};
 
 /// Bytes of Warp's `array_t<T>` descriptor.
 pub const ARRAY_DESCRIPTOR_BYTES: usize = ARRAY_LAYOUT.size;
@@ -188,18 +190,12 @@ pub struct KernelAbi {
 impl KernelAbi {
     /// `(offset, size)` of every parameter, `launch_bounds_t` first, as the driver reports them.
     pub fn param_layout(&self) -> Vec<(usize, usize)> {
-        let mut out = vec![(0, launch_bounds_layout(self.dim).size)];
-        out.extend(self.params.iter().map(|p| (p.offset, p.size)));
-        out
+        kernel_param_layout(self.dim, self.params.iter().map(|p| (p.offset, p.size)))
     }
 
     /// Length of the packed argument buffer.
     pub fn param_bytes(&self) -> usize {
-        self.param_layout()
-            .iter()
-            .map(|(o, s)| o + s)
-            .max()
-            .unwrap_or(0)
+        packed_len(&self.param_layout())
     }
 }
 

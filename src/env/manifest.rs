@@ -586,23 +586,32 @@ impl EnvManifest {
     }
 }
 
+/// `(offset, size)` of every parameter of a kernel launched over `dim` dimensions whose
+/// parameters after `launch_bounds_t` are `params`: `launch_bounds_t` first, as the driver's
+/// `cuFuncGetParamInfo` reports them for the loaded kernel.
+pub fn kernel_param_layout(
+    dim: usize,
+    params: impl IntoIterator<Item = (usize, usize)>,
+) -> Vec<(usize, usize)> {
+    let mut out = vec![(0, launch_bounds_layout(dim).size)];
+    out.extend(params);
+    out
+}
+
+/// The packed argument buffer's length for a parameter layout: the end of the last parameter.
+pub fn packed_len(layout: &[(usize, usize)]) -> usize {
+    layout.iter().map(|(o, s)| o + s).max().unwrap_or(0)
+}
+
 impl KernelDef {
-    /// `(offset, size)` of every parameter, `launch_bounds_t` first: what the driver's
-    /// `cuFuncGetParamInfo` reports for the loaded kernel.
+    /// `(offset, size)` of every parameter, `launch_bounds_t` first ([`kernel_param_layout`]).
     pub fn param_layout(&self) -> Vec<(usize, usize)> {
-        let bounds = launch_bounds_layout(self.dim);
-        let mut out = vec![(0, bounds.size)];
-        out.extend(self.params.iter().map(|p| (p.offset, p.size)));
-        out
+        kernel_param_layout(self.dim, self.params.iter().map(|p| (p.offset, p.size)))
     }
 
-    /// The packed argument buffer's length: the end of the last parameter.
+    /// The packed argument buffer's length.
     pub fn param_bytes(&self) -> usize {
-        self.param_layout()
-            .iter()
-            .map(|(o, s)| o + s)
-            .max()
-            .unwrap_or(0)
+        packed_len(&self.param_layout())
     }
 
     /// Checks the manifest's parameters against the entry's declarations in `ptx` (the module
