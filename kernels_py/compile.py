@@ -1,7 +1,8 @@
 """Regenerate the PTX of every MuJoCo Warp module the committed plans use (no GPU needed).
 
-    python kernels_py/compile.py            # write ptx/mjwarp/*.ptx
-    python kernels_py/compile.py --check    # exit 1 if ptx/ differs from what this produces
+    python kernels_py/compile.py              # write ptx/mjwarp/*.ptx and ptx/env/ (our kernels)
+    python kernels_py/compile.py --check      # exit 1 if ptx/ differs from what this produces
+    python kernels_py/compile.py --only env   # only our env kernels (env_build.py; no plans needed)
 
 The plans (ptx/plans/manifest.json) name each module by Warp's content hash and the block size
 it was launched with. This script rebuilds the same model with the physics the plans were
@@ -10,6 +11,9 @@ the same module objects, checks that each module hashes to the recorded value, a
 ahead of time to PTX for physics.PTX_ARCH with Warp's bundled NVRTC. Virtual registers are then
 renumbered canonically (ptx_canon.py), since NVRTC's numbering varies between runs. Same inputs,
 same bytes.
+
+Our own env kernels (kernels_py/env/) are compiled in the same run by env_build.py, into ptx/env/
+with their manifest (docs/kernels.md).
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import sys
 import tempfile
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import env_build  # noqa: E402
 import physics  # noqa: E402
 import ptx_canon  # noqa: E402
 
@@ -116,17 +121,43 @@ def main(argv=None) -> int:
     parser.add_argument("--manifest", default=str(MANIFEST))
     parser.add_argument("--out", default=str(PTX_DIR), help="the ptx/ directory to write or check")
     parser.add_argument("--check", action="store_true", help="compare with --out instead of writing")
+    parser.add_argument(
+        "--only",
+        choices=("all", "mjwarp", "env"),
+        default="all",
+        help="which files: the plans' MuJoCo Warp modules, our env kernels, or both (default)",
+    )
     args = parser.parse_args(argv)
 
+    wp = physics.configure_warp()
+    wp.config.kernel_cache_dir = tempfile.mkdtemp(prefix="instantmimic-warp-cache-")
+    wp.init()
+    status = 0
+    if args.only in ("all", "mjwarp"):
+        status = max(status, compile_mjwarp(args))
+    if args.only in ("all", "env"):
+        status = max(status, compile_env(args))
+    return status
+
+
+def compile_env(args) -> int:
+    """ptx/env/: our kernels and their manifest (env_build.py)."""
+    try:
+        files = env_build.generate()
+    except env_build.EnvBuildError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    return env_build.sync(files, pathlib.Path(args.out), args.check)
+
+
+def compile_mjwarp(args) -> int:
+    """ptx/mjwarp/: the MuJoCo Warp modules the committed plans launch. Warp is initialized."""
     try:
         manifest = json.loads(pathlib.Path(args.manifest).read_text())
     except (OSError, json.JSONDecodeError) as e:
         print(f"error: {args.manifest}: {e}", file=sys.stderr)
         return 2
 
-    wp = physics.configure_warp()
-    wp.config.kernel_cache_dir = tempfile.mkdtemp(prefix="instantmimic-warp-cache-")
-    wp.init()
     try:
         files = generate(manifest)
     except CompileError as e:

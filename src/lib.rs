@@ -4,6 +4,7 @@
 //! replayed here through CUDA graphs. Layout:
 //! - [`cuda`]: the driver (context, modules, launches, graphs). The only place with `unsafe` CUDA calls.
 //! - [`plan`]: the `.wrp` plan format: reader, validation, packing, replay into CUDA graphs.
+//! - [`env`]: our own kernels (env, PPO): AOT-compiled Warp PTX and typed launchers.
 //! - [`motion`]: DeepMimic reference motions and their kinematics.
 //! - [`bench`]: benchmarks of physics (and later the whole loop), for `instantmimic bench`.
 //! - [`hpo`]: hyperparameter search by an agent (plan → propose → experiment).
@@ -14,6 +15,7 @@ pub mod assets;
 pub mod bench;
 pub mod cli;
 pub mod cuda;
+pub mod env;
 pub mod hpo;
 pub mod motion;
 pub mod plan;

@@ -1,0 +1,406 @@
+//! Warp's kernel ABI from the Rust side: values as bytes, the `array_t` descriptor, the
+//! `launch_bounds_t` header, and the packed argument buffer a launch passes to the driver.
+//!
+//! A Warp kernel takes `launch_bounds_t<dim>` and then its parameters, laid out as one C struct
+//! (each at the next multiple of its alignment); `Stream::launch` hands that buffer to
+//! `cuLaunchKernel` as is. The layouts are in [`super::manifest`] ([`ARRAY_LAYOUT`],
+//! [`launch_bounds_layout`]) and checked there against what env_build.py read from Warp. All
+//! bytes are little-endian, the byte order of every CUDA host and device.
+
+use super::error::EnvError;
+pub use super::manifest::ScalarType;
+use super::manifest::{
+    ARRAY_LAYOUT, MAX_DIMS, kernel_param_layout, launch_bounds_layout, packed_len,
+};
+
+/// Bytes of Warp's `array_t<T>` descriptor.
+pub const ARRAY_DESCRIPTOR_BYTES: usize = ARRAY_LAYOUT.size;
+
+mod sealed {
+    pub trait Sealed {}
+}
+
+/// A Warp value type: a scalar, or a fixed-size vector (`[T; N]`: `vec3f` is `[f32; 3]`,
+/// `quatf` is `[f32; 4]` in Warp's x, y, z, w order) or matrix (`[[T; C]; R]`, row-major) of
+/// one. Arrays of these are [`super::DeviceArray`]s; kernel parameters of these are passed by
+/// value.
+pub trait Element: Copy + Send + Sync + 'static + sealed::Sealed {
+    /// The scalar type.
+    const SCALAR: ScalarType;
+    /// `[]` for a scalar, `[N]` for a vector, `[R, C]` for a matrix.
+    const SHAPE: &'static [usize];
+    /// Bytes of one value.
+    const SIZE: usize;
+    /// Writes the value into `out`, which is exactly [`Element::SIZE`] bytes long.
+    fn write_le(&self, out: &mut [u8]);
+    /// Reads a value from exactly [`Element::SIZE`] bytes.
+    fn read_le(bytes: &[u8]) -> Self;
+}
+
+macro_rules! element {
+    ($t:ty, $scalar:ident, $to:expr, $from:expr) => {
+        impl sealed::Sealed for $t {}
+        impl Element for $t {
+            const SCALAR: ScalarType = ScalarType::$scalar;
+            const SHAPE: &'static [usize] = &[];
+            const SIZE: usize = std::mem::size_of::<$t>();
+            fn write_le(&self, out: &mut [u8]) {
+                let to: fn($t) -> [u8; std::mem::size_of::<$t>()] = $to;
+                out.copy_from_slice(&to(*self));
+            }
+            fn read_le(bytes: &[u8]) -> Self {
+                let from: fn([u8; std::mem::size_of::<$t>()]) -> $t = $from;
+                let mut raw = [0u8; std::mem::size_of::<$t>()];
+                raw.copy_from_slice(bytes);
+                from(raw)
+            }
+        }
+        impl<const N: usize> sealed::Sealed for [$t; N] {}
+        impl<const N: usize> Element for [$t; N] {
+            const SCALAR: ScalarType = ScalarType::$scalar;
+            const SHAPE: &'static [usize] = &[N];
+            const SIZE: usize = N * std::mem::size_of::<$t>();
+            fn write_le(&self, out: &mut [u8]) {
+                for (v, dst) in self.iter().zip(out.chunks_exact_mut(<$t>::SIZE)) {
+                    v.write_le(dst);
+                }
+            }
+            fn read_le(bytes: &[u8]) -> Self {
+                let mut out = [<$t>::read_le(&[0u8; std::mem::size_of::<$t>()]); N];
+                for (v, src) in out.iter_mut().zip(bytes.chunks_exact(<$t>::SIZE)) {
+                    *v = <$t>::read_le(src);
+                }
+                out
+            }
+        }
+        impl<const R: usize, const C: usize> sealed::Sealed for [[$t; C]; R] {}
+        impl<const R: usize, const C: usize> Element for [[$t; C]; R] {
+            const SCALAR: ScalarType = ScalarType::$scalar;
+            const SHAPE: &'static [usize] = &[R, C];
+            const SIZE: usize = R * C * std::mem::size_of::<$t>();
+            fn write_le(&self, out: &mut [u8]) {
+                for (row, dst) in self.iter().zip(out.chunks_exact_mut(<[$t; C]>::SIZE)) {
+                    row.write_le(dst);
+                }
+            }
+            fn read_le(bytes: &[u8]) -> Self {
+                let zero = <$t>::read_le(&[0u8; std::mem::size_of::<$t>()]);
+                let mut out = [[zero; C]; R];
+                for (row, src) in out.iter_mut().zip(bytes.chunks_exact(<[$t; C]>::SIZE)) {
+                    *row = <[$t; C]>::read_le(src);
+                }
+                out
+            }
+        }
+    };
+    ($t:ty, $scalar:ident) => {
+        element!($t, $scalar, <$t>::to_le_bytes, <$t>::from_le_bytes);
+    };
+}
+
+element!(bool, Bool, |v| [u8::from(v)], |b| b[0] != 0);
+element!(i8, Int8);
+element!(u8, Uint8);
+element!(i16, Int16);
+element!(u16, Uint16);
+element!(i32, Int32);
+element!(u32, Uint32);
+element!(i64, Int64);
+element!(u64, Uint64);
+element!(half::f16, Float16);
+element!(f32, Float32);
+element!(f64, Float64);
+
+/// A `@wp.struct` passed by value. `build.rs` implements it for the Rust struct it generates
+/// from each struct in the manifest.
+pub trait WarpStruct {
+    /// The Warp struct's name.
+    const NAME: &'static str;
+    /// Bytes of the struct, padding included.
+    const SIZE: usize;
+    /// Writes the fields at their offsets into `out`, which is exactly [`WarpStruct::SIZE`]
+    /// bytes long and zeroed (padding stays zero).
+    fn write_le(&self, out: &mut [u8]);
+}
+
+/// Writes a struct field of a generated [`WarpStruct`] at `offset`. The generated offsets lie
+/// inside the struct's size (the manifest was validated when the code was generated).
+pub fn write_field<T: Element>(out: &mut [u8], offset: usize, value: &T) {
+    if let Some(dst) = out.get_mut(offset..offset + T::SIZE) {
+        value.write_le(dst);
+    }
+}
+
+/// Writes a nested struct field of a generated [`WarpStruct`] at `offset`.
+pub fn write_struct_field<S: WarpStruct>(out: &mut [u8], offset: usize, value: &S) {
+    if let Some(dst) = out.get_mut(offset..offset + S::SIZE) {
+        value.write_le(dst);
+    }
+}
+
+/// What a kernel parameter is, as the generated code was built for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ParamKind {
+    /// A scalar, vector or matrix passed by value.
+    Value {
+        scalar: ScalarType,
+        shape: &'static [usize],
+    },
+    /// A `wp.array` of `ndim` dimensions of values.
+    Array {
+        scalar: ScalarType,
+        shape: &'static [usize],
+        ndim: usize,
+    },
+    /// A `@wp.struct` by value.
+    Struct { name: &'static str },
+}
+
+/// One kernel parameter after `launch_bounds_t`: its place in the packed buffer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ParamAbi {
+    pub name: &'static str,
+    pub kind: ParamKind,
+    pub offset: usize,
+    pub size: usize,
+    pub align: usize,
+}
+
+/// A kernel as the generated launchers pack it: `build.rs` writes one per manifest kernel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct KernelAbi {
+    /// Module name (`kernels_py/env/<module>.py`).
+    pub module: &'static str,
+    /// The embedded PTX, relative to `ptx/`.
+    pub ptx: &'static str,
+    /// Kernel name (the Python function, the launcher).
+    pub name: &'static str,
+    /// PTX entry.
+    pub entry: &'static str,
+    /// Launch dimensionality.
+    pub dim: usize,
+    /// Threads per block.
+    pub block_dim: u32,
+    /// Dynamic shared memory per block.
+    pub smem_bytes: u32,
+    /// Parameters after `launch_bounds_t<dim>`.
+    pub params: &'static [ParamAbi],
+}
+
+impl KernelAbi {
+    /// `(offset, size)` of every parameter, `launch_bounds_t` first, as the driver reports them.
+    pub fn param_layout(&self) -> Vec<(usize, usize)> {
+        kernel_param_layout(self.dim, self.params.iter().map(|p| (p.offset, p.size)))
+    }
+
+    /// Length of the packed argument buffer.
+    pub fn param_bytes(&self) -> usize {
+        packed_len(&self.param_layout())
+    }
+}
+
+/// The `array_t` descriptor of a contiguous row-major array at device address `data` (no
+/// gradient): shape, byte strides, ndim. Warp stores shape and strides as `int`, so every extent
+/// and stride must fit `i32`.
+pub fn array_descriptor(
+    data: u64,
+    shape: &[usize],
+    element_size: usize,
+) -> Result<[u8; ARRAY_DESCRIPTOR_BYTES], EnvError> {
+    let bad = |reason: String| EnvError::ArrayShape {
+        shape: shape.to_vec(),
+        reason,
+    };
+    if shape.is_empty() || shape.len() > MAX_DIMS {
+        return Err(bad(format!("Warp arrays have 1 to {MAX_DIMS} dimensions")));
+    }
+    let f = ARRAY_LAYOUT.fields;
+    let mut out = [0u8; ARRAY_DESCRIPTOR_BYTES];
+    out[f.data..f.data + 8].copy_from_slice(&data.to_le_bytes());
+    // grad stays null: env kernels have no backward pass.
+    let mut stride = element_size;
+    for d in (0..shape.len()).rev() {
+        let extent = i32::try_from(shape[d])
+            .map_err(|_| bad(format!("extent {} does not fit Warp's int", shape[d])))?;
+        let stride_i32 = i32::try_from(stride)
+            .map_err(|_| bad(format!("byte stride {stride} does not fit Warp's int")))?;
+        out[f.shape + 4 * d..f.shape + 4 * d + 4].copy_from_slice(&extent.to_le_bytes());
+        out[f.strides + 4 * d..f.strides + 4 * d + 4].copy_from_slice(&stride_i32.to_le_bytes());
+        stride = stride
+            .checked_mul(shape[d])
+            .ok_or_else(|| bad("the byte size overflows".to_owned()))?;
+    }
+    let ndim = shape.len() as u16;
+    out[f.ndim..f.ndim + 2].copy_from_slice(&ndim.to_le_bytes());
+    // flags (ARRAY_FLAG_RETAIN_GRAD) stay 0.
+    Ok(out)
+}
+
+/// The `launch_bounds_t<shape.len()>` bytes for a launch over `shape`: extents, their product
+/// (`size`), `coord_mult` 1. Each extent must fit `i32` (`wp.tid()` returns `int`).
+pub fn launch_bounds(shape: &[usize]) -> Result<(Vec<u8>, usize), EnvError> {
+    let bad = |reason: String| EnvError::LaunchShape {
+        shape: shape.to_vec(),
+        reason,
+    };
+    if shape.is_empty() || shape.len() > MAX_DIMS {
+        return Err(bad(format!(
+            "Warp launches have 1 to {MAX_DIMS} dimensions"
+        )));
+    }
+    let layout = launch_bounds_layout(shape.len());
+    let mut out = vec![0u8; layout.size];
+    let mut size: usize = 1;
+    for (d, &extent) in shape.iter().enumerate() {
+        if i32::try_from(extent).is_err() {
+            return Err(bad(format!("extent {extent} does not fit Warp's int")));
+        }
+        let at = layout.fields.shape + 4 * d;
+        out[at..at + 4].copy_from_slice(&(extent as u32).to_le_bytes());
+        size = size
+            .checked_mul(extent)
+            .ok_or_else(|| bad("the thread count overflows".to_owned()))?;
+    }
+    let at = layout.fields.size;
+    out[at..at + 8].copy_from_slice(&(size as u64).to_le_bytes());
+    let at = layout.fields.coord_mult;
+    out[at..at + 8].copy_from_slice(&1u64.to_le_bytes());
+    Ok((out, size))
+}
+
+/// A kernel's packed argument buffer being filled, parameter by parameter. Each setter checks
+/// that the value has the parameter's type (the generated launchers always pass the right one;
+/// the check turns a generator bug into an error instead of a corrupt launch).
+#[derive(Debug, Clone)]
+pub struct ArgBuffer {
+    abi: &'static KernelAbi,
+    bytes: Vec<u8>,
+}
+
+impl ArgBuffer {
+    /// A zeroed buffer of the kernel's parameter size.
+    pub fn new(abi: &'static KernelAbi) -> ArgBuffer {
+        ArgBuffer {
+            abi,
+            bytes: vec![0; abi.param_bytes()],
+        }
+    }
+
+    pub fn abi(&self) -> &'static KernelAbi {
+        self.abi
+    }
+
+    /// The packed bytes.
+    pub fn bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+
+    fn slot(&mut self, index: usize, expected: &str, fits: bool) -> Result<&mut [u8], EnvError> {
+        let abi = self.abi;
+        let param = abi.params.get(index).ok_or_else(|| EnvError::Argument {
+            kernel: abi.name,
+            param: format!("#{index}"),
+            reason: format!("the kernel has {} parameters", abi.params.len()),
+        })?;
+        if !fits {
+            return Err(EnvError::Argument {
+                kernel: abi.name,
+                param: param.name.to_owned(),
+                reason: format!("expects {:?}, got {expected}", param.kind),
+            });
+        }
+        let range = param.offset..param.offset + param.size;
+        self.bytes.get_mut(range).ok_or_else(|| EnvError::Argument {
+            kernel: abi.name,
+            param: param.name.to_owned(),
+            reason: "lies outside the argument buffer".to_owned(),
+        })
+    }
+
+    /// Sets value parameter `index` (a scalar, vector or matrix).
+    pub fn set_value<T: Element>(&mut self, index: usize, value: &T) -> Result<(), EnvError> {
+        let fits = self.abi.params.get(index).is_some_and(|p| {
+            p.kind
+                == ParamKind::Value {
+                    scalar: T::SCALAR,
+                    shape: T::SHAPE,
+                }
+                && p.size == T::SIZE
+        });
+        let dst = self.slot(index, &format!("a {:?} {:?}", T::SCALAR, T::SHAPE), fits)?;
+        value.write_le(dst);
+        Ok(())
+    }
+
+    /// Sets array parameter `index` from a descriptor of an array of `T` with `ndim` dimensions.
+    pub fn set_array_descriptor<T: Element>(
+        &mut self,
+        index: usize,
+        ndim: usize,
+        descriptor: &[u8; ARRAY_DESCRIPTOR_BYTES],
+    ) -> Result<(), EnvError> {
+        let fits = self.abi.params.get(index).is_some_and(|p| {
+            p.kind
+                == ParamKind::Array {
+                    scalar: T::SCALAR,
+                    shape: T::SHAPE,
+                    ndim,
+                }
+                && p.size == ARRAY_DESCRIPTOR_BYTES
+        });
+        let expected = format!(
+            "an array of {:?} {:?} with ndim {ndim}",
+            T::SCALAR,
+            T::SHAPE
+        );
+        self.slot(index, &expected, fits)?
+            .copy_from_slice(descriptor);
+        Ok(())
+    }
+
+    /// Sets array parameter `index`.
+    pub fn set_array<T: Element, const N: usize>(
+        &mut self,
+        index: usize,
+        array: &super::DeviceArray<T, N>,
+    ) -> Result<(), EnvError> {
+        self.set_array_descriptor::<T>(index, N, &array.descriptor()?)
+    }
+
+    /// Sets struct parameter `index`.
+    pub fn set_struct<S: WarpStruct>(&mut self, index: usize, value: &S) -> Result<(), EnvError> {
+        let fits =
+            self.abi.params.get(index).is_some_and(|p| {
+                p.kind == ParamKind::Struct { name: S::NAME } && p.size == S::SIZE
+            });
+        let dst = self.slot(index, &format!("struct {}", S::NAME), fits)?;
+        value.write_le(dst);
+        Ok(())
+    }
+
+    /// Writes `launch_bounds_t` for a launch over `shape` (one extent per launch dimension);
+    /// returns the thread count.
+    pub fn set_launch_bounds(&mut self, shape: &[usize]) -> Result<usize, EnvError> {
+        if shape.len() != self.abi.dim {
+            return Err(EnvError::LaunchShape {
+                shape: shape.to_vec(),
+                reason: format!(
+                    "kernel {} is launched over {} dimension(s)",
+                    self.abi.name, self.abi.dim
+                ),
+            });
+        }
+        let (bytes, size) = launch_bounds(shape)?;
+        match self.bytes.get_mut(..bytes.len()) {
+            Some(dst) => dst.copy_from_slice(&bytes),
+            None => {
+                return Err(EnvError::Argument {
+                    kernel: self.abi.name,
+                    param: "launch_bounds".to_owned(),
+                    reason: "lies outside the argument buffer".to_owned(),
+                });
+            }
+        }
+        Ok(size)
+    }
+}

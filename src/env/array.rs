@@ -1,0 +1,138 @@
+//! Owned, typed device arrays: what Warp kernels call `wp.array(dtype=T, ndim=N)`.
+
+use std::marker::PhantomData;
+
+use crate::cuda::{DeviceMemory, Gpu};
+
+use super::abi::{ARRAY_DESCRIPTOR_BYTES, Element, array_descriptor};
+use super::error::EnvError;
+use super::manifest::MAX_DIMS;
+
+/// A contiguous row-major device array of `T` with `N` dimensions (1 to 4), freed on drop.
+///
+/// Copies ([`DeviceArray::upload`], [`DeviceArray::download`]) run on the GPU's main stream and
+/// wait for it: they are ordered after kernels launched on that stream, not after work on other
+/// streams (synchronize those first).
+pub struct DeviceArray<T: Element, const N: usize = 1> {
+    memory: DeviceMemory,
+    shape: [usize; N],
+    element: PhantomData<T>,
+}
+
+/// A two-dimensional [`DeviceArray`] (`wp.array2d`).
+pub type DeviceArray2<T> = DeviceArray<T, 2>;
+/// A three-dimensional [`DeviceArray`] (`wp.array3d`).
+pub type DeviceArray3<T> = DeviceArray<T, 3>;
+/// A four-dimensional [`DeviceArray`] (`wp.array4d`).
+pub type DeviceArray4<T> = DeviceArray<T, 4>;
+
+impl<T: Element, const N: usize> std::fmt::Debug for DeviceArray<T, N> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DeviceArray")
+            .field("scalar", &T::SCALAR)
+            .field("element_shape", &T::SHAPE)
+            .field("shape", &self.shape)
+            .field("memory", &self.memory)
+            .finish()
+    }
+}
+
+/// Number of elements of `shape`, checked against what Warp's descriptor can hold.
+fn element_count<T: Element>(shape: &[usize]) -> Result<usize, EnvError> {
+    // Builds the descriptor for address 0: every extent and stride must fit Warp's int.
+    array_descriptor(0, shape, T::SIZE)?;
+    shape
+        .iter()
+        .try_fold(1usize, |n, &d| n.checked_mul(d))
+        .ok_or_else(|| EnvError::ArrayShape {
+            shape: shape.to_vec(),
+            reason: "the element count overflows".to_owned(),
+        })
+}
+
+impl<T: Element, const N: usize> DeviceArray<T, N> {
+    const DIMS_OK: () = assert!(
+        N >= 1 && N <= MAX_DIMS,
+        "Warp arrays have 1 to 4 dimensions"
+    );
+
+    /// A zeroed array of `shape`.
+    pub fn zeros(gpu: &Gpu, shape: [usize; N]) -> Result<DeviceArray<T, N>, EnvError> {
+        let () = Self::DIMS_OK;
+        let count = element_count::<T>(&shape)?;
+        let bytes = count
+            .checked_mul(T::SIZE)
+            .ok_or_else(|| EnvError::ArrayShape {
+                shape: shape.to_vec(),
+                reason: "the byte size overflows".to_owned(),
+            })?;
+        Ok(DeviceArray {
+            memory: gpu.alloc_zeroed(bytes)?,
+            shape,
+            element: PhantomData,
+        })
+    }
+
+    /// An array of `shape` holding `data` (row-major, exactly as many values as the shape).
+    pub fn from_slice(
+        gpu: &Gpu,
+        shape: [usize; N],
+        data: &[T],
+    ) -> Result<DeviceArray<T, N>, EnvError> {
+        let array = DeviceArray::zeros(gpu, shape)?;
+        array.upload(data)?;
+        Ok(array)
+    }
+
+    /// Overwrites the whole array with `data` (row-major, exactly [`DeviceArray::len`] values).
+    pub fn upload(&self, data: &[T]) -> Result<(), EnvError> {
+        if data.len() != self.len() {
+            return Err(EnvError::Length {
+                operation: "DeviceArray::upload",
+                given: data.len(),
+                expected: self.len(),
+                shape: self.shape.to_vec(),
+            });
+        }
+        let mut bytes = vec![0u8; self.memory.len()];
+        for (v, dst) in data.iter().zip(bytes.chunks_exact_mut(T::SIZE)) {
+            v.write_le(dst);
+        }
+        self.memory.copy_from_host(0, &bytes)?;
+        Ok(())
+    }
+
+    /// The whole array, row-major.
+    pub fn download(&self) -> Result<Vec<T>, EnvError> {
+        let bytes = self.memory.to_vec()?;
+        Ok(bytes.chunks_exact(T::SIZE).map(T::read_le).collect())
+    }
+
+    pub fn shape(&self) -> [usize; N] {
+        self.shape
+    }
+
+    /// Number of elements.
+    pub fn len(&self) -> usize {
+        self.shape.iter().product()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The device address of element 0 (0 for an empty array).
+    pub fn device_ptr(&self) -> u64 {
+        self.memory.device_ptr()
+    }
+
+    /// The underlying allocation, for stream operations (memsets, copies in graphs).
+    pub fn memory(&self) -> &DeviceMemory {
+        &self.memory
+    }
+
+    /// Warp's `array_t<T>` descriptor of this array, as a kernel parameter.
+    pub fn descriptor(&self) -> Result<[u8; ARRAY_DESCRIPTOR_BYTES], EnvError> {
+        array_descriptor(self.device_ptr(), &self.shape, T::SIZE)
+    }
+}

@@ -1,0 +1,27 @@
+//! Our own GPU kernels (env and, later, PPO): Warp kernels written in `kernels_py/env/`,
+//! compiled ahead of time to PTX (`ptx/env/`) with a manifest of their ABI, launched from Rust
+//! through launchers that `build.rs` generates from that manifest. `docs/kernels.md` describes
+//! the pipeline and how to add a kernel.
+//!
+//! - [`EnvKernels`]: the loaded kernels and one typed launch function per kernel.
+//! - [`DeviceArray`]: owned typed device arrays, passed as Warp `array_t` descriptors.
+//! - [`DeviceReferenceTable`]: a reference table on the GPU and its lookup.
+//! - [`abi`]: Warp's kernel ABI (values as bytes, descriptors, packed argument buffers).
+//! - [`manifest`]: `ptx/env/manifest.json`, parsed and validated (shared with `build.rs`).
+
+pub mod abi;
+mod array;
+mod error;
+mod kernels;
+pub mod manifest;
+mod reference;
+
+pub use abi::{ArgBuffer, Element, KernelAbi, ParamAbi, ParamKind, ScalarType, WarpStruct};
+pub use array::{DeviceArray, DeviceArray2, DeviceArray3, DeviceArray4};
+pub use error::EnvError;
+pub use reference::DeviceReferenceTable;
+// The launchers, their ABI constants and the Rust structs of Warp structs, all generated.
+pub use kernels::*;
+
+/// The manifest as embedded in this binary (path relative to `ptx/`).
+pub const MANIFEST_ASSET: &str = "env/manifest.json";

@@ -1,0 +1,378 @@
+//! The GPU reference-table lookup (`kernels_py/env/reference.py`, launched through the
+//! generated `EnvKernels::lookup_reference`) against its CPU twin `ReferenceTable::lookup`.
+//! Run on a machine with an NVIDIA GPU:
+//! `INSTANTMIMIC_MOTIONS=../shared/data/motions cargo test --features gpu --test gpu_reference_table -- --nocapture`
+//!
+//! Every value of ~10 000 looked-up rows per clip must agree with the CPU in f64 within
+//! `1e-6 * max(1, |cpu|)`: 1e-6 absolute for values up to 1 (quaternions, most positions and
+//! joint angles), 1e-6 relative above, where the GPU's `f32` output alone rounds by up to
+//! 6e-8 relative and an absolute 1e-6 is finer than one `f32` step from 16 on (velocities,
+//! positions several cycles out). Quaternions are compared up to sign. Wrapped clips are
+//! sampled over several cycles but not within 1e-5 s of a cycle boundary, where the pose jumps
+//! and the two sides may round t / D to different cycles (`docs/reference_table.md`).
+#![cfg(feature = "gpu")]
+
+use instantmimic::cuda::Gpu;
+use instantmimic::env::{DeviceArray, DeviceArray2, DeviceReferenceTable, EnvKernels};
+use instantmimic::motion::library::{CLIP_NAMES, motions_dir_from_env, resolve_motion};
+use instantmimic::motion::table::{HEADER_LEN, HUMANOID_LAYOUT};
+use instantmimic::motion::{
+    Character, LoopMode, MotionClip, ReferenceMotion, ReferenceTable, SyntheticMotion, TableLayout,
+};
+
+const CONTROL_DT: f64 = 1.0 / 30.0;
+const LOOKUPS: usize = 10_000;
+/// Agreement: |gpu - cpu| <= TOLERANCE * max(1, |cpu|).
+const TOLERANCE: f64 = 1e-6;
+/// Wrapped clips: no sample closer than this to a cycle boundary (s).
+const SEAM_MARGIN: f64 = 1e-5;
+
+/// splitmix64: deterministic samples without a dependency.
+struct Samples(u64);
+
+impl Samples {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [lo, hi).
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// Lookup times for `table`: random ones plus row times, the ends, and non-finite times.
+fn lookup_times(table: &ReferenceTable, seed: u64) -> Vec<f32> {
+    let d = table.duration();
+    let mut times: Vec<f32> = vec![0.0, -0.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
+    let wrap = table.loop_mode() == LoopMode::Wrap;
+    let near_seam = |t: f32| {
+        let t = f64::from(t);
+        let k = (t / d).round();
+        t != k * d && (t - k * d).abs() < SEAM_MARGIN
+    };
+    for r in 0..table.num_rows() {
+        times.push(table.row_time(r) as f32);
+    }
+    if !wrap {
+        times.extend([d as f32, -1.0, (d + 1.0) as f32]);
+    }
+    let mut samples = Samples(seed);
+    while times.len() < LOOKUPS {
+        let t = if wrap {
+            // Cycles -2 to 4: negative times, and shifts of several displacements.
+            samples.uniform(-2.0 * d, 4.0 * d) as f32
+        } else {
+            samples.uniform(-0.5, d + 0.5) as f32
+        };
+        if !(wrap && near_seam(t)) {
+            times.push(t);
+        }
+    }
+    times.retain(|&t| !(wrap && near_seam(t)));
+    times
+}
+
+/// A readable name for row value `j` of `layout`.
+fn slot_name(layout: &TableLayout, j: usize) -> String {
+    const XYZ: [&str; 3] = ["x", "y", "z"];
+    const WXYZ: [&str; 4] = ["w", "x", "y", "z"];
+    let fields = [
+        ("qpos", layout.qpos, layout.nq, 1),
+        ("qvel", layout.qvel, layout.nv, 1),
+        ("body_pos", layout.body_pos, layout.nbody, 3),
+        ("body_quat", layout.body_quat, layout.nbody, 4),
+        ("body_linvel", layout.body_linvel, layout.nbody, 3),
+        ("body_angvel", layout.body_angvel, layout.nbody, 3),
+        ("com_pos", layout.com_pos, 1, 3),
+        ("com_vel", layout.com_vel, 1, 3),
+        ("heading", layout.heading, 1, 4),
+    ];
+    for (name, start, count, width) in fields {
+        if j >= start && j < start + count * width {
+            let (item, component) = ((j - start) / width, (j - start) % width);
+            return match width {
+                1 => format!("{name}[{item}] (slot {j})"),
+                3 if count == 1 => format!("{name}.{} (slot {j})", XYZ[component]),
+                3 => format!("{name}[body {item}].{} (slot {j})", XYZ[component]),
+                _ if count == 1 => format!("{name}.{} (slot {j})", WXYZ[component]),
+                _ => format!("{name}[body {item}].{} (slot {j})", WXYZ[component]),
+            };
+        }
+    }
+    format!("slot {j}")
+}
+
+/// One value that disagrees (or the worst that agrees).
+#[derive(Debug, Clone)]
+struct Mismatch {
+    time: f32,
+    slot: usize,
+    gpu: f32,
+    cpu: f64,
+    error: f64,
+    tolerance: f64,
+}
+
+struct Comparison {
+    max_abs: f64,
+    /// The largest error / tolerance.
+    worst: Option<Mismatch>,
+    failures: Vec<Mismatch>,
+    values: usize,
+}
+
+fn compare(table: &ReferenceTable, times: &[f32], gpu: &[f32]) -> Comparison {
+    let stride = table.layout().stride;
+    let mut result = Comparison {
+        max_abs: 0.0,
+        worst: None,
+        failures: Vec::new(),
+        values: 0,
+    };
+    for (i, &t) in times.iter().enumerate() {
+        let cpu = table.lookup(f64::from(t));
+        let row = &gpu[i * stride..(i + 1) * stride];
+        // Quaternions q and -q are the same rotation: take the CPU's sign closest to the GPU's.
+        let mut sign = vec![1.0; stride];
+        for &q in table.quaternion_offsets() {
+            let diff = |s: f64| {
+                (0..4)
+                    .map(|c| (f64::from(row[q + c]) - s * cpu[q + c]).abs())
+                    .fold(0.0, f64::max)
+            };
+            if diff(-1.0) < diff(1.0) {
+                sign[q..q + 4].fill(-1.0);
+            }
+        }
+        for j in 0..stride {
+            let expected = sign[j] * cpu[j];
+            let error = (f64::from(row[j]) - expected).abs();
+            let error = if error.is_nan() { f64::INFINITY } else { error };
+            let tolerance = TOLERANCE * expected.abs().max(1.0);
+            result.values += 1;
+            result.max_abs = result.max_abs.max(error);
+            let m = Mismatch {
+                time: t,
+                slot: j,
+                gpu: row[j],
+                cpu: expected,
+                error,
+                tolerance,
+            };
+            if result
+                .worst
+                .as_ref()
+                .is_none_or(|w| error / tolerance > w.error / w.tolerance)
+            {
+                result.worst = Some(m.clone());
+            }
+            if error > tolerance {
+                result.failures.push(m);
+            }
+        }
+    }
+    result
+}
+
+fn humanoid() -> Character {
+    Character::humanoid().expect("the embedded humanoid loads")
+}
+
+fn synthetic_table(motion: &SyntheticMotion) -> ReferenceTable {
+    let character = humanoid();
+    let clip = MotionClip::from_deepmimic_frames(
+        "synthetic",
+        &motion.deepmimic_frames(),
+        motion.loop_mode,
+        &character,
+    )
+    .expect("synthetic frames are valid");
+    let reference = ReferenceMotion::new(clip, &character).expect("kinematics");
+    ReferenceTable::build(&reference, CONTROL_DT).expect("table")
+}
+
+/// The tables to check: synthetic ones always, the five DeepMimic clips when
+/// INSTANTMIMIC_MOTIONS is set.
+fn tables() -> Vec<(String, ReferenceTable)> {
+    let mut out = vec![
+        (
+            "synthetic walk (wrap, 30 fps)".to_owned(),
+            synthetic_table(&SyntheticMotion::default()),
+        ),
+        (
+            "synthetic turning run (wrap, 60 fps)".to_owned(),
+            synthetic_table(&SyntheticMotion {
+                frames: 49,
+                frame_dt: 1.0 / 60.0,
+                forward_speed: 3.0,
+                turn_rate: 0.8,
+                amplitude: 1.0,
+                ..SyntheticMotion::default()
+            }),
+        ),
+        (
+            "synthetic clamp (60 fps, 0.75 s)".to_owned(),
+            synthetic_table(&SyntheticMotion {
+                frames: 46,
+                frame_dt: 1.0 / 60.0,
+                loop_mode: LoopMode::Clamp,
+                amplitude: 0.8,
+                ..SyntheticMotion::default()
+            }),
+        ),
+    ];
+    match motions_dir_from_env() {
+        None => println!(
+            "note: INSTANTMIMIC_MOTIONS is not set; checking synthetic clips only (set it to check the five DeepMimic clips)"
+        ),
+        Some(dir) => {
+            let character = humanoid();
+            for name in CLIP_NAMES {
+                let path =
+                    resolve_motion(name, Some(&dir)).expect("the clip is in the motions directory");
+                let reference = ReferenceMotion::load(&path, &character).expect("the clip loads");
+                let table = ReferenceTable::build(&reference, CONTROL_DT).expect("table");
+                out.push((format!("{name} ({:?})", table.loop_mode()), table));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn gpu_lookup_agrees_with_the_cpu_lookup_within_1e6() {
+    let gpu = Gpu::open(0).expect("opening GPU 0");
+    let kernels = EnvKernels::load(&gpu).expect("loading the env kernels");
+    let stream = gpu.stream();
+    let mut report = Vec::new();
+    for (seed, (name, table)) in tables().into_iter().enumerate() {
+        assert_eq!(table.layout(), HUMANOID_LAYOUT);
+        let device_table = DeviceReferenceTable::upload(&gpu, &table).expect("upload");
+        let times = lookup_times(&table, 0x5eed + seed as u64);
+        let device_times = DeviceArray::from_slice(&gpu, [times.len()], &times).expect("times");
+        let out: DeviceArray2<f32> =
+            DeviceArray::zeros(&gpu, [times.len(), table.layout().stride]).expect("out");
+        device_table
+            .lookup(&kernels, stream, &device_times, &out)
+            .expect("launch");
+        stream.synchronize().expect("the lookup kernel ran");
+        let rows = out.download().expect("download");
+        let c = compare(&table, &times, &rows);
+        let layout = table.layout();
+        let worst = c.worst.as_ref().map_or(String::new(), |w| {
+            format!(
+                "worst at t = {} s, {}: gpu {} cpu {:.9} (error {:.2e}, {:.0}% of tolerance)",
+                w.time,
+                slot_name(&layout, w.slot),
+                w.gpu,
+                w.cpu,
+                w.error,
+                100.0 * w.error / w.tolerance
+            )
+        });
+        println!(
+            "{name}: {} rows, {} times, {} values, max abs error {:.2e}; {worst}",
+            table.num_rows(),
+            times.len(),
+            c.values,
+            c.max_abs
+        );
+        if !c.failures.is_empty() {
+            let mut failures = c.failures.clone();
+            failures.sort_by(|a, b| (b.error / b.tolerance).total_cmp(&(a.error / a.tolerance)));
+            let lines: Vec<String> = failures
+                .iter()
+                .take(12)
+                .map(|m| {
+                    format!(
+                        "  t = {:.9} s ({}): gpu {:.9} cpu {:.9} error {:.3e} > tolerance {:.1e}",
+                        m.time,
+                        slot_name(&layout, m.slot),
+                        m.gpu,
+                        m.cpu,
+                        m.error,
+                        m.tolerance
+                    )
+                })
+                .collect();
+            report.push(format!(
+                "{name}: {} of {} values disagree beyond 1e-6 * max(1, |cpu|), the worst:\n{}",
+                failures.len(),
+                c.values,
+                lines.join("\n")
+            ));
+        }
+    }
+    assert!(
+        report.is_empty(),
+        "GPU lookup vs ReferenceTable::lookup:\n{}",
+        report.join("\n")
+    );
+}
+
+#[test]
+fn a_table_with_fewer_than_two_rows_reads_as_nan_and_empty_launches_do_nothing() {
+    let gpu = Gpu::open(0).expect("opening GPU 0");
+    let kernels = EnvKernels::load(&gpu).expect("loading the env kernels");
+    let stream = gpu.stream();
+    let stride = HUMANOID_LAYOUT.stride;
+    // A header claiming 3 rows over a buffer that holds one: the kernel must not read past it.
+    let mut data = vec![0.5f32; HEADER_LEN + stride];
+    data[..HEADER_LEN].copy_from_slice(&[
+        3.0,
+        1.0 / 30.0,
+        2.0 / 30.0,
+        1.0,
+        0.0,
+        0.0,
+        0.0,
+        stride as f32,
+    ]);
+    let table = DeviceArray::from_slice(&gpu, [data.len()], &data).unwrap();
+    let offsets = DeviceArray::from_slice(&gpu, [1], &[3i32]).unwrap();
+    let times = DeviceArray::from_slice(&gpu, [2], &[0.0f32, 0.01]).unwrap();
+    let out: DeviceArray2<f32> = DeviceArray::zeros(&gpu, [2, stride]).unwrap();
+    kernels
+        .lookup_reference(stream, 2, &table, &offsets, &offsets, &times, &out)
+        .unwrap();
+    stream.synchronize().unwrap();
+    let rows = out.download().unwrap();
+    assert!(
+        rows.iter().all(|v| v.is_nan()),
+        "an unusable table gives NaN rows"
+    );
+
+    // dim 0: nothing is launched, the output keeps its values.
+    let before = out.download().unwrap();
+    kernels
+        .lookup_reference(stream, 0, &table, &offsets, &offsets, &times, &out)
+        .unwrap();
+    stream.synchronize().unwrap();
+    assert_eq!(
+        out.download()
+            .unwrap()
+            .iter()
+            .map(|v| v.to_bits())
+            .collect::<Vec<_>>(),
+        before.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+    );
+}
+
+#[test]
+fn the_table_wrapper_refuses_an_output_of_the_wrong_shape() {
+    let gpu = Gpu::open(0).expect("opening GPU 0");
+    let kernels = EnvKernels::load(&gpu).expect("loading the env kernels");
+    let table = synthetic_table(&SyntheticMotion::default());
+    let device_table = DeviceReferenceTable::upload(&gpu, &table).unwrap();
+    let times = DeviceArray::from_slice(&gpu, [3], &[0.0f32, 0.1, 0.2]).unwrap();
+    let out: DeviceArray2<f32> = DeviceArray::zeros(&gpu, [3, 100]).unwrap();
+    let err = device_table
+        .lookup(&kernels, gpu.stream(), &times, &out)
+        .unwrap_err();
+    assert!(err.to_string().contains("[3, 282]"), "{err}");
+}
