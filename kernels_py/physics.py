@@ -31,6 +31,7 @@ PHYSICS_KEYS = {
     "nconmax": int,
     "njmax": int,
     "graph_conditional": bool,
+    "deterministic": bool,
 }
 
 # The plans the runtime needs. `step` is one mj_step; `kinematics` is what a reset needs before
@@ -173,12 +174,16 @@ def make_model_data(config: dict, nworld: int):
     """Model and Data on the current Warp device, in the reset state."""
     import mujoco
     import mujoco_warp as mjw
+    from mujoco_warp._src.types import DeterminismType
 
     mjm = build_mjmodel(config)
     mjd = mujoco.MjData(mjm)
     mujoco.mj_forward(mjm, mjd)
     m = mjw.put_model(mjm)
     m.opt.graph_conditional = config["graph_conditional"]
+    # Stable contact order, canonical constraint rows and order-invariant atomic sums: the same
+    # inputs give the same bits on every run, at some cost (measured in BENCHMARKS.md).
+    m.opt.deterministic = int(DeterminismType.ALL if config.get("deterministic", False) else DeterminismType.NONE)
     d = mjw.put_data(mjm, mjd, nworld=nworld, nconmax=config["nconmax"], njmax=config["njmax"])
     return mjm, m, d
 

@@ -64,52 +64,67 @@ def initial_state(mjm, nworld: int, case: str, seed: int):
     return qpos.astype(np.float32), qvel.astype(np.float32), ctrl.astype(np.float32)
 
 
-def run_exact(config: dict, nworld: int, out: pathlib.Path, seed: int) -> dict:
+def step_case(config: dict, nworld: int, case: str, seed: int, checkpoints: list[int]):
+    """Runs one case from a fresh simulation; returns the initial arrays and qpos/qvel at each
+    checkpoint."""
     import mujoco_warp as mjw
     import warp as wp
 
+    mjm, m, d = setup(config, nworld)
+    init = dict(zip(("qpos", "qvel", "ctrl"), initial_state(mjm, nworld, case, seed)))
+    for name, arr in init.items():
+        wp.copy(getattr(d, name), wp.array(arr, dtype=float))
+    with wp.ScopedCapture() as capture:
+        mjw.step(m, d)
+    done = 0
+    states = []
+    for target in checkpoints:
+        while done < target:
+            wp.capture_launch(capture.graph)
+            done += 1
+        wp.synchronize()
+        states.append({"qpos": d.qpos.numpy().copy(), "qvel": d.qvel.numpy().copy(),
+                       "ncon": int(d.nacon.numpy()[0])})
+    return init, states
+
+
+def run_exact(config: dict, nworld: int, out: pathlib.Path, seed: int) -> dict:
     cases = {"contact": [1, 100], "freefall": [1, 20]}
-    summary = {"nworld": nworld, "seed": seed, "cases": []}
+    summary = {"nworld": nworld, "seed": seed, "deterministic": config.get("deterministic", False), "cases": []}
     for case, checkpoints in cases.items():
-        mjm, m, d = setup(config, nworld)
-        qpos, qvel, ctrl = initial_state(mjm, nworld, case, seed)
-        wp.copy(d.qpos, wp.array(qpos, dtype=float))
-        wp.copy(d.qvel, wp.array(qvel, dtype=float))
-        wp.copy(d.ctrl, wp.array(ctrl, dtype=float))
+        init, states = step_case(config, nworld, case, seed, checkpoints)
+        # MuJoCo Warp against itself: a second run from a fresh simulation. Without the
+        # determinism features, contact order (atomics) makes this differ.
+        _, again = step_case(config, nworld, case, seed, checkpoints)
         files = {}
-        for name, arr in (("qpos", qpos), ("qvel", qvel), ("ctrl", ctrl)):
+        for name, arr in init.items():
             path = out / f"{case}_init_{name}.f32"
             arr.astype("<f4").tofile(path)
             files[f"init_{name}"] = path.name
-        with wp.ScopedCapture() as capture:
-            mjw.step(m, d)
-        done = 0
         steps = []
-        for target in checkpoints:
-            while done < target:
-                wp.capture_launch(capture.graph)
-                done += 1
-            wp.synchronize()
-            entry = {"steps": target}
+        for target, state, other in zip(checkpoints, states, again):
+            entry = {"steps": target, "ncon": state["ncon"], "warp_vs_warp": {}}
             for name in ("qpos", "qvel"):
                 path = out / f"{case}_step{target}_{name}.f32"
-                getattr(d, name).numpy().astype("<f4").tofile(path)
+                state[name].astype("<f4").tofile(path)
                 entry[name] = path.name
-            entry["ncon"] = int(d.nacon.numpy()[0]) if hasattr(d, "nacon") else None
+                entry["warp_vs_warp"][name] = float(np.max(np.abs(state[name] - other[name])))
             steps.append(entry)
         summary["cases"].append({"name": case, "files": files, "checkpoints": steps})
-        print(f"exact reference {case}: {nworld} worlds, checkpoints {checkpoints}, "
-              f"contacts at the end: {steps[-1]['ncon']}", flush=True)
+        spreads = ", ".join(f"{e['steps']} steps: {e['warp_vs_warp']}" for e in steps)
+        print(f"exact reference {case}: {nworld} worlds, contacts at the end {steps[-1]['ncon']}; "
+              f"MuJoCo Warp against itself: {spreads}", flush=True)
     return summary
 
 
-def run_timing(config: dict, nworlds: list[int], steps: int, warmup: int, shipped: bool) -> list[dict]:
+def run_timing(config: dict, nworlds: list[int], steps: int, warmup: int, shipped: bool,
+               modes=(True, False)) -> list[dict]:
     import mujoco_warp as mjw
     import warp as wp
 
     rows = []
     for nworld in nworlds:
-        for conditional in (True, False):
+        for conditional in modes:
             cfg = dict(config, graph_conditional=conditional)
             _, m, d = setup(cfg, nworld)
             with wp.ScopedCapture() as capture:
@@ -148,6 +163,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--steps", type=int, default=1000)
     parser.add_argument("--warmup", type=int, default=200)
+    parser.add_argument("--graph-conditional", choices=("true", "false", "both"), default="both",
+                        help="timing: the solver loop as a conditional node, unrolled, or both")
     parser.add_argument("--shipped-ptx", action="store_true",
                         help="timing: run the PTX the Rust runtime ships (exact always does)")
     args = parser.parse_args(argv)
@@ -175,7 +192,8 @@ def main(argv=None) -> int:
             summary = run_exact(config, args.nworld[0], out, args.seed)
             (out / "reference.json").write_text(json.dumps(summary, indent=1) + "\n")
         else:
-            rows = run_timing(config, args.nworld, args.steps, args.warmup, shipped)
+            modes = {"true": (True,), "false": (False,), "both": (True, False)}[args.graph_conditional]
+            rows = run_timing(config, args.nworld, args.steps, args.warmup, shipped, modes)
             if args.json:
                 pathlib.Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
     return 0

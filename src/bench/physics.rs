@@ -11,13 +11,15 @@ use std::time::Instant;
 use serde::Serialize;
 
 use crate::cuda::{Gpu, NvtxRange};
-use crate::plan::{PlanStore, Simulation, SimulationError};
+use crate::plan::{PlanStore, ReplayOrder, Simulation, SimulationError};
 
 /// The result of [`bench_physics`].
 #[derive(Clone, Debug, Serialize)]
 pub struct PhysicsBench {
     pub gpu: String,
     pub nworld: u32,
+    /// Operation order of the step graph (`Dag` or `Linear`).
+    pub order: String,
     pub steps: u32,
     pub warmup: u32,
     /// Loading the plan (allocation, upload, module JIT, graph capture and instantiation).
@@ -35,9 +37,10 @@ pub fn bench_physics(
     nworld: u32,
     steps: u32,
     warmup: u32,
+    order: ReplayOrder,
 ) -> Result<PhysicsBench, SimulationError> {
     let started = Instant::now();
-    let sim = Simulation::load(gpu, store, nworld, &["step"])?;
+    let sim = Simulation::load_with_order(gpu, store, nworld, &["step"], order)?;
     gpu.stream().synchronize()?;
     let load_seconds = started.elapsed().as_secs_f64();
     let graph_nodes = sim.graph("step")?.node_counts()?;
@@ -64,6 +67,7 @@ pub fn bench_physics(
     Ok(PhysicsBench {
         gpu: gpu.info().name.clone(),
         nworld,
+        order: format!("{order:?}"),
         steps,
         warmup,
         load_seconds,

@@ -3,11 +3,20 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use clap::{Args, Subcommand};
+use clap::{Args, Subcommand, ValueEnum};
 
 use crate::bench::bench_physics;
 use crate::cuda::Gpu;
-use crate::plan::PlanStore;
+use crate::plan::{PlanStore, ReplayOrder};
+
+/// `--order`: how the step graph orders the plan's operations.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum Order {
+    /// Each operation after the earlier ones that touch the same memory (the default).
+    Dag,
+    /// One chain, as Warp records it.
+    Linear,
+}
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {
@@ -39,6 +48,9 @@ struct PhysicsArgs {
     /// CUDA device ordinal.
     #[arg(long, default_value_t = 0)]
     device: usize,
+    /// Operation order of the step graph.
+    #[arg(long, value_enum, default_value_t = Order::Dag)]
+    order: Order,
     /// Print the result as JSON.
     #[arg(long)]
     json: bool,
@@ -56,7 +68,11 @@ fn physics(args: PhysicsArgs) -> Result<()> {
     }
     let gpu = Gpu::open(args.device)?;
     let store = PlanStore::new(args.assets.as_deref());
-    let result = bench_physics(&gpu, &store, args.envs, args.steps, args.warmup)
+    let order = match args.order {
+        Order::Dag => ReplayOrder::Dag,
+        Order::Linear => ReplayOrder::Linear,
+    };
+    let result = bench_physics(&gpu, &store, args.envs, args.steps, args.warmup, order)
         .with_context(|| format!("physics benchmark with {} worlds", args.envs))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&result)?);
@@ -69,8 +85,9 @@ fn physics(args: PhysicsArgs) -> Result<()> {
         .collect();
     println!("GPU: {}", result.gpu);
     println!(
-        "plan: step, {} worlds; loaded in {:.2} s; graph nodes: {}",
+        "plan: step, {} worlds, {} order; loaded in {:.2} s; graph nodes: {}",
         result.nworld,
+        result.order,
         result.load_seconds,
         nodes.join(", ")
     );

@@ -228,37 +228,7 @@ impl Stream {
     fn capture_state(&self, operation: &'static str) -> Result<CaptureState, CudaError> {
         // The kernels must already be loaded (by Stream::capture); report their load error here.
         self.conditional_kernels(operation)?;
-        self.bind()?;
-        let mut status = sys::CUstreamCaptureStatus::CU_STREAM_CAPTURE_STATUS_NONE;
-        let mut id: sys::cuuint64_t = 0;
-        let mut graph: sys::CUgraph = std::ptr::null_mut();
-        let mut deps: *const sys::CUgraphNode = std::ptr::null();
-        let mut edges: *const sys::CUgraphEdgeData = std::ptr::null();
-        let mut count = 0usize;
-        // SAFETY: the stream is alive; every out-pointer is a live local. The returned arrays
-        // are owned by the driver and copied below before the next call on this stream.
-        unsafe {
-            sys::cuStreamGetCaptureInfo_v3(
-                self.cu_stream(),
-                &mut status,
-                &mut id,
-                &mut graph,
-                &mut deps,
-                &mut edges,
-                &mut count,
-            )
-        }
-        .check("cuStreamGetCaptureInfo")?;
-        if status != sys::CUstreamCaptureStatus::CU_STREAM_CAPTURE_STATUS_ACTIVE || graph.is_null()
-        {
-            return Err(CudaError::NotCapturing { operation });
-        }
-        let dependencies = if count == 0 || deps.is_null() {
-            Vec::new()
-        } else {
-            // SAFETY: the driver returned `count` valid node handles at `deps`.
-            unsafe { std::slice::from_raw_parts(deps, count) }.to_vec()
-        };
+        let (graph, dependencies) = self.capture_info(operation)?;
         Ok(CaptureState {
             graph,
             dependencies,

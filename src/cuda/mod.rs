@@ -14,6 +14,7 @@ mod conditional;
 mod context;
 mod error;
 mod event;
+mod frontier;
 mod graph;
 mod memory;
 mod module;
@@ -28,6 +29,7 @@ pub use conditional::{
 pub use context::{Gpu, GpuInfo, MIN_DRIVER_VERSION, driver_library_present};
 pub use error::CudaError;
 pub use event::Event;
+pub use frontier::CaptureNodes;
 pub use graph::Graph;
 pub use memory::{DeviceMemory, PinnedHostMemory};
 pub use module::{Function, Module};

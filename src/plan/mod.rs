@@ -47,6 +47,7 @@ pub use pack::{
     load_plan_with_limit, pack,
 };
 pub use reader::MAX_NESTING_DEPTH;
+pub use replay::ReplayOrder;
 pub use simulation::{Buffer, Element, Simulation, SimulationError};
 pub use store::{MANIFEST_PATH, MJWARP_PTX_DIR, PlanEntry, PlanManifest, PlanStore, ptx_file_name};
 pub use summary::{BindingSummary, PlanSummary};

@@ -5,18 +5,43 @@
 //! against the loaded kernel's parameter layout. [`record_ops`] then only queues work, so the
 //! same plan can be recorded into its own CUDA graph and into larger graphs (a rollout records
 //! the step plan once per physics substep) without repeating any of that.
+//!
+//! Order. Warp records a plan as one chain: each operation waits for the one before. Recorded
+//! with [`ReplayOrder::Dag`], an operation waits only for the earlier operations that touch a
+//! memory region it touches (the regions its pointer arguments, or the memset/copy, address),
+//! so independent kernels run concurrently. Every touch counts as a write, except for regions
+//! bound only to Model arrays (`m.*`), which MuJoCo Warp reads and never writes during a step
+//! or kinematics pass (tests/gpu_physics.rs checks that they stay unchanged). Kernels reach
+//! memory only through their arguments (pointers stored inside memory would escape this
+//! analysis; Warp's launch records carry every pointer as a relocation).
 
-use std::collections::{HashMap, HashSet};
+use std::collections::{BTreeSet, HashMap, HashSet};
 
-use crate::cuda::{CudaError, Function, PinnedHostMemory, Stream};
+use crate::cuda::{CaptureNodes, CudaError, Function, PinnedHostMemory, Stream};
 
 use super::error::PlanError;
 use super::launch_args::{launch_dims, packed_launch_args};
 use super::model::Plan;
-use super::ops::{KernelLaunch, Op, RegionRef};
+use super::ops::{KernelLaunch, Op, RegionRef, RelocationTarget};
 
 /// Kernels above this much dynamic shared memory need an explicit opt-in per function.
 const DEFAULT_MAX_DYNAMIC_SMEM: u32 = 48 * 1024;
+
+/// How [`record_ops`] orders operations (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum ReplayOrder {
+    /// Each operation after the previous one, as Warp records them.
+    Linear,
+    /// Each operation after the earlier ones that touch the same writable memory.
+    #[default]
+    Dag,
+}
+
+/// An operation ready to be queued, with the writable regions it touches.
+pub struct Prepared {
+    pub op: PreparedOp,
+    regions: Vec<u32>,
+}
 
 /// One operation, ready to be queued.
 pub enum PreparedOp {
@@ -57,12 +82,12 @@ pub enum PreparedOp {
     },
     While {
         cond: u64,
-        body: Vec<PreparedOp>,
+        body: Vec<Prepared>,
     },
     If {
         cond: u64,
-        then: Vec<PreparedOp>,
-        otherwise: Vec<PreparedOp>,
+        then: Vec<Prepared>,
+        otherwise: Vec<Prepared>,
     },
 }
 
@@ -80,6 +105,8 @@ pub struct ReplayContext<'a> {
     pub alloc_pinned: &'a dyn Fn(usize) -> Result<PinnedHostMemory, CudaError>,
     /// Functions whose dynamic shared memory limit was already raised.
     pub raised_smem: HashSet<(String, String)>,
+    /// Regions no operation writes (bound only to Model arrays): no ordering through them.
+    pub read_only: &'a HashSet<u32>,
 }
 
 impl ReplayContext<'_> {
@@ -123,79 +150,96 @@ fn unsupported(at: &str, what: &str) -> PlanError {
     )
 }
 
+/// The regions an operation's own record addresses (nested branches are added by the caller).
+fn touched_regions(op: &Op) -> Vec<u32> {
+    match op {
+        Op::KernelLaunch(l) => l
+            .relocations()
+            .filter_map(|r| match r.target {
+                RelocationTarget::DataPtr { region, .. } => Some(region),
+                _ => None,
+            })
+            .collect(),
+        Op::Memset(m) => vec![m.dst.region],
+        Op::Memtile(t) => vec![t.dst.region],
+        Op::MemcpyD2D(c) => vec![c.dst.region, c.src.region],
+        Op::MemcpyH2D(c) => vec![c.dst.region],
+        Op::While(w) => vec![w.cond.region],
+        Op::If(c) => vec![c.cond.region],
+        _ => Vec::new(),
+    }
+}
+
 /// Prepares `ops` (and nested branches) for [`record_ops`]. `path` names the position for errors.
 pub fn prepare_ops(
     ctx: &mut ReplayContext<'_>,
     ops: &[Op],
     path: &str,
-) -> Result<Vec<PreparedOp>, PlanError> {
+) -> Result<Vec<Prepared>, PlanError> {
     let mut out = Vec::with_capacity(ops.len());
     for (i, op) in ops.iter().enumerate() {
         let at = format!("{path}operation {i} ({})", op.kind().name());
-        match op {
-            Op::KernelLaunch(launch) => {
-                if let Some(prepared) = prepare_launch(ctx, launch, &at)? {
-                    out.push(prepared);
-                }
+        let mut regions: BTreeSet<u32> = touched_regions(op).into_iter().collect();
+        let prepared = match op {
+            Op::KernelLaunch(launch) => prepare_launch(ctx, launch, &at)?,
+            Op::Memset(m) if m.size > 0 => Some(PreparedOp::Memset {
+                dst: ctx.address(&at, m.dst, m.size)?,
+                // cudaMemsetAsync semantics: the low byte of the value.
+                value: m.value as u8,
+                bytes: usize_of(&at, m.size)?,
+            }),
+            Op::Memtile(t) => prepare_fill(ctx, t.dst, t.count, &t.value, &at)?,
+            Op::MemcpyD2D(c) if c.size > 0 => Some(PreparedOp::CopyD2D {
+                dst: ctx.address(&at, c.dst, c.size)?,
+                src: ctx.address(&at, c.src, c.size)?,
+                bytes: usize_of(&at, c.size)?,
+            }),
+            Op::MemcpyH2D(c) if !c.data.is_empty() => {
+                let dst = ctx.address(&at, c.dst, c.data.len() as u64)?;
+                let mut host = (ctx.alloc_pinned)(c.data.len())
+                    .map_err(|e| PlanError::malformed(&at, format!("pinned host buffer: {e}")))?;
+                host.write(0, &c.data)
+                    .map_err(|e| PlanError::malformed(&at, e.to_string()))?;
+                ctx.pinned.push(host);
+                Some(PreparedOp::CopyH2D {
+                    dst,
+                    buffer: ctx.pinned.len() - 1,
+                    bytes: c.data.len(),
+                })
             }
-            Op::Memset(m) => {
-                if m.size > 0 {
-                    out.push(PreparedOp::Memset {
-                        dst: ctx.address(&at, m.dst, m.size)?,
-                        // cudaMemsetAsync semantics: the low byte of the value.
-                        value: m.value as u8,
-                        bytes: usize_of(&at, m.size)?,
-                    });
-                }
-            }
-            Op::Memtile(t) => {
-                if let Some(prepared) = prepare_fill(ctx, t.dst, t.count, &t.value, &at)? {
-                    out.push(prepared);
-                }
-            }
-            Op::MemcpyD2D(c) => {
-                if c.size > 0 {
-                    out.push(PreparedOp::CopyD2D {
-                        dst: ctx.address(&at, c.dst, c.size)?,
-                        src: ctx.address(&at, c.src, c.size)?,
-                        bytes: usize_of(&at, c.size)?,
-                    });
-                }
-            }
-            Op::MemcpyH2D(c) => {
-                if !c.data.is_empty() {
-                    let dst = ctx.address(&at, c.dst, c.data.len() as u64)?;
-                    let mut host = (ctx.alloc_pinned)(c.data.len()).map_err(|e| {
-                        PlanError::malformed(&at, format!("pinned host buffer: {e}"))
-                    })?;
-                    host.write(0, &c.data)
-                        .map_err(|e| PlanError::malformed(&at, e.to_string()))?;
-                    ctx.pinned.push(host);
-                    out.push(PreparedOp::CopyH2D {
-                        dst,
-                        buffer: ctx.pinned.len() - 1,
-                        bytes: c.data.len(),
-                    });
-                }
-            }
+            // Empty memsets and copies do nothing.
+            Op::Memset(_) | Op::MemcpyD2D(_) | Op::MemcpyH2D(_) => None,
             // Regions of in-graph allocations are allocated when the plan is loaded.
-            Op::Alloc(_) => {}
+            Op::Alloc(_) => None,
             Op::While(w) => {
                 let cond = ctx.address(&at, w.cond, 4)?;
                 let body = prepare_ops(ctx, &w.body, &format!("{at}: body "))?;
-                out.push(PreparedOp::While { cond, body });
+                regions.extend(body.iter().flat_map(|p| p.regions.iter().copied()));
+                Some(PreparedOp::While { cond, body })
             }
             Op::If(c) => {
                 let cond = ctx.address(&at, c.cond, 4)?;
                 let then = prepare_ops(ctx, &c.then_ops, &format!("{at}: then "))?;
                 let otherwise = prepare_ops(ctx, &c.else_ops, &format!("{at}: else "))?;
-                out.push(PreparedOp::If {
+                regions.extend(
+                    then.iter()
+                        .chain(&otherwise)
+                        .flat_map(|p| p.regions.iter().copied()),
+                );
+                Some(PreparedOp::If {
                     cond,
                     then,
                     otherwise,
-                });
+                })
             }
             other => return Err(unsupported(&at, other.kind().name())),
+        };
+        if let Some(op) = prepared {
+            let regions = regions
+                .into_iter()
+                .filter(|r| !ctx.read_only.contains(r))
+                .collect();
+            out.push(Prepared { op, regions });
         }
     }
     Ok(out)
@@ -358,62 +402,111 @@ fn prepare_fill(
     ))
 }
 
-/// Queues prepared operations on `stream` (inside a capture, conditional nodes for IF/WHILE).
+/// Queues prepared operations on `stream` (inside a capture, conditional nodes for IF/WHILE)
+/// in `order`. With [`ReplayOrder::Dag`] the stream must be capturing; afterwards its frontier
+/// is every leaf of what was recorded, so later work waits for all of it.
 pub fn record_ops(
-    ops: &[PreparedOp],
+    ops: &[Prepared],
     stream: &Stream,
     pinned: &[PinnedHostMemory],
+    order: ReplayOrder,
 ) -> Result<(), CudaError> {
-    for op in ops {
-        match op {
-            PreparedOp::Launch {
-                function,
-                grid,
-                block,
-                shared_mem,
-                args,
-            } => stream.launch(function, *grid, *block, *shared_mem, args)?,
-            PreparedOp::Memset { dst, value, bytes } => stream.memset_u8(*dst, *value, *bytes)?,
-            PreparedOp::Fill16 { dst, value, count } => stream.memset_u16(*dst, *value, *count)?,
-            PreparedOp::Fill32 {
-                dst,
-                pitch,
-                words,
-                count,
-            } => {
-                if words.len() == 1 {
-                    stream.memset_u32(*dst, words[0], *count)?;
-                } else {
-                    for (w, &word) in words.iter().enumerate() {
-                        stream.memset_u32_strided(*dst + 4 * w as u64, *pitch, word, *count)?;
-                    }
-                }
-            }
-            PreparedOp::CopyD2D { dst, src, bytes } => stream.memcpy_dtod(*dst, *src, *bytes)?,
-            PreparedOp::CopyH2D { dst, buffer, bytes } => {
-                let host = pinned.get(*buffer).ok_or(CudaError::InvalidArgument {
-                    operation: "record_ops",
-                    reason: format!("pinned buffer {buffer} does not exist"),
-                })?;
-                stream.memcpy_htod(*dst, host, 0, *bytes)?;
-            }
-            PreparedOp::While { cond, body } => {
-                stream.capture_while(*cond, |s| record_ops(body, s, pinned))?
-            }
-            PreparedOp::If {
-                cond,
-                then,
-                otherwise,
-            } => {
-                let mut then_fn = |s: &Stream| record_ops(then, s, pinned);
-                let mut else_fn = |s: &Stream| record_ops(otherwise, s, pinned);
-                stream.capture_if::<CudaError>(
-                    *cond,
-                    (!then.is_empty()).then_some(&mut then_fn as _),
-                    (!otherwise.is_empty()).then_some(&mut else_fn as _),
-                )?
-            }
+    if order == ReplayOrder::Linear {
+        for p in ops {
+            record_op(&p.op, stream, pinned, order)?;
+        }
+        return Ok(());
+    }
+    let start = stream.capture_frontier()?;
+    // The last operation that touched each region, and each operation's last node(s).
+    let mut last_touch: HashMap<u32, usize> = HashMap::new();
+    let mut ends: Vec<CaptureNodes> = Vec::with_capacity(ops.len());
+    let mut has_successor = vec![false; ops.len()];
+    for (i, p) in ops.iter().enumerate() {
+        let before: BTreeSet<usize> = p
+            .regions
+            .iter()
+            .filter_map(|r| last_touch.get(r).copied())
+            .collect();
+        let mut deps = if before.is_empty() {
+            start.clone()
+        } else {
+            CaptureNodes::default()
+        };
+        for &j in &before {
+            deps.extend(&ends[j]);
+            has_successor[j] = true;
+        }
+        stream.set_capture_frontier(&deps)?;
+        record_op(&p.op, stream, pinned, order)?;
+        ends.push(stream.capture_frontier()?);
+        for &r in &p.regions {
+            last_touch.insert(r, i);
         }
     }
+    if !ops.is_empty() {
+        let mut leaves = CaptureNodes::default();
+        for (end, _) in ends.iter().zip(&has_successor).filter(|(_, s)| !**s) {
+            leaves.extend(end);
+        }
+        stream.set_capture_frontier(&leaves)?;
+    }
     Ok(())
+}
+
+fn record_op(
+    op: &PreparedOp,
+    stream: &Stream,
+    pinned: &[PinnedHostMemory],
+    order: ReplayOrder,
+) -> Result<(), CudaError> {
+    match op {
+        PreparedOp::Launch {
+            function,
+            grid,
+            block,
+            shared_mem,
+            args,
+        } => stream.launch(function, *grid, *block, *shared_mem, args),
+        PreparedOp::Memset { dst, value, bytes } => stream.memset_u8(*dst, *value, *bytes),
+        PreparedOp::Fill16 { dst, value, count } => stream.memset_u16(*dst, *value, *count),
+        PreparedOp::Fill32 {
+            dst,
+            pitch,
+            words,
+            count,
+        } => {
+            if words.len() == 1 {
+                return stream.memset_u32(*dst, words[0], *count);
+            }
+            for (w, &word) in words.iter().enumerate() {
+                stream.memset_u32_strided(*dst + 4 * w as u64, *pitch, word, *count)?;
+            }
+            Ok(())
+        }
+        PreparedOp::CopyD2D { dst, src, bytes } => stream.memcpy_dtod(*dst, *src, *bytes),
+        PreparedOp::CopyH2D { dst, buffer, bytes } => {
+            let host = pinned.get(*buffer).ok_or(CudaError::InvalidArgument {
+                operation: "record_ops",
+                reason: format!("pinned buffer {buffer} does not exist"),
+            })?;
+            stream.memcpy_htod(*dst, host, 0, *bytes)
+        }
+        PreparedOp::While { cond, body } => {
+            stream.capture_while(*cond, |s| record_ops(body, s, pinned, order))
+        }
+        PreparedOp::If {
+            cond,
+            then,
+            otherwise,
+        } => {
+            let mut then_fn = |s: &Stream| record_ops(then, s, pinned, order);
+            let mut else_fn = |s: &Stream| record_ops(otherwise, s, pinned, order);
+            stream.capture_if::<CudaError>(
+                *cond,
+                (!then.is_empty()).then_some(&mut then_fn as _),
+                (!otherwise.is_empty()).then_some(&mut else_fn as _),
+            )
+        }
+    }
 }

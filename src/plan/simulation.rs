@@ -20,7 +20,7 @@ use crate::cuda::{
 use super::error::PlanError;
 use super::format::DeviceType;
 use super::model::{Plan, PlanInfo};
-use super::replay::{PreparedOp, ReplayContext, prepare_ops, record_ops};
+use super::replay::{Prepared, ReplayContext, ReplayOrder, prepare_ops, record_ops};
 use super::store::PlanStore;
 
 /// Errors of loading and running plans on a GPU.
@@ -56,7 +56,7 @@ pub enum SimulationError {
 /// A plan ready to run: its prepared operations, its graph and what they point into.
 struct LoadedPlan {
     info: Option<PlanInfo>,
-    ops: Vec<PreparedOp>,
+    ops: Vec<Prepared>,
     pinned: Vec<PinnedHostMemory>,
     graph: Graph,
     /// Every region's memory (shared named ones included), kept alive as long as the graph.
@@ -71,6 +71,7 @@ pub struct Simulation {
     modules: HashMap<String, Module>,
     functions: HashMap<(String, String), Function>,
     plans: BTreeMap<String, LoadedPlan>,
+    order: ReplayOrder,
 }
 
 /// A scalar type a buffer can be read and written as (little-endian, as on every CUDA device).
@@ -169,7 +170,19 @@ impl Simulation {
         nworld: u32,
         names: &[&str],
     ) -> Result<Simulation, SimulationError> {
+        Simulation::load_with_order(gpu, store, nworld, names, ReplayOrder::default())
+    }
+
+    /// [`Simulation::load`] with the operation order of the graphs (see [`ReplayOrder`]).
+    pub fn load_with_order(
+        gpu: &Gpu,
+        store: &PlanStore,
+        nworld: u32,
+        names: &[&str],
+        order: ReplayOrder,
+    ) -> Result<Simulation, SimulationError> {
         let mut sim = Simulation {
+            order,
             gpu: gpu.clone(),
             nworld,
             named: BTreeMap::new(),
@@ -248,7 +261,7 @@ impl Simulation {
     /// records the step plan once per substep). The simulation must outlive that graph.
     pub fn record(&self, plan: &str, stream: &Stream) -> Result<(), SimulationError> {
         let loaded = self.loaded(plan)?;
-        record_ops(&loaded.ops, stream, &loaded.pinned)?;
+        record_ops(&loaded.ops, stream, &loaded.pinned, self.order)?;
         Ok(())
     }
 
@@ -352,6 +365,12 @@ impl Simulation {
             memories.insert(region.id, memory);
         }
 
+        // Regions bound only to Model arrays: MuJoCo Warp never writes the model in a step.
+        let read_only: HashSet<u32> = names_of
+            .iter()
+            .filter(|(_, names)| names.iter().all(|n| n.starts_with("m.")))
+            .map(|(&id, _)| id)
+            .collect();
         let addresses: HashMap<u32, (u64, u64)> = memories
             .iter()
             .map(|(&id, m)| (id, (m.device_ptr(), m.len() as u64)))
@@ -370,11 +389,13 @@ impl Simulation {
                 pinned: &mut pinned,
                 alloc_pinned: &alloc_pinned,
                 raised_smem: HashSet::new(),
+                read_only: &read_only,
             };
             prepare_ops(&mut ctx, &plan.ops, "")?
         };
         let stream = self.gpu.stream();
-        let graph = stream.capture(|s| record_ops(&ops, s, &pinned))?;
+        let order = self.order;
+        let graph = stream.capture(|s| record_ops(&ops, s, &pinned, order))?;
         graph.upload(stream)?;
         self.plans.insert(
             name.to_string(),
