@@ -7,9 +7,10 @@
 //! test prints why and passes, since it cannot check anything.
 //!
 //! Both replay orders are checked (Warp's chain and our dependency DAG). A free fall (no
-//! contact) must agree bit for bit. With contacts, MuJoCo Warp without its determinism features
-//! differs from itself run to run (contact order comes from atomics); the reference records that
-//! spread, and the limit after one step is 1e-5 or, for a non-deterministic plan, that spread.
+//! contact) must agree bit for bit. With contacts, MuJoCo Warp differs from itself run to run
+//! (contact order comes from atomics; its determinism features cannot be recorded in a plan):
+//! the reference records the largest difference among three MuJoCo Warp runs from the same
+//! state, and after one step the replay must be within 1e-5 or twice that spread.
 #![cfg(feature = "gpu")]
 
 use std::path::{Path, PathBuf};
@@ -95,6 +96,7 @@ fn step_plan_matches_mujoco_warp() {
     let Some(r) = reference() else { return };
     let deterministic = r.summary["deterministic"].as_bool().unwrap_or(false);
     let gpu = Gpu::open(0).expect("a GPU");
+    let mut failures: Vec<String> = Vec::new();
     for order in [ReplayOrder::Linear, ReplayOrder::Dag] {
         for case in r.summary["cases"].as_array().expect("cases") {
             let name = case["name"].as_str().expect("case name");
@@ -124,26 +126,27 @@ fn step_plan_matches_mujoco_warp() {
                         "{order:?} {name}: after {target} steps max |d{field}| = {diff:.3e} (world {}); bit-identical: {identical}; MuJoCo Warp against itself: {spread:.3e}",
                         at / (got.len() / r.nworld as usize).max(1)
                     );
-                    if name == "freefall" {
-                        assert!(
-                            identical,
+                    if name == "freefall" && !identical {
+                        failures.push(format!(
                             "{order:?} {name}: {field} after {target} steps differs from MuJoCo Warp (max {diff:e})"
-                        );
-                    } else if target == 1 {
+                        ));
+                    } else if name != "freefall" && target == 1 {
                         let limit = if deterministic {
                             1e-5
                         } else {
-                            spread.max(1e-5)
+                            (2.0 * spread).max(1e-5)
                         };
-                        assert!(
-                            diff <= limit,
-                            "{order:?} {name}: max |d{field}| after 1 step is {diff:e} > {limit:e}"
-                        );
+                        if diff.is_nan() || diff > limit {
+                            failures.push(format!(
+                                "{order:?} {name}: max |d{field}| after 1 step is {diff:e} > {limit:e}"
+                            ));
+                        }
                     }
                 }
             }
         }
     }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
 /// The DAG order treats Model arrays as read-only: check that stepping with contacts leaves

@@ -1,0 +1,63 @@
+//! The plans built into the binary: every plan the manifest lists loads, says what it is, and
+//! finds the PTX of each of its modules; step and kinematics plans of one world count bind
+//! their shared buffers with equal sizes (so one simulation can load both).
+
+use std::collections::BTreeMap;
+
+use instantmimic::plan::{DeviceType, OpKind, PlanStore, ptx_file_name, walk_ops};
+
+#[test]
+fn every_committed_plan_loads_and_finds_its_modules() {
+    let store = PlanStore::Embedded;
+    let manifest = store.manifest().expect("the embedded plan manifest");
+    assert!(!manifest.plans.is_empty());
+    let mut sizes: BTreeMap<u32, BTreeMap<String, u64>> = BTreeMap::new();
+    for entry in &manifest.plans {
+        let plan = store
+            .plan(&entry.name, entry.nworld)
+            .unwrap_or_else(|e| panic!("{} {}: {e}", entry.name, entry.nworld));
+        assert_eq!(plan.header.device, DeviceType::Cuda);
+        let info = plan.info().expect("packed plans carry PlanInfo");
+        assert_eq!((info.name.as_str(), info.nworld), (entry.name.as_str(), entry.nworld));
+        for module in &plan.modules {
+            let file = ptx_file_name(&module.binary_filename).unwrap();
+            let ptx = store
+                .module_ptx(&module.binary_filename)
+                .unwrap_or_else(|e| panic!("{file}: {e}"));
+            let text = String::from_utf8_lossy(&ptx);
+            for kernel in plan.kernels.iter().filter(|k| k.module_hash == module.hash) {
+                assert!(
+                    text.contains(&format!(".entry {}(", kernel.forward_name)),
+                    "{file} lacks the entry {}",
+                    kernel.forward_name
+                );
+            }
+        }
+        let mut launches = 0;
+        walk_ops(&plan.ops, &mut |op, _| {
+            if op.kind() == OpKind::KernelLaunch {
+                launches += 1;
+            }
+        });
+        assert!(launches > 0, "{} {} launches nothing", entry.name, entry.nworld);
+        let shared = sizes.entry(entry.nworld).or_default();
+        for binding in &plan.bindings {
+            let size = plan.region(binding.region).unwrap().size;
+            if let Some(&other) = shared.get(&binding.name) {
+                assert_eq!(other, size, "{} binds {} with another size", entry.name, binding.name);
+            }
+            shared.insert(binding.name.clone(), size);
+        }
+        for name in ["d.qpos", "d.qvel", "d.ctrl", "d.xpos", "d.xquat", "m.body_mass"] {
+            assert!(plan.binding(name).is_some(), "{} {} does not bind {name}", entry.name, entry.nworld);
+        }
+        println!(
+            "{} {} worlds: {} modules, {} kernels, {launches} launches, {} bindings",
+            entry.name,
+            entry.nworld,
+            plan.modules.len(),
+            plan.kernels.len(),
+            plan.bindings.len()
+        );
+    }
+}

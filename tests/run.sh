@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# The test command (README; CI runs exactly this). No GPU needed.
+#
+# Sets up the build-step Python once (kernels_py/requirements.txt, in .venv) so that the tests
+# also check that ptx/ regenerates from kernels_py/ byte for byte and that every shipped PTX
+# assembles with ptxas for every supported GPU, then runs `cargo test`. Reference motions are
+# read from $INSTANTMIMIC_MOTIONS (default ../shared/data/motions; tests that need them skip
+# with a note when the directory is missing).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+venv=${INSTANTMIMIC_VENV:-.venv}
+if [ ! -x "$venv/bin/python" ] || ! cmp -s kernels_py/requirements.txt "$venv/requirements.txt"; then
+  python3 -m venv "$venv"
+  "$venv/bin/pip" install --quiet --disable-pip-version-check -r kernels_py/requirements.txt
+  cp kernels_py/requirements.txt "$venv/requirements.txt"
+fi
+INSTANTMIMIC_BUILD_PYTHON="$PWD/$venv/bin/python"
+PTXAS=$("$INSTANTMIMIC_BUILD_PYTHON" -c 'import nvidia.cu13, pathlib; print(pathlib.Path(nvidia.cu13.__path__[0]) / "bin" / "ptxas")')
+export INSTANTMIMIC_BUILD_PYTHON PTXAS
+export INSTANTMIMIC_MOTIONS=${INSTANTMIMIC_MOTIONS:-$(cd .. && pwd)/shared/data/motions}
+exec cargo test "$@"
