@@ -18,7 +18,10 @@ fn every_committed_plan_loads_and_finds_its_modules() {
             .unwrap_or_else(|e| panic!("{} {}: {e}", entry.name, entry.nworld));
         assert_eq!(plan.header.device, DeviceType::Cuda);
         let info = plan.info().expect("packed plans carry PlanInfo");
-        assert_eq!((info.name.as_str(), info.nworld), (entry.name.as_str(), entry.nworld));
+        assert_eq!(
+            (info.name.as_str(), info.nworld),
+            (entry.name.as_str(), entry.nworld)
+        );
         for module in &plan.modules {
             let file = ptx_file_name(&module.binary_filename).unwrap();
             let ptx = store
@@ -39,17 +42,38 @@ fn every_committed_plan_loads_and_finds_its_modules() {
                 launches += 1;
             }
         });
-        assert!(launches > 0, "{} {} launches nothing", entry.name, entry.nworld);
+        assert!(
+            launches > 0,
+            "{} {} launches nothing",
+            entry.name,
+            entry.nworld
+        );
         let shared = sizes.entry(entry.nworld).or_default();
         for binding in &plan.bindings {
             let size = plan.region(binding.region).unwrap().size;
             if let Some(&other) = shared.get(&binding.name) {
-                assert_eq!(other, size, "{} binds {} with another size", entry.name, binding.name);
+                assert_eq!(
+                    other, size,
+                    "{} binds {} with another size",
+                    entry.name, binding.name
+                );
             }
             shared.insert(binding.name.clone(), size);
         }
-        for name in ["d.qpos", "d.qvel", "d.ctrl", "d.xpos", "d.xquat", "m.body_mass"] {
-            assert!(plan.binding(name).is_some(), "{} {} does not bind {name}", entry.name, entry.nworld);
+        for name in [
+            "d.qpos",
+            "d.qvel",
+            "d.ctrl",
+            "d.xpos",
+            "d.xquat",
+            "m.body_mass",
+        ] {
+            assert!(
+                plan.binding(name).is_some(),
+                "{} {} does not bind {name}",
+                entry.name,
+                entry.nworld
+            );
         }
         println!(
             "{} {} worlds: {} modules, {} kernels, {launches} launches, {} bindings",

@@ -58,7 +58,10 @@ fn every_shipped_ptx_assembles_for_every_supported_arch() {
     let mut jobs = Vec::new();
     for file in &files {
         for (arch, oldest) in ARCHS {
-            let mut isas = vec![PtxIsa::for_driver(oldest), PtxIsa::for_driver(MEASURED_DRIVER)];
+            let mut isas = vec![
+                PtxIsa::for_driver(oldest),
+                PtxIsa::for_driver(MEASURED_DRIVER),
+            ];
             isas.dedup();
             for isa in isas {
                 jobs.push((file.clone(), arch, isa));
