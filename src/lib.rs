@@ -7,6 +7,7 @@
 //! - [`env`]: our own kernels (env, PPO): AOT-compiled Warp PTX and typed launchers.
 //! - [`motion`]: DeepMimic reference motions and their kinematics.
 //! - [`bench`]: benchmarks of physics (and later the whole loop), for `instantmimic bench`.
+//! - [`train`]: the training configuration (and the PPO loop, with issue 5).
 //! - [`hpo`]: hyperparameter search by an agent (plan → propose → experiment).
 //! - [`assets`]: PTX and plans embedded in the binary at build time.
 //! - [`cli`]: the command line.
@@ -19,3 +20,4 @@ pub mod env;
 pub mod hpo;
 pub mod motion;
 pub mod plan;
+pub mod train;

@@ -1,0 +1,472 @@
+//! The training configuration: `configs/train/*.toml`, parsed into typed sections with defaults
+//! (the paper's baseline, Isaac-Humanoid-Direct-v0 PPO). Unknown keys and out-of-range values
+//! are errors that name the key. Every value here is a run-time value: changing it needs no
+//! rebuild (the physics options that need new plans are in `configs/physics/`).
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// A configuration that cannot be used.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    #[error("{path}: {source}")]
+    Read {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// TOML syntax, an unknown key or a wrong type; toml's message names the key and line.
+    #[error("{path}: {message}")]
+    Parse { path: String, message: String },
+    #[error("{path}: `{key}` = {value}: {reason}")]
+    Invalid {
+        path: String,
+        key: &'static str,
+        value: String,
+        reason: String,
+    },
+}
+
+/// The whole training configuration.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TrainConfig {
+    /// A motion name (`backflip`, resolved in the motions directory) or a path.
+    pub motion: String,
+    #[serde(default)]
+    pub seed: u64,
+    #[serde(default)]
+    pub env: EnvConfig,
+    #[serde(default)]
+    pub reward: RewardConfig,
+    #[serde(default)]
+    pub obs: ObsConfig,
+    #[serde(default)]
+    pub policy: PolicyConfig,
+    #[serde(default)]
+    pub ppo: PpoConfig,
+}
+
+/// `[env]`: episodes, actions and termination (docs/env.md).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct EnvConfig {
+    pub num_envs: u32,
+    /// Physics steps per control step (control at 1/(substeps * physics dt)).
+    pub substeps: u32,
+    /// Global scale of the normalized actions (paper: 1.0, tuned backflip 0.875).
+    pub action_scale: f32,
+    /// Metres the root may fall below the reference root before the episode fails.
+    pub termination_height: f32,
+    /// Largest body distance to the reference (m) before the episode fails.
+    pub tracking_distance: f32,
+    /// Control steps after a reset during which failures are ignored.
+    pub grace_steps: u32,
+    /// Reference state initialization noise (rad; velocities get 10x).
+    pub motion_noise_std: f32,
+    /// Episode length limit in control steps (truncation, not failure).
+    pub max_episode_steps: u32,
+    /// Adaptive start-phase sampling: bins over the clip, uniform floor, per-rollout decay.
+    pub phase_bins: u32,
+    pub phase_floor: f32,
+    pub phase_decay: f32,
+}
+
+impl Default for EnvConfig {
+    fn default() -> Self {
+        EnvConfig {
+            num_envs: 4096,
+            substeps: 4,
+            action_scale: 1.0,
+            termination_height: 0.8,
+            tracking_distance: 1.0,
+            grace_steps: 4,
+            motion_noise_std: 0.02,
+            max_episode_steps: 300,
+            phase_bins: 20,
+            phase_floor: 0.1,
+            phase_decay: 0.99,
+        }
+    }
+}
+
+/// `[reward]`: weights of the multiplicative DeepMimic reward.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct RewardConfig {
+    pub pose_weight: f32,
+    pub velocity_weight: f32,
+    pub com_weight: f32,
+    pub ee_pos_weight: f32,
+    pub ee_rot_weight: f32,
+}
+
+impl Default for RewardConfig {
+    fn default() -> Self {
+        RewardConfig {
+            pose_weight: 10.0,
+            velocity_weight: 0.1,
+            com_weight: 10.0,
+            ee_pos_weight: 40.0,
+            ee_rot_weight: 2.0,
+        }
+    }
+}
+
+/// `[obs]`: the optional observation blocks and normalization.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ObsConfig {
+    /// Future reference end-effector frames, and control steps between them.
+    pub future_frames: u32,
+    pub future_spacing: u32,
+    pub prev_action: bool,
+    pub root_target: bool,
+    /// Normalized observations are clipped to [-clip, clip].
+    pub clip: f32,
+}
+
+impl Default for ObsConfig {
+    fn default() -> Self {
+        ObsConfig {
+            future_frames: 2,
+            future_spacing: 1,
+            prev_action: true,
+            root_target: false,
+            clip: 5.0,
+        }
+    }
+}
+
+/// `[policy]`: the actor and critic networks.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct PolicyConfig {
+    pub actor_hidden: Vec<u32>,
+    pub critic_hidden: Vec<u32>,
+    pub init_log_std: f32,
+}
+
+impl Default for PolicyConfig {
+    fn default() -> Self {
+        PolicyConfig {
+            actor_hidden: vec![400, 200, 100],
+            critic_hidden: vec![400, 200, 100],
+            init_log_std: -2.0,
+        }
+    }
+}
+
+/// `[ppo]`: the update (issue 5).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct PpoConfig {
+    /// Control steps per environment per rollout.
+    pub horizon: u32,
+    pub epochs: u32,
+    pub minibatches: u32,
+    pub gamma: f32,
+    pub lambda: f32,
+    pub learning_rate: f32,
+    /// Target KL of the adaptive learning rate.
+    pub kl_threshold: f32,
+    pub clip: f32,
+    pub entropy_coef: f32,
+    pub value_coef: f32,
+    pub max_grad_norm: f32,
+}
+
+impl Default for PpoConfig {
+    fn default() -> Self {
+        PpoConfig {
+            horizon: 32,
+            epochs: 5,
+            minibatches: 4,
+            gamma: 0.99,
+            lambda: 0.95,
+            learning_rate: 5e-4,
+            kl_threshold: 0.008,
+            clip: 0.2,
+            entropy_coef: 0.0,
+            value_coef: 2.0,
+            max_grad_norm: 1.0,
+        }
+    }
+}
+
+impl TrainConfig {
+    /// Reads and validates a TOML file.
+    pub fn load(path: &Path) -> Result<TrainConfig, ConfigError> {
+        let name = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: name.clone(),
+            source,
+        })?;
+        TrainConfig::from_toml(&text, &name)
+    }
+
+    /// Parses and validates TOML text; `name` labels errors.
+    pub fn from_toml(text: &str, name: &str) -> Result<TrainConfig, ConfigError> {
+        let config: TrainConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: name.to_string(),
+            message: e.to_string().trim().replace('\n', " "),
+        })?;
+        config.validate(name)?;
+        Ok(config)
+    }
+
+    /// Checks every value's range; the error names the key. Written as `!(in range)` so that NaN
+    /// fails every check.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    pub fn validate(&self, name: &str) -> Result<(), ConfigError> {
+        let bad = |key: &'static str, value: String, reason: &str| ConfigError::Invalid {
+            path: name.to_string(),
+            key,
+            value,
+            reason: reason.to_string(),
+        };
+        macro_rules! check {
+            ($cond:expr, $key:literal, $value:expr, $reason:literal) => {
+                if !($cond) {
+                    return Err(bad($key, format!("{}", $value), $reason));
+                }
+            };
+        }
+        let (e, r, o, p, q) = (&self.env, &self.reward, &self.obs, &self.policy, &self.ppo);
+        check!(
+            !self.motion.trim().is_empty(),
+            "motion",
+            "\"\"",
+            "name a motion or a file"
+        );
+        check!(
+            (1..=1 << 20).contains(&e.num_envs),
+            "env.num_envs",
+            e.num_envs,
+            "must be 1 to 1048576"
+        );
+        check!(
+            (1..=64).contains(&e.substeps),
+            "env.substeps",
+            e.substeps,
+            "must be 1 to 64"
+        );
+        check!(
+            e.action_scale > 0.0 && e.action_scale <= 10.0,
+            "env.action_scale",
+            e.action_scale,
+            "must be in (0, 10]"
+        );
+        check!(
+            e.termination_height > 0.0,
+            "env.termination_height",
+            e.termination_height,
+            "must be positive (metres)"
+        );
+        check!(
+            e.tracking_distance > 0.0,
+            "env.tracking_distance",
+            e.tracking_distance,
+            "must be positive (metres)"
+        );
+        check!(
+            e.grace_steps <= 1000,
+            "env.grace_steps",
+            e.grace_steps,
+            "must be at most 1000"
+        );
+        check!(
+            (0.0..=1.0).contains(&e.motion_noise_std),
+            "env.motion_noise_std",
+            e.motion_noise_std,
+            "must be in [0, 1] rad"
+        );
+        check!(
+            e.max_episode_steps >= 1,
+            "env.max_episode_steps",
+            e.max_episode_steps,
+            "must be at least 1"
+        );
+        check!(
+            (1..=1024).contains(&e.phase_bins),
+            "env.phase_bins",
+            e.phase_bins,
+            "must be 1 to 1024"
+        );
+        check!(
+            e.phase_floor > 0.0,
+            "env.phase_floor",
+            e.phase_floor,
+            "must be positive"
+        );
+        check!(
+            e.phase_decay > 0.0 && e.phase_decay <= 1.0,
+            "env.phase_decay",
+            e.phase_decay,
+            "must be in (0, 1]"
+        );
+        for (key, w) in [
+            ("reward.pose_weight", r.pose_weight),
+            ("reward.velocity_weight", r.velocity_weight),
+            ("reward.com_weight", r.com_weight),
+            ("reward.ee_pos_weight", r.ee_pos_weight),
+            ("reward.ee_rot_weight", r.ee_rot_weight),
+        ] {
+            if !(w >= 0.0 && w.is_finite()) {
+                return Err(bad(key, w.to_string(), "must be a finite weight >= 0"));
+            }
+        }
+        check!(
+            o.future_frames <= 16,
+            "obs.future_frames",
+            o.future_frames,
+            "must be at most 16"
+        );
+        check!(
+            o.future_spacing >= 1,
+            "obs.future_spacing",
+            o.future_spacing,
+            "must be at least 1"
+        );
+        check!(o.clip > 0.0, "obs.clip", o.clip, "must be positive");
+        for (key, layers) in [
+            ("policy.actor_hidden", &p.actor_hidden),
+            ("policy.critic_hidden", &p.critic_hidden),
+        ] {
+            if layers.is_empty() || layers.iter().any(|&n| n == 0 || n > 4096) {
+                return Err(bad(
+                    key,
+                    format!("{layers:?}"),
+                    "must list 1 or more layer widths of 1 to 4096",
+                ));
+            }
+        }
+        check!(
+            (-10.0..=2.0).contains(&p.init_log_std),
+            "policy.init_log_std",
+            p.init_log_std,
+            "must be in [-10, 2]"
+        );
+        check!(
+            (1..=4096).contains(&q.horizon),
+            "ppo.horizon",
+            q.horizon,
+            "must be 1 to 4096"
+        );
+        check!(
+            (1..=100).contains(&q.epochs),
+            "ppo.epochs",
+            q.epochs,
+            "must be 1 to 100"
+        );
+        check!(
+            q.minibatches >= 1,
+            "ppo.minibatches",
+            q.minibatches,
+            "must be at least 1"
+        );
+        let samples = u64::from(q.horizon) * u64::from(e.num_envs);
+        if samples % u64::from(q.minibatches) != 0 {
+            return Err(bad(
+                "ppo.minibatches",
+                q.minibatches.to_string(),
+                &format!("must divide ppo.horizon x env.num_envs = {samples}"),
+            ));
+        }
+        check!(
+            q.gamma > 0.0 && q.gamma <= 1.0,
+            "ppo.gamma",
+            q.gamma,
+            "must be in (0, 1]"
+        );
+        check!(
+            (0.0..=1.0).contains(&q.lambda),
+            "ppo.lambda",
+            q.lambda,
+            "must be in [0, 1]"
+        );
+        check!(
+            q.learning_rate > 0.0 && q.learning_rate < 1.0,
+            "ppo.learning_rate",
+            q.learning_rate,
+            "must be in (0, 1)"
+        );
+        check!(
+            q.kl_threshold > 0.0,
+            "ppo.kl_threshold",
+            q.kl_threshold,
+            "must be positive"
+        );
+        check!(
+            q.clip > 0.0 && q.clip < 1.0,
+            "ppo.clip",
+            q.clip,
+            "must be in (0, 1)"
+        );
+        check!(
+            q.entropy_coef >= 0.0,
+            "ppo.entropy_coef",
+            q.entropy_coef,
+            "must be >= 0"
+        );
+        check!(
+            q.value_coef >= 0.0,
+            "ppo.value_coef",
+            q.value_coef,
+            "must be >= 0"
+        );
+        check!(
+            q.max_grad_norm > 0.0,
+            "ppo.max_grad_norm",
+            q.max_grad_norm,
+            "must be positive"
+        );
+        Ok(())
+    }
+
+    /// Control steps per second of simulated time for a physics timestep.
+    pub fn control_dt(&self, physics_dt: f64) -> f64 {
+        physics_dt * f64::from(self.env.substeps)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_the_paper_baseline_and_valid() {
+        let c = TrainConfig::from_toml("motion = \"backflip\"", "t").unwrap();
+        assert_eq!((c.env.num_envs, c.ppo.horizon, c.ppo.epochs), (4096, 32, 5));
+        assert_eq!(
+            (c.ppo.gamma, c.ppo.lambda, c.ppo.learning_rate),
+            (0.99, 0.95, 5e-4)
+        );
+        assert_eq!(
+            (c.ppo.kl_threshold, c.ppo.clip, c.ppo.value_coef),
+            (0.008, 0.2, 2.0)
+        );
+        assert_eq!(c.policy.init_log_std, -2.0);
+    }
+
+    #[test]
+    fn errors_name_the_key() {
+        let err = |text: &str| {
+            TrainConfig::from_toml(text, "c.toml")
+                .unwrap_err()
+                .to_string()
+        };
+        let e = err("motion = \"walk\"\n[env]\nnum_env = 3");
+        assert!(e.contains("num_env"), "{e}");
+        let e = err("motion = \"walk\"\n[reward]\ncom_weight = -1.0");
+        assert!(e.contains("`reward.com_weight` = -1"), "{e}");
+        let e = err("motion = \"walk\"\n[ppo]\nminibatches = 3");
+        assert!(e.contains("ppo.minibatches") && e.contains("131072"), "{e}");
+        let e = err("motion = \"walk\"\n[policy]\nactor_hidden = []");
+        assert!(e.contains("policy.actor_hidden"), "{e}");
+        let e = err("motion = 3");
+        assert!(e.contains("c.toml") && e.contains("motion"), "{e}");
+    }
+}
