@@ -1,20 +1,24 @@
 //! Owned, typed device arrays: what Warp kernels call `wp.array(dtype=T, ndim=N)`.
 
 use std::marker::PhantomData;
+use std::sync::Arc;
 
 use crate::cuda::{DeviceMemory, Gpu};
+use crate::plan::Simulation;
 
 use super::abi::{ARRAY_DESCRIPTOR_BYTES, Element, array_descriptor};
 use super::error::EnvError;
 use super::manifest::MAX_DIMS;
 
-/// A contiguous row-major device array of `T` with `N` dimensions (1 to 4), freed on drop.
+/// A contiguous row-major device array of `T` with `N` dimensions (1 to 4). Its memory is freed
+/// when the last array or simulation holding it is dropped: [`DeviceArray::from_simulation`]
+/// views a physics buffer (e.g. `d.qpos`) without copying it.
 ///
 /// Copies ([`DeviceArray::upload`], [`DeviceArray::download`]) run on the GPU's main stream and
 /// wait for it: they are ordered after kernels launched on that stream, not after work on other
 /// streams (synchronize those first).
 pub struct DeviceArray<T: Element, const N: usize = 1> {
-    memory: DeviceMemory,
+    memory: Arc<DeviceMemory>,
     shape: [usize; N],
     element: PhantomData<T>,
 }
@@ -67,9 +71,54 @@ impl<T: Element, const N: usize> DeviceArray<T, N> {
                 reason: "the byte size overflows".to_owned(),
             })?;
         Ok(DeviceArray {
-            memory: gpu.alloc_zeroed(bytes)?,
+            memory: Arc::new(gpu.alloc_zeroed(bytes)?),
             shape,
             element: PhantomData,
+        })
+    }
+
+    /// A view of shared memory as an array of `shape`; the memory must hold exactly that many
+    /// elements.
+    pub fn from_shared(
+        memory: Arc<DeviceMemory>,
+        shape: [usize; N],
+    ) -> Result<DeviceArray<T, N>, EnvError> {
+        let () = Self::DIMS_OK;
+        let count = element_count::<T>(&shape)?;
+        if count.checked_mul(T::SIZE) != Some(memory.len()) {
+            return Err(EnvError::ArrayShape {
+                shape: shape.to_vec(),
+                reason: format!(
+                    "{} elements of {} bytes do not fill the {} bytes of the buffer",
+                    count,
+                    T::SIZE,
+                    memory.len()
+                ),
+            });
+        }
+        Ok(DeviceArray {
+            memory,
+            shape,
+            element: PhantomData,
+        })
+    }
+
+    /// The simulation's buffer `name` (e.g. `d.xpos` as `[nworld, 16]` of `[f32; 3]`), shared.
+    pub fn from_simulation(
+        sim: &Simulation,
+        name: &str,
+        shape: [usize; N],
+    ) -> Result<DeviceArray<T, N>, EnvError> {
+        let memory = sim.shared_buffer(name).map_err(|e| EnvError::ArrayShape {
+            shape: shape.to_vec(),
+            reason: e.to_string(),
+        })?;
+        DeviceArray::from_shared(memory, shape).map_err(|e| match e {
+            EnvError::ArrayShape { shape, reason } => EnvError::ArrayShape {
+                shape,
+                reason: format!("physics buffer `{name}`: {reason}"),
+            },
+            other => other,
         })
     }
 

@@ -235,6 +235,16 @@ impl Simulation {
         })
     }
 
+    /// The device memory bound to `name`, shared (kernels of our own read and write it).
+    pub fn shared_buffer(&self, name: &str) -> Result<Arc<DeviceMemory>, SimulationError> {
+        self.named
+            .get(name)
+            .cloned()
+            .ok_or_else(|| SimulationError::NoBuffer {
+                name: name.to_string(),
+            })
+    }
+
     /// The [`PlanInfo`] a loaded plan was packed with.
     pub fn plan_info(&self, plan: &str) -> Option<&PlanInfo> {
         self.plans.get(plan).and_then(|p| p.info.as_ref())
