@@ -17,7 +17,7 @@ use instantmimic::env::{DeviceArray, DeviceArray2, DeviceReferenceTable, EnvKern
 use instantmimic::motion::library::{CLIP_NAMES, motions_dir_from_env, resolve_motion};
 use instantmimic::motion::table::{HEADER_LEN, HUMANOID_LAYOUT};
 use instantmimic::motion::{
-    Character, LoopMode, MotionClip, ReferenceMotion, ReferenceTable, SyntheticMotion, TableLayout,
+    Character, LoopMode, ReferenceMotion, ReferenceTable, SyntheticMotion, TableLayout,
 };
 
 const CONTROL_DT: f64 = 1.0 / 30.0;
@@ -184,15 +184,9 @@ fn humanoid() -> Character {
 }
 
 fn synthetic_table(motion: &SyntheticMotion) -> ReferenceTable {
-    let character = humanoid();
-    let clip = MotionClip::from_deepmimic_frames(
-        "synthetic",
-        &motion.deepmimic_frames(),
-        motion.loop_mode,
-        &character,
-    )
-    .expect("synthetic frames are valid");
-    let reference = ReferenceMotion::new(clip, &character).expect("kinematics");
+    let reference = motion
+        .reference_motion(&humanoid())
+        .expect("synthetic frames are valid");
     ReferenceTable::build(&reference, CONTROL_DT).expect("table")
 }
 

@@ -20,15 +20,9 @@ fn humanoid() -> Character {
 }
 
 fn reference(motion: &SyntheticMotion) -> ReferenceMotion {
-    let character = humanoid();
-    let clip = MotionClip::from_deepmimic_frames(
-        "synthetic",
-        &motion.deepmimic_frames(),
-        motion.loop_mode,
-        &character,
-    )
-    .expect("synthetic frames are valid");
-    ReferenceMotion::new(clip, &character).expect("kinematics")
+    motion
+        .reference_motion(&humanoid())
+        .expect("synthetic frames are valid")
 }
 
 fn quat(v: &[f64], at: usize) -> UnitQuaternion<f64> {

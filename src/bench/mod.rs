@@ -1,5 +1,6 @@
 //! Benchmarks of the real thing, shared by `instantmimic bench ...` and `benches/`.
 
 mod physics;
+pub mod rollout;
 
 pub use physics::{PhysicsBench, bench_physics};

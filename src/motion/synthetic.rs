@@ -8,8 +8,11 @@
 use std::f64::consts::TAU;
 use std::fmt::Write as _;
 
-use super::clip::LoopMode;
+use super::character::Character;
+use super::clip::{LoopMode, MotionClip};
 use super::deepmimic::{ANGLE_COLUMNS, DeepMimicFrame, FRAME_LEN, ROTATION_COLUMNS};
+use super::error::MotionError;
+use super::reference::ReferenceMotion;
 
 /// Parameters of a synthetic clip.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -62,6 +65,18 @@ fn mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
 }
 
 impl SyntheticMotion {
+    /// The clip with its reference kinematics on `character`: what tests of the reward, the
+    /// observation and the reference table need instead of a motion file.
+    pub fn reference_motion(&self, character: &Character) -> Result<ReferenceMotion, MotionError> {
+        let clip = MotionClip::from_deepmimic_frames(
+            "synthetic",
+            &self.deepmimic_frames(),
+            self.loop_mode,
+            character,
+        )?;
+        ReferenceMotion::new(clip, character)
+    }
+
     /// Total time from the first key frame to the last (s).
     pub fn duration(&self) -> f64 {
         self.frames.saturating_sub(1) as f64 * self.frame_dt
