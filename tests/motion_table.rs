@@ -8,7 +8,7 @@ use instantmimic::motion::table::{
     HUMANOID_LAYOUT, HUMANOID_QPOS_QUATERNIONS, HUMANOID_ROOT_POSITION,
 };
 use instantmimic::motion::{
-    Character, LoopMode, MotionClip, MotionError, ReferenceMotion, ReferenceState, ReferenceTable,
+    Character, LoopMode, MotionError, ReferenceMotion, ReferenceState, ReferenceTable,
     SyntheticMotion, TableLayout,
 };
 use nalgebra::{Quaternion, UnitQuaternion};
