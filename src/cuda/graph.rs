@@ -218,7 +218,8 @@ impl Graph {
     /// How many nodes of each kind the graph holds, counted through child graphs and
     /// conditional bodies: "kernel", "memcpy", "memset", "host", "graph" (child graph),
     /// "empty", "event_wait", "event_record", "ext_semaphore_signal", "ext_semaphore_wait",
-    /// "mem_alloc", "mem_free", "batch_mem_op", "conditional".
+    /// "mem_alloc", "mem_free", "batch_mem_op", "conditional"; each copy is also counted by
+    /// direction, as `memcpy_device_to_device`, `memcpy_host_to_device`, `memcpy_device_to_host`...
     pub fn node_counts(&self) -> Result<BTreeMap<String, usize>, CudaError> {
         self.device.bind()?;
         let mut counts = BTreeMap::new();
@@ -242,6 +243,9 @@ impl Graph {
         for node in graph_nodes(graph)? {
             let kind = node_type(node)?;
             *counts.entry(node_kind_name(kind)).or_insert(0) += 1;
+            if kind == sys::CUgraphNodeType::CU_GRAPH_NODE_TYPE_MEMCPY as u32 {
+                *counts.entry(memcpy_direction(node)?).or_insert(0) += 1;
+            }
             match kind {
                 k if k == sys::CUgraphNodeType::CU_GRAPH_NODE_TYPE_GRAPH as u32 => {
                     let mut child: sys::CUgraph = std::ptr::null_mut();
@@ -271,6 +275,52 @@ impl Graph {
         }
         Ok(())
     }
+}
+
+/// `memcpy_<from>_to_<to>` for a copy node, each side `host`, `device` or `array`: a copy from
+/// or to host memory inside a graph would put the host on the GPU's critical path.
+fn memcpy_direction(node: sys::CUgraphNode) -> Result<String, CudaError> {
+    // SAFETY: CUDA_MEMCPY3D is a plain C struct of integers and pointers: all zeros is valid.
+    let mut params: sys::CUDA_MEMCPY3D = unsafe { std::mem::zeroed() };
+    // SAFETY: `node` is a memcpy node of a live graph; `params` is a live local the driver fills.
+    unsafe { sys::cuGraphMemcpyNodeGetParams(node, &mut params) }
+        .check("cuGraphMemcpyNodeGetParams")?;
+    let from = memory_side(params.srcMemoryType, params.srcDevice)?;
+    let to = memory_side(params.dstMemoryType, params.dstDevice)?;
+    Ok(format!("memcpy_{from}_to_{to}"))
+}
+
+/// Where one side of a copy lives; a unified address is asked of the driver.
+fn memory_side(
+    kind: sys::CUmemorytype,
+    address: sys::CUdeviceptr,
+) -> Result<&'static str, CudaError> {
+    use sys::CUmemorytype as M;
+    let kind = if kind == M::CU_MEMORYTYPE_UNIFIED {
+        let mut actual: u32 = 0;
+        // SAFETY: MEMORY_TYPE writes one CUmemorytype (a 32-bit C enum) into `actual`, a live
+        // local; `address` is the copy's own unified pointer.
+        unsafe {
+            sys::cuPointerGetAttribute(
+                (&mut actual as *mut u32).cast(),
+                sys::CUpointer_attribute::CU_POINTER_ATTRIBUTE_MEMORY_TYPE,
+                address,
+            )
+        }
+        .check("cuPointerGetAttribute")?;
+        return Ok(match actual {
+            a if a == M::CU_MEMORYTYPE_HOST as u32 => "host",
+            a if a == M::CU_MEMORYTYPE_ARRAY as u32 => "array",
+            _ => "device",
+        });
+    } else {
+        kind
+    };
+    Ok(match kind {
+        M::CU_MEMORYTYPE_HOST => "host",
+        M::CU_MEMORYTYPE_ARRAY => "array",
+        _ => "device",
+    })
 }
 
 /// The nodes of `graph`.

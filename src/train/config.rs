@@ -197,6 +197,19 @@ impl Default for PpoConfig {
 }
 
 impl TrainConfig {
+    /// The built-in baseline for `motion` (every section at its default).
+    pub fn with_motion(motion: &str) -> TrainConfig {
+        TrainConfig {
+            motion: motion.to_owned(),
+            seed: 0,
+            env: EnvConfig::default(),
+            reward: RewardConfig::default(),
+            obs: ObsConfig::default(),
+            policy: PolicyConfig::default(),
+            ppo: PpoConfig::default(),
+        }
+    }
+
     /// Reads and validates a TOML file.
     pub fn load(path: &Path) -> Result<TrainConfig, ConfigError> {
         let name = path.display().to_string();
