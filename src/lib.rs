@@ -20,4 +20,5 @@ pub mod env;
 pub mod hpo;
 pub mod motion;
 pub mod plan;
+pub mod ppo;
 pub mod train;

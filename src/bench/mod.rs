@@ -4,3 +4,4 @@ mod physics;
 pub mod rollout;
 
 pub use physics::{PhysicsBench, bench_physics};
+pub use rollout::{RolloutBench, bench_rollout};

@@ -4,8 +4,16 @@
 //! recorded into one CUDA graph with nothing else: what the rollout would cost if the policy,
 //! the env kernels and the kinematics passes were free. A frame is one control step of one env.
 
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use serde::Serialize;
+
 use crate::cuda::{Gpu, Graph, NvtxRange};
-use crate::plan::{Simulation, SimulationError};
+use crate::env::{Phase, Rollout, RolloutError};
+use crate::motion::ReferenceMotion;
+use crate::plan::{PlanStore, Simulation, SimulationError};
+use crate::train::TrainConfig;
 
 /// Frames per second of `graph` (one rollout of `frames_per_launch` frames), after `warmup`
 /// untimed launches, over `launches` timed ones.
@@ -46,4 +54,124 @@ pub fn physics_only_graph(
         }
         Ok::<(), SimulationError>(())
     })
+}
+
+/// The result of [`bench_rollout`].
+#[derive(Clone, Debug, Serialize)]
+pub struct RolloutBench {
+    pub gpu: String,
+    pub motion: String,
+    pub num_envs: usize,
+    pub substeps: usize,
+    pub horizon: usize,
+    pub observation_size: usize,
+    /// Timed rollouts per measurement, and measurements (rollout and floor alternate).
+    pub launches: u32,
+    pub rounds: u32,
+    /// Median over rounds of the full rollout's frames/s (one frame: one control step of one
+    /// env) and of the physics-only floor's.
+    pub frames_per_s: f64,
+    pub physics_only_frames_per_s: f64,
+    /// `frames_per_s / physics_only_frames_per_s`.
+    pub ratio: f64,
+    /// Every round's figures, in order.
+    pub rounds_frames_per_s: Vec<f64>,
+    pub rounds_physics_only_frames_per_s: Vec<f64>,
+    /// Milliseconds per rollout in each phase, from the event-timed graph (mean over its
+    /// launches), and that graph's own total.
+    pub phase_ms: BTreeMap<Phase, f64>,
+    pub timed_rollout_ms: f64,
+    /// Node kinds of the rollout graph (no `host` node, no copy from or to the host).
+    pub graph_nodes: BTreeMap<String, usize>,
+    /// Building the rollout (plans, kernels, buffers) and capturing its graphs.
+    pub setup_seconds: f64,
+}
+
+/// Builds the rollout of `config` for `motion`, then alternates `rounds` times: `launches`
+/// replays of the rollout graph and `launches` of the physics-only floor, each after putting every
+/// env at a reference state and `warmup` untimed launches. Then `launches` replays of the
+/// event-timed graph give the per-phase breakdown.
+pub fn bench_rollout(
+    gpu: &Gpu,
+    store: &PlanStore,
+    motion: &ReferenceMotion,
+    config: &TrainConfig,
+    launches: u32,
+    warmup: u32,
+    rounds: u32,
+) -> Result<RolloutBench, RolloutError> {
+    let started = Instant::now();
+    let rollout = Rollout::new(gpu, store, motion, config)?;
+    let (graph, _) = rollout.capture(false)?;
+    let (timed_graph, events) = rollout.capture(true)?;
+    let events = events.ok_or_else(|| RolloutError::Setup("no phase events".to_owned()))?;
+    let floor = physics_only_graph(
+        rollout.simulation(),
+        rollout.substeps() as u32,
+        rollout.horizon() as u32,
+    )?;
+    floor.upload(gpu.stream())?;
+    let graph_nodes = graph.node_counts()?;
+    gpu.synchronize()?;
+    let setup_seconds = started.elapsed().as_secs_f64();
+
+    let frames = (rollout.num_envs() * rollout.horizon()) as u64;
+    let mut full = Vec::new();
+    let mut physics = Vec::new();
+    for round in 0..rounds.max(1) {
+        let _range = NvtxRange::push(&format!("round {round}"));
+        rollout.reset_all()?;
+        full.push(time_graph(gpu, &graph, frames, warmup, launches)?);
+        rollout.reset_all()?;
+        physics.push(time_graph(gpu, &floor, frames, warmup, launches)?);
+    }
+
+    rollout.reset_all()?;
+    let mut phase_ms: BTreeMap<Phase, f64> = BTreeMap::new();
+    let mut timed_rollout_ms = 0.0;
+    {
+        let _range = NvtxRange::push("phase timing");
+        for _ in 0..warmup {
+            timed_graph.launch(gpu.stream())?;
+        }
+        for _ in 0..launches {
+            timed_graph.launch(gpu.stream())?;
+            for (phase, ms) in events.elapsed_ms()? {
+                *phase_ms.entry(phase).or_insert(0.0) += ms / f64::from(launches);
+                timed_rollout_ms += ms / f64::from(launches);
+            }
+        }
+    }
+
+    let frames_per_s = median(&full);
+    let physics_only_frames_per_s = median(&physics);
+    Ok(RolloutBench {
+        gpu: gpu.info().name.clone(),
+        motion: motion.clip().name().to_owned(),
+        num_envs: rollout.num_envs(),
+        substeps: rollout.substeps(),
+        horizon: rollout.horizon(),
+        observation_size: rollout.observation_size(),
+        launches,
+        rounds: rounds.max(1),
+        frames_per_s,
+        physics_only_frames_per_s,
+        ratio: frames_per_s / physics_only_frames_per_s,
+        rounds_frames_per_s: full,
+        rounds_physics_only_frames_per_s: physics,
+        phase_ms,
+        timed_rollout_ms,
+        graph_nodes,
+        setup_seconds,
+    })
+}
+
+fn median(values: &[f64]) -> f64 {
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    match sorted.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => sorted[n / 2],
+        n => 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]),
+    }
 }

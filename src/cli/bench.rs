@@ -5,9 +5,14 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand, ValueEnum};
 
-use crate::bench::bench_physics;
+use std::fmt::Write as _;
+
+use crate::bench::{RolloutBench, bench_physics, bench_rollout};
 use crate::cuda::Gpu;
+use crate::motion::library::{motions_dir_from_env, resolve_motion};
+use crate::motion::{Character, ReferenceMotion};
 use crate::plan::{PlanStore, ReplayOrder};
+use crate::train::TrainConfig;
 
 /// `--order`: how the step graph orders the plan's operations.
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -28,6 +33,50 @@ pub struct BenchArgs {
 enum BenchCommand {
     /// Physics steps per second of the step plan's CUDA graph.
     Physics(PhysicsArgs),
+    /// Frames per second of the rollout graph against its physics-only floor, with the time of
+    /// each phase (policy, physics, post-physics, reset, observation).
+    Rollout(RolloutArgs),
+}
+
+#[derive(Args, Debug)]
+struct RolloutArgs {
+    /// A DeepMimic motion file, or a clip name (e.g. `backflip`) in the motions directory.
+    #[arg(long)]
+    motion: String,
+    /// Training configuration (TOML); its `motion` key is replaced by --motion. Default: the
+    /// built-in baseline (src/train/config.rs).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Number of envs, overriding `env.num_envs` (a step plan for this count must exist).
+    #[arg(long)]
+    envs: Option<u32>,
+    /// Physics substeps per control step, overriding `env.substeps`.
+    #[arg(long)]
+    substeps: Option<u32>,
+    /// Control steps per rollout, overriding `ppo.horizon`.
+    #[arg(long)]
+    horizon: Option<u32>,
+    /// Timed rollouts per measurement.
+    #[arg(long, default_value_t = 20)]
+    launches: u32,
+    /// Untimed rollouts before each measurement.
+    #[arg(long, default_value_t = 3)]
+    warmup: u32,
+    /// Measurements of the rollout and of the physics-only floor, alternating.
+    #[arg(long, default_value_t = 3)]
+    rounds: u32,
+    /// Directory of DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
+    #[arg(long)]
+    motions_dir: Option<PathBuf>,
+    /// A directory laid out like ptx/ instead of the plans built into the binary.
+    #[arg(long)]
+    assets: Option<PathBuf>,
+    /// CUDA device ordinal.
+    #[arg(long, default_value_t = 0)]
+    device: usize,
+    /// Print the result as JSON.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args, Debug)]
@@ -59,6 +108,7 @@ struct PhysicsArgs {
 pub fn run(args: BenchArgs) -> Result<()> {
     match args.command {
         BenchCommand::Physics(args) => physics(args),
+        BenchCommand::Rollout(args) => rollout(args),
     }
 }
 
@@ -100,4 +150,115 @@ fn physics(args: PhysicsArgs) -> Result<()> {
         result.steps_per_s / 1e6
     );
     Ok(())
+}
+
+fn rollout(args: RolloutArgs) -> Result<()> {
+    if args.launches == 0 {
+        bail!("--launches must be at least 1");
+    }
+    let mut config = match &args.config {
+        Some(path) => TrainConfig::load(path)?,
+        None => TrainConfig::with_motion(&args.motion),
+    };
+    config.motion = args.motion.clone();
+    if let Some(envs) = args.envs {
+        config.env.num_envs = envs;
+    }
+    if let Some(substeps) = args.substeps {
+        config.env.substeps = substeps;
+    }
+    if let Some(horizon) = args.horizon {
+        config.ppo.horizon = horizon;
+    }
+    let name = args.config.as_ref().map_or_else(
+        || "the command line".to_owned(),
+        |p| p.display().to_string(),
+    );
+    config.validate(&name)?;
+
+    let character = Character::humanoid()?;
+    let dir = args.motions_dir.clone().or_else(motions_dir_from_env);
+    let path = resolve_motion(&config.motion, dir.as_deref())?;
+    let motion = ReferenceMotion::load(&path, &character)?;
+    let gpu = Gpu::open(args.device)?;
+    let store = PlanStore::new(args.assets.as_deref());
+    let result = bench_rollout(
+        &gpu,
+        &store,
+        &motion,
+        &config,
+        args.launches,
+        args.warmup,
+        args.rounds,
+    )
+    .with_context(|| format!("rollout benchmark with {} envs", config.env.num_envs))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&result)?);
+        return Ok(());
+    }
+    print!("{}", rollout_report(&result));
+    Ok(())
+}
+
+fn rollout_report(r: &RolloutBench) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "GPU: {}", r.gpu);
+    let _ = writeln!(
+        out,
+        "rollout: {} on {} envs, horizon {}, {} physics substeps per control step, observation {} \
+         (setup {:.1} s)",
+        r.motion, r.num_envs, r.horizon, r.substeps, r.observation_size, r.setup_seconds
+    );
+    let host = r.graph_nodes.get("host").copied().unwrap_or(0);
+    let from_host = r
+        .graph_nodes
+        .get("memcpy_host_to_device")
+        .copied()
+        .unwrap_or(0);
+    let to_host = r
+        .graph_nodes
+        .get("memcpy_device_to_host")
+        .copied()
+        .unwrap_or(0);
+    let kernels = r.graph_nodes.get("kernel").copied().unwrap_or(0);
+    let _ = writeln!(
+        out,
+        "graph: {kernels} kernel nodes, {host} host nodes, {from_host} copies from the host, {to_host} copies to the host"
+    );
+    let rounds = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{:.3}", x / 1e6))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let _ = writeln!(
+        out,
+        "full rollout:  {:.3} M frames/s  (rounds: {})",
+        r.frames_per_s / 1e6,
+        rounds(&r.rounds_frames_per_s)
+    );
+    let _ = writeln!(
+        out,
+        "physics only:  {:.3} M frames/s  (rounds: {})",
+        r.physics_only_frames_per_s / 1e6,
+        rounds(&r.rounds_physics_only_frames_per_s)
+    );
+    let _ = writeln!(out, "ratio:         {:.3}", r.ratio);
+    let _ = writeln!(
+        out,
+        "phases (event-timed graph, {:.3} ms per rollout, {:.1} us per control step):",
+        r.timed_rollout_ms,
+        r.timed_rollout_ms * 1e3 / r.horizon as f64
+    );
+    for (phase, ms) in &r.phase_ms {
+        let _ = writeln!(
+            out,
+            "  {:<13} {:>9.3} ms  {:>5.1}%  {:>8.1} us/step",
+            phase.name(),
+            ms,
+            100.0 * ms / r.timed_rollout_ms,
+            ms * 1e3 / r.horizon as f64
+        );
+    }
+    out
 }

@@ -19,6 +19,8 @@ use super::manifest::MAX_DIMS;
 /// streams (synchronize those first).
 pub struct DeviceArray<T: Element, const N: usize = 1> {
     memory: Arc<DeviceMemory>,
+    /// Elements of `memory` before element 0 (a view of part of an allocation).
+    offset: usize,
     shape: [usize; N],
     element: PhantomData<T>,
 }
@@ -36,6 +38,7 @@ impl<T: Element, const N: usize> std::fmt::Debug for DeviceArray<T, N> {
             .field("scalar", &T::SCALAR)
             .field("element_shape", &T::SHAPE)
             .field("shape", &self.shape)
+            .field("offset", &self.offset)
             .field("memory", &self.memory)
             .finish()
     }
@@ -72,6 +75,7 @@ impl<T: Element, const N: usize> DeviceArray<T, N> {
             })?;
         Ok(DeviceArray {
             memory: Arc::new(gpu.alloc_zeroed(bytes)?),
+            offset: 0,
             shape,
             element: PhantomData,
         })
@@ -98,6 +102,32 @@ impl<T: Element, const N: usize> DeviceArray<T, N> {
         }
         Ok(DeviceArray {
             memory,
+            offset: 0,
+            shape,
+            element: PhantomData,
+        })
+    }
+
+    /// A view of `shape` starting at element `start` of this array (sharing its memory), e.g. one
+    /// layer's weights in a flat parameter buffer.
+    pub fn view<const M: usize>(
+        &self,
+        start: usize,
+        shape: [usize; M],
+    ) -> Result<DeviceArray<T, M>, EnvError> {
+        let count = element_count::<T>(&shape)?;
+        if start.checked_add(count).is_none_or(|end| end > self.len()) {
+            return Err(EnvError::ArrayShape {
+                shape: shape.to_vec(),
+                reason: format!(
+                    "a view of {count} elements at {start} does not fit in {} elements",
+                    self.len()
+                ),
+            });
+        }
+        Ok(DeviceArray {
+            memory: Arc::clone(&self.memory),
+            offset: self.offset + start,
             shape,
             element: PhantomData,
         })
@@ -143,17 +173,19 @@ impl<T: Element, const N: usize> DeviceArray<T, N> {
                 shape: self.shape.to_vec(),
             });
         }
-        let mut bytes = vec![0u8; self.memory.len()];
+        let mut bytes = vec![0u8; self.len() * T::SIZE];
         for (v, dst) in data.iter().zip(bytes.chunks_exact_mut(T::SIZE)) {
             v.write_le(dst);
         }
-        self.memory.copy_from_host(0, &bytes)?;
+        self.memory.copy_from_host(self.offset * T::SIZE, &bytes)?;
         Ok(())
     }
 
     /// The whole array, row-major.
     pub fn download(&self) -> Result<Vec<T>, EnvError> {
-        let bytes = self.memory.to_vec()?;
+        let mut bytes = vec![0u8; self.len() * T::SIZE];
+        self.memory
+            .copy_to_host(self.offset * T::SIZE, &mut bytes)?;
         Ok(bytes.chunks_exact(T::SIZE).map(T::read_le).collect())
     }
 
@@ -170,9 +202,9 @@ impl<T: Element, const N: usize> DeviceArray<T, N> {
         self.len() == 0
     }
 
-    /// The device address of element 0 (0 for an empty array).
+    /// The device address of element 0.
     pub fn device_ptr(&self) -> u64 {
-        self.memory.device_ptr()
+        self.memory.device_ptr() + (self.offset * T::SIZE) as u64
     }
 
     /// The underlying allocation, for stream operations (memsets, copies in graphs).

@@ -6,6 +6,9 @@
 //! - [`EnvKernels`]: the loaded kernels and one typed launch function per kernel.
 //! - [`DeviceArray`]: owned typed device arrays, passed as Warp `array_t` descriptors.
 //! - [`DeviceReferenceTable`]: a reference table on the GPU and its lookup.
+//! - [`Rollout`]: the rollout graph (policy, PD control and physics, reward and termination,
+//!   masked reset, observation), captured once and replayed; [`Phase`]s name its parts.
+//! - [`layout`]: what the kernels need from the character and the config.
 //! - [`abi`]: Warp's kernel ABI (values as bytes, descriptors, packed argument buffers).
 //! - [`manifest`]: `ptx/env/manifest.json`, parsed and validated (shared with `build.rs`).
 
@@ -13,13 +16,18 @@ pub mod abi;
 mod array;
 mod error;
 mod kernels;
+pub mod layout;
 pub mod manifest;
+mod phases;
 mod reference;
+mod rollout;
 
 pub use abi::{ArgBuffer, Element, KernelAbi, ParamAbi, ParamKind, ScalarType, WarpStruct};
 pub use array::{DeviceArray, DeviceArray2, DeviceArray3, DeviceArray4};
 pub use error::EnvError;
+pub use phases::{Phase, PhaseEvents, PhaseRecorder};
 pub use reference::DeviceReferenceTable;
+pub use rollout::{EpisodeState, PhysicsState, Rollout, RolloutError, RolloutStorage};
 // The launchers, their ABI constants and the Rust structs of Warp structs, all generated.
 pub use kernels::*;
 

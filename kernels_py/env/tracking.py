@@ -1,0 +1,170 @@
+"""Reward and termination of the tracking task, one fused kernel (docs/env.md, "Reward",
+"Termination").
+
+After the physics substeps and the kinematics plan, each env compares its state with the
+reference at `ref_time + dt`, writes the reward and the done flags into rollout storage at row
+`t`, the five tracking errors (metrics), the reset mask `done`, then advances its episode clock.
+It also counts visits and failures per phase bin for the adaptive start-phase sampling
+(`reset.py`), with atomics.
+"""
+
+import warp as wp
+
+from env.reference import (
+    HEADER_DURATION,
+    HEADER_WRAP,
+    reference_locate,
+    reference_position,
+    reference_quat_wxyz,
+    reference_value,
+)
+from env.rotation import qdiff_angle
+
+wp.set_module_options({"enable_backward": False})
+
+# Reference row layout (docs/reference_table.md).
+REF_QVEL = wp.constant(43)
+REF_BODY_POS = wp.constant(77)
+REF_BODY_QUAT = wp.constant(122)
+REF_COM_POS = wp.constant(272)
+NUM_BODIES = wp.constant(15)
+BALL = wp.constant(0)
+ROOT_DOFS = wp.constant(6)
+
+
+@wp.struct
+class TrackingParams:
+    """Run-time parameters (config `[reward]` and `[env]`)."""
+
+    pose_weight: wp.float32
+    velocity_weight: wp.float32
+    com_weight: wp.float32
+    ee_pos_weight: wp.float32
+    ee_rot_weight: wp.float32
+    # Control timestep (s).
+    dt: wp.float32
+    termination_height: wp.float32
+    tracking_distance: wp.float32
+    grace_steps: wp.int32
+    max_episode_steps: wp.int32
+
+
+@wp.func
+def phase_bin(table: wp.array(dtype=wp.float32), t: wp.float32, bins: wp.int32) -> wp.int32:
+    """The bin of time t's position in the clip's cycle (clamped clips: in the clip)."""
+    d = table[HEADER_DURATION]
+    x = t / d
+    if table[HEADER_WRAP] != 0.0:
+        x = x - wp.floor(x)
+    b = wp.int32(wp.floor(x * wp.float32(bins)))
+    return wp.clamp(b, 0, bins - 1)
+
+
+@wp.kernel
+def reward_termination(
+    qpos: wp.array2d(dtype=wp.float32),
+    qvel: wp.array2d(dtype=wp.float32),
+    xpos: wp.array3d(dtype=wp.float32),
+    xquat: wp.array3d(dtype=wp.float32),
+    subtree_com: wp.array3d(dtype=wp.float32),
+    table: wp.array(dtype=wp.float32),
+    joint_kind: wp.array(dtype=wp.int32),
+    joint_qpos: wp.array(dtype=wp.int32),
+    end_effectors: wp.array(dtype=wp.int32),
+    params: TrackingParams,
+    t: wp.int32,
+    ref_time: wp.array(dtype=wp.float32),
+    episode_step: wp.array(dtype=wp.int32),
+    rewards: wp.array2d(dtype=wp.float32),
+    terminated: wp.array2d(dtype=wp.int32),
+    truncated: wp.array2d(dtype=wp.int32),
+    done: wp.array(dtype=wp.int32),
+    errors: wp.array2d(dtype=wp.float32),
+    phase_visits: wp.array(dtype=wp.float32),
+    phase_failures: wp.array(dtype=wp.float32),
+):
+    """One thread per env n: `r = exp(-(w . e))` over the pose, velocity, COM, end-effector
+    position and orientation errors against the reference at `ref_time[n] + dt`; failure when the
+    root is more than `termination_height` below the reference root or a body is farther than
+    `tracking_distance` from its reference (not within `grace_steps` of a reset); truncation at
+    `max_episode_steps` or the end of a clamped clip. Writes `rewards/terminated/truncated[t, n]`,
+    `done[n]`, `errors[n, 0..5]`, advances `ref_time[n]` by dt and `episode_step[n]` by 1, and
+    counts the visit (and failure) in the phase bin of `ref_time[n]`."""
+    n = wp.tid()
+    t_ref = ref_time[n] + params.dt
+    at = reference_locate(table, t_ref)
+
+    e_pose = float(0.0)
+    for j in range(joint_kind.shape[0]):
+        a = joint_qpos[j]
+        if joint_kind[j] == BALL:
+            q = wp.vec4(qpos[n, a], qpos[n, a + 1], qpos[n, a + 2], qpos[n, a + 3])
+            d = qdiff_angle(q, reference_quat_wxyz(table, at, a))
+            e_pose += d * d
+        else:
+            d = qpos[n, a] - reference_value(table, at, a)
+            e_pose += d * d
+
+    e_vel = float(0.0)
+    for k in range(ROOT_DOFS, qvel.shape[1]):
+        d = qvel[n, k] - reference_value(table, at, REF_QVEL + k)
+        e_vel += d * d
+
+    com = wp.vec3(subtree_com[n, 1, 0], subtree_com[n, 1, 1], subtree_com[n, 1, 2])
+    dc = com - reference_position(table, at, REF_COM_POS)
+    e_com = wp.dot(dc, dc)
+
+    e_eep = float(0.0)
+    e_eer = float(0.0)
+    for k in range(end_effectors.shape[0]):
+        b = end_effectors[k]
+        p = wp.vec3(xpos[n, b + 1, 0], xpos[n, b + 1, 1], xpos[n, b + 1, 2])
+        dp = p - reference_position(table, at, REF_BODY_POS + 3 * b)
+        e_eep += wp.dot(dp, dp)
+        q = wp.vec4(xquat[n, b + 1, 0], xquat[n, b + 1, 1], xquat[n, b + 1, 2], xquat[n, b + 1, 3])
+        d = qdiff_angle(q, reference_quat_wxyz(table, at, REF_BODY_QUAT + 4 * b))
+        e_eer += d * d
+
+    far = float(0.0)
+    for b in range(NUM_BODIES):
+        p = wp.vec3(xpos[n, b + 1, 0], xpos[n, b + 1, 1], xpos[n, b + 1, 2])
+        far = wp.max(far, wp.length(p - reference_position(table, at, REF_BODY_POS + 3 * b)))
+
+    reward = wp.exp(
+        -(
+            params.pose_weight * e_pose
+            + params.velocity_weight * e_vel
+            + params.com_weight * e_com
+            + params.ee_pos_weight * e_eep
+            + params.ee_rot_weight * e_eer
+        )
+    )
+
+    step = episode_step[n]
+    fell = reference_value(table, at, 2) - qpos[n, 2] > params.termination_height
+    lost = far > params.tracking_distance
+    failed = 0
+    if step >= params.grace_steps and (fell or lost):
+        failed = 1
+    ended = 0
+    if step + 1 >= params.max_episode_steps:
+        ended = 1
+    if table[HEADER_WRAP] == 0.0 and t_ref + params.dt > table[HEADER_DURATION]:
+        ended = 1
+
+    rewards[t, n] = reward
+    terminated[t, n] = failed
+    truncated[t, n] = ended
+    done[n] = wp.max(failed, ended)
+    errors[n, 0] = e_pose
+    errors[n, 1] = e_vel
+    errors[n, 2] = e_com
+    errors[n, 3] = e_eep
+    errors[n, 4] = e_eer
+
+    b = phase_bin(table, ref_time[n], phase_visits.shape[0])
+    wp.atomic_add(phase_visits, b, 1.0)
+    if failed != 0:
+        wp.atomic_add(phase_failures, b, 1.0)
+    ref_time[n] = t_ref
+    episode_step[n] = step + 1

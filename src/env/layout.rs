@@ -1,0 +1,229 @@
+//! What the env kernels need to know about the character and the config: the per-joint PD
+//! layout, the end effectors, the observation size and the kernels' parameter structs. All of it
+//! is computed at run time from `configs/characters/*.json` and `configs/train/*.toml`.
+
+use crate::cuda::Gpu;
+use crate::motion::Character;
+use crate::motion::character::JointType;
+use crate::train::{ObsConfig, TrainConfig};
+
+use super::{DeviceArray, EnvError, ObservationParams, ResetParams, TrackingParams};
+
+/// Joint kinds as the kernels read them (`kernels_py/env/control.py`).
+pub const BALL: i32 = 0;
+pub const HINGE: i32 = 1;
+
+/// DeepMimic's proportional gains (`humanoid3d_ctrl.txt`, Kp), by joint name suffix (both sides
+/// share a gain). Kd is the joint damping in the MJCF (`configs/characters/humanoid.xml`).
+const DEEPMIMIC_KP: [(&str, f32); 7] = [
+    ("chest", 1000.0),
+    ("neck", 100.0),
+    ("shoulder", 400.0),
+    ("elbow", 300.0),
+    ("hip", 500.0),
+    ("knee", 500.0),
+    ("ankle", 400.0),
+];
+
+/// The actuated joints, in dof order (motor `dof - 6` drives `qvel[dof]`), and the body indices
+/// of the end effectors (MuJoCo body id - 1).
+#[derive(Clone, Debug, PartialEq)]
+pub struct JointLayout {
+    pub kind: Vec<i32>,
+    pub qpos: Vec<i32>,
+    pub dof: Vec<i32>,
+    pub kp: Vec<f32>,
+    /// Torque limit (the actuator's ctrlrange).
+    pub limit: Vec<f32>,
+    /// Radians per unit action: 1 for ball joints, half the range for hinges.
+    pub scale: Vec<f32>,
+    /// Hinge target at action 0: the middle of the range (0 for ball joints).
+    pub center: Vec<f32>,
+    pub end_effectors: Vec<i32>,
+    /// qpos address of the root quaternion.
+    pub root_quat: i32,
+    /// Number of motors.
+    pub num_motors: usize,
+}
+
+fn setup_error(reason: String) -> EnvError {
+    EnvError::ArrayShape {
+        shape: Vec::new(),
+        reason,
+    }
+}
+
+impl JointLayout {
+    /// The layout of `character`: every ball or hinge joint with one motor per dof (gear 1, in
+    /// dof order), Kp from DeepMimic's table.
+    pub fn for_character(character: &Character) -> Result<JointLayout, EnvError> {
+        let root = character.root_joint().ok_or_else(|| {
+            setup_error(format!("{}: no free root joint", character.source_name()))
+        })?;
+        let mut layout = JointLayout {
+            kind: Vec::new(),
+            qpos: Vec::new(),
+            dof: Vec::new(),
+            kp: Vec::new(),
+            limit: Vec::new(),
+            scale: Vec::new(),
+            center: Vec::new(),
+            end_effectors: Vec::new(),
+            root_quat: (root.qposadr + 3) as i32,
+            num_motors: character.actuators().len(),
+        };
+        for (id, joint) in character.joints().iter().enumerate() {
+            let kind = match joint.kind {
+                JointType::Free => continue,
+                JointType::Ball => BALL,
+                JointType::Hinge => HINGE,
+                JointType::Slide => {
+                    return Err(setup_error(format!(
+                        "joint {}: slide joints are not supported",
+                        joint.name
+                    )));
+                }
+            };
+            let kp = DEEPMIMIC_KP
+                .iter()
+                .find(|(suffix, _)| joint.name.ends_with(suffix))
+                .map(|(_, kp)| *kp)
+                .ok_or_else(|| {
+                    setup_error(format!(
+                        "joint {}: no DeepMimic Kp for this joint",
+                        joint.name
+                    ))
+                })?;
+            let motors: Vec<usize> = character
+                .actuators()
+                .iter()
+                .enumerate()
+                .filter(|(_, a)| a.joint == id)
+                .map(|(m, _)| m)
+                .collect();
+            let first = joint.dofadr - root.dofadr - 6;
+            if motors != (first..first + joint.kind.nv()).collect::<Vec<_>>() {
+                return Err(setup_error(format!(
+                    "joint {}: expected motors {first}.. (one per dof, in dof order), found {motors:?}",
+                    joint.name
+                )));
+            }
+            let ctrlrange = character.actuators()[first].ctrlrange;
+            let (scale, center) = match (kind, joint.range) {
+                (HINGE, Some([lo, hi])) if hi > lo => (0.5 * (hi - lo), 0.5 * (hi + lo)),
+                (HINGE, _) => (1.0, 0.0),
+                _ => (1.0, 0.0),
+            };
+            layout.kind.push(kind);
+            layout.qpos.push(joint.qposadr as i32);
+            layout.dof.push(joint.dofadr as i32);
+            layout.kp.push(kp);
+            layout.limit.push(ctrlrange[1].abs() as f32);
+            layout.scale.push(scale as f32);
+            layout.center.push(center as f32);
+        }
+        layout.end_effectors = character
+            .end_effectors()
+            .iter()
+            .map(|&id| id as i32 - 1)
+            .collect();
+        Ok(layout)
+    }
+
+    pub fn num_joints(&self) -> usize {
+        self.kind.len()
+    }
+}
+
+/// A [`JointLayout`] on the GPU.
+pub struct DeviceJointLayout {
+    pub kind: DeviceArray<i32>,
+    pub qpos: DeviceArray<i32>,
+    pub dof: DeviceArray<i32>,
+    pub kp: DeviceArray<f32>,
+    pub limit: DeviceArray<f32>,
+    pub scale: DeviceArray<f32>,
+    pub center: DeviceArray<f32>,
+    pub end_effectors: DeviceArray<i32>,
+    pub root_quat: i32,
+    pub num_joints: usize,
+}
+
+impl DeviceJointLayout {
+    pub fn upload(gpu: &Gpu, layout: &JointLayout) -> Result<DeviceJointLayout, EnvError> {
+        let j = layout.num_joints();
+        Ok(DeviceJointLayout {
+            kind: DeviceArray::from_slice(gpu, [j], &layout.kind)?,
+            qpos: DeviceArray::from_slice(gpu, [j], &layout.qpos)?,
+            dof: DeviceArray::from_slice(gpu, [j], &layout.dof)?,
+            kp: DeviceArray::from_slice(gpu, [j], &layout.kp)?,
+            limit: DeviceArray::from_slice(gpu, [j], &layout.limit)?,
+            scale: DeviceArray::from_slice(gpu, [j], &layout.scale)?,
+            center: DeviceArray::from_slice(gpu, [j], &layout.center)?,
+            end_effectors: DeviceArray::from_slice(
+                gpu,
+                [layout.end_effectors.len()],
+                &layout.end_effectors,
+            )?,
+            root_quat: layout.root_quat,
+            num_joints: j,
+        })
+    }
+}
+
+/// Number of bodies the observation describes (the humanoid's 15, world excluded).
+pub const OBSERVED_BODIES: usize = 15;
+
+/// The observation size for `obs` (docs/env.md table) with `motors` actions and `effectors` end
+/// effectors.
+pub fn observation_size(obs: &ObsConfig, motors: usize, effectors: usize) -> usize {
+    let b = OBSERVED_BODIES;
+    let mut size = 1 + 6 + 6 + 3 * (b - 1) + 6 * b + 3 * b + 3 * b;
+    size += 9 * effectors * obs.future_frames as usize;
+    if obs.prev_action {
+        size += motors;
+    }
+    if obs.root_target {
+        size += 9;
+    }
+    size
+}
+
+/// The reward and termination parameters of `config` at control timestep `dt`.
+pub fn tracking_params(config: &TrainConfig, dt: f64) -> TrackingParams {
+    let (r, e) = (&config.reward, &config.env);
+    TrackingParams {
+        pose_weight: r.pose_weight,
+        velocity_weight: r.velocity_weight,
+        com_weight: r.com_weight,
+        ee_pos_weight: r.ee_pos_weight,
+        ee_rot_weight: r.ee_rot_weight,
+        dt: dt as f32,
+        termination_height: e.termination_height,
+        tracking_distance: e.tracking_distance,
+        grace_steps: e.grace_steps as i32,
+        max_episode_steps: e.max_episode_steps as i32,
+    }
+}
+
+/// The reset parameters of `config` at control timestep `dt`.
+pub fn reset_params(config: &TrainConfig, dt: f64) -> ResetParams {
+    ResetParams {
+        // Warp's rand_init takes an int seed; the config's u64 is folded into it.
+        seed: (config.seed ^ (config.seed >> 32)) as u32 as i32,
+        horizon: config.ppo.horizon as i32,
+        dt: dt as f32,
+        noise_std: config.env.motion_noise_std,
+    }
+}
+
+/// The observation parameters of `obs` at control timestep `dt`.
+pub fn observation_params(obs: &ObsConfig, dt: f64) -> ObservationParams {
+    ObservationParams {
+        future_frames: obs.future_frames as i32,
+        future_spacing: obs.future_spacing as i32,
+        dt: dt as f32,
+        prev_action: i32::from(obs.prev_action),
+        root_target: i32::from(obs.root_target),
+    }
+}

@@ -1,0 +1,561 @@
+//! The rollout graph: `horizon` control steps of every env, captured once into one CUDA graph
+//! and replayed (docs/env.md, "One control step of the rollout graph").
+//!
+//! Per control step: policy (actor and critic forward, sampling), `substeps` x [PD control, the
+//! step plan], the kinematics plan, reward and termination, the masked reset and the kinematics
+//! plan again, then the observation. Every kernel reads and writes device memory only: the reset
+//! always runs and a per-env mask chooses who is reset, random numbers are offset by a device
+//! counter that the graph itself advances, so replays need nothing from the host.
+
+use std::sync::Arc;
+
+use thiserror::Error;
+
+use crate::cuda::{CudaError, Gpu, Graph, Stream};
+use crate::motion::{ReferenceMotion, ReferenceTable};
+use crate::plan::{PlanStore, Simulation, SimulationError};
+use crate::ppo::{ActStorage, GaussianPolicy, PolicyError};
+use crate::train::TrainConfig;
+
+use super::layout::{
+    DeviceJointLayout, JointLayout, observation_params, observation_size, reset_params,
+    tracking_params,
+};
+use super::phases::{Phase, PhaseEvents, PhaseRecorder};
+use super::{
+    DeviceArray, DeviceArray2, DeviceArray3, DeviceReferenceTable, EnvError, EnvKernels,
+    ObservationParams, ResetParams, TrackingParams,
+};
+
+/// Why a rollout cannot be built or run.
+#[derive(Debug, Error)]
+pub enum RolloutError {
+    #[error(transparent)]
+    Cuda(#[from] CudaError),
+    #[error(transparent)]
+    Simulation(#[from] SimulationError),
+    #[error(transparent)]
+    Env(#[from] EnvError),
+    #[error(transparent)]
+    Policy(#[from] PolicyError),
+    #[error("reference motion: {0}")]
+    Motion(String),
+    #[error("{0}")]
+    Setup(String),
+}
+
+/// Where a rollout leaves its data for the update: `[T, N, ...]` device arrays, `T` = horizon.
+pub struct RolloutStorage {
+    /// Normalized observations, `[T + 1, N, D]`: row t is the input of step t, row T the
+    /// observation after the last step (bootstrap).
+    pub observations: DeviceArray3<f32>,
+    /// Sampled actions `[T, N, A]` and their log-probabilities `[T, N]`.
+    pub actions: DeviceArray3<f32>,
+    pub log_probs: DeviceArray2<f32>,
+    /// Critic values of the observations `[T, N]`.
+    pub values: DeviceArray2<f32>,
+    /// Rewards and done flags `[T, N]` (flags 0 or 1).
+    pub rewards: DeviceArray2<f32>,
+    pub terminated: DeviceArray2<i32>,
+    pub truncated: DeviceArray2<i32>,
+}
+
+impl RolloutStorage {
+    fn zeros(gpu: &Gpu, t: usize, n: usize, obs: usize, act: usize) -> Result<Self, EnvError> {
+        Ok(RolloutStorage {
+            observations: DeviceArray::zeros(gpu, [t + 1, n, obs])?,
+            actions: DeviceArray::zeros(gpu, [t, n, act])?,
+            log_probs: DeviceArray::zeros(gpu, [t, n])?,
+            values: DeviceArray::zeros(gpu, [t, n])?,
+            rewards: DeviceArray::zeros(gpu, [t, n])?,
+            terminated: DeviceArray::zeros(gpu, [t, n])?,
+            truncated: DeviceArray::zeros(gpu, [t, n])?,
+        })
+    }
+}
+
+/// Views of the physics buffers the env kernels read and write (shared with the plans).
+pub struct PhysicsState {
+    pub qpos: DeviceArray2<f32>,
+    pub qvel: DeviceArray2<f32>,
+    pub ctrl: DeviceArray2<f32>,
+    pub qacc_warmstart: DeviceArray2<f32>,
+    pub xpos: DeviceArray3<f32>,
+    pub xquat: DeviceArray3<f32>,
+    pub subtree_com: DeviceArray3<f32>,
+    pub cvel: DeviceArray3<f32>,
+}
+
+impl PhysicsState {
+    fn view(sim: &Simulation) -> Result<PhysicsState, EnvError> {
+        let n = sim.nworld() as usize;
+        Ok(PhysicsState {
+            qpos: DeviceArray::from_simulation(sim, "d.qpos", [n, NQ])?,
+            qvel: DeviceArray::from_simulation(sim, "d.qvel", [n, NV])?,
+            ctrl: DeviceArray::from_simulation(sim, "d.ctrl", [n, NU])?,
+            qacc_warmstart: DeviceArray::from_simulation(sim, "d.qacc_warmstart", [n, NV])?,
+            xpos: DeviceArray::from_simulation(sim, "d.xpos", [n, NBODY, 3])?,
+            xquat: DeviceArray::from_simulation(sim, "d.xquat", [n, NBODY, 4])?,
+            subtree_com: DeviceArray::from_simulation(sim, "d.subtree_com", [n, NBODY, 3])?,
+            cvel: DeviceArray::from_simulation(sim, "d.cvel", [n, NBODY, 6])?,
+        })
+    }
+}
+
+// The humanoid's sizes (docs/env.md); `Rollout::new` checks them against the character.
+const NQ: usize = 43;
+const NV: usize = 34;
+const NU: usize = 28;
+const NBODY: usize = 16;
+
+/// Per-env episode state.
+pub struct EpisodeState {
+    /// Seconds into the clip of the env's current state.
+    pub ref_time: DeviceArray<f32>,
+    /// Control steps since the env's last reset.
+    pub episode_step: DeviceArray<i32>,
+    /// 1 where the last step ended the episode (the reset mask).
+    pub done: DeviceArray<i32>,
+    /// The action applied in the last control step `[N, A]` (the observation's previous action).
+    pub actions: DeviceArray2<f32>,
+    /// The five tracking errors of the last step `[N, 5]` (metrics).
+    pub errors: DeviceArray2<f32>,
+}
+
+/// Everything one rollout graph needs, built once; [`Rollout::capture`] records the graph.
+pub struct Rollout {
+    gpu: Gpu,
+    sim: Simulation,
+    kernels: Arc<EnvKernels>,
+    table: DeviceReferenceTable,
+    physics: PhysicsState,
+    pub state: EpisodeState,
+    pub storage: RolloutStorage,
+    joints: DeviceJointLayout,
+    action_scale: f32,
+    tracking: TrackingParams,
+    reset: ResetParams,
+    observation: ObservationParams,
+    normalizer: ObservationNormalizer,
+    phase_statistics: PhaseStatistics,
+    pub policy: GaussianPolicy,
+    num_envs: usize,
+    horizon: usize,
+    substeps: usize,
+    control_dt: f64,
+}
+
+impl Rollout {
+    /// Loads the step and kinematics plans for `config.env.num_envs` worlds, uploads the
+    /// reference table of `motion` at the control rate, allocates the env state and storage,
+    /// and builds the kernels' parameters from `config` (all run-time values).
+    pub fn new(
+        gpu: &Gpu,
+        store: &PlanStore,
+        motion: &ReferenceMotion,
+        config: &TrainConfig,
+    ) -> Result<Rollout, RolloutError> {
+        let n = config.env.num_envs as usize;
+        let horizon = config.ppo.horizon as usize;
+        let substeps = config.env.substeps as usize;
+        let sim = Simulation::load(gpu, store, config.env.num_envs, &["step", "kinematics"])?;
+        let physics_dt = physics_timestep(&sim)?;
+        let control_dt = config.control_dt(physics_dt);
+        let character = motion.character();
+        if character.nq() != NQ || character.nv() != NV || character.actuators().len() != NU {
+            return Err(RolloutError::Setup(format!(
+                "the rollout is built for the humanoid (nq {NQ}, nv {NV}, nu {NU}); {} has nq {}, nv {}, nu {}",
+                character.source_name(),
+                character.nq(),
+                character.nv(),
+                character.actuators().len()
+            )));
+        }
+        let table = ReferenceTable::build(motion, control_dt)
+            .map_err(|e| RolloutError::Motion(e.to_string()))?;
+        let table = DeviceReferenceTable::upload(gpu, &table)?;
+        let kernels = Arc::new(EnvKernels::load(gpu)?);
+        let physics = PhysicsState::view(&sim)?;
+
+        let layout = JointLayout::for_character(character)?;
+        let joints = DeviceJointLayout::upload(gpu, &layout)?;
+        let obs_size = observation_size(&config.obs, NU, layout.end_effectors.len());
+        let normalizer = ObservationNormalizer::new(gpu, n, obs_size, config.obs.clip)?;
+        let phase_statistics = PhaseStatistics::new(gpu, config)?;
+        let policy = GaussianPolicy::new(gpu, &config.policy, obs_size, NU, n, config.seed)?;
+        let state = EpisodeState {
+            ref_time: DeviceArray::zeros(gpu, [n])?,
+            episode_step: DeviceArray::zeros(gpu, [n])?,
+            done: DeviceArray::from_slice(gpu, [n], &vec![1; n])?,
+            actions: DeviceArray::zeros(gpu, [n, NU])?,
+            errors: DeviceArray::zeros(gpu, [n, 5])?,
+        };
+        let storage = RolloutStorage::zeros(gpu, horizon, n, obs_size, NU)?;
+        Ok(Rollout {
+            gpu: gpu.clone(),
+            sim,
+            kernels,
+            table,
+            physics,
+            state,
+            storage,
+            joints,
+            action_scale: config.env.action_scale,
+            tracking: tracking_params(config, control_dt),
+            reset: reset_params(config, control_dt),
+            observation: observation_params(&config.obs, control_dt),
+            normalizer,
+            phase_statistics,
+            policy,
+            num_envs: n,
+            horizon,
+            substeps,
+            control_dt,
+        })
+    }
+
+    pub fn num_envs(&self) -> usize {
+        self.num_envs
+    }
+
+    pub fn horizon(&self) -> usize {
+        self.horizon
+    }
+
+    pub fn substeps(&self) -> usize {
+        self.substeps
+    }
+
+    pub fn control_dt(&self) -> f64 {
+        self.control_dt
+    }
+
+    pub fn observation_size(&self) -> usize {
+        self.normalizer.size
+    }
+
+    pub fn simulation(&self) -> &Simulation {
+        &self.sim
+    }
+
+    /// Puts every env at a reference state (all envs marked done, then the masked reset, the
+    /// kinematics plan and the first observation). Queued on the GPU's stream, not captured.
+    pub fn reset_all(&self) -> Result<(), RolloutError> {
+        let stream = self.gpu.stream();
+        let n = self.num_envs;
+        self.state.done.upload(&vec![1; n])?;
+        self.record_reset(stream, 0)?;
+        self.record_observation(stream, 0, true)?;
+        stream.synchronize()?;
+        Ok(())
+    }
+
+    /// Captures the rollout into a graph. With `timed`, an event is recorded at every phase
+    /// boundary (for [`PhaseEvents::elapsed_ms`]); the graph is then a little slower.
+    pub fn capture(&self, timed: bool) -> Result<(Graph, Option<PhaseEvents>), RolloutError> {
+        let stream = self.gpu.stream();
+        let mut events = None;
+        let graph = stream.capture(|s| {
+            let mut phases = if timed {
+                PhaseRecorder::timed(&self.gpu, s)?
+            } else {
+                PhaseRecorder::untimed()
+            };
+            self.record_rollout(s, &mut phases)?;
+            events = phases.into_events();
+            Ok::<(), RolloutError>(())
+        })?;
+        graph.upload(stream)?;
+        Ok((graph, events))
+    }
+
+    fn record_rollout(&self, s: &Stream, phases: &mut PhaseRecorder) -> Result<(), RolloutError> {
+        let gpu = &self.gpu;
+        for t in 0..self.horizon {
+            let t32 = t as i32;
+            phases.phase(gpu, s, Phase::Policy, |s| self.record_policy(s, t))?;
+            phases.phase(gpu, s, Phase::Physics, |s| {
+                for _ in 0..self.substeps {
+                    self.record_pd_control(s)?;
+                    self.sim.record("step", s)?;
+                }
+                Ok::<(), RolloutError>(())
+            })?;
+            phases.phase(gpu, s, Phase::PostPhysics, |s| {
+                self.sim.record("kinematics", s)?;
+                self.record_reward(s, t32)
+            })?;
+            phases.phase(gpu, s, Phase::Reset, |s| self.record_reset(s, t32))?;
+            phases.phase(gpu, s, Phase::Observation, |s| {
+                self.record_observation(s, t + 1, true)
+            })?;
+        }
+        phases.phase(gpu, s, Phase::Bookkeeping, |s| {
+            // The next rollout's first input is this one's last observation.
+            let row = self.storage.observations.len() / (self.horizon + 1);
+            let bytes = row * std::mem::size_of::<f32>();
+            s.memcpy_dtod(
+                self.storage.observations.device_ptr(),
+                self.storage.observations.device_ptr() + (self.horizon * bytes) as u64,
+                bytes,
+            )?;
+            self.phase_statistics.record_update(&self.kernels, s)?;
+            Ok::<(), RolloutError>(())
+        })?;
+        Ok(())
+    }
+
+    fn record_policy(&self, s: &Stream, t: usize) -> Result<(), RolloutError> {
+        let storage = ActStorage {
+            actions: &self.storage.actions,
+            log_probs: &self.storage.log_probs,
+            values: &self.storage.values,
+        };
+        self.policy.record_act(
+            &self.kernels,
+            s,
+            &self.normalizer.normalized,
+            &self.state.actions,
+            &storage,
+            &self.phase_statistics.iteration,
+            t,
+            false,
+        )?;
+        Ok(())
+    }
+
+    fn record_pd_control(&self, s: &Stream) -> Result<(), RolloutError> {
+        let j = &self.joints;
+        self.kernels.pd_control(
+            s,
+            self.num_envs * j.num_joints,
+            &self.state.actions,
+            &self.physics.qpos,
+            &j.kind,
+            &j.qpos,
+            &j.dof,
+            &j.kp,
+            &j.limit,
+            &j.scale,
+            &j.center,
+            self.action_scale,
+            &self.physics.ctrl,
+        )?;
+        Ok(())
+    }
+
+    fn record_reward(&self, s: &Stream, t: i32) -> Result<(), RolloutError> {
+        let (p, st) = (&self.physics, &self.state);
+        self.kernels.reward_termination(
+            s,
+            self.num_envs,
+            &p.qpos,
+            &p.qvel,
+            &p.xpos,
+            &p.xquat,
+            &p.subtree_com,
+            self.table.table(),
+            &self.joints.kind,
+            &self.joints.qpos,
+            &self.joints.end_effectors,
+            &self.tracking,
+            t,
+            &st.ref_time,
+            &st.episode_step,
+            &self.storage.rewards,
+            &self.storage.terminated,
+            &self.storage.truncated,
+            &st.done,
+            &st.errors,
+            &self.phase_statistics.visits,
+            &self.phase_statistics.failures,
+        )?;
+        Ok(())
+    }
+
+    /// The masked reset of step `t`, then the kinematics plan (for every env: the ones not
+    /// reset are unchanged by it).
+    fn record_reset(&self, s: &Stream, t: i32) -> Result<(), RolloutError> {
+        let (p, st) = (&self.physics, &self.state);
+        self.kernels.reset_masked(
+            s,
+            self.num_envs,
+            &st.done,
+            self.table.table(),
+            self.joints.root_quat,
+            &self.joints.kind,
+            &self.joints.qpos,
+            &self.phase_statistics.cdf,
+            &self.phase_statistics.iteration,
+            t,
+            &self.reset,
+            &p.qpos,
+            &p.qvel,
+            &p.ctrl,
+            &p.qacc_warmstart,
+            &st.ref_time,
+            &st.episode_step,
+            &st.actions,
+        )?;
+        self.sim.record("kinematics", s)?;
+        Ok(())
+    }
+
+    /// The observation into storage row `row`, normalized (statistics updated when `update`).
+    fn record_observation(&self, s: &Stream, row: usize, update: bool) -> Result<(), RolloutError> {
+        let p = &self.physics;
+        let norm = &self.normalizer;
+        self.kernels.observe(
+            s,
+            self.num_envs,
+            &p.qpos,
+            &p.qvel,
+            &p.xpos,
+            &p.xquat,
+            &p.cvel,
+            &p.subtree_com,
+            self.table.table(),
+            &self.joints.end_effectors,
+            &self.state.ref_time,
+            &self.state.actions,
+            &self.observation,
+            &norm.raw,
+        )?;
+        norm.record(&self.kernels, s, &self.storage.observations, row, update)?;
+        Ok(())
+    }
+}
+
+/// Running normalization of the observation (kernels_py/env/observe.py): the raw rows, the
+/// normalized ones (the policy's input) and float64 moments.
+struct ObservationNormalizer {
+    raw: DeviceArray2<f32>,
+    normalized: DeviceArray2<f32>,
+    batch_sum: DeviceArray<f64>,
+    batch_sum_sq: DeviceArray<f64>,
+    /// [running count, merged count] (see `observation_moments_merge`).
+    count: DeviceArray<f64>,
+    mean: DeviceArray<f64>,
+    m2: DeviceArray<f64>,
+    clip: f32,
+    size: usize,
+}
+
+/// Envs summed by one thread of `observation_moments` (observe.py `MOMENT_CHUNK`).
+const MOMENT_CHUNK: usize = 64;
+
+impl ObservationNormalizer {
+    fn new(gpu: &Gpu, n: usize, size: usize, clip: f32) -> Result<Self, EnvError> {
+        Ok(ObservationNormalizer {
+            raw: DeviceArray::zeros(gpu, [n, size])?,
+            normalized: DeviceArray::zeros(gpu, [n, size])?,
+            batch_sum: DeviceArray::zeros(gpu, [size])?,
+            batch_sum_sq: DeviceArray::zeros(gpu, [size])?,
+            count: DeviceArray::zeros(gpu, [2])?,
+            mean: DeviceArray::zeros(gpu, [size])?,
+            m2: DeviceArray::zeros(gpu, [size])?,
+            clip,
+            size,
+        })
+    }
+
+    fn record(
+        &self,
+        kernels: &EnvKernels,
+        s: &Stream,
+        storage: &DeviceArray3<f32>,
+        row: usize,
+        update: bool,
+    ) -> Result<(), EnvError> {
+        let [n, d] = self.raw.shape();
+        if update {
+            kernels.observation_moments(
+                s,
+                n.div_ceil(MOMENT_CHUNK) * d,
+                &self.raw,
+                &self.batch_sum,
+                &self.batch_sum_sq,
+            )?;
+            kernels.observation_moments_merge(
+                s,
+                d,
+                n as f64,
+                &self.batch_sum,
+                &self.batch_sum_sq,
+                &self.count,
+                &self.mean,
+                &self.m2,
+            )?;
+            let ptr = self.count.device_ptr();
+            s.memcpy_dtod(ptr, ptr + 8, 8)?;
+        }
+        kernels.observation_normalize(
+            s,
+            n * d,
+            &self.raw,
+            &self.count,
+            &self.mean,
+            &self.m2,
+            self.clip,
+            row as i32,
+            &self.normalized,
+            storage,
+        )?;
+        Ok(())
+    }
+}
+
+/// Adaptive start-phase sampling (kernels_py/env/reset.py): decayed visit and failure counts
+/// per phase bin, the sampling CDF, and the device iteration counter that moves the random
+/// numbers from one rollout to the next.
+struct PhaseStatistics {
+    visits: DeviceArray<f32>,
+    failures: DeviceArray<f32>,
+    cdf: DeviceArray<f32>,
+    iteration: DeviceArray<i32>,
+    decay: f32,
+    floor: f32,
+}
+
+impl PhaseStatistics {
+    fn new(gpu: &Gpu, config: &TrainConfig) -> Result<Self, EnvError> {
+        let bins = config.env.phase_bins as usize;
+        let uniform: Vec<f32> = (1..=bins).map(|b| b as f32 / bins as f32).collect();
+        Ok(PhaseStatistics {
+            visits: DeviceArray::zeros(gpu, [bins])?,
+            failures: DeviceArray::zeros(gpu, [bins])?,
+            cdf: DeviceArray::from_slice(gpu, [bins], &uniform)?,
+            iteration: DeviceArray::zeros(gpu, [1])?,
+            decay: config.env.phase_decay,
+            floor: config.env.phase_floor,
+        })
+    }
+
+    fn record_update(&self, kernels: &EnvKernels, s: &Stream) -> Result<(), EnvError> {
+        kernels.phase_statistics_update(
+            s,
+            1,
+            self.decay,
+            self.floor,
+            &self.visits,
+            &self.failures,
+            &self.cdf,
+            &self.iteration,
+        )
+    }
+}
+
+/// The step plan's physics timestep (s), from the options it was captured with.
+fn physics_timestep(sim: &Simulation) -> Result<f64, RolloutError> {
+    sim.plan_info("step")
+        .and_then(|info| info.physics.get("config"))
+        .and_then(|config| config.get("timestep"))
+        .and_then(serde_json::Value::as_f64)
+        .filter(|dt| *dt > 0.0 && dt.is_finite())
+        .ok_or_else(|| {
+            RolloutError::Setup(
+                "the step plan does not record its physics timestep (recapture it with kernels_py/capture.py)"
+                    .to_owned(),
+            )
+        })
+}

@@ -1,0 +1,302 @@
+//! The Gaussian MLP actor and the MLP critic on the GPU (docs/env.md, "Policy").
+//!
+//! Each network's parameters are one flat `f32` device buffer (so the optimizer is one kernel
+//! over all of them), laid out layer by layer as `w [in, out]` row-major then `b [out]`; the
+//! actor's buffer ends with the state-independent `log_std [A]`. Layers are views into it.
+//! The forward pass is `kernels_py/env/policy.py` (tile GEMMs with bias and ELU), queued on a
+//! stream only: it records into a CUDA graph like any other launch.
+
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+use rand_distr::{Distribution, StandardNormal};
+use thiserror::Error;
+
+use crate::cuda::{Gpu, Stream};
+use crate::env::{DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels};
+use crate::train::PolicyConfig;
+
+/// Edge of the output tile of one thread block of `linear_elu` / `linear` (policy.py).
+const TILE: usize = 64;
+/// Threads per tile (policy.py `TILE_THREADS`, the module's block size).
+const TILE_THREADS: usize = 128;
+
+#[derive(Debug, Error)]
+pub enum PolicyError {
+    #[error(transparent)]
+    Env(#[from] EnvError),
+    #[error("policy: {0}")]
+    Shape(String),
+}
+
+/// Where one layer lives in a flat parameter buffer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LayerShape {
+    pub inputs: usize,
+    pub outputs: usize,
+    /// Offset of `w` (then `b` at `offset + inputs * outputs`), in values.
+    pub offset: usize,
+}
+
+impl LayerShape {
+    pub fn bias_offset(&self) -> usize {
+        self.offset + self.inputs * self.outputs
+    }
+
+    pub fn end(&self) -> usize {
+        self.bias_offset() + self.outputs
+    }
+}
+
+/// Layer shapes of an MLP `inputs -> hidden... -> outputs`, packed from offset 0.
+pub fn mlp_layout(inputs: usize, hidden: &[u32], outputs: usize) -> Vec<LayerShape> {
+    let mut sizes = vec![inputs];
+    sizes.extend(hidden.iter().map(|&h| h as usize));
+    sizes.push(outputs);
+    let mut offset = 0;
+    sizes
+        .windows(2)
+        .map(|io| {
+            let layer = LayerShape {
+                inputs: io[0],
+                outputs: io[1],
+                offset,
+            };
+            offset = layer.end();
+            layer
+        })
+        .collect()
+}
+
+/// Initial parameters: weights N(0, gain^2 / inputs) (He-like scaling; the output layers' gain
+/// is small so that the first actions stay near the reference pose and the first values near
+/// 0), biases 0.
+pub fn initial_parameters(layers: &[LayerShape], last_gain: f64, rng: &mut StdRng) -> Vec<f32> {
+    let total = layers.last().map_or(0, LayerShape::end);
+    let mut params = vec![0.0f32; total];
+    for (l, layer) in layers.iter().enumerate() {
+        let gain = if l + 1 == layers.len() {
+            last_gain
+        } else {
+            2f64.sqrt()
+        };
+        let std = gain / (layer.inputs as f64).sqrt();
+        for w in &mut params[layer.offset..layer.bias_offset()] {
+            let g: f64 = StandardNormal.sample(rng);
+            *w = (std * g) as f32;
+        }
+    }
+    params
+}
+
+/// An MLP on the GPU: its layers as views into `params`, and activations for a batch.
+struct Mlp {
+    params: DeviceArray<f32>,
+    layers: Vec<(DeviceArray2<f32>, DeviceArray<f32>)>,
+    activations: Vec<DeviceArray2<f32>>,
+}
+
+impl Mlp {
+    fn new(
+        gpu: &Gpu,
+        shapes: &[LayerShape],
+        params: DeviceArray<f32>,
+        batch: usize,
+    ) -> Result<Mlp, EnvError> {
+        let mut layers = Vec::new();
+        let mut activations = Vec::new();
+        for s in shapes {
+            layers.push((
+                params.view(s.offset, [s.inputs, s.outputs])?,
+                params.view(s.bias_offset(), [s.outputs])?,
+            ));
+            activations.push(DeviceArray::zeros(gpu, [batch, s.outputs])?);
+        }
+        Ok(Mlp {
+            params,
+            layers,
+            activations,
+        })
+    }
+
+    /// Queues the forward pass of `input` (`[batch, inputs]`); the result is the last activation.
+    fn record(
+        &self,
+        kernels: &EnvKernels,
+        stream: &Stream,
+        input: &DeviceArray2<f32>,
+    ) -> Result<(), EnvError> {
+        let mut x = input;
+        let last = self.layers.len() - 1;
+        for (l, ((w, b), y)) in self.layers.iter().zip(&self.activations).enumerate() {
+            let [m, n] = y.shape();
+            let threads = m.div_ceil(TILE) * n.div_ceil(TILE) * TILE_THREADS;
+            if l == last {
+                kernels.linear(stream, threads, x, w, b, y)?;
+            } else {
+                kernels.linear_elu(stream, threads, x, w, b, y)?;
+            }
+            x = y;
+        }
+        Ok(())
+    }
+
+    fn output(&self) -> &DeviceArray2<f32> {
+        &self.activations[self.activations.len() - 1]
+    }
+}
+
+/// The rollout's policy: actor (mean and log std) and critic, for a batch of envs.
+pub struct GaussianPolicy {
+    actor_shapes: Vec<LayerShape>,
+    critic_shapes: Vec<LayerShape>,
+    actor: Mlp,
+    critic: Mlp,
+    log_std: DeviceArray<f32>,
+    observation_size: usize,
+    action_size: usize,
+    batch: usize,
+    seed: i32,
+}
+
+impl GaussianPolicy {
+    /// A freshly initialized policy for `observation_size` inputs and `action_size` actions,
+    /// with activations for `batch` envs; `seed` seeds the initialization and the sampling.
+    pub fn new(
+        gpu: &Gpu,
+        config: &PolicyConfig,
+        observation_size: usize,
+        action_size: usize,
+        batch: usize,
+        seed: u64,
+    ) -> Result<GaussianPolicy, PolicyError> {
+        if observation_size == 0 || action_size == 0 || batch == 0 {
+            return Err(PolicyError::Shape(format!(
+                "observation size {observation_size}, action size {action_size} and batch {batch} must be positive"
+            )));
+        }
+        let actor_shapes = mlp_layout(observation_size, &config.actor_hidden, action_size);
+        let critic_shapes = mlp_layout(observation_size, &config.critic_hidden, 1);
+        let mut rng = StdRng::seed_from_u64(seed);
+        let mut actor_values = initial_parameters(&actor_shapes, 0.01, &mut rng);
+        let log_std_offset = actor_values.len();
+        actor_values.extend(std::iter::repeat_n(config.init_log_std, action_size));
+        let critic_values = initial_parameters(&critic_shapes, 1.0, &mut rng);
+
+        let actor_params = DeviceArray::from_slice(gpu, [actor_values.len()], &actor_values)?;
+        let critic_params = DeviceArray::from_slice(gpu, [critic_values.len()], &critic_values)?;
+        let log_std = actor_params.view(log_std_offset, [action_size])?;
+        Ok(GaussianPolicy {
+            actor: Mlp::new(gpu, &actor_shapes, actor_params, batch)?,
+            critic: Mlp::new(gpu, &critic_shapes, critic_params, batch)?,
+            actor_shapes,
+            critic_shapes,
+            log_std,
+            observation_size,
+            action_size,
+            batch,
+            seed: (seed ^ (seed >> 32)) as u32 as i32,
+        })
+    }
+
+    pub fn actor_layers(&self) -> &[LayerShape] {
+        &self.actor_shapes
+    }
+
+    pub fn critic_layers(&self) -> &[LayerShape] {
+        &self.critic_shapes
+    }
+
+    /// The actor's flat parameters (layers, then log std) and the critic's.
+    pub fn actor_parameters(&self) -> &DeviceArray<f32> {
+        &self.actor.params
+    }
+
+    pub fn critic_parameters(&self) -> &DeviceArray<f32> {
+        &self.critic.params
+    }
+
+    /// The actor's mean actions and the critic's values `[batch, 1]` of the last forward pass.
+    pub fn mean(&self) -> &DeviceArray2<f32> {
+        self.actor.output()
+    }
+
+    pub fn value(&self) -> &DeviceArray2<f32> {
+        self.critic.output()
+    }
+
+    pub fn batch(&self) -> usize {
+        self.batch
+    }
+
+    /// Queues the actor and critic forward passes of `obs` (`[batch, observation size]`).
+    pub fn record_forward(
+        &self,
+        kernels: &EnvKernels,
+        stream: &Stream,
+        obs: &DeviceArray2<f32>,
+    ) -> Result<(), PolicyError> {
+        if obs.shape() != [self.batch, self.observation_size] {
+            return Err(PolicyError::Shape(format!(
+                "observations of shape {:?}, expected [{}, {}]",
+                obs.shape(),
+                self.batch,
+                self.observation_size
+            )));
+        }
+        self.actor.record(kernels, stream, obs)?;
+        self.critic.record(kernels, stream, obs)?;
+        Ok(())
+    }
+
+    /// Queues rollout step `t`: forward of `obs`, then actions sampled into `actions` (`[batch,
+    /// A]`) and stored with their log-probabilities and the values in row t of the storage.
+    /// `deterministic` takes the mean action (evaluation).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_act(
+        &self,
+        kernels: &EnvKernels,
+        stream: &Stream,
+        obs: &DeviceArray2<f32>,
+        actions: &DeviceArray2<f32>,
+        storage: &ActStorage<'_>,
+        iteration: &DeviceArray<i32>,
+        t: usize,
+        deterministic: bool,
+    ) -> Result<(), PolicyError> {
+        self.record_forward(kernels, stream, obs)?;
+        let [horizon, n, a] = storage.actions.shape();
+        if n != self.batch || a != self.action_size || actions.shape() != [n, a] || t >= horizon {
+            return Err(PolicyError::Shape(format!(
+                "storage {:?} and actions {:?} for step {t}, expected [T > {t}, {}, {}]",
+                storage.actions.shape(),
+                actions.shape(),
+                self.batch,
+                self.action_size
+            )));
+        }
+        kernels.gaussian_sample(
+            stream,
+            self.batch,
+            self.mean(),
+            &self.log_std,
+            self.value(),
+            iteration,
+            t as i32,
+            horizon as i32,
+            self.seed,
+            i32::from(deterministic),
+            actions,
+            storage.actions,
+            storage.log_probs,
+            storage.values,
+        )?;
+        Ok(())
+    }
+}
+
+/// Rollout storage rows the policy writes.
+pub struct ActStorage<'a> {
+    pub actions: &'a DeviceArray3<f32>,
+    pub log_probs: &'a DeviceArray2<f32>,
+    pub values: &'a DeviceArray2<f32>,
+}

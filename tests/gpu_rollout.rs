@@ -1,0 +1,136 @@
+//! The rollout graph (`src/env/rollout.rs`) on the GPU: what it contains and what a replay leaves.
+//! Run on a machine with an NVIDIA GPU:
+//! `INSTANTMIMIC_MOTIONS=../shared/data/motions cargo test --release --features gpu --test gpu_rollout -- --nocapture`
+//!
+//! - The graph holds no host node and no copy from or to host memory: nothing in a rollout waits
+//!   for the CPU, and a replay needs nothing from it.
+//! - Replays advance on their own: the device iteration counter moves the random numbers, so two
+//!   replays from the same state store different actions; rewards lie in (0, 1], flags are 0 or
+//!   1, observations are finite and clipped, episode times stay on the clip.
+#![cfg(feature = "gpu")]
+
+use instantmimic::cuda::Gpu;
+use instantmimic::env::Rollout;
+use instantmimic::motion::library::{motions_dir_from_env, resolve_motion};
+use instantmimic::motion::{Character, ReferenceMotion, SyntheticMotion};
+use instantmimic::plan::PlanStore;
+use instantmimic::train::TrainConfig;
+
+/// The backflip clip when the motions directory is set, else a synthetic clip.
+fn motion() -> ReferenceMotion {
+    let character = Character::humanoid().expect("the humanoid");
+    match motions_dir_from_env() {
+        Some(dir) => {
+            let path =
+                resolve_motion("backflip", Some(&dir)).expect("backflip in INSTANTMIMIC_MOTIONS");
+            ReferenceMotion::load(&path, &character).expect("backflip loads")
+        }
+        None => {
+            eprintln!("note: INSTANTMIMIC_MOTIONS is not set; using a synthetic clip");
+            SyntheticMotion::default()
+                .reference_motion(&character)
+                .expect("synthetic clip")
+        }
+    }
+}
+
+fn config(num_envs: u32, horizon: u32) -> TrainConfig {
+    let mut config = TrainConfig::with_motion("backflip");
+    config.env.num_envs = num_envs;
+    config.ppo.horizon = horizon;
+    config.validate("test").expect("valid config");
+    config
+}
+
+#[test]
+fn rollout_graph_has_no_host_work_and_replays_advance() {
+    let gpu = Gpu::open(0).expect("a GPU");
+    let store = PlanStore::new(None);
+    let config = config(32, 8);
+    let motion = motion();
+    let rollout = Rollout::new(&gpu, &store, &motion, &config).expect("rollout");
+    let (graph, _) = rollout.capture(false).expect("capture");
+    let nodes = graph.node_counts().expect("node counts");
+    eprintln!("rollout graph nodes: {nodes:?}");
+    for kind in [
+        "host",
+        "memcpy_device_to_host",
+        "memcpy_host_to_device",
+        "memcpy_host_to_host",
+    ] {
+        assert_eq!(
+            nodes.get(kind).copied().unwrap_or(0),
+            0,
+            "{kind} nodes in the rollout graph: {nodes:?}"
+        );
+    }
+    assert!(
+        nodes.get("kernel").copied().unwrap_or(0) > 0,
+        "no kernels: {nodes:?}"
+    );
+
+    rollout.reset_all().expect("reset");
+    graph.launch(gpu.stream()).expect("launch");
+    gpu.synchronize().expect("first replay");
+    let first_actions = rollout.storage.actions.download().expect("actions");
+    graph.launch(gpu.stream()).expect("launch");
+    gpu.synchronize().expect("second replay");
+    let second_actions = rollout.storage.actions.download().expect("actions");
+    assert!(
+        first_actions.iter().all(|a| a.is_finite()),
+        "non-finite action"
+    );
+    let same = first_actions
+        .iter()
+        .zip(&second_actions)
+        .filter(|(a, b)| a == b)
+        .count();
+    assert!(
+        same < first_actions.len() / 100,
+        "{same} of {} actions repeat between replays: the noise does not advance",
+        first_actions.len()
+    );
+
+    let rewards = rollout.storage.rewards.download().expect("rewards");
+    assert!(
+        rewards.iter().all(|r| *r > 0.0 && *r <= 1.0),
+        "rewards outside (0, 1]: {:?}",
+        rewards.iter().find(|r| !(**r > 0.0 && **r <= 1.0))
+    );
+    for (name, flags) in [
+        (
+            "terminated",
+            rollout.storage.terminated.download().expect("flags"),
+        ),
+        (
+            "truncated",
+            rollout.storage.truncated.download().expect("flags"),
+        ),
+    ] {
+        assert!(
+            flags.iter().all(|f| *f == 0 || *f == 1),
+            "{name} flags other than 0/1"
+        );
+    }
+    let clip = f64::from(config.obs.clip);
+    let obs = rollout
+        .storage
+        .observations
+        .download()
+        .expect("observations");
+    assert!(
+        obs.iter()
+            .all(|o| o.is_finite() && f64::from(o.abs()) <= clip + 1e-6),
+        "observation outside [-clip, clip]: {:?}",
+        obs.iter()
+            .find(|o| !(o.is_finite() && f64::from(o.abs()) <= clip + 1e-6))
+    );
+    let ref_time = rollout.state.ref_time.download().expect("ref_time");
+    let duration = motion.clip().duration() as f32;
+    assert!(
+        ref_time
+            .iter()
+            .all(|t| t.is_finite() && *t >= 0.0 && *t <= duration + 1e-3),
+        "ref_time off the clip (0..{duration}): {ref_time:?}"
+    );
+}
