@@ -24,8 +24,9 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 12] = [
+const EXPECTED_KERNELS: [(&str, &str); 13] = [
     ("control", "pd_control"),
+    ("evaluate", "evaluation_accumulate"),
     ("observe", "observe"),
     ("observe", "observation_moments"),
     ("observe", "observation_moments_merge"),

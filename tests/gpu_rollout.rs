@@ -134,3 +134,71 @@ fn rollout_graph_has_no_host_work_and_replays_advance() {
         "ref_time off the clip (0..{duration}): {ref_time:?}"
     );
 }
+
+/// The evaluation rollout shares the training policy's parameters, plays one episode per env
+/// from the clip's start with mean actions, and scores it: every env either fails or completes
+/// the clip within the horizon, the first step starts near the reference, the errors are finite.
+#[test]
+fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
+    let gpu = Gpu::open(0).expect("a GPU");
+    let store = PlanStore::new(None);
+    let config = config(32, 8);
+    let motion = motion();
+    let training = Rollout::new(&gpu, &store, &motion, &config).expect("training rollout");
+    let evaluation =
+        Rollout::evaluation(&training, &store, &motion, &config, 32).expect("evaluation rollout");
+    assert_eq!(
+        evaluation.policy.actor_parameters().device_ptr(),
+        training.policy.actor_parameters().device_ptr(),
+        "the evaluation must read the training policy's parameters"
+    );
+    let (graph, _) = evaluation.capture(false).expect("capture");
+    let nodes = graph.node_counts().expect("node counts");
+    assert_eq!(nodes.get("host").copied().unwrap_or(0), 0, "{nodes:?}");
+    let horizon = evaluation.horizon() as u32;
+    for round in 0..2 {
+        evaluation.reset_all().expect("reset");
+        let start = evaluation.state.ref_time.download().expect("ref_time");
+        assert!(
+            start.iter().all(|t| *t == 0.0),
+            "evaluation episodes start at the clip's start: {start:?}"
+        );
+        graph.launch(gpu.stream()).expect("launch");
+        gpu.synchronize().expect("evaluation replay");
+        let scores = evaluation
+            .episode_scores()
+            .expect("an evaluation rollout has scores")
+            .download()
+            .expect("scores");
+        eprintln!(
+            "round {round}: {} of {} completed, steps {:?}",
+            scores.iter().filter(|s| s.completed).count(),
+            scores.len(),
+            scores.iter().map(|s| s.steps).collect::<Vec<_>>()
+        );
+        for s in &scores {
+            assert!(s.completed != s.failed, "{s:?}: exactly one outcome");
+            assert!(
+                s.steps >= 1 && s.steps <= horizon,
+                "{s:?} (horizon {horizon})"
+            );
+            if s.completed {
+                assert_eq!(s.steps, horizon, "{s:?}: completed before the clip's end");
+            } else {
+                assert!(
+                    s.steps > config.env.grace_steps,
+                    "{s:?}: failed within the grace steps"
+                );
+            }
+            for e in [
+                s.pose_error,
+                s.mpjpe,
+                s.ee_position_error,
+                s.ee_rotation_error,
+            ] {
+                assert!(e.is_finite() && e >= 0.0, "{s:?}");
+            }
+            assert!(s.pose_error <= s.mpjpe + 1.0, "{s:?}");
+        }
+    }
+}

@@ -38,6 +38,9 @@ class ResetParams:
     dt: wp.float32
     # Reference state initialization noise (rad; velocities get 10x).
     noise_std: wp.float32
+    # Start time (s) of every reset episode; negative: drawn from the adaptive phase CDF
+    # (training). Evaluation starts every env at the clip's start.
+    start_time: wp.float32
 
 
 @wp.func
@@ -76,7 +79,8 @@ def reset_masked(
     episode_step: wp.array(dtype=wp.int32),
     actions: wp.array2d(dtype=wp.float32),
 ):
-    """For every env n with done[n] != 0: a start time t0 from the adaptive phase CDF, qpos = the
+    """For every env n with done[n] != 0: a start time t0 from the adaptive phase CDF (or
+    `params.start_time` when it is not negative), qpos = the
     reference qpos at t0 with noise (root orientation and ball joints `q * qexp(sigma g)`, hinges
     `theta + sigma g`, root position exact), qvel = reference qvel + 10 sigma g, ctrl, warm start
     and last action zeroed, ref_time = t0, episode_step = 0. Random stream: seed, offset
@@ -89,7 +93,9 @@ def reset_masked(
     state = wp.rand_init(params.seed, offset)
     u = wp.randf(state)
     v = wp.randf(state)
-    t0 = sample_start_time(u, v, table, phase_cdf, params.dt)
+    t0 = params.start_time
+    if t0 < 0.0:
+        t0 = sample_start_time(u, v, table, phase_cdf, params.dt)
     at = reference_locate(table, t0)
     sigma = params.noise_std
 

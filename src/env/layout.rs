@@ -214,6 +214,8 @@ pub fn reset_params(config: &TrainConfig, dt: f64) -> ResetParams {
         horizon: config.ppo.horizon as i32,
         dt: dt as f32,
         noise_std: config.env.motion_noise_std,
+        // Training draws every start time from the adaptive phase CDF.
+        start_time: -1.0,
     }
 }
 

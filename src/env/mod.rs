@@ -15,6 +15,7 @@
 pub mod abi;
 mod array;
 mod error;
+mod evaluation;
 mod kernels;
 pub mod layout;
 pub mod manifest;
@@ -25,6 +26,7 @@ mod rollout;
 pub use abi::{ArgBuffer, Element, KernelAbi, ParamAbi, ParamKind, ScalarType, WarpStruct};
 pub use array::{DeviceArray, DeviceArray2, DeviceArray3, DeviceArray4};
 pub use error::EnvError;
+pub use evaluation::{COMPLETED, EpisodeScore, EpisodeScores, FAILED, RUNNING, episode_steps};
 pub use phases::{Phase, PhaseEvents, PhaseRecorder};
 pub use reference::DeviceReferenceTable;
 pub use rollout::{EpisodeState, PhysicsState, Rollout, RolloutError, RolloutStorage};

@@ -17,6 +17,7 @@ use crate::plan::{PlanStore, Simulation, SimulationError};
 use crate::ppo::{ActStorage, GaussianPolicy, PolicyError};
 use crate::train::TrainConfig;
 
+use super::evaluation::{EpisodeScores, episode_steps};
 use super::layout::{
     DeviceJointLayout, JointLayout, observation_params, observation_size, reset_params,
     tracking_params,
@@ -139,10 +140,21 @@ pub struct Rollout {
     normalizer: ObservationNormalizer,
     phase_statistics: PhaseStatistics,
     pub policy: GaussianPolicy,
+    purpose: Purpose,
     num_envs: usize,
     horizon: usize,
     substeps: usize,
     control_dt: f64,
+}
+
+/// What a rollout is for.
+enum Purpose {
+    /// PPO's rollout: sampled actions, normalization statistics updated every step, start phases
+    /// drawn from the adaptive statistics (updated once per rollout).
+    Training,
+    /// The paper's evaluation: mean actions, the training rollout's normalization frozen, every
+    /// env starting at the clip's start, each env's first episode scored.
+    Evaluation(EpisodeScores),
 }
 
 impl Rollout {
@@ -155,8 +167,35 @@ impl Rollout {
         motion: &ReferenceMotion,
         config: &TrainConfig,
     ) -> Result<Rollout, RolloutError> {
+        Rollout::build(gpu, store, motion, config, None)
+    }
+
+    /// The evaluation rollout of `training` on `num_envs` worlds (a step plan for that count
+    /// must exist): the same motion, kernels and policy parameters (shared, not copied), the
+    /// training rollout's normalization statistics read but never updated, mean actions, every
+    /// env reset to the clip's start with the training config's noise drawn from a fixed stream
+    /// (the same initial states at every evaluation), and a horizon of one whole clip (for a
+    /// looping clip, one cycle), so that each env plays exactly one episode unless it fails.
+    pub fn evaluation(
+        training: &Rollout,
+        store: &PlanStore,
+        motion: &ReferenceMotion,
+        config: &TrainConfig,
+        num_envs: u32,
+    ) -> Result<Rollout, RolloutError> {
+        let mut config = config.clone();
+        config.env.num_envs = num_envs;
+        Rollout::build(&training.gpu, store, motion, &config, Some(training))
+    }
+
+    fn build(
+        gpu: &Gpu,
+        store: &PlanStore,
+        motion: &ReferenceMotion,
+        config: &TrainConfig,
+        evaluated: Option<&Rollout>,
+    ) -> Result<Rollout, RolloutError> {
         let n = config.env.num_envs as usize;
-        let horizon = config.ppo.horizon as usize;
         let substeps = config.env.substeps as usize;
         let sim = Simulation::load(gpu, store, config.env.num_envs, &["step", "kinematics"])?;
         let physics_dt = physics_timestep(&sim)?;
@@ -171,18 +210,45 @@ impl Rollout {
                 character.actuators().len()
             )));
         }
-        let table = ReferenceTable::build(motion, control_dt)
+        let host_table = ReferenceTable::build(motion, control_dt)
             .map_err(|e| RolloutError::Motion(e.to_string()))?;
-        let table = DeviceReferenceTable::upload(gpu, &table)?;
-        let kernels = Arc::new(EnvKernels::load(gpu)?);
+        let table = DeviceReferenceTable::upload(gpu, &host_table)?;
         let physics = PhysicsState::view(&sim)?;
 
         let layout = JointLayout::for_character(character)?;
         let joints = DeviceJointLayout::upload(gpu, &layout)?;
         let obs_size = observation_size(&config.obs, NU, layout.end_effectors.len());
-        let normalizer = ObservationNormalizer::new(gpu, n, obs_size, config.obs.clip)?;
         let phase_statistics = PhaseStatistics::new(gpu, config)?;
-        let policy = GaussianPolicy::new(gpu, &config.policy, obs_size, NU, n, config.seed)?;
+        let mut tracking = tracking_params(config, control_dt);
+        let mut reset = reset_params(config, control_dt);
+        let (kernels, normalizer, policy, horizon, purpose) = match evaluated {
+            None => (
+                Arc::new(EnvKernels::load(gpu)?),
+                ObservationNormalizer::new(gpu, n, obs_size, config.obs.clip)?,
+                GaussianPolicy::new(gpu, &config.policy, obs_size, NU, n, config.seed)?,
+                config.ppo.horizon as usize,
+                Purpose::Training,
+            ),
+            Some(training) => {
+                if training.observation_size() != obs_size {
+                    return Err(RolloutError::Setup(format!(
+                        "the evaluation's observation size {obs_size} differs from the training rollout's {}",
+                        training.observation_size()
+                    )));
+                }
+                let steps = episode_steps(&host_table, control_dt);
+                tracking.max_episode_steps = steps as i32;
+                reset.start_time = 0.0;
+                reset.horizon = steps as i32;
+                (
+                    Arc::clone(&training.kernels),
+                    ObservationNormalizer::frozen(gpu, &training.normalizer, n)?,
+                    training.policy.with_batch(gpu, n)?,
+                    steps,
+                    Purpose::Evaluation(EpisodeScores::zeros(gpu, n)?),
+                )
+            }
+        };
         let state = EpisodeState {
             ref_time: DeviceArray::zeros(gpu, [n])?,
             episode_step: DeviceArray::zeros(gpu, [n])?,
@@ -201,12 +267,13 @@ impl Rollout {
             storage,
             joints,
             action_scale: config.env.action_scale,
-            tracking: tracking_params(config, control_dt),
-            reset: reset_params(config, control_dt),
+            tracking,
+            reset,
             observation: observation_params(&config.obs, control_dt),
             normalizer,
             phase_statistics,
             policy,
+            purpose,
             num_envs: n,
             horizon,
             substeps,
@@ -244,10 +311,46 @@ impl Rollout {
         let stream = self.gpu.stream();
         let n = self.num_envs;
         self.state.done.upload(&vec![1; n])?;
+        if let Purpose::Evaluation(scores) = &self.purpose {
+            scores.clear()?;
+        }
         self.record_reset(stream, 0)?;
-        self.record_observation(stream, 0, true)?;
+        self.record_observation(stream, 0, self.is_training())?;
         stream.synchronize()?;
         Ok(())
+    }
+
+    fn is_training(&self) -> bool {
+        matches!(self.purpose, Purpose::Training)
+    }
+
+    /// The scores of the evaluation rollout's episodes (None for a training rollout).
+    pub fn episode_scores(&self) -> Option<&EpisodeScores> {
+        match &self.purpose {
+            Purpose::Evaluation(scores) => Some(scores),
+            Purpose::Training => None,
+        }
+    }
+
+    /// The policy's observation normalization: running count, mean and M2 (float64 device
+    /// buffers), for checkpoints.
+    pub fn normalizer_moments(&self) -> [&DeviceArray<f64>; 3] {
+        let n = &self.normalizer;
+        [&n.count, &n.mean, &n.m2]
+    }
+
+    /// The adaptive start-phase statistics (visits, failures, CDF) and the device iteration
+    /// counter, for checkpoints.
+    pub fn phase_statistics(
+        &self,
+    ) -> (
+        &DeviceArray<f32>,
+        &DeviceArray<f32>,
+        &DeviceArray<f32>,
+        &DeviceArray<i32>,
+    ) {
+        let p = &self.phase_statistics;
+        (&p.visits, &p.failures, &p.cdf, &p.iteration)
     }
 
     /// Captures the rollout into a graph. With `timed`, an event is recorded at every phase
@@ -283,12 +386,19 @@ impl Rollout {
             })?;
             phases.phase(gpu, s, Phase::PostPhysics, |s| {
                 self.sim.record("kinematics", s)?;
-                self.record_reward(s, t32)
+                self.record_reward(s, t32)?;
+                if let Purpose::Evaluation(scores) = &self.purpose {
+                    self.record_scores(s, scores, t32)?;
+                }
+                Ok::<(), RolloutError>(())
             })?;
             phases.phase(gpu, s, Phase::Reset, |s| self.record_reset(s, t32))?;
             phases.phase(gpu, s, Phase::Observation, |s| {
-                self.record_observation(s, t + 1, true)
+                self.record_observation(s, t + 1, self.is_training())
             })?;
+        }
+        if !self.is_training() {
+            return Ok(());
         }
         phases.phase(gpu, s, Phase::Bookkeeping, |s| {
             // The next rollout's first input is this one's last observation.
@@ -319,7 +429,33 @@ impl Rollout {
             &storage,
             &self.phase_statistics.iteration,
             t,
-            false,
+            !self.is_training(),
+        )?;
+        Ok(())
+    }
+
+    fn record_scores(
+        &self,
+        s: &Stream,
+        scores: &EpisodeScores,
+        t: i32,
+    ) -> Result<(), RolloutError> {
+        let p = &self.physics;
+        self.kernels.evaluation_accumulate(
+            s,
+            self.num_envs,
+            &p.xpos,
+            &p.xquat,
+            self.table.table(),
+            &self.joints.end_effectors,
+            &self.state.ref_time,
+            t,
+            &self.storage.rewards,
+            &self.storage.terminated,
+            &self.storage.truncated,
+            &scores.status,
+            &scores.steps,
+            &scores.sums,
         )?;
         Ok(())
     }
@@ -455,6 +591,24 @@ impl ObservationNormalizer {
             mean: DeviceArray::zeros(gpu, [size])?,
             m2: DeviceArray::zeros(gpu, [size])?,
             clip,
+            size,
+        })
+    }
+
+    /// A normalizer for `n` envs that reads `source`'s statistics (shared device memory, so it
+    /// always sees the latest) and must never update them.
+    fn frozen(gpu: &Gpu, source: &ObservationNormalizer, n: usize) -> Result<Self, EnvError> {
+        let size = source.size;
+        let share = |a: &DeviceArray<f64>| a.view(0, [a.len()]);
+        Ok(ObservationNormalizer {
+            raw: DeviceArray::zeros(gpu, [n, size])?,
+            normalized: DeviceArray::zeros(gpu, [n, size])?,
+            batch_sum: DeviceArray::zeros(gpu, [size])?,
+            batch_sum_sq: DeviceArray::zeros(gpu, [size])?,
+            count: share(&source.count)?,
+            mean: share(&source.mean)?,
+            m2: share(&source.m2)?,
+            clip: source.clip,
             size,
         })
     }

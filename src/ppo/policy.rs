@@ -198,6 +198,31 @@ impl GaussianPolicy {
         })
     }
 
+    /// The same networks (parameters shared, not copied: updates to this policy's parameters
+    /// are seen by both) with activations for `batch` envs, e.g. the evaluation's 32.
+    pub fn with_batch(&self, gpu: &Gpu, batch: usize) -> Result<GaussianPolicy, PolicyError> {
+        if batch == 0 {
+            return Err(PolicyError::Shape("batch must be positive".to_owned()));
+        }
+        let share = |a: &DeviceArray<f32>| a.view(0, [a.len()]);
+        let actor_params = share(&self.actor.params)?;
+        let log_std = actor_params.view(
+            self.actor_shapes.last().map_or(0, LayerShape::end),
+            [self.action_size],
+        )?;
+        Ok(GaussianPolicy {
+            actor: Mlp::new(gpu, &self.actor_shapes, actor_params, batch)?,
+            critic: Mlp::new(gpu, &self.critic_shapes, share(&self.critic.params)?, batch)?,
+            actor_shapes: self.actor_shapes.clone(),
+            critic_shapes: self.critic_shapes.clone(),
+            log_std,
+            observation_size: self.observation_size,
+            action_size: self.action_size,
+            batch,
+            seed: self.seed,
+        })
+    }
+
     pub fn actor_layers(&self) -> &[LayerShape] {
         &self.actor_shapes
     }

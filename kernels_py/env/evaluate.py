@@ -1,0 +1,89 @@
+"""Evaluation metrics of one episode per env (docs/env.md, "Evaluation").
+
+The paper evaluates a policy every few iterations on 32 deterministic envs (mean action, fixed
+initial states) and calls it a success when at least 90% of them complete the whole clip without
+early termination; it reports average pose error, global MPJPE and end-effector errors beside it.
+`evaluation_accumulate` runs once per control step of the evaluation rollout, after
+`reward_termination` (which compared the state with the reference at the new `ref_time`, wrote the
+step's flags at row `t` and advanced `ref_time` to the time of the current state). Each env's first
+episode is scored: while its status is running, the step's errors are added to its sums; the first
+failure or truncation freezes it. The host reads the sums once, after the rollout.
+"""
+
+import warp as wp
+
+from env.reference import reference_locate, reference_position, reference_quat_wxyz
+from env.rotation import qdiff_angle
+
+wp.set_module_options({"enable_backward": False})
+
+REF_BODY_POS = wp.constant(77)
+REF_BODY_QUAT = wp.constant(122)
+NUM_BODIES = wp.constant(15)
+
+RUNNING = wp.constant(0)
+COMPLETED = wp.constant(1)
+FAILED = wp.constant(2)
+
+# Columns of `sums`.
+SUM_POSE = wp.constant(0)
+SUM_MPJPE = wp.constant(1)
+SUM_EE_POS = wp.constant(2)
+SUM_EE_ROT = wp.constant(3)
+SUM_REWARD = wp.constant(4)
+
+
+@wp.kernel
+def evaluation_accumulate(
+    xpos: wp.array3d(dtype=wp.float32),
+    xquat: wp.array3d(dtype=wp.float32),
+    table: wp.array(dtype=wp.float32),
+    end_effectors: wp.array(dtype=wp.int32),
+    ref_time: wp.array(dtype=wp.float32),
+    t: wp.int32,
+    rewards: wp.array2d(dtype=wp.float32),
+    terminated: wp.array2d(dtype=wp.int32),
+    truncated: wp.array2d(dtype=wp.int32),
+    status: wp.array(dtype=wp.int32),
+    steps: wp.array(dtype=wp.int32),
+    sums: wp.array2d(dtype=wp.float32),
+):
+    """One thread per env n whose status is RUNNING: adds, for the state after step t against the
+    reference at `ref_time[n]`, the mean root-relative body position error (average pose error,
+    m), the mean world body position error (global MPJPE, m), the mean end-effector position
+    error (m) and orientation error (rad) over the 5 end effectors, and the step's reward to
+    `sums[n]`, counts the step, then sets the status to FAILED if `terminated[t, n]`, else
+    COMPLETED if `truncated[t, n]`."""
+    n = wp.tid()
+    if status[n] != RUNNING:
+        return
+    at = reference_locate(table, ref_time[n])
+    root = wp.vec3(xpos[n, 1, 0], xpos[n, 1, 1], xpos[n, 1, 2])
+    root_ref = reference_position(table, at, REF_BODY_POS)
+    pose = float(0.0)
+    mpjpe = float(0.0)
+    for b in range(NUM_BODIES):
+        p = wp.vec3(xpos[n, b + 1, 0], xpos[n, b + 1, 1], xpos[n, b + 1, 2])
+        p_ref = reference_position(table, at, REF_BODY_POS + 3 * b)
+        mpjpe += wp.length(p - p_ref)
+        pose += wp.length((p - root) - (p_ref - root_ref))
+    ee_pos = float(0.0)
+    ee_rot = float(0.0)
+    effectors = end_effectors.shape[0]
+    for k in range(effectors):
+        b = end_effectors[k]
+        p = wp.vec3(xpos[n, b + 1, 0], xpos[n, b + 1, 1], xpos[n, b + 1, 2])
+        ee_pos += wp.length(p - reference_position(table, at, REF_BODY_POS + 3 * b))
+        q = wp.vec4(xquat[n, b + 1, 0], xquat[n, b + 1, 1], xquat[n, b + 1, 2], xquat[n, b + 1, 3])
+        ee_rot += qdiff_angle(q, reference_quat_wxyz(table, at, REF_BODY_QUAT + 4 * b))
+    bodies = wp.float32(NUM_BODIES)
+    sums[n, SUM_POSE] = sums[n, SUM_POSE] + pose / bodies
+    sums[n, SUM_MPJPE] = sums[n, SUM_MPJPE] + mpjpe / bodies
+    sums[n, SUM_EE_POS] = sums[n, SUM_EE_POS] + ee_pos / wp.float32(effectors)
+    sums[n, SUM_EE_ROT] = sums[n, SUM_EE_ROT] + ee_rot / wp.float32(effectors)
+    sums[n, SUM_REWARD] = sums[n, SUM_REWARD] + rewards[t, n]
+    steps[n] = steps[n] + 1
+    if terminated[t, n] != 0:
+        status[n] = FAILED
+    elif truncated[t, n] != 0:
+        status[n] = COMPLETED

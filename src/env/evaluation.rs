@@ -1,0 +1,170 @@
+//! Scores of the evaluation rollout's episodes (`kernels_py/env/evaluate.py`).
+//!
+//! The paper evaluates on 32 deterministic envs: the policy's mean action, fixed initial states,
+//! success when at least 90% of the envs complete the whole clip without early termination.
+//! [`crate::env::Rollout::evaluation`] builds that rollout; its graph accumulates per-env sums on
+//! the device and the host reads them once, after the rollout ([`EpisodeScores::download`]).
+
+use crate::cuda::Gpu;
+use crate::motion::ReferenceTable;
+use crate::motion::clip::LoopMode;
+
+use super::{DeviceArray, DeviceArray2, EnvError};
+
+/// Status of an env's scored episode (evaluate.py `RUNNING/COMPLETED/FAILED`).
+pub const RUNNING: i32 = 0;
+pub const COMPLETED: i32 = 1;
+pub const FAILED: i32 = 2;
+
+/// Columns of the per-env sums (evaluate.py `SUM_*`).
+const SUMS: usize = 5;
+
+/// Per-env accumulators of the evaluation rollout, on the device.
+pub struct EpisodeScores {
+    pub(super) status: DeviceArray<i32>,
+    pub(super) steps: DeviceArray<i32>,
+    /// `[N, 5]`: average pose error, global MPJPE, end-effector position and orientation
+    /// errors (per-step means, summed over steps), reward.
+    pub(super) sums: DeviceArray2<f32>,
+}
+
+impl EpisodeScores {
+    pub(super) fn zeros(gpu: &Gpu, n: usize) -> Result<EpisodeScores, EnvError> {
+        Ok(EpisodeScores {
+            status: DeviceArray::zeros(gpu, [n])?,
+            steps: DeviceArray::zeros(gpu, [n])?,
+            sums: DeviceArray::zeros(gpu, [n, SUMS])?,
+        })
+    }
+
+    /// Every env running, nothing counted (synchronous upload).
+    pub(super) fn clear(&self) -> Result<(), EnvError> {
+        let n = self.status.len();
+        self.status.upload(&vec![RUNNING; n])?;
+        self.steps.upload(&vec![0; n])?;
+        self.sums.upload(&vec![0.0; n * SUMS])?;
+        Ok(())
+    }
+
+    /// Copies the scores to the host (waits for the work queued before).
+    pub fn download(&self) -> Result<Vec<EpisodeScore>, EnvError> {
+        let status = self.status.download()?;
+        let steps = self.steps.download()?;
+        let sums = self.sums.download()?;
+        Ok(status
+            .iter()
+            .zip(&steps)
+            .zip(sums.chunks_exact(SUMS))
+            .map(|((&status, &steps), s)| {
+                let per_step = |x: f32| {
+                    if steps > 0 {
+                        f64::from(x) / f64::from(steps)
+                    } else {
+                        f64::NAN
+                    }
+                };
+                EpisodeScore {
+                    completed: status == COMPLETED,
+                    failed: status == FAILED,
+                    steps: steps.max(0) as u32,
+                    pose_error: per_step(s[0]),
+                    mpjpe: per_step(s[1]),
+                    ee_position_error: per_step(s[2]),
+                    ee_rotation_error: per_step(s[3]),
+                    episode_return: f64::from(s[4]),
+                }
+            })
+            .collect())
+    }
+}
+
+/// One env's evaluation episode.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EpisodeScore {
+    /// Reached the end of the clip without early termination.
+    pub completed: bool,
+    /// Terminated early (fell or lost track of the reference).
+    pub failed: bool,
+    /// Control steps scored.
+    pub steps: u32,
+    /// Means over the scored steps: root-relative body position error (m), world body position
+    /// error (m), end-effector position error (m) and orientation error (rad).
+    pub pose_error: f64,
+    pub mpjpe: f64,
+    pub ee_position_error: f64,
+    pub ee_rotation_error: f64,
+    /// Sum of rewards.
+    pub episode_return: f64,
+}
+
+/// Control steps of one evaluation episode started at the clip's start: until `reward_termination`
+/// truncates a clamped clip (the first step k with `k dt + dt > duration`, with `ref_time` advanced
+/// by repeated f32 additions as the kernel does), or one cycle of a looping clip.
+pub fn episode_steps(table: &ReferenceTable, control_dt: f64) -> usize {
+    let duration = table.duration() as f32;
+    let dt = control_dt as f32;
+    match table.loop_mode() {
+        LoopMode::Wrap => ((f64::from(duration) / control_dt).round() as usize).max(1),
+        LoopMode::Clamp => {
+            let mut t = 0.0f32;
+            let mut steps = 0;
+            loop {
+                steps += 1;
+                t += dt;
+                if t + dt > duration || steps >= 1 << 20 {
+                    return steps;
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::motion::{Character, SyntheticMotion};
+
+    fn table(loop_mode: LoopMode, frames: usize, dt: f64) -> ReferenceTable {
+        let character = Character::humanoid().expect("humanoid");
+        let motion = SyntheticMotion {
+            frames,
+            frame_dt: 1.0 / 30.0,
+            loop_mode,
+            ..SyntheticMotion::default()
+        }
+        .reference_motion(&character)
+        .expect("synthetic clip");
+        ReferenceTable::build(&motion, dt).expect("table")
+    }
+
+    #[test]
+    fn a_clamped_clip_ends_where_the_termination_kernel_truncates_it() {
+        for (frames, dt) in [
+            (31, 1.0 / 30.0),
+            (52, 1.0 / 30.0),
+            (40, 1.0 / 60.0),
+            (17, 0.04),
+        ] {
+            let table = table(LoopMode::Clamp, frames, dt);
+            let steps = episode_steps(&table, dt);
+            let duration = table.duration();
+            // Step k truncates when k dt + dt > duration (tracking.py); not before.
+            let k = steps as f64;
+            assert!(
+                k * dt + dt > duration - 1e-6,
+                "{frames} frames: {steps} steps"
+            );
+            assert!(
+                (k - 1.0) * dt + dt <= duration + 1e-6,
+                "{frames} frames: {steps} steps"
+            );
+        }
+    }
+
+    #[test]
+    fn a_looping_clip_is_scored_over_one_cycle() {
+        let dt = 1.0 / 30.0;
+        let table = table(LoopMode::Wrap, 31, dt);
+        assert_eq!(episode_steps(&table, dt), 30);
+    }
+}
