@@ -24,7 +24,7 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 13] = [
+const EXPECTED_KERNELS: [(&str, &str); 15] = [
     ("control", "pd_control"),
     ("evaluate", "evaluation_accumulate"),
     ("observe", "observe"),
@@ -37,6 +37,8 @@ const EXPECTED_KERNELS: [(&str, &str); 13] = [
     ("reference", "lookup_reference"),
     ("reset", "reset_masked"),
     ("reset", "phase_statistics_update"),
+    ("statistics", "episode_statistics"),
+    ("statistics", "rollout_statistics"),
     ("tracking", "reward_termination"),
 ];
 

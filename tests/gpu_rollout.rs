@@ -91,7 +91,35 @@ fn rollout_graph_has_no_host_work_and_replays_advance() {
         first_actions.len()
     );
 
+    // The device totals of the second replay agree with its stored flags and rewards.
+    let totals = rollout.statistics().totals().download().expect("totals");
+    let terminated = rollout.storage.terminated.download().expect("flags");
+    let truncated = rollout.storage.truncated.download().expect("flags");
     let rewards = rollout.storage.rewards.download().expect("rewards");
+    let ended = terminated
+        .iter()
+        .zip(&truncated)
+        .filter(|(a, b)| **a != 0 || **b != 0)
+        .count() as f64;
+    let failed = terminated.iter().filter(|a| **a != 0).count() as f64;
+    let reward_sum: f64 = rewards.iter().map(|r| f64::from(*r)).sum();
+    eprintln!("totals {totals:?}: ended {ended}, failed {failed}, reward sum {reward_sum}");
+    assert_eq!(totals[0], ended, "episodes ended");
+    assert_eq!(totals[3], failed, "episodes failed");
+    assert_eq!(totals[5], rewards.len() as f64, "steps");
+    assert!(
+        (totals[4] - reward_sum).abs() <= 1e-4 * reward_sum.abs().max(1.0),
+        "reward sum {} vs {reward_sum}",
+        totals[4]
+    );
+    if ended > 0.0 {
+        let mean_length = totals[2] / ended;
+        assert!(
+            mean_length >= 1.0 && mean_length <= f64::from(config.env.max_episode_steps),
+            "mean episode length {mean_length}"
+        );
+    }
+
     assert!(
         rewards.iter().all(|r| *r > 0.0 && *r <= 1.0),
         "rewards outside (0, 1]: {:?}",

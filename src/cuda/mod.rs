@@ -9,6 +9,7 @@
 //! - [`Stream`]: launches, memsets, copies, and [`Stream::capture`] into a [`Graph`], with
 //!   [`Stream::capture_while`] and [`Stream::capture_if`] for conditional nodes.
 //! - [`Event`] timing and [`NvtxRange`] profiler ranges.
+//! - [`Readback`]: device bytes copied to pinned host memory without stalling the stream.
 
 mod conditional;
 mod context;
@@ -20,6 +21,7 @@ mod memory;
 mod module;
 mod nvtx;
 pub mod ptx;
+mod readback;
 mod stream;
 
 pub use conditional::{
@@ -35,4 +37,5 @@ pub use memory::{DeviceMemory, PinnedHostMemory};
 pub use module::{Function, Module};
 pub use nvtx::NvtxRange;
 pub use ptx::{PtxIsa, lower_ptx_version, prepare_ptx};
+pub use readback::Readback;
 pub use stream::Stream;

@@ -22,6 +22,7 @@ pub mod manifest;
 mod phases;
 mod reference;
 mod rollout;
+mod statistics;
 
 pub use abi::{ArgBuffer, Element, KernelAbi, ParamAbi, ParamKind, ScalarType, WarpStruct};
 pub use array::{DeviceArray, DeviceArray2, DeviceArray3, DeviceArray4};
@@ -30,6 +31,7 @@ pub use evaluation::{COMPLETED, EpisodeScore, EpisodeScores, FAILED, RUNNING, ep
 pub use phases::{Phase, PhaseEvents, PhaseRecorder};
 pub use reference::DeviceReferenceTable;
 pub use rollout::{EpisodeState, PhysicsState, Rollout, RolloutError, RolloutStorage};
+pub use statistics::{RolloutStatistics, RolloutTotals, TOTALS};
 // The launchers, their ABI constants and the Rust structs of Warp structs, all generated.
 pub use kernels::*;
 

@@ -23,6 +23,7 @@ use super::layout::{
     tracking_params,
 };
 use super::phases::{Phase, PhaseEvents, PhaseRecorder};
+use super::statistics::RolloutStatistics;
 use super::{
     DeviceArray, DeviceArray2, DeviceArray3, DeviceReferenceTable, EnvError, EnvKernels,
     ObservationParams, ResetParams, TrackingParams,
@@ -140,6 +141,7 @@ pub struct Rollout {
     normalizer: ObservationNormalizer,
     phase_statistics: PhaseStatistics,
     pub policy: GaussianPolicy,
+    statistics: RolloutStatistics,
     purpose: Purpose,
     num_envs: usize,
     horizon: usize,
@@ -273,6 +275,7 @@ impl Rollout {
             normalizer,
             phase_statistics,
             policy,
+            statistics: RolloutStatistics::new(gpu, n)?,
             purpose,
             num_envs: n,
             horizon,
@@ -314,10 +317,17 @@ impl Rollout {
         if let Purpose::Evaluation(scores) = &self.purpose {
             scores.clear()?;
         }
+        self.statistics.clear_running()?;
         self.record_reset(stream, 0)?;
         self.record_observation(stream, 0, self.is_training())?;
         stream.synchronize()?;
         Ok(())
+    }
+
+    /// The rollout's statistics (episodes ended, return, length, reward), on the device; the
+    /// rollout graph clears them first and completes them last.
+    pub fn statistics(&self) -> &RolloutStatistics {
+        &self.statistics
     }
 
     fn is_training(&self) -> bool {
@@ -374,6 +384,9 @@ impl Rollout {
 
     fn record_rollout(&self, s: &Stream, phases: &mut PhaseRecorder) -> Result<(), RolloutError> {
         let gpu = &self.gpu;
+        if self.is_training() {
+            self.statistics.record_clear(s)?;
+        }
         for t in 0..self.horizon {
             let t32 = t as i32;
             phases.phase(gpu, s, Phase::Policy, |s| self.record_policy(s, t))?;
@@ -387,8 +400,15 @@ impl Rollout {
             phases.phase(gpu, s, Phase::PostPhysics, |s| {
                 self.sim.record("kinematics", s)?;
                 self.record_reward(s, t32)?;
-                if let Purpose::Evaluation(scores) = &self.purpose {
-                    self.record_scores(s, scores, t32)?;
+                match &self.purpose {
+                    Purpose::Evaluation(scores) => self.record_scores(s, scores, t32)?,
+                    Purpose::Training => self.statistics.record_step(
+                        &self.kernels,
+                        s,
+                        t32,
+                        &self.storage,
+                        &self.state.episode_step,
+                    )?,
                 }
                 Ok::<(), RolloutError>(())
             })?;
@@ -410,6 +430,7 @@ impl Rollout {
                 bytes,
             )?;
             self.phase_statistics.record_update(&self.kernels, s)?;
+            self.statistics.record_end(&self.kernels, s, self.horizon)?;
             Ok::<(), RolloutError>(())
         })?;
         Ok(())

@@ -1,0 +1,84 @@
+//! Device bytes brought back to the host without stalling the stream.
+//!
+//! The training loop copies each iteration's statistics back with one asynchronous copy and reads
+//! them later, while the GPU goes on with the next iteration. The copy writes page-locked host
+//! memory behind Rust's back, so the bytes are only handed out once the event recorded after the
+//! copy has completed: a reader can never see a copy in progress.
+
+use cudarc::driver::sys;
+
+use super::error::CheckResult;
+use super::{CudaError, Event, Gpu, PinnedHostMemory, Stream};
+
+/// A page-locked buffer, the copy into it and the event that marks the copy's end.
+pub struct Readback {
+    memory: PinnedHostMemory,
+    done: Event,
+    /// Bytes of the last queued copy; None before the first.
+    queued: Option<usize>,
+}
+
+impl Readback {
+    /// A readback of up to `capacity` bytes.
+    pub fn new(gpu: &Gpu, capacity: usize) -> Result<Readback, CudaError> {
+        Ok(Readback {
+            memory: gpu.alloc_pinned(capacity)?,
+            done: gpu.new_event()?,
+            queued: None,
+        })
+    }
+
+    /// Queues on `stream` a copy of `bytes` bytes from device address `src`, after the work
+    /// already queued there. Not for use inside a capture (the copy and the event belong to
+    /// the stream's timeline, not to a graph).
+    pub fn queue(&mut self, stream: &Stream, src: u64, bytes: usize) -> Result<(), CudaError> {
+        if bytes > self.memory.len() {
+            return Err(CudaError::OutOfBounds {
+                operation: "Readback::queue",
+                offset: 0,
+                bytes,
+                len: self.memory.len(),
+            });
+        }
+        if stream.is_capturing()? {
+            return Err(CudaError::InvalidArgument {
+                operation: "Readback::queue",
+                reason: "the stream is capturing a graph; queue the readback after the launch"
+                    .to_owned(),
+            });
+        }
+        // A queued copy may still be writing the buffer: the new one is ordered after it on
+        // the same stream, but wait anyway if it went to another stream.
+        if self.queued.is_some() {
+            self.done.synchronize()?;
+        }
+        if bytes > 0 {
+            stream.bind()?;
+            // SAFETY: [0, bytes) lies inside the pinned allocation (checked above), which lives
+            // as long as self; no Rust reference to it is handed out until the event after the
+            // copy completes (`wait` takes &mut self and synchronizes first); the source is a
+            // device address, which the driver bounds-checks against its allocations.
+            unsafe {
+                sys::cuMemcpyDtoHAsync_v2(
+                    self.memory.host_ptr().cast_mut().cast(),
+                    src,
+                    bytes,
+                    stream.cu_stream(),
+                )
+            }
+            .check_with(|| format!("cuMemcpyDtoHAsync ({bytes} bytes from {src:#x})"))?;
+        }
+        self.done.record(stream)?;
+        self.queued = Some(bytes);
+        Ok(())
+    }
+
+    /// Waits for the last queued copy and returns its bytes (None if nothing was queued).
+    pub fn wait(&mut self) -> Result<Option<&[u8]>, CudaError> {
+        let Some(bytes) = self.queued else {
+            return Ok(None);
+        };
+        self.done.synchronize()?;
+        Ok(Some(&self.memory.as_slice()[..bytes]))
+    }
+}
