@@ -896,3 +896,32 @@ fn nvtx_ranges_never_panic() {
     drop(outer);
     println!("NVTX push/pop ran (a no-op when libnvToolsExt is absent)");
 }
+
+#[test]
+fn readback_returns_the_bytes_of_the_last_queued_copy_only_once_it_is_done() {
+    let gpu = Gpu::open(0).unwrap();
+    let memory = gpu.alloc_zeroed(4096).unwrap();
+    let mut readback = instantmimic::cuda::Readback::new(&gpu, 1024).unwrap();
+    assert!(readback.wait().unwrap().is_none(), "nothing queued yet");
+    let stream = gpu.stream();
+    for round in 0u8..3 {
+        let bytes: Vec<u8> = (0..1024u32)
+            .map(|i| (i as u8).wrapping_mul(7) ^ round)
+            .collect();
+        memory.copy_from_host(512, &bytes).unwrap();
+        readback
+            .queue(stream, memory.device_ptr() + 512, bytes.len())
+            .unwrap();
+        assert_eq!(
+            readback.wait().unwrap().unwrap(),
+            &bytes[..],
+            "round {round}"
+        );
+    }
+    readback.queue(stream, memory.device_ptr(), 16).unwrap();
+    assert_eq!(readback.wait().unwrap().unwrap(), &[0u8; 16][..]);
+    let too_big = readback
+        .queue(stream, memory.device_ptr(), 1025)
+        .unwrap_err();
+    assert!(too_big.to_string().contains("Readback::queue"), "{too_big}");
+}
