@@ -1,0 +1,75 @@
+#!/usr/bin/env bash
+# One call on the GPU machine: GPU tests, rollout benchmarks and training runs, with a short
+# table printed last and full logs under $OUT. Stage the binaries first (tests/device/stage.sh)
+# and carry that directory:
+#   BIN=.device-bin tests/device/session.sh [tests] [bench] [train]   (default: all three)
+# Environment: BIN (staged binaries), OUT (logs; default /tmp/instantmimic-out),
+# SEEDS (train: default "0 1 2"), MOTIONS_LIST (train: default all five clips),
+# TRAIN_ARGS (extra flags for every `instantmimic train`).
+set -uo pipefail
+cd "$(dirname "$0")/../.."
+BIN=${BIN:-.device-bin}
+OUT=${OUT:-/tmp/instantmimic-out}
+mkdir -p "$OUT"
+export INSTANTMIMIC_MOTIONS=${INSTANTMIMIC_MOTIONS:-$PWD/$BIN/motions}
+export PYTHONPATH=
+summary="$OUT/summary.txt"
+: > "$summary"
+note() { echo "$*" | tee -a "$summary"; }
+
+nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.sm,clocks.max.sm --format=csv,noheader \
+  | tee "$OUT/gpu.txt"
+
+run_tests() {
+  for t in "$BIN"/gpu_*; do
+    name=$(basename "$t")
+    start=$(date +%s)
+    if "$t" --nocapture --test-threads 1 > "$OUT/test_$name.log" 2>&1; then status=PASS; else status=FAIL; fi
+    note "test  $name  $status  $(( $(date +%s) - start )) s  $(grep -c '^test .* ok$' "$OUT/test_$name.log") ok"
+    [ "$status" = FAIL ] && grep -E "panicked|FAILED|failed" "$OUT/test_$name.log" | head -5
+  done
+}
+
+run_bench() {
+  for variant in "--envs 4096 --substeps 4 --horizon 32" "--envs 4096 --substeps 4 --horizon 32 --critic-in-update" ; do
+    tag=$(echo "$variant" | tr -d ' -')
+    if "$BIN/instantmimic" bench rollout --motion backflip $variant --json > "$OUT/bench_$tag.json" 2> "$OUT/bench_$tag.err"; then
+      python3 - "$OUT/bench_$tag.json" "$variant" <<'PY' | tee -a "$summary"
+import json, sys
+r = json.load(open(sys.argv[1]))
+print(f"bench {sys.argv[2]}: {r['frames_per_s']/1e6:.3f} M frames/s, physics only "
+      f"{r['physics_only_frames_per_s']/1e6:.3f}, ratio {r['ratio']:.3f}; "
+      + ", ".join(f"{k} {v:.2f} ms" for k, v in r["phase_ms"].items()))
+PY
+    else
+      note "bench $variant FAILED: $(tail -2 "$OUT/bench_$tag.err")"
+    fi
+  done
+}
+
+run_train() {
+  for motion in ${MOTIONS_LIST:-walk run spinkick backflip cartwheel}; do
+    for seed in ${SEEDS:-0 1 2}; do
+      dir="$OUT/runs/${motion}_$seed"
+      if "$BIN/instantmimic" train --motion "$motion" --config "configs/train/$motion.toml" --seed "$seed" \
+          --out "$dir" ${TRAIN_ARGS:-} > "$OUT/train_${motion}_$seed.log" 2>&1; then
+        note "train $motion seed $seed: $(tail -1 "$OUT/train_${motion}_$seed.log")"
+      else
+        note "train $motion seed $seed FAILED: $(tail -2 "$OUT/train_${motion}_$seed.log" | tr '\n' ' ')"
+      fi
+    done
+  done
+}
+
+sections=${*:-tests bench train}
+for s in $sections; do
+  case "$s" in
+    tests) run_tests ;;
+    bench) run_bench ;;
+    train) run_train ;;
+    *) echo "unknown section $s (tests, bench, train)" >&2; exit 2 ;;
+  esac
+done
+# The device hands back at most 8 files: pack the logs, metrics and curves (not checkpoints).
+tar czf /tmp/logs.tgz -C "$OUT" --exclude='*.safetensors' . && rm -rf "${OUT:?}"/* && mv /tmp/logs.tgz "$OUT/logs.tgz"
+echo "==== summary"; tar xzf "$OUT/logs.tgz" -O ./summary.txt

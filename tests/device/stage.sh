@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Build the release binary and the GPU test binaries here, and stage them for the GPU machine.
+#   tests/device/stage.sh [DIR]      (default .device-bin; ignored by git via .git/info/exclude)
+# DIR then holds `instantmimic`, one stripped binary per tests/gpu_*.rs (named after the file),
+# and a copy of the motions directory ($INSTANTMIMIC_MOTIONS, default ../shared/data/motions)
+# under DIR/motions. Carry DIR in the device call and run tests/device/session.sh there.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+DIR=${1:-.device-bin}
+MOTIONS=${INSTANTMIMIC_MOTIONS:-$(cd .. && pwd)/shared/data/motions}
+mkdir -p .git/info
+grep -qx "/$DIR/" .git/info/exclude 2>/dev/null || echo "/$DIR/" >> .git/info/exclude
+rm -rf "$DIR"; mkdir -p "$DIR"
+cargo build --release --quiet
+cp target/release/instantmimic "$DIR/"
+cargo test --release --features gpu --no-run --message-format=json 2>/dev/null \
+  | python3 -c '
+import json, sys
+for line in sys.stdin:
+    m = json.loads(line)
+    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"].startswith("gpu_"):
+        print(m["target"]["name"], m["executable"])
+' | while read -r name exe; do cp "$exe" "$DIR/$name"; done
+strip "$DIR"/*
+cp -r "$MOTIONS" "$DIR/motions"
+du -sh "$DIR"; ls "$DIR"
