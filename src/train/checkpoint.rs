@@ -29,12 +29,9 @@ const FILE_SUFFIX: &str = ".safetensors";
 /// A checkpoint that cannot be written, read or used. Every message names the file.
 #[derive(Debug, Error)]
 pub enum CheckpointError {
-    #[error("{path}: {source}")]
-    Io {
-        path: String,
-        #[source]
-        source: std::io::Error,
-    },
+    /// The I/O error is in the message, not a `source` (a chain printer would repeat it).
+    #[error("{path}: {error}")]
+    Io { path: String, error: std::io::Error },
     #[error("{path}: corrupt or truncated checkpoint: {problem}")]
     Corrupt { path: String, problem: String },
     #[error(
@@ -446,18 +443,18 @@ impl Checkpoint {
     /// Writes the checkpoint to `path` atomically (temporary file, sync, rename, directory sync).
     pub fn save(&self, path: &Path) -> Result<(), CheckpointError> {
         let bytes = self.to_bytes()?;
-        write_bytes_atomically(path, &bytes).map_err(|source| CheckpointError::Io {
+        write_bytes_atomically(path, &bytes).map_err(|error| CheckpointError::Io {
             path: path.display().to_string(),
-            source,
+            error,
         })
     }
 
     /// Reads and checks a checkpoint file.
     pub fn load(path: &Path) -> Result<Checkpoint, CheckpointError> {
         let name = path.display().to_string();
-        let bytes = std::fs::read(path).map_err(|source| CheckpointError::Io {
+        let bytes = std::fs::read(path).map_err(|error| CheckpointError::Io {
             path: name.clone(),
-            source,
+            error,
         })?;
         Checkpoint::from_bytes(&bytes, &name)
     }
@@ -514,7 +511,7 @@ impl CheckpointDir {
     pub fn save(&self, checkpoint: &Checkpoint) -> Result<PathBuf, CheckpointError> {
         let io = |path: &Path| {
             let path = path.display().to_string();
-            move |source| CheckpointError::Io { path, source }
+            move |error| CheckpointError::Io { path, error }
         };
         std::fs::create_dir_all(&self.dir).map_err(io(&self.dir))?;
         let path = self.file_for(checkpoint.meta.iteration);
@@ -538,18 +535,18 @@ impl CheckpointDir {
         let entries = match std::fs::read_dir(&self.dir) {
             Ok(entries) => entries,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-            Err(source) => {
+            Err(error) => {
                 return Err(CheckpointError::Io {
                     path: self.dir.display().to_string(),
-                    source,
+                    error,
                 });
             }
         };
         let mut files = Vec::new();
         for entry in entries {
-            let entry = entry.map_err(|source| CheckpointError::Io {
+            let entry = entry.map_err(|error| CheckpointError::Io {
                 path: self.dir.display().to_string(),
-                source,
+                error,
             })?;
             let name = entry.file_name();
             let Some(name) = name.to_str() else { continue };

@@ -14,12 +14,9 @@ use crate::plan::PlanError;
 
 #[derive(Debug, Error)]
 pub enum TrainError {
-    #[error("{path}: {source}")]
-    Io {
-        path: String,
-        #[source]
-        source: std::io::Error,
-    },
+    /// The I/O error is in the message, not a `source` (a chain printer would repeat it).
+    #[error("{path}: {error}")]
+    Io { path: String, error: std::io::Error },
     #[error(transparent)]
     Config(#[from] ConfigError),
     #[error(transparent)]
@@ -52,10 +49,10 @@ pub enum TrainError {
 }
 
 impl TrainError {
-    pub fn io(path: &Path, source: std::io::Error) -> TrainError {
+    pub fn io(path: &Path, error: std::io::Error) -> TrainError {
         TrainError::Io {
             path: path.display().to_string(),
-            source,
+            error,
         }
     }
 }

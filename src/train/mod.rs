@@ -25,8 +25,8 @@ pub use checkpoint::{
 };
 pub use clock::{ActiveClock, StopReason, StopRule};
 pub use config::{
-    ConfigError, EnvConfig, EvalStart, ObsConfig, PolicyConfig, PpoConfig, RewardConfig, RunConfig,
-    TrainConfig,
+    COMMITTED_CONFIGS, ConfigError, EnvConfig, EvalStart, ObsConfig, PolicyConfig, PpoConfig,
+    RewardConfig, RunConfig, TrainConfig,
 };
 pub use error::TrainError;
 pub use evaluation::{

@@ -149,12 +149,12 @@ pub fn check_plans(store: &PlanStore, nworld: u32) -> Result<Vec<PlanCheck>, Tra
     Ok(checks)
 }
 
-/// Runs every check a run can make without a GPU.
+/// Runs every check a run can make without a GPU; returns what it found and the motion.
 pub fn preflight(
     config: &TrainConfig,
     motions_dir: Option<&Path>,
     store: &PlanStore,
-) -> Result<Preflight, TrainError> {
+) -> Result<(Preflight, ReferenceMotion), TrainError> {
     let (motion_path, motion) = load_motion(config, motions_dir)?;
     let mut plans = check_plans(store, config.env.num_envs)?;
     if config.run.eval_envs != config.env.num_envs {
@@ -170,7 +170,7 @@ pub fn preflight(
     let control_dt = config.control_dt(physics_dt);
     let table = ReferenceTable::build(&motion, control_dt)?;
     let clip = motion.clip();
-    Ok(Preflight {
+    let checks = Preflight {
         motion_path,
         clip_frames: clip.num_frames(),
         clip_duration_s: clip.duration(),
@@ -181,7 +181,8 @@ pub fn preflight(
         eval_steps: evaluation_steps(config, clip.duration(), control_dt),
         plans,
         policy: PolicyShapes::new(config, motion.character())?,
-    })
+    };
+    Ok((checks, motion))
 }
 
 impl Preflight {
@@ -204,8 +205,11 @@ impl Preflight {
         for p in &self.plans {
             let _ = writeln!(
                 out,
-                "plan          {} for {} worlds ({} modules, PTX present)",
-                p.name, p.nworld, p.modules
+                "plan          {} for {} worlds ({} module{}, PTX present)",
+                p.name,
+                p.nworld,
+                p.modules,
+                if p.modules == 1 { "" } else { "s" }
             );
         }
         let _ = writeln!(
