@@ -81,6 +81,7 @@ impl RunSession {
         overwrite: bool,
         progress: ProgressMode,
     ) -> Result<RunSession, TrainError> {
+        config.validate("the run configuration")?;
         let (dir, metrics) = RunDir::create(root, config, overwrite)?;
         Ok(RunSession::assemble(
             config.clone(),
