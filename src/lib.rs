@@ -7,7 +7,8 @@
 //! - [`env`]: our own kernels (env, PPO): AOT-compiled Warp PTX and typed launchers.
 //! - [`motion`]: DeepMimic reference motions and their kinematics.
 //! - [`bench`]: benchmarks of physics (and later the whole loop), for `instantmimic bench`.
-//! - [`train`]: the training configuration (and the PPO loop, with issue 5).
+//! - [`train`]: training runs: configuration, run directories, checkpoints, metrics, evaluation
+//!   protocol (the GPU loop, with issue 5).
 //! - [`hpo`]: hyperparameter search by an agent (plan → propose → experiment).
 //! - [`assets`]: PTX and plans embedded in the binary at build time.
 //! - [`cli`]: the command line.

@@ -1,10 +1,12 @@
 //! The command line: `instantmimic <command> ...`.
 
 mod bench;
+mod eval;
 mod gpu;
 mod hpo;
 mod motion;
 mod plan;
+mod train;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -32,6 +34,10 @@ enum Command {
     Gpu(gpu::GpuArgs),
     /// Hyperparameter search by an agent: plan, propose, experiment (see docs/hpo.md).
     Hpo(hpo::HpoArgs),
+    /// Train a motion-tracking policy (PPO on the GPU) into a run directory (see docs/train.md).
+    Train(train::TrainArgs),
+    /// Evaluate a checkpoint by the paper's protocol.
+    Eval(eval::EvalArgs),
 }
 
 /// Parses the command line and runs the command.
@@ -43,5 +49,7 @@ pub fn run() -> Result<()> {
         Command::Motion(args) => motion::run(args),
         Command::Gpu(args) => gpu::run(&args),
         Command::Hpo(args) => hpo::run_hpo(args),
+        Command::Train(args) => train::run(args),
+        Command::Eval(args) => eval::run(args),
     }
 }

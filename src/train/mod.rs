@@ -1,7 +1,42 @@
-//! Training: the configuration (and, with issue 5, the PPO loop, evaluation and checkpoints).
+//! Training: the configuration, and everything around the GPU loop that needs no GPU: run
+//! directories, checkpoints, the metrics log, the learning curve, the evaluation protocol's
+//! arithmetic, the active clock and stop rule, progress display, and the checks of
+//! `train --dry-run` (docs/train.md). The GPU loop drives a [`RunSession`].
 
+mod atomic_file;
+pub mod checkpoint;
+mod clock;
 mod config;
+pub mod curve;
+mod error;
+pub mod evaluation;
+mod gpu_loop;
+pub mod metrics;
+pub mod preflight;
+mod progress;
+pub mod run_dir;
+mod session;
+mod summary;
 
-pub use config::{
-    ConfigError, EnvConfig, ObsConfig, PolicyConfig, PpoConfig, RewardConfig, TrainConfig,
+pub use atomic_file::{is_temporary, write_atomically, write_bytes_atomically};
+pub use checkpoint::{
+    CHECKPOINT_FORMAT_VERSION, Checkpoint, CheckpointDir, CheckpointError, CheckpointMeta,
+    CheckpointScan, Tensor, TensorData,
 };
+pub use clock::{ActiveClock, StopReason, StopRule};
+pub use config::{
+    COMMITTED_CONFIGS, ConfigError, EnvConfig, EvalStart, ObsConfig, PolicyConfig, PpoConfig,
+    RewardConfig, RunConfig, TrainConfig,
+};
+pub use error::TrainError;
+pub use evaluation::{
+    EnvEvaluation, EvaluationError, EvaluationSummary, evaluation_start_times, evaluation_steps,
+    format_evaluation_report, summarize,
+};
+pub use gpu_loop::{RunStart, TrainSetup, evaluate_on_gpu, train_on_gpu};
+pub use metrics::{IterationRecord, MetricsLog, ResumedMetrics, UpdateStats};
+pub use preflight::{PolicyShapes, Preflight, check_plans, load_motion, preflight};
+pub use progress::{Progress, ProgressMode};
+pub use run_dir::{ResumedRun, RunDir, default_run_dir};
+pub use session::{IterationStats, IterationStep, NextStep, RunSession};
+pub use summary::RunSummary;

@@ -1,0 +1,85 @@
+//! `instantmimic eval`: evaluate a checkpoint's policy by the paper's protocol. The checkpoint,
+//! its stored configuration, the policy it holds, the motion and the evaluation plans are
+//! checked here; the episodes themselves run on the GPU.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use clap::Args;
+
+use crate::motion::library::motions_dir_from_env;
+use crate::plan::PlanStore;
+use crate::train::{
+    Checkpoint, evaluate_on_gpu, evaluation_steps, format_evaluation_report, preflight,
+};
+
+#[derive(Args, Debug)]
+pub struct EvalArgs {
+    /// A checkpoint (`runs/<name>/checkpoints/iter_*.safetensors`).
+    #[arg(long)]
+    checkpoint: PathBuf,
+    /// Evaluation rounds; each runs the configuration's `run.eval_envs` envs once.
+    #[arg(long, default_value_t = 1)]
+    episodes: u32,
+    /// Directory of DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
+    #[arg(long)]
+    motions_dir: Option<PathBuf>,
+    /// A directory laid out like ptx/ instead of the plans built into the binary.
+    #[arg(long)]
+    assets: Option<PathBuf>,
+    /// Print the result as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// What the checkpoint says about itself (printed before the evaluation).
+fn checkpoint_report(checkpoint: &Checkpoint) -> String {
+    let m = &checkpoint.meta;
+    let mut out = String::new();
+    let _ = writeln!(out, "checkpoint           {}", checkpoint.source());
+    let _ = writeln!(
+        out,
+        "trained              {} seed {}: {} iterations, {:.2} s active, {:.3} M frames (instantmimic {})",
+        m.motion,
+        m.seed,
+        m.iteration,
+        m.active_time_s,
+        m.frames as f64 / 1e6,
+        m.crate_version
+    );
+    out
+}
+
+/// Runs `eval`.
+pub fn run(args: EvalArgs) -> Result<()> {
+    if args.episodes == 0 {
+        bail!("--episodes must be at least 1");
+    }
+    let checkpoint = Checkpoint::load(&args.checkpoint)?;
+    let config = checkpoint.meta.config(checkpoint.source())?;
+    let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
+    let store = PlanStore::new(args.assets.as_deref());
+    let (checks, motion) = preflight(&config, motions_dir.as_deref(), &store)?;
+    checks.policy.check(&checkpoint)?;
+    if !args.json {
+        print!("{}", checkpoint_report(&checkpoint));
+        println!(
+            "evaluation           {} x {} envs x {} steps, success at {}",
+            args.episodes,
+            config.run.eval_envs,
+            evaluation_steps(&config, checks.clip_duration_s, checks.control_dt),
+            config.run.success_rate
+        );
+    }
+    let summary = evaluate_on_gpu(&config, &checkpoint, &motion, &store, args.episodes)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        print!(
+            "{}",
+            format_evaluation_report(&summary, config.run.success_rate)
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,226 @@
+//! `instantmimic train`: resolve the configuration (committed config of the motion, a file, or
+//! the baseline; then command-line overrides), check everything that needs no GPU, and hand
+//! over to the GPU loop. `--dry-run` stops after the checks and prints the resolved config.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+
+use crate::motion::library::motions_dir_from_env;
+use crate::plan::PlanStore;
+use crate::train::{
+    ProgressMode, RunDir, RunStart, TrainConfig, TrainSetup, default_run_dir, preflight,
+    train_on_gpu,
+};
+
+/// `--progress`.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum ProgressArg {
+    /// A bar on a terminal, one line per evaluation otherwise.
+    Auto,
+    Bar,
+    Lines,
+    Quiet,
+}
+
+#[derive(Args, Debug)]
+pub struct TrainArgs {
+    /// A motion name (`walk`, `run`, `spinkick`, `backflip`, `cartwheel`, or another clip in the
+    /// motions directory) or a DeepMimic motion file. A committed name without --config uses
+    /// configs/train/<name>.toml (built in); other motions start from the paper's baseline.
+    #[arg(long)]
+    motion: Option<String>,
+    /// Training configuration (TOML); --motion, if given, replaces its `motion`.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Random seed, overriding `seed`.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Run directory (default: runs/<motion>-seed<seed>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Continue the run in this directory from its newest good checkpoint (its config.toml;
+    /// only budgets and evaluation settings may be overridden).
+    #[arg(long, conflicts_with_all = ["motion", "config", "seed", "out", "overwrite", "envs", "horizon"])]
+    resume: Option<PathBuf>,
+    /// Replace the run files of a non-empty --out directory.
+    #[arg(long)]
+    overwrite: bool,
+    /// Check everything that needs no GPU and print the resolved configuration.
+    #[arg(long)]
+    dry_run: bool,
+    /// Number of training envs, overriding `env.num_envs` (plans must exist for it).
+    #[arg(long)]
+    envs: Option<u32>,
+    /// Control steps per env per iteration, overriding `ppo.horizon`.
+    #[arg(long)]
+    horizon: Option<u32>,
+    /// Iteration budget, overriding `run.max_iterations`.
+    #[arg(long)]
+    max_iterations: Option<u64>,
+    /// Active-time budget in seconds, overriding `run.time_budget_s`.
+    #[arg(long, allow_hyphen_values = true)]
+    time_budget: Option<f64>,
+    /// Iterations between evaluations, overriding `run.eval_interval`.
+    #[arg(long)]
+    eval_interval: Option<u32>,
+    /// Directory of DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
+    #[arg(long)]
+    motions_dir: Option<PathBuf>,
+    /// A directory laid out like ptx/ instead of the plans built into the binary.
+    #[arg(long)]
+    assets: Option<PathBuf>,
+    /// How progress is shown.
+    #[arg(long, value_enum, default_value_t = ProgressArg::Auto)]
+    progress: ProgressArg,
+}
+
+impl TrainArgs {
+    /// The `[run]` overrides (the only ones a resumed run accepts) and their flags.
+    fn apply_run_overrides(&self, config: &mut TrainConfig, flags: &mut Vec<&'static str>) {
+        if let Some(n) = self.max_iterations {
+            config.run.max_iterations = n;
+            flags.push("--max-iterations");
+        }
+        if let Some(s) = self.time_budget {
+            config.run.time_budget_s = s;
+            flags.push("--time-budget");
+        }
+        if let Some(n) = self.eval_interval {
+            config.run.eval_interval = n;
+            flags.push("--eval-interval");
+        }
+    }
+}
+
+/// The configuration of a new run and the label naming where it came from.
+fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
+    let (mut config, mut label) = match (&args.config, &args.motion) {
+        (Some(path), _) => (TrainConfig::load(path)?, path.display().to_string()),
+        (None, Some(motion)) => match TrainConfig::committed(motion) {
+            Some((label, config)) => (config?, label),
+            None => (
+                TrainConfig::with_motion(motion),
+                "the baseline (src/train/config.rs)".to_string(),
+            ),
+        },
+        (None, None) => bail!(
+            "name a motion with --motion, a configuration with --config, or a run to continue with --resume"
+        ),
+    };
+    let mut flags = Vec::new();
+    if let Some(motion) = &args.motion {
+        if args.config.is_some() {
+            flags.push("--motion");
+        }
+        config.motion = motion.clone();
+    }
+    if let Some(seed) = args.seed {
+        config.seed = seed;
+        flags.push("--seed");
+    }
+    if let Some(envs) = args.envs {
+        config.env.num_envs = envs;
+        flags.push("--envs");
+    }
+    if let Some(horizon) = args.horizon {
+        config.ppo.horizon = horizon;
+        flags.push("--horizon");
+    }
+    args.apply_run_overrides(&mut config, &mut flags);
+    if !flags.is_empty() {
+        label = format!("{label} with {}", flags.join(", "));
+    }
+    config.validate(&label)?;
+    Ok((config, label))
+}
+
+/// Runs `train`.
+pub fn run(args: TrainArgs) -> Result<()> {
+    let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
+    let store = PlanStore::new(args.assets.as_deref());
+    let progress = match args.progress {
+        ProgressArg::Auto => ProgressMode::for_stdout(),
+        ProgressArg::Bar => ProgressMode::Bar,
+        ProgressArg::Lines => ProgressMode::Lines,
+        ProgressArg::Quiet => ProgressMode::Quiet,
+    };
+    let (config, label, start, directory_line, resume_checkpoint) = match &args.resume {
+        Some(root) => {
+            let resumed = RunDir::inspect_resume(root)
+                .with_context(|| format!("cannot resume {}", root.display()))?;
+            for warning in &resumed.warnings {
+                eprintln!("warning: {warning}");
+            }
+            let mut config = resumed.config.clone();
+            let mut flags = Vec::new();
+            args.apply_run_overrides(&mut config, &mut flags);
+            let mut label = resumed.dir.config_path().display().to_string();
+            if !flags.is_empty() {
+                label = format!("{label} with {}", flags.join(", "));
+            }
+            config.validate(&label)?;
+            let line = match &resumed.checkpoint {
+                Some((path, c)) => format!(
+                    "{} (resume from iteration {}: {}, {:.2} s active)",
+                    root.display(),
+                    c.meta.iteration,
+                    path.display(),
+                    c.meta.active_time_s
+                ),
+                None => format!("{} (no usable checkpoint: starts over)", root.display()),
+            };
+            let start = RunStart::Resume {
+                root: root.to_path_buf(),
+            };
+            let checkpoint = resumed.checkpoint.map(|(_, c)| c);
+            (config, label, start, line, checkpoint)
+        }
+        None => {
+            let (config, label) = resolve_new(&args)?;
+            let root = args.out.clone().unwrap_or_else(|| default_run_dir(&config));
+            let replaced = RunDir::check_new(&root, args.overwrite)?;
+            let line = match (root.exists(), replaced.len()) {
+                (false, _) => format!("{} (new)", root.display()),
+                (true, 0) => format!("{} (exists, no run files)", root.display()),
+                (true, n) => format!(
+                    "{} (--overwrite: {n} run files and directories replaced)",
+                    root.display()
+                ),
+            };
+            let start = RunStart::New {
+                root,
+                overwrite: args.overwrite,
+            };
+            (config, label, start, line, None)
+        }
+    };
+    let (checks, motion) = preflight(&config, motions_dir.as_deref(), &store)?;
+    if let Some(checkpoint) = &resume_checkpoint {
+        // The checkpoint must hold the policy this configuration builds.
+        checks.policy.check(checkpoint)?;
+    }
+    if args.dry_run {
+        println!("configuration {label}");
+        println!("run directory {directory_line}");
+        print!("{}", checks.report(&config));
+        println!();
+        println!("# resolved configuration (the run's config.toml)");
+        print!("{}", config.to_toml()?);
+        println!();
+        println!("dry run: everything that needs no GPU checks out");
+        return Ok(());
+    }
+    let setup = TrainSetup {
+        config,
+        motion,
+        store,
+        preflight: checks,
+        start,
+        progress,
+    };
+    let summary = train_on_gpu(setup)?;
+    print!("{}", summary.report());
+    Ok(())
+}

@@ -1,0 +1,178 @@
+//! `curve.png`: the learning curve of a run: mean episode length (left axis, every iteration)
+//! and evaluation success rate (right axis, every evaluation) against active training time,
+//! with the success threshold as a dashed line. Drawn into a pixel buffer with the embedded
+//! font (as `hpo/plot.rs`), so it needs no system fonts or libraries.
+
+use std::path::Path;
+use std::sync::Once;
+
+use plotters::prelude::*;
+use plotters::style::{FontStyle, register_font};
+
+use super::atomic_file::write_bytes_atomically;
+use super::error::TrainError;
+use super::metrics::IterationRecord;
+
+pub const CURVE_WIDTH: u32 = 1000;
+pub const CURVE_HEIGHT: u32 = 600;
+const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
+/// Series colors (tests look for them in the image).
+pub const EPISODE_LENGTH_COLOR: RGBColor = RGBColor(40, 100, 200);
+pub const SUCCESS_RATE_COLOR: RGBColor = RGBColor(215, 80, 30);
+
+fn plot_error(e: impl std::fmt::Display) -> TrainError {
+    TrainError::Plot(e.to_string())
+}
+
+/// The learning curve as PNG bytes. `max_episode_length` sets the left axis (the episode
+/// length limit); `threshold` is the success rate drawn as a dashed line.
+pub fn learning_curve_png(
+    records: &[IterationRecord],
+    title: &str,
+    max_episode_length: f64,
+    threshold: f64,
+) -> Result<Vec<u8>, TrainError> {
+    static FONT_ONCE: Once = Once::new();
+    let mut font_result = Ok(());
+    FONT_ONCE.call_once(|| {
+        font_result = register_font("sans-serif", FontStyle::Normal, FONT)
+            .map_err(|_| plot_error("the embedded font does not load"));
+    });
+    font_result?;
+
+    let finite = |x: f64| x.is_finite();
+    let lengths: Vec<(f64, f64)> = records
+        .iter()
+        .map(|r| (r.active_time_s, r.mean_episode_length))
+        .filter(|&(t, l)| finite(t) && finite(l))
+        .collect();
+    let success: Vec<(f64, f64)> = records
+        .iter()
+        .filter_map(|r| Some((r.active_time_s, r.evaluation.as_ref()?.success_rate)))
+        .filter(|&(t, s)| finite(t) && finite(s))
+        .collect();
+    let t_max = lengths
+        .iter()
+        .chain(&success)
+        .map(|p| p.0)
+        .fold(0.0, f64::max);
+    let t_hi = if t_max > 0.0 { t_max * 1.02 } else { 1.0 };
+    let l_max = lengths
+        .iter()
+        .map(|p| p.1)
+        .fold(max_episode_length, f64::max);
+    let l_hi = if l_max > 0.0 { l_max * 1.05 } else { 1.0 };
+
+    let mut buffer = vec![255u8; (CURVE_WIDTH * CURVE_HEIGHT * 3) as usize];
+    {
+        let backend = BitMapBackend::<plotters::backend::RGBPixel>::with_buffer_and_format(
+            &mut buffer,
+            (CURVE_WIDTH, CURVE_HEIGHT),
+        )
+        .map_err(plot_error)?;
+        let root = backend.into_drawing_area();
+        root.fill(&WHITE).map_err(plot_error)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 24))
+            .margin(16)
+            .x_label_area_size(48)
+            .y_label_area_size(72)
+            .right_y_label_area_size(72)
+            .build_cartesian_2d(0f64..t_hi, 0f64..l_hi)
+            .map_err(plot_error)?
+            .set_secondary_coord(0f64..t_hi, 0f64..1.05f64);
+        chart
+            .configure_mesh()
+            .x_desc("active training time (s)")
+            .y_desc("mean episode length (control steps)")
+            .y_label_formatter(&|y| format!("{y:.0}"))
+            .light_line_style(RGBColor(235, 235, 235))
+            .label_style(("sans-serif", 15))
+            .axis_desc_style(("sans-serif", 17))
+            .draw()
+            .map_err(plot_error)?;
+        chart
+            .configure_secondary_axes()
+            .y_desc("evaluation success rate")
+            .label_style(("sans-serif", 15))
+            .axis_desc_style(("sans-serif", 17))
+            .draw()
+            .map_err(plot_error)?;
+        chart
+            .draw_series(LineSeries::new(
+                lengths.iter().copied(),
+                EPISODE_LENGTH_COLOR.stroke_width(2),
+            ))
+            .map_err(plot_error)?
+            .label("episode length")
+            .legend(|(x, y)| {
+                PathElement::new(
+                    vec![(x, y), (x + 20, y)],
+                    EPISODE_LENGTH_COLOR.stroke_width(2),
+                )
+            });
+        let grey = RGBColor(120, 120, 120);
+        chart
+            .draw_secondary_series(DashedLineSeries::new(
+                [(0.0, threshold), (t_hi, threshold)],
+                8,
+                6,
+                grey.stroke_width(1),
+            ))
+            .map_err(plot_error)?
+            .label(format!("success threshold {threshold}"))
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(1))
+            });
+        chart
+            .draw_secondary_series(LineSeries::new(
+                success.iter().copied(),
+                SUCCESS_RATE_COLOR.stroke_width(2),
+            ))
+            .map_err(plot_error)?;
+        chart
+            .draw_secondary_series(
+                success
+                    .iter()
+                    .map(|&p| Circle::new(p, 4, SUCCESS_RATE_COLOR.filled())),
+            )
+            .map_err(plot_error)?
+            .label("success rate")
+            .legend(|(x, y)| Circle::new((x + 10, y), 4, SUCCESS_RATE_COLOR.filled()));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 15))
+            .position(SeriesLabelPosition::LowerRight)
+            .draw()
+            .map_err(plot_error)?;
+        root.present().map_err(plot_error)?;
+    }
+    encode_png(&buffer)
+}
+
+/// Draws the curve and replaces `path` with it atomically (a viewer never sees half a PNG).
+pub fn write_learning_curve(
+    path: &Path,
+    records: &[IterationRecord],
+    title: &str,
+    max_episode_length: f64,
+    threshold: f64,
+) -> Result<(), TrainError> {
+    let png = learning_curve_png(records, title, max_episode_length, threshold)?;
+    write_bytes_atomically(path, &png).map_err(|e| TrainError::io(path, e))
+}
+
+fn encode_png(rgb: &[u8]) -> Result<Vec<u8>, TrainError> {
+    let mut out = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut out, CURVE_WIDTH, CURVE_HEIGHT);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header().map_err(plot_error)?;
+        writer.write_image_data(rgb).map_err(plot_error)?;
+        writer.finish().map_err(plot_error)?;
+    }
+    Ok(out)
+}

@@ -1,0 +1,58 @@
+//! Errors of a training run outside the GPU: files of the run directory, the configuration,
+//! the motion, the plans, checkpoints and the learning curve. Each message names the file or
+//! key at fault.
+
+use std::path::Path;
+
+use thiserror::Error;
+
+use super::checkpoint::CheckpointError;
+use super::config::ConfigError;
+use super::evaluation::EvaluationError;
+use crate::motion::MotionError;
+use crate::plan::PlanError;
+
+#[derive(Debug, Error)]
+pub enum TrainError {
+    /// The I/O error is in the message, not a `source` (a chain printer would repeat it).
+    #[error("{path}: {error}")]
+    Io { path: String, error: std::io::Error },
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
+    #[error(transparent)]
+    Motion(#[from] MotionError),
+    #[error(transparent)]
+    Plan(#[from] PlanError),
+    #[error("evaluation: {0}")]
+    Evaluation(#[from] EvaluationError),
+    #[error("{path}: {problem}")]
+    Metrics { path: String, problem: String },
+    #[error("learning curve: {0}")]
+    Plot(String),
+    /// A new run aimed at a directory that already holds files.
+    #[error(
+        "{path} is not empty: continue that run with --resume {path}, replace it with --overwrite, or choose another --out"
+    )]
+    RunDirNotEmpty { path: String },
+    #[error("{path}: not a run directory: {problem}")]
+    NotARunDir { path: String, problem: String },
+    /// The run's settings are inconsistent with the plans, the motion or a checkpoint.
+    #[error("{0}")]
+    Setup(String),
+    /// The part of the command that needs the GPU training loop, which this build lacks.
+    #[error(
+        "{what} needs the GPU training loop, which is not built yet (issue 5); `--dry-run` checks everything else"
+    )]
+    GpuLoopNotBuilt { what: &'static str },
+}
+
+impl TrainError {
+    pub fn io(path: &Path, error: std::io::Error) -> TrainError {
+        TrainError::Io {
+            path: path.display().to_string(),
+            error,
+        }
+    }
+}

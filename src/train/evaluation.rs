@@ -1,0 +1,323 @@
+//! The evaluation protocol, CPU side (the paper's appendix, "Backflip Search"): every
+//! `run.eval_interval` iterations the policy's mean action drives `run.eval_envs` envs from
+//! deterministic initial states (no noise) for one pass of the clip; success when at least
+//! `run.success_rate` of them complete it without early termination. The GPU evaluation
+//! fills one [`EnvEvaluation`] per env; [`summarize`] turns them into the metrics.
+//!
+//! Error metrics are means over every evaluated control step of every env (a failed env
+//! contributes its steps up to the failure), so an env that falls early weighs less:
+//! - average pose error: mean distance of the 15 bodies to the reference, both taken
+//!   relative to their root (m);
+//! - global MPJPE: the same in world coordinates, roots included (m);
+//! - end-effector position error: mean distance of the 5 end effectors to the reference
+//!   (world, m), and orientation error: their mean rotation angle to the reference (rad).
+
+use std::fmt::Write as _;
+
+use serde::{Deserialize, Serialize};
+
+use super::config::{EvalStart, TrainConfig};
+use super::metrics::nan_from_null;
+use crate::motion::LoopMode;
+
+/// One env's evaluation episode, as the GPU evaluation reports it: whether it ran all
+/// `steps` control steps without early termination, how many it ran, and per-step error
+/// means summed over those steps.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EnvEvaluation {
+    pub completed: bool,
+    pub steps: u32,
+    pub pose_error_sum: f64,
+    pub global_position_error_sum: f64,
+    pub ee_position_error_sum: f64,
+    pub ee_orientation_error_sum: f64,
+}
+
+/// The metrics of one evaluation (`metrics.jsonl`'s `evaluation`, `eval`'s report).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EvaluationSummary {
+    /// Env episodes evaluated and how many completed.
+    pub episodes: u32,
+    pub completed: u32,
+    pub success_rate: f64,
+    /// `success_rate >= run.success_rate`.
+    pub success: bool,
+    /// Control steps of a complete episode.
+    pub episode_steps: u32,
+    #[serde(deserialize_with = "nan_from_null")]
+    pub mean_episode_steps: f64,
+    /// Average pose error (root-relative body positions), m.
+    #[serde(deserialize_with = "nan_from_null")]
+    pub pose_error_m: f64,
+    /// Global mean per-joint position error, m.
+    #[serde(deserialize_with = "nan_from_null")]
+    pub global_mpjpe_m: f64,
+    #[serde(deserialize_with = "nan_from_null")]
+    pub ee_position_error_m: f64,
+    #[serde(deserialize_with = "nan_from_null")]
+    pub ee_orientation_error_rad: f64,
+}
+
+/// Evaluation results that do not describe an evaluation.
+#[derive(Debug, thiserror::Error)]
+pub enum EvaluationError {
+    #[error("no evaluation episodes")]
+    Empty,
+    #[error(
+        "env {env}: {steps} steps reported for an episode of {episode_steps}{}",
+        if *.completed { " marked complete" } else { "" }
+    )]
+    Steps {
+        env: usize,
+        steps: u32,
+        episode_steps: u32,
+        completed: bool,
+    },
+    #[error("env {env}: error sum {value} is negative or not finite")]
+    ErrorSum { env: usize, value: f64 },
+}
+
+/// The summary of `episodes` (any number of evaluation rounds of any number of envs) of
+/// `episode_steps` steps each, judged against `success_threshold`.
+pub fn summarize(
+    episodes: &[EnvEvaluation],
+    episode_steps: u32,
+    success_threshold: f64,
+) -> Result<EvaluationSummary, EvaluationError> {
+    if episodes.is_empty() {
+        return Err(EvaluationError::Empty);
+    }
+    let mut completed = 0u32;
+    let mut steps = 0u64;
+    let mut sums = [0.0f64; 4];
+    for (env, e) in episodes.iter().enumerate() {
+        // A complete episode ran every step; an incomplete one ended early (at least one step).
+        let consistent = if e.completed {
+            e.steps == episode_steps
+        } else {
+            e.steps < episode_steps
+        };
+        if !consistent {
+            return Err(EvaluationError::Steps {
+                env,
+                steps: e.steps,
+                episode_steps,
+                completed: e.completed,
+            });
+        }
+        let env_sums = [
+            e.pose_error_sum,
+            e.global_position_error_sum,
+            e.ee_position_error_sum,
+            e.ee_orientation_error_sum,
+        ];
+        for (total, value) in sums.iter_mut().zip(env_sums) {
+            if !(value >= 0.0 && value.is_finite()) {
+                return Err(EvaluationError::ErrorSum { env, value });
+            }
+            *total += value;
+        }
+        completed += u32::from(e.completed);
+        steps += u64::from(e.steps);
+    }
+    let n = episodes.len() as f64;
+    let success_rate = f64::from(completed) / n;
+    // No step at all (every env failed at once): the errors are undefined, not zero.
+    let per_step = |sum: f64| {
+        if steps == 0 {
+            f64::NAN
+        } else {
+            sum / steps as f64
+        }
+    };
+    Ok(EvaluationSummary {
+        episodes: episodes.len() as u32,
+        completed,
+        success_rate,
+        success: success_rate >= success_threshold,
+        episode_steps,
+        mean_episode_steps: steps as f64 / n,
+        pose_error_m: per_step(sums[0]),
+        global_mpjpe_m: per_step(sums[1]),
+        ee_position_error_m: per_step(sums[2]),
+        ee_orientation_error_rad: per_step(sums[3]),
+    })
+}
+
+/// Control steps of an evaluation episode: `run.eval_steps`, or one pass of the clip,
+/// ceil(duration / control dt) (a step shorter than rounding noise is not counted).
+pub fn evaluation_steps(config: &TrainConfig, clip_duration_s: f64, control_dt_s: f64) -> u32 {
+    if let Some(steps) = config.run.eval_steps {
+        return steps;
+    }
+    let steps = (clip_duration_s / control_dt_s - 1e-9).ceil();
+    if steps.is_finite() && steps >= 1.0 {
+        steps.min(f64::from(u32::MAX)) as u32
+    } else {
+        1
+    }
+}
+
+/// Clip time (s) at which each of `envs` evaluation episodes starts: spread evenly over a
+/// looping clip (env i at i/n of it), or all at 0 (`clip_start`, or a clip that does not loop:
+/// it cannot be completed from the middle).
+pub fn evaluation_start_times(
+    start: EvalStart,
+    envs: u32,
+    clip_duration_s: f64,
+    loop_mode: LoopMode,
+) -> Vec<f64> {
+    let spread = start == EvalStart::Spread && loop_mode == LoopMode::Wrap;
+    (0..envs)
+        .map(|i| {
+            if spread {
+                clip_duration_s * f64::from(i) / f64::from(envs)
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// The report `instantmimic eval` prints.
+pub fn format_evaluation_report(summary: &EvaluationSummary, threshold: f64) -> String {
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "success              {} ({}/{} episodes complete = {:.3}; threshold {threshold})",
+        if summary.success { "yes" } else { "no" },
+        summary.completed,
+        summary.episodes,
+        summary.success_rate
+    );
+    let _ = writeln!(
+        out,
+        "episode length       {:.1} of {} control steps (mean)",
+        summary.mean_episode_steps, summary.episode_steps
+    );
+    let _ = writeln!(out, "average pose error   {:.4} m", summary.pose_error_m);
+    let _ = writeln!(out, "global MPJPE         {:.4} m", summary.global_mpjpe_m);
+    let _ = writeln!(
+        out,
+        "end effectors        {:.4} m, {:.4} rad ({:.2} deg)",
+        summary.ee_position_error_m,
+        summary.ee_orientation_error_rad,
+        summary.ee_orientation_error_rad.to_degrees()
+    );
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn env(completed: bool, steps: u32, per_step: [f64; 4]) -> EnvEvaluation {
+        let s = f64::from(steps);
+        EnvEvaluation {
+            completed,
+            steps,
+            pose_error_sum: per_step[0] * s,
+            global_position_error_sum: per_step[1] * s,
+            ee_position_error_sum: per_step[2] * s,
+            ee_orientation_error_sum: per_step[3] * s,
+        }
+    }
+
+    #[test]
+    fn success_needs_the_threshold_fraction_of_complete_episodes() {
+        // 29 of 32 complete: 0.90625 >= 0.9. 28 of 32: 0.875 < 0.9.
+        let mut envs = vec![env(true, 53, [0.05, 0.1, 0.08, 0.2]); 29];
+        envs.extend(vec![env(false, 10, [0.05, 0.1, 0.08, 0.2]); 3]);
+        let s = summarize(&envs, 53, 0.9).unwrap();
+        assert_eq!((s.completed, s.episodes), (29, 32));
+        assert_eq!(s.success_rate, 29.0 / 32.0);
+        assert!(s.success);
+        envs[0] = env(false, 52, [0.05, 0.1, 0.08, 0.2]);
+        let s = summarize(&envs, 53, 0.9).unwrap();
+        assert_eq!(s.completed, 28);
+        assert!(!s.success);
+        // Exactly at the threshold counts: 9 of 10 at 0.9.
+        let mut ten = vec![env(true, 5, [0.0; 4]); 9];
+        ten.push(env(false, 1, [0.0; 4]));
+        assert!(summarize(&ten, 5, 0.9).unwrap().success);
+    }
+
+    #[test]
+    fn errors_are_step_weighted_means() {
+        // Env A: 10 steps at pose error 0.1; env B: 30 steps at 0.3 -> (1 + 9) / 40 = 0.25.
+        let envs = [
+            env(false, 10, [0.1, 0.2, 0.4, 1.0]),
+            env(true, 30, [0.3, 0.6, 0.8, 2.0]),
+        ];
+        let s = summarize(&envs, 30, 0.5).unwrap();
+        assert!((s.pose_error_m - 0.25).abs() < 1e-12, "{}", s.pose_error_m);
+        assert!((s.global_mpjpe_m - 0.5).abs() < 1e-12);
+        assert!((s.ee_position_error_m - 0.7).abs() < 1e-12);
+        assert!((s.ee_orientation_error_rad - 1.75).abs() < 1e-12);
+        assert_eq!(s.mean_episode_steps, 20.0);
+        assert!(s.success);
+    }
+
+    #[test]
+    fn inconsistent_results_are_rejected() {
+        assert!(matches!(
+            summarize(&[], 10, 0.9),
+            Err(EvaluationError::Empty)
+        ));
+        let e = summarize(&[env(true, 9, [0.0; 4])], 10, 0.9).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "env 0: 9 steps reported for an episode of 10 marked complete"
+        );
+        let e = summarize(&[env(false, 10, [0.0; 4])], 10, 0.9).unwrap_err();
+        assert!(matches!(e, EvaluationError::Steps { .. }), "{e}");
+        let mut bad = env(true, 10, [0.0; 4]);
+        bad.ee_position_error_sum = f64::NAN;
+        let e = summarize(&[bad], 10, 0.9).unwrap_err();
+        assert!(e.to_string().contains("env 0: error sum NaN"), "{e}");
+    }
+
+    #[test]
+    fn all_failed_at_once_has_undefined_errors() {
+        let s = summarize(&[env(false, 0, [0.0; 4])], 10, 0.9).unwrap();
+        assert_eq!(s.success_rate, 0.0);
+        assert!(s.pose_error_m.is_nan());
+    }
+
+    #[test]
+    fn episode_length_is_one_pass_of_the_clip() {
+        let mut c = TrainConfig::with_motion("backflip");
+        // Backflip: 1.75 s at 30 Hz is 52.5 steps -> 53; walk 1.266616 s -> 38.
+        assert_eq!(evaluation_steps(&c, 1.75, 1.0 / 30.0), 53);
+        assert_eq!(evaluation_steps(&c, 1.266616, 1.0 / 30.0), 38);
+        // An exact multiple is not rounded up by floating-point noise: 0.8 s is 24 steps.
+        assert_eq!(evaluation_steps(&c, 0.8, 4.0 / 120.0), 24);
+        c.run.eval_steps = Some(90);
+        assert_eq!(evaluation_steps(&c, 1.75, 1.0 / 30.0), 90);
+    }
+
+    #[test]
+    fn start_times_cover_a_looping_clip() {
+        let t = evaluation_start_times(EvalStart::Spread, 4, 2.0, LoopMode::Wrap);
+        assert_eq!(t, [0.0, 0.5, 1.0, 1.5]);
+        let t = evaluation_start_times(EvalStart::Spread, 3, 2.0, LoopMode::Clamp);
+        assert_eq!(t, [0.0; 3]);
+        let t = evaluation_start_times(EvalStart::ClipStart, 2, 2.0, LoopMode::Wrap);
+        assert_eq!(t, [0.0; 2]);
+    }
+
+    #[test]
+    fn report_lists_every_metric() {
+        let envs = [env(true, 4, [0.05, 0.07, 0.09, 0.2])];
+        let text = format_evaluation_report(&summarize(&envs, 4, 0.9).unwrap(), 0.9);
+        for expected in [
+            "success              yes (1/1 episodes complete = 1.000; threshold 0.9)",
+            "episode length       4.0 of 4 control steps (mean)",
+            "average pose error   0.0500 m",
+            "global MPJPE         0.0700 m",
+            "end effectors        0.0900 m, 0.2000 rad (11.46 deg)",
+        ] {
+            assert!(text.contains(expected), "missing {expected:?} in\n{text}");
+        }
+    }
+}

@@ -1,0 +1,240 @@
+//! `metrics.jsonl`: one JSON object per training iteration, appended and flushed line by line
+//! so that a crash loses at most the line being written. On resume the log is read back, a
+//! half-written last line is dropped, and records after the checkpoint's iteration are
+//! dropped (those iterations run again), so the continued log has no gap and no duplicate.
+//!
+//! Non-finite numbers (a diverged loss) are written as `null` (JSON has no NaN) and read back
+//! as NaN.
+
+use std::fs::{File, OpenOptions};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Deserializer, Serialize};
+
+use super::atomic_file::write_bytes_atomically;
+use super::error::TrainError;
+use super::evaluation::EvaluationSummary;
+
+/// What the PPO update of one iteration reports (means over its minibatches).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct UpdateStats {
+    #[serde(deserialize_with = "nan_from_null")]
+    pub policy_loss: f64,
+    #[serde(deserialize_with = "nan_from_null")]
+    pub value_loss: f64,
+    #[serde(deserialize_with = "nan_from_null")]
+    pub entropy: f64,
+    /// Approximate KL divergence between the rollout policy and the updated one.
+    #[serde(deserialize_with = "nan_from_null")]
+    pub kl: f64,
+    /// The learning rate after this iteration's KL adaptation.
+    #[serde(deserialize_with = "nan_from_null")]
+    pub learning_rate: f64,
+}
+
+/// One line of `metrics.jsonl`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IterationRecord {
+    /// Iterations completed (1 for the first).
+    pub iteration: u64,
+    /// Active training seconds so far (initialization, evaluation, checkpoints excluded).
+    #[serde(deserialize_with = "nan_from_null")]
+    pub active_time_s: f64,
+    /// Environment frames (control steps of all envs) simulated so far.
+    pub frames: u64,
+    /// Frames per active second of this iteration (rollout and update).
+    #[serde(deserialize_with = "nan_from_null")]
+    pub frames_per_s: f64,
+    /// Mean undiscounted return and length (control steps) of the episodes that ended in this
+    /// iteration's rollout.
+    #[serde(deserialize_with = "nan_from_null")]
+    pub mean_return: f64,
+    #[serde(deserialize_with = "nan_from_null")]
+    pub mean_episode_length: f64,
+    #[serde(flatten)]
+    pub update: UpdateStats,
+    /// Present on evaluation iterations.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub evaluation: Option<EvaluationSummary>,
+}
+
+/// `null` read as NaN: serde_json writes non-finite floats as `null`.
+pub(crate) fn nan_from_null<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
+/// The log of a run, open for appending.
+#[derive(Debug)]
+pub struct MetricsLog {
+    path: PathBuf,
+    file: File,
+    last_iteration: u64,
+}
+
+/// What [`MetricsLog::resume`] kept and dropped.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ResumedMetrics {
+    /// Records up to the checkpoint's iteration, in order.
+    pub records: Vec<IterationRecord>,
+    /// Records after the checkpoint that were dropped (their iterations run again).
+    pub dropped_after_checkpoint: usize,
+    /// A last line without its newline (a crash mid-write) was dropped.
+    pub dropped_partial_line: bool,
+    /// Problems that do not stop the resume (a record missing before the checkpoint).
+    pub warnings: Vec<String>,
+}
+
+/// A log read back: complete records and whether a partial last line was found.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MetricsFile {
+    pub records: Vec<IterationRecord>,
+    /// Byte length of each record's line (newline included), to rewrite a prefix.
+    line_ends: Vec<usize>,
+    pub partial_last_line: bool,
+}
+
+impl MetricsLog {
+    /// A new, empty log at `path` (an existing file is replaced).
+    pub fn create(path: &Path) -> Result<MetricsLog, TrainError> {
+        let file = File::create(path).map_err(|e| TrainError::io(path, e))?;
+        Ok(MetricsLog {
+            path: path.to_path_buf(),
+            file,
+            last_iteration: 0,
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Appends one record as one line and flushes it to the file. Iterations must increase.
+    pub fn append(&mut self, record: &IterationRecord) -> Result<(), TrainError> {
+        if record.iteration <= self.last_iteration {
+            return Err(TrainError::Metrics {
+                path: self.path.display().to_string(),
+                problem: format!(
+                    "iteration {} appended after iteration {}",
+                    record.iteration, self.last_iteration
+                ),
+            });
+        }
+        let mut line = serde_json::to_string(record).map_err(|e| TrainError::Metrics {
+            path: self.path.display().to_string(),
+            problem: e.to_string(),
+        })?;
+        line.push('\n');
+        // One write per line: a crash leaves a prefix of this line at worst, never a mix.
+        self.file
+            .write_all(line.as_bytes())
+            .and_then(|()| self.file.flush())
+            .map_err(|e| TrainError::io(&self.path, e))?;
+        self.last_iteration = record.iteration;
+        Ok(())
+    }
+
+    /// Reads a log. A last line without a newline is a partial write: it is reported, not
+    /// parsed. Any other line that is not a record, or a record whose iteration does not
+    /// increase, is an error naming the line.
+    pub fn read(path: &Path) -> Result<MetricsFile, TrainError> {
+        let text = std::fs::read(path).map_err(|e| TrainError::io(path, e))?;
+        MetricsLog::parse(&text, path)
+    }
+
+    fn parse(text: &[u8], path: &Path) -> Result<MetricsFile, TrainError> {
+        let bad = |line: usize, problem: String| TrainError::Metrics {
+            path: format!("{} line {line}", path.display()),
+            problem,
+        };
+        let mut records: Vec<IterationRecord> = Vec::new();
+        let mut line_ends = Vec::new();
+        let mut start = 0;
+        let mut partial_last_line = false;
+        let mut number = 0;
+        while start < text.len() {
+            number += 1;
+            let Some(newline) = text[start..].iter().position(|&b| b == b'\n') else {
+                partial_last_line = true;
+                break;
+            };
+            let end = start + newline + 1;
+            let line = &text[start..end - 1];
+            let record: IterationRecord = serde_json::from_slice(line)
+                .map_err(|e| bad(number, format!("not a metrics record: {e}")))?;
+            if let Some(previous) = records.last()
+                && record.iteration <= previous.iteration
+            {
+                return Err(bad(
+                    number,
+                    format!(
+                        "iteration {} follows iteration {}",
+                        record.iteration, previous.iteration
+                    ),
+                ));
+            }
+            records.push(record);
+            line_ends.push(end);
+            start = end;
+        }
+        Ok(MetricsFile {
+            records,
+            line_ends,
+            partial_last_line,
+        })
+    }
+
+    /// Reopens the log of a run resumed after `checkpoint_iteration` iterations (0: from the
+    /// start): keeps the records up to it, rewrites the file to hold exactly those (atomically),
+    /// and opens it for appending. A missing file is an empty log.
+    pub fn resume(
+        path: &Path,
+        checkpoint_iteration: u64,
+    ) -> Result<(MetricsLog, ResumedMetrics), TrainError> {
+        let exists = path.exists();
+        let text = if exists {
+            std::fs::read(path).map_err(|e| TrainError::io(path, e))?
+        } else {
+            Vec::new()
+        };
+        let file = MetricsLog::parse(&text, path)?;
+        let keep = file
+            .records
+            .iter()
+            .take_while(|r| r.iteration <= checkpoint_iteration)
+            .count();
+        let dropped_after_checkpoint = file.records.len() - keep;
+        let mut records = file.records;
+        records.truncate(keep);
+        let mut warnings = Vec::new();
+        let last = records.last().map_or(0, |r| r.iteration);
+        if last != checkpoint_iteration {
+            warnings.push(format!(
+                "{}: no records for iterations {}..={checkpoint_iteration} (the log ends at iteration {last}); the log continues after them",
+                path.display(),
+                last + 1
+            ));
+        }
+        if dropped_after_checkpoint > 0 || file.partial_last_line || !exists {
+            let end = keep.checked_sub(1).map_or(0, |last| file.line_ends[last]);
+            write_bytes_atomically(path, &text[..end]).map_err(|e| TrainError::io(path, e))?;
+        }
+        let handle = OpenOptions::new()
+            .append(true)
+            .open(path)
+            .map_err(|e| TrainError::io(path, e))?;
+        Ok((
+            MetricsLog {
+                path: path.to_path_buf(),
+                file: handle,
+                last_iteration: last.max(checkpoint_iteration),
+            },
+            ResumedMetrics {
+                records,
+                dropped_after_checkpoint,
+                dropped_partial_line: file.partial_last_line,
+                warnings,
+            },
+        ))
+    }
+}

@@ -1,0 +1,248 @@
+//! Everything a run needs that can be checked without a GPU (`train --dry-run`, and the first
+//! thing a real run does): the motion file and its reference table at the control rate, the
+//! step and kinematics plans for the training and evaluation world counts with the PTX of every
+//! module they launch, and the sizes of the policy a checkpoint must hold.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use super::config::TrainConfig;
+use super::error::TrainError;
+use super::evaluation::evaluation_steps;
+use crate::env::layout::{JointLayout, observation_size};
+use crate::motion::library::resolve_motion;
+use crate::motion::{Character, LoopMode, ReferenceMotion, ReferenceTable};
+use crate::plan::PlanStore;
+use crate::ppo::mlp_layout;
+
+/// The plans a run replays: physics steps, and the kinematics a reset needs.
+pub const RUN_PLANS: [&str; 2] = ["step", "kinematics"];
+
+/// Checkpoint tensor names the policy needs (`eval` checks them; the trainer adds its own,
+/// docs/train.md lists the convention).
+pub mod tensor_names {
+    /// Actor parameters, f32 `[P]`: layer by layer `w [in, out]` then `b [out]`, then `log_std [A]`.
+    pub const ACTOR: &str = "actor.params";
+    /// Critic parameters, f32 `[P]`, the same layout without `log_std`.
+    pub const CRITIC: &str = "critic.params";
+    /// Observation normalizer: running count and merged count, f64 `[2]`.
+    pub const OBS_COUNT: &str = "obs_norm.count";
+    /// Running mean and sum of squared deviations, f64 `[D]`.
+    pub const OBS_MEAN: &str = "obs_norm.mean";
+    pub const OBS_M2: &str = "obs_norm.m2";
+}
+
+/// Sizes of the networks of a configuration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PolicyShapes {
+    pub observation_size: usize,
+    pub action_size: usize,
+    /// Actor parameters, `log_std` included.
+    pub actor_params: usize,
+    pub critic_params: usize,
+}
+
+impl PolicyShapes {
+    pub fn new(config: &TrainConfig, character: &Character) -> Result<PolicyShapes, TrainError> {
+        let layout =
+            JointLayout::for_character(character).map_err(|e| TrainError::Setup(e.to_string()))?;
+        let actions = layout.num_motors;
+        let observation = observation_size(&config.obs, actions, layout.end_effectors.len());
+        let end = |layers: Vec<crate::ppo::LayerShape>| layers.last().map_or(0, |l| l.end());
+        Ok(PolicyShapes {
+            observation_size: observation,
+            action_size: actions,
+            actor_params: end(mlp_layout(
+                observation,
+                &config.policy.actor_hidden,
+                actions,
+            )) + actions,
+            critic_params: end(mlp_layout(observation, &config.policy.critic_hidden, 1)),
+        })
+    }
+
+    /// Checks that `checkpoint` holds the policy and normalizer of these sizes.
+    pub fn check(&self, checkpoint: &super::checkpoint::Checkpoint) -> Result<(), TrainError> {
+        use tensor_names::*;
+        checkpoint.get::<f32>(ACTOR, &[self.actor_params])?;
+        checkpoint.get::<f32>(CRITIC, &[self.critic_params])?;
+        checkpoint.get::<f64>(OBS_COUNT, &[2])?;
+        checkpoint.get::<f64>(OBS_MEAN, &[self.observation_size])?;
+        checkpoint.get::<f64>(OBS_M2, &[self.observation_size])?;
+        Ok(())
+    }
+}
+
+/// A plan found and checked.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlanCheck {
+    pub name: String,
+    pub nworld: u32,
+    pub modules: usize,
+    pub physics_dt: f64,
+}
+
+/// What the checks found.
+#[derive(Clone, Debug)]
+pub struct Preflight {
+    pub motion_path: PathBuf,
+    pub clip_frames: usize,
+    pub clip_duration_s: f64,
+    pub loop_mode: LoopMode,
+    pub physics_dt: f64,
+    pub control_dt: f64,
+    /// Rows of the reference table at the control rate.
+    pub table_frames: usize,
+    pub eval_steps: u32,
+    pub plans: Vec<PlanCheck>,
+    pub policy: PolicyShapes,
+}
+
+/// Loads the motion named by `config.motion` (a file, or a name in `motions_dir`).
+pub fn load_motion(
+    config: &TrainConfig,
+    motions_dir: Option<&Path>,
+) -> Result<(PathBuf, ReferenceMotion), TrainError> {
+    let character = Character::humanoid().map_err(crate::motion::MotionError::from)?;
+    let path = resolve_motion(&config.motion, motions_dir)?;
+    let motion = ReferenceMotion::load(&path, &character)?;
+    Ok((path, motion))
+}
+
+/// Checks that `store` has the run's plans for `nworld` worlds and the PTX of their modules.
+pub fn check_plans(store: &PlanStore, nworld: u32) -> Result<Vec<PlanCheck>, TrainError> {
+    let mut checks = Vec::new();
+    for name in RUN_PLANS {
+        let plan = store.plan(name, nworld)?;
+        let info = plan.info.as_ref().ok_or_else(|| {
+            TrainError::Setup(format!(
+                "the `{name}` plan for {nworld} worlds has no plan-info section (pack it with `instantmimic plan pack`)"
+            ))
+        })?;
+        if info.nworld != nworld {
+            return Err(TrainError::Setup(format!(
+                "the `{name}` plan listed for {nworld} worlds was captured for {}",
+                info.nworld
+            )));
+        }
+        let physics_dt = info
+            .physics
+            .get("config")
+            .and_then(|c| c.get("timestep"))
+            .and_then(serde_json::Value::as_f64)
+            .filter(|dt| *dt > 0.0 && dt.is_finite())
+            .ok_or_else(|| {
+                TrainError::Setup(format!(
+                    "the `{name}` plan for {nworld} worlds records no physics timestep"
+                ))
+            })?;
+        for module in &plan.modules {
+            store.module_ptx(&module.binary_filename)?;
+        }
+        checks.push(PlanCheck {
+            name: name.to_string(),
+            nworld,
+            modules: plan.modules.len(),
+            physics_dt,
+        });
+    }
+    Ok(checks)
+}
+
+/// Runs every check a run can make without a GPU; returns what it found and the motion.
+pub fn preflight(
+    config: &TrainConfig,
+    motions_dir: Option<&Path>,
+    store: &PlanStore,
+) -> Result<(Preflight, ReferenceMotion), TrainError> {
+    let (motion_path, motion) = load_motion(config, motions_dir)?;
+    let mut plans = check_plans(store, config.env.num_envs)?;
+    if config.run.eval_envs != config.env.num_envs {
+        plans.extend(check_plans(store, config.run.eval_envs)?);
+    }
+    let physics_dt = plans.first().map_or(0.0, |p| p.physics_dt);
+    if let Some(other) = plans.iter().find(|p| p.physics_dt != physics_dt) {
+        return Err(TrainError::Setup(format!(
+            "the plans disagree on the physics timestep: {physics_dt} s and {} s (`{}` for {} worlds); capture them together",
+            other.physics_dt, other.name, other.nworld
+        )));
+    }
+    let control_dt = config.control_dt(physics_dt);
+    let table = ReferenceTable::build(&motion, control_dt)?;
+    let clip = motion.clip();
+    let checks = Preflight {
+        motion_path,
+        clip_frames: clip.num_frames(),
+        clip_duration_s: clip.duration(),
+        loop_mode: clip.loop_mode(),
+        physics_dt,
+        control_dt,
+        table_frames: table.num_rows(),
+        eval_steps: evaluation_steps(config, clip.duration(), control_dt),
+        plans,
+        policy: PolicyShapes::new(config, motion.character())?,
+    };
+    Ok((checks, motion))
+}
+
+impl Preflight {
+    /// The lines `train --dry-run` prints.
+    pub fn report(&self, config: &TrainConfig) -> String {
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "motion        {} ({} frames, {:.4} s, loop {})",
+            self.motion_path.display(),
+            self.clip_frames,
+            self.clip_duration_s,
+            self.loop_mode.deepmimic_name()
+        );
+        let _ = writeln!(
+            out,
+            "control       {:.6} s ({} physics steps of {:.6} s); reference table {} rows",
+            self.control_dt, config.env.substeps, self.physics_dt, self.table_frames
+        );
+        for p in &self.plans {
+            let _ = writeln!(
+                out,
+                "plan          {} for {} worlds ({} module{}, PTX present)",
+                p.name,
+                p.nworld,
+                p.modules,
+                if p.modules == 1 { "" } else { "s" }
+            );
+        }
+        let _ = writeln!(
+            out,
+            "policy        observation {}, action {}, actor {} and critic {} parameters",
+            self.policy.observation_size,
+            self.policy.action_size,
+            self.policy.actor_params,
+            self.policy.critic_params
+        );
+        let frames = u64::from(config.env.num_envs) * u64::from(config.ppo.horizon);
+        let _ = writeln!(
+            out,
+            "iteration     {} envs x {} steps = {frames} frames; {} epochs x {} minibatches",
+            config.env.num_envs, config.ppo.horizon, config.ppo.epochs, config.ppo.minibatches
+        );
+        let _ = writeln!(
+            out,
+            "evaluation    every {} iterations: {} envs x {} steps ({:.3} s), success at {}",
+            config.run.eval_interval,
+            config.run.eval_envs,
+            self.eval_steps,
+            f64::from(self.eval_steps) * self.control_dt,
+            config.run.success_rate
+        );
+        let _ = writeln!(
+            out,
+            "budgets       {} s active, {} iterations; checkpoint every {} iterations, keep {}",
+            config.run.time_budget_s,
+            config.run.max_iterations,
+            config.run.checkpoint_interval,
+            config.run.keep_checkpoints
+        );
+        out
+    }
+}

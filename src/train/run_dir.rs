@@ -1,0 +1,325 @@
+//! A run directory, `runs/<name>/`:
+//!
+//! ```text
+//! config.toml      the resolved configuration (what --resume reloads)
+//! metrics.jsonl    one record per iteration (metrics.rs)
+//! curve.png        the learning curve, redrawn after every evaluation
+//! checkpoints/     iter_<iteration>.safetensors, the last run.keep_checkpoints of them
+//! summary.json     the final report (written when the run stops)
+//! ```
+//!
+//! A new run refuses a directory that holds files unless told to overwrite it; a resumed run
+//! continues from the newest checkpoint that reads back (corrupt newer ones are renamed to
+//! `*.corrupt` with a warning) and cuts the metrics log to that checkpoint.
+
+use std::path::{Path, PathBuf};
+
+use super::atomic_file::write_bytes_atomically;
+use super::checkpoint::{Checkpoint, CheckpointDir};
+use super::config::TrainConfig;
+use super::curve::write_learning_curve;
+use super::error::TrainError;
+use super::metrics::{IterationRecord, MetricsLog};
+use super::summary::RunSummary;
+
+pub const CONFIG_FILE: &str = "config.toml";
+pub const METRICS_FILE: &str = "metrics.jsonl";
+pub const CURVE_FILE: &str = "curve.png";
+pub const CHECKPOINTS_DIR: &str = "checkpoints";
+pub const SUMMARY_FILE: &str = "summary.json";
+/// Everything a run writes (what `--overwrite` removes; other files are left alone).
+const RUN_ENTRIES: [&str; 5] = [
+    CONFIG_FILE,
+    METRICS_FILE,
+    CURVE_FILE,
+    CHECKPOINTS_DIR,
+    SUMMARY_FILE,
+];
+
+/// The directory of one run.
+#[derive(Clone, Debug)]
+pub struct RunDir {
+    root: PathBuf,
+}
+
+/// A run directory reopened by `--resume`.
+#[derive(Debug)]
+pub struct ResumedRun {
+    pub dir: RunDir,
+    pub config: TrainConfig,
+    /// The checkpoint to continue from; `None` starts over from iteration 0.
+    pub checkpoint: Option<(PathBuf, Checkpoint)>,
+    /// The log, cut to the checkpoint's iteration and open for appending (`None` when only
+    /// inspected, see [`RunDir::inspect_resume`]).
+    pub metrics: Option<MetricsLog>,
+    /// The records kept (the learning curve and the final report are drawn from them).
+    pub records: Vec<IterationRecord>,
+    /// What the user should know: skipped checkpoints, dropped records, gaps.
+    pub warnings: Vec<String>,
+}
+
+impl ResumedRun {
+    /// Iterations already done.
+    pub fn iteration(&self) -> u64 {
+        self.checkpoint
+            .as_ref()
+            .map_or(0, |(_, c)| c.meta.iteration)
+    }
+}
+
+/// The default run directory of a configuration: `runs/<motion>-seed<seed>`, the motion's
+/// file stem without DeepMimic's `humanoid3d_` prefix.
+pub fn default_run_dir(config: &TrainConfig) -> PathBuf {
+    let stem = Path::new(&config.motion)
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("run");
+    let stem = stem.strip_prefix("humanoid3d_").unwrap_or(stem);
+    PathBuf::from("runs").join(format!("{stem}-seed{}", config.seed))
+}
+
+impl RunDir {
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    pub fn config_path(&self) -> PathBuf {
+        self.root.join(CONFIG_FILE)
+    }
+
+    pub fn metrics_path(&self) -> PathBuf {
+        self.root.join(METRICS_FILE)
+    }
+
+    pub fn curve_path(&self) -> PathBuf {
+        self.root.join(CURVE_FILE)
+    }
+
+    pub fn summary_path(&self) -> PathBuf {
+        self.root.join(SUMMARY_FILE)
+    }
+
+    /// The checkpoints of the run, keeping `config.run.keep_checkpoints`.
+    pub fn checkpoints(&self, config: &TrainConfig) -> CheckpointDir {
+        CheckpointDir::new(
+            &self.root.join(CHECKPOINTS_DIR),
+            config.run.keep_checkpoints,
+        )
+    }
+
+    /// Checks, without writing anything, that a new run may use `root`: it does not exist, is
+    /// empty, or `overwrite` is set. Returns the run files `--overwrite` would remove.
+    pub fn check_new(root: &Path, overwrite: bool) -> Result<Vec<PathBuf>, TrainError> {
+        let entries = match std::fs::read_dir(root) {
+            Ok(entries) => entries,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+            Err(e) if e.kind() == std::io::ErrorKind::NotADirectory => {
+                return Err(TrainError::NotARunDir {
+                    path: root.display().to_string(),
+                    problem: "it is a file".to_string(),
+                });
+            }
+            Err(e) => return Err(TrainError::io(root, e)),
+        };
+        let mut ours = Vec::new();
+        let mut any = false;
+        for entry in entries {
+            let entry = entry.map_err(|e| TrainError::io(root, e))?;
+            any = true;
+            if entry
+                .file_name()
+                .to_str()
+                .is_some_and(|n| RUN_ENTRIES.contains(&n))
+            {
+                ours.push(entry.path());
+            }
+        }
+        if any && !overwrite {
+            return Err(TrainError::RunDirNotEmpty {
+                path: root.display().to_string(),
+            });
+        }
+        ours.sort();
+        Ok(ours)
+    }
+
+    /// Starts a new run in `root`: checks it ([`check_new`](Self::check_new)), removes an old
+    /// run's files when overwriting, writes `config.toml` and opens an empty metrics log.
+    pub fn create(
+        root: &Path,
+        config: &TrainConfig,
+        overwrite: bool,
+    ) -> Result<(RunDir, MetricsLog), TrainError> {
+        for old in RunDir::check_new(root, overwrite)? {
+            let removed = if old.is_dir() {
+                std::fs::remove_dir_all(&old)
+            } else {
+                std::fs::remove_file(&old)
+            };
+            removed.map_err(|e| TrainError::io(&old, e))?;
+        }
+        std::fs::create_dir_all(root).map_err(|e| TrainError::io(root, e))?;
+        let dir = RunDir {
+            root: root.to_path_buf(),
+        };
+        dir.write_config(config)?;
+        let metrics = MetricsLog::create(&dir.metrics_path())?;
+        Ok((dir, metrics))
+    }
+
+    /// Replaces `config.toml` (a resumed run with new budgets).
+    pub fn write_config(&self, config: &TrainConfig) -> Result<(), TrainError> {
+        let path = self.config_path();
+        let text = format!(
+            "# The resolved configuration of this run (instantmimic {}); `train --resume` reads it.\n{}",
+            env!("CARGO_PKG_VERSION"),
+            config.to_toml()?
+        );
+        write_bytes_atomically(&path, text.as_bytes()).map_err(|e| TrainError::io(&path, e))
+    }
+
+    /// Redraws `curve.png` from the records.
+    pub fn write_curve(
+        &self,
+        config: &TrainConfig,
+        records: &[IterationRecord],
+    ) -> Result<(), TrainError> {
+        let title = format!("{} (seed {})", config.motion, config.seed);
+        write_learning_curve(
+            &self.curve_path(),
+            records,
+            &title,
+            f64::from(config.env.max_episode_steps),
+            config.run.success_rate,
+        )
+    }
+
+    /// Writes `summary.json`.
+    pub fn write_summary(&self, summary: &RunSummary) -> Result<(), TrainError> {
+        let path = self.summary_path();
+        let mut text = serde_json::to_string_pretty(summary).map_err(|e| TrainError::Metrics {
+            path: path.display().to_string(),
+            problem: e.to_string(),
+        })?;
+        text.push('\n');
+        write_bytes_atomically(&path, text.as_bytes()).map_err(|e| TrainError::io(&path, e))
+    }
+
+    /// Reopens a run to continue it: its configuration, the newest good checkpoint (newer
+    /// corrupt ones are renamed to `*.corrupt`), and the metrics log cut to that checkpoint.
+    pub fn resume(root: &Path) -> Result<ResumedRun, TrainError> {
+        RunDir::reopen(root, true)
+    }
+
+    /// What [`resume`](Self::resume) would continue from, changing nothing (`--dry-run`).
+    pub fn inspect_resume(root: &Path) -> Result<ResumedRun, TrainError> {
+        RunDir::reopen(root, false)
+    }
+
+    fn reopen(root: &Path, modify: bool) -> Result<ResumedRun, TrainError> {
+        let dir = RunDir {
+            root: root.to_path_buf(),
+        };
+        let config_path = dir.config_path();
+        if !config_path.is_file() {
+            return Err(TrainError::NotARunDir {
+                path: root.display().to_string(),
+                problem: format!("it has no {CONFIG_FILE}"),
+            });
+        }
+        let config = TrainConfig::load(&config_path)?;
+        let scan = dir.checkpoints(&config).latest_good()?;
+        let mut warnings: Vec<String> = scan
+            .skipped
+            .iter()
+            .map(|s| format!("skipping checkpoint {s}"))
+            .collect();
+        if modify {
+            // Out of the way, so that pruning and the next resume do not meet them again.
+            let newest_good = scan.latest.as_ref().map_or(0, |(_, c)| c.meta.iteration);
+            for (iteration, path) in dir.checkpoints(&config).list()? {
+                if iteration > newest_good {
+                    let aside = path.with_extension("safetensors.corrupt");
+                    std::fs::rename(&path, &aside).map_err(|e| TrainError::io(&path, e))?;
+                    warnings.push(format!("renamed {} to {}", path.display(), aside.display()));
+                }
+            }
+        }
+        if let Some((path, checkpoint)) = &scan.latest {
+            check_same_training(&config, checkpoint, path)?;
+        } else {
+            warnings.push(format!(
+                "{}: no usable checkpoint; the run starts over from iteration 0",
+                root.display()
+            ));
+        }
+        let iteration = scan.latest.as_ref().map_or(0, |(_, c)| c.meta.iteration);
+        let metrics_path = dir.metrics_path();
+        let (metrics, records) = if modify {
+            let (log, resumed) = MetricsLog::resume(&metrics_path, iteration)?;
+            if resumed.dropped_partial_line {
+                warnings.push(format!(
+                    "{}: dropped a half-written last line",
+                    metrics_path.display()
+                ));
+            }
+            if resumed.dropped_after_checkpoint > 0 {
+                warnings.push(format!(
+                    "{}: dropped {} records after iteration {iteration} (they run again)",
+                    metrics_path.display(),
+                    resumed.dropped_after_checkpoint
+                ));
+            }
+            warnings.extend(resumed.warnings);
+            (Some(log), resumed.records)
+        } else if metrics_path.exists() {
+            let file = MetricsLog::read(&metrics_path)?;
+            let records = file
+                .records
+                .into_iter()
+                .take_while(|r| r.iteration <= iteration)
+                .collect();
+            (None, records)
+        } else {
+            (None, Vec::new())
+        };
+        Ok(ResumedRun {
+            dir,
+            config,
+            checkpoint: scan.latest,
+            metrics,
+            records,
+            warnings,
+        })
+    }
+}
+
+/// A checkpoint continues a run only if it was trained with the same settings (the budgets
+/// and other `[run]` keys may change between sessions).
+fn check_same_training(
+    config: &TrainConfig,
+    checkpoint: &Checkpoint,
+    path: &Path,
+) -> Result<(), TrainError> {
+    let stored = checkpoint.meta.config(&path.display().to_string())?;
+    let differs = [
+        ("motion", stored.motion != config.motion),
+        ("seed", stored.seed != config.seed),
+        ("[env]", stored.env != config.env),
+        ("[reward]", stored.reward != config.reward),
+        ("[obs]", stored.obs != config.obs),
+        ("[policy]", stored.policy != config.policy),
+        ("[ppo]", stored.ppo != config.ppo),
+    ];
+    let keys: Vec<&str> = differs.iter().filter(|d| d.1).map(|d| d.0).collect();
+    if keys.is_empty() {
+        Ok(())
+    } else {
+        Err(TrainError::Setup(format!(
+            "{}: trained with a different {} than {}; only [run] may change when resuming",
+            path.display(),
+            keys.join(", "),
+            CONFIG_FILE
+        )))
+    }
+}

@@ -1,0 +1,296 @@
+//! The bookkeeping of a training run, for the GPU loop to drive: the active clock, the metrics
+//! log, evaluation cadence, checkpoints, the learning curve, progress and the stop rule. The
+//! loop does the GPU work; one iteration goes
+//!
+//! ```text
+//! session.start_iteration();                       // the active clock runs
+//! /* replay rollout + update graphs, copy the statistics back, synchronize */
+//! let step = session.finish_iteration(stats);     // the clock stops
+//! let eval = step.evaluate.then(|| /* GPU evaluation -> summarize(...) */);
+//! let next = session.record(step, eval)?;          // metrics.jsonl, curve.png, progress
+//! if next.checkpoint_due {
+//!     let mut ckpt = session.new_checkpoint()?;     // metadata filled in
+//!     /* ckpt.insert(...) every tensor the trainer keeps */
+//!     session.save_checkpoint(&ckpt)?;
+//! }
+//! if let Some(reason) = next.stop { return session.finish(reason); }
+//! ```
+//!
+//! Everything here runs on the CPU, so the whole sequence (including a crash and a resume) is
+//! tested without a GPU.
+
+use std::path::Path;
+
+use super::checkpoint::{Checkpoint, CheckpointDir, CheckpointMeta};
+use super::clock::{ActiveClock, StopReason, StopRule};
+use super::config::TrainConfig;
+use super::error::TrainError;
+use super::evaluation::EvaluationSummary;
+use super::metrics::{IterationRecord, MetricsLog, UpdateStats};
+use super::progress::{Progress, ProgressMode};
+use super::run_dir::{ResumedRun, RunDir};
+use super::summary::RunSummary;
+
+/// What the GPU reports about one iteration (the per-iteration statistics copy).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct IterationStats {
+    pub mean_return: f64,
+    pub mean_episode_length: f64,
+    pub update: UpdateStats,
+}
+
+/// An iteration done on the GPU, not yet recorded.
+#[derive(Clone, Debug, PartialEq)]
+pub struct IterationStep {
+    /// Iterations completed, this one included.
+    pub iteration: u64,
+    /// Whether the protocol evaluates after this iteration.
+    pub evaluate: bool,
+    record: IterationRecord,
+}
+
+/// What the loop does after recording an iteration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NextStep {
+    /// Save a checkpoint now (interval reached, or the run stops).
+    pub checkpoint_due: bool,
+    pub stop: Option<StopReason>,
+}
+
+/// A run in progress (see the module documentation for the call sequence).
+pub struct RunSession {
+    config: TrainConfig,
+    dir: RunDir,
+    metrics: MetricsLog,
+    records: Vec<IterationRecord>,
+    checkpoints: CheckpointDir,
+    rule: StopRule,
+    clock: ActiveClock,
+    progress: Progress,
+    iteration: u64,
+    frames: u64,
+    /// Active seconds when the current iteration started.
+    iteration_start_s: f64,
+}
+
+impl RunSession {
+    /// A new run in `root` (see [`RunDir::create`]).
+    pub fn start_new(
+        root: &Path,
+        config: &TrainConfig,
+        overwrite: bool,
+        progress: ProgressMode,
+    ) -> Result<RunSession, TrainError> {
+        config.validate("the run configuration")?;
+        let (dir, metrics) = RunDir::create(root, config, overwrite)?;
+        Ok(RunSession::assemble(
+            config.clone(),
+            dir,
+            metrics,
+            Vec::new(),
+            None,
+            Progress::new(progress, 0, config.run.max_iterations),
+        ))
+    }
+
+    /// Continues the run in `root` from its newest good checkpoint. `adjust` may change the
+    /// `[run]` section (new budgets); the result is validated and written to `config.toml`.
+    /// Returns the session, the checkpoint to restore on the GPU (`None`: start over) and the
+    /// warnings to show (skipped checkpoints, dropped records; the caller prints them).
+    pub fn resume(
+        root: &Path,
+        adjust: impl FnOnce(&mut TrainConfig),
+        progress: ProgressMode,
+    ) -> Result<(RunSession, Option<Checkpoint>, Vec<String>), TrainError> {
+        // Settle the configuration before anything in the directory changes.
+        let before = RunDir::inspect_resume(root)?.config;
+        let mut config = before.clone();
+        adjust(&mut config);
+        if config != before {
+            // Only [run] may change: the checkpoint was trained with the rest.
+            let mut rest = config.clone();
+            rest.run = before.run.clone();
+            if rest != before {
+                return Err(TrainError::Setup(
+                    "only [run] settings (budgets, evaluation, checkpoints) may change when resuming"
+                        .to_string(),
+                ));
+            }
+            config.validate("the resumed configuration")?;
+        }
+        let ResumedRun {
+            dir,
+            checkpoint,
+            metrics,
+            records,
+            warnings,
+            ..
+        } = RunDir::resume(root)?;
+        if config != before {
+            dir.write_config(&config)?;
+        }
+        let metrics = metrics
+            .ok_or_else(|| TrainError::Setup("the resumed metrics log is not open".to_string()))?;
+        let start = checkpoint.as_ref().map_or(0, |(_, c)| c.meta.iteration);
+        let progress = Progress::new(progress, start, config.run.max_iterations);
+        let session = RunSession::assemble(
+            config,
+            dir,
+            metrics,
+            records,
+            checkpoint.as_ref().map(|(_, c)| c),
+            progress,
+        );
+        Ok((session, checkpoint.map(|(_, c)| c), warnings))
+    }
+
+    fn assemble(
+        config: TrainConfig,
+        dir: RunDir,
+        metrics: MetricsLog,
+        records: Vec<IterationRecord>,
+        checkpoint: Option<&Checkpoint>,
+        progress: Progress,
+    ) -> RunSession {
+        let (iteration, active, frames) = checkpoint.map_or((0, 0.0, 0), |c| {
+            (c.meta.iteration, c.meta.active_time_s, c.meta.frames)
+        });
+        RunSession {
+            checkpoints: dir.checkpoints(&config),
+            rule: StopRule::new(&config.run),
+            clock: ActiveClock::paused_at(active),
+            config,
+            dir,
+            metrics,
+            records,
+            progress,
+            iteration,
+            frames,
+            iteration_start_s: active,
+        }
+    }
+
+    pub fn config(&self) -> &TrainConfig {
+        &self.config
+    }
+
+    pub fn run_dir(&self) -> &RunDir {
+        &self.dir
+    }
+
+    /// Iterations completed.
+    pub fn iteration(&self) -> u64 {
+        self.iteration
+    }
+
+    pub fn records(&self) -> &[IterationRecord] {
+        &self.records
+    }
+
+    /// Active seconds so far.
+    pub fn active_time_s(&self) -> f64 {
+        self.clock.seconds()
+    }
+
+    /// Before the GPU work of an iteration is queued: the active clock runs.
+    pub fn start_iteration(&mut self) {
+        self.iteration_start_s = self.clock.seconds();
+        self.clock.start();
+    }
+
+    /// After the iteration's GPU work has completed (the stream synchronized): stops the clock
+    /// and prepares the iteration's record.
+    pub fn finish_iteration(&mut self, stats: IterationStats) -> IterationStep {
+        self.clock.pause();
+        let active = self.clock.seconds();
+        let iteration = self.iteration + 1;
+        let frames_now = u64::from(self.config.env.num_envs) * u64::from(self.config.ppo.horizon);
+        let elapsed = active - self.iteration_start_s;
+        let record = IterationRecord {
+            iteration,
+            active_time_s: active,
+            frames: self.frames + frames_now,
+            frames_per_s: if elapsed > 0.0 {
+                frames_now as f64 / elapsed
+            } else {
+                f64::NAN
+            },
+            mean_return: stats.mean_return,
+            mean_episode_length: stats.mean_episode_length,
+            update: stats.update,
+            evaluation: None,
+        };
+        IterationStep {
+            iteration,
+            evaluate: self.rule.evaluates_after(iteration, active),
+            record,
+        }
+    }
+
+    /// Records an iteration (with its evaluation, when one ran): appends it to
+    /// `metrics.jsonl`, redraws `curve.png` after an evaluation, updates the progress
+    /// display, and says whether to checkpoint and whether to stop.
+    pub fn record(
+        &mut self,
+        step: IterationStep,
+        evaluation: Option<EvaluationSummary>,
+    ) -> Result<NextStep, TrainError> {
+        let mut record = step.record;
+        let evaluated = evaluation.is_some();
+        record.evaluation = evaluation;
+        self.metrics.append(&record)?;
+        self.iteration = record.iteration;
+        self.frames = record.frames;
+        let stop = self.rule.check(
+            record.iteration,
+            record.active_time_s,
+            record.evaluation.as_ref(),
+        );
+        self.progress.iteration(&record);
+        self.records.push(record);
+        if evaluated {
+            self.dir.write_curve(&self.config, &self.records)?;
+        }
+        let interval = u64::from(self.config.run.checkpoint_interval);
+        let checkpoint_due =
+            stop.is_some() || (interval > 0 && self.iteration.is_multiple_of(interval));
+        Ok(NextStep {
+            checkpoint_due,
+            stop,
+        })
+    }
+
+    /// An empty checkpoint of the current iteration with its metadata filled in; the loop
+    /// adds the tensors.
+    pub fn new_checkpoint(&self) -> Result<Checkpoint, TrainError> {
+        Ok(Checkpoint::new(CheckpointMeta::new(
+            &self.config,
+            self.iteration,
+            self.clock.seconds(),
+            self.frames,
+        )?))
+    }
+
+    /// Writes a checkpoint (the clock is paused: checkpointing is not active time).
+    pub fn save_checkpoint(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainError> {
+        let checkpoints = &self.checkpoints;
+        self.clock.excluding(|| checkpoints.save(checkpoint))?;
+        Ok(())
+    }
+
+    /// Ends the run: redraws the curve, writes `summary.json`, and returns the summary.
+    pub fn finish(mut self, reason: StopReason) -> Result<RunSummary, TrainError> {
+        self.clock.pause();
+        self.dir.write_curve(&self.config, &self.records)?;
+        let summary =
+            RunSummary::from_records(&self.config.motion, self.config.seed, &self.records, reason);
+        self.dir.write_summary(&summary)?;
+        self.progress.finish();
+        Ok(summary)
+    }
+
+    /// The progress display (to print notes above the bar).
+    pub fn progress(&mut self) -> &mut Progress {
+        &mut self.progress
+    }
+}

@@ -1,0 +1,187 @@
+//! The final report of a run: how it stopped, its time to success (active seconds at the first
+//! successful evaluation) and its last evaluation, computed from the metrics records alone, so
+//! a resumed run reports the same as an uninterrupted one.
+
+use std::fmt::Write as _;
+
+use serde::{Deserialize, Serialize};
+
+use super::clock::StopReason;
+use super::evaluation::EvaluationSummary;
+use super::metrics::IterationRecord;
+use crate::hpo::trial::TrialOutcome;
+
+/// `summary.json` of a run directory, and what `train` prints at the end.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunSummary {
+    pub motion: String,
+    pub seed: u64,
+    pub stop_reason: StopReason,
+    pub iterations: u64,
+    pub active_time_s: f64,
+    pub frames: u64,
+    /// Frames per active second over the whole run.
+    pub frames_per_s: f64,
+    /// Active seconds at the end of the iteration whose evaluation first succeeded.
+    pub time_to_success_s: Option<f64>,
+    pub success_iteration: Option<u64>,
+    pub last_evaluation: Option<EvaluationSummary>,
+}
+
+impl RunSummary {
+    /// The summary of a run whose log is `records`.
+    pub fn from_records(
+        motion: &str,
+        seed: u64,
+        records: &[IterationRecord],
+        stop_reason: StopReason,
+    ) -> RunSummary {
+        let last = records.last();
+        let first_success = records
+            .iter()
+            .find(|r| r.evaluation.as_ref().is_some_and(|e| e.success));
+        let active_time_s = last.map_or(0.0, |r| r.active_time_s);
+        let frames = last.map_or(0, |r| r.frames);
+        RunSummary {
+            motion: motion.to_string(),
+            seed,
+            stop_reason,
+            iterations: last.map_or(0, |r| r.iteration),
+            active_time_s,
+            frames,
+            frames_per_s: if active_time_s > 0.0 {
+                frames as f64 / active_time_s
+            } else {
+                0.0
+            },
+            time_to_success_s: first_success.map(|r| r.active_time_s),
+            success_iteration: first_success.map(|r| r.iteration),
+            last_evaluation: records.iter().rev().find_map(|r| r.evaluation.clone()),
+        }
+    }
+
+    /// The outcome the hyperparameter search scores (`hpo::TrialOutcome`).
+    pub fn trial_outcome(&self) -> TrialOutcome {
+        let evaluation = self.last_evaluation.as_ref();
+        let finite = |x: f64| x.is_finite().then_some(x);
+        TrialOutcome {
+            success: self.time_to_success_s.is_some(),
+            active_time_s: self.time_to_success_s.unwrap_or(self.active_time_s),
+            iterations: self.success_iteration.unwrap_or(self.iterations),
+            success_rate: evaluation.map_or(0.0, |e| e.success_rate),
+            ape_m: evaluation.and_then(|e| finite(e.pose_error_m)),
+            mpjpe_m: evaluation.and_then(|e| finite(e.global_mpjpe_m)),
+            ee_error_m: evaluation.and_then(|e| finite(e.ee_position_error_m)),
+            frames_per_s: finite(self.frames_per_s).filter(|&f| f > 0.0),
+        }
+    }
+
+    /// The lines `train` prints when a run ends.
+    pub fn report(&self) -> String {
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "{} seed {}: stopped after {} iterations ({}), {:.2} s active, {:.3} M frames, {:.3} M frames/s",
+            self.motion,
+            self.seed,
+            self.iterations,
+            self.stop_reason.describe(),
+            self.active_time_s,
+            self.frames as f64 / 1e6,
+            self.frames_per_s / 1e6
+        );
+        match (self.time_to_success_s, self.success_iteration) {
+            (Some(t), Some(i)) => {
+                let _ = writeln!(out, "time to success {t:.3} s (active, at iteration {i})");
+            }
+            _ => {
+                let _ = writeln!(out, "no success");
+            }
+        }
+        if let Some(e) = &self.last_evaluation {
+            let _ = writeln!(
+                out,
+                "last evaluation: success rate {:.3} ({}/{}), pose error {:.4} m, MPJPE {:.4} m, end effectors {:.4} m / {:.4} rad",
+                e.success_rate,
+                e.completed,
+                e.episodes,
+                e.pose_error_m,
+                e.global_mpjpe_m,
+                e.ee_position_error_m,
+                e.ee_orientation_error_rad
+            );
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::train::metrics::UpdateStats;
+
+    fn record(iteration: u64, success: Option<bool>) -> IterationRecord {
+        IterationRecord {
+            iteration,
+            active_time_s: 0.25 * iteration as f64,
+            frames: 131_072 * iteration,
+            frames_per_s: 524_288.0,
+            mean_return: 10.0,
+            mean_episode_length: 20.0,
+            update: UpdateStats::default(),
+            evaluation: success.map(|s| EvaluationSummary {
+                episodes: 32,
+                completed: if s { 30 } else { 3 },
+                success_rate: if s { 30.0 / 32.0 } else { 3.0 / 32.0 },
+                success: s,
+                episode_steps: 53,
+                mean_episode_steps: 50.0,
+                pose_error_m: 0.05,
+                global_mpjpe_m: 0.08,
+                ee_position_error_m: 0.07,
+                ee_orientation_error_rad: 0.3,
+            }),
+        }
+    }
+
+    #[test]
+    fn time_to_success_is_the_first_successful_evaluation() {
+        let records: Vec<_> = (1..=15)
+            .map(|i| {
+                let eval = (i % 5 == 0).then_some(i >= 10);
+                record(i, eval)
+            })
+            .collect();
+        let s = RunSummary::from_records("backflip", 1, &records, StopReason::IterationBudget);
+        assert_eq!(s.time_to_success_s, Some(2.5));
+        assert_eq!(s.success_iteration, Some(10));
+        assert_eq!(s.iterations, 15);
+        assert_eq!(s.frames_per_s, 131_072.0 * 15.0 / 3.75);
+        let outcome = s.trial_outcome();
+        assert!(outcome.success);
+        assert_eq!((outcome.active_time_s, outcome.iterations), (2.5, 10));
+        assert_eq!(outcome.ape_m, Some(0.05));
+        let text = s.report();
+        assert!(
+            text.contains("time to success 2.500 s (active, at iteration 10)"),
+            "{text}"
+        );
+        assert!(text.contains("iteration budget spent"), "{text}");
+    }
+
+    #[test]
+    fn a_run_without_success_reports_its_time_spent() {
+        let records: Vec<_> = (1..=10)
+            .map(|i| record(i, (i % 5 == 0).then_some(false)))
+            .collect();
+        let s = RunSummary::from_records("walk", 0, &records, StopReason::TimeBudget);
+        assert_eq!(s.time_to_success_s, None);
+        let outcome = s.trial_outcome();
+        assert!(!outcome.success);
+        assert_eq!(outcome.active_time_s, 2.5);
+        assert_eq!(outcome.success_rate, 3.0 / 32.0);
+        assert!(s.report().contains("no success"));
+        let empty = RunSummary::from_records("walk", 0, &[], StopReason::Interrupted);
+        assert_eq!((empty.iterations, empty.frames_per_s), (0, 0.0));
+    }
+}

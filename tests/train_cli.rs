@@ -1,0 +1,408 @@
+//! `instantmimic train` and `eval`, run as a user would: `--dry-run` end to end, resume
+//! inspection, and bad inputs that must give one clear line. The GPU part answers that it is
+//! not built yet.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use instantmimic::motion::library::{CLIP_NAMES, MOTIONS_ENV, motions_dir_from_env};
+use instantmimic::motion::{Character, SyntheticMotion};
+use instantmimic::train::preflight::tensor_names;
+use instantmimic::train::{
+    Checkpoint, IterationStats, PolicyShapes, ProgressMode, RunSession, TrainConfig,
+};
+
+fn run(args: &[&str], motions_dir: Option<&Path>, cwd: &Path) -> Output {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_instantmimic"));
+    cmd.args(args).env_remove(MOTIONS_ENV).current_dir(cwd);
+    if let Some(dir) = motions_dir {
+        cmd.env(MOTIONS_ENV, dir);
+    }
+    cmd.output().expect("the binary runs")
+}
+
+fn stdout(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The error of a failed command, which must be exactly one line.
+fn one_line_error(out: &Output) -> String {
+    assert!(!out.status.success(), "succeeded: {}", stdout(out));
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(err.trim_end().lines().count(), 1, "not one line:\n{err}");
+    assert!(err.starts_with("error: "), "{err}");
+    err
+}
+
+fn succeeded(out: &Output) -> String {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout(out)
+}
+
+/// A temporary directory with the synthetic clip as `humanoid3d_synth.txt` (1 s, 30 fps).
+fn workspace() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    std::fs::create_dir(dir.path().join("motions")).unwrap();
+    std::fs::write(
+        dir.path().join("motions/humanoid3d_synth.txt"),
+        SyntheticMotion::default().to_json(),
+    )
+    .unwrap();
+    dir
+}
+
+/// The TOML after the "# resolved configuration" line of a dry run.
+fn resolved_config(text: &str) -> TrainConfig {
+    let start = text
+        .find("# resolved configuration")
+        .expect("the dry run prints the configuration");
+    let toml: String = text[start..]
+        .lines()
+        .skip(1)
+        .take_while(|l| !l.starts_with("dry run:"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    TrainConfig::from_toml(&toml, "dry run output").unwrap()
+}
+
+#[test]
+fn dry_run_checks_everything_and_prints_the_resolved_config() {
+    let ws = workspace();
+    let motions = ws.path().join("motions");
+    let out = run(
+        &[
+            "train",
+            "--motion",
+            "synth",
+            "--seed",
+            "7",
+            "--envs",
+            "32",
+            "--horizon",
+            "16",
+            "--max-iterations",
+            "40",
+            "--time-budget",
+            "12.5",
+            "--eval-interval",
+            "2",
+            "--dry-run",
+        ],
+        Some(&motions),
+        ws.path(),
+    );
+    let text = succeeded(&out);
+    for expected in [
+        "configuration the baseline (src/train/config.rs) with --seed, --envs, --horizon, --max-iterations, --time-budget, --eval-interval",
+        "run directory runs/synth-seed7 (new)",
+        "humanoid3d_synth.txt (31 frames, 1.0000 s, loop wrap)",
+        "control       0.033333 s (4 physics steps of 0.008333 s)",
+        "plan          step for 32 worlds (41 modules, PTX present)",
+        "plan          kinematics for 32 worlds (1 module, PTX present)",
+        "policy        observation 353, action 28",
+        "iteration     32 envs x 16 steps = 512 frames; 5 epochs x 4 minibatches",
+        "evaluation    every 2 iterations: 32 envs x 30 steps (1.000 s), success at 0.9",
+        "budgets       12.5 s active, 40 iterations",
+        "dry run: everything that needs no GPU checks out",
+    ] {
+        assert!(text.contains(expected), "missing {expected:?} in\n{text}");
+    }
+    // The training and evaluation world counts are the same: one set of plans listed.
+    assert_eq!(text.matches("plan          ").count(), 2, "{text}");
+    let config = resolved_config(&text);
+    let mut expected = TrainConfig::with_motion("synth");
+    expected.seed = 7;
+    expected.env.num_envs = 32;
+    expected.ppo.horizon = 16;
+    expected.run.max_iterations = 40;
+    expected.run.time_budget_s = 12.5;
+    expected.run.eval_interval = 2;
+    assert_eq!(config, expected);
+    // A dry run writes nothing.
+    assert!(!ws.path().join("runs").exists());
+}
+
+#[test]
+fn without_dry_run_the_gpu_loop_says_it_is_not_built() {
+    let ws = workspace();
+    let motions = ws.path().join("motions");
+    let out = run(&["train", "--motion", "synth"], Some(&motions), ws.path());
+    let err = one_line_error(&out);
+    assert!(
+        err.contains("training needs the GPU training loop, which is not built yet"),
+        "{err}"
+    );
+    // Nothing was written for a run that did not start.
+    assert!(!ws.path().join("runs").exists());
+}
+
+#[test]
+fn bad_inputs_give_one_clear_line() {
+    let ws = workspace();
+    let motions = ws.path().join("motions");
+    let bad_config = ws.path().join("bad.toml");
+    std::fs::write(&bad_config, "motion = \"synth\"\n[ppo]\nepoch = 3\n").unwrap();
+    let full = ws.path().join("full");
+    std::fs::create_dir(&full).unwrap();
+    std::fs::write(full.join("notes.txt"), "x").unwrap();
+    let bad_config_arg = bad_config.to_str().unwrap();
+    let full_arg = full.to_str().unwrap();
+    for (args, expected) in [
+        (
+            vec!["train", "--motion", "synth", "--envs", "64", "--dry-run"],
+            "no `step` plan for 64 worlds",
+        ),
+        (
+            vec!["train", "--motion", "synth", "--envs", "0", "--dry-run"],
+            "`env.num_envs` = 0: must be 1 to 1048576",
+        ),
+        (
+            vec![
+                "train",
+                "--motion",
+                "synth",
+                "--time-budget",
+                "-1",
+                "--dry-run",
+            ],
+            "with --time-budget: `run.time_budget_s` = -1",
+        ),
+        (
+            vec![
+                "train",
+                "--motion",
+                "synth",
+                "--envs",
+                "3",
+                "--horizon",
+                "1",
+                "--dry-run",
+            ],
+            "`ppo.minibatches` = 4: must divide ppo.horizon x env.num_envs = 3",
+        ),
+        (
+            vec!["train", "--config", bad_config_arg, "--dry-run"],
+            "epoch",
+        ),
+        (
+            vec!["train", "--motion", "nosuch", "--dry-run"],
+            "no motion file for \"nosuch\"",
+        ),
+        (vec!["train", "--dry-run"], "name a motion with --motion"),
+        (
+            vec!["train", "--motion", "synth", "--out", full_arg, "--dry-run"],
+            "is not empty: continue that run with --resume",
+        ),
+        (
+            vec!["train", "--resume", full_arg, "--dry-run"],
+            "not a run directory: it has no config.toml",
+        ),
+        (
+            vec!["eval", "--checkpoint", bad_config_arg],
+            "bad.toml: corrupt or truncated checkpoint",
+        ),
+        (
+            vec!["eval", "--checkpoint", "missing.safetensors"],
+            "missing.safetensors: No such file",
+        ),
+    ] {
+        let err = one_line_error(&run(&args, Some(&motions), ws.path()));
+        assert!(err.contains(expected), "{args:?}: {err}");
+    }
+    // --overwrite accepts the non-empty directory (in a dry run, it only says so).
+    let out = run(
+        &[
+            "train",
+            "--motion",
+            "synth",
+            "--out",
+            full_arg,
+            "--overwrite",
+            "--dry-run",
+        ],
+        Some(&motions),
+        ws.path(),
+    );
+    assert!(succeeded(&out).contains("(exists, no run files)"));
+    assert!(full.join("notes.txt").exists());
+}
+
+/// A checkpoint holding the policy of `config` (zeros), as the trainer will write it.
+fn add_policy(checkpoint: &mut Checkpoint, config: &TrainConfig) {
+    let shapes = PolicyShapes::new(config, &Character::humanoid().unwrap()).unwrap();
+    let d = shapes.observation_size;
+    checkpoint
+        .insert(
+            tensor_names::ACTOR,
+            &[shapes.actor_params],
+            vec![0.0f32; shapes.actor_params],
+        )
+        .unwrap();
+    checkpoint
+        .insert(
+            tensor_names::CRITIC,
+            &[shapes.critic_params],
+            vec![0.0f32; shapes.critic_params],
+        )
+        .unwrap();
+    checkpoint
+        .insert(tensor_names::OBS_COUNT, &[2], vec![1.0f64, 1.0])
+        .unwrap();
+    checkpoint
+        .insert(tensor_names::OBS_MEAN, &[d], vec![0.0f64; d])
+        .unwrap();
+    checkpoint
+        .insert(tensor_names::OBS_M2, &[d], vec![1.0f64; d])
+        .unwrap();
+}
+
+/// A run of `iterations` iterations on the synthetic clip with checkpoints every 5.
+fn make_run(root: &Path, motions: &Path, iterations: u64) -> TrainConfig {
+    let mut config =
+        TrainConfig::with_motion(motions.join("humanoid3d_synth.txt").to_str().unwrap());
+    config.env.num_envs = 32;
+    config.run.checkpoint_interval = 5;
+    let mut session = RunSession::start_new(root, &config, false, ProgressMode::Quiet).unwrap();
+    while session.iteration() < iterations {
+        session.start_iteration();
+        let step = session.finish_iteration(IterationStats::default());
+        let next = session.record(step, None).unwrap();
+        if next.checkpoint_due {
+            let mut ckpt = session.new_checkpoint().unwrap();
+            add_policy(&mut ckpt, &config);
+            session.save_checkpoint(&ckpt).unwrap();
+        }
+    }
+    config
+}
+
+#[test]
+fn resume_dry_run_inspects_the_run_without_changing_it() {
+    let ws = workspace();
+    let motions = ws.path().join("motions");
+    let root = ws.path().join("runs/synth");
+    make_run(&root, &motions, 12);
+    let metrics_before = std::fs::read(root.join("metrics.jsonl")).unwrap();
+    let config_before = std::fs::read(root.join("config.toml")).unwrap();
+    let root_arg = root.to_str().unwrap();
+    let out = run(
+        &[
+            "train",
+            "--resume",
+            root_arg,
+            "--max-iterations",
+            "99",
+            "--dry-run",
+        ],
+        None,
+        ws.path(),
+    );
+    let text = succeeded(&out);
+    assert!(
+        text.contains("(resume from iteration 10: ") && text.contains("iter_00000010.safetensors"),
+        "{text}"
+    );
+    assert!(text.contains("config.toml with --max-iterations"), "{text}");
+    assert_eq!(resolved_config(&text).run.max_iterations, 99);
+    assert_eq!(
+        std::fs::read(root.join("metrics.jsonl")).unwrap(),
+        metrics_before
+    );
+    assert_eq!(
+        std::fs::read(root.join("config.toml")).unwrap(),
+        config_before
+    );
+    // Training settings cannot change on resume.
+    let out = run(
+        &["train", "--resume", root_arg, "--envs", "32"],
+        None,
+        ws.path(),
+    );
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("cannot be used with"));
+    // Without --dry-run: the GPU loop is missing.
+    let err = one_line_error(&run(&["train", "--resume", root_arg], None, ws.path()));
+    assert!(err.contains("not built yet"), "{err}");
+}
+
+#[test]
+fn eval_checks_the_checkpoint_then_needs_the_gpu() {
+    let ws = workspace();
+    let motions = ws.path().join("motions");
+    let root = ws.path().join("runs/synth");
+    let config = make_run(&root, &motions, 5);
+    let path = root.join("checkpoints/iter_00000005.safetensors");
+    let path_arg = path.to_str().unwrap();
+    let out = run(
+        &["eval", "--checkpoint", path_arg, "--episodes", "3"],
+        None,
+        ws.path(),
+    );
+    let err = one_line_error(&out);
+    assert!(
+        err.contains("evaluation needs the GPU training loop"),
+        "{err}"
+    );
+    let text = stdout(&out);
+    assert!(text.contains("iter_00000005.safetensors"), "{text}");
+    assert!(
+        text.contains("5 iterations") && text.contains("seed 0"),
+        "{text}"
+    );
+    assert!(
+        text.contains("evaluation           3 x 32 envs x 30 steps, success at 0.9"),
+        "{text}"
+    );
+    // A checkpoint without the policy this configuration builds is refused, naming the tensor.
+    let mut wrong = Checkpoint::load(&path).unwrap();
+    let mut bigger = config.clone();
+    bigger.policy.actor_hidden = vec![64];
+    add_policy(&mut wrong, &bigger);
+    let wrong_path = ws.path().join("wrong.safetensors");
+    wrong.save(&wrong_path).unwrap();
+    let err = one_line_error(&run(
+        &["eval", "--checkpoint", wrong_path.to_str().unwrap()],
+        None,
+        ws.path(),
+    ));
+    assert!(err.contains("tensor `actor.params` is f32 ["), "{err}");
+}
+
+#[test]
+fn every_committed_config_passes_the_dry_run_with_its_clip() {
+    let Some(dir) = motions_dir_from_env() else {
+        println!("note: {MOTIONS_ENV} is not set; skipping the dry runs of the committed configs");
+        return;
+    };
+    let ws = tempfile::tempdir().unwrap();
+    for (name, steps) in CLIP_NAMES.iter().zip([38, 24, 39, 53, 82]) {
+        let out = run(
+            &["train", "--motion", name, "--dry-run"],
+            Some(&dir),
+            ws.path(),
+        );
+        let text = succeeded(&out);
+        assert!(
+            text.contains(&format!(
+                "configuration configs/train/{name}.toml (built in)"
+            )),
+            "{text}"
+        );
+        assert!(
+            text.contains(&format!("32 envs x {steps} steps")),
+            "{name}: {text}"
+        );
+        assert!(
+            text.contains("plan          step for 4096 worlds"),
+            "{text}"
+        );
+        assert_eq!(
+            &resolved_config(&text),
+            &TrainConfig::committed(name).unwrap().1.unwrap()
+        );
+    }
+}

@@ -1,0 +1,389 @@
+//! The run directory, the metrics log and the learning curve, driven through `RunSession` as
+//! the GPU loop will drive it (with made-up statistics in place of the GPU): a run is killed,
+//! resumed, and its log continues with no gap and no duplicate.
+
+use std::io::Write;
+use std::path::Path;
+
+use instantmimic::train::{
+    EvaluationSummary, IterationRecord, IterationStats, MetricsLog, ProgressMode, RunDir,
+    RunSession, StopReason, TrainConfig, TrainError, UpdateStats, curve,
+};
+
+fn config(max_iterations: u64) -> TrainConfig {
+    let mut c = TrainConfig::with_motion("walk");
+    c.env.num_envs = 64;
+    c.ppo.horizon = 8;
+    c.run.max_iterations = max_iterations;
+    c.run.checkpoint_interval = 10;
+    c.run.keep_checkpoints = 2;
+    c.run.time_budget_s = 1e6;
+    c
+}
+
+fn stats(iteration: u64) -> IterationStats {
+    IterationStats {
+        mean_return: iteration as f64 * 0.5,
+        mean_episode_length: (iteration as f64 * 3.0).min(300.0),
+        update: UpdateStats {
+            policy_loss: -0.01,
+            value_loss: 1.0 / iteration as f64,
+            entropy: 20.0,
+            kl: if iteration == 3 { f64::NAN } else { 0.007 },
+            learning_rate: 5e-4,
+        },
+    }
+}
+
+/// An evaluation that succeeds from iteration `success_from` on.
+fn evaluation(iteration: u64, success_from: u64) -> EvaluationSummary {
+    let completed = if iteration >= success_from {
+        30
+    } else {
+        (iteration / 5) as u32
+    };
+    EvaluationSummary {
+        episodes: 32,
+        completed,
+        success_rate: f64::from(completed) / 32.0,
+        success: f64::from(completed) / 32.0 >= 0.9,
+        episode_steps: 38,
+        mean_episode_steps: 20.0,
+        pose_error_m: 0.1,
+        global_mpjpe_m: 0.2,
+        ee_position_error_m: 0.15,
+        ee_orientation_error_rad: 0.4,
+    }
+}
+
+/// Runs iterations the way the GPU loop will, until `stop_after` iterations (a "kill") or a
+/// stop reason. The checkpoint holds one tensor derived from the iteration, so a resume can be
+/// checked to restore the right one.
+fn drive(session: &mut RunSession, stop_after: u64, success_from: u64) -> Option<StopReason> {
+    while session.iteration() < stop_after {
+        session.start_iteration();
+        std::thread::sleep(std::time::Duration::from_millis(1));
+        let step = session.finish_iteration(stats(session.iteration() + 1));
+        let iteration = step.iteration;
+        let eval = step.evaluate.then(|| evaluation(iteration, success_from));
+        let next = session.record(step, eval).unwrap();
+        if next.checkpoint_due {
+            let mut ckpt = session.new_checkpoint().unwrap();
+            ckpt.insert(
+                "actor.params",
+                &[2],
+                vec![iteration as f32, -(iteration as f32)],
+            )
+            .unwrap();
+            session.save_checkpoint(&ckpt).unwrap();
+        }
+        if next.stop.is_some() {
+            return next.stop;
+        }
+    }
+    None
+}
+
+fn iterations(path: &Path) -> Vec<u64> {
+    MetricsLog::read(path)
+        .unwrap()
+        .records
+        .iter()
+        .map(|r| r.iteration)
+        .collect()
+}
+
+#[test]
+fn a_killed_run_resumes_from_its_checkpoint_without_gap_or_duplicate() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("runs/walk");
+    let mut session =
+        RunSession::start_new(&root, &config(60), false, ProgressMode::Quiet).unwrap();
+    assert_eq!(drive(&mut session, 27, 1000), None);
+    drop(session); // killed after iteration 27: the last checkpoint is at 20
+    // ... in the middle of writing line 28.
+    let metrics = root.join("metrics.jsonl");
+    let mut file = std::fs::OpenOptions::new()
+        .append(true)
+        .open(&metrics)
+        .unwrap();
+    file.write_all(b"{\"iteration\":28,\"active_ti").unwrap();
+    drop(file);
+    assert_eq!(iterations(&metrics), (1..=27).collect::<Vec<_>>());
+    let active_at_20 = MetricsLog::read(&metrics).unwrap().records[19].active_time_s;
+
+    let (mut session, checkpoint, warnings) =
+        RunSession::resume(&root, |c| c.run.max_iterations = 45, ProgressMode::Quiet).unwrap();
+    let checkpoint = checkpoint.unwrap();
+    assert_eq!(checkpoint.meta.iteration, 20);
+    assert_eq!(
+        checkpoint.get::<f32>("actor.params", &[2]).unwrap(),
+        [20.0, -20.0]
+    );
+    assert_eq!(checkpoint.meta.frames, 20 * 64 * 8);
+    // The checkpoint's active time is the clock's at iteration 20's end, checkpointing excluded.
+    assert_eq!(checkpoint.meta.active_time_s, active_at_20);
+    assert_eq!(session.iteration(), 20);
+    assert_eq!(session.records().len(), 20);
+    assert!(
+        warnings.iter().any(|w| w.contains("half-written")),
+        "{warnings:?}"
+    );
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("dropped 7 records after iteration 20")),
+        "{warnings:?}"
+    );
+    assert_eq!(iterations(&metrics), (1..=20).collect::<Vec<_>>());
+    // The new budget went to config.toml.
+    let stored = TrainConfig::load(&root.join("config.toml")).unwrap();
+    assert_eq!(stored.run.max_iterations, 45);
+
+    assert_eq!(
+        drive(&mut session, 1000, 1000),
+        Some(StopReason::IterationBudget)
+    );
+    let summary = session.finish(StopReason::IterationBudget).unwrap();
+    let records = MetricsLog::read(&metrics).unwrap().records;
+    assert_eq!(
+        records.iter().map(|r| r.iteration).collect::<Vec<_>>(),
+        (1..=45).collect::<Vec<_>>()
+    );
+    // Time and frames continue from the checkpoint: strictly increasing, no reset.
+    for pair in records.windows(2) {
+        assert!(pair[1].active_time_s > pair[0].active_time_s, "{pair:?}");
+        assert_eq!(pair[1].frames - pair[0].frames, 64 * 8);
+    }
+    assert!(records[20].active_time_s > active_at_20);
+    // Every 5th iteration and the last carry an evaluation; NaN came back as NaN.
+    let evaluated: Vec<u64> = records
+        .iter()
+        .filter(|r| r.evaluation.is_some())
+        .map(|r| r.iteration)
+        .collect();
+    assert_eq!(evaluated, [5, 10, 15, 20, 25, 30, 35, 40, 45]);
+    assert!(records[2].update.kl.is_nan());
+    assert_eq!(summary.iterations, 45);
+    assert_eq!(summary.time_to_success_s, None);
+    // Checkpoints: the last 2 (40 and the final 45).
+    let kept: Vec<u64> = session_checkpoints(&root);
+    assert_eq!(kept, [40, 45]);
+    assert!(root.join("curve.png").is_file());
+    assert!(root.join("summary.json").is_file());
+}
+
+fn session_checkpoints(root: &Path) -> Vec<u64> {
+    let config = TrainConfig::load(&root.join("config.toml")).unwrap();
+    RunDir::inspect_resume(root)
+        .unwrap()
+        .dir
+        .checkpoints(&config)
+        .list()
+        .unwrap()
+        .into_iter()
+        .map(|(i, _)| i)
+        .collect()
+}
+
+#[test]
+fn success_stops_the_run_and_is_its_time_to_success() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("run");
+    let mut session =
+        RunSession::start_new(&root, &config(100), false, ProgressMode::Quiet).unwrap();
+    assert_eq!(drive(&mut session, 1000, 23), Some(StopReason::Success));
+    assert_eq!(session.iteration(), 25);
+    let at_25 = session.records()[24].active_time_s;
+    let summary = session.finish(StopReason::Success).unwrap();
+    assert_eq!(summary.success_iteration, Some(25));
+    assert_eq!(summary.time_to_success_s, Some(at_25));
+    let text = std::fs::read_to_string(root.join("summary.json")).unwrap();
+    let back: instantmimic::train::RunSummary = serde_json::from_str(&text).unwrap();
+    assert_eq!(back, summary);
+    // The final checkpoint is written at the stop, off the 10-iteration interval.
+    assert_eq!(session_checkpoints(&root), [20, 25]);
+}
+
+#[test]
+fn a_new_run_refuses_a_non_empty_directory_unless_told() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("run");
+    let config = config(10);
+    RunSession::start_new(&root, &config, false, ProgressMode::Quiet).unwrap();
+    let err = RunSession::start_new(&root, &config, false, ProgressMode::Quiet)
+        .err()
+        .unwrap();
+    assert!(matches!(err, TrainError::RunDirNotEmpty { .. }), "{err}");
+    let text = err.to_string();
+    assert!(
+        text.contains("is not empty") && text.contains("--resume") && text.contains("--overwrite"),
+        "{text}"
+    );
+    // A foreign file alone also makes it non-empty, and survives an overwrite.
+    std::fs::write(root.join("notes.txt"), "mine").unwrap();
+    let mut session = RunSession::start_new(&root, &config, true, ProgressMode::Quiet).unwrap();
+    drive(&mut session, 3, 1000);
+    assert_eq!(iterations(&root.join("metrics.jsonl")), [1, 2, 3]);
+    assert_eq!(
+        std::fs::read_to_string(root.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    // An empty directory is fine; a file is not a run directory.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    RunSession::start_new(&empty, &config, false, ProgressMode::Quiet).unwrap();
+    let file = dir.path().join("file");
+    std::fs::write(&file, "x").unwrap();
+    assert!(RunDir::check_new(&file, false).is_err());
+}
+
+#[test]
+fn resume_skips_a_corrupt_newest_checkpoint_and_refuses_a_changed_training() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("run");
+    let mut session =
+        RunSession::start_new(&root, &config(100), false, ProgressMode::Quiet).unwrap();
+    drive(&mut session, 30, 1000);
+    drop(session);
+    // Iteration 30's checkpoint is cut short (a disk full after the rename, say).
+    let newest = root.join("checkpoints/iter_00000030.safetensors");
+    let bytes = std::fs::read(&newest).unwrap();
+    std::fs::write(&newest, &bytes[..bytes.len() / 3]).unwrap();
+    // A dry run inspects without changing anything.
+    let inspected = RunDir::inspect_resume(&root).unwrap();
+    assert_eq!(inspected.iteration(), 20);
+    assert_eq!(iterations(&root.join("metrics.jsonl")).len(), 30);
+    assert!(newest.exists());
+
+    // Changing the training (not [run]) is refused.
+    let err = RunSession::resume(&root, |c| c.ppo.epochs = 3, ProgressMode::Quiet)
+        .err()
+        .unwrap();
+    assert!(err.to_string().contains("only [run] settings"), "{err}");
+
+    let (session, checkpoint, warnings) =
+        RunSession::resume(&root, |_| {}, ProgressMode::Quiet).unwrap();
+    assert_eq!(checkpoint.unwrap().meta.iteration, 20);
+    assert_eq!(session.iteration(), 20);
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("skipping checkpoint") && w.contains("iter_00000030")),
+        "{warnings:?}"
+    );
+    assert!(!newest.exists());
+    assert!(
+        root.join("checkpoints/iter_00000030.safetensors.corrupt")
+            .exists()
+    );
+
+    // config.toml edited to train differently from the checkpoint: refused, naming the section.
+    let text = std::fs::read_to_string(root.join("config.toml")).unwrap();
+    std::fs::write(
+        root.join("config.toml"),
+        text.replace("gamma = 0.99", "gamma = 0.98"),
+    )
+    .unwrap();
+    let err = RunDir::inspect_resume(&root).unwrap_err().to_string();
+    assert!(err.contains("different [ppo]"), "{err}");
+}
+
+#[test]
+fn resume_without_a_run_directory_or_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let err = RunDir::inspect_resume(dir.path()).unwrap_err().to_string();
+    assert!(
+        err.contains("not a run directory") && err.contains("config.toml"),
+        "{err}"
+    );
+    // Killed before the first checkpoint: it starts over, the log emptied.
+    let root = dir.path().join("run");
+    let mut session =
+        RunSession::start_new(&root, &config(100), false, ProgressMode::Quiet).unwrap();
+    drive(&mut session, 7, 1000);
+    drop(session);
+    let (mut session, checkpoint, warnings) =
+        RunSession::resume(&root, |_| {}, ProgressMode::Quiet).unwrap();
+    assert!(checkpoint.is_none());
+    assert!(
+        warnings.iter().any(|w| w.contains("starts over")),
+        "{warnings:?}"
+    );
+    assert!(iterations(&root.join("metrics.jsonl")).is_empty());
+    drive(&mut session, 2, 1000);
+    assert_eq!(iterations(&root.join("metrics.jsonl")), [1, 2]);
+}
+
+#[test]
+fn a_damaged_line_before_the_end_is_an_error_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("run");
+    let mut session =
+        RunSession::start_new(&root, &config(100), false, ProgressMode::Quiet).unwrap();
+    drive(&mut session, 4, 1000);
+    let path = root.join("metrics.jsonl");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut lines: Vec<&str> = text.lines().collect();
+    lines[1] = "{\"iteration\": 2, garbage";
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    let err = MetricsLog::read(&path).unwrap_err().to_string();
+    assert!(
+        err.contains("metrics.jsonl line 2: not a metrics record"),
+        "{err}"
+    );
+    // A duplicate iteration is an error too.
+    let text = std::fs::read_to_string(&path).unwrap();
+    let first = text.lines().next().unwrap();
+    std::fs::write(&path, format!("{first}\n{first}\n")).unwrap();
+    let err = MetricsLog::read(&path).unwrap_err().to_string();
+    assert!(
+        err.contains("line 2: iteration 1 follows iteration 1"),
+        "{err}"
+    );
+}
+
+#[test]
+fn the_learning_curve_is_a_png_with_both_series() {
+    let records: Vec<IterationRecord> = (1..=40)
+        .map(|i| IterationRecord {
+            iteration: i,
+            active_time_s: 0.1 * i as f64,
+            frames: 512 * i,
+            frames_per_s: 5120.0,
+            mean_return: 1.0,
+            mean_episode_length: 5.0 * i as f64,
+            update: UpdateStats::default(),
+            evaluation: (i % 5 == 0).then(|| evaluation(i, 30)),
+        })
+        .collect();
+    let png_bytes = curve::learning_curve_png(&records, "walk (seed 0)", 300.0, 0.9).unwrap();
+    let decoder = png::Decoder::new(std::io::Cursor::new(png_bytes));
+    let mut reader = decoder.read_info().unwrap();
+    let mut pixels = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut pixels).unwrap();
+    assert_eq!(
+        (info.width, info.height),
+        (curve::CURVE_WIDTH, curve::CURVE_HEIGHT)
+    );
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    let count = |c: plotters::style::RGBColor| {
+        pixels[..info.buffer_size()]
+            .chunks_exact(3)
+            .filter(|p| p[0] == c.0 && p[1] == c.1 && p[2] == c.2)
+            .count()
+    };
+    // Both lines are drawn (hundreds of pixels each, not a stray legend swatch).
+    assert!(
+        count(curve::EPISODE_LENGTH_COLOR) > 500,
+        "{}",
+        count(curve::EPISODE_LENGTH_COLOR)
+    );
+    assert!(
+        count(curve::SUCCESS_RATE_COLOR) > 500,
+        "{}",
+        count(curve::SUCCESS_RATE_COLOR)
+    );
+    // No records at all still draws (a run killed before its first iteration).
+    assert!(curve::learning_curve_png(&[], "empty", 300.0, 0.9).is_ok());
+}
