@@ -9,12 +9,14 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=${INSTANTMIMIC_VENV:-.venv}
+# Relative to the repository root unless absolute.
+case $venv in /*) ;; *) venv=$PWD/$venv ;; esac
 if [ ! -x "$venv/bin/python" ] || ! cmp -s kernels_py/requirements.txt "$venv/requirements.txt"; then
   python3 -m venv "$venv"
   "$venv/bin/pip" install --quiet --disable-pip-version-check -r kernels_py/requirements.txt
   cp kernels_py/requirements.txt "$venv/requirements.txt"
 fi
-INSTANTMIMIC_BUILD_PYTHON="$PWD/$venv/bin/python"
+INSTANTMIMIC_BUILD_PYTHON="$venv/bin/python"
 PTXAS=$("$INSTANTMIMIC_BUILD_PYTHON" -c 'import nvidia.cu13, pathlib; print(pathlib.Path(nvidia.cu13.__path__[0]) / "bin" / "ptxas")')
 export INSTANTMIMIC_BUILD_PYTHON PTXAS
 export INSTANTMIMIC_MOTIONS=${INSTANTMIMIC_MOTIONS:-$(cd .. && pwd)/shared/data/motions}

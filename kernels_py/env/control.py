@@ -6,7 +6,7 @@ are recomputed each substep instead of stored: a few transcendental functions pe
 than a round trip of a target buffer through memory, and the kernel stays one launch.
 
 One thread per (env, joint). The per-joint layout comes from the character
-(`src/env/control.rs: PdControl`): kind (0 ball, 1 hinge), qpos address, dof address (motor
+(`src/env/layout.rs: JointLayout`): kind (0 ball, 1 hinge), qpos address, dof address (motor
 `dof - 6` drives `qvel[dof]`, motors in dof order), Kp, torque limit, action scale, hinge center.
 """
 

@@ -3,7 +3,8 @@
 `observe` writes one raw row per env: everything in the heading frame of the simulated root,
 positions relative to the root, rotations as 6D (the first two columns of the rotation matrix).
 Which optional blocks are present and how many future frames are read are run-time arguments,
-so the observation size follows the config with no rebuild (`src/env/observe.rs` computes it).
+so the observation size follows the config with no rebuild (`src/env/layout.rs:
+observation_size` computes it).
 
 Normalization keeps per-dimension running moments on the GPU in float64:
 `observation_moments` adds the batch's sums (a 2-D launch over env chunks x dimensions, so that

@@ -1,0 +1,122 @@
+//! Every env kernel on Warp's CPU device against its f64 reference (tests/kernel_checks/; the
+//! same cases run on a GPU in tests/gpu_env_kernels.rs). Runs when `INSTANTMIMIC_BUILD_PYTHON`
+//! names the build-step Python (tests/run.sh sets it); otherwise the kernel tests skip with a
+//! note. `-- --nocapture` prints the error of every case and the largest per output.
+
+mod kernel_checks;
+
+use std::collections::BTreeSet;
+
+use instantmimic::env::KERNELS;
+use kernel_checks::program::Step;
+use kernel_checks::{Check, Fixture, cpu, run_checks};
+
+fn run_on_cpu(kernel: &str, checks: impl FnOnce(&Fixture) -> Vec<Check>) {
+    let Some(python) = cpu::build_python() else {
+        return;
+    };
+    let fixture = Fixture::load();
+    run_checks(kernel, checks(&fixture), |programs| {
+        cpu::run(&python, kernel, programs)
+    });
+}
+
+/// All check families, as the two executions run them.
+fn all_checks(fixture: &Fixture) -> Vec<Check> {
+    use kernel_checks::{control, normalize, observe, policy, reset, tracking};
+    [
+        control::checks(fixture),
+        tracking::checks(fixture),
+        reset::reset_checks(fixture),
+        reset::statistics_checks(fixture),
+        observe::checks(fixture),
+        normalize::moments_checks(fixture),
+        normalize::normalize_checks(fixture),
+        policy::linear_checks(fixture),
+        policy::sample_checks(fixture),
+    ]
+    .into_iter()
+    .flatten()
+    .collect()
+}
+
+/// Runs without Python: every case fits its kernel's generated ABI, and every env kernel but
+/// the reference lookup (checked against `ReferenceTable::lookup` by gpu_reference_table.rs) has
+/// a check.
+#[test]
+fn every_case_fits_its_kernel_and_every_kernel_is_checked() {
+    let fixture = Fixture::load();
+    let mut launched = BTreeSet::new();
+    for check in all_checks(&fixture) {
+        let p = &check.program;
+        p.validate().unwrap_or_else(|e| panic!("{e}"));
+        for step in &p.steps {
+            if let Step::Launch { abi, .. } = step {
+                launched.insert(abi.name);
+            }
+        }
+    }
+    let expected: BTreeSet<&str> = KERNELS
+        .iter()
+        .map(|k| k.name)
+        .filter(|&name| name != "lookup_reference")
+        .collect();
+    assert_eq!(
+        launched, expected,
+        "kernels with a check vs kernels in the manifest"
+    );
+}
+
+#[test]
+fn pd_control_matches_the_f64_reference() {
+    run_on_cpu("pd_control", kernel_checks::control::checks);
+}
+
+#[test]
+fn reward_termination_matches_the_f64_reference() {
+    run_on_cpu("reward_termination", kernel_checks::tracking::checks);
+}
+
+#[test]
+fn reset_masked_matches_the_f64_reference() {
+    run_on_cpu("reset_masked", kernel_checks::reset::reset_checks);
+}
+
+#[test]
+fn phase_statistics_update_matches_the_f64_reference() {
+    run_on_cpu(
+        "phase_statistics_update",
+        kernel_checks::reset::statistics_checks,
+    );
+}
+
+#[test]
+fn observe_matches_the_f64_reference_block_by_block() {
+    run_on_cpu("observe", kernel_checks::observe::checks);
+}
+
+#[test]
+fn observation_moments_and_merge_match_two_pass_f64_statistics() {
+    run_on_cpu(
+        "observation_moments",
+        kernel_checks::normalize::moments_checks,
+    );
+}
+
+#[test]
+fn observation_normalize_matches_the_f64_reference() {
+    run_on_cpu(
+        "observation_normalize",
+        kernel_checks::normalize::normalize_checks,
+    );
+}
+
+#[test]
+fn linear_layers_match_the_f64_reference() {
+    run_on_cpu("linear_elu / linear", kernel_checks::policy::linear_checks);
+}
+
+#[test]
+fn gaussian_sample_matches_the_f64_reference() {
+    run_on_cpu("gaussian_sample", kernel_checks::policy::sample_checks);
+}

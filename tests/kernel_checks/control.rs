@@ -1,0 +1,194 @@
+//! `pd_control` (kernels_py/env/control.py; docs/env.md, "Actions and PD control").
+//!
+//! Reference: ball joint j, `ctrl = clamp(kp * qlog(conj(q) * qexp(s a)), +-limit)`; hinge,
+//! `ctrl = clamp(kp * (center + s a - theta), +-limit)`, with `s = action_scale * scale_j`.
+//! Half the envs are near their targets (errors below the torque limit), half far (clamped).
+
+use instantmimic::env::PD_CONTROL;
+use instantmimic::env::layout::{BALL, JointLayout};
+
+use super::compare::{Report, wide};
+use super::physics::{NQ, NU};
+use super::program::{Arg, Program, Scalar};
+use super::quat::{qexp, qlog, quat, quat_at, wxyz};
+use super::rng::Sampler;
+use super::{Check, Fixture, nan_f32};
+
+/// The relative rotation between a joint and its target stays below this (rad), far from pi
+/// where the shorter rotation flips sign (f32 and f64 could pick different sides).
+const MAX_ERROR_ANGLE: f64 = 3.0;
+
+/// The f64 torques of every env, `[n, 28]`, and how many ball / hinge values are clamped.
+pub fn reference(
+    layout: &JointLayout,
+    actions: &[f32],
+    qpos: &[f32],
+    action_scale: f32,
+) -> (Vec<f64>, [usize; 4]) {
+    let n = actions.len() / NU;
+    let mut ctrl = vec![0.0; n * NU];
+    // [ball clamped, ball free, hinge clamped, hinge free]
+    let mut counts = [0usize; 4];
+    for e in 0..n {
+        let a = |m: usize| f64::from(actions[e * NU + m]);
+        for j in 0..layout.num_joints() {
+            let m = layout.dof[j] as usize - 6;
+            let addr = e * NQ + layout.qpos[j] as usize;
+            let s = f64::from(action_scale) * f64::from(layout.scale[j]);
+            let (kp, limit) = (f64::from(layout.kp[j]), f64::from(layout.limit[j]));
+            let clamped = |v: f64, counts: &mut [usize; 4], base: usize| {
+                if v.abs() > limit {
+                    counts[base] += 1;
+                } else {
+                    counts[base + 1] += 1;
+                }
+                v.clamp(-limit, limit)
+            };
+            if layout.kind[j] == BALL {
+                let target = qexp([s * a(m), s * a(m + 1), s * a(m + 2)]);
+                let q = quat_at(qpos, addr);
+                let e_vec = qlog(&(q.inverse() * target));
+                assert!(
+                    e_vec.norm() < MAX_ERROR_ANGLE,
+                    "case construction: joint {j} of env {e} is {} rad from its target",
+                    e_vec.norm()
+                );
+                for i in 0..3 {
+                    ctrl[e * NU + m + i] = clamped(kp * e_vec[i], &mut counts, 0);
+                }
+            } else {
+                let target = f64::from(layout.center[j]) + s * a(m);
+                ctrl[e * NU + m] = clamped(kp * (target - f64::from(qpos[addr])), &mut counts, 2);
+            }
+        }
+    }
+    (ctrl, counts)
+}
+
+/// Random actions and joint positions for `n` envs; even envs near their targets.
+fn inputs(
+    layout: &JointLayout,
+    n: usize,
+    action_scale: f32,
+    rng: &mut Sampler,
+) -> (Vec<f32>, Vec<f32>) {
+    let mut actions = vec![0.0f32; n * NU];
+    let mut qpos = vec![0.0f32; n * NQ];
+    // Ball joint actions up to this keep |s a| <= 1.22 rad (with joints up to 1.2 rad away, the
+    // error stays below MAX_ERROR_ANGLE).
+    let amax = 0.7 / f64::from(action_scale);
+    for e in 0..n {
+        let near = e % 2 == 0;
+        for v in &mut qpos[e * NQ..e * NQ + 3] {
+            *v = rng.uniform(-2.0, 2.0) as f32;
+        }
+        let root = quat([rng.normal(), rng.normal(), rng.normal(), rng.normal()]);
+        for (c, v) in wxyz(&root).iter().enumerate() {
+            qpos[e * NQ + 3 + c] = *v as f32;
+        }
+        for j in 0..layout.num_joints() {
+            let m = layout.dof[j] as usize - 6;
+            let addr = e * NQ + layout.qpos[j] as usize;
+            let s = f64::from(action_scale) * f64::from(layout.scale[j]);
+            if layout.kind[j] == BALL {
+                let a = [0, 1, 2].map(|_| rng.uniform(-amax, amax));
+                for i in 0..3 {
+                    actions[e * NU + m + i] = a[i] as f32;
+                }
+                let target = qexp(a.map(|x| s * (x as f32) as f64));
+                let q = if near {
+                    target * qexp(rng.normal3(0.03))
+                } else {
+                    let r = rng.normal3(1.0);
+                    let len = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+                    let angle = rng.uniform(0.0, 1.2);
+                    qexp(r.map(|x| x * angle / len))
+                };
+                for (c, v) in wxyz(&q).iter().enumerate() {
+                    qpos[addr + c] = *v as f32;
+                }
+            } else {
+                let a = rng.uniform(-1.2, 1.2);
+                actions[e * NU + m] = a as f32;
+                let center = f64::from(layout.center[j]);
+                let half = f64::from(layout.scale[j]);
+                let theta = if near {
+                    center + s * a + 0.05 * rng.normal()
+                } else {
+                    center + half * rng.uniform(-1.1, 1.1)
+                };
+                qpos[addr] = theta as f32;
+            }
+        }
+    }
+    (actions, qpos)
+}
+
+fn case(fx: &Fixture, n: usize, action_scale: f32, seed: u64) -> Check {
+    let layout = fx.layout.clone();
+    let mut rng = Sampler::new(seed);
+    let (actions, qpos) = inputs(&layout, n, action_scale, &mut rng);
+    let j = layout.num_joints();
+    let mut p = Program::new(format!(
+        "pd_control: {n} envs x {j} joints, action_scale {action_scale}"
+    ));
+    let args = vec![
+        p.f32("actions", &[n, NU], actions),
+        p.f32("qpos", &[n, NQ], qpos),
+        p.i32("joint_kind", &[j], layout.kind.clone()),
+        p.i32("joint_qpos", &[j], layout.qpos.clone()),
+        p.i32("joint_dof", &[j], layout.dof.clone()),
+        p.f32("joint_kp", &[j], layout.kp.clone()),
+        p.f32("joint_limit", &[j], layout.limit.clone()),
+        p.f32("joint_scale", &[j], layout.scale.clone()),
+        p.f32("joint_center", &[j], layout.center.clone()),
+        Arg::Scalar(Scalar::F32(action_scale)),
+        p.f32("ctrl", &[n, NU], nan_f32(n * NU)),
+    ];
+    p.launch(&PD_CONTROL, n * j, args);
+    Check::new(p, move |p, out| {
+        let mut r = Report::new(&p.name);
+        let (expected, counts) = reference(
+            &layout,
+            p.input_f32("actions"),
+            p.input_f32("qpos"),
+            action_scale,
+        );
+        let got = wide(out.f32("ctrl"));
+        r.relative("ctrl (all motors)", &got, &expected);
+        let ball_motors: Vec<usize> = (0..layout.num_joints())
+            .filter(|&j| layout.kind[j] == BALL)
+            .flat_map(|j| {
+                let first = layout.dof[j] as usize - 6;
+                first..first + 3
+            })
+            .collect();
+        let hinge_motors: Vec<usize> = (0..layout.num_joints())
+            .filter(|&j| layout.kind[j] != BALL)
+            .map(|j| layout.dof[j] as usize - 6)
+            .collect();
+        for (label, motors) in [
+            ("ctrl (ball joints)", &ball_motors),
+            ("ctrl (hinges)", &hinge_motors),
+        ] {
+            let pick = |v: &[f64]| -> Vec<f64> {
+                (0..v.len() / NU)
+                    .flat_map(|e| motors.iter().map(move |&m| v[e * NU + m]))
+                    .collect()
+            };
+            r.relative(label, &pick(&got), &pick(&expected));
+        }
+        r.check(
+            counts.iter().all(|&c| c > 0),
+            format!(
+                "coverage: ball values clamped {} / free {}, hinge values clamped {} / free {}",
+                counts[0], counts[1], counts[2], counts[3]
+            ),
+        );
+        r
+    })
+}
+
+pub fn checks(fx: &Fixture) -> Vec<Check> {
+    vec![case(fx, 64, 1.0, 11), case(fx, 37, 0.5, 12)]
+}
