@@ -23,7 +23,9 @@ fn run_on_cpu(kernel: &str, checks: impl FnOnce(&Fixture) -> Vec<Check>) {
 
 /// All check families, as the two executions run them.
 fn all_checks(fixture: &Fixture) -> Vec<Check> {
-    use kernel_checks::{control, normalize, observe, policy, reset, tracking};
+    use kernel_checks::{
+        control, evaluate, normalize, observe, policy, reset, statistics, tracking,
+    };
     [
         control::checks(fixture),
         tracking::checks(fixture),
@@ -34,6 +36,8 @@ fn all_checks(fixture: &Fixture) -> Vec<Check> {
         normalize::normalize_checks(fixture),
         policy::linear_checks(fixture),
         policy::sample_checks(fixture),
+        evaluate::checks(fixture),
+        statistics::checks(fixture),
     ]
     .into_iter()
     .flatten()
@@ -119,4 +123,14 @@ fn linear_layers_match_the_f64_reference() {
 #[test]
 fn gaussian_sample_matches_the_f64_reference() {
     run_on_cpu("gaussian_sample", kernel_checks::policy::sample_checks);
+}
+
+#[test]
+fn evaluation_accumulate_matches_the_f64_reference() {
+    run_on_cpu("evaluation_accumulate", kernel_checks::evaluate::checks);
+}
+
+#[test]
+fn rollout_statistics_match_the_f64_reference() {
+    run_on_cpu("episode_statistics", kernel_checks::statistics::checks);
 }

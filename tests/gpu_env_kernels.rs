@@ -293,6 +293,37 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             &a.array(10),
             &a.array(11),
         ),
+        "evaluation_accumulate" => kernels.evaluation_accumulate(
+            s,
+            dim,
+            &a.array(0),
+            &a.array(1),
+            &a.array(2),
+            &a.array(3),
+            &a.array(4),
+            a.i32(5),
+            &a.array(6),
+            &a.array(7),
+            &a.array(8),
+            &a.array(9),
+            &a.array(10),
+            &a.array(11),
+        ),
+        "episode_statistics" => kernels.episode_statistics(
+            s,
+            dim,
+            a.i32(0),
+            &a.array(1),
+            &a.array(2),
+            &a.array(3),
+            &a.array(4),
+            &a.array(5),
+            &a.array(6),
+            &a.array(7),
+        ),
+        "rollout_statistics" => {
+            kernels.rollout_statistics(s, dim, a.i32(0), &a.array(1), &a.array(2))
+        }
         other => panic!("no GPU dispatch for kernel {other}"),
     };
     result.unwrap_or_else(|e| panic!("launching {kernel}: {e}"));
@@ -412,4 +443,14 @@ fn gpu_linear_layers_match_the_f64_reference() {
 #[test]
 fn gpu_gaussian_sample_matches_the_f64_reference() {
     run_on_gpu("gaussian_sample", kernel_checks::policy::sample_checks);
+}
+
+#[test]
+fn gpu_evaluation_accumulate_matches_the_f64_reference() {
+    run_on_gpu("evaluation_accumulate", kernel_checks::evaluate::checks);
+}
+
+#[test]
+fn gpu_rollout_statistics_match_the_f64_reference() {
+    run_on_gpu("episode_statistics", kernel_checks::statistics::checks);
 }

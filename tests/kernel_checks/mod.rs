@@ -16,6 +16,7 @@
 pub mod compare;
 pub mod control;
 pub mod cpu;
+pub mod evaluate;
 pub mod normalize;
 pub mod observe;
 pub mod physics;
@@ -24,6 +25,7 @@ pub mod program;
 pub mod quat;
 pub mod reset;
 pub mod rng;
+pub mod statistics;
 pub mod tracking;
 
 use instantmimic::env::layout::JointLayout;

@@ -161,6 +161,7 @@ impl StructArg {
                 ("horizon", I32(p.horizon)),
                 ("dt", F32(p.dt)),
                 ("noise_std", F32(p.noise_std)),
+                ("start_time", F32(p.start_time)),
             ],
             StructArg::Observation(p) => vec![
                 ("future_frames", I32(p.future_frames)),

@@ -56,7 +56,11 @@ pub fn reference_reset(
     let l = HUMANOID_LAYOUT;
     let u = rng.randf();
     let v = rng.randf();
-    let (bin, t0) = start_time(clip.table.data(), cdf, params.dt, u, v);
+    let (bin, mut t0) = start_time(clip.table.data(), cdf, params.dt, u, v);
+    if params.start_time >= 0.0 {
+        // Evaluation: a fixed start time (the draws above still happen, in the same order).
+        t0 = params.start_time;
+    }
     let row = clip.table.lookup(f64::from(t0));
     let sigma = f64::from(params.noise_std);
     let mut qpos = row[l.qpos..l.qpos + NQ].to_vec();
@@ -110,6 +114,8 @@ struct ResetCase {
     iteration: i32,
     t: i32,
     seed: u64,
+    /// Some(t): every reset env starts at t (evaluation), else from the CDF (training).
+    fixed_start: Option<f32>,
 }
 
 fn rows_of(v: &[f32], width: usize, envs: &[usize]) -> Vec<f32> {
@@ -151,6 +157,7 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         horizon: 32,
         dt: super::CONTROL_DT as f32,
         noise_std: c.noise_std,
+        start_time: c.fixed_start.unwrap_or(-1.0),
     };
     // Envs that stay: arbitrary values that must survive bit for bit. Envs reset: poison.
     let fill = |width: usize, rng: &mut Sampler| -> Vec<f32> {
@@ -190,9 +197,10 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         "reset_masked: {clip_name}, {n} envs, {:.0}% done, noise {}, {}",
         100.0 * c.done_fraction,
         c.noise_std,
-        match c.one_bin {
-            Some(b) => format!("all mass in bin {b} of {}", c.bins),
-            None => format!("random CDF over {} bins", c.bins),
+        match (c.fixed_start, c.one_bin) {
+            (Some(t), _) => format!("fixed start time {t} s"),
+            (None, Some(b)) => format!("all mass in bin {b} of {}", c.bins),
+            (None, None) => format!("random CDF over {} bins", c.bins),
         }
     ));
     let args = vec![
@@ -313,7 +321,12 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         let (d, dt) = (data[HEADER_DURATION], params.dt);
         let span = if clip.wraps() { d } else { (d - dt).max(0.0) };
         let width = span / c.bins as f32;
-        if let Some(b) = c.one_bin {
+        if let Some(start) = c.fixed_start {
+            r.check(
+                got_t0.iter().all(|&t| t == start),
+                format!("every start time is the fixed {start} s"),
+            );
+        } else if let Some(b) = c.one_bin {
             let inside = got_t0.iter().all(|&t| {
                 t >= b as f32 * width * (1.0 - 1e-6) && t <= (b + 1) as f32 * width * (1.0 + 1e-6)
             });
@@ -494,6 +507,7 @@ pub fn reset_checks(fx: &Fixture) -> Vec<Check> {
         iteration: 3,
         t: 5,
         seed: 31,
+        fixed_start: None,
     };
     vec![
         case(fx, base),
@@ -539,6 +553,29 @@ pub fn reset_checks(fx: &Fixture) -> Vec<Check> {
                 iteration: 77,
                 t: 17,
                 seed: 35,
+                ..base
+            },
+        ),
+        // Evaluation: every env at the clip's start, fixed noise stream (iteration 0).
+        case(
+            fx,
+            ResetCase {
+                done_fraction: 1.0,
+                iteration: 0,
+                t: 0,
+                seed: 36,
+                fixed_start: Some(0.0),
+                ..base
+            },
+        ),
+        case(
+            fx,
+            ResetCase {
+                clip_index: 1,
+                noise_std: 0.0,
+                one_bin: Some(3),
+                seed: 37,
+                fixed_start: Some(0.37),
                 ..base
             },
         ),
