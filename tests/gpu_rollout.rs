@@ -174,7 +174,7 @@ fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
     let motion = motion();
     let training = Rollout::new(&gpu, &store, &motion, &config).expect("training rollout");
     let evaluation =
-        Rollout::evaluation(&training, &store, &motion, &config, 32).expect("evaluation rollout");
+        Rollout::evaluation(&training, &store, &motion, &config).expect("evaluation rollout");
     assert_eq!(
         evaluation.policy.actor_parameters().device_ptr(),
         training.policy.actor_parameters().device_ptr(),
@@ -187,10 +187,15 @@ fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
     for round in 0..2 {
         evaluation.reset_all().expect("reset");
         let start = evaluation.state.ref_time.download().expect("ref_time");
-        assert!(
-            start.iter().all(|t| *t == 0.0),
-            "evaluation episodes start at the clip's start: {start:?}"
-        );
+        let cycle = motion.clip().duration() as f32;
+        for (i, t) in start.iter().enumerate() {
+            // The default `run.eval_start` spreads the envs over a looping clip's cycle.
+            let expected = cycle * i as f32 / start.len() as f32;
+            assert!(
+                (t - expected).abs() <= 1e-5,
+                "env {i} starts at {t}, expected {expected}"
+            );
+        }
         graph.launch(gpu.stream()).expect("launch");
         gpu.synchronize().expect("evaluation replay");
         let scores = evaluation
@@ -211,7 +216,11 @@ fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
                 "{s:?} (horizon {horizon})"
             );
             if s.completed {
-                assert_eq!(s.steps, horizon, "{s:?}: completed before the clip's end");
+                // Looping clips (all five) end by max_episode_steps = the horizon.
+                assert_eq!(
+                    s.steps, horizon,
+                    "{s:?}: completed before the episode's end"
+                );
             } else {
                 assert!(
                     s.steps > config.env.grace_steps,

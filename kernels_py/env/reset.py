@@ -39,8 +39,10 @@ class ResetParams:
     # Reference state initialization noise (rad; velocities get 10x).
     noise_std: wp.float32
     # Start time (s) of every reset episode; negative: drawn from the adaptive phase CDF
-    # (training). Evaluation starts every env at the clip's start.
+    # (training). Evaluation: env n of N starts at `start_time + start_spread * n / N` (spread
+    # over a looping clip's cycle, or all at the start with a spread of 0).
     start_time: wp.float32
+    start_spread: wp.float32
 
 
 @wp.func
@@ -79,8 +81,8 @@ def reset_masked(
     episode_step: wp.array(dtype=wp.int32),
     actions: wp.array2d(dtype=wp.float32),
 ):
-    """For every env n with done[n] != 0: a start time t0 from the adaptive phase CDF (or
-    `params.start_time` when it is not negative), qpos = the
+    """For every env n with done[n] != 0: a start time t0 from the adaptive phase CDF (or, when
+    `params.start_time` is not negative, `start_time + start_spread * n / N`), qpos = the
     reference qpos at t0 with noise (root orientation and ball joints `q * qexp(sigma g)`, hinges
     `theta + sigma g`, root position exact), qvel = reference qvel + 10 sigma g, ctrl, warm start
     and last action zeroed, ref_time = t0, episode_step = 0. Random stream: seed, offset
@@ -93,8 +95,8 @@ def reset_masked(
     state = wp.rand_init(params.seed, offset)
     u = wp.randf(state)
     v = wp.randf(state)
-    t0 = params.start_time
-    if t0 < 0.0:
+    t0 = params.start_time + params.start_spread * wp.float32(n) / wp.float32(num_envs)
+    if params.start_time < 0.0:
         t0 = sample_start_time(u, v, table, phase_cdf, params.dt)
     at = reference_locate(table, t0)
     sigma = params.noise_std

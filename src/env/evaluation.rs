@@ -6,8 +6,6 @@
 //! the device and the host reads them once, after the rollout ([`EpisodeScores::download`]).
 
 use crate::cuda::Gpu;
-use crate::motion::ReferenceTable;
-use crate::motion::clip::LoopMode;
 
 use super::{DeviceArray, DeviceArray2, EnvError};
 
@@ -95,76 +93,4 @@ pub struct EpisodeScore {
     pub ee_rotation_error: f64,
     /// Sum of rewards.
     pub episode_return: f64,
-}
-
-/// Control steps of one evaluation episode started at the clip's start: until `reward_termination`
-/// truncates a clamped clip (the first step k with `k dt + dt > duration`, with `ref_time` advanced
-/// by repeated f32 additions as the kernel does), or one cycle of a looping clip.
-pub fn episode_steps(table: &ReferenceTable, control_dt: f64) -> usize {
-    let duration = table.duration() as f32;
-    let dt = control_dt as f32;
-    match table.loop_mode() {
-        LoopMode::Wrap => ((f64::from(duration) / control_dt).round() as usize).max(1),
-        LoopMode::Clamp => {
-            let mut t = 0.0f32;
-            let mut steps = 0;
-            loop {
-                steps += 1;
-                t += dt;
-                if t + dt > duration || steps >= 1 << 20 {
-                    return steps;
-                }
-            }
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::motion::{Character, SyntheticMotion};
-
-    fn table(loop_mode: LoopMode, frames: usize, dt: f64) -> ReferenceTable {
-        let character = Character::humanoid().expect("humanoid");
-        let motion = SyntheticMotion {
-            frames,
-            frame_dt: 1.0 / 30.0,
-            loop_mode,
-            ..SyntheticMotion::default()
-        }
-        .reference_motion(&character)
-        .expect("synthetic clip");
-        ReferenceTable::build(&motion, dt).expect("table")
-    }
-
-    #[test]
-    fn a_clamped_clip_ends_where_the_termination_kernel_truncates_it() {
-        for (frames, dt) in [
-            (31, 1.0 / 30.0),
-            (52, 1.0 / 30.0),
-            (40, 1.0 / 60.0),
-            (17, 0.04),
-        ] {
-            let table = table(LoopMode::Clamp, frames, dt);
-            let steps = episode_steps(&table, dt);
-            let duration = table.duration();
-            // Step k truncates when k dt + dt > duration (tracking.py); not before.
-            let k = steps as f64;
-            assert!(
-                k * dt + dt > duration - 1e-6,
-                "{frames} frames: {steps} steps"
-            );
-            assert!(
-                (k - 1.0) * dt + dt <= duration + 1e-6,
-                "{frames} frames: {steps} steps"
-            );
-        }
-    }
-
-    #[test]
-    fn a_looping_clip_is_scored_over_one_cycle() {
-        let dt = 1.0 / 30.0;
-        let table = table(LoopMode::Wrap, 31, dt);
-        assert_eq!(episode_steps(&table, dt), 30);
-    }
 }

@@ -216,6 +216,7 @@ pub fn reset_params(config: &TrainConfig, dt: f64) -> ResetParams {
         noise_std: config.env.motion_noise_std,
         // Training draws every start time from the adaptive phase CDF.
         start_time: -1.0,
+        start_spread: 0.0,
     }
 }
 

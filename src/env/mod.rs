@@ -27,7 +27,7 @@ mod statistics;
 pub use abi::{ArgBuffer, Element, KernelAbi, ParamAbi, ParamKind, ScalarType, WarpStruct};
 pub use array::{DeviceArray, DeviceArray2, DeviceArray3, DeviceArray4};
 pub use error::EnvError;
-pub use evaluation::{COMPLETED, EpisodeScore, EpisodeScores, FAILED, RUNNING, episode_steps};
+pub use evaluation::{COMPLETED, EpisodeScore, EpisodeScores, FAILED, RUNNING};
 pub use phases::{Phase, PhaseEvents, PhaseRecorder};
 pub use reference::DeviceReferenceTable;
 pub use rollout::{EpisodeState, PhysicsState, Rollout, RolloutError, RolloutStorage};

@@ -12,12 +12,13 @@ use std::sync::Arc;
 use thiserror::Error;
 
 use crate::cuda::{CudaError, Gpu, Graph, Stream};
+use crate::motion::LoopMode;
 use crate::motion::{ReferenceMotion, ReferenceTable};
 use crate::plan::{PlanStore, Simulation, SimulationError};
 use crate::ppo::{ActStorage, GaussianPolicy, PolicyError};
-use crate::train::TrainConfig;
+use crate::train::{EvalStart, TrainConfig, evaluation_steps};
 
-use super::evaluation::{EpisodeScores, episode_steps};
+use super::evaluation::EpisodeScores;
 use super::layout::{
     DeviceJointLayout, JointLayout, observation_params, observation_size, reset_params,
     tracking_params,
@@ -172,21 +173,22 @@ impl Rollout {
         Rollout::build(gpu, store, motion, config, None)
     }
 
-    /// The evaluation rollout of `training` on `num_envs` worlds (a step plan for that count
-    /// must exist): the same motion, kernels and policy parameters (shared, not copied), the
-    /// training rollout's normalization statistics read but never updated, mean actions, every
-    /// env reset to the clip's start with the training config's noise drawn from a fixed stream
-    /// (the same initial states at every evaluation), and a horizon of one whole clip (for a
-    /// looping clip, one cycle), so that each env plays exactly one episode unless it fails.
+    /// The evaluation rollout of `training` (the paper's protocol, config `[run]`) on
+    /// `run.eval_envs` worlds (a step plan for that count must exist): the same motion, kernels
+    /// and policy parameters (shared, not copied), the training rollout's normalization
+    /// statistics read but never updated, mean actions, no reset noise, env i of n starting at
+    /// i/n of a looping clip's cycle (`run.eval_start = "spread"`) or every env at the clip's
+    /// start, and a horizon of one episode (`evaluation_steps`: one pass of the clip), so that
+    /// each env plays exactly one episode unless it fails.
     pub fn evaluation(
         training: &Rollout,
         store: &PlanStore,
         motion: &ReferenceMotion,
         config: &TrainConfig,
-        num_envs: u32,
     ) -> Result<Rollout, RolloutError> {
         let mut config = config.clone();
-        config.env.num_envs = num_envs;
+        config.env.num_envs = config.run.eval_envs;
+        config.env.motion_noise_std = 0.0;
         Rollout::build(&training.gpu, store, motion, &config, Some(training))
     }
 
@@ -238,9 +240,13 @@ impl Rollout {
                         training.observation_size()
                     )));
                 }
-                let steps = episode_steps(&host_table, control_dt);
+                let steps = evaluation_steps(config, host_table.duration(), control_dt) as usize;
                 tracking.max_episode_steps = steps as i32;
                 reset.start_time = 0.0;
+                reset.start_spread = match (config.run.eval_start, host_table.loop_mode()) {
+                    (EvalStart::Spread, LoopMode::Wrap) => host_table.duration() as f32,
+                    _ => 0.0,
+                };
                 reset.horizon = steps as i32;
                 (
                     Arc::clone(&training.kernels),

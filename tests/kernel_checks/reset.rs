@@ -51,6 +51,7 @@ pub fn reference_reset(
     layout: &JointLayout,
     cdf: &[f32],
     params: &ResetParams,
+    env: (usize, usize),
     rng: &mut WarpRandom,
 ) -> ResetState {
     let l = HUMANOID_LAYOUT;
@@ -58,8 +59,10 @@ pub fn reference_reset(
     let v = rng.randf();
     let (bin, mut t0) = start_time(clip.table.data(), cdf, params.dt, u, v);
     if params.start_time >= 0.0 {
-        // Evaluation: a fixed start time (the draws above still happen, in the same order).
-        t0 = params.start_time;
+        // Evaluation: fixed start times spread over the envs (the draws above still happen, in
+        // the same order), in the kernel's f32 arithmetic.
+        let (e, n) = env;
+        t0 = params.start_time + params.start_spread * e as f32 / n as f32;
     }
     let row = clip.table.lookup(f64::from(t0));
     let sigma = f64::from(params.noise_std);
@@ -114,8 +117,9 @@ struct ResetCase {
     iteration: i32,
     t: i32,
     seed: u64,
-    /// Some(t): every reset env starts at t (evaluation), else from the CDF (training).
-    fixed_start: Option<f32>,
+    /// Some((t, spread)): env e of n starts at t + spread e / n (evaluation), else from the CDF
+    /// (training).
+    fixed_start: Option<(f32, f32)>,
 }
 
 fn rows_of(v: &[f32], width: usize, envs: &[usize]) -> Vec<f32> {
@@ -157,7 +161,8 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         horizon: 32,
         dt: super::CONTROL_DT as f32,
         noise_std: c.noise_std,
-        start_time: c.fixed_start.unwrap_or(-1.0),
+        start_time: c.fixed_start.map_or(-1.0, |(t, _)| t),
+        start_spread: c.fixed_start.map_or(0.0, |(_, s)| s),
     };
     // Envs that stay: arbitrary values that must survive bit for bit. Envs reset: poison.
     let fill = |width: usize, rng: &mut Sampler| -> Vec<f32> {
@@ -198,7 +203,7 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         100.0 * c.done_fraction,
         c.noise_std,
         match (c.fixed_start, c.one_bin) {
-            (Some(t), _) => format!("fixed start time {t} s"),
+            (Some((t, spread)), _) => format!("fixed start time {t} s + {spread} s x env / envs"),
             (None, Some(b)) => format!("all mass in bin {b} of {}", c.bins),
             (None, None) => format!("random CDF over {} bins", c.bins),
         }
@@ -279,6 +284,7 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
                         &layout,
                         &cdf,
                         &params,
+                        (e, n),
                         &mut WarpRandom::new(params.seed, offset, order),
                     )
                 })
@@ -321,10 +327,14 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         let (d, dt) = (data[HEADER_DURATION], params.dt);
         let span = if clip.wraps() { d } else { (d - dt).max(0.0) };
         let width = span / c.bins as f32;
-        if let Some(start) = c.fixed_start {
+        if let Some((start, spread)) = c.fixed_start {
+            let exact = reset
+                .iter()
+                .zip(&got_t0)
+                .all(|(&e, &t)| t == start + spread * e as f32 / n as f32);
             r.check(
-                got_t0.iter().all(|&t| t == start),
-                format!("every start time is the fixed {start} s"),
+                exact,
+                format!("every start time is {start} s + {spread} s x env / envs"),
             );
         } else if let Some(b) = c.one_bin {
             let inside = got_t0.iter().all(|&t| {
@@ -556,7 +566,19 @@ pub fn reset_checks(fx: &Fixture) -> Vec<Check> {
                 ..base
             },
         ),
-        // Evaluation: every env at the clip's start, fixed noise stream (iteration 0).
+        // Evaluation: envs spread over the cycle, no noise; all at the start, with noise.
+        case(
+            fx,
+            ResetCase {
+                done_fraction: 1.0,
+                noise_std: 0.0,
+                iteration: 0,
+                t: 0,
+                seed: 38,
+                fixed_start: Some((0.0, fx.main.table.duration() as f32)),
+                ..base
+            },
+        ),
         case(
             fx,
             ResetCase {
@@ -564,7 +586,7 @@ pub fn reset_checks(fx: &Fixture) -> Vec<Check> {
                 iteration: 0,
                 t: 0,
                 seed: 36,
-                fixed_start: Some(0.0),
+                fixed_start: Some((0.0, 0.0)),
                 ..base
             },
         ),
@@ -575,7 +597,7 @@ pub fn reset_checks(fx: &Fixture) -> Vec<Check> {
                 noise_std: 0.0,
                 one_bin: Some(3),
                 seed: 37,
-                fixed_start: Some(0.37),
+                fixed_start: Some((0.37, 0.0)),
                 ..base
             },
         ),
