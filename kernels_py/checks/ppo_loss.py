@@ -63,7 +63,7 @@ def analytic_gradients(mean, log_std, value, batch, clip, value_coef, entropy_co
     return d_mean, d_log_std, value_coef * dv / m
 
 
-def make_batch(rng, m, a, clip):
+def make_batch(rng, m, a, clip, ratio_spread=0.3):
     mean = f32(rng.normal(0.0, 0.5, (m, a)))
     log_std = f32(rng.uniform(-1.5, -0.5, a))
     actions = f32(mean + np.exp(log_std) * rng.standard_normal((m, a)))
@@ -73,7 +73,7 @@ def make_batch(rng, m, a, clip):
     adv = f32(rng.standard_normal(m))
     z = (actions - mean) * np.exp(-log_std)
     logp = np.sum(-0.5 * z * z - log_std - HALF_LOG_TWO_PI, axis=1)
-    log_ratio = rng.normal(0.0, 0.3, m)
+    log_ratio = rng.normal(0.0, ratio_spread, m)
     # keep every sample 1e-3 away from the kinks (ratio = 1 +- clip, |V - V_old| = clip, and
     # where the clipped value loss switches branches)
     for _ in range(100):
@@ -177,6 +177,17 @@ def main() -> int:
         v.error(f"d_value vs finite differences ({len(keys)} entries), {what}", [d_value[k] for k in keys], [fd_value[k] for k in keys])
         for k, (name, ref) in enumerate(parts.items()):
             v.error(f"{name} (column sum of terms), {what}", sums[k], ref)
+    # Near-identical policies (the first minibatch of an update): the approximate KL is tiny and
+    # must not cancel to noise (or below zero) in float32. (At log ratios ~1e-4 the log ratio
+    # itself, a difference of log-probabilities ~20 apart from float32 steps of 2e-6, is the
+    # limit.)
+    for spread in [1e-2, 1e-3]:
+        mean, log_std, value, batch = make_batch(rng, 400, 28, 0.2, ratio_spread=spread)
+        _, _, terms = run_kernel(mean, log_std, value, batch, 0.2, 2.0, True)
+        _, parts, _ = loss_parts(mean, log_std, value, batch, 0.2, 2.0, 0.0, True)
+        kl_terms = terms[:, 3]
+        v.check(f"approximate KL terms >= 0, log ratios ~ {spread}", bool(np.all(kl_terms >= 0.0)))
+        v.error(f"approximate KL, log ratios ~ {spread} (KL {parts['approximate KL']:.1e})", kl_terms.sum(), parts["approximate KL"])
     return v.finish()
 
 

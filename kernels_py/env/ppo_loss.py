@@ -43,6 +43,17 @@ HALF_LOG_TWO_PI = wp.constant(0.5 * math.log(2.0 * math.pi))
 UNIT_GAUSSIAN_ENTROPY = wp.constant(0.5 + 0.5 * math.log(2.0 * math.pi))
 
 
+@wp.func
+def kl_term(log_ratio: wp.float32) -> wp.float32:
+    """(ratio - 1) - log ratio = exp(x) - 1 - x for x = log ratio. Near 0 the difference cancels
+    in float32 (and can round below 0), so small |x| use the series x^2/2 + x^3/6 + x^4/24 +
+    x^5/120 (relative error < 3e-7 below 0.1, where the direct form's is < 3e-5)."""
+    x = log_ratio
+    if wp.abs(x) < 0.1:
+        return x * x * (0.5 + x * (1.0 / 6.0 + x * (1.0 / 24.0 + x * (1.0 / 120.0))))
+    return wp.exp(x) - 1.0 - x
+
+
 @wp.struct
 class PpoLossParams:
     """Run-time parameters (config `[ppo]`)."""
@@ -114,7 +125,7 @@ def ppo_loss_gradients(
     terms[i, TERM_SURROGATE] = surrogate * inv_m
     terms[i, TERM_VALUE] = value_loss * inv_m
     terms[i, TERM_ENTROPY] = entropy * inv_m
-    terms[i, TERM_KL] = ((ratio - 1.0) - log_ratio) * inv_m
+    terms[i, TERM_KL] = kl_term(log_ratio) * inv_m
     terms[i, TERM_CLIP_FRACTION] = clipped * inv_m
     for j in range(num_actions):
         inv_std = wp.exp(-log_std[j])
