@@ -10,63 +10,6 @@ use ppo_support::*;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 
-/// Random loss inputs with no sample within 1e-3 of a kink of the loss (where a derivative
-/// depends on the side), ratios on both sides of the clip range.
-fn targets(
-    rng: &mut StdRng,
-    m: usize,
-    a: usize,
-    clip: f64,
-    mean: &[f64],
-    log_std: &[f64],
-    value: &[f64],
-) -> LossTargets {
-    let noise = to_f64(&normal(rng, m * a, 0.0, 1.0));
-    let actions: Vec<f64> = (0..m * a)
-        .map(|k| mean[k] + log_std[k % a].exp() * noise[k])
-        .collect();
-    let log_ratio = to_f64(&normal(rng, m, 0.0, 0.3));
-    let old_values: Vec<f64> = to_f64(&normal(rng, m, 0.0, 0.3))
-        .iter()
-        .zip(value)
-        .map(|(d, v)| v + d)
-        .collect();
-    let returns = to_f64(&normal(rng, m, 0.0, 1.0));
-    let advantages = to_f64(&normal(rng, m, 0.0, 1.0));
-    let mut y = LossTargets {
-        actions,
-        old_log_probs: vec![0.0; m],
-        old_values,
-        advantages,
-        returns,
-        action_size: a,
-    };
-    for i in 0..m {
-        let logp: f64 = (0..a)
-            .map(|j| {
-                let z = (y.actions[i * a + j] - mean[i * a + j]) * (-log_std[j]).exp();
-                -0.5 * z * z - log_std[j] - HALF_LOG_TWO_PI
-            })
-            .sum();
-        let mut lr = log_ratio[i];
-        while ((lr.exp() - 1.0).abs() - clip).abs() < 1e-3 {
-            lr += 0.01;
-        }
-        y.old_log_probs[i] = logp - lr;
-        loop {
-            let delta = value[i] - y.old_values[i];
-            let vc = y.old_values[i] + delta.clamp(-clip, clip);
-            let near_branch =
-                ((vc - y.returns[i]).abs() - (value[i] - y.returns[i]).abs()).abs() < 1e-3;
-            if (delta.abs() - clip).abs() >= 1e-3 && !near_branch {
-                break;
-            }
-            y.old_values[i] += 0.013;
-        }
-    }
-    y
-}
-
 #[test]
 fn loss_gradients_match_finite_differences() {
     let mut rng = StdRng::seed_from_u64(1);
@@ -80,7 +23,7 @@ fn loss_gradients_match_finite_differences() {
     let mean = to_f64(&normal(&mut rng, m * a, 0.0, 0.5));
     let log_std = to_f64(&normal(&mut rng, a, -1.0, 0.2));
     let value = to_f64(&normal(&mut rng, m, 0.0, 1.0));
-    let y = targets(&mut rng, m, a, c.clip, &mean, &log_std, &value);
+    let y = loss_targets(&mut rng, m, a, c.clip, &mean, &log_std, &value);
     let (d_mean, d_log_std, d_value) = ppo_loss_gradients(&mean, &log_std, &value, &y, &c);
     let h = 1e-6;
     let fd = |f: &dyn Fn(f64) -> f64| (f(h) - f(-h)) / (2.0 * h);
@@ -161,7 +104,7 @@ fn policy_gradients_match_finite_differences() {
         entropy_coef: 0.003,
         clip_value_loss: true,
     };
-    let y = targets(
+    let y = loss_targets(
         &mut rng,
         rows,
         a,

@@ -4,6 +4,8 @@
 //! (gradients against finite differences, on the CPU); `tests/gpu_ppo.rs` holds the kernels to
 //! them.
 #![allow(dead_code)] // each test file uses part of it
+// Index loops: the references read like the formulas they check.
+#![allow(clippy::needless_range_loop)]
 
 use instantmimic::ppo::LayerShape;
 use rand::Rng;
@@ -41,11 +43,76 @@ pub fn normal(rng: &mut StdRng, count: usize, mean: f64, std: f64) -> Vec<f32> {
         .collect()
 }
 
+/// `x` rounded to float32.
+pub fn round32(x: f64) -> f64 {
+    f64::from(x as f32)
+}
+
 /// 0/1 flags, 1 with probability `p`.
 pub fn flags(rng: &mut StdRng, count: usize, p: f64) -> Vec<i32> {
     (0..count)
         .map(|_| i32::from(rng.random::<f64>() < p))
         .collect()
+}
+
+/// Random loss inputs for a policy with outputs `mean [M, A]`, `log_std [A]` and `value [M]`:
+/// ratios on both sides of the clip range, values on both sides of the value clip, no sample
+/// within 1e-3 of a kink of the loss (where a derivative depends on the side). Every value is a
+/// float32 (held in f64), so a device copy holds exactly the same inputs.
+pub fn loss_targets(
+    rng: &mut StdRng,
+    m: usize,
+    a: usize,
+    clip: f64,
+    mean: &[f64],
+    log_std: &[f64],
+    value: &[f64],
+) -> LossTargets {
+    let noise = to_f64(&normal(rng, m * a, 0.0, 1.0));
+    let actions: Vec<f64> = (0..m * a)
+        .map(|k| round32(mean[k] + log_std[k % a].exp() * noise[k]))
+        .collect();
+    let log_ratio = to_f64(&normal(rng, m, 0.0, 0.3));
+    let old_values: Vec<f64> = to_f64(&normal(rng, m, 0.0, 0.3))
+        .iter()
+        .zip(value)
+        .map(|(d, v)| round32(v + d))
+        .collect();
+    let returns = to_f64(&normal(rng, m, 0.0, 1.0));
+    let advantages = to_f64(&normal(rng, m, 0.0, 1.0));
+    let mut y = LossTargets {
+        actions,
+        old_log_probs: vec![0.0; m],
+        old_values,
+        advantages,
+        returns,
+        action_size: a,
+    };
+    for i in 0..m {
+        let logp: f64 = (0..a)
+            .map(|j| {
+                let z = (y.actions[i * a + j] - mean[i * a + j]) * (-log_std[j]).exp();
+                -0.5 * z * z - log_std[j] - HALF_LOG_TWO_PI
+            })
+            .sum();
+        let mut lr = log_ratio[i];
+        while ((lr.exp() - 1.0).abs() - clip).abs() < 1e-3 {
+            lr += 0.01;
+        }
+        y.old_log_probs[i] = logp - lr;
+        loop {
+            let delta = value[i] - y.old_values[i];
+            let vc = y.old_values[i] + delta.clamp(-clip, clip);
+            let near_branch =
+                ((vc - y.returns[i]).abs() - (value[i] - y.returns[i]).abs()).abs() < 1e-3;
+            if (delta.abs() - clip).abs() >= 1e-3 && !near_branch {
+                break;
+            }
+            y.old_values[i] = round32(y.old_values[i] + 0.013);
+        }
+    }
+    y.old_log_probs = y.old_log_probs.iter().map(|&v| round32(v)).collect();
+    y
 }
 
 /// GAE of `kernels_py/env/gae.py` over `[T, N]` arrays (row-major): (advantages, returns).
