@@ -60,7 +60,7 @@ fn download2(a: &DeviceArray2<f32>) -> Vec<f64> {
     to_f64(&a.download().expect("download"))
 }
 
-/// A rollout's storage on the device, and its host copy.
+/// A rollout's storage on the device.
 struct Rollout {
     t: usize,
     n: usize,
