@@ -95,5 +95,5 @@ def linear_backward_input_elu(
         g = wp.tile_load(dz, shape=(TILE_M, TILE_K), offset=(i * TILE_M, s * TILE_K), storage="shared")
         ws = wp.tile_load(w, shape=(TILE_N, TILE_K), offset=(j * TILE_N, s * TILE_K), storage="shared")
         wp.tile_matmul(g, wp.tile_transpose(ws), acc)
-    y = wp.tile_load(y_prev, shape=(TILE_M, TILE_N), offset=(i * TILE_M, j * TILE_N))
+    y = wp.tile_load(y_prev, shape=(TILE_M, TILE_N), offset=(i * TILE_M, j * TILE_N), storage="shared")
     wp.tile_store(y_prev, wp.tile_map(elu_backward, acc, y), offset=(i * TILE_M, j * TILE_N))
