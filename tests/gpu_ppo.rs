@@ -9,6 +9,8 @@
 //!   the graph; with 1 epoch x 1 minibatch its gradients equal the float64 gradients of the PPO
 //!   loss at the rollout's parameters; with 3 epochs x 4 minibatches two replays each lower
 //!   the PPO loss of the fixed batch, and the statistics count the updates.
+//! - The baseline's update (4096 envs, horizon 32, 5 x 4 minibatches): replay time and FLOP
+//!   rate, printed.
 //!
 //! Tolerance: normwise relative error `max |x - ref| / max |ref|` <= 1e-4.
 #![cfg(feature = "gpu")]
@@ -686,5 +688,45 @@ fn replays_of_a_captured_update_lower_the_loss_of_a_fixed_batch() {
     assert!(
         losses.iter().all(|(before, after)| after < before),
         "an update did not lower its loss: {losses:?}"
+    );
+}
+
+/// Not a check of values: the baseline's update (T 32, N 4096, D 353, A 28, [400, 200, 100],
+/// 5 epochs x 4 minibatches) on a sampled batch, its graph replay time and FLOP rate.
+#[test]
+fn baseline_update_replay_time() {
+    let (gpu, kernels) = gpu();
+    let config = TrainConfig::with_motion("test");
+    config.validate("test").expect("the baseline");
+    let (t, n) = (config.ppo.horizon as usize, config.env.num_envs as usize);
+    let policy = GaussianPolicy::new(&gpu, &config.policy, 353, 28, n, 7).expect("policy");
+    let rollout = Rollout::sampled(&gpu, &kernels, &policy, t, &mut StdRng::seed_from_u64(7));
+    let update = PpoUpdate::new(&gpu, kernels, &policy, &config).expect("update");
+    let graph = gpu
+        .stream()
+        .capture(|s| update.record(s, &rollout.batch()))
+        .expect("capture");
+    println!("baseline update graph: {:?}", graph.node_counts().unwrap());
+    graph.upload(gpu.stream()).unwrap();
+    graph.launch(gpu.stream()).unwrap(); // warm-up
+    let (start, end) = (gpu.new_event().unwrap(), gpu.new_event().unwrap());
+    let replays = 5;
+    start.record(gpu.stream()).unwrap();
+    for _ in 0..replays {
+        graph.launch(gpu.stream()).unwrap();
+    }
+    end.record(gpu.stream()).unwrap();
+    let ms = start.elapsed_ms(&end).unwrap() / replays as f32;
+    let flops = update.flops();
+    let stats = update.read_statistics().unwrap();
+    println!(
+        "baseline update: {ms:.2} ms per replay, {:.3} TFLOP ({:.1} TFLOP/s); {stats:?}",
+        flops.total() / 1e12,
+        flops.total() / (f64::from(ms) * 1e-3) / 1e12
+    );
+    assert_eq!(stats.updates, replays as u64 + 1);
+    assert!(
+        stats.value_loss.is_finite() && stats.grad_norm.is_finite(),
+        "{stats:?}"
     );
 }
