@@ -24,16 +24,28 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 15] = [
+const EXPECTED_KERNELS: [(&str, &str); 27] = [
     ("control", "pd_control"),
     ("evaluate", "evaluation_accumulate"),
+    ("gae", "gae_advantages"),
+    ("minibatch", "shuffle_indices"),
+    ("minibatch", "gather_minibatch"),
+    ("mlp_backward", "linear_backward_weight"),
+    ("mlp_backward", "linear_backward_input_elu"),
     ("observe", "observe"),
     ("observe", "observation_moments"),
     ("observe", "observation_moments_merge"),
     ("observe", "observation_normalize"),
+    ("optimizer", "ppo_minibatch_schedule"),
+    ("optimizer", "adam_update"),
     ("policy", "linear_elu"),
     ("policy", "linear"),
     ("policy", "gaussian_sample"),
+    ("ppo_loss", "ppo_loss_gradients"),
+    ("ppo_statistics", "ppo_update_statistics"),
+    ("reduce", "column_sums"),
+    ("reduce", "sum_of_squares"),
+    ("reduce", "sum_and_squares"),
     ("reference", "lookup_reference"),
     ("reset", "reset_masked"),
     ("reset", "phase_statistics_update"),

@@ -29,8 +29,13 @@ fn load_module(gpu: &Gpu, ptx: &'static str) -> Result<Module, EnvError> {
     Ok(gpu.load_ptx(ptx, bytes)?)
 }
 
+/// Dynamic shared memory a launch may use before the kernel's limit must be raised.
+const DEFAULT_DYNAMIC_SHARED_MEMORY: u32 = 48 * 1024;
+
 /// The kernel `abi` describes, from its loaded module, after checking that the driver sees the
-/// parameters where the launcher packs them.
+/// parameters where the launcher packs them. Kernels that need more than 48 KiB of dynamic
+/// shared memory (policy.py's GEMM tiles: 49408 bytes) get their limit raised, as Warp's own
+/// launches do; the driver refuses such launches otherwise.
 fn bind_kernel(module: &Module, abi: &'static KernelAbi) -> Result<Function, EnvError> {
     let function = module.function(abi.entry)?;
     let expected = abi.param_layout();
@@ -41,6 +46,9 @@ fn bind_kernel(module: &Module, abi: &'static KernelAbi) -> Result<Function, Env
             expected,
             driver: function.param_layout().to_vec(),
         });
+    }
+    if abi.smem_bytes > DEFAULT_DYNAMIC_SHARED_MEMORY {
+        function.set_max_dynamic_shared_memory(abi.smem_bytes)?;
     }
     Ok(function)
 }

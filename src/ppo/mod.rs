@@ -1,10 +1,26 @@
-//! PPO on the GPU: the policy of the rollout (and, with issue 5, the update).
+//! PPO on the GPU: the policy of the rollout and the update.
 //!
 //! - [`GaussianPolicy`]: the actor and critic MLPs, their flat parameter buffers, the forward pass
 //!   and action sampling (`kernels_py/env/policy.py`).
+//! - [`PpoUpdate`]: the whole update (GAE, device shuffle, minibatch forward, loss, backward,
+//!   gradient clipping, Adam, KL-adaptive learning rate, statistics) recorded onto a stream with
+//!   no host work, for capture into a CUDA graph (`kernels_py/env/{gae, minibatch, ppo_loss,
+//!   mlp_backward, reduce, optimizer, ppo_statistics}.py`).
+//! - The parts, each with the shape checks its kernels cannot do: [`batch`] (what the rollout
+//!   hands over, GAE, shuffle, gather), [`loss`] (loss gradients, the statistics layout),
+//!   [`backward`] (MLP backward, split weight-gradient reductions), [`reduce`], [`adam`].
 
+pub mod adam;
+pub mod backward;
+pub mod batch;
+pub mod loss;
 mod policy;
+pub mod reduce;
+mod update;
 
+pub use batch::PpoBatch;
+pub use loss::PpoStatistics;
 pub use policy::{
     ActStorage, GaussianPolicy, LayerShape, PolicyError, initial_parameters, mlp_layout,
 };
+pub use update::{PpoError, PpoOptimizerState, PpoUpdate, UpdateFlops};

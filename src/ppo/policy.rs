@@ -88,15 +88,17 @@ pub fn initial_parameters(layers: &[LayerShape], last_gain: f64, rng: &mut StdRn
     params
 }
 
-/// An MLP on the GPU: its layers as views into `params`, and activations for a batch.
-struct Mlp {
-    params: DeviceArray<f32>,
-    layers: Vec<(DeviceArray2<f32>, DeviceArray<f32>)>,
-    activations: Vec<DeviceArray2<f32>>,
+/// An MLP on the GPU: its layers as views into `params`, and activations for a batch (each
+/// layer's output; the PPO update's backward pass reads them and overwrites the hidden ones).
+pub(crate) struct Mlp {
+    pub(crate) params: DeviceArray<f32>,
+    /// Each layer's `w [in, out]` and `b [out]`.
+    pub(crate) layers: Vec<(DeviceArray2<f32>, DeviceArray<f32>)>,
+    pub(crate) activations: Vec<DeviceArray2<f32>>,
 }
 
 impl Mlp {
-    fn new(
+    pub(crate) fn new(
         gpu: &Gpu,
         shapes: &[LayerShape],
         params: DeviceArray<f32>,
@@ -119,7 +121,7 @@ impl Mlp {
     }
 
     /// Queues the forward pass of `input` (`[batch, inputs]`); the result is the last activation.
-    fn record(
+    pub(crate) fn record(
         &self,
         kernels: &EnvKernels,
         stream: &Stream,
@@ -140,7 +142,7 @@ impl Mlp {
         Ok(())
     }
 
-    fn output(&self) -> &DeviceArray2<f32> {
+    pub(crate) fn output(&self) -> &DeviceArray2<f32> {
         &self.activations[self.activations.len() - 1]
     }
 }
@@ -251,6 +253,20 @@ impl GaussianPolicy {
 
     pub fn batch(&self) -> usize {
         self.batch
+    }
+
+    pub fn observation_size(&self) -> usize {
+        self.observation_size
+    }
+
+    pub fn action_size(&self) -> usize {
+        self.action_size
+    }
+
+    /// The state-independent log standard deviation `[A]`: a view of the end of the actor's
+    /// parameters.
+    pub fn log_std(&self) -> &DeviceArray<f32> {
+        &self.log_std
     }
 
     /// Queues the actor and critic forward passes of `obs` (`[batch, observation size]`).

@@ -176,6 +176,12 @@ pub struct PpoConfig {
     pub clip: f32,
     pub entropy_coef: f32,
     pub value_coef: f32,
+    /// Clip the value around the rollout's value by `clip` in the value loss (rsl_rl's
+    /// `use_clipped_value_loss`, on in the baseline).
+    pub clip_value_loss: bool,
+    /// Adapt the learning rate to the approximate KL after each minibatch (rsl_rl's
+    /// "adaptive" schedule, on in the baseline); off: the rate stays `learning_rate`.
+    pub adaptive_learning_rate: bool,
     pub max_grad_norm: f32,
 }
 
@@ -192,6 +198,8 @@ impl Default for PpoConfig {
             clip: 0.2,
             entropy_coef: 0.0,
             value_coef: 2.0,
+            clip_value_loss: true,
+            adaptive_learning_rate: true,
             max_grad_norm: 1.0,
         }
     }
@@ -601,6 +609,7 @@ mod tests {
             (0.008, 0.2, 2.0)
         );
         assert_eq!(c.policy.init_log_std, -2.0);
+        assert!(c.ppo.clip_value_loss && c.ppo.adaptive_learning_rate);
     }
 
     #[test]

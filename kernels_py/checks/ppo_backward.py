@@ -1,0 +1,150 @@
+"""Check the MLP backward kernels (env/mlp_backward.py) and the reductions (env/reduce.py) on
+Warp's CPU device against numpy float64.
+
+- `linear_backward_weight`: dw = x^T dz and db = column sums of dz, for shapes that are not
+  multiples of the tiles and for several split counts (1 split; several; more splits than rows,
+  where the last splits see no rows), accumulated onto non-zero initial values.
+- `linear_backward_input_elu`: (dz @ w^T) * elu'(y) written over y.
+- A whole MLP (policy.py's forward kernels, then the backward kernels layer by layer, as
+  src/ppo/backward.rs records them) against float64 backpropagation.
+- `column_sums`, `sum_of_squares`, `sum_and_squares`.
+
+    python kernels_py/checks/ppo_backward.py
+"""
+
+import sys
+
+from check_support import Verdict, array, np, wp, zeros
+
+from env import mlp_backward, policy, reduce
+
+TILE = 64
+TILE_K = 32
+THREADS = 128
+
+
+def elu(z):
+    return np.where(z > 0.0, z, np.expm1(np.minimum(z, 0.0)))
+
+
+def launch_weight_grad(x, dz, dw, db, splits):
+    m = x.shape[0]
+    chunks = -(-m // (splits * TILE_K))
+    tiles = -(-dw.shape[0] // TILE) * -(-dw.shape[1] // TILE)
+    wp.launch_tiled(
+        mlp_backward.linear_backward_weight, dim=[tiles * splits], inputs=[x, dz, chunks, dw, db], block_dim=THREADS, device="cpu"
+    )
+
+
+def launch_input_grad(dz, w, y):
+    tiles = -(-y.shape[0] // TILE) * -(-y.shape[1] // TILE)
+    wp.launch_tiled(mlp_backward.linear_backward_input_elu, dim=[tiles], inputs=[dz, w, y], block_dim=THREADS, device="cpu")
+
+
+def launch_forward(kernel, x, w, b, y):
+    # policy.py's 1-D tile index: every CPU thread runs its block's tile (identical stores).
+    tiles = -(-y.shape[0] // TILE) * -(-y.shape[1] // TILE)
+    wp.launch(kernel, dim=tiles * THREADS, inputs=[x, w, b, y], block_dim=THREADS, device="cpu")
+
+
+def check_weight_grad(v: Verdict, rng):
+    for m, k, n, splits in [(200, 70, 45, 1), (200, 70, 45, 3), (333, 130, 1, 4), (40, 9, 28, 7), (1000, 64, 64, 5)]:
+        x = rng.standard_normal((m, k))
+        dz = rng.standard_normal((m, n))
+        dw0 = rng.standard_normal((k, n))
+        db0 = rng.standard_normal(n)
+        dw, db = array(dw0), array(db0)
+        launch_weight_grad(array(x), array(dz), dw, db, splits)
+        v.error(f"linear_backward_weight dw, M={m} K={k} N={n} splits={splits}", dw.numpy(), dw0 + x.T @ dz)
+        v.error(f"linear_backward_weight db, M={m} K={k} N={n} splits={splits}", db.numpy(), db0 + dz.sum(axis=0))
+
+
+def check_input_grad(v: Verdict, rng):
+    for m, k, n in [(130, 70, 45), (64, 64, 1), (257, 400, 200)]:
+        dz = rng.standard_normal((m, n))
+        w = rng.standard_normal((k, n))
+        y = elu(rng.standard_normal((m, k)))
+        y32 = y.astype(np.float32).astype(np.float64)
+        yd = array(y)
+        launch_input_grad(array(dz), array(w), yd)
+        ref = (dz @ w.T) * np.where(y32 > 0.0, 1.0, y32 + 1.0)
+        v.error(f"linear_backward_input_elu, M={m} K={k} N={n}", yd.numpy(), ref)
+
+
+def check_mlp(v: Verdict, rng):
+    """Forward with policy.py's kernels, backward with ours, against float64 backprop."""
+    m, sizes = 150, [37, 70, 45, 5]
+    layers = len(sizes) - 1
+    ws = [rng.standard_normal((sizes[i], sizes[i + 1])) * np.sqrt(2.0 / sizes[i]) for i in range(layers)]
+    bs = [0.1 * rng.standard_normal(sizes[i + 1]) for i in range(layers)]
+    x = rng.standard_normal((m, sizes[0]))
+    d_out = rng.standard_normal((m, sizes[-1])) / m
+
+    # float64 reference
+    acts = [x]
+    for i in range(layers):
+        z = acts[-1] @ ws[i] + bs[i]
+        acts.append(z if i == layers - 1 else elu(z))
+    ref_dw, ref_db = [None] * layers, [None] * layers
+    dz = d_out
+    for i in reversed(range(layers)):
+        ref_dw[i] = acts[i].T @ dz
+        ref_db[i] = dz.sum(axis=0)
+        if i > 0:
+            dz = (dz @ ws[i].T) * np.where(acts[i] > 0.0, 1.0, acts[i] + 1.0)
+
+    # kernels
+    xd = array(x)
+    wd = [array(w) for w in ws]
+    bd = [array(b) for b in bs]
+    ys = [zeros((m, sizes[i + 1])) for i in range(layers)]
+    inp = xd
+    for i in range(layers):
+        launch_forward(policy.linear if i == layers - 1 else policy.linear_elu, inp, wd[i], bd[i], ys[i])
+        inp = ys[i]
+    v.error("MLP forward (policy.py) output", ys[-1].numpy(), acts[-1])
+    dwd = [zeros(w.shape) for w in ws]
+    dbd = [zeros(b.shape) for b in bs]
+    dz_d = array(d_out)
+    for i in reversed(range(layers)):
+        below = xd if i == 0 else ys[i - 1]
+        launch_weight_grad(below, dz_d, dwd[i], dbd[i], splits=2)
+        if i > 0:
+            launch_input_grad(dz_d, wd[i], ys[i - 1])
+            dz_d = ys[i - 1]
+    for i in range(layers):
+        v.error(f"MLP backward dw[{i}]", dwd[i].numpy(), ref_dw[i])
+        v.error(f"MLP backward db[{i}]", dbd[i].numpy(), ref_db[i])
+
+
+def check_reductions(v: Verdict, rng):
+    for rows, cols, chunks in [(300, 33, 1), (300, 33, 2), (1000, 130, 3), (5, 70, 1)]:
+        x = rng.standard_normal((rows, cols))
+        out0 = rng.standard_normal(cols)
+        out = array(out0)
+        blocks = -(-cols // 64) * -(-rows // (64 * chunks))
+        wp.launch_tiled(reduce.column_sums, dim=[blocks], inputs=[array(x), chunks, out], block_dim=THREADS, device="cpu")
+        v.error(f"column_sums, {rows} x {cols}, {chunks} chunks per block", out.numpy(), out0 + x.sum(axis=0))
+    for size in [1, 2047, 2048, 5000, 100_001]:
+        x = (rng.standard_normal(size) + 0.5).astype(np.float32).astype(np.float64)
+        out = array(np.array([7.0, 1.5, -2.0]), dtype=wp.float64)
+        blocks = -(-size // 2048)
+        wp.launch_tiled(reduce.sum_of_squares, dim=[blocks], inputs=[array(x), 1, out], block_dim=THREADS, device="cpu")
+        v.error(f"sum_of_squares, {size} values, into slot 1", out.numpy(), [7.0, 1.5 + np.sum(x * x), -2.0])
+        moments = zeros(2, dtype=wp.float64)
+        wp.launch_tiled(reduce.sum_and_squares, dim=[blocks], inputs=[array(x), moments], block_dim=THREADS, device="cpu")
+        v.error(f"sum_and_squares, {size} values", moments.numpy(), [np.sum(x), np.sum(x * x)], limit=1e-12)
+
+
+def main() -> int:
+    rng = np.random.default_rng(5)
+    v = Verdict("ppo_backward")
+    check_weight_grad(v, rng)
+    check_input_grad(v, rng)
+    check_mlp(v, rng)
+    check_reductions(v, rng)
+    return v.finish()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,153 @@
+"""Check the optimizer kernels (env/optimizer.py) and the update statistics
+(env/ppo_statistics.py) on Warp's CPU device against float64 references.
+
+- `ppo_minibatch_schedule`: the log-std gradient, rsl_rl's KL rule in every case (above twice
+  the target, below half of it, zero KL, in between, at both clamps, adaptation off) and the
+  step count.
+- `adam_update`: torch's Adam with global-norm clipping (a norm above the threshold and one
+  below), at steps 1 and 7, several steps in a row against the reference's own trajectory.
+- `ppo_update_statistics`: means over minibatch slots, the learning rate, advantage moments,
+  the update counter.
+
+    python kernels_py/checks/ppo_optimizer.py
+"""
+
+import sys
+
+from check_support import Verdict, array, f32, np, wp, zeros
+
+from env import optimizer, ppo_statistics
+
+TERMS = 5
+TERM_KL = 3
+
+
+def schedule_params(kl_target, entropy_coef, adaptive=True, lr_min=1e-5, lr_max=1e-2):
+    p = optimizer.ScheduleParams()
+    p.kl_target = kl_target
+    p.lr_min = lr_min
+    p.lr_max = lr_max
+    p.adaptive = 1 if adaptive else 0
+    p.entropy_coef = entropy_coef
+    return p
+
+
+def check_schedule(v: Verdict, rng):
+    a = 5
+    target = 0.008
+    cases = [
+        ("KL above twice the target", 0.02, 5e-4, 5e-4 / 1.5),
+        ("KL below half the target", 0.001, 5e-4, 5e-4 * 1.5),
+        ("zero KL", 0.0, 5e-4, 5e-4),
+        ("KL between the bounds", 0.008, 5e-4, 5e-4),
+        ("KL above, at the lower clamp", 1.0, 1.2e-5, 1e-5),
+        ("KL below, at the upper clamp", 1e-6, 9e-3, 1e-2),
+    ]
+    for what, kl, lr0, lr_ref in cases:
+        sums = f32(rng.standard_normal(TERMS + a))
+        sums[TERM_KL] = f32(kl)
+        grad = zeros(a)
+        lr = array(np.array([lr0]))
+        step = array(np.array([6]))
+        wp.launch(optimizer.ppo_minibatch_schedule, dim=1, inputs=[array(sums), schedule_params(target, 0.01), grad, lr, step], device="cpu")
+        v.error(f"schedule, {what}: learning rate", lr.numpy(), [float(np.float32(lr_ref))], limit=1e-6)
+        v.error(f"schedule, {what}: log-std gradient", grad.numpy(), sums[TERMS:] - float(np.float32(0.01)), limit=1e-6)
+        v.check(f"schedule, {what}: Adam step advanced", step.numpy()[0] == 7, f"step {step.numpy()[0]}")
+    sums = np.zeros(TERMS + a)
+    sums[TERM_KL] = 1.0
+    lr = array(np.array([5e-4]))
+    wp.launch(optimizer.ppo_minibatch_schedule, dim=1, inputs=[array(sums), schedule_params(target, 0.0, adaptive=False), zeros(a), lr, zeros(1, dtype=wp.int32)], device="cpu")
+    v.error("schedule, adaptation off: learning rate unchanged", lr.numpy(), [float(np.float32(5e-4))], limit=0.0)
+
+
+def adam_params(beta1, beta2, eps, max_norm):
+    p = optimizer.AdamParams()
+    p.beta1 = beta1
+    p.beta2 = beta2
+    p.epsilon = eps
+    p.max_grad_norm = max_norm
+    return p
+
+
+def adam_reference(p, g, m, v, lr, t, norm, b1, b2, eps, max_norm):
+    """torch.optim.Adam after torch.nn.utils.clip_grad_norm_, in float64."""
+    g = g * min(1.0, max_norm / (norm + 1e-6))
+    m = b1 * m + (1.0 - b1) * g
+    v = b2 * v + (1.0 - b2) * g * g
+    step_size = lr / (1.0 - b1**t)
+    denom = np.sqrt(v) / np.sqrt(1.0 - b2**t) + eps
+    return p - step_size * m / denom, m, v
+
+
+def check_adam(v: Verdict, rng):
+    b1, b2, eps = 0.9, 0.999, 1e-8
+    b1_32, b2_32, eps32 = (float(np.float32(x)) for x in (b1, b2, eps))
+    for size, t, norm, max_norm in [(1000, 1, 3.0, 1.0), (1000, 7, 0.5, 1.0), (4099, 1, 0.0, 1.0), (77, 3, 12.0, 0.5)]:
+        # small parameters: their float32 rounding (|p| 2^-24) stays far below the step (~lr)
+        p = f32(rng.standard_normal(size) * 0.01)
+        g = f32(rng.standard_normal(size) * 0.1)
+        m = f32(rng.standard_normal(size) * 0.01) if t > 1 else np.zeros(size)
+        vv = f32(np.abs(rng.standard_normal(size)) * 1e-4) if t > 1 else np.zeros(size)
+        lr = f32(5e-4)
+        norm_sq = np.array([9.0, norm * norm])
+        pd, md, vd = array(p), array(m), array(vv)
+        wp.launch(
+            optimizer.adam_update,
+            dim=size,
+            inputs=[pd, array(g), md, vd, array(np.array([lr])), array(np.array([t])), array(norm_sq, dtype=wp.float64), 1, adam_params(b1, b2, eps, max_norm)],
+            device="cpu",
+        )
+        ref_p, ref_m, ref_v = adam_reference(p, g, m, vv, lr, t, norm, b1_32, b2_32, eps32, float(np.float32(max_norm)))
+        what = f"{size} parameters, step {t}, norm {norm} (threshold {max_norm})"
+        v.error(f"Adam parameter change, {what}", pd.numpy() - p, ref_p - p)
+        v.error(f"Adam first moment, {what}", md.numpy(), ref_m)
+        v.error(f"Adam second moment, {what}", vd.numpy(), ref_v)
+    # Several steps in a row: the device state evolves like the reference's.
+    size = 500
+    p = f32(rng.standard_normal(size) * 0.01)
+    pd, md, vd = array(p), zeros(size), zeros(size)
+    ref = (p.copy(), np.zeros(size), np.zeros(size))
+    for t in range(1, 6):
+        g = f32(rng.standard_normal(size))
+        norm = float(np.linalg.norm(g))
+        wp.launch(
+            optimizer.adam_update,
+            dim=size,
+            inputs=[pd, array(g), md, vd, array(np.array([1e-3])), array(np.array([t])), array(np.array([norm * norm]), dtype=wp.float64), 0, adam_params(b1, b2, eps, 1.0)],
+            device="cpu",
+        )
+        ref = adam_reference(ref[0], g, ref[1], ref[2], float(np.float32(1e-3)), t, norm, b1_32, b2_32, eps32, 1.0)
+    v.error("Adam, 5 clipped steps: parameter change", pd.numpy() - p, ref[0] - p)
+    v.error("Adam, 5 clipped steps: moments", np.stack([md.numpy(), vd.numpy()]), np.stack([ref[1], ref[2]]))
+
+
+def check_statistics(v: Verdict, rng):
+    steps, a, samples = 20, 4, 1000
+    sums = f32(rng.uniform(0.0, 1.0, (steps, TERMS + a)))
+    norm_sq = rng.uniform(0.1, 4.0, steps)
+    adv = rng.standard_normal(samples) * 2.0 + 0.3
+    moments = np.array([adv.sum(), (adv * adv).sum()])
+    counter = array(np.array([41]))
+    stats = zeros(10)
+    wp.launch(
+        ppo_statistics.ppo_update_statistics,
+        dim=1,
+        inputs=[array(sums), array(norm_sq, dtype=wp.float64), array(moments, dtype=wp.float64), samples, array(np.array([3e-4])), counter, stats],
+        device="cpu",
+    )
+    ref = np.concatenate([sums[:, :TERMS].mean(axis=0), [float(np.float32(3e-4)), np.sqrt(norm_sq).mean(), adv.mean(), adv.std(ddof=1), 42.0]])
+    v.error("update statistics", stats.numpy(), ref, limit=1e-6)
+    v.check("update counter advanced", counter.numpy()[0] == 42, f"{counter.numpy()[0]}")
+
+
+def main() -> int:
+    rng = np.random.default_rng(13)
+    v = Verdict("ppo_optimizer")
+    check_schedule(v, rng)
+    check_adam(v, rng)
+    check_statistics(v, rng)
+    return v.finish()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

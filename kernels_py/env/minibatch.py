@@ -1,0 +1,133 @@
+"""Minibatches of the PPO update: a fresh random permutation of the batch per epoch, drawn on the
+device, and the gather of each minibatch into contiguous buffers (with the advantages
+normalized).
+
+The permutation needs no sort and no host: `pi(j)` is a keyed Feistel network, a bijection on
+`[0, 2^(2h))` (the smallest such power of four >= the batch size B), restricted to `[0, B)` by
+cycle walking (apply it again until the value falls inside; it always returns because the
+cycle through j contains j). The walk takes fewer than 4 steps on average (2^(2h) < 4 B). The
+round keys hash `seed`, the epoch and a device counter that the update advances once per update
+(`ppo_update_statistics`), so each replay of a captured update shuffles differently.
+"""
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+FEISTEL_ROUNDS = wp.constant(4)
+# Multipliers of the mixer and the golden-ratio step between round keys, typed unsigned (as
+# plain literals they would be int32 constants and wrap).
+MIX_MULTIPLIER_1 = wp.constant(wp.uint32(0x7FEB352D))
+MIX_MULTIPLIER_2 = wp.constant(wp.uint32(0x846CA68B))
+ROUND_KEY_STEP = wp.constant(wp.uint32(0x9E3779B9))
+# Added to the advantages' standard deviation before dividing (rsl_rl's 1e-8).
+ADVANTAGE_EPSILON = wp.constant(1.0e-8)
+
+
+@wp.func
+def mix32(x: wp.uint32) -> wp.uint32:
+    """A bijective 32-bit mixer with good avalanche (`lowbias32`, C. Wellons' hash prospector)."""
+    x = x ^ (x >> wp.uint32(16))
+    x = x * MIX_MULTIPLIER_1
+    x = x ^ (x >> wp.uint32(15))
+    x = x * MIX_MULTIPLIER_2
+    x = x ^ (x >> wp.uint32(16))
+    return x
+
+
+@wp.func
+def shuffle_key(seed: wp.int32, counter: wp.int32, epoch: wp.int32) -> wp.uint32:
+    return mix32(mix32(mix32(wp.uint32(seed)) ^ wp.uint32(counter)) ^ wp.uint32(epoch))
+
+
+@wp.func
+def feistel(x: wp.uint32, key: wp.uint32, half_bits: wp.uint32) -> wp.uint32:
+    """One pass of the balanced Feistel network on 2 * half_bits bits."""
+    mask = (wp.uint32(1) << half_bits) - wp.uint32(1)
+    left = x >> half_bits
+    right = x & mask
+    for r in range(FEISTEL_ROUNDS):
+        round_key = mix32(key + wp.uint32(r) * ROUND_KEY_STEP)
+        f = mix32(right ^ round_key) & mask
+        new_right = left ^ f
+        left = right
+        right = new_right
+    return (left << half_bits) | right
+
+
+@wp.func
+def permute(j: wp.int32, size: wp.int32, key: wp.uint32) -> wp.int32:
+    """pi(j) for j in [0, size): the keyed bijection of [0, size)."""
+    half_bits = wp.uint32(1)
+    while (wp.int64(1) << wp.int64(half_bits + half_bits)) < wp.int64(size):
+        half_bits += wp.uint32(1)
+    x = feistel(wp.uint32(j), key, half_bits)
+    while x >= wp.uint32(size):
+        x = feistel(x, key, half_bits)
+    return wp.int32(x)
+
+
+@wp.kernel
+def shuffle_indices(
+    update_counter: wp.array(dtype=wp.int32),
+    seed: wp.int32,
+    epoch: wp.int32,
+    permutation: wp.array(dtype=wp.int32),
+):
+    """One thread per sample j of the batch (B = len(permutation)): permutation[j] = pi(j), a
+    random permutation of [0, B) keyed by (seed, update_counter[0], epoch)."""
+    j = wp.tid()
+    key = shuffle_key(seed, update_counter[0], epoch)
+    permutation[j] = permute(j, permutation.shape[0], key)
+
+
+@wp.func
+def advantage_mean_std(moments: wp.array(dtype=wp.float64), count: wp.int32) -> wp.vec2d:
+    """Mean and standard deviation of the batch's advantages from their sum and sum of squares
+    (`moments`, reduce.py `sum_and_squares`); the unbiased std, torch's `std()` as rsl_rl uses."""
+    n = wp.float64(count)
+    mean = moments[0] / n
+    var = wp.max(moments[1] - moments[0] * mean, wp.float64(0.0)) / wp.max(n - wp.float64(1.0), wp.float64(1.0))
+    return wp.vec2d(mean, wp.sqrt(var))
+
+
+@wp.kernel
+def gather_minibatch(
+    permutation: wp.array(dtype=wp.int32),
+    start: wp.int32,
+    observations: wp.array3d(dtype=wp.float32),
+    actions: wp.array3d(dtype=wp.float32),
+    log_probs: wp.array2d(dtype=wp.float32),
+    values: wp.array2d(dtype=wp.float32),
+    advantages: wp.array2d(dtype=wp.float32),
+    returns: wp.array2d(dtype=wp.float32),
+    advantage_moments: wp.array(dtype=wp.float64),
+    mb_observations: wp.array2d(dtype=wp.float32),
+    mb_actions: wp.array2d(dtype=wp.float32),
+    mb_log_probs: wp.array(dtype=wp.float32),
+    mb_values: wp.array(dtype=wp.float32),
+    mb_advantages: wp.array(dtype=wp.float32),
+    mb_returns: wp.array(dtype=wp.float32),
+):
+    """Row i of the minibatch is sample s = permutation[start + i] = t * N + n of the rollout
+    (storage `[T(+1), N, ...]`). Thread (i, c) of a 1-D launch of M * W threads, W = max(D, A),
+    copies observation column c (c < D), action column c (c < A) and, for c = 0, the
+    log-probability, value, return and the advantage normalized with the batch's moments."""
+    tid = wp.tid()
+    width = wp.max(observations.shape[2], actions.shape[2])
+    i = tid // width
+    c = tid - i * width
+    s = permutation[start + i]
+    num_envs = actions.shape[1]
+    t = s // num_envs
+    n = s - t * num_envs
+    if c < observations.shape[2]:
+        mb_observations[i, c] = observations[t, n, c]
+    if c < actions.shape[2]:
+        mb_actions[i, c] = actions[t, n, c]
+    if c == 0:
+        stats = advantage_mean_std(advantage_moments, actions.shape[0] * num_envs)
+        mb_log_probs[i] = log_probs[t, n]
+        mb_values[i] = values[t, n]
+        mb_returns[i] = returns[t, n]
+        mb_advantages[i] = wp.float32((wp.float64(advantages[t, n]) - stats[0]) / (stats[1] + wp.float64(ADVANTAGE_EPSILON)))

@@ -1,0 +1,245 @@
+//! The batch side of the update: what the rollout hands over ([`PpoBatch`]), GAE
+//! (`kernels_py/env/gae.py`), the per-epoch device shuffle and the minibatch gather
+//! (`kernels_py/env/minibatch.py`), with the shape checks the launchers cannot do.
+
+use crate::cuda::{Gpu, Stream};
+use crate::env::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels, RolloutStorage};
+
+use super::PpoError;
+
+/// The rollout's data, `[T, N, ...]` (`T` = horizon, `N` = envs): what
+/// [`super::PpoUpdate::record`] reads. Flags are 0 or 1.
+pub struct PpoBatch<'a> {
+    /// Normalized observations `[T + 1, N, D]`; row T is the bootstrap observation.
+    pub observations: &'a DeviceArray3<f32>,
+    pub actions: &'a DeviceArray3<f32>,
+    pub log_probs: &'a DeviceArray2<f32>,
+    /// The critic's values of rows 0..T of the observations, from the rollout.
+    pub values: &'a DeviceArray2<f32>,
+    pub rewards: &'a DeviceArray2<f32>,
+    pub terminated: &'a DeviceArray2<i32>,
+    pub truncated: &'a DeviceArray2<i32>,
+}
+
+impl<'a> From<&'a RolloutStorage> for PpoBatch<'a> {
+    fn from(s: &'a RolloutStorage) -> Self {
+        PpoBatch {
+            observations: &s.observations,
+            actions: &s.actions,
+            log_probs: &s.log_probs,
+            values: &s.values,
+            rewards: &s.rewards,
+            terminated: &s.terminated,
+            truncated: &s.truncated,
+        }
+    }
+}
+
+impl PpoBatch<'_> {
+    /// Checks every array against `[horizon, envs]`, `D` observations and `A` actions.
+    pub fn check(
+        &self,
+        horizon: usize,
+        envs: usize,
+        observations: usize,
+        actions: usize,
+    ) -> Result<(), PpoError> {
+        let (t, n) = (horizon, envs);
+        let flat = [
+            ("log_probs", self.log_probs.shape()),
+            ("values", self.values.shape()),
+            ("rewards", self.rewards.shape()),
+            ("terminated", self.terminated.shape()),
+            ("truncated", self.truncated.shape()),
+        ];
+        let mut wrong: Vec<String> = flat
+            .iter()
+            .filter(|(_, shape)| *shape != [t, n])
+            .map(|(name, shape)| format!("{name} {shape:?} (expected [{t}, {n}])"))
+            .collect();
+        if self.observations.shape() != [t + 1, n, observations] {
+            wrong.push(format!(
+                "observations {:?} (expected [{}, {n}, {observations}])",
+                self.observations.shape(),
+                t + 1
+            ));
+        }
+        if self.actions.shape() != [t, n, actions] {
+            wrong.push(format!(
+                "actions {:?} (expected [{t}, {n}, {actions}])",
+                self.actions.shape()
+            ));
+        }
+        if wrong.is_empty() {
+            Ok(())
+        } else {
+            Err(PpoError::Shape(format!(
+                "rollout batch: {}",
+                wrong.join(", ")
+            )))
+        }
+    }
+}
+
+/// Advantages and returns `[T, N]` of a batch.
+pub struct Advantages {
+    pub advantages: DeviceArray2<f32>,
+    pub returns: DeviceArray2<f32>,
+}
+
+impl Advantages {
+    pub fn zeros(gpu: &Gpu, horizon: usize, envs: usize) -> Result<Advantages, PpoError> {
+        Ok(Advantages {
+            advantages: DeviceArray::zeros(gpu, [horizon, envs])?,
+            returns: DeviceArray::zeros(gpu, [horizon, envs])?,
+        })
+    }
+
+    /// Queues GAE (`kernels_py/env/gae.py`: truncated steps bootstrap with `gamma V(s_t)`) from
+    /// the batch and the critic's values of the bootstrap observations `last_values [N, 1]`.
+    pub fn record_gae(
+        &self,
+        kernels: &EnvKernels,
+        stream: &Stream,
+        batch: &PpoBatch<'_>,
+        last_values: &DeviceArray2<f32>,
+        gamma: f32,
+        lambda: f32,
+    ) -> Result<(), PpoError> {
+        let [t, n] = self.advantages.shape();
+        batch.check(
+            t,
+            n,
+            batch.observations.shape()[2],
+            batch.actions.shape()[2],
+        )?;
+        if last_values.shape() != [n, 1] || self.returns.shape() != [t, n] {
+            return Err(PpoError::Shape(format!(
+                "GAE: bootstrap values {:?} (expected [{n}, 1]), returns {:?} (expected [{t}, {n}])",
+                last_values.shape(),
+                self.returns.shape()
+            )));
+        }
+        kernels.gae_advantages(
+            stream,
+            n,
+            batch.rewards,
+            batch.values,
+            last_values,
+            batch.terminated,
+            batch.truncated,
+            gamma,
+            lambda,
+            &self.advantages,
+            &self.returns,
+        )?;
+        Ok(())
+    }
+}
+
+/// Queues `permutation[j] = pi(j)`, a random permutation of `[0, B)` (B = its length) keyed by
+/// `(seed, update_counter[0], epoch)`: a Feistel bijection with cycle walking, no sort.
+pub fn record_shuffle(
+    kernels: &EnvKernels,
+    stream: &Stream,
+    update_counter: &DeviceArray<i32>,
+    seed: i32,
+    epoch: usize,
+    permutation: &DeviceArray<i32>,
+) -> Result<(), PpoError> {
+    // The Feistel domain is the next power of four, computed in 64 bits; indices are i32.
+    if permutation.len() > 1 << 30 {
+        return Err(PpoError::Shape(format!(
+            "a batch of {} samples: the device shuffle handles at most 2^30",
+            permutation.len()
+        )));
+    }
+    kernels.shuffle_indices(
+        stream,
+        permutation.len(),
+        update_counter,
+        seed,
+        epoch as i32,
+        permutation,
+    )?;
+    Ok(())
+}
+
+/// One minibatch, gathered into contiguous rows `[M, ...]`.
+pub struct Minibatch {
+    pub observations: DeviceArray2<f32>,
+    pub actions: DeviceArray2<f32>,
+    pub log_probs: DeviceArray<f32>,
+    pub values: DeviceArray<f32>,
+    /// Normalized with the whole batch's mean and (unbiased) standard deviation.
+    pub advantages: DeviceArray<f32>,
+    pub returns: DeviceArray<f32>,
+}
+
+impl Minibatch {
+    pub fn zeros(
+        gpu: &Gpu,
+        rows: usize,
+        observations: usize,
+        actions: usize,
+    ) -> Result<Minibatch, PpoError> {
+        Ok(Minibatch {
+            observations: DeviceArray::zeros(gpu, [rows, observations])?,
+            actions: DeviceArray::zeros(gpu, [rows, actions])?,
+            log_probs: DeviceArray::zeros(gpu, [rows])?,
+            values: DeviceArray::zeros(gpu, [rows])?,
+            advantages: DeviceArray::zeros(gpu, [rows])?,
+            returns: DeviceArray::zeros(gpu, [rows])?,
+        })
+    }
+
+    pub fn rows(&self) -> usize {
+        self.observations.shape()[0]
+    }
+
+    /// Queues the gather of samples `permutation[start..start + M]` of `batch` (with its
+    /// advantages and returns) into this minibatch; `advantage_moments` holds the sum and sum
+    /// of squares of all the batch's advantages (`reduce::record_sum_and_squares`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_gather(
+        &self,
+        kernels: &EnvKernels,
+        stream: &Stream,
+        batch: &PpoBatch<'_>,
+        advantages: &Advantages,
+        advantage_moments: &DeviceArray<f64>,
+        permutation: &DeviceArray<i32>,
+        start: usize,
+    ) -> Result<(), PpoError> {
+        let [m, d] = self.observations.shape();
+        let a = self.actions.shape()[1];
+        let [t, n] = advantages.advantages.shape();
+        batch.check(t, n, d, a)?;
+        if permutation.len() != t * n || start + m > permutation.len() {
+            return Err(PpoError::Shape(format!(
+                "minibatch of {m} rows from {start} of a permutation of {} ({t} x {n} samples)",
+                permutation.len()
+            )));
+        }
+        kernels.gather_minibatch(
+            stream,
+            m * d.max(a),
+            permutation,
+            start as i32,
+            batch.observations,
+            batch.actions,
+            batch.log_probs,
+            batch.values,
+            &advantages.advantages,
+            &advantages.returns,
+            advantage_moments,
+            &self.observations,
+            &self.actions,
+            &self.log_probs,
+            &self.values,
+            &self.advantages,
+            &self.returns,
+        )?;
+        Ok(())
+    }
+}

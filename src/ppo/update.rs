@@ -1,0 +1,486 @@
+//! The PPO update on the GPU, recorded onto a stream with no host synchronization and no host
+//! node, so that it can be captured into a CUDA graph and replayed every iteration.
+//!
+//! [`PpoUpdate::record`] queues, in order:
+//!
+//! 1. clears of the update's accumulators; the critic on the bootstrap observations (row T);
+//!    GAE (`gae.py`; truncation bootstraps with `gamma V(s_t)`, rsl_rl's approximation); the
+//!    advantages' sum and sum of squares (for their normalization over the whole batch);
+//! 2. per epoch, a fresh device permutation of the T x N samples (`minibatch.py`), keyed by a
+//!    device counter the update advances, so every replay shuffles differently;
+//! 3. per minibatch (slot `s = epoch * minibatches + k`): the gather; the actor and critic
+//!    forward passes (`policy.py`, activations kept); the loss gradients (`ppo_loss.py`) and
+//!    the column sums of their per-sample terms into row s of the loss sums; the backward
+//!    passes (`mlp_backward.py`); the schedule (`optimizer.py`: log-std gradient, KL-adaptive
+//!    learning rate, Adam step count); the squared global gradient norm into slot s; Adam on
+//!    the actor's and the critic's parameters (clipped by that norm);
+//! 4. the statistics (`ppo_statistics.py`) into one small buffer, and the update counter.
+//!
+//! Every hyperparameter is a kernel argument (recorded with the launch; change it by
+//! recording again) or lives in device memory (the learning rate, Adam's step, the counter).
+
+use std::sync::Arc;
+
+use thiserror::Error;
+
+use crate::cuda::{CudaError, Gpu, Stream};
+use crate::env::{
+    AdamParams, DeviceArray, DeviceArray2, EnvError, EnvKernels, PpoLossParams, ScheduleParams,
+};
+use crate::train::TrainConfig;
+
+use super::adam::{
+    AdamMoments, LEARNING_RATE_MAX, LEARNING_RATE_MIN, adam_params, record_schedule,
+};
+use super::backward::{MlpGradients, record_mlp_backward};
+use super::batch::{Advantages, Minibatch, PpoBatch, record_shuffle};
+use super::loss::{LOSS_TERMS, LossGradients, PpoStatistics};
+use super::policy::{GaussianPolicy, LayerShape, Mlp, PolicyError};
+use super::reduce::{
+    record_clear, record_column_sums, record_sum_and_squares, record_sum_of_squares,
+};
+
+/// Why an update cannot be built or recorded.
+#[derive(Debug, Error)]
+pub enum PpoError {
+    #[error(transparent)]
+    Env(#[from] EnvError),
+    #[error(transparent)]
+    Cuda(#[from] CudaError),
+    #[error(transparent)]
+    Policy(#[from] PolicyError),
+    #[error("PPO update: {0}")]
+    Shape(String),
+}
+
+/// Target of resident blocks per SM for the split weight-gradient reductions: the kernel uses
+/// 165 registers per thread (ptxas, sm_90) and 48 KiB of shared memory, so 3 blocks of 128
+/// threads fit on one SM of an A100 or H100 (65536 registers).
+const WEIGHT_GRAD_BLOCKS_PER_SM: usize = 3;
+
+/// The optimizer's device state, as a host copy (for checkpoints and resume).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PpoOptimizerState {
+    pub learning_rate: f32,
+    pub adam_step: i32,
+    pub update_counter: i32,
+    pub actor_moment1: Vec<f32>,
+    pub actor_moment2: Vec<f32>,
+    pub critic_moment1: Vec<f32>,
+    pub critic_moment2: Vec<f32>,
+}
+
+/// Floating-point operations of one update (multiply and add counted as 2).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UpdateFlops {
+    /// Forward passes of actor and critic over every minibatch row of every epoch, and the
+    /// critic over the bootstrap row.
+    pub forward: f64,
+    /// Weight gradients (`x^T dz`) and input gradients (`dz w^T`, not for the first layer).
+    pub backward: f64,
+}
+
+impl UpdateFlops {
+    /// For networks `actor` and `critic`, `samples` = T x N rows per epoch, `epochs`, and the
+    /// `envs` bootstrap rows.
+    pub fn of(
+        actor: &[LayerShape],
+        critic: &[LayerShape],
+        samples: usize,
+        epochs: usize,
+        envs: usize,
+    ) -> UpdateFlops {
+        let macs = |layers: &[LayerShape]| -> f64 {
+            layers.iter().map(|l| (l.inputs * l.outputs) as f64).sum()
+        };
+        let input_macs =
+            |layers: &[LayerShape]| -> f64 { macs(layers) - macs(&layers[..layers.len().min(1)]) };
+        let rows = (samples * epochs) as f64;
+        UpdateFlops {
+            forward: 2.0 * rows * (macs(actor) + macs(critic)) + 2.0 * envs as f64 * macs(critic),
+            backward: 2.0
+                * rows
+                * (macs(actor) + macs(critic) + input_macs(actor) + input_macs(critic)),
+        }
+    }
+
+    pub fn total(&self) -> f64 {
+        self.forward + self.backward
+    }
+}
+
+/// Everything one update needs, allocated once; [`PpoUpdate::record`] queues the update.
+pub struct PpoUpdate {
+    gpu: Gpu,
+    kernels: Arc<EnvKernels>,
+    horizon: usize,
+    envs: usize,
+    observation_size: usize,
+    action_size: usize,
+    epochs: usize,
+    minibatches: usize,
+    seed: i32,
+    gamma: f32,
+    lambda: f32,
+    loss_params: PpoLossParams,
+    schedule: ScheduleParams,
+    adam: AdamParams,
+    target_blocks: usize,
+    actor_shapes: Vec<LayerShape>,
+    critic_shapes: Vec<LayerShape>,
+    actor_params: DeviceArray<f32>,
+    critic_params: DeviceArray<f32>,
+    log_std: DeviceArray<f32>,
+    /// The networks over a minibatch (sharing the policy's parameters), and the critic over
+    /// the bootstrap row.
+    actor: Mlp,
+    critic: Mlp,
+    bootstrap: Mlp,
+    actor_grads: MlpGradients,
+    critic_grads: MlpGradients,
+    log_std_grad: DeviceArray<f32>,
+    actor_moments: AdamMoments,
+    critic_moments: AdamMoments,
+    advantages: Advantages,
+    permutation: DeviceArray<i32>,
+    minibatch: Minibatch,
+    loss: LossGradients,
+    /// Per minibatch step: column sums of the loss terms `[S, LOSS_TERMS + A]` and the squared
+    /// gradient norm `[S]`; the advantages' sum and sum of squares.
+    loss_sums: DeviceArray2<f32>,
+    grad_norm_sq: DeviceArray<f64>,
+    advantage_moments: DeviceArray<f64>,
+    learning_rate: DeviceArray<f32>,
+    adam_step: DeviceArray<i32>,
+    update_counter: DeviceArray<i32>,
+    statistics: DeviceArray<f32>,
+}
+
+impl PpoUpdate {
+    /// An update of `policy` (its parameters are updated in place) for batches of
+    /// `config.ppo.horizon` x `config.env.num_envs` samples with the hyperparameters of
+    /// `config.ppo`; the learning rate starts at `config.ppo.learning_rate`. `kernels` may be
+    /// shared with the rollout.
+    pub fn new(
+        gpu: &Gpu,
+        kernels: Arc<EnvKernels>,
+        policy: &GaussianPolicy,
+        config: &TrainConfig,
+    ) -> Result<PpoUpdate, PpoError> {
+        let q = &config.ppo;
+        let (horizon, envs) = (q.horizon as usize, config.env.num_envs as usize);
+        let (epochs, minibatches) = (q.epochs as usize, q.minibatches as usize);
+        let samples = horizon * envs;
+        if samples == 0 || epochs == 0 || minibatches == 0 || samples % minibatches != 0 {
+            return Err(PpoError::Shape(format!(
+                "{horizon} x {envs} samples in {minibatches} minibatches, {epochs} epochs: sizes must be positive and the minibatches must divide the samples"
+            )));
+        }
+        if samples > i32::MAX as usize {
+            return Err(PpoError::Shape(format!(
+                "{samples} samples: indices are i32"
+            )));
+        }
+        let rows = samples / minibatches;
+        let (d, a) = (policy.observation_size(), policy.action_size());
+        let actor_shapes = policy.actor_layers().to_vec();
+        let critic_shapes = policy.critic_layers().to_vec();
+        let share = |p: &DeviceArray<f32>| p.view(0, [p.len()]);
+        let actor_params = share(policy.actor_parameters())?;
+        let critic_params = share(policy.critic_parameters())?;
+        let log_std_offset = actor_shapes.last().map_or(0, LayerShape::end);
+        let actor_grads = MlpGradients::new(gpu, &actor_shapes, actor_params.len())?;
+        let critic_grads = MlpGradients::new(gpu, &critic_shapes, critic_params.len())?;
+        let log_std_grad = actor_grads.flat.view(log_std_offset, [a])?;
+        let steps = epochs * minibatches;
+        Ok(PpoUpdate {
+            gpu: gpu.clone(),
+            horizon,
+            envs,
+            observation_size: d,
+            action_size: a,
+            epochs,
+            minibatches,
+            // The shuffle's own seed (the sampling uses the low and high halves xor-ed).
+            seed: (config.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 32) as u32 as i32,
+            gamma: q.gamma,
+            lambda: q.lambda,
+            loss_params: PpoLossParams {
+                clip: q.clip,
+                value_coef: q.value_coef,
+                clip_value_loss: i32::from(q.clip_value_loss),
+            },
+            schedule: ScheduleParams {
+                kl_target: q.kl_threshold,
+                lr_min: LEARNING_RATE_MIN,
+                lr_max: LEARNING_RATE_MAX,
+                adaptive: i32::from(q.adaptive_learning_rate),
+                entropy_coef: q.entropy_coef,
+            },
+            adam: adam_params(q.max_grad_norm),
+            target_blocks: gpu.info().sm_count.max(1) as usize * WEIGHT_GRAD_BLOCKS_PER_SM,
+            actor: Mlp::new(gpu, &actor_shapes, share(&actor_params)?, rows)?,
+            critic: Mlp::new(gpu, &critic_shapes, share(&critic_params)?, rows)?,
+            bootstrap: Mlp::new(gpu, &critic_shapes, share(&critic_params)?, envs)?,
+            log_std: policy.log_std().view(0, [a])?,
+            actor_moments: AdamMoments::zeros(gpu, actor_params.len())?,
+            critic_moments: AdamMoments::zeros(gpu, critic_params.len())?,
+            actor_shapes,
+            critic_shapes,
+            actor_params,
+            critic_params,
+            actor_grads,
+            critic_grads,
+            log_std_grad,
+            advantages: Advantages::zeros(gpu, horizon, envs)?,
+            permutation: DeviceArray::zeros(gpu, [samples])?,
+            minibatch: Minibatch::zeros(gpu, rows, d, a)?,
+            loss: LossGradients::zeros(gpu, rows, a)?,
+            loss_sums: DeviceArray::zeros(gpu, [steps, LOSS_TERMS + a])?,
+            grad_norm_sq: DeviceArray::zeros(gpu, [steps])?,
+            advantage_moments: DeviceArray::zeros(gpu, [2])?,
+            learning_rate: DeviceArray::from_slice(gpu, [1], &[q.learning_rate])?,
+            adam_step: DeviceArray::zeros(gpu, [1])?,
+            update_counter: DeviceArray::zeros(gpu, [1])?,
+            statistics: DeviceArray::zeros(gpu, [PpoStatistics::LEN])?,
+            kernels,
+        })
+    }
+
+    /// Queues the whole update of `batch` on `stream` (see the module docs); valid inside
+    /// [`Stream::capture`]. The statistics land in [`PpoUpdate::statistics`] at the end.
+    pub fn record(&self, stream: &Stream, batch: &PpoBatch<'_>) -> Result<(), PpoError> {
+        let (t, n, d, a) = (
+            self.horizon,
+            self.envs,
+            self.observation_size,
+            self.action_size,
+        );
+        batch.check(t, n, d, a)?;
+        let k = &*self.kernels;
+        record_clear(stream, &self.loss_sums)?;
+        record_clear(stream, &self.grad_norm_sq)?;
+        record_clear(stream, &self.advantage_moments)?;
+
+        let bootstrap_obs = batch.observations.view(t * n * d, [n, d])?;
+        self.bootstrap.record(k, stream, &bootstrap_obs)?;
+        self.advantages.record_gae(
+            k,
+            stream,
+            batch,
+            self.bootstrap.output(),
+            self.gamma,
+            self.lambda,
+        )?;
+        let flat_advantages = self.advantages.advantages.view(0, [t * n])?;
+        record_sum_and_squares(k, stream, &flat_advantages, &self.advantage_moments)?;
+
+        let rows = self.minibatch.rows();
+        for epoch in 0..self.epochs {
+            record_shuffle(
+                k,
+                stream,
+                &self.update_counter,
+                self.seed,
+                epoch,
+                &self.permutation,
+            )?;
+            for mb in 0..self.minibatches {
+                let slot = epoch * self.minibatches + mb;
+                self.minibatch.record_gather(
+                    k,
+                    stream,
+                    batch,
+                    &self.advantages,
+                    &self.advantage_moments,
+                    &self.permutation,
+                    mb * rows,
+                )?;
+                self.record_minibatch_step(stream, slot)?;
+            }
+        }
+        k.ppo_update_statistics(
+            stream,
+            1,
+            &self.loss_sums,
+            &self.grad_norm_sq,
+            &self.advantage_moments,
+            (t * n) as i32,
+            &self.learning_rate,
+            &self.update_counter,
+            &self.statistics,
+        )?;
+        Ok(())
+    }
+
+    /// Forward, loss, backward, schedule and Adam for the gathered minibatch, step `slot`.
+    fn record_minibatch_step(&self, stream: &Stream, slot: usize) -> Result<(), PpoError> {
+        let k = &*self.kernels;
+        let obs = &self.minibatch.observations;
+        self.actor.record(k, stream, obs)?;
+        self.critic.record(k, stream, obs)?;
+        record_clear(stream, &self.actor_grads.flat)?;
+        record_clear(stream, &self.critic_grads.flat)?;
+        self.loss.record(
+            k,
+            stream,
+            &self.minibatch,
+            self.actor.output(),
+            &self.log_std,
+            self.critic.output(),
+            &self.loss_params,
+        )?;
+        let width = LOSS_TERMS + self.action_size;
+        let sums = self.loss_sums.view(slot * width, [width])?;
+        record_column_sums(k, stream, &self.loss.terms, &sums)?;
+        let blocks = self.target_blocks;
+        record_mlp_backward(
+            k,
+            stream,
+            &self.actor,
+            obs,
+            &self.loss.d_mean,
+            &self.actor_grads,
+            blocks,
+        )?;
+        record_mlp_backward(
+            k,
+            stream,
+            &self.critic,
+            obs,
+            &self.loss.d_value,
+            &self.critic_grads,
+            blocks,
+        )?;
+        record_schedule(
+            k,
+            stream,
+            &sums,
+            &self.schedule,
+            &self.log_std_grad,
+            &self.learning_rate,
+            &self.adam_step,
+        )?;
+        record_sum_of_squares(k, stream, &self.actor_grads.flat, &self.grad_norm_sq, slot)?;
+        record_sum_of_squares(k, stream, &self.critic_grads.flat, &self.grad_norm_sq, slot)?;
+        for (params, grads, moments) in [
+            (&self.actor_params, &self.actor_grads, &self.actor_moments),
+            (
+                &self.critic_params,
+                &self.critic_grads,
+                &self.critic_moments,
+            ),
+        ] {
+            moments.record_step(
+                k,
+                stream,
+                params,
+                &grads.flat,
+                &self.learning_rate,
+                &self.adam_step,
+                &self.grad_norm_sq,
+                slot,
+                &self.adam,
+            )?;
+        }
+        Ok(())
+    }
+
+    /// The statistics of the last recorded update, `[PpoStatistics::LEN]` `f32` (layout:
+    /// [`PpoStatistics`]); copy it back asynchronously after the update.
+    pub fn statistics(&self) -> &DeviceArray<f32> {
+        &self.statistics
+    }
+
+    /// Downloads the statistics (waits for the GPU's main stream).
+    pub fn read_statistics(&self) -> Result<PpoStatistics, PpoError> {
+        PpoStatistics::from_values(&self.statistics.download()?)
+    }
+
+    /// The current learning rate `[1]` (device; the schedule adapts it).
+    pub fn learning_rate(&self) -> &DeviceArray<f32> {
+        &self.learning_rate
+    }
+
+    /// Advantages and returns `[T, N]` of the last update.
+    pub fn advantages(&self) -> &Advantages {
+        &self.advantages
+    }
+
+    /// Gradients of the last minibatch step (actor, with its log std at the end; critic).
+    pub fn gradients(&self) -> (&MlpGradients, &MlpGradients) {
+        (&self.actor_grads, &self.critic_grads)
+    }
+
+    /// Minibatch rows, steps (epochs x minibatches), samples per update.
+    pub fn sizes(&self) -> (usize, usize, usize) {
+        (
+            self.minibatch.rows(),
+            self.epochs * self.minibatches,
+            self.horizon * self.envs,
+        )
+    }
+
+    /// Floating-point operations of one update.
+    pub fn flops(&self) -> UpdateFlops {
+        UpdateFlops::of(
+            &self.actor_shapes,
+            &self.critic_shapes,
+            self.horizon * self.envs,
+            self.epochs,
+            self.envs,
+        )
+    }
+
+    /// A host copy of the optimizer's state (synchronous; for checkpoints).
+    pub fn download_state(&self) -> Result<PpoOptimizerState, PpoError> {
+        self.gpu.synchronize()?;
+        Ok(PpoOptimizerState {
+            learning_rate: self.learning_rate.download()?[0],
+            adam_step: self.adam_step.download()?[0],
+            update_counter: self.update_counter.download()?[0],
+            actor_moment1: self.actor_moments.moment1.download()?,
+            actor_moment2: self.actor_moments.moment2.download()?,
+            critic_moment1: self.critic_moments.moment1.download()?,
+            critic_moment2: self.critic_moments.moment2.download()?,
+        })
+    }
+
+    /// Restores a state from [`PpoUpdate::download_state`] (resume).
+    pub fn upload_state(&self, state: &PpoOptimizerState) -> Result<(), PpoError> {
+        self.gpu.synchronize()?;
+        self.learning_rate.upload(&[state.learning_rate])?;
+        self.adam_step.upload(&[state.adam_step])?;
+        self.update_counter.upload(&[state.update_counter])?;
+        self.actor_moments.moment1.upload(&state.actor_moment1)?;
+        self.actor_moments.moment2.upload(&state.actor_moment2)?;
+        self.critic_moments.moment1.upload(&state.critic_moment1)?;
+        self.critic_moments.moment2.upload(&state.critic_moment2)?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ppo::mlp_layout;
+
+    #[test]
+    fn flops_of_the_baseline_update() {
+        let actor = mlp_layout(353, &[400, 200, 100], 28);
+        let critic = mlp_layout(353, &[400, 200, 100], 1);
+        let f = UpdateFlops::of(&actor, &critic, 32 * 4096, 5, 4096);
+        // multiply-adds per row: actor 141200 + 80000 + 20000 + 2800 = 244000, critic 241300;
+        // input gradients skip the first layers (141200 each)
+        let rows = 32.0 * 4096.0 * 5.0;
+        assert_eq!(
+            f.forward,
+            2.0 * rows * (244000.0 + 241300.0) + 2.0 * 4096.0 * 241300.0
+        );
+        assert_eq!(
+            f.backward,
+            2.0 * rows * (244000.0 + 241300.0 + 102800.0 + 100100.0)
+        );
+        assert!((f.total() / 1e12 - 1.5401).abs() < 1e-4, "{}", f.total());
+    }
+}

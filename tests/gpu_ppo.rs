@@ -1,0 +1,732 @@
+//! The PPO update on the GPU against float64 host references (`tests/ppo_support`, themselves
+//! checked against finite differences by `tests/ppo_reference.rs`). Run on a machine with an
+//! NVIDIA GPU: `cargo test --release --features gpu --test gpu_ppo -- --nocapture`
+//!
+//! - GAE; the loss gradients against central finite differences of the float64 loss (and the
+//!   analytic ones), the loss statistics; Adam with clipping over three steps; the backward
+//!   GEMMs at the baseline's sizes (split-K atomics, in-place input gradient) and the reductions.
+//! - A whole recorded update, captured with `Stream::capture`: no host node and no host copy in
+//!   the graph; with 1 epoch x 1 minibatch its gradients equal the float64 gradients of the PPO
+//!   loss at the rollout's parameters; with 3 epochs x 4 minibatches two replays each lower
+//!   the PPO loss of the fixed batch, and the statistics count the updates.
+//! - The baseline's update (4096 envs, horizon 32, 5 x 4 minibatches): replay time and FLOP
+//!   rate, printed.
+//!
+//! Tolerance: normwise relative error `max |x - ref| / max |ref|` <= 1e-4.
+#![cfg(feature = "gpu")]
+
+mod ppo_support;
+
+use std::sync::Arc;
+
+use instantmimic::cuda::Gpu;
+use instantmimic::env::ScheduleParams;
+use instantmimic::env::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels, PpoLossParams};
+use instantmimic::ppo::adam::{AdamMoments, adam_params, record_schedule};
+use instantmimic::ppo::backward::{
+    record_linear_backward_input_elu, record_linear_backward_weight,
+};
+use instantmimic::ppo::batch::{Advantages, Minibatch};
+use instantmimic::ppo::loss::{LOSS_TERMS, LossGradients};
+use instantmimic::ppo::reduce::{
+    record_column_sums, record_sum_and_squares, record_sum_of_squares,
+};
+use instantmimic::ppo::{ActStorage, GaussianPolicy, LayerShape, PpoBatch, PpoUpdate};
+use instantmimic::train::TrainConfig;
+use ppo_support::*;
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+
+const LIMIT: f64 = 1e-4;
+
+fn gpu() -> (Gpu, Arc<EnvKernels>) {
+    let gpu = Gpu::open(0).expect("a GPU");
+    let kernels = Arc::new(EnvKernels::load(&gpu).expect("env kernels"));
+    (gpu, kernels)
+}
+
+fn check(what: &str, x: &[f64], reference: &[f64]) {
+    let err = relative_error(x, reference);
+    println!("{what}: relative error {err:.2e}");
+    assert!(
+        err <= LIMIT,
+        "{what}: relative error {err:.3e} > {LIMIT:.0e}"
+    );
+}
+
+fn download(a: &DeviceArray<f32>) -> Vec<f64> {
+    to_f64(&a.download().expect("download"))
+}
+
+fn download2(a: &DeviceArray2<f32>) -> Vec<f64> {
+    to_f64(&a.download().expect("download"))
+}
+
+/// A rollout's storage on the device.
+struct Rollout {
+    t: usize,
+    n: usize,
+    observations: DeviceArray3<f32>,
+    actions: DeviceArray3<f32>,
+    log_probs: DeviceArray2<f32>,
+    values: DeviceArray2<f32>,
+    rewards: DeviceArray2<f32>,
+    terminated: DeviceArray2<i32>,
+    truncated: DeviceArray2<i32>,
+}
+
+impl Rollout {
+    fn batch(&self) -> PpoBatch<'_> {
+        PpoBatch {
+            observations: &self.observations,
+            actions: &self.actions,
+            log_probs: &self.log_probs,
+            values: &self.values,
+            rewards: &self.rewards,
+            terminated: &self.terminated,
+            truncated: &self.truncated,
+        }
+    }
+
+    /// Random storage (observations, actions, log-probabilities and values unrelated).
+    fn random(gpu: &Gpu, rng: &mut StdRng, t: usize, n: usize, d: usize, a: usize) -> Rollout {
+        let arr2 = |v: &[f32]| DeviceArray::from_slice(gpu, [t, n], v).unwrap();
+        let flags = |rng: &mut StdRng| {
+            DeviceArray::from_slice(gpu, [t, n], &ppo_support::flags(rng, t * n, 0.1)).unwrap()
+        };
+        Rollout {
+            t,
+            n,
+            observations: DeviceArray::from_slice(
+                gpu,
+                [t + 1, n, d],
+                &normal(rng, (t + 1) * n * d, 0.0, 1.0),
+            )
+            .unwrap(),
+            actions: DeviceArray::from_slice(gpu, [t, n, a], &normal(rng, t * n * a, 0.0, 1.0))
+                .unwrap(),
+            log_probs: arr2(&normal(rng, t * n, -5.0, 1.0)),
+            values: arr2(&normal(rng, t * n, 5.0, 2.0)),
+            rewards: arr2(&normal(rng, t * n, 0.5, 0.2)),
+            terminated: flags(rng),
+            truncated: flags(rng),
+        }
+    }
+
+    /// Actions, log-probabilities and values sampled by `policy` from random observations (as
+    /// the rollout does), rewards for actions near 0.3, some failures and truncations.
+    fn sampled(
+        gpu: &Gpu,
+        kernels: &EnvKernels,
+        policy: &GaussianPolicy,
+        t: usize,
+        rng: &mut StdRng,
+    ) -> Rollout {
+        let (n, d, a) = (
+            policy.batch(),
+            policy.observation_size(),
+            policy.action_size(),
+        );
+        let mut r = Rollout::random(gpu, rng, t, n, d, a);
+        let current = DeviceArray::zeros(gpu, [n, a]).unwrap();
+        let iteration = DeviceArray::zeros(gpu, [1]).unwrap();
+        let storage = ActStorage {
+            actions: &r.actions,
+            log_probs: &r.log_probs,
+            values: &r.values,
+        };
+        for step in 0..t {
+            let obs = r.observations.view(step * n * d, [n, d]).unwrap();
+            policy
+                .record_act(
+                    kernels,
+                    gpu.stream(),
+                    &obs,
+                    &current,
+                    &storage,
+                    &iteration,
+                    step,
+                    false,
+                )
+                .expect("policy act");
+        }
+        gpu.synchronize().expect("rollout");
+        let actions = r.actions.download().unwrap();
+        let rewards: Vec<f32> = actions
+            .chunks(a)
+            .map(|row| {
+                let e: f32 = row.iter().map(|x| (x - 0.3) * (x - 0.3)).sum::<f32>() / a as f32;
+                (-e).exp()
+            })
+            .collect();
+        r.rewards = DeviceArray::from_slice(gpu, [t, n], &rewards).unwrap();
+        r.terminated = DeviceArray::from_slice(gpu, [t, n], &flags(rng, t * n, 0.03)).unwrap();
+        r.truncated = DeviceArray::from_slice(gpu, [t, n], &flags(rng, t * n, 0.03)).unwrap();
+        r
+    }
+}
+
+#[test]
+fn gae_matches_the_float64_reference() {
+    let (gpu, kernels) = gpu();
+    let mut rng = StdRng::seed_from_u64(1);
+    let (t, n) = (32, 1000);
+    let r = Rollout::random(&gpu, &mut rng, t, n, 3, 2);
+    let last = normal(&mut rng, n, 5.0, 2.0);
+    let last_d = DeviceArray::from_slice(&gpu, [n, 1], &last).unwrap();
+    let adv = Advantages::zeros(&gpu, t, n).unwrap();
+    adv.record_gae(&kernels, gpu.stream(), &r.batch(), &last_d, 0.99, 0.95)
+        .expect("gae");
+    gpu.synchronize().unwrap();
+    let (ref_adv, ref_ret) = gae(
+        &download2(&r.rewards),
+        &download2(&r.values),
+        &to_f64(&last),
+        &r.terminated.download().unwrap(),
+        &r.truncated.download().unwrap(),
+        n,
+        f64::from(0.99f32),
+        f64::from(0.95f32),
+    );
+    check("GAE advantages", &download2(&adv.advantages), &ref_adv);
+    check("GAE returns", &download2(&adv.returns), &ref_ret);
+}
+
+#[test]
+fn loss_gradients_match_finite_differences() {
+    let (gpu, kernels) = gpu();
+    let mut rng = StdRng::seed_from_u64(2);
+    let (m, a) = (512, 28);
+    let c = LossConfig {
+        clip: f64::from(0.2f32),
+        value_coef: 2.0,
+        entropy_coef: f64::from(0.01f32),
+        clip_value_loss: true,
+    };
+    let mean = normal(&mut rng, m * a, 0.0, 0.5);
+    let log_std = normal(&mut rng, a, -1.0, 0.2);
+    let value = normal(&mut rng, m, 0.0, 1.0);
+    let (mean64, log_std64, value64) = (to_f64(&mean), to_f64(&log_std), to_f64(&value));
+    let targets = loss_targets(&mut rng, m, a, c.clip, &mean64, &log_std64, &value64);
+    let to32 = |x: &[f64]| -> Vec<f32> { x.iter().map(|&v| v as f32).collect() };
+    let (actions, old_log_probs, old_values, advantages, returns) = (
+        to32(&targets.actions),
+        to32(&targets.old_log_probs),
+        to32(&targets.old_values),
+        to32(&targets.advantages),
+        to32(&targets.returns),
+    );
+
+    let mb = Minibatch::zeros(&gpu, m, 1, a).unwrap();
+    mb.actions.upload(&actions).unwrap();
+    mb.log_probs.upload(&old_log_probs).unwrap();
+    mb.values.upload(&old_values).unwrap();
+    mb.advantages.upload(&advantages).unwrap();
+    mb.returns.upload(&returns).unwrap();
+    let mean_d = DeviceArray::from_slice(&gpu, [m, a], &mean).unwrap();
+    let log_std_d = DeviceArray::from_slice(&gpu, [a], &log_std).unwrap();
+    let value_d = DeviceArray::from_slice(&gpu, [m, 1], &value).unwrap();
+    let grads = LossGradients::zeros(&gpu, m, a).unwrap();
+    let params = PpoLossParams {
+        clip: 0.2,
+        value_coef: 2.0,
+        clip_value_loss: 1,
+    };
+    let sums = DeviceArray::zeros(&gpu, [LOSS_TERMS + a]).unwrap();
+    let s = gpu.stream();
+    grads
+        .record(&kernels, s, &mb, &mean_d, &log_std_d, &value_d, &params)
+        .expect("loss");
+    record_column_sums(&kernels, s, &grads.terms, &sums).expect("sums");
+    gpu.synchronize().unwrap();
+
+    let d_mean = download2(&grads.d_mean);
+    let d_value = download2(&grads.d_value);
+    let sums = download(&sums);
+    let d_log_std: Vec<f64> = sums[LOSS_TERMS..]
+        .iter()
+        .map(|g| g - c.entropy_coef)
+        .collect();
+    let (ref_mean, ref_log_std, ref_value) =
+        ppo_loss_gradients(&mean64, &log_std64, &value64, &targets, &c);
+    check("d_mean vs analytic float64", &d_mean, &ref_mean);
+    check("d_log_std vs analytic float64", &d_log_std, &ref_log_std);
+    check("d_value vs analytic float64", &d_value, &ref_value);
+
+    let h = 1e-6;
+    let loss = |mu: &[f64], s: &[f64], v: &[f64]| ppo_loss(mu, s, v, &targets, &c)[0];
+    let picks: Vec<usize> = (0..300).map(|k| (k * 7919) % (m * a)).collect();
+    let fd_mean: Vec<f64> = picks
+        .iter()
+        .map(|&k| {
+            let (mut p, mut q) = (mean64.clone(), mean64.clone());
+            p[k] += h;
+            q[k] -= h;
+            (loss(&p, &log_std64, &value64) - loss(&q, &log_std64, &value64)) / (2.0 * h)
+        })
+        .collect();
+    let fd_log_std: Vec<f64> = (0..a)
+        .map(|j| {
+            let (mut p, mut q) = (log_std64.clone(), log_std64.clone());
+            p[j] += h;
+            q[j] -= h;
+            (loss(&mean64, &p, &value64) - loss(&mean64, &q, &value64)) / (2.0 * h)
+        })
+        .collect();
+    let fd_value: Vec<f64> = (0..m)
+        .map(|i| {
+            let (mut p, mut q) = (value64.clone(), value64.clone());
+            p[i] += h;
+            q[i] -= h;
+            (loss(&mean64, &log_std64, &p) - loss(&mean64, &log_std64, &q)) / (2.0 * h)
+        })
+        .collect();
+    let picked: Vec<f64> = picks.iter().map(|&k| d_mean[k]).collect();
+    check(
+        "d_mean vs finite differences (300 entries)",
+        &picked,
+        &fd_mean,
+    );
+    check("d_log_std vs finite differences", &d_log_std, &fd_log_std);
+    check("d_value vs finite differences", &d_value, &fd_value);
+    let parts = ppo_loss(&mean64, &log_std64, &value64, &targets, &c);
+    check(
+        "loss statistics (column sums)",
+        &sums[..LOSS_TERMS],
+        &parts[1..],
+    );
+}
+
+#[test]
+fn adam_steps_with_clipping_match_the_float64_reference() {
+    let (gpu, kernels) = gpu();
+    let mut rng = StdRng::seed_from_u64(3);
+    let size = 100_003;
+    let p0 = normal(&mut rng, size, 0.0, 0.01);
+    let params = DeviceArray::from_slice(&gpu, [size], &p0).unwrap();
+    let grads = DeviceArray::zeros(&gpu, [size]).unwrap();
+    let moments = AdamMoments::zeros(&gpu, size).unwrap();
+    let lr = DeviceArray::from_slice(&gpu, [1], &[5e-4f32]).unwrap();
+    let step = DeviceArray::zeros(&gpu, [1]).unwrap();
+    let norm_sq = DeviceArray::zeros(&gpu, [3]).unwrap();
+    let a = 4;
+    // KL between the bounds: the schedule only counts the step.
+    let mut sums = vec![0.0f32; LOSS_TERMS + a];
+    sums[3] = 0.008;
+    let sums = DeviceArray::from_slice(&gpu, [LOSS_TERMS + a], &sums).unwrap();
+    let log_std_grad = DeviceArray::zeros(&gpu, [a]).unwrap();
+    let schedule = ScheduleParams {
+        kl_target: 0.008,
+        lr_min: 1e-5,
+        lr_max: 1e-2,
+        adaptive: 1,
+        entropy_coef: 0.0,
+    };
+    let hp = adam_params(1.0);
+    let (b1, b2, eps) = (
+        f64::from(hp.beta1),
+        f64::from(hp.beta2),
+        f64::from(hp.epsilon),
+    );
+    let mut p = to_f64(&p0);
+    let (mut m, mut v) = (vec![0.0; size], vec![0.0; size]);
+    for t in 1..=3 {
+        // gradient norms above and below the threshold
+        let g = normal(&mut rng, size, 0.0, if t == 2 { 1e-4 } else { 0.01 });
+        grads.upload(&g).unwrap();
+        let s = gpu.stream();
+        record_schedule(&kernels, s, &sums, &schedule, &log_std_grad, &lr, &step).unwrap();
+        record_sum_of_squares(&kernels, s, &grads, &norm_sq, t - 1).unwrap();
+        moments
+            .record_step(
+                &kernels,
+                s,
+                &params,
+                &grads,
+                &lr,
+                &step,
+                &norm_sq,
+                t - 1,
+                &hp,
+            )
+            .unwrap();
+        gpu.synchronize().unwrap();
+        let g = to_f64(&g);
+        let norm = g.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let gpu_norm = norm_sq.download().unwrap()[t - 1].sqrt();
+        check(&format!("step {t}: gradient norm"), &[gpu_norm], &[norm]);
+        let scale = (1.0 / (norm + 1e-6)).min(1.0);
+        let lr64 = f64::from(5e-4f32);
+        let before = p.clone();
+        for i in 0..size {
+            let gi = g[i] * scale;
+            m[i] = b1 * m[i] + (1.0 - b1) * gi;
+            v[i] = b2 * v[i] + (1.0 - b2) * gi * gi;
+            let denom = v[i].sqrt() / (1.0 - b2.powi(t as i32)).sqrt() + eps;
+            p[i] -= lr64 / (1.0 - b1.powi(t as i32)) * m[i] / denom;
+        }
+        let gpu_p = download(&params);
+        let step_gpu: Vec<f64> = gpu_p.iter().zip(&before).map(|(x, y)| x - y).collect();
+        let step_ref: Vec<f64> = p.iter().zip(&before).map(|(x, y)| x - y).collect();
+        check(
+            &format!("step {t}: Adam parameter change"),
+            &step_gpu,
+            &step_ref,
+        );
+        check(
+            &format!("step {t}: first moment"),
+            &download(&moments.moment1),
+            &m,
+        );
+        check(
+            &format!("step {t}: second moment"),
+            &download(&moments.moment2),
+            &v,
+        );
+        p = gpu_p;
+        assert_eq!(step.download().unwrap(), vec![t as i32]);
+        assert_eq!(lr.download().unwrap(), vec![5e-4f32]);
+    }
+}
+
+#[test]
+fn backward_gemms_and_reductions_match_float64_at_the_baselines_sizes() {
+    let (gpu, kernels) = gpu();
+    let mut rng = StdRng::seed_from_u64(4);
+    let (m, k, n) = (8192, 353, 400);
+    let x = normal(&mut rng, m * k, 0.0, 1.0);
+    let dz = normal(&mut rng, m * n, 0.0, 1e-3);
+    let x_d = DeviceArray::from_slice(&gpu, [m, k], &x).unwrap();
+    let dz_d = DeviceArray::from_slice(&gpu, [m, n], &dz).unwrap();
+    let dw = DeviceArray::zeros(&gpu, [k, n]).unwrap();
+    let db = DeviceArray::zeros(&gpu, [n]).unwrap();
+    let target = gpu.info().sm_count as usize * 4;
+    let s = gpu.stream();
+    record_linear_backward_weight(&kernels, s, &x_d, &dz_d, &dw, &db, target).unwrap();
+    // input gradient through ELU outputs, in place
+    let w = normal(&mut rng, k * n, 0.0, 0.05);
+    let y: Vec<f32> = normal(&mut rng, m * k, 0.0, 1.0)
+        .iter()
+        .map(|&z| if z > 0.0 { z } else { z.exp_m1() })
+        .collect();
+    let w_d = DeviceArray::from_slice(&gpu, [k, n], &w).unwrap();
+    let y_d = DeviceArray::from_slice(&gpu, [m, k], &y).unwrap();
+    record_linear_backward_input_elu(&kernels, s, &dz_d, &w_d, &y_d).unwrap();
+    let col = DeviceArray::zeros(&gpu, [n]).unwrap();
+    record_column_sums(&kernels, s, &dz_d, &col).unwrap();
+    let moments = DeviceArray::zeros(&gpu, [2]).unwrap();
+    let flat_x = x_d.view(0, [m * k]).unwrap();
+    record_sum_and_squares(&kernels, s, &flat_x, &moments).unwrap();
+    gpu.synchronize().unwrap();
+
+    let (x64, dz64) = (to_f64(&x), to_f64(&dz));
+    let mut ref_dw = vec![0.0; k * n];
+    let mut ref_db = vec![0.0; n];
+    for r in 0..m {
+        let g = &dz64[r * n..(r + 1) * n];
+        for (acc, gv) in ref_db.iter_mut().zip(g) {
+            *acc += gv;
+        }
+        for i in 0..k {
+            let xv = x64[r * k + i];
+            for (acc, gv) in ref_dw[i * n..(i + 1) * n].iter_mut().zip(g) {
+                *acc += xv * gv;
+            }
+        }
+    }
+    check("dw = x^T dz (split-K, 8192 rows)", &download2(&dw), &ref_dw);
+    check("db = column sums of dz", &download(&db), &ref_db);
+    check("column_sums of dz", &download(&col), &ref_db);
+    let w64 = to_f64(&w);
+    let mut ref_dx = vec![0.0; m * k];
+    for r in 0..m {
+        for i in 0..k {
+            let g: f64 = (0..n).map(|o| dz64[r * n + o] * w64[i * n + o]).sum();
+            let yv = f64::from(y[r * k + i]);
+            ref_dx[r * k + i] = if yv > 0.0 { g } else { g * (yv + 1.0) };
+        }
+    }
+    check("dx = (dz w^T) elu'(y), in place", &download2(&y_d), &ref_dx);
+    let sum: f64 = x64.iter().sum();
+    let sum_sq: f64 = x64.iter().map(|v| v * v).sum();
+    let got = moments.download().unwrap();
+    check("sum of x (float64)", &got[..1], &[sum]);
+    check("sum of x^2 (float64)", &got[1..], &[sum_sq]);
+}
+
+/// A small policy, an update of it, and a batch it sampled.
+fn small_setup(
+    epochs: u32,
+    minibatches: u32,
+    seed: u64,
+) -> (
+    Gpu,
+    Arc<EnvKernels>,
+    GaussianPolicy,
+    PpoUpdate,
+    Rollout,
+    TrainConfig,
+) {
+    let (gpu, kernels) = gpu();
+    let (t, n, d, a) = (8usize, 64usize, 24usize, 6usize);
+    let mut config = TrainConfig::with_motion("test");
+    config.env.num_envs = n as u32;
+    config.ppo.horizon = t as u32;
+    config.ppo.epochs = epochs;
+    config.ppo.minibatches = minibatches;
+    config.ppo.entropy_coef = 0.001;
+    config.policy.actor_hidden = vec![64, 32];
+    config.policy.critic_hidden = vec![64, 32];
+    config.policy.init_log_std = -1.0;
+    config.seed = seed;
+    config.validate("test").expect("valid config");
+    let policy = GaussianPolicy::new(&gpu, &config.policy, d, a, n, seed).expect("policy");
+    let mut rng = StdRng::seed_from_u64(seed);
+    let rollout = Rollout::sampled(&gpu, &kernels, &policy, t, &mut rng);
+    let update = PpoUpdate::new(&gpu, kernels.clone(), &policy, &config).expect("update");
+    (gpu, kernels, policy, update, rollout, config)
+}
+
+/// The PPO loss inputs of a sampled batch, as the update sees them, in float64: observations
+/// rows 0..T as `[B, D]`, targets with advantages from GAE (bootstrap values from `host`'s
+/// critic) normalized over the batch, the loss's hyperparameters, and the raw advantages.
+fn host_targets(
+    r: &Rollout,
+    host: &HostPolicy,
+    config: &TrainConfig,
+) -> (Vec<f64>, LossTargets, LossConfig, Vec<f64>) {
+    let (t, n) = (r.t, r.n);
+    let obs_all = to_f64(&r.observations.download().unwrap());
+    let d = obs_all.len() / ((t + 1) * n);
+    let obs = obs_all[..t * n * d].to_vec();
+    let last_obs = &obs_all[t * n * d..];
+    let last = mlp_forward(&host.critic_layers, &host.critic, last_obs, n);
+    let values = download2(&r.values);
+    let (adv, ret) = gae(
+        &download2(&r.rewards),
+        &values,
+        last.last().unwrap(),
+        &r.terminated.download().unwrap(),
+        &r.truncated.download().unwrap(),
+        n,
+        f64::from(config.ppo.gamma),
+        f64::from(config.ppo.lambda),
+    );
+    let a = r.actions.shape()[2];
+    let targets = LossTargets {
+        actions: to_f64(&r.actions.download().unwrap()),
+        old_log_probs: download2(&r.log_probs),
+        old_values: values,
+        advantages: normalize(&adv),
+        returns: ret,
+        action_size: a,
+    };
+    let raw_advantages = adv;
+    let c = LossConfig {
+        clip: f64::from(config.ppo.clip),
+        value_coef: f64::from(config.ppo.value_coef),
+        entropy_coef: f64::from(config.ppo.entropy_coef),
+        clip_value_loss: config.ppo.clip_value_loss,
+    };
+    (obs, targets, c, raw_advantages)
+}
+
+fn host_policy(policy: &GaussianPolicy) -> HostPolicy {
+    HostPolicy {
+        actor_layers: policy.actor_layers().to_vec(),
+        critic_layers: policy.critic_layers().to_vec(),
+        actor: download(policy.actor_parameters()),
+        critic: download(policy.critic_parameters()),
+    }
+}
+
+fn assert_no_host_work(nodes: &std::collections::BTreeMap<String, usize>) {
+    for kind in [
+        "host",
+        "memcpy_device_to_host",
+        "memcpy_host_to_device",
+        "memcpy_host_to_host",
+    ] {
+        assert_eq!(
+            nodes.get(kind).copied().unwrap_or(0),
+            0,
+            "{kind} nodes in the update graph: {nodes:?}"
+        );
+    }
+    assert!(
+        nodes.get("kernel").copied().unwrap_or(0) > 0,
+        "no kernels: {nodes:?}"
+    );
+}
+
+#[test]
+fn one_update_step_has_the_float64_gradients_of_the_ppo_loss() {
+    let (gpu, _kernels, policy, update, rollout, config) = small_setup(1, 1, 5);
+    let host = host_policy(&policy);
+    let (obs, targets, c, raw_advantages) = host_targets(&rollout, &host, &config);
+    let rows = obs.len() / policy.observation_size();
+    let (ref_actor, ref_critic) = host.gradients(&obs, rows, &targets, &c);
+
+    let graph = gpu
+        .stream()
+        .capture(|s| update.record(s, &rollout.batch()))
+        .expect("capture");
+    let nodes = graph.node_counts().expect("node counts");
+    println!("update graph (1 x 1): {nodes:?}");
+    assert_no_host_work(&nodes);
+    graph.launch(gpu.stream()).expect("launch");
+    gpu.synchronize().expect("update");
+
+    check(
+        "advantages (device bootstrap critic and GAE)",
+        &download2(&update.advantages().advantages),
+        &raw_advantages,
+    );
+    let (actor_grads, critic_grads) = update.gradients();
+    let (ga, gc) = (download(&actor_grads.flat), download(&critic_grads.flat));
+    for (name, layers, got, reference) in [
+        ("actor", &host.actor_layers, &ga, &ref_actor),
+        ("critic", &host.critic_layers, &gc, &ref_critic),
+    ] {
+        for (l, s) in layers.iter().enumerate() {
+            let LayerShape { offset, .. } = *s;
+            check(
+                &format!("{name} layer {l} dw"),
+                &got[offset..s.bias_offset()],
+                &reference[offset..s.bias_offset()],
+            );
+            check(
+                &format!("{name} layer {l} db"),
+                &got[s.bias_offset()..s.end()],
+                &reference[s.bias_offset()..s.end()],
+            );
+        }
+    }
+    let end = host.actor_layers.last().unwrap().end();
+    check("actor log-std gradient", &ga[end..], &ref_actor[end..]);
+
+    let stats = update.read_statistics().expect("statistics");
+    println!("statistics after one update: {stats:?}");
+    let parts = host.loss(&obs, rows, &targets, &c);
+    assert_eq!(stats.updates, 1);
+    check(
+        "value loss statistic",
+        &[f64::from(stats.value_loss)],
+        &[parts[2]],
+    );
+    check(
+        "entropy statistic",
+        &[f64::from(stats.entropy)],
+        &[parts[3]],
+    );
+    assert!(
+        stats.approx_kl >= 0.0 && stats.approx_kl < 1e-5,
+        "KL at the rollout's parameters: {}",
+        stats.approx_kl
+    );
+    assert_eq!(stats.clip_fraction, 0.0);
+    let norm = ref_actor
+        .iter()
+        .chain(&ref_critic)
+        .map(|g| g * g)
+        .sum::<f64>()
+        .sqrt();
+    check(
+        "gradient norm statistic",
+        &[f64::from(stats.grad_norm)],
+        &[norm],
+    );
+    assert!(
+        stats.learning_rate == 5e-4 || stats.learning_rate == 7.5e-4,
+        "the first step keeps the rate or raises it by 1.5 (KL ~ 0): {}",
+        stats.learning_rate
+    );
+}
+
+#[test]
+fn replays_of_a_captured_update_lower_the_loss_of_a_fixed_batch() {
+    let (gpu, _kernels, policy, update, rollout, config) = small_setup(3, 4, 6);
+    let graph = gpu
+        .stream()
+        .capture(|s| update.record(s, &rollout.batch()))
+        .expect("capture");
+    let nodes = graph.node_counts().expect("node counts");
+    println!("update graph (3 x 4): {nodes:?}");
+    assert_no_host_work(&nodes);
+    graph.upload(gpu.stream()).expect("upload");
+
+    // Each update optimizes the loss of the fixed batch with the advantages and returns of the
+    // parameters it starts from (its bootstrap values come from the current critic): that loss
+    // must be lower after the update than before.
+    let mut losses = Vec::new();
+    for replay in 1..=2u64 {
+        let before = host_policy(&policy);
+        let (obs, targets, c, _) = host_targets(&rollout, &before, &config);
+        let rows = obs.len() / policy.observation_size();
+        let loss_before = before.loss(&obs, rows, &targets, &c)[0];
+        graph.launch(gpu.stream()).expect("launch");
+        gpu.synchronize().expect("update");
+        let stats = update.read_statistics().expect("statistics");
+        println!("replay {replay}: {stats:?}");
+        assert_eq!(stats.updates, replay);
+        assert!((1e-5..=1e-2).contains(&stats.learning_rate), "{stats:?}");
+        assert!(
+            stats.approx_kl >= 0.0 && stats.approx_kl.is_finite(),
+            "{stats:?}"
+        );
+        assert!((0.0..=1.0).contains(&stats.clip_fraction), "{stats:?}");
+        assert!(
+            stats.grad_norm.is_finite() && stats.grad_norm > 0.0,
+            "{stats:?}"
+        );
+        let loss_after = host_policy(&policy).loss(&obs, rows, &targets, &c)[0];
+        println!(
+            "replay {replay}: PPO loss of the fixed batch {loss_before:.6} -> {loss_after:.6}"
+        );
+        losses.push((loss_before, loss_after));
+    }
+    assert!(
+        losses.iter().all(|(before, after)| after < before),
+        "an update did not lower its loss: {losses:?}"
+    );
+}
+
+/// Not a check of values: the baseline's update (T 32, N 4096, D 353, A 28, [400, 200, 100],
+/// 5 epochs x 4 minibatches) on a sampled batch, its graph replay time and FLOP rate.
+#[test]
+fn baseline_update_replay_time() {
+    let (gpu, kernels) = gpu();
+    let config = TrainConfig::with_motion("test");
+    config.validate("test").expect("the baseline");
+    let (t, n) = (config.ppo.horizon as usize, config.env.num_envs as usize);
+    let policy = GaussianPolicy::new(&gpu, &config.policy, 353, 28, n, 7).expect("policy");
+    let rollout = Rollout::sampled(&gpu, &kernels, &policy, t, &mut StdRng::seed_from_u64(7));
+    let update = PpoUpdate::new(&gpu, kernels, &policy, &config).expect("update");
+    let graph = gpu
+        .stream()
+        .capture(|s| update.record(s, &rollout.batch()))
+        .expect("capture");
+    println!("baseline update graph: {:?}", graph.node_counts().unwrap());
+    graph.upload(gpu.stream()).unwrap();
+    graph.launch(gpu.stream()).unwrap(); // warm-up
+    let (start, end) = (gpu.new_event().unwrap(), gpu.new_event().unwrap());
+    let replays = 5;
+    start.record(gpu.stream()).unwrap();
+    for _ in 0..replays {
+        graph.launch(gpu.stream()).unwrap();
+    }
+    end.record(gpu.stream()).unwrap();
+    let ms = start.elapsed_ms(&end).unwrap() / replays as f32;
+    let flops = update.flops();
+    let stats = update.read_statistics().unwrap();
+    println!(
+        "baseline update: {ms:.2} ms per replay, {:.3} TFLOP ({:.1} TFLOP/s); {stats:?}",
+        flops.total() / 1e12,
+        flops.total() / (f64::from(ms) * 1e-3) / 1e12
+    );
+    assert_eq!(stats.updates, replays as u64 + 1);
+    assert!(
+        stats.value_loss.is_finite() && stats.grad_norm.is_finite(),
+        "{stats:?}"
+    );
+}

@@ -1,0 +1,147 @@
+//! The PPO update's kernels on the CPU (no GPU needed).
+//!
+//! - `kernels_py/checks/ppo_*.py` run every PPO kernel on Warp's CPU device (the same source as
+//!   the shipped PTX) against numpy float64 references, the loss gradients also against finite
+//!   differences, and exit non-zero on a failure. Runs when `INSTANTMIMIC_BUILD_PYTHON` names a
+//!   Python with `kernels_py/requirements.txt` installed (tests/run.sh sets one up); otherwise it
+//!   skips with a note.
+//! - The constants the Rust side shares with the kernels (tile sizes, the loss-term and
+//!   statistics layouts) are read from the Python sources and compared (always runs).
+
+use std::path::Path;
+use std::process::Command;
+
+use instantmimic::ppo::PpoStatistics;
+use instantmimic::ppo::{backward, loss, reduce};
+
+const CHECKS: [&str; 5] = [
+    "kernels_py/checks/ppo_gae.py",
+    "kernels_py/checks/ppo_minibatch.py",
+    "kernels_py/checks/ppo_loss.py",
+    "kernels_py/checks/ppo_backward.py",
+    "kernels_py/checks/ppo_optimizer.py",
+];
+
+#[test]
+fn ppo_kernels_match_float64_references_on_warps_cpu_device() {
+    let Some(python) = std::env::var_os("INSTANTMIMIC_BUILD_PYTHON") else {
+        println!("INSTANTMIMIC_BUILD_PYTHON is not set: skipping (tests/run.sh sets it)");
+        return;
+    };
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut failed = Vec::new();
+    for script in CHECKS {
+        let out = Command::new(&python)
+            .arg(root.join(script))
+            .current_dir(root)
+            .output()
+            .unwrap_or_else(|e| panic!("running {script}: {e}"));
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        let summary = stdout.lines().last().unwrap_or("(no output)");
+        println!("{script}: {summary}");
+        if !out.status.success() {
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            let problems: Vec<&str> = stdout
+                .lines()
+                .filter(|l| l.ends_with("FAIL"))
+                .chain(
+                    stderr
+                        .lines()
+                        .filter(|l| !l.starts_with("Module ") && !l.contains("CUDA driver")),
+                )
+                .collect();
+            failed.push(format!("{script}:\n{}", problems.join("\n")));
+        }
+    }
+    assert!(failed.is_empty(), "{}", failed.join("\n\n"));
+}
+
+/// The value of `NAME = wp.constant(<int>)` in a kernel source.
+fn python_constant(source: &str, file: &str, name: &str) -> usize {
+    let prefix = format!("{name} = wp.constant(");
+    let line = source
+        .lines()
+        .find(|l| l.starts_with(&prefix))
+        .unwrap_or_else(|| panic!("{file} defines no {name}"));
+    line[prefix.len()..]
+        .trim_end_matches(')')
+        .parse()
+        .unwrap_or_else(|e| panic!("{file}: {line}: {e}"))
+}
+
+fn kernel_source(file: &str) -> String {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("kernels_py/env")
+        .join(file);
+    std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+#[test]
+fn rust_and_kernels_agree_on_shared_constants() {
+    let reduce_py = kernel_source("reduce.py");
+    for (name, rust) in [
+        ("TILE_THREADS", reduce::TILE_THREADS),
+        ("SUM_CHUNK", reduce::SUM_CHUNK),
+        ("COLUMN_ROWS", reduce::COLUMN_ROWS),
+        ("COLUMN_TILE", reduce::COLUMN_TILE),
+    ] {
+        assert_eq!(
+            python_constant(&reduce_py, "reduce.py", name),
+            rust,
+            "{name}"
+        );
+    }
+    let backward_py = kernel_source("mlp_backward.py");
+    for (name, rust) in [
+        ("TILE_M", backward::TILE),
+        ("TILE_N", backward::TILE),
+        ("TILE_K", backward::TILE_K),
+        ("TILE_THREADS", reduce::TILE_THREADS),
+    ] {
+        assert_eq!(
+            python_constant(&backward_py, "mlp_backward.py", name),
+            rust,
+            "{name}"
+        );
+    }
+    let loss_py = kernel_source("ppo_loss.py");
+    for (name, rust) in [
+        ("LOSS_TERMS", loss::LOSS_TERMS),
+        ("TERM_SURROGATE", loss::TERM_SURROGATE),
+        ("TERM_VALUE", loss::TERM_VALUE),
+        ("TERM_ENTROPY", loss::TERM_ENTROPY),
+        ("TERM_KL", loss::TERM_KL),
+        ("TERM_CLIP_FRACTION", loss::TERM_CLIP_FRACTION),
+    ] {
+        assert_eq!(
+            python_constant(&loss_py, "ppo_loss.py", name),
+            rust,
+            "{name}"
+        );
+    }
+    // PpoStatistics::from_values reads the fields in this order (its unit test checks it).
+    let stats_py = kernel_source("ppo_statistics.py");
+    let order = [
+        "STAT_SURROGATE",
+        "STAT_VALUE",
+        "STAT_ENTROPY",
+        "STAT_KL",
+        "STAT_CLIP_FRACTION",
+        "STAT_LEARNING_RATE",
+        "STAT_GRAD_NORM",
+        "STAT_ADVANTAGE_MEAN",
+        "STAT_ADVANTAGE_STD",
+        "STAT_UPDATES",
+    ];
+    for (i, name) in order.iter().enumerate() {
+        assert_eq!(
+            python_constant(&stats_py, "ppo_statistics.py", name),
+            i,
+            "{name}"
+        );
+    }
+    assert_eq!(
+        python_constant(&stats_py, "ppo_statistics.py", "NUM_STATS"),
+        PpoStatistics::LEN
+    );
+}
