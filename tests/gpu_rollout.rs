@@ -228,14 +228,16 @@ fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
                 );
             }
             for e in [
-                s.pose_error,
-                s.mpjpe,
-                s.ee_position_error,
-                s.ee_rotation_error,
+                s.pose_error_sum,
+                s.mpjpe_sum,
+                s.ee_position_error_sum,
+                s.ee_rotation_error_sum,
             ] {
                 assert!(e.is_finite() && e >= 0.0, "{s:?}");
             }
-            assert!(s.pose_error <= s.mpjpe + 1.0, "{s:?}");
+            // Started on the reference with no noise: the first steps track it closely.
+            let per_step = s.mpjpe_sum / f64::from(s.steps);
+            assert!(per_step < 0.5, "{s:?}: mean MPJPE {per_step} m");
         }
     }
 }

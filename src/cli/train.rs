@@ -74,6 +74,9 @@ pub struct TrainArgs {
     /// How progress is shown.
     #[arg(long, value_enum, default_value_t = ProgressArg::Auto)]
     progress: ProgressArg,
+    /// CUDA device ordinal.
+    #[arg(long, default_value_t = 0)]
+    device: usize,
 }
 
 impl TrainArgs {
@@ -219,6 +222,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         preflight: checks,
         start,
         progress,
+        device: args.device,
     };
     let summary = train_on_gpu(setup)?;
     print!("{}", summary.report());

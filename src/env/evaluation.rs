@@ -53,24 +53,15 @@ impl EpisodeScores {
             .iter()
             .zip(&steps)
             .zip(sums.chunks_exact(SUMS))
-            .map(|((&status, &steps), s)| {
-                let per_step = |x: f32| {
-                    if steps > 0 {
-                        f64::from(x) / f64::from(steps)
-                    } else {
-                        f64::NAN
-                    }
-                };
-                EpisodeScore {
-                    completed: status == COMPLETED,
-                    failed: status == FAILED,
-                    steps: steps.max(0) as u32,
-                    pose_error: per_step(s[0]),
-                    mpjpe: per_step(s[1]),
-                    ee_position_error: per_step(s[2]),
-                    ee_rotation_error: per_step(s[3]),
-                    episode_return: f64::from(s[4]),
-                }
+            .map(|((&status, &steps), s)| EpisodeScore {
+                completed: status == COMPLETED,
+                failed: status == FAILED,
+                steps: steps.max(0) as u32,
+                pose_error_sum: f64::from(s[0]),
+                mpjpe_sum: f64::from(s[1]),
+                ee_position_error_sum: f64::from(s[2]),
+                ee_rotation_error_sum: f64::from(s[3]),
+                episode_return: f64::from(s[4]),
             })
             .collect())
     }
@@ -79,18 +70,19 @@ impl EpisodeScores {
 /// One env's evaluation episode.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EpisodeScore {
-    /// Reached the end of the clip without early termination.
+    /// Reached the end of the episode without early termination.
     pub completed: bool,
     /// Terminated early (fell or lost track of the reference).
     pub failed: bool,
     /// Control steps scored.
     pub steps: u32,
-    /// Means over the scored steps: root-relative body position error (m), world body position
-    /// error (m), end-effector position error (m) and orientation error (rad).
-    pub pose_error: f64,
-    pub mpjpe: f64,
-    pub ee_position_error: f64,
-    pub ee_rotation_error: f64,
+    /// Sums over the scored steps of the per-step means: root-relative body position error
+    /// (m), world body position error (m), end-effector position error (m) and orientation
+    /// error (rad).
+    pub pose_error_sum: f64,
+    pub mpjpe_sum: f64,
+    pub ee_position_error_sum: f64,
+    pub ee_rotation_error_sum: f64,
     /// Sum of rewards.
     pub episode_return: f64,
 }

@@ -388,6 +388,17 @@ impl Rollout {
         Ok((graph, events))
     }
 
+    /// Queues the whole rollout on `s` (inside a capture: the training loop records it into one
+    /// graph with the update).
+    pub fn record(&self, s: &Stream) -> Result<(), RolloutError> {
+        self.record_rollout(s, &mut PhaseRecorder::untimed())
+    }
+
+    /// The loaded kernels (shared with the PPO update).
+    pub fn kernels(&self) -> &Arc<EnvKernels> {
+        &self.kernels
+    }
+
     fn record_rollout(&self, s: &Stream, phases: &mut PhaseRecorder) -> Result<(), RolloutError> {
         let gpu = &self.gpu;
         if self.is_training() {

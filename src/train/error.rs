@@ -41,11 +41,14 @@ pub enum TrainError {
     /// The run's settings are inconsistent with the plans, the motion or a checkpoint.
     #[error("{0}")]
     Setup(String),
-    /// The part of the command that needs the GPU training loop, which this build lacks.
-    #[error(
-        "{what} needs the GPU training loop, which is not built yet (issue 5); `--dry-run` checks everything else"
-    )]
-    GpuLoopNotBuilt { what: &'static str },
+    #[error(transparent)]
+    Cuda(#[from] crate::cuda::CudaError),
+    #[error(transparent)]
+    Env(#[from] crate::env::EnvError),
+    #[error(transparent)]
+    Rollout(#[from] crate::env::RolloutError),
+    #[error(transparent)]
+    Ppo(#[from] crate::ppo::PpoError),
 }
 
 impl TrainError {

@@ -1,16 +1,19 @@
-//! The seam to the GPU training loop, which is not built yet: `train` and `eval` prepare and
-//! check everything on the CPU, then call [`train_on_gpu`] / [`evaluate_on_gpu`]. These return
-//! [`TrainError::GpuLoopNotBuilt`] until the loop exists; they do not pretend to train.
+//! The training loop: `train` and `eval` prepare and check everything on the CPU, then call
+//! [`train_on_gpu`] / [`evaluate_on_gpu`], which build a [`Trainer`] and drive a
+//! [`RunSession`] (src/train/session.rs documents the call sequence).
 
 use std::path::PathBuf;
 
 use super::checkpoint::Checkpoint;
 use super::config::TrainConfig;
 use super::error::TrainError;
-use super::evaluation::EvaluationSummary;
+use super::evaluation::{EvaluationSummary, summarize};
 use super::preflight::Preflight;
 use super::progress::ProgressMode;
+use super::session::RunSession;
 use super::summary::RunSummary;
+use super::trainer::Trainer;
+use crate::cuda::Gpu;
 use crate::motion::ReferenceMotion;
 use crate::plan::PlanStore;
 
@@ -35,18 +38,65 @@ pub struct TrainSetup {
     pub preflight: Preflight,
     pub start: RunStart,
     pub progress: ProgressMode,
+    /// CUDA device ordinal.
+    pub device: usize,
 }
 
-/// Trains on the GPU. To be written: build `Rollout` for `config.env.num_envs` worlds and the
-/// evaluation env for `config.run.eval_envs`, the PPO update, then drive a `RunSession`
-/// (src/train/session.rs documents the call sequence) until it says stop.
+/// Trains on the GPU until the session says stop (success, time or iteration budget):
+/// opens the device, builds the [`Trainer`] (not active time), restores the checkpoint of a
+/// resumed run, then iterates: one graph replay per iteration, an evaluation every
+/// `run.eval_interval` iterations, checkpoints at `run.checkpoint_interval` and at the end.
 pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
-    let _ = setup;
-    Err(TrainError::GpuLoopNotBuilt { what: "training" })
+    let gpu = Gpu::open(setup.device)?;
+    let (mut session, checkpoint, warnings) = match &setup.start {
+        RunStart::New { root, overwrite } => (
+            RunSession::start_new(root, &setup.config, *overwrite, setup.progress)?,
+            None,
+            Vec::new(),
+        ),
+        RunStart::Resume { root } => {
+            let run = setup.config.run.clone();
+            RunSession::resume(root, |c| c.run = run, setup.progress)?
+        }
+    };
+    for warning in &warnings {
+        session.progress().note(&format!("warning: {warning}"));
+    }
+    let config = session.config().clone();
+    let mut trainer = Trainer::new(&gpu, &setup.store, &setup.motion, &config)?;
+    if let Some(checkpoint) = &checkpoint {
+        trainer.restore(checkpoint)?;
+        session.progress().note(&format!(
+            "resumed at iteration {} ({:.2} s active)",
+            checkpoint.meta.iteration, checkpoint.meta.active_time_s
+        ));
+    }
+    let threshold = config.run.success_rate;
+    loop {
+        session.start_iteration();
+        let stats = trainer.iterate()?;
+        let step = session.finish_iteration(stats);
+        let evaluation = if step.evaluate {
+            let episodes = trainer.evaluate()?;
+            Some(summarize(&episodes, trainer.evaluation_steps(), threshold)?)
+        } else {
+            None
+        };
+        let next = session.record(step, evaluation)?;
+        if next.checkpoint_due {
+            let mut checkpoint = session.new_checkpoint()?;
+            trainer.save_into(&mut checkpoint)?;
+            session.save_checkpoint(&checkpoint)?;
+        }
+        if let Some(reason) = next.stop {
+            return session.finish(reason);
+        }
+    }
 }
 
 /// Evaluates a checkpoint's policy on the GPU: `episodes` rounds of `config.run.eval_envs`
-/// deterministic envs, summarized with `summarize`. To be written with the training loop.
+/// deterministic envs (the same start states each round; rounds differ only by the physics'
+/// own run-to-run variation), summarized together.
 pub fn evaluate_on_gpu(
     config: &TrainConfig,
     checkpoint: &Checkpoint,
@@ -54,6 +104,20 @@ pub fn evaluate_on_gpu(
     store: &PlanStore,
     episodes: u32,
 ) -> Result<EvaluationSummary, TrainError> {
-    let _ = (config, checkpoint, motion, store, episodes);
-    Err(TrainError::GpuLoopNotBuilt { what: "evaluation" })
+    let gpu = Gpu::open(0)?;
+    // The policy's home is a training rollout; at the evaluation's own size it needs no other
+    // plans than the evaluation's.
+    let mut small = config.clone();
+    small.env.num_envs = config.run.eval_envs;
+    let trainer = Trainer::new(&gpu, store, motion, &small)?;
+    trainer.restore(checkpoint)?;
+    let mut all = Vec::new();
+    for _ in 0..episodes.max(1) {
+        all.extend(trainer.evaluate()?);
+    }
+    Ok(summarize(
+        &all,
+        trainer.evaluation_steps(),
+        config.run.success_rate,
+    )?)
 }

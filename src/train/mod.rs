@@ -1,7 +1,8 @@
 //! Training: the configuration, and everything around the GPU loop that needs no GPU: run
 //! directories, checkpoints, the metrics log, the learning curve, the evaluation protocol's
 //! arithmetic, the active clock and stop rule, progress display, and the checks of
-//! `train --dry-run` (docs/train.md). The GPU loop drives a [`RunSession`].
+//! `train --dry-run` (docs/train.md); and the GPU side, [`Trainer`] (rollout, PPO update and
+//! evaluation as CUDA graphs), which `train_on_gpu` drives through a [`RunSession`].
 
 mod atomic_file;
 pub mod checkpoint;
@@ -17,6 +18,7 @@ mod progress;
 pub mod run_dir;
 mod session;
 mod summary;
+mod trainer;
 
 pub use atomic_file::{is_temporary, write_atomically, write_bytes_atomically};
 pub use checkpoint::{
@@ -40,3 +42,4 @@ pub use progress::{Progress, ProgressMode};
 pub use run_dir::{ResumedRun, RunDir, default_run_dir};
 pub use session::{IterationStats, IterationStep, NextStep, RunSession};
 pub use summary::RunSummary;
+pub use trainer::Trainer;

@@ -1,0 +1,258 @@
+//! The GPU side of training: the rollout, the PPO update and the evaluation, built once and
+//! replayed (docs/train.md, "The training loop").
+//!
+//! One training iteration is one CUDA graph: the rollout (horizon x [policy, physics substeps,
+//! reward, reset, observation]), then the whole PPO update, then two device copies that gather
+//! the rollout's statistics and the update's into one small report. The host launches it,
+//! queues one asynchronous copy of the report, and reads the report when the iteration is done:
+//! nothing inside an iteration waits for the host. Evaluation is a second graph over the
+//! 32-world plans that reads the same policy parameters.
+
+use crate::cuda::{DeviceMemory, Gpu, Graph, Readback};
+use crate::env::{DeviceArray, EpisodeScore, Rollout, RolloutTotals, TOTALS};
+use crate::motion::ReferenceMotion;
+use crate::plan::PlanStore;
+use crate::ppo::{PpoBatch, PpoOptimizerState, PpoStatistics, PpoUpdate};
+
+use super::checkpoint::{Checkpoint, CheckpointError};
+use super::config::TrainConfig;
+use super::error::TrainError;
+use super::evaluation::EnvEvaluation;
+use super::metrics::UpdateStats;
+use super::preflight::tensor_names;
+use super::session::IterationStats;
+
+/// Bytes of the rollout's totals (float64) at the start of the report, then the update's
+/// statistics (float32).
+const TOTALS_BYTES: usize = TOTALS * 8;
+const REPORT_BYTES: usize = TOTALS_BYTES + PpoStatistics::LEN * 4;
+
+/// Checkpoint tensors beyond the policy's (docs/train.md): what an exact continuation needs.
+mod state_names {
+    pub const ADAM_ACTOR_M: &str = "adam.actor.m";
+    pub const ADAM_ACTOR_V: &str = "adam.actor.v";
+    pub const ADAM_CRITIC_M: &str = "adam.critic.m";
+    pub const ADAM_CRITIC_V: &str = "adam.critic.v";
+    /// i32 `[2]`: Adam's step count and the update counter (the shuffle's stream).
+    pub const ADAM_STEP: &str = "adam.step";
+    pub const LEARNING_RATE: &str = "ppo.learning_rate";
+    pub const PHASE_VISITS: &str = "phase.visits";
+    pub const PHASE_FAILURES: &str = "phase.failures";
+    pub const PHASE_CDF: &str = "phase.cdf";
+    /// i32 `[1]`: the rollout's iteration counter (its random streams).
+    pub const RNG_ITERATION: &str = "rng.iteration";
+}
+
+/// Everything on the GPU that a run trains and evaluates with.
+pub struct Trainer {
+    gpu: Gpu,
+    rollout: Rollout,
+    evaluation: Rollout,
+    update: PpoUpdate,
+    iteration_graph: Graph,
+    evaluation_graph: Graph,
+    report: DeviceMemory,
+    readback: Readback,
+}
+
+impl Trainer {
+    /// Loads the plans (training and evaluation world counts), builds the rollout, the update
+    /// and the evaluation for `config`, captures their graphs, and puts every env at a
+    /// reference state.
+    pub fn new(
+        gpu: &Gpu,
+        store: &PlanStore,
+        motion: &ReferenceMotion,
+        config: &TrainConfig,
+    ) -> Result<Trainer, TrainError> {
+        let rollout = Rollout::new(gpu, store, motion, config)?;
+        let evaluation = Rollout::evaluation(&rollout, store, motion, config)?;
+        let update = PpoUpdate::new(gpu, rollout.kernels().clone(), &rollout.policy, config)?;
+        let report = gpu.alloc_zeroed(REPORT_BYTES)?;
+        let stream = gpu.stream();
+        let iteration_graph = stream.capture(|s| {
+            rollout.record(s)?;
+            update.record(s, &PpoBatch::from(&rollout.storage))?;
+            let totals = rollout.statistics().totals();
+            s.memcpy_dtod(report.device_ptr(), totals.device_ptr(), TOTALS_BYTES)?;
+            s.memcpy_dtod(
+                report.device_ptr() + TOTALS_BYTES as u64,
+                update.statistics().device_ptr(),
+                PpoStatistics::LEN * 4,
+            )?;
+            Ok::<(), TrainError>(())
+        })?;
+        iteration_graph.upload(stream)?;
+        let (evaluation_graph, _) = evaluation.capture(false)?;
+        rollout.reset_all()?;
+        Ok(Trainer {
+            gpu: gpu.clone(),
+            readback: Readback::new(gpu, REPORT_BYTES)?,
+            rollout,
+            evaluation,
+            update,
+            iteration_graph,
+            evaluation_graph,
+            report,
+        })
+    }
+
+    /// Runs one training iteration (rollout and update) and returns its statistics. Waits for
+    /// the iteration to finish: the caller's clock measures it.
+    pub fn iterate(&mut self) -> Result<IterationStats, TrainError> {
+        let stream = self.gpu.stream();
+        self.iteration_graph.launch(stream)?;
+        self.readback
+            .queue(stream, self.report.device_ptr(), REPORT_BYTES)?;
+        let bytes = self
+            .readback
+            .wait()?
+            .ok_or_else(|| TrainError::Setup("the iteration report was not queued".to_owned()))?;
+        let totals = RolloutTotals::from_bytes(&bytes[..TOTALS_BYTES])
+            .ok_or_else(|| TrainError::Setup("malformed rollout totals".to_owned()))?;
+        let values: Vec<f32> = bytes[TOTALS_BYTES..]
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        let ppo = PpoStatistics::from_values(&values)?;
+        Ok(IterationStats {
+            mean_return: totals.mean_return,
+            mean_episode_length: totals.mean_episode_length,
+            update: UpdateStats {
+                policy_loss: f64::from(ppo.surrogate_loss),
+                value_loss: f64::from(ppo.value_loss),
+                entropy: f64::from(ppo.entropy),
+                kl: f64::from(ppo.approx_kl),
+                learning_rate: f64::from(ppo.learning_rate),
+            },
+        })
+    }
+
+    /// Evaluates the current policy by the paper's protocol (one episode per evaluation env,
+    /// mean actions, fixed start states) and returns every env's episode.
+    pub fn evaluate(&self) -> Result<Vec<EnvEvaluation>, TrainError> {
+        self.evaluation.reset_all()?;
+        self.evaluation_graph.launch(self.gpu.stream())?;
+        self.gpu.synchronize()?;
+        let scores = self
+            .evaluation
+            .episode_scores()
+            .ok_or_else(|| TrainError::Setup("the evaluation rollout keeps no scores".to_owned()))?
+            .download()?;
+        Ok(scores.iter().map(env_evaluation).collect())
+    }
+
+    /// Control steps of one evaluation episode.
+    pub fn evaluation_steps(&self) -> u32 {
+        self.evaluation.horizon() as u32
+    }
+
+    /// Adds the policy, the normalization and everything an exact continuation needs to
+    /// `checkpoint` (waits for the GPU).
+    pub fn save_into(&self, checkpoint: &mut Checkpoint) -> Result<(), TrainError> {
+        use state_names::*;
+        use tensor_names::*;
+        self.gpu.synchronize()?;
+        let policy = &self.rollout.policy;
+        put_f32(checkpoint, ACTOR, policy.actor_parameters())?;
+        put_f32(checkpoint, CRITIC, policy.critic_parameters())?;
+        let [count, mean, m2] = self.rollout.normalizer_moments();
+        put_f64(checkpoint, OBS_COUNT, count)?;
+        put_f64(checkpoint, OBS_MEAN, mean)?;
+        put_f64(checkpoint, OBS_M2, m2)?;
+        let state = self.update.download_state()?;
+        insert_vec(checkpoint, ADAM_ACTOR_M, state.actor_moment1)?;
+        insert_vec(checkpoint, ADAM_ACTOR_V, state.actor_moment2)?;
+        insert_vec(checkpoint, ADAM_CRITIC_M, state.critic_moment1)?;
+        insert_vec(checkpoint, ADAM_CRITIC_V, state.critic_moment2)?;
+        checkpoint.insert(ADAM_STEP, &[2], vec![state.adam_step, state.update_counter])?;
+        checkpoint.insert(LEARNING_RATE, &[1], vec![state.learning_rate])?;
+        let (visits, failures, cdf, iteration) = self.rollout.phase_statistics();
+        put_f32(checkpoint, PHASE_VISITS, visits)?;
+        put_f32(checkpoint, PHASE_FAILURES, failures)?;
+        put_f32(checkpoint, PHASE_CDF, cdf)?;
+        checkpoint.insert(RNG_ITERATION, &[1], iteration.download()?)?;
+        Ok(())
+    }
+
+    /// Restores the policy and the normalization from `checkpoint`, and, when it has them
+    /// (a training checkpoint), the optimizer and the start-phase statistics; then puts every
+    /// env at a new reference state (episodes in progress are not stored).
+    pub fn restore(&self, checkpoint: &Checkpoint) -> Result<(), TrainError> {
+        use state_names::*;
+        use tensor_names::*;
+        self.gpu.synchronize()?;
+        let policy = &self.rollout.policy;
+        get_f32(checkpoint, ACTOR, policy.actor_parameters())?;
+        get_f32(checkpoint, CRITIC, policy.critic_parameters())?;
+        let [count, mean, m2] = self.rollout.normalizer_moments();
+        get_f64(checkpoint, OBS_COUNT, count)?;
+        get_f64(checkpoint, OBS_MEAN, mean)?;
+        get_f64(checkpoint, OBS_M2, m2)?;
+        if checkpoint.tensor(ADAM_STEP).is_some() {
+            let len = |a: &DeviceArray<f32>| a.len();
+            let actor = len(policy.actor_parameters());
+            let critic = len(policy.critic_parameters());
+            let step = checkpoint.get::<i32>(ADAM_STEP, &[2])?;
+            let state = PpoOptimizerState {
+                learning_rate: checkpoint.get::<f32>(LEARNING_RATE, &[1])?[0],
+                adam_step: step[0],
+                update_counter: step[1],
+                actor_moment1: checkpoint.get::<f32>(ADAM_ACTOR_M, &[actor])?.to_vec(),
+                actor_moment2: checkpoint.get::<f32>(ADAM_ACTOR_V, &[actor])?.to_vec(),
+                critic_moment1: checkpoint.get::<f32>(ADAM_CRITIC_M, &[critic])?.to_vec(),
+                critic_moment2: checkpoint.get::<f32>(ADAM_CRITIC_V, &[critic])?.to_vec(),
+            };
+            self.update.upload_state(&state)?;
+            let (visits, failures, cdf, iteration) = self.rollout.phase_statistics();
+            get_f32(checkpoint, PHASE_VISITS, visits)?;
+            get_f32(checkpoint, PHASE_FAILURES, failures)?;
+            get_f32(checkpoint, PHASE_CDF, cdf)?;
+            iteration.upload(checkpoint.get::<i32>(RNG_ITERATION, &[1])?)?;
+        }
+        self.rollout.reset_all()?;
+        Ok(())
+    }
+
+    /// Floating-point operations of one update (for throughput reports).
+    pub fn update_flops(&self) -> f64 {
+        self.update.flops().total()
+    }
+}
+
+/// The training report's view of one evaluation episode.
+fn env_evaluation(score: &EpisodeScore) -> EnvEvaluation {
+    EnvEvaluation {
+        completed: score.completed,
+        steps: score.steps,
+        pose_error_sum: score.pose_error_sum,
+        global_position_error_sum: score.mpjpe_sum,
+        ee_position_error_sum: score.ee_position_error_sum,
+        ee_orientation_error_sum: score.ee_rotation_error_sum,
+    }
+}
+
+fn put_f32(c: &mut Checkpoint, name: &str, a: &DeviceArray<f32>) -> Result<(), TrainError> {
+    c.insert(name, &[a.len()], a.download()?)?;
+    Ok(())
+}
+
+fn put_f64(c: &mut Checkpoint, name: &str, a: &DeviceArray<f64>) -> Result<(), TrainError> {
+    c.insert(name, &[a.len()], a.download()?)?;
+    Ok(())
+}
+
+fn insert_vec(c: &mut Checkpoint, name: &str, v: Vec<f32>) -> Result<(), CheckpointError> {
+    let len = v.len();
+    c.insert(name, &[len], v)
+}
+
+fn get_f32(c: &Checkpoint, name: &str, a: &DeviceArray<f32>) -> Result<(), TrainError> {
+    a.upload(c.get::<f32>(name, &[a.len()])?)?;
+    Ok(())
+}
+
+fn get_f64(c: &Checkpoint, name: &str, a: &DeviceArray<f64>) -> Result<(), TrainError> {
+    a.upload(c.get::<f64>(name, &[a.len()])?)?;
+    Ok(())
+}

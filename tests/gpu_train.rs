@@ -1,0 +1,207 @@
+//! `instantmimic train` / `eval` on a GPU, run through the binary as a user would (feature
+//! `gpu`; `INSTANTMIMIC_MOTIONS` names the DeepMimic clips):
+//! `cargo test --release --features gpu --test gpu_train -- --nocapture --test-threads 1`
+//!
+//! - A short run on the 32-world plans writes a metrics line per iteration with finite losses,
+//!   evaluates on schedule, checkpoints, writes the curve and the summary, and `eval` reads its
+//!   checkpoint back.
+//! - A run killed with SIGKILL mid-training resumes from its last checkpoint and its metrics
+//!   continue without a gap or a duplicate (issue 5's acceptance).
+#![cfg(feature = "gpu")]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use instantmimic::motion::library::motions_dir_from_env;
+use instantmimic::train::TrainConfig;
+
+fn motions_dir() -> PathBuf {
+    motions_dir_from_env().expect("INSTANTMIMIC_MOTIONS names the DeepMimic clips")
+}
+
+fn binary() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_instantmimic"));
+    c.env("INSTANTMIMIC_MOTIONS", motions_dir());
+    c
+}
+
+/// The backflip's committed config at the 32-world size, with small iterations.
+fn write_config(dir: &Path, max_iterations: u64, checkpoint_interval: u32) -> PathBuf {
+    let (_, config) = TrainConfig::committed("backflip").expect("a committed backflip config");
+    let mut config = config.expect("the committed backflip config is valid");
+    config.env.num_envs = 32;
+    config.ppo.horizon = 16;
+    config.ppo.minibatches = 2;
+    config.ppo.epochs = 2;
+    config.run.eval_interval = 2;
+    config.run.max_iterations = max_iterations;
+    config.run.time_budget_s = 600.0;
+    config.run.checkpoint_interval = checkpoint_interval;
+    config.run.stop_on_success = false;
+    config.validate("test").expect("valid test config");
+    let path = dir.join("config.toml");
+    std::fs::write(&path, config.to_toml().expect("toml")).expect("write config");
+    path
+}
+
+fn metrics(run: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(run.join("metrics.jsonl"))
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect()
+}
+
+fn check_success(out: &Output, what: &str) {
+    assert!(
+        out.status.success(),
+        "{what} failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn a_short_run_trains_evaluates_checkpoints_and_its_checkpoint_evaluates() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let config = write_config(dir.path(), 6, 3);
+    let run = dir.path().join("run");
+    let out = binary()
+        .args([
+            "train",
+            "--motion",
+            "backflip",
+            "--progress",
+            "lines",
+            "--config",
+        ])
+        .arg(&config)
+        .arg("--out")
+        .arg(&run)
+        .output()
+        .expect("train runs");
+    check_success(&out, "train");
+    println!("{}", String::from_utf8_lossy(&out.stdout));
+    let records = metrics(&run);
+    assert_eq!(records.len(), 6, "one metrics line per iteration");
+    for (i, r) in records.iter().enumerate() {
+        assert_eq!(r["iteration"], i as u64 + 1);
+        for key in ["policy_loss", "value_loss", "learning_rate"] {
+            let v = r["update"][key].as_f64();
+            assert!(
+                v.is_some_and(f64::is_finite),
+                "iteration {}: {key} = {v:?}",
+                i + 1
+            );
+        }
+        assert!(r["frames_per_s"].as_f64().is_some_and(|f| f > 0.0), "{r}");
+        let evaluated = !r["evaluation"].is_null();
+        assert_eq!(
+            evaluated,
+            (i + 1) % 2 == 0,
+            "evaluation every 2 iterations: {r}"
+        );
+        if evaluated {
+            let e = &r["evaluation"];
+            assert_eq!(e["episodes"], 32);
+            let rate = e["success_rate"].as_f64().expect("success rate");
+            assert!((0.0..=1.0).contains(&rate), "{e}");
+        }
+    }
+    let times: Vec<f64> = records
+        .iter()
+        .map(|r| r["active_time_s"].as_f64().expect("active time"))
+        .collect();
+    assert!(
+        times.windows(2).all(|w| w[1] > w[0]),
+        "active time grows: {times:?}"
+    );
+    for file in ["curve.png", "summary.json", "config.toml"] {
+        assert!(run.join(file).is_file(), "{file} written");
+    }
+    let checkpoint = run.join("checkpoints/iter_00000006.safetensors");
+    assert!(checkpoint.is_file(), "final checkpoint written");
+
+    let out = binary()
+        .args(["eval", "--json", "--checkpoint"])
+        .arg(&checkpoint)
+        .output()
+        .expect("eval runs");
+    check_success(&out, "eval");
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).expect("eval prints JSON");
+    assert_eq!(summary["episodes"], 32, "{summary}");
+}
+
+#[test]
+fn a_killed_run_resumes_from_its_checkpoint_without_a_gap_in_its_metrics() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let config = write_config(dir.path(), 30, 4);
+    let run = dir.path().join("run");
+    let mut child = binary()
+        .args([
+            "train",
+            "--motion",
+            "backflip",
+            "--progress",
+            "quiet",
+            "--config",
+        ])
+        .arg(&config)
+        .arg("--out")
+        .arg(&run)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("train starts");
+    // Kill it (SIGKILL: no cleanup) once it is past a checkpoint and between two.
+    let started = Instant::now();
+    loop {
+        let n = metrics(&run).len();
+        if n >= 10 {
+            break;
+        }
+        assert!(
+            child.try_wait().expect("child status").is_none(),
+            "the run ended before it could be killed ({n} iterations)"
+        );
+        assert!(started.elapsed() < Duration::from_secs(300), "no progress");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().expect("kill");
+    child.wait().expect("reaped");
+    let before = metrics(&run).len();
+    println!("killed after {before} iterations");
+    assert!(before < 30, "killed mid-run");
+
+    let out = binary()
+        .args(["train", "--progress", "lines", "--resume"])
+        .arg(&run)
+        .output()
+        .expect("resume runs");
+    check_success(&out, "resume");
+    println!("{}", String::from_utf8_lossy(&out.stdout));
+    let records = metrics(&run);
+    let iterations: Vec<u64> = records
+        .iter()
+        .map(|r| r["iteration"].as_u64().expect("iteration"))
+        .collect();
+    assert_eq!(
+        iterations,
+        (1..=30).collect::<Vec<u64>>(),
+        "metrics continue without a gap or a duplicate"
+    );
+    let frames: Vec<u64> = records
+        .iter()
+        .map(|r| r["frames"].as_u64().expect("frames"))
+        .collect();
+    assert!(
+        frames.windows(2).all(|w| w[1] == w[0] + 32 * 16),
+        "frames grow by one rollout per iteration: {frames:?}"
+    );
+    let times: Vec<f64> = records
+        .iter()
+        .map(|r| r["active_time_s"].as_f64().expect("active time"))
+        .collect();
+    assert!(times.windows(2).all(|w| w[1] > w[0]), "{times:?}");
+}
