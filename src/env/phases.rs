@@ -28,7 +28,7 @@ pub enum Phase {
     Reset,
     /// Observation, its normalization and storage.
     Observation,
-    /// Once per rollout: copies into storage and the adaptive phase statistics.
+    /// Once per rollout: the adaptive phase statistics and the rollout statistics.
     Bookkeeping,
 }
 

@@ -403,6 +403,16 @@ impl Rollout {
         let gpu = &self.gpu;
         if self.is_training() {
             self.statistics.record_clear(s)?;
+            // Storage row 0 is this rollout's first input: the policy's input buffer, which
+            // holds the latest observation (the last one of the previous rollout, or the
+            // reset's). Copied here, not at the end of the previous rollout, because the update
+            // that follows a rollout still reads its row 0.
+            let bytes = self.normalizer.normalized.len() * std::mem::size_of::<f32>();
+            s.memcpy_dtod(
+                self.storage.observations.device_ptr(),
+                self.normalizer.normalized.device_ptr(),
+                bytes,
+            )?;
         }
         for t in 0..self.horizon {
             let t32 = t as i32;
@@ -438,14 +448,6 @@ impl Rollout {
             return Ok(());
         }
         phases.phase(gpu, s, Phase::Bookkeeping, |s| {
-            // The next rollout's first input is this one's last observation.
-            let row = self.storage.observations.len() / (self.horizon + 1);
-            let bytes = row * std::mem::size_of::<f32>();
-            s.memcpy_dtod(
-                self.storage.observations.device_ptr(),
-                self.storage.observations.device_ptr() + (self.horizon * bytes) as u64,
-                bytes,
-            )?;
             self.phase_statistics.record_update(&self.kernels, s)?;
             self.statistics.record_end(&self.kernels, s, self.horizon)?;
             Ok::<(), RolloutError>(())
