@@ -73,11 +73,19 @@ fn rollout_graph_has_no_host_work_and_replays_advance() {
     graph.launch(gpu.stream()).expect("launch");
     gpu.synchronize().expect("first replay");
     let first_actions = rollout.storage.actions.download().expect("actions");
-    let first_obs = rollout.storage.observations.download().expect("observations");
+    let first_obs = rollout
+        .storage
+        .observations
+        .download()
+        .expect("observations");
     graph.launch(gpu.stream()).expect("launch");
     gpu.synchronize().expect("second replay");
     // A rollout starts from the previous one's last observation (row T -> row 0).
-    let second_obs = rollout.storage.observations.download().expect("observations");
+    let second_obs = rollout
+        .storage
+        .observations
+        .download()
+        .expect("observations");
     let row = first_obs.len() / (rollout.horizon() + 1);
     assert!(
         second_obs[..row] == first_obs[rollout.horizon() * row..],

@@ -209,8 +209,14 @@ pub fn tracking_params(config: &TrainConfig, dt: f64) -> TrackingParams {
 /// The reset parameters of `config` at control timestep `dt`.
 pub fn reset_params(config: &TrainConfig, dt: f64) -> ResetParams {
     ResetParams {
-        // Warp's rand_init takes an int seed; the config's u64 is folded into it.
-        seed: (config.seed ^ (config.seed >> 32)) as u32 as i32,
+        // Warp's rand_init takes an int seed. The policy's sampling folds the config's u64 as
+        // `seed ^ seed >> 32` with the same per-(iteration, step, env) offsets, so the reset
+        // mixes it differently: the two streams must not coincide.
+        seed: (config
+            .seed
+            .wrapping_add(1)
+            .wrapping_mul(0xD1B5_4A32_D192_ED03)
+            >> 32) as u32 as i32,
         horizon: config.ppo.horizon as i32,
         dt: dt as f32,
         noise_std: config.env.motion_noise_std,
@@ -228,5 +234,22 @@ pub fn observation_params(obs: &ObsConfig, dt: f64) -> ObservationParams {
         dt: dt as f32,
         prev_action: i32::from(obs.prev_action),
         root_target: i32::from(obs.root_target),
+    }
+}
+
+#[cfg(test)]
+mod seed_tests {
+    use super::*;
+
+    #[test]
+    fn the_reset_and_the_policy_draw_from_different_streams() {
+        for seed in [0u64, 1, 2, 42, u64::MAX] {
+            let config = TrainConfig {
+                seed,
+                ..TrainConfig::with_motion("walk")
+            };
+            let policy_seed = (seed ^ (seed >> 32)) as u32 as i32;
+            assert_ne!(reset_params(&config, 1.0 / 30.0).seed, policy_seed, "seed {seed}");
+        }
     }
 }
