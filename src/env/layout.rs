@@ -249,7 +249,11 @@ mod seed_tests {
                 ..TrainConfig::with_motion("walk")
             };
             let policy_seed = (seed ^ (seed >> 32)) as u32 as i32;
-            assert_ne!(reset_params(&config, 1.0 / 30.0).seed, policy_seed, "seed {seed}");
+            assert_ne!(
+                reset_params(&config, 1.0 / 30.0).seed,
+                policy_seed,
+                "seed {seed}"
+            );
         }
     }
 }
