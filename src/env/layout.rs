@@ -212,11 +212,8 @@ pub fn reset_params(config: &TrainConfig, dt: f64) -> ResetParams {
         // Warp's rand_init takes an int seed. The policy's sampling folds the config's u64 as
         // `seed ^ seed >> 32` with the same per-(iteration, step, env) offsets, so the reset
         // mixes it differently: the two streams must not coincide.
-        seed: (config
-            .seed
-            .wrapping_add(1)
-            .wrapping_mul(0xD1B5_4A32_D192_ED03)
-            >> 32) as u32 as i32,
+        seed: ((config.seed ^ 0x5851_F42D_4C95_7F2D).wrapping_mul(0xD1B5_4A32_D192_ED03) >> 32)
+            as u32 as i32,
         horizon: config.ppo.horizon as i32,
         dt: dt as f32,
         noise_std: config.env.motion_noise_std,
