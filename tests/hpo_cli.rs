@@ -100,6 +100,10 @@ fn the_backflip_configuration_loads_and_names_the_missing_trainer() {
     );
     assert!(config.prompts.plan.contains("{recent_results}"));
 
+    if instantmimic::cuda::driver_library_present() {
+        // On a GPU machine the command would start the search for real.
+        return;
+    }
     let tmp = tempfile::tempdir().unwrap();
     let output = Command::new(binary())
         .args(["hpo", "--config"])
@@ -110,10 +114,7 @@ fn the_backflip_configuration_loads_and_names_the_missing_trainer() {
         .unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(!output.status.success());
-    assert!(
-        stderr.contains("the in-process trainer is not built yet; see README, 'Missing'"),
-        "{stderr}"
-    );
+    assert!(stderr.contains("the trainer needs a GPU"), "{stderr}");
     assert!(!tmp.path().join("run").exists());
 }
 

@@ -114,6 +114,25 @@ impl Gpu {
         Ok(Gpu { shared, stream })
     }
 
+    /// Number of CUDA devices the driver sees (errors as [`Gpu::open`]: no driver, no device).
+    pub fn device_count() -> Result<usize, CudaError> {
+        if !driver_library_present() {
+            return Err(CudaError::NoDriver);
+        }
+        match result::init() {
+            Ok(()) => {}
+            Err(e) if e.0 == sys::CUresult::CUDA_ERROR_NO_DEVICE => {
+                return Err(CudaError::NoDevice {
+                    ordinal: 0,
+                    count: 0,
+                });
+            }
+            Err(e) => return Err(from_cudarc("cuInit (starting the NVIDIA driver)")(e)),
+        }
+        let count = result::device::get_count().map_err(from_cudarc("cuDeviceGetCount"))?;
+        Ok(usize::try_from(count).unwrap_or(0))
+    }
+
     /// Facts about the device.
     pub fn info(&self) -> &GpuInfo {
         &self.shared.info

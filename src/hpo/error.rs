@@ -16,11 +16,6 @@ pub enum HpoError {
     },
     #[error("{path}: not a valid HPO configuration: {problem}")]
     Config { path: String, problem: String },
-    #[error(
-        "the in-process trainer is not built yet; see README, 'Missing'. \
-         Use `[runner] kind = \"synthetic\"` to exercise the search loop without training"
-    )]
-    TrainerMissing,
     #[error("trial failed to run (seed {seed}): {problem}")]
     Trial { seed: u64, problem: String },
     #[error("{path}: {action}: {source}")]

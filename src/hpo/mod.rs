@@ -26,6 +26,7 @@ pub mod space;
 pub mod state;
 pub mod strategy;
 pub mod synthetic;
+pub mod train_runner;
 pub mod trial;
 
 use std::io::Write;

@@ -1,7 +1,8 @@
 //! The seam between the search and training: a [`TrialRunner`] trains one configuration with
-//! one seed and reports how long it took to succeed. The in-process trainer plugs in here; the
-//! [`SyntheticObjective`](crate::hpo::synthetic::SyntheticObjective) stands in for it in tests
-//! and in `configs/hpo/synthetic.toml`.
+//! one seed and reports how long it took to succeed: the in-process trainer
+//! ([`TrainRunner`](crate::hpo::train_runner::TrainRunner)), or the
+//! [`SyntheticObjective`](crate::hpo::synthetic::SyntheticObjective) that stands in for it in
+//! tests and in `configs/hpo/synthetic.toml`.
 
 use serde::{Deserialize, Serialize};
 
@@ -78,7 +79,7 @@ pub fn build_runners(
     spec: TrialSpec,
 ) -> Result<Vec<BoxedRunner>, HpoError> {
     match &settings.kind {
-        RunnerKind::Train => Err(HpoError::TrainerMissing),
+        RunnerKind::Train => crate::hpo::train_runner::train_runners(settings.workers, spec),
         RunnerKind::Synthetic(objective) => {
             let first = SyntheticObjective::new(objective.clone(), spec);
             let workers = settings.workers.unwrap_or_else(|| first.devices()).max(1);
@@ -117,7 +118,10 @@ mod tests {
     }
 
     #[test]
-    fn the_trainer_kind_says_it_is_missing() {
+    fn the_trainer_kind_needs_a_gpu_and_says_so_without_one() {
+        if crate::cuda::driver_library_present() {
+            return;
+        }
         let settings = RunnerSettings {
             kind: RunnerKind::Train,
             workers: None,
@@ -129,7 +133,7 @@ mod tests {
         let err = build_runners(&settings, spec).err().map(|e| e.to_string());
         assert!(
             err.as_deref()
-                .is_some_and(|e| e.contains("in-process trainer is not built yet")),
+                .is_some_and(|e| e.contains("the trainer needs a GPU")),
             "{err:?}"
         );
     }

@@ -48,22 +48,43 @@ pub struct TrainSetup {
 /// `run.eval_interval` iterations, checkpoints at `run.checkpoint_interval` and at the end.
 pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
     let gpu = Gpu::open(setup.device)?;
-    let (mut session, checkpoint, warnings) = match &setup.start {
+    train_with(
+        &gpu,
+        &setup.config,
+        &setup.motion,
+        &setup.store,
+        &setup.start,
+        setup.progress,
+    )
+}
+
+/// [`train_on_gpu`] on an open GPU (the hyperparameter search trains trial after trial on
+/// one): `config` is the resolved configuration (for a resumed run, its `[run]` section
+/// replaces the run directory's).
+pub fn train_with(
+    gpu: &Gpu,
+    config: &TrainConfig,
+    motion: &ReferenceMotion,
+    store: &PlanStore,
+    start: &RunStart,
+    progress: ProgressMode,
+) -> Result<RunSummary, TrainError> {
+    let (mut session, checkpoint, warnings) = match start {
         RunStart::New { root, overwrite } => (
-            RunSession::start_new(root, &setup.config, *overwrite, setup.progress)?,
+            RunSession::start_new(root, config, *overwrite, progress)?,
             None,
             Vec::new(),
         ),
         RunStart::Resume { root } => {
-            let run = setup.config.run.clone();
-            RunSession::resume(root, |c| c.run = run, setup.progress)?
+            let run = config.run.clone();
+            RunSession::resume(root, |c| c.run = run, progress)?
         }
     };
     for warning in &warnings {
         session.progress().note(&format!("warning: {warning}"));
     }
     let config = session.config().clone();
-    let mut trainer = Trainer::new(&gpu, &setup.store, &setup.motion, &config)?;
+    let mut trainer = Trainer::new(gpu, store, motion, &config)?;
     if let Some(checkpoint) = &checkpoint {
         trainer.restore(checkpoint)?;
         session.progress().note(&format!(

@@ -35,7 +35,7 @@ pub use evaluation::{
     EnvEvaluation, EvaluationError, EvaluationSummary, evaluation_start_times, evaluation_steps,
     format_evaluation_report, summarize,
 };
-pub use gpu_loop::{RunStart, TrainSetup, evaluate_on_gpu, train_on_gpu};
+pub use gpu_loop::{RunStart, TrainSetup, evaluate_on_gpu, train_on_gpu, train_with};
 pub use metrics::{IterationRecord, MetricsLog, ResumedMetrics, UpdateStats};
 pub use preflight::{PolicyShapes, Preflight, check_plans, load_motion, preflight};
 pub use progress::{Progress, ProgressMode};
