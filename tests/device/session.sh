@@ -2,7 +2,8 @@
 # One call on the GPU machine: GPU tests, rollout benchmarks and training runs, with a short
 # table printed last and full logs under $OUT. Stage the binaries first (tests/device/stage.sh)
 # and carry that directory:
-#   BIN=.device-bin tests/device/session.sh [tests] [bench] [train]   (default: all three)
+#   BIN=.device-bin tests/device/session.sh [tests] [bench] [train] [hpo]
+#   (default: tests bench train; hpo runs HPO_CYCLES (10) offline cycles on backflip)
 # Environment: BIN (staged binaries), OUT (logs; default /tmp/instantmimic-out),
 # SEEDS (train: default "0 1 2"), MOTIONS_LIST (train: default all five clips),
 # TRAIN_ARGS (extra flags for every `instantmimic train`).
@@ -31,7 +32,7 @@ run_tests() {
 }
 
 run_bench() {
-  for variant in "--envs 4096 --substeps 4 --horizon 32" "--envs 4096 --substeps 4 --horizon 32 --critic-in-update" ; do
+  for variant in "--envs 4096 --substeps 4 --horizon 32" "--envs 4096 --substeps 4 --horizon 8"; do
     tag=$(echo "$variant" | tr -d ' -')
     if "$BIN/instantmimic" bench rollout --motion backflip $variant --json > "$OUT/bench_$tag.json" 2> "$OUT/bench_$tag.err"; then
       python3 - "$OUT/bench_$tag.json" "$variant" <<'PY' | tee -a "$summary"
@@ -61,13 +62,24 @@ run_train() {
   done
 }
 
+run_hpo() {
+  # Issue 6: an offline (no LLM) search on backflip from the paper's baseline.
+  if "$BIN/instantmimic" hpo --config configs/hpo/backflip.toml --cycles "${HPO_CYCLES:-10}" \
+      --out "$OUT/hpo" > "$OUT/hpo.log" 2>&1; then
+    note "hpo: $(tail -3 "$OUT/hpo.log" | tr '\n' ' ')"
+  else
+    note "hpo FAILED: $(tail -3 "$OUT/hpo.log" | tr '\n' ' ')"
+  fi
+}
+
 sections=${*:-tests bench train}
 for s in $sections; do
   case "$s" in
     tests) run_tests ;;
     bench) run_bench ;;
     train) run_train ;;
-    *) echo "unknown section $s (tests, bench, train)" >&2; exit 2 ;;
+    hpo) run_hpo ;;
+    *) echo "unknown section $s (tests, bench, train, hpo)" >&2; exit 2 ;;
   esac
 done
 # The device hands back at most 8 files: pack the logs, metrics and curves (not checkpoints).
