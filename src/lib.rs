@@ -4,13 +4,15 @@
 //! replayed here through CUDA graphs. Layout:
 //! - [`cuda`]: the driver (context, modules, launches, graphs). The only place with `unsafe` CUDA calls.
 //! - [`plan`]: the `.wrp` plan format: reader, validation, packing, replay into CUDA graphs.
-//! - [`env`]: our own kernels (env, PPO): AOT-compiled Warp PTX and typed launchers.
+//! - [`env`]: our own kernels (AOT-compiled Warp PTX, typed launchers) and the rollout graph.
+//! - [`ppo`]: the policy networks and the PPO update on the GPU.
 //! - [`motion`]: DeepMimic reference motions and their kinematics.
-//! - [`bench`]: benchmarks of physics (and later the whole loop), for `instantmimic bench`.
-//! - [`train`]: training runs: configuration, run directories, checkpoints, metrics, evaluation
-//!   protocol (the GPU loop, with issue 5).
+//! - [`bench`]: benchmarks of physics and of the rollout, for `instantmimic bench`.
+//! - [`train`]: training runs: the GPU loop (`Trainer`), configuration, run directories,
+//!   checkpoints, metrics, the evaluation protocol.
 //! - [`hpo`]: hyperparameter search by an agent (plan → propose → experiment).
 //! - [`assets`]: PTX and plans embedded in the binary at build time.
+//! - [`plot`]: PNG charts with an embedded font.
 //! - [`cli`]: the command line.
 
 pub mod assets;
@@ -21,5 +23,6 @@ pub mod env;
 pub mod hpo;
 pub mod motion;
 pub mod plan;
+pub mod plot;
 pub mod ppo;
 pub mod train;

@@ -2,17 +2,13 @@
 //! point (failed candidates, scored at the budget, as crosses). Drawn into a pixel buffer with
 //! an embedded font, so it needs no system fonts or libraries.
 
-use std::sync::Once;
-
 use plotters::prelude::*;
-use plotters::style::{FontStyle, register_font};
 
 use crate::hpo::error::HpoError;
 use crate::hpo::record::{CycleRecord, CycleStatus};
 
 const WIDTH: u32 = 1000;
 const HEIGHT: u32 = 600;
-const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
 
 fn plot_error(e: impl std::fmt::Display) -> HpoError {
     HpoError::Plot {
@@ -26,14 +22,6 @@ pub fn trajectory_png(
     title: &str,
     budget_s: f64,
 ) -> Result<Vec<u8>, HpoError> {
-    static FONT_ONCE: Once = Once::new();
-    let mut font_result = Ok(());
-    FONT_ONCE.call_once(|| {
-        font_result = register_font("sans-serif", FontStyle::Normal, FONT)
-            .map_err(|_| plot_error("the embedded font does not load"));
-    });
-    font_result?;
-
     let mut points: Vec<(f64, f64, bool)> = Vec::new();
     for record in history.iter().filter(|r| r.status != CycleStatus::Skipped) {
         for c in &record.candidates {
@@ -74,16 +62,8 @@ pub fn trajectory_png(
         1.0
     };
 
-    let mut buffer = vec![255u8; (WIDTH * HEIGHT * 3) as usize];
-    {
-        let backend = BitMapBackend::<plotters::backend::RGBPixel>::with_buffer_and_format(
-            &mut buffer,
-            (WIDTH, HEIGHT),
-        )
-        .map_err(plot_error)?;
-        let root = backend.into_drawing_area();
-        root.fill(&WHITE).map_err(plot_error)?;
-        let mut chart = ChartBuilder::on(&root)
+    crate::plot::render_png(WIDTH, HEIGHT, plot_error, |root| {
+        let mut chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 24))
             .margin(16)
             .x_label_area_size(48)
@@ -142,20 +122,6 @@ pub fn trajectory_png(
             .position(SeriesLabelPosition::UpperRight)
             .draw()
             .map_err(plot_error)?;
-        root.present().map_err(plot_error)?;
-    }
-    encode_png(&buffer)
-}
-
-fn encode_png(rgb: &[u8]) -> Result<Vec<u8>, HpoError> {
-    let mut out = Vec::new();
-    {
-        let mut encoder = png::Encoder::new(&mut out, WIDTH, HEIGHT);
-        encoder.set_color(png::ColorType::Rgb);
-        encoder.set_depth(png::BitDepth::Eight);
-        let mut writer = encoder.write_header().map_err(plot_error)?;
-        writer.write_image_data(rgb).map_err(plot_error)?;
-        writer.finish().map_err(plot_error)?;
-    }
-    Ok(out)
+        Ok(())
+    })
 }

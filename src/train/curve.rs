@@ -4,10 +4,8 @@
 //! font (as `hpo/plot.rs`), so it needs no system fonts or libraries.
 
 use std::path::Path;
-use std::sync::Once;
 
 use plotters::prelude::*;
-use plotters::style::{FontStyle, register_font};
 
 use super::atomic_file::write_bytes_atomically;
 use super::error::TrainError;
@@ -15,7 +13,6 @@ use super::metrics::IterationRecord;
 
 pub const CURVE_WIDTH: u32 = 1000;
 pub const CURVE_HEIGHT: u32 = 600;
-const FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
 /// Series colors (tests look for them in the image).
 pub const EPISODE_LENGTH_COLOR: RGBColor = RGBColor(40, 100, 200);
 pub const SUCCESS_RATE_COLOR: RGBColor = RGBColor(215, 80, 30);
@@ -32,14 +29,6 @@ pub fn learning_curve_png(
     max_episode_length: f64,
     threshold: f64,
 ) -> Result<Vec<u8>, TrainError> {
-    static FONT_ONCE: Once = Once::new();
-    let mut font_result = Ok(());
-    FONT_ONCE.call_once(|| {
-        font_result = register_font("sans-serif", FontStyle::Normal, FONT)
-            .map_err(|_| plot_error("the embedded font does not load"));
-    });
-    font_result?;
-
     let finite = |x: f64| x.is_finite();
     let lengths: Vec<(f64, f64)> = records
         .iter()
@@ -63,16 +52,8 @@ pub fn learning_curve_png(
         .fold(max_episode_length, f64::max);
     let l_hi = if l_max > 0.0 { l_max * 1.05 } else { 1.0 };
 
-    let mut buffer = vec![255u8; (CURVE_WIDTH * CURVE_HEIGHT * 3) as usize];
-    {
-        let backend = BitMapBackend::<plotters::backend::RGBPixel>::with_buffer_and_format(
-            &mut buffer,
-            (CURVE_WIDTH, CURVE_HEIGHT),
-        )
-        .map_err(plot_error)?;
-        let root = backend.into_drawing_area();
-        root.fill(&WHITE).map_err(plot_error)?;
-        let mut chart = ChartBuilder::on(&root)
+    crate::plot::render_png(CURVE_WIDTH, CURVE_HEIGHT, plot_error, |root| {
+        let mut chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 24))
             .margin(16)
             .x_label_area_size(48)
@@ -147,9 +128,8 @@ pub fn learning_curve_png(
             .position(SeriesLabelPosition::LowerRight)
             .draw()
             .map_err(plot_error)?;
-        root.present().map_err(plot_error)?;
-    }
-    encode_png(&buffer)
+        Ok(())
+    })
 }
 
 /// Draws the curve and replaces `path` with it atomically (a viewer never sees half a PNG).
@@ -162,17 +142,4 @@ pub fn write_learning_curve(
 ) -> Result<(), TrainError> {
     let png = learning_curve_png(records, title, max_episode_length, threshold)?;
     write_bytes_atomically(path, &png).map_err(|e| TrainError::io(path, e))
-}
-
-fn encode_png(rgb: &[u8]) -> Result<Vec<u8>, TrainError> {
-    let mut out = Vec::new();
-    {
-        let mut encoder = png::Encoder::new(&mut out, CURVE_WIDTH, CURVE_HEIGHT);
-        encoder.set_color(png::ColorType::Rgb);
-        encoder.set_depth(png::BitDepth::Eight);
-        let mut writer = encoder.write_header().map_err(plot_error)?;
-        writer.write_image_data(rgb).map_err(plot_error)?;
-        writer.finish().map_err(plot_error)?;
-    }
-    Ok(out)
 }
