@@ -134,6 +134,7 @@ impl Rollout {
             actions: &r.actions,
             log_probs: &r.log_probs,
             values: &r.values,
+            values_in_update: false,
         };
         for step in 0..t {
             let obs = r.observations.view(step * n * d, [n, d]).unwrap();

@@ -144,6 +144,8 @@ pub struct Rollout {
     pub policy: GaussianPolicy,
     statistics: RolloutStatistics,
     purpose: Purpose,
+    /// `ppo.values_in_update`: the critic runs in the update, not per step here.
+    values_in_update: bool,
     num_envs: usize,
     horizon: usize,
     substeps: usize,
@@ -283,6 +285,7 @@ impl Rollout {
             policy,
             statistics: RolloutStatistics::new(gpu, n)?,
             purpose,
+            values_in_update: config.ppo.values_in_update,
             num_envs: n,
             horizon,
             substeps,
@@ -460,6 +463,8 @@ impl Rollout {
             actions: &self.storage.actions,
             log_probs: &self.storage.log_probs,
             values: &self.storage.values,
+            // Evaluation needs no values at all.
+            values_in_update: self.values_in_update || !self.is_training(),
         };
         self.policy.record_act(
             &self.kernels,

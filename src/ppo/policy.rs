@@ -276,6 +276,13 @@ impl GaussianPolicy {
         stream: &Stream,
         obs: &DeviceArray2<f32>,
     ) -> Result<(), PolicyError> {
+        self.check_observations(obs)?;
+        self.actor.record(kernels, stream, obs)?;
+        self.critic.record(kernels, stream, obs)?;
+        Ok(())
+    }
+
+    fn check_observations(&self, obs: &DeviceArray2<f32>) -> Result<(), PolicyError> {
         if obs.shape() != [self.batch, self.observation_size] {
             return Err(PolicyError::Shape(format!(
                 "observations of shape {:?}, expected [{}, {}]",
@@ -284,8 +291,6 @@ impl GaussianPolicy {
                 self.observation_size
             )));
         }
-        self.actor.record(kernels, stream, obs)?;
-        self.critic.record(kernels, stream, obs)?;
         Ok(())
     }
 
@@ -304,7 +309,12 @@ impl GaussianPolicy {
         t: usize,
         deterministic: bool,
     ) -> Result<(), PolicyError> {
-        self.record_forward(kernels, stream, obs)?;
+        if storage.values_in_update {
+            self.check_observations(obs)?;
+            self.actor.record(kernels, stream, obs)?;
+        } else {
+            self.record_forward(kernels, stream, obs)?;
+        }
         let [horizon, n, a] = storage.actions.shape();
         if n != self.batch || a != self.action_size || actions.shape() != [n, a] || t >= horizon {
             return Err(PolicyError::Shape(format!(
@@ -340,4 +350,7 @@ pub struct ActStorage<'a> {
     pub actions: &'a DeviceArray3<f32>,
     pub log_probs: &'a DeviceArray2<f32>,
     pub values: &'a DeviceArray2<f32>,
+    /// The update computes the values (`ppo.values_in_update`): the critic does not run here,
+    /// and what lands in `values` is stale until the update overwrites it.
+    pub values_in_update: bool,
 }

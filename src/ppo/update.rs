@@ -136,6 +136,8 @@ pub struct PpoUpdate {
     actor: Mlp,
     critic: Mlp,
     bootstrap: Mlp,
+    /// The rollout leaves the values to the update (`ppo.values_in_update`).
+    values_in_update: bool,
     actor_grads: MlpGradients,
     critic_grads: MlpGradients,
     log_std_grad: DeviceArray<f32>,
@@ -221,7 +223,19 @@ impl PpoUpdate {
             target_blocks: gpu.info().sm_count.max(1) as usize * WEIGHT_GRAD_BLOCKS_PER_SM,
             actor: Mlp::new(gpu, &actor_shapes, share(&actor_params)?, rows)?,
             critic: Mlp::new(gpu, &critic_shapes, share(&critic_params)?, rows)?,
-            bootstrap: Mlp::new(gpu, &critic_shapes, share(&critic_params)?, envs)?,
+            // With `values_in_update` the critic values every observation row of the rollout
+            // (T + 1 rows of N) in one pass; otherwise only the bootstrap row T.
+            bootstrap: Mlp::new(
+                gpu,
+                &critic_shapes,
+                share(&critic_params)?,
+                if q.values_in_update {
+                    (horizon + 1) * envs
+                } else {
+                    envs
+                },
+            )?,
+            values_in_update: q.values_in_update,
             log_std: policy.log_std().view(0, [a])?,
             actor_moments: AdamMoments::zeros(gpu, actor_params.len())?,
             critic_moments: AdamMoments::zeros(gpu, critic_params.len())?,
@@ -262,16 +276,26 @@ impl PpoUpdate {
         record_clear(stream, &self.grad_norm_sq)?;
         record_clear(stream, &self.advantage_moments)?;
 
-        let bootstrap_obs = batch.observations.view(t * n * d, [n, d])?;
-        self.bootstrap.record(k, stream, &bootstrap_obs)?;
-        self.advantages.record_gae(
-            k,
-            stream,
-            batch,
-            self.bootstrap.output(),
-            self.gamma,
-            self.lambda,
-        )?;
+        let last_values = if self.values_in_update {
+            // One forward over all rows; rows 0..T are the rollout's values (what GAE, the
+            // value clipping and the statistics read), row T the bootstrap.
+            let all = batch.observations.view(0, [(t + 1) * n, d])?;
+            self.bootstrap.record(k, stream, &all)?;
+            let values = self.bootstrap.output();
+            stream.memcpy_dtod(
+                batch.values.device_ptr(),
+                values.device_ptr(),
+                t * n * std::mem::size_of::<f32>(),
+            )?;
+            values.view(t * n, [n, 1])?
+        } else {
+            let bootstrap_obs = batch.observations.view(t * n * d, [n, d])?;
+            self.bootstrap.record(k, stream, &bootstrap_obs)?;
+            let values = self.bootstrap.output();
+            values.view(0, [n, 1])?
+        };
+        self.advantages
+            .record_gae(k, stream, batch, &last_values, self.gamma, self.lambda)?;
         let flat_advantages = self.advantages.advantages.view(0, [t * n])?;
         record_sum_and_squares(k, stream, &flat_advantages, &self.advantage_moments)?;
 
