@@ -2,7 +2,7 @@
 
 use cudarc::driver::{CudaEvent, sys};
 
-use super::error::from_cudarc;
+use super::error::{CheckResult, from_cudarc};
 use super::{CudaError, Gpu, Stream};
 
 /// A CUDA event with timing enabled.
@@ -34,6 +34,23 @@ impl Event {
         self.inner
             .record(&stream.inner.cu)
             .map_err(from_cudarc("cuEventRecord"))
+    }
+
+    /// Records this event as a node of the graph being captured on `stream`, so that each replay
+    /// of the graph records it. A plain [`Event::record`] inside a capture only orders the
+    /// capture; synchronizing or timing such an event afterwards fails with INVALID_VALUE.
+    pub fn record_in_capture(&self, stream: &Stream) -> Result<(), CudaError> {
+        stream.bind()?;
+        // SAFETY: the event and the stream are alive and belong to the current context; the flag
+        // is a valid CUevent_record_flags value.
+        unsafe {
+            sys::cuEventRecordWithFlags(
+                self.inner.cu_event(),
+                stream.cu_stream(),
+                sys::CUevent_record_flags::CU_EVENT_RECORD_EXTERNAL as u32,
+            )
+        }
+        .check("cuEventRecordWithFlags(EXTERNAL)")
     }
 
     /// Waits for the recorded work to finish.

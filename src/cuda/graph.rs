@@ -280,11 +280,14 @@ impl Graph {
 /// `memcpy_<from>_to_<to>` for a copy node, each side `host`, `device` or `array`: a copy from
 /// or to host memory inside a graph would put the host on the GPU's critical path.
 fn memcpy_direction(node: sys::CUgraphNode) -> Result<String, CudaError> {
-    // SAFETY: CUDA_MEMCPY3D is a plain C struct of integers and pointers: all zeros is valid.
-    let mut params: sys::CUDA_MEMCPY3D = unsafe { std::mem::zeroed() };
+    // Not `mem::zeroed`: CUmemorytype has no zero variant, so an all-zeros struct is invalid
+    // (Rust panics on it). The driver writes the whole struct.
+    let mut params = std::mem::MaybeUninit::<sys::CUDA_MEMCPY3D>::uninit();
     // SAFETY: `node` is a memcpy node of a live graph; `params` is a live local the driver fills.
-    unsafe { sys::cuGraphMemcpyNodeGetParams(node, &mut params) }
+    unsafe { sys::cuGraphMemcpyNodeGetParams(node, params.as_mut_ptr()) }
         .check("cuGraphMemcpyNodeGetParams")?;
+    // SAFETY: the call succeeded, so the driver has written every field of `params`.
+    let params = unsafe { params.assume_init() };
     let from = memory_side(params.srcMemoryType, params.srcDevice)?;
     let to = memory_side(params.dstMemoryType, params.dstDevice)?;
     Ok(format!("memcpy_{from}_to_{to}"))

@@ -29,13 +29,11 @@ fn load_module(gpu: &Gpu, ptx: &'static str) -> Result<Module, EnvError> {
     Ok(gpu.load_ptx(ptx, bytes)?)
 }
 
-/// Dynamic shared memory a launch may use before the kernel's limit must be raised.
-const DEFAULT_DYNAMIC_SHARED_MEMORY: u32 = 48 * 1024;
-
 /// The kernel `abi` describes, from its loaded module, after checking that the driver sees the
-/// parameters where the launcher packs them. Kernels that need more than 48 KiB of dynamic
-/// shared memory (policy.py's GEMM tiles: 49408 bytes) get their limit raised, as Warp's own
-/// launches do; the driver refuses such launches otherwise.
+/// parameters where the launcher packs them. Every kernel with dynamic shared memory gets its
+/// limit raised to what it asks: the driver refuses a launch whose static plus dynamic shared
+/// memory passes 48 KiB otherwise, and Warp's tile kernels add static storage (mlp_backward.py:
+/// 512 B beside 48 KiB dynamic).
 fn bind_kernel(module: &Module, abi: &'static KernelAbi) -> Result<Function, EnvError> {
     let function = module.function(abi.entry)?;
     let expected = abi.param_layout();
@@ -47,7 +45,7 @@ fn bind_kernel(module: &Module, abi: &'static KernelAbi) -> Result<Function, Env
             driver: function.param_layout().to_vec(),
         });
     }
-    if abi.smem_bytes > DEFAULT_DYNAMIC_SHARED_MEMORY {
+    if abi.smem_bytes > 0 {
         function.set_max_dynamic_shared_memory(abi.smem_bytes)?;
     }
     Ok(function)

@@ -75,7 +75,7 @@ impl PhaseRecorder {
     /// Also records an event at every phase boundary into the graph being captured on `stream`.
     pub fn timed(gpu: &Gpu, stream: &Stream) -> Result<PhaseRecorder, CudaError> {
         let start = gpu.new_event()?;
-        start.record(stream)?;
+        start.record_in_capture(stream)?;
         Ok(PhaseRecorder {
             timing: Some(PhaseEvents {
                 start,
@@ -103,7 +103,7 @@ impl PhaseRecorder {
         }
         if let Some(timing) = &mut self.timing {
             let event = gpu.new_event()?;
-            event.record(stream)?;
+            event.record_in_capture(stream)?;
             timing.ends.push((phase, event));
         }
         Ok(())

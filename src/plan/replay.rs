@@ -24,9 +24,6 @@ use super::launch_args::{launch_dims, packed_launch_args};
 use super::model::Plan;
 use super::ops::{KernelLaunch, Op, RegionRef, RelocationTarget};
 
-/// Kernels above this much dynamic shared memory need an explicit opt-in per function.
-const DEFAULT_MAX_DYNAMIC_SMEM: u32 = 48 * 1024;
-
 /// How [`record_ops`] orders operations (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum ReplayOrder {
@@ -104,7 +101,7 @@ pub struct ReplayContext<'a> {
     pub pinned: &'a mut Vec<PinnedHostMemory>,
     pub alloc_pinned: &'a dyn Fn(usize) -> Result<PinnedHostMemory, CudaError>,
     /// Functions whose dynamic shared memory limit was already raised.
-    pub raised_smem: HashSet<(String, String)>,
+    pub raised_smem: HashMap<(String, String), u32>,
     /// Regions no operation writes (bound only to Model arrays): no ordering through them.
     pub read_only: &'a HashSet<u32>,
 }
@@ -295,14 +292,18 @@ fn prepare_launch(
         Ok(base + offset)
     })?;
     let args = fit_to_layout(packed.bytes, &packed.offsets, &function, at)?;
-    if dims.shared_mem > DEFAULT_MAX_DYNAMIC_SMEM
-        && ctx
-            .raised_smem
-            .insert((module.binary_filename.clone(), entry.clone()))
-    {
+    // Raised for every kernel with dynamic shared memory, to the most any of its launches asks:
+    // the driver refuses static + dynamic above 48 KiB without it, and Warp's tile kernels add
+    // static storage beside the dynamic.
+    let raised = ctx
+        .raised_smem
+        .entry((module.binary_filename.clone(), entry.clone()))
+        .or_insert(0);
+    if dims.shared_mem > *raised {
         function
             .set_max_dynamic_shared_memory(dims.shared_mem)
             .map_err(|e| PlanError::malformed(at, e.to_string()))?;
+        *raised = dims.shared_mem;
     }
     Ok(Some(PreparedOp::Launch {
         function,

@@ -268,9 +268,15 @@ impl Simulation {
     }
 
     /// Queues `plan`'s operations on `stream`, typically inside a larger capture (a rollout
-    /// records the step plan once per substep). The simulation must outlive that graph.
+    /// records the step plan once per substep). The simulation must outlive that graph. On a
+    /// stream that is not capturing (a reset queued directly) it launches the plan's own graph:
+    /// the DAG order and the conditional nodes exist only inside a capture.
     pub fn record(&self, plan: &str, stream: &Stream) -> Result<(), SimulationError> {
         let loaded = self.loaded(plan)?;
+        if !stream.is_capturing()? {
+            loaded.graph.launch(stream)?;
+            return Ok(());
+        }
         record_ops(&loaded.ops, stream, &loaded.pinned, self.order)?;
         Ok(())
     }
@@ -398,7 +404,7 @@ impl Simulation {
                 function: &mut loader,
                 pinned: &mut pinned,
                 alloc_pinned: &alloc_pinned,
-                raised_smem: HashSet::new(),
+                raised_smem: HashMap::new(),
                 read_only: &read_only,
             };
             prepare_ops(&mut ctx, &plan.ops, "")?
