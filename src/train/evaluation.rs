@@ -91,11 +91,12 @@ pub fn summarize(
     let mut steps = 0u64;
     let mut sums = [0.0f64; 4];
     for (env, e) in episodes.iter().enumerate() {
-        // A complete episode ran every step; an incomplete one ended early (at least one step).
+        // A complete episode ran every step; a failed one ended early or failed on its last
+        // step (failure wins over the truncation that ends the pass).
         let consistent = if e.completed {
             e.steps == episode_steps
         } else {
-            e.steps < episode_steps
+            e.steps <= episode_steps
         };
         if !consistent {
             return Err(EvaluationError::Steps {
@@ -269,8 +270,11 @@ mod tests {
             e.to_string(),
             "env 0: 9 steps reported for an episode of 10 marked complete"
         );
-        let e = summarize(&[env(false, 10, [0.0; 4])], 10, 0.9).unwrap_err();
+        let e = summarize(&[env(false, 11, [0.0; 4])], 10, 0.9).unwrap_err();
         assert!(matches!(e, EvaluationError::Steps { .. }), "{e}");
+        // Failing on the last step is a failure, not an inconsistency.
+        let s = summarize(&[env(false, 10, [0.0; 4])], 10, 0.9).unwrap();
+        assert_eq!(s.completed, 0);
         let mut bad = env(true, 10, [0.0; 4]);
         bad.ee_position_error_sum = f64::NAN;
         let e = summarize(&[bad], 10, 0.9).unwrap_err();

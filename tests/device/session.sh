@@ -10,13 +10,25 @@
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 BIN=${BIN:-.device-bin}
+if [ -f "$BIN/bin.txz" ]; then
+  mkdir -p /tmp/instantmimic-bin && tar xJf "$BIN/bin.txz" -C /tmp/instantmimic-bin && BIN=/tmp/instantmimic-bin
+fi
+BIN=$(cd "$BIN" && pwd)
 OUT=${OUT:-/tmp/instantmimic-out}
 mkdir -p "$OUT"
-export INSTANTMIMIC_MOTIONS=${INSTANTMIMIC_MOTIONS:-$PWD/$BIN/motions}
+export INSTANTMIMIC_MOTIONS=${INSTANTMIMIC_MOTIONS:-$BIN/motions}
 export PYTHONPATH=
+export INSTANTMIMIC_BIN=$BIN/instantmimic
 summary="$OUT/summary.txt"
 : > "$summary"
 note() { echo "$*" | tee -a "$summary"; }
+# The device call's own limit is 600 s: stop starting new work SESSION_S seconds in, and cap
+# each command's timeout by what is left, so the logs are always packed and come back.
+deadline=$(( $(date +%s) + ${SESSION_S:-560} ))
+budget() { # budget SECONDS: the smaller of SECONDS and the time left (1 when none: `timeout 0` would mean no limit)
+  local left=$(( deadline - $(date +%s) )); [ "$left" -lt 1 ] && left=1
+  echo $(( $1 < left ? $1 : left ))
+}
 
 nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.sm,clocks.max.sm --format=csv,noheader \
   | tee "$OUT/gpu.txt"
@@ -25,8 +37,8 @@ run_tests() {
   for t in "$BIN"/gpu_*; do
     name=$(basename "$t")
     start=$(date +%s)
-    if "$t" --nocapture --test-threads 1 > "$OUT/test_$name.log" 2>&1; then status=PASS; else status=FAIL; fi
-    note "test  $name  $status  $(( $(date +%s) - start )) s  $(grep -c '^test .* ok$' "$OUT/test_$name.log") ok"
+    if timeout "$(budget "${TEST_TIMEOUT:-180}")" "$t" --nocapture --test-threads 1 > "$OUT/test_$name.log" 2>&1; then status=PASS; else status=FAIL; fi
+    note "test  $name  $status  $(( $(date +%s) - start )) s  $(grep -o 'test result: .*; [0-9]* ignored' "$OUT/test_$name.log" | tail -1)"
     [ "$status" = FAIL ] && grep -E "panicked|FAILED|failed" "$OUT/test_$name.log" | head -5
   done
 }
@@ -34,7 +46,7 @@ run_tests() {
 run_bench() {
   for variant in "--envs 4096 --substeps 4 --horizon 32" "--envs 4096 --substeps 4 --horizon 8"; do
     tag=$(echo "$variant" | tr -d ' -')
-    if "$BIN/instantmimic" bench rollout --motion backflip $variant --json > "$OUT/bench_$tag.json" 2> "$OUT/bench_$tag.err"; then
+    if timeout "$(budget 180)" "$BIN/instantmimic" bench rollout --motion backflip $variant --json > "$OUT/bench_$tag.json" 2> "$OUT/bench_$tag.err"; then
       python3 - "$OUT/bench_$tag.json" "$variant" <<'PY' | tee -a "$summary"
 import json, sys
 r = json.load(open(sys.argv[1]))
@@ -52,7 +64,7 @@ run_train() {
   for motion in ${MOTIONS_LIST:-walk run spinkick backflip cartwheel}; do
     for seed in ${SEEDS:-0 1 2}; do
       dir="$OUT/runs/${motion}_$seed"
-      if "$BIN/instantmimic" train --motion "$motion" --config "configs/train/$motion.toml" --seed "$seed" \
+      if timeout "$(budget "${TRAIN_TIMEOUT:-150}")" "$BIN/instantmimic" train --motion "$motion" --config "configs/train/$motion.toml" --seed "$seed" \
           --out "$dir" ${TRAIN_ARGS:-} > "$OUT/train_${motion}_$seed.log" 2>&1; then
         note "train $motion seed $seed: $(tail -1 "$OUT/train_${motion}_$seed.log")"
       else
@@ -64,7 +76,7 @@ run_train() {
 
 run_hpo() {
   # Issue 6: an offline (no LLM) search on backflip from the paper's baseline.
-  if "$BIN/instantmimic" hpo --config configs/hpo/backflip.toml --cycles "${HPO_CYCLES:-10}" \
+  if timeout "$(budget 600)" "$BIN/instantmimic" hpo --config configs/hpo/backflip.toml --cycles "${HPO_CYCLES:-10}" \
       --out "$OUT/hpo" > "$OUT/hpo.log" 2>&1; then
     note "hpo: $(tail -3 "$OUT/hpo.log" | tr '\n' ' ')"
   else

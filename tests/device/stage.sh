@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Build the release binary and the GPU test binaries here, and stage them for the GPU machine.
 #   tests/device/stage.sh [DIR]      (default .device-bin; ignored by git via .git/info/exclude)
-# DIR then holds `instantmimic`, one stripped binary per tests/gpu_*.rs (named after the file),
-# and a copy of the motions directory ($INSTANTMIMIC_MOTIONS, default ../shared/data/motions)
-# under DIR/motions. Carry DIR in the device call and run tests/device/session.sh there.
+# DIR then holds bin.txz: `instantmimic`, one stripped binary per tests/gpu_*.rs (named after
+# the file), and a copy of the motions directory ($INSTANTMIMIC_MOTIONS, default
+# ../shared/data/motions) under motions/. Carry DIR in the device call and run tests/device/session.sh there.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 DIR=${1:-.device-bin}
@@ -23,4 +23,7 @@ for line in sys.stdin:
 ' | while read -r name exe; do cp "$exe" "$DIR/$name"; done
 strip "$DIR"/*
 cp -r "$MOTIONS" "$DIR/motions"
+# Unpacked the binaries pass the 64 MiB a device call carries: ship them xz-packed
+# (session.sh unpacks DIR/bin.txz).
+tar cJf /tmp/instantmimic-bin.txz -C "$DIR" . && rm -rf "${DIR:?}"/* && mv /tmp/instantmimic-bin.txz "$DIR/bin.txz"
 du -sh "$DIR"; ls "$DIR"
