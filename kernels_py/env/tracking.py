@@ -3,9 +3,9 @@
 
 After the physics substeps and the kinematics plan, each env compares its state with the
 reference at `ref_time + dt`, writes the reward and the done flags into rollout storage at row
-`t`, the five tracking errors (metrics), the reset mask `done`, then advances its episode clock.
-It also counts visits and failures per phase bin for the adaptive start-phase sampling
-(`reset.py`), with atomics.
+`t`, the five tracking errors (metrics; means per joint, dof or end effector), the reset mask
+`done`, then advances its episode clock. It also counts visits and failures per phase bin for the
+adaptive start-phase sampling (`reset.py`), with atomics.
 """
 
 import warp as wp
@@ -88,8 +88,17 @@ def reward_termination(
     root is more than `termination_height` below the reference root or a body is farther than
     `tracking_distance` from its reference (not within `grace_steps` of a reset); truncation at
     `max_episode_steps` or the end of a clamped clip. Writes `rewards/terminated/truncated[t, n]`,
-    `done[n]`, `errors[n, 0..5]`, advances `ref_time[n]` by dt and `episode_step[n]` by 1, and
-    counts the visit (and failure) in the phase bin of `ref_time[n]`."""
+    `done[n]`, `errors[n, 0..5]` (the five error terms, as used in the reward), advances
+    `ref_time[n]` by dt and `episode_step[n]` by 1, and counts the visit (and failure) in the
+    phase bin of `ref_time[n]`.
+
+    The error terms are means, not sums: over the joints (pose), the non-root dofs (velocity) and
+    the end effectors (position, orientation); the COM error is one point's. With the paper's
+    weights (pose 10, velocity 0.1, COM 10, end-effector position 40, rotation 2) summed errors
+    over 12 joints, 28 dofs and 5 end effectors put the exponent at tens: the first GPU training
+    runs got a reward of ~1e-6 per step (returns 0.00, no learning). Means keep it O(1) near the
+    reference (0.1 rad per joint, 1 rad/s per dof, 5 cm per end effector and of COM, 0.1 rad per
+    end effector's rotation: an exponent of ~0.35)."""
     n = wp.tid()
     t_ref = ref_time[n] + params.dt
     at = reference_locate(table, t_ref)
@@ -104,11 +113,13 @@ def reward_termination(
         else:
             d = qpos[n, a] - reference_value(table, at, a)
             e_pose += d * d
+    e_pose = e_pose / float(wp.max(joint_kind.shape[0], 1))
 
     e_vel = float(0.0)
     for k in range(ROOT_DOFS, qvel.shape[1]):
         d = qvel[n, k] - reference_value(table, at, REF_QVEL + k)
         e_vel += d * d
+    e_vel = e_vel / float(wp.max(qvel.shape[1] - ROOT_DOFS, 1))
 
     com = wp.vec3(subtree_com[n, 1, 0], subtree_com[n, 1, 1], subtree_com[n, 1, 2])
     dc = com - reference_position(table, at, REF_COM_POS)
@@ -124,6 +135,9 @@ def reward_termination(
         q = wp.vec4(xquat[n, b + 1, 0], xquat[n, b + 1, 1], xquat[n, b + 1, 2], xquat[n, b + 1, 3])
         d = qdiff_angle(q, reference_quat_wxyz(table, at, REF_BODY_QUAT + 4 * b))
         e_eer += d * d
+    ee_count = float(wp.max(end_effectors.shape[0], 1))
+    e_eep = e_eep / ee_count
+    e_eer = e_eer / ee_count
 
     far = float(0.0)
     for b in range(NUM_BODIES):

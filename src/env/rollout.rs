@@ -121,7 +121,8 @@ pub struct EpisodeState {
     pub done: DeviceArray<i32>,
     /// The action applied in the last control step `[N, A]` (the observation's previous action).
     pub actions: DeviceArray2<f32>,
-    /// The five tracking errors of the last step `[N, 5]` (metrics).
+    /// The five tracking errors of the last step `[N, 5]` (metrics; the reward's terms: means
+    /// per joint, non-root dof or end effector, docs/env.md "Reward").
     pub errors: DeviceArray2<f32>,
 }
 

@@ -1,7 +1,8 @@
 //! `reward_termination` (kernels_py/env/tracking.py; docs/env.md, "Reward", "Termination").
 //!
 //! Reference: the reference state at `t = ref_time + dt` (`ReferenceTable::lookup`, f64), the
-//! five tracking errors, `r = exp(-w . e)`, failure (root fallen more than
+//! five tracking errors (means over the joints, the non-root dofs and the end effectors; the
+//! COM's one point), `r = exp(-w . e)`, failure (root fallen more than
 //! `termination_height` below the reference root, or a body farther than `tracking_distance`
 //! from its reference) from `grace_steps` on, truncation at `max_episode_steps` or when a
 //! clamped clip's next reference time would pass its end, the phase bin counts, the advanced
@@ -81,10 +82,12 @@ pub fn reference_env(
         };
         errors[0] += d * d;
     }
+    errors[0] /= layout.num_joints().max(1) as f64;
     for k in 6..NV {
         let d = f64::from(qvel[k]) - row[l.qvel + k];
         errors[1] += d * d;
     }
+    errors[1] /= (NV - 6).max(1) as f64;
     let com = vec3(&physics.subtree_com, (e * NBODY + 1) * 3);
     errors[2] = (com - vec3_64(&row, l.com_pos)).norm_squared();
     for &b in &HUMANOID_END_EFFECTORS {
@@ -94,6 +97,9 @@ pub fn reference_env(
         let d = angle(&q, &quat_at64(&row, l.body_quat + 4 * b));
         errors[4] += d * d;
     }
+    let ee_count = HUMANOID_END_EFFECTORS.len().max(1) as f64;
+    errors[3] /= ee_count;
+    errors[4] /= ee_count;
     let far = (0..BODIES)
         .map(|b| (vec3(&physics.xpos, body(b)) - vec3_64(&row, l.body_pos + 3 * b)).norm())
         .fold(0.0, f64::max);
