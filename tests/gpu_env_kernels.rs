@@ -175,8 +175,10 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             &a.array(6),
             &a.array(7),
             &a.array(8),
-            a.f32(9),
+            &a.array(9),
             &a.array(10),
+            a.f32(11),
+            &a.array(12),
         ),
         "reward_termination" => kernels.reward_termination(
             s,

@@ -8,6 +8,16 @@ than a round trip of a target buffer through memory, and the kernel stays one la
 One thread per (env, joint). The per-joint layout comes from the character
 (`src/env/layout.rs: JointLayout`): kind (0 ball, 1 hinge), qpos address, dof address (motor
 `dof - 6` drives `qvel[dof]`, motors in dof order), Kp, torque limit, action scale, hinge center.
+
+The derivative part of the PD is the joints' passive damping (`m.dof_damping`, DeepMimic's Kd),
+which the integrator treats implicitly, so that stiff, light links stay stable at 120 Hz. Passive
+damping alone is not clamped, though: against a motor limited to L it caps a joint's speed at
+L / Kd (hips 200 / 50 = 4 rad/s, knees 3 rad/s), while a backflip or a spinkick needs 10-25 rad/s
+(the first GPU runs learnt walk and run but never the flip or the kick). DeepMimic clamps the
+whole PD torque instead. So the motor adds the damping back, `ctrl = clamp(P - Kd v, +-L) + Kd v`:
+with the implicit `-Kd v'` the net torque is DeepMimic's clamped PD, `clamp(P - Kd v, +-L)`, up to
+`Kd (v - v')`, an implicit term that only steadies. The runtime widens `m.actuator_ctrlrange`
+(src/env/rollout.rs) so that MuJoCo does not clamp `ctrl` a second time.
 """
 
 import warp as wp
@@ -25,6 +35,8 @@ ROOT_DOFS = wp.constant(6)
 def pd_control(
     actions: wp.array2d(dtype=wp.float32),
     qpos: wp.array2d(dtype=wp.float32),
+    qvel: wp.array2d(dtype=wp.float32),
+    dof_damping: wp.array(dtype=wp.float32),
     joint_kind: wp.array(dtype=wp.int32),
     joint_qpos: wp.array(dtype=wp.int32),
     joint_dof: wp.array(dtype=wp.int32),
@@ -35,9 +47,11 @@ def pd_control(
     action_scale: wp.float32,
     ctrl: wp.array2d(dtype=wp.float32),
 ):
-    """ctrl[n, m] for every (env n, joint j): ball joints `clamp(kp * qlog(conj(q) qexp(s a)))`
-    (a rotation vector in the joint's frame), hinges `clamp(kp * (center + s a - theta))`, with
-    `s = action_scale * joint_scale[j]` and the clamp at +-joint_limit[j]. Launch N * J threads."""
+    """ctrl[n, m] for every (env n, joint j): `clamp(P - kd v, +-joint_limit[j]) + kd v` with
+    `kd = dof_damping[dof]`, `v = qvel[n, dof]` per motor and P: ball joints
+    `kp * qlog(conj(q) qexp(s a))` (a rotation vector in the joint's frame), hinges
+    `kp * (center + s a - theta)`, with `s = action_scale * joint_scale[j]`. Launch N * J
+    threads."""
     tid = wp.tid()
     nj = joint_kind.shape[0]
     n = tid // nj
@@ -47,12 +61,15 @@ def pd_control(
     s = action_scale * joint_scale[j]
     kp = joint_kp[j]
     limit = joint_limit[j]
+    d = joint_dof[j]
     if joint_kind[j] == BALL:
         target = qexp(wp.vec3(s * actions[n, m], s * actions[n, m + 1], s * actions[n, m + 2]))
         q = wp.vec4(qpos[n, a], qpos[n, a + 1], qpos[n, a + 2], qpos[n, a + 3])
         e = qlog(qmul(qconj(q), target))
         for i in range(3):
-            ctrl[n, m + i] = wp.clamp(kp * e[i], -limit, limit)
+            damping = dof_damping[d + i] * qvel[n, d + i]
+            ctrl[n, m + i] = wp.clamp(kp * e[i] - damping, -limit, limit) + damping
     else:
         angle = joint_center[j] + s * actions[n, m]
-        ctrl[n, m] = wp.clamp(kp * (angle - qpos[n, a]), -limit, limit)
+        damping = dof_damping[d] * qvel[n, d]
+        ctrl[n, m] = wp.clamp(kp * (angle - qpos[n, a]) - damping, -limit, limit) + damping

@@ -87,6 +87,9 @@ pub struct PhysicsState {
     pub xquat: DeviceArray3<f32>,
     pub subtree_com: DeviceArray3<f32>,
     pub cvel: DeviceArray3<f32>,
+    /// Model arrays: each dof's passive damping (the PD's Kd) and each motor's control range.
+    pub dof_damping: DeviceArray<f32>,
+    pub ctrlrange: DeviceArray2<f32>,
 }
 
 impl PhysicsState {
@@ -101,9 +104,22 @@ impl PhysicsState {
             xquat: DeviceArray::from_simulation(sim, "d.xquat", [n, NBODY, 4])?,
             subtree_com: DeviceArray::from_simulation(sim, "d.subtree_com", [n, NBODY, 3])?,
             cvel: DeviceArray::from_simulation(sim, "d.cvel", [n, NBODY, 6])?,
+            dof_damping: DeviceArray::from_simulation(sim, "m.dof_damping", [NV])?,
+            ctrlrange: DeviceArray::from_simulation(sim, "m.actuator_ctrlrange", [NU, 2])?,
         })
     }
+
+    /// Lets `d.ctrl` through unclamped: `pd_control` clamps the PD torque itself and adds the
+    /// passive damping back on top (kernels_py/env/control.py), which MuJoCo's clamp at the
+    /// MJCF's ctrlrange (the torque limit) would cut off again.
+    fn widen_control_range(&self) -> Result<(), EnvError> {
+        let range: Vec<f32> = (0..NU).flat_map(|_| [-UNCLAMPED, UNCLAMPED]).collect();
+        self.ctrlrange.upload(&range)
+    }
 }
+
+/// `m.actuator_ctrlrange` at run time (N m): far above any torque limit plus damping.
+const UNCLAMPED: f32 = 1.0e6;
 
 // The humanoid's sizes (docs/env.md); `Rollout::new` checks them against the character.
 const NQ: usize = 43;
@@ -221,6 +237,7 @@ impl Rollout {
             .map_err(|e| RolloutError::Motion(e.to_string()))?;
         let table = DeviceReferenceTable::upload(gpu, &host_table)?;
         let physics = PhysicsState::view(&sim)?;
+        physics.widen_control_range()?;
 
         let layout = JointLayout::for_character(character)?;
         let joints = DeviceJointLayout::upload(gpu, &layout)?;
@@ -513,6 +530,8 @@ impl Rollout {
             self.num_envs * j.num_joints,
             &self.state.actions,
             &self.physics.qpos,
+            &self.physics.qvel,
+            &self.physics.dof_damping,
             &j.kind,
             &j.qpos,
             &j.dof,

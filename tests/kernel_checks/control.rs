@@ -1,14 +1,15 @@
 //! `pd_control` (kernels_py/env/control.py; docs/env.md, "Actions and PD control").
 //!
-//! Reference: ball joint j, `ctrl = clamp(kp * qlog(conj(q) * qexp(s a)), +-limit)`; hinge,
-//! `ctrl = clamp(kp * (center + s a - theta), +-limit)`, with `s = action_scale * scale_j`.
-//! Half the envs are near their targets (errors below the torque limit), half far (clamped).
+//! Reference: per motor, `ctrl = clamp(P - kd v, +-limit) + kd v` with the dof's damping kd and
+//! velocity v, and P for ball joint j `kp * qlog(conj(q) * qexp(s a))`, for a hinge
+//! `kp * (center + s a - theta)`, with `s = action_scale * scale_j`. Half the envs are near their
+//! targets and slow (below the torque limit), half far and fast (clamped).
 
 use instantmimic::env::PD_CONTROL;
 use instantmimic::env::layout::{BALL, JointLayout};
 
 use super::compare::{Report, wide};
-use super::physics::{NQ, NU};
+use super::physics::{NQ, NU, NV};
 use super::program::{Arg, Program, Scalar};
 use super::quat::{qexp, qlog, quat, quat_at, wxyz};
 use super::rng::Sampler;
@@ -23,6 +24,8 @@ pub fn reference(
     layout: &JointLayout,
     actions: &[f32],
     qpos: &[f32],
+    qvel: &[f32],
+    damping: &[f32],
     action_scale: f32,
 ) -> (Vec<f64>, [usize; 4]) {
     let n = actions.len() / NU;
@@ -36,13 +39,17 @@ pub fn reference(
             let addr = e * NQ + layout.qpos[j] as usize;
             let s = f64::from(action_scale) * f64::from(layout.scale[j]);
             let (kp, limit) = (f64::from(layout.kp[j]), f64::from(layout.limit[j]));
-            let clamped = |v: f64, counts: &mut [usize; 4], base: usize| {
+            let d = layout.dof[j] as usize;
+            // The motor adds back the passive damping it clamps against (control.py).
+            let pd = |p: f64, dof: usize, counts: &mut [usize; 4], base: usize| {
+                let damping = f64::from(damping[dof]) * f64::from(qvel[e * NV + dof]);
+                let v = p - damping;
                 if v.abs() > limit {
                     counts[base] += 1;
                 } else {
                     counts[base + 1] += 1;
                 }
-                v.clamp(-limit, limit)
+                v.clamp(-limit, limit) + damping
             };
             if layout.kind[j] == BALL {
                 let target = qexp([s * a(m), s * a(m + 1), s * a(m + 2)]);
@@ -54,26 +61,34 @@ pub fn reference(
                     e_vec.norm()
                 );
                 for i in 0..3 {
-                    ctrl[e * NU + m + i] = clamped(kp * e_vec[i], &mut counts, 0);
+                    ctrl[e * NU + m + i] = pd(kp * e_vec[i], d + i, &mut counts, 0);
                 }
             } else {
                 let target = f64::from(layout.center[j]) + s * a(m);
-                ctrl[e * NU + m] = clamped(kp * (target - f64::from(qpos[addr])), &mut counts, 2);
+                ctrl[e * NU + m] = pd(kp * (target - f64::from(qpos[addr])), d, &mut counts, 2);
             }
         }
     }
     (ctrl, counts)
 }
 
-/// Random actions and joint positions for `n` envs; even envs near their targets.
+/// Random actions, joint positions and velocities for `n` envs; even envs near their targets
+/// and slow (0.1 rad/s), odd ones far and fast (10 rad/s).
 fn inputs(
     layout: &JointLayout,
     n: usize,
     action_scale: f32,
     rng: &mut Sampler,
-) -> (Vec<f32>, Vec<f32>) {
+) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
     let mut actions = vec![0.0f32; n * NU];
     let mut qpos = vec![0.0f32; n * NQ];
+    let mut qvel = vec![0.0f32; n * NV];
+    for e in 0..n {
+        let speed = if e % 2 == 0 { 0.1 } else { 10.0 };
+        for v in &mut qvel[e * NV..(e + 1) * NV] {
+            *v = (speed * rng.normal()) as f32;
+        }
+    }
     // Ball joint actions up to this keep |s a| <= 1.22 rad (with joints up to 1.2 rad away, the
     // error stays below MAX_ERROR_ANGLE).
     let amax = 0.7 / f64::from(action_scale);
@@ -121,13 +136,23 @@ fn inputs(
             }
         }
     }
-    (actions, qpos)
+    (actions, qpos, qvel)
 }
 
 fn case(fx: &Fixture, n: usize, action_scale: f32, seed: u64) -> Check {
     let layout = fx.layout.clone();
     let mut rng = Sampler::new(seed);
-    let (actions, qpos) = inputs(&layout, n, action_scale, &mut rng);
+    let (actions, qpos, qvel) = inputs(&layout, n, action_scale, &mut rng);
+    // DeepMimic's Kd range (10 to 100), random per dof; the root's six dofs undamped.
+    let damping: Vec<f32> = (0..NV)
+        .map(|k| {
+            if k < 6 {
+                0.0
+            } else {
+                rng.uniform(10.0, 100.0) as f32
+            }
+        })
+        .collect();
     let j = layout.num_joints();
     let mut p = Program::new(format!(
         "pd_control: {n} envs x {j} joints, action_scale {action_scale}"
@@ -135,6 +160,8 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, seed: u64) -> Check {
     let args = vec![
         p.f32("actions", &[n, NU], actions),
         p.f32("qpos", &[n, NQ], qpos),
+        p.f32("qvel", &[n, NV], qvel),
+        p.f32("dof_damping", &[NV], damping),
         p.i32("joint_kind", &[j], layout.kind.clone()),
         p.i32("joint_qpos", &[j], layout.qpos.clone()),
         p.i32("joint_dof", &[j], layout.dof.clone()),
@@ -152,6 +179,8 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, seed: u64) -> Check {
             &layout,
             p.input_f32("actions"),
             p.input_f32("qpos"),
+            p.input_f32("qvel"),
+            p.input_f32("dof_damping"),
             action_scale,
         );
         let got = wide(out.f32("ctrl"));
