@@ -44,14 +44,19 @@ run_tests() {
 }
 
 run_bench() {
-  for variant in "--envs 4096 --substeps 4 --horizon 32" "--envs 4096 --substeps 4 --horizon 8"; do
-    tag=$(echo "$variant" | tr -d ' -')
+  # BENCH_VARIANTS: flag sets separated by ';'
+  IFS=';' read -ra variants <<< "${BENCH_VARIANTS:---envs 4096 --substeps 4 --horizon 32;--envs 4096 --substeps 4 --horizon 8}"
+  for variant in "${variants[@]}"; do
+    tag=$(echo "$variant" | tr -cd 'A-Za-z0-9_')
     if timeout "$(budget 180)" "$BIN/instantmimic" bench rollout --motion backflip $variant --json > "$OUT/bench_$tag.json" 2> "$OUT/bench_$tag.err"; then
       python3 - "$OUT/bench_$tag.json" "$variant" <<'PY' | tee -a "$summary"
 import json, sys
-r = json.load(open(sys.argv[1]))
+# MuJoCo Warp's kernels printf their overflow warnings to stdout, before the JSON.
+text = open(sys.argv[1]).read()
+r = json.loads(text[text.index("\n{") + 1 if not text.startswith("{") else 0:])
 print(f"bench {sys.argv[2]}: {r['frames_per_s']/1e6:.3f} M frames/s, physics only "
-      f"{r['physics_only_frames_per_s']/1e6:.3f}, ratio {r['ratio']:.3f}; "
+      f"{r['physics_only_frames_per_s']/1e6:.3f}, ratio {r['ratio']:.3f}, physics share "
+      f"{r['phase_ms']['physics'] / sum(r['phase_ms'].values()):.3f}; "
       + ", ".join(f"{k} {v:.2f} ms" for k, v in r["phase_ms"].items()))
 PY
     else
@@ -64,7 +69,7 @@ run_train() {
   for motion in ${MOTIONS_LIST:-walk run spinkick backflip cartwheel}; do
     for seed in ${SEEDS:-0 1 2}; do
       dir="$OUT/runs/${motion}_$seed"
-      if timeout "$(budget "${TRAIN_TIMEOUT:-150}")" "$BIN/instantmimic" train --motion "$motion" --config "configs/train/$motion.toml" --seed "$seed" \
+      if timeout "$(budget "${TRAIN_TIMEOUT:-150}")" "$BIN/instantmimic" train --motion "$motion" --config "${CONFIG_DIR:-configs/train}/$motion${CONFIG_SUFFIX:-}.toml" --seed "$seed" \
           --out "$dir" ${TRAIN_ARGS:-} > "$OUT/train_${motion}_$seed.log" 2>&1; then
         note "train $motion seed $seed: $(tail -1 "$OUT/train_${motion}_$seed.log")"
       else
