@@ -731,3 +731,37 @@ fn baseline_update_replay_time() {
         "{stats:?}"
     );
 }
+
+/// `ppo.values_in_update`: the rollout leaves the values to the update, whose first pass writes
+/// the critic's value of every stored observation row, the same values the rollout's per-step
+/// critic computes.
+#[test]
+fn values_in_update_writes_the_values_the_rollout_would_have() {
+    let (gpu, kernels, policy, _, rollout, config) = small_setup(2, 2, 8);
+    let from_rollout = download2(&rollout.values);
+    let [t, n] = rollout.values.shape();
+    rollout
+        .values
+        .upload(&vec![f32::NAN; t * n])
+        .expect("clear the values");
+    let mut on = config.clone();
+    on.ppo.values_in_update = true;
+    let update = PpoUpdate::new(&gpu, kernels, &policy, &on).expect("update");
+    let graph = gpu
+        .stream()
+        .capture(|s| update.record(s, &rollout.batch()))
+        .expect("capture");
+    assert_no_host_work(&graph.node_counts().expect("node counts"));
+    graph.launch(gpu.stream()).expect("launch");
+    gpu.synchronize().expect("update");
+    check(
+        "values written by the update",
+        &download2(&rollout.values),
+        &from_rollout,
+    );
+    let stats = update.read_statistics().expect("statistics");
+    assert!(
+        stats.grad_norm.is_finite() && stats.approx_kl.is_finite(),
+        "{stats:?}"
+    );
+}

@@ -40,6 +40,41 @@ pub fn time_graph(
     Ok(frames_per_launch as f64 * f64::from(launches) / seconds)
 }
 
+/// Frames per second of the physics-only `floor`, each of its `launches` timed replays starting
+/// from the states one untimed replay of the rollout `graph` just left (after `warmup` pairs).
+/// The plain floor ([`time_graph`] after a reset) runs characters that soon lie still under
+/// stale controls, which the solver finishes faster than the policy-driven, resetting characters
+/// of a rollout; this one keeps the floor's states where the rollout's are.
+pub fn time_floor_from_rollout_states(
+    gpu: &Gpu,
+    graph: &Graph,
+    floor: &Graph,
+    frames_per_launch: u64,
+    warmup: u32,
+    launches: u32,
+) -> Result<f64, SimulationError> {
+    let stream = gpu.stream();
+    for _ in 0..warmup {
+        graph.launch(stream)?;
+        floor.launch(stream)?;
+    }
+    let mut pairs = Vec::with_capacity(launches as usize);
+    for _ in 0..launches {
+        graph.launch(stream)?;
+        let (start, end) = (gpu.new_event()?, gpu.new_event()?);
+        start.record(stream)?;
+        floor.launch(stream)?;
+        end.record(stream)?;
+        pairs.push((start, end));
+    }
+    let mut seconds = 0.0;
+    for (start, end) in &pairs {
+        end.synchronize()?;
+        seconds += f64::from(start.elapsed_ms(end)?) / 1000.0;
+    }
+    Ok(frames_per_launch as f64 * f64::from(launches) / seconds)
+}
+
 /// The physics-only floor: `horizon` control steps of `substeps` step-plan replays each, in one
 /// graph. Returns the graph (the caller times it next to the rollout's).
 pub fn physics_only_graph(
@@ -74,9 +109,14 @@ pub struct RolloutBench {
     pub physics_only_frames_per_s: f64,
     /// `frames_per_s / physics_only_frames_per_s`.
     pub ratio: f64,
+    /// Median over rounds of the floor replayed from the states the rollout reaches
+    /// ([`time_floor_from_rollout_states`]), and the rollout's ratio to it.
+    pub physics_only_from_rollout_states_frames_per_s: f64,
+    pub ratio_to_rollout_states: f64,
     /// Every round's figures, in order.
     pub rounds_frames_per_s: Vec<f64>,
     pub rounds_physics_only_frames_per_s: Vec<f64>,
+    pub rounds_physics_only_from_rollout_states_frames_per_s: Vec<f64>,
     /// Milliseconds per rollout in each phase, from the event-timed graph (mean over its
     /// launches), and that graph's own total.
     pub phase_ms: BTreeMap<Phase, f64>,
@@ -88,9 +128,10 @@ pub struct RolloutBench {
 }
 
 /// Builds the rollout of `config` for `motion`, then alternates `rounds` times: `launches`
-/// replays of the rollout graph and `launches` of the physics-only floor, each after putting every
-/// env at a reference state and `warmup` untimed launches. Then `launches` replays of the
-/// event-timed graph give the per-phase breakdown.
+/// replays of the rollout graph, `launches` of the physics-only floor, and `launches` of the floor
+/// each right after an untimed rollout, each after putting every env at a reference state and
+/// `warmup` untimed launches. Then `launches` replays of the event-timed graph give the per-phase
+/// breakdown.
 pub fn bench_rollout(
     gpu: &Gpu,
     store: &PlanStore,
@@ -118,12 +159,17 @@ pub fn bench_rollout(
     let frames = (rollout.num_envs() * rollout.horizon()) as u64;
     let mut full = Vec::new();
     let mut physics = Vec::new();
+    let mut physics_same_state = Vec::new();
     for round in 0..rounds.max(1) {
         let _range = NvtxRange::push(&format!("round {round}"));
         rollout.reset_all()?;
         full.push(time_graph(gpu, &graph, frames, warmup, launches)?);
         rollout.reset_all()?;
         physics.push(time_graph(gpu, &floor, frames, warmup, launches)?);
+        rollout.reset_all()?;
+        physics_same_state.push(time_floor_from_rollout_states(
+            gpu, &graph, &floor, frames, warmup, launches,
+        )?);
     }
 
     rollout.reset_all()?;
@@ -145,6 +191,7 @@ pub fn bench_rollout(
 
     let frames_per_s = median(&full);
     let physics_only_frames_per_s = median(&physics);
+    let same_state = median(&physics_same_state);
     Ok(RolloutBench {
         gpu: gpu.info().name.clone(),
         motion: motion.clip().name().to_owned(),
@@ -157,8 +204,11 @@ pub fn bench_rollout(
         frames_per_s,
         physics_only_frames_per_s,
         ratio: frames_per_s / physics_only_frames_per_s,
+        physics_only_from_rollout_states_frames_per_s: same_state,
+        ratio_to_rollout_states: frames_per_s / same_state,
         rounds_frames_per_s: full,
         rounds_physics_only_frames_per_s: physics,
+        rounds_physics_only_from_rollout_states_frames_per_s: physics_same_state,
         phase_ms,
         timed_rollout_ms,
         graph_nodes,

@@ -246,6 +246,13 @@ fn rollout_report(r: &RolloutBench) -> String {
     let _ = writeln!(out, "ratio:         {:.3}", r.ratio);
     let _ = writeln!(
         out,
+        "physics only from the rollout's states:  {:.3} M frames/s  (rounds: {}), ratio {:.3}",
+        r.physics_only_from_rollout_states_frames_per_s / 1e6,
+        rounds(&r.rounds_physics_only_from_rollout_states_frames_per_s),
+        r.ratio_to_rollout_states
+    );
+    let _ = writeln!(
+        out,
         "phases (event-timed graph, {:.3} ms per rollout, {:.1} us per control step):",
         r.timed_rollout_ms,
         r.timed_rollout_ms * 1e3 / r.horizon as f64
