@@ -3,6 +3,7 @@
 
 use std::ffi::{CString, c_void};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU32, Ordering};
 
 use cudarc::driver::{CudaContext, sys};
 
@@ -156,6 +157,7 @@ impl Module {
             cu_function,
             entry: entry.to_owned(),
             params: params.into(),
+            dynamic_smem_allowed: Arc::new(AtomicU32::new(0)),
         })
     }
 
@@ -205,6 +207,8 @@ pub struct Function {
     pub(crate) cu_function: sys::CUfunction,
     entry: String,
     params: Arc<[(usize, usize)]>,
+    /// The dynamic shared memory limit raised so far (0: the driver's default), shared by clones.
+    dynamic_smem_allowed: Arc<AtomicU32>,
 }
 
 // SAFETY: a CUfunction is a handle into a loaded module (kept alive by `module`), usable from
@@ -270,6 +274,20 @@ impl Function {
                 self.entry
             )
         })
+    }
+
+    /// Makes sure launches with `bytes` of dynamic shared memory are allowed: raises the limit
+    /// once per new maximum. Every kernel that uses dynamic shared memory needs this, not only
+    /// those above 48 KiB: the driver refuses a launch whose static plus dynamic shared memory
+    /// passes 48 KiB, and Warp's tile kernels add static storage beside the dynamic (512 B next
+    /// to 48 KiB in mlp_backward.py).
+    pub fn allow_dynamic_shared_memory(&self, bytes: u32) -> Result<(), CudaError> {
+        if bytes <= self.dynamic_smem_allowed.load(Ordering::Acquire) {
+            return Ok(());
+        }
+        self.set_max_dynamic_shared_memory(bytes)?;
+        self.dynamic_smem_allowed.fetch_max(bytes, Ordering::AcqRel);
+        Ok(())
     }
 
     /// A kernel attribute (`cuFuncGetAttribute`), e.g. registers or max threads per block.

@@ -30,10 +30,8 @@ fn load_module(gpu: &Gpu, ptx: &'static str) -> Result<Module, EnvError> {
 }
 
 /// The kernel `abi` describes, from its loaded module, after checking that the driver sees the
-/// parameters where the launcher packs them. Every kernel with dynamic shared memory gets its
-/// limit raised to what it asks: the driver refuses a launch whose static plus dynamic shared
-/// memory passes 48 KiB otherwise, and Warp's tile kernels add static storage (mlp_backward.py:
-/// 512 B beside 48 KiB dynamic).
+/// parameters where the launcher packs them, with its dynamic shared memory allowed
+/// ([`Function::allow_dynamic_shared_memory`]).
 fn bind_kernel(module: &Module, abi: &'static KernelAbi) -> Result<Function, EnvError> {
     let function = module.function(abi.entry)?;
     let expected = abi.param_layout();
@@ -45,9 +43,7 @@ fn bind_kernel(module: &Module, abi: &'static KernelAbi) -> Result<Function, Env
             driver: function.param_layout().to_vec(),
         });
     }
-    if abi.smem_bytes > 0 {
-        function.set_max_dynamic_shared_memory(abi.smem_bytes)?;
-    }
+    function.allow_dynamic_shared_memory(abi.smem_bytes)?;
     Ok(function)
 }
 

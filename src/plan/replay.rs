@@ -100,8 +100,6 @@ pub struct ReplayContext<'a> {
     /// Pinned host buffers the H2D copies read from; preparing appends to it.
     pub pinned: &'a mut Vec<PinnedHostMemory>,
     pub alloc_pinned: &'a dyn Fn(usize) -> Result<PinnedHostMemory, CudaError>,
-    /// Functions whose dynamic shared memory limit was already raised.
-    pub raised_smem: HashMap<(String, String), u32>,
     /// Regions no operation writes (bound only to Model arrays): no ordering through them.
     pub read_only: &'a HashSet<u32>,
 }
@@ -292,19 +290,9 @@ fn prepare_launch(
         Ok(base + offset)
     })?;
     let args = fit_to_layout(packed.bytes, &packed.offsets, &function, at)?;
-    // Raised for every kernel with dynamic shared memory, to the most any of its launches asks:
-    // the driver refuses static + dynamic above 48 KiB without it, and Warp's tile kernels add
-    // static storage beside the dynamic.
-    let raised = ctx
-        .raised_smem
-        .entry((module.binary_filename.clone(), entry.clone()))
-        .or_insert(0);
-    if dims.shared_mem > *raised {
-        function
-            .set_max_dynamic_shared_memory(dims.shared_mem)
-            .map_err(|e| PlanError::malformed(at, e.to_string()))?;
-        *raised = dims.shared_mem;
-    }
+    function
+        .allow_dynamic_shared_memory(dims.shared_mem)
+        .map_err(|e| PlanError::malformed(at, e.to_string()))?;
     Ok(Some(PreparedOp::Launch {
         function,
         grid: dims.grid,

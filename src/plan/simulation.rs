@@ -404,7 +404,6 @@ impl Simulation {
                 function: &mut loader,
                 pinned: &mut pinned,
                 alloc_pinned: &alloc_pinned,
-                raised_smem: HashMap::new(),
                 read_only: &read_only,
             };
             prepare_ops(&mut ctx, &plan.ops, "")?
