@@ -177,8 +177,12 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             &a.array(8),
             &a.array(9),
             &a.array(10),
-            a.f32(11),
+            &a.array(11),
             &a.array(12),
+            a.f32(13),
+            a.i32(14),
+            a.f32(15),
+            &a.array(16),
         ),
         "reward_termination" => kernels.reward_termination(
             s,

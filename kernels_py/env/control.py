@@ -5,6 +5,11 @@ targets and the targets and the current joint positions into motor torques in `d
 are recomputed each substep instead of stored: a few transcendental functions per joint cost less
 than a round trip of a target buffer through memory, and the kernel stays one launch.
 
+Targets are absolute (relative to the zero pose, DeepMimic's) or residual: an offset from the
+reference pose at the end of the control step (`ref_time + target_dt`). A fresh policy's mean
+action is 0, so a residual policy starts by commanding the reference trajectory instead of the
+zero pose; the choice is a run-time argument (config `env.action_mode`).
+
 One thread per (env, joint). The per-joint layout comes from the character
 (`src/env/layout.rs: JointLayout`): kind (0 ball, 1 hinge), qpos address, dof address (motor
 `dof - 6` drives `qvel[dof]`, motors in dof order), Kp, torque limit, action scale, hinge center.
@@ -22,6 +27,7 @@ with the implicit `-Kd v'` the net torque is DeepMimic's clamped PD, `clamp(P - 
 
 import warp as wp
 
+from env.reference import reference_locate, reference_quat_wxyz, reference_value
 from env.rotation import qconj, qexp, qlog, qmul
 
 wp.set_module_options({"enable_backward": False})
@@ -44,14 +50,19 @@ def pd_control(
     joint_limit: wp.array(dtype=wp.float32),
     joint_scale: wp.array(dtype=wp.float32),
     joint_center: wp.array(dtype=wp.float32),
+    table: wp.array(dtype=wp.float32),
+    ref_time: wp.array(dtype=wp.float32),
+    target_dt: wp.float32,
+    residual: wp.int32,
     action_scale: wp.float32,
     ctrl: wp.array2d(dtype=wp.float32),
 ):
     """ctrl[n, m] for every (env n, joint j): `clamp(P - kd v, +-joint_limit[j]) + kd v` with
     `kd = dof_damping[dof]`, `v = qvel[n, dof]` per motor and P: ball joints
     `kp * qlog(conj(q) qexp(s a))` (a rotation vector in the joint's frame), hinges
-    `kp * (center + s a - theta)`, with `s = action_scale * joint_scale[j]`. Launch N * J
-    threads."""
+    `kp * (center + s a - theta)`, with `s = action_scale * joint_scale[j]`. With `residual`
+    not 0 the zero pose and the centers are replaced by the reference pose at
+    `ref_time[n] + target_dt`: `q_ref qexp(s a)` and `theta_ref + s a`. Launch N * J threads."""
     tid = wp.tid()
     nj = joint_kind.shape[0]
     n = tid // nj
@@ -64,12 +75,19 @@ def pd_control(
     d = joint_dof[j]
     if joint_kind[j] == BALL:
         target = qexp(wp.vec3(s * actions[n, m], s * actions[n, m + 1], s * actions[n, m + 2]))
+        if residual != 0:
+            at = reference_locate(table, ref_time[n] + target_dt)
+            target = qmul(reference_quat_wxyz(table, at, a), target)
         q = wp.vec4(qpos[n, a], qpos[n, a + 1], qpos[n, a + 2], qpos[n, a + 3])
         e = qlog(qmul(qconj(q), target))
         for i in range(3):
             damping = dof_damping[d + i] * qvel[n, d + i]
             ctrl[n, m + i] = wp.clamp(kp * e[i] - damping, -limit, limit) + damping
     else:
-        angle = joint_center[j] + s * actions[n, m]
+        base = joint_center[j]
+        if residual != 0:
+            at = reference_locate(table, ref_time[n] + target_dt)
+            base = reference_value(table, at, a)
+        angle = base + s * actions[n, m]
         damping = dof_damping[d] * qvel[n, d]
         ctrl[n, m] = wp.clamp(kp * (angle - qpos[n, a]) - damping, -limit, limit) + damping

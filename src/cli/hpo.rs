@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::Args;
 
-use crate::hpo::{HpoRequest, run};
+use crate::hpo::{HpoRequest, SearchOverrides, run};
 
 #[derive(Args, Debug)]
 pub struct HpoArgs {
@@ -22,6 +22,15 @@ pub struct HpoArgs {
     /// Run directory of a new search (default: runs/hpo/<name>-<UTC time>).
     #[arg(long, conflicts_with = "resume")]
     out: Option<PathBuf>,
+    /// Seeds of every candidate, comma-separated, overriding `[search] seeds` (a new search).
+    #[arg(long, value_delimiter = ',', conflicts_with = "resume")]
+    seeds: Option<Vec<u64>>,
+    /// Candidates per cycle at most, overriding `[search] max_candidates` (a new search).
+    #[arg(long, conflicts_with = "resume")]
+    max_candidates: Option<usize>,
+    /// Active seconds allowed to one trial, overriding `[objective] budget_s` (a new search).
+    #[arg(long, conflicts_with = "resume")]
+    budget: Option<f64>,
 }
 
 /// Runs `hpo`: progress on stderr, the summary table on stdout.
@@ -31,6 +40,11 @@ pub fn run_hpo(args: HpoArgs) -> Result<()> {
         resume: args.resume,
         cycles: args.cycles,
         out: args.out,
+        overrides: SearchOverrides {
+            seeds: args.seeds,
+            max_candidates: args.max_candidates,
+            budget_s: args.budget,
+        },
     };
     let mut progress = std::io::stderr();
     let summary = run(&request, &mut progress).context("hyperparameter search")?;

@@ -16,7 +16,7 @@ use crate::motion::LoopMode;
 use crate::motion::{ReferenceMotion, ReferenceTable};
 use crate::plan::{PlanStore, Simulation, SimulationError};
 use crate::ppo::{ActStorage, GaussianPolicy, PolicyError};
-use crate::train::{EvalStart, TrainConfig, evaluation_steps};
+use crate::train::{ActionMode, EvalStart, TrainConfig, evaluation_steps};
 
 use super::evaluation::EpisodeScores;
 use super::layout::{
@@ -152,6 +152,7 @@ pub struct Rollout {
     pub state: EpisodeState,
     pub storage: RolloutStorage,
     joints: DeviceJointLayout,
+    action_mode: ActionMode,
     action_scale: f32,
     tracking: TrackingParams,
     reset: ResetParams,
@@ -294,6 +295,7 @@ impl Rollout {
             state,
             storage,
             joints,
+            action_mode: config.env.action_mode,
             action_scale: config.env.action_scale,
             tracking,
             reset,
@@ -539,6 +541,11 @@ impl Rollout {
             &j.limit,
             &j.scale,
             &j.center,
+            self.table.table(),
+            &self.state.ref_time,
+            // The targets are the pose at the end of this control step (the reward's time).
+            self.tracking.dt,
+            i32::from(self.action_mode == ActionMode::Residual),
             self.action_scale,
             &self.physics.ctrl,
         )?;

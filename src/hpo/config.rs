@@ -38,6 +38,15 @@ pub struct HpoConfig {
     pub prompts: PromptTemplates,
 }
 
+/// Command-line values that replace the configuration's for a new search (the run directory
+/// keeps the result, so a resumed search uses them too).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SearchOverrides {
+    pub seeds: Option<Vec<u64>>,
+    pub max_candidates: Option<usize>,
+    pub budget_s: Option<f64>,
+}
+
 /// `[task]`: what the agent is told about the task.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -154,6 +163,24 @@ impl HpoConfig {
         };
         config.check(origin)?;
         Ok(config)
+    }
+
+    /// The configuration with the command line's overrides of `[search] seeds`,
+    /// `[search] max_candidates` and `[objective] budget_s`, checked again.
+    pub fn with_overrides(mut self, overrides: &SearchOverrides) -> Result<Self, HpoError> {
+        if let Some(seeds) = &overrides.seeds {
+            self.search.seeds = seeds.clone();
+        }
+        if let Some(max) = overrides.max_candidates {
+            self.search.max_candidates = max;
+            // A smaller maximum lowers the minimum with it rather than failing the check.
+            self.search.min_candidates = self.search.min_candidates.min(max.max(1));
+        }
+        if let Some(budget) = overrides.budget_s {
+            self.objective.budget_s = budget;
+        }
+        self.check("the command line (--seeds, --max-candidates, --budget)")?;
+        Ok(self)
     }
 
     /// The values of the searchable parameters in the base configuration: cycle_000.

@@ -32,7 +32,7 @@ pub mod trial;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-pub use config::HpoConfig;
+pub use config::{HpoConfig, SearchOverrides};
 pub use error::HpoError;
 pub use experiment::RunnerPool;
 pub use record::Kept;
@@ -51,6 +51,8 @@ pub struct HpoRequest {
     pub cycles: Option<u32>,
     /// Run directory of a new search (default: `runs/hpo/<name>-<UTC time>`).
     pub out: Option<PathBuf>,
+    /// Replacements of the configuration's seeds, candidate limit and budget (a new search).
+    pub overrides: SearchOverrides,
 }
 
 /// What a finished search reports.
@@ -68,8 +70,17 @@ pub struct HpoSummary {
 pub fn run(request: &HpoRequest, progress: &mut dyn Write) -> Result<HpoSummary, HpoError> {
     let given = request.config.as_deref().map(HpoConfig::load).transpose()?;
     let mut search = match (&request.resume, given) {
+        (Some(_), _) if request.overrides != SearchOverrides::default() => {
+            return Err(HpoError::Config {
+                path: "(command line)".to_string(),
+                problem: "--seeds, --max-candidates and --budget apply to a new search; a \
+                          resumed search keeps the values it started with"
+                    .to_string(),
+            });
+        }
         (Some(dir), given) => Search::resume(dir, given)?,
         (None, Some(config)) => {
+            let config = config.with_overrides(&request.overrides)?;
             // Build what can fail before creating the run directory.
             check_runnable(&config)?;
             let dir = request

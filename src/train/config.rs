@@ -57,6 +57,8 @@ pub struct EnvConfig {
     pub num_envs: u32,
     /// Physics steps per control step (control at 1/(substeps * physics dt)).
     pub substeps: u32,
+    /// What the actions are offsets from: the reference pose (default) or the zero pose.
+    pub action_mode: ActionMode,
     /// Global scale of the normalized actions (paper: 1.0, tuned backflip 0.875).
     pub action_scale: f32,
     /// Metres the root may fall below the reference root before the episode fails.
@@ -80,6 +82,7 @@ impl Default for EnvConfig {
         EnvConfig {
             num_envs: 4096,
             substeps: 4,
+            action_mode: ActionMode::Residual,
             action_scale: 1.0,
             termination_height: 0.8,
             tracking_distance: 1.0,
@@ -91,6 +94,18 @@ impl Default for EnvConfig {
             phase_decay: 0.99,
         }
     }
+}
+
+/// What a PD target is relative to (docs/env.md, "Actions and PD control").
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ActionMode {
+    /// Offsets from the zero pose (ball joints) and the middle of the range (hinges), as
+    /// DeepMimic's targets: a fresh policy commands the zero pose.
+    Absolute,
+    /// Offsets from the reference pose at the end of the control step: a fresh policy commands
+    /// the reference trajectory.
+    Residual,
 }
 
 /// `[reward]`: weights of the multiplicative DeepMimic reward.
@@ -695,6 +710,7 @@ mod tests {
     fn committed_configs_are_the_tuned_baseline_with_their_run_settings() {
         // The baseline with the paper's tuned backflip values (the committed files' header).
         let mut tuned = TrainConfig::with_motion("x");
+        tuned.env.action_mode = ActionMode::Residual;
         tuned.env.action_scale = 0.875;
         tuned.env.termination_height = 0.6;
         tuned.env.grace_steps = 3;
@@ -735,8 +751,9 @@ mod tests {
                 "{name}"
             );
             let budget = match name {
-                "walk" | "run" => 60.0,
-                _ => 180.0,
+                "walk" | "run" => 30.0,
+                "backflip" => 120.0,
+                _ => 60.0,
             };
             assert_eq!(config.run.time_budget_s, budget, "{name}");
         }

@@ -6,7 +6,8 @@
 #   (default: tests bench train; hpo runs HPO_CYCLES (10) offline cycles on backflip)
 # Environment: BIN (staged binaries), OUT (logs; default /tmp/instantmimic-out),
 # SEEDS (train: default "0 1 2"), MOTIONS_LIST (train: default all five clips),
-# TRAIN_ARGS (extra flags for every `instantmimic train`).
+# TRAIN_ARGS (extra flags for every `instantmimic train`), GPU_TESTS (test binaries to run;
+# default every gpu_*).
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 BIN=${BIN:-.device-bin}
@@ -36,6 +37,8 @@ nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.sm,clocks.max.sm 
 run_tests() {
   for t in "$BIN"/gpu_*; do
     name=$(basename "$t")
+    # GPU_TESTS: the test binaries to run (default: every gpu_* binary)
+    case " ${GPU_TESTS:-$name} " in *" $name "*) ;; *) continue ;; esac
     start=$(date +%s)
     if timeout "$(budget "${TEST_TIMEOUT:-180}")" "$t" --nocapture --test-threads 1 > "$OUT/test_$name.log" 2>&1; then status=PASS; else status=FAIL; fi
     note "test  $name  $status  $(( $(date +%s) - start )) s  $(grep -o 'test result: .*; [0-9]* ignored' "$OUT/test_$name.log" | tail -1)"
@@ -81,12 +84,21 @@ run_train() {
 }
 
 run_hpo() {
-  # Issue 6: an offline (no LLM) search on backflip from the paper's baseline.
-  if timeout "$(budget 600)" "$BIN/instantmimic" hpo --config configs/hpo/backflip.toml --cycles "${HPO_CYCLES:-10}" \
-      --out "$OUT/hpo" > "$OUT/hpo.log" 2>&1; then
+  # Issue 6: an offline (no LLM) search on backflip from the paper's baseline. HPO_DIR: the
+  # search directory of an earlier call (carried back) to resume; HPO_ARGS: flags of a new
+  # search (e.g. --seeds 0 --max-candidates 2); HPO_CYCLES: run until this cycle (10).
+  local dir="$OUT/hpo" args
+  if [ -n "${HPO_DIR:-}" ] && [ -d "$HPO_DIR" ]; then
+    cp -r "$HPO_DIR" "$dir"
+    args=(--resume "$dir")
+  else
+    args=(--config "${HPO_CONFIG:-configs/hpo/backflip.toml}" --out "$dir" ${HPO_ARGS:-})
+  fi
+  if timeout "$(budget 600)" "$BIN/instantmimic" hpo "${args[@]}" --cycles "${HPO_CYCLES:-10}" \
+      > "$OUT/hpo.log" 2>&1; then
     note "hpo: $(tail -3 "$OUT/hpo.log" | tr '\n' ' ')"
   else
-    note "hpo FAILED: $(tail -3 "$OUT/hpo.log" | tr '\n' ' ')"
+    note "hpo stopped (resume with HPO_DIR): $(grep -v 'overflow\|limit reached' "$OUT/hpo.log" | tail -3 | tr '\n' ' ')"
   fi
 }
 

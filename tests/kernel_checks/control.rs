@@ -2,18 +2,40 @@
 //!
 //! Reference: per motor, `ctrl = clamp(P - kd v, +-limit) + kd v` with the dof's damping kd and
 //! velocity v, and P for ball joint j `kp * qlog(conj(q) * qexp(s a))`, for a hinge
-//! `kp * (center + s a - theta)`, with `s = action_scale * scale_j`. Half the envs are near their
-//! targets and slow (below the torque limit), half far and fast (clamped).
+//! `kp * (center + s a - theta)`, with `s = action_scale * scale_j`; residual targets replace the
+//! zero pose and the centers with the reference pose at `ref_time + dt` (`ReferenceTable::lookup`,
+//! f64): `q_ref * qexp(s a)`, `theta_ref + s a`. Half the envs are near their targets and slow
+//! (below the torque limit), half far and fast (clamped).
 
 use instantmimic::env::PD_CONTROL;
 use instantmimic::env::layout::{BALL, JointLayout};
+use instantmimic::motion::table::HUMANOID_LAYOUT;
 
 use super::compare::{Report, wide};
 use super::physics::{NQ, NU, NV};
 use super::program::{Arg, Program, Scalar};
-use super::quat::{qexp, qlog, quat, quat_at, wxyz};
+use super::quat::{Quat, qexp, qlog, quat, quat_at, quat_at64, wxyz};
 use super::rng::Sampler;
-use super::{Check, Fixture, nan_f32};
+use super::{Check, Clip, Fixture, nan_f32};
+
+/// The control step of the residual cases (s): targets are the reference at `ref_time + DT`.
+const DT: f32 = 1.0 / 30.0;
+
+/// What env `e`'s targets are offsets from: the zero pose and the hinge centers (`None`), or the
+/// reference rows at each env's `ref_time + DT`.
+fn base_ball(rows: Option<&[Vec<f64>]>, e: usize, qpos_addr: usize) -> Quat {
+    match rows {
+        Some(rows) => quat_at64(&rows[e], HUMANOID_LAYOUT.qpos + qpos_addr),
+        None => Quat::identity(),
+    }
+}
+
+fn base_hinge(rows: Option<&[Vec<f64>]>, layout: &JointLayout, e: usize, j: usize) -> f64 {
+    match rows {
+        Some(rows) => rows[e][HUMANOID_LAYOUT.qpos + layout.qpos[j] as usize],
+        None => f64::from(layout.center[j]),
+    }
+}
 
 /// The relative rotation between a joint and its target stays below this (rad), far from pi
 /// where the shorter rotation flips sign (f32 and f64 could pick different sides).
@@ -22,6 +44,7 @@ const MAX_ERROR_ANGLE: f64 = 3.0;
 /// The f64 torques of every env, `[n, 28]`, and how many ball / hinge values are clamped.
 pub fn reference(
     layout: &JointLayout,
+    rows: Option<&[Vec<f64>]>,
     actions: &[f32],
     qpos: &[f32],
     qvel: &[f32],
@@ -52,7 +75,8 @@ pub fn reference(
                 v.clamp(-limit, limit) + damping
             };
             if layout.kind[j] == BALL {
-                let target = qexp([s * a(m), s * a(m + 1), s * a(m + 2)]);
+                let target = base_ball(rows, e, layout.qpos[j] as usize)
+                    * qexp([s * a(m), s * a(m + 1), s * a(m + 2)]);
                 let q = quat_at(qpos, addr);
                 let e_vec = qlog(&(q.inverse() * target));
                 assert!(
@@ -64,7 +88,7 @@ pub fn reference(
                     ctrl[e * NU + m + i] = pd(kp * e_vec[i], d + i, &mut counts, 0);
                 }
             } else {
-                let target = f64::from(layout.center[j]) + s * a(m);
+                let target = base_hinge(rows, layout, e, j) + s * a(m);
                 ctrl[e * NU + m] = pd(kp * (target - f64::from(qpos[addr])), d, &mut counts, 2);
             }
         }
@@ -76,6 +100,7 @@ pub fn reference(
 /// and slow (0.1 rad/s), odd ones far and fast (10 rad/s).
 fn inputs(
     layout: &JointLayout,
+    rows: Option<&[Vec<f64>]>,
     n: usize,
     action_scale: f32,
     rng: &mut Sampler,
@@ -110,14 +135,15 @@ fn inputs(
                 for i in 0..3 {
                     actions[e * NU + m + i] = a[i] as f32;
                 }
-                let target = qexp(a.map(|x| s * (x as f32) as f64));
+                let base = base_ball(rows, e, layout.qpos[j] as usize);
+                let target = base * qexp(a.map(|x| s * (x as f32) as f64));
                 let q = if near {
                     target * qexp(rng.normal3(0.03))
                 } else {
                     let r = rng.normal3(1.0);
                     let len = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
                     let angle = rng.uniform(0.0, 1.2);
-                    qexp(r.map(|x| x * angle / len))
+                    base * qexp(r.map(|x| x * angle / len))
                 };
                 for (c, v) in wxyz(&q).iter().enumerate() {
                     qpos[addr + c] = *v as f32;
@@ -125,7 +151,7 @@ fn inputs(
             } else {
                 let a = rng.uniform(-1.2, 1.2);
                 actions[e * NU + m] = a as f32;
-                let center = f64::from(layout.center[j]);
+                let center = base_hinge(rows, layout, e, j);
                 let half = f64::from(layout.scale[j]);
                 let theta = if near {
                     center + s * a + 0.05 * rng.normal()
@@ -139,10 +165,25 @@ fn inputs(
     (actions, qpos, qvel)
 }
 
-fn case(fx: &Fixture, n: usize, action_scale: f32, seed: u64) -> Check {
+/// `residual`: the clip whose reference pose the targets are offsets from.
+fn case(fx: &Fixture, n: usize, action_scale: f32, residual: Option<&Clip>, seed: u64) -> Check {
     let layout = fx.layout.clone();
     let mut rng = Sampler::new(seed);
-    let (actions, qpos, qvel) = inputs(&layout, n, action_scale, &mut rng);
+    // Times over several cycles of a looping clip (and past a clamped clip's end, where the
+    // lookup holds the last row).
+    let ref_time: Vec<f32> = (0..n)
+        .map(|_| match residual {
+            Some(clip) => rng.uniform(0.0, 3.0 * clip.table.duration()) as f32,
+            None => 0.0,
+        })
+        .collect();
+    let rows: Option<Vec<Vec<f64>>> = residual.map(|clip| {
+        ref_time
+            .iter()
+            .map(|&t| clip.table.lookup(f64::from(t + DT)))
+            .collect()
+    });
+    let (actions, qpos, qvel) = inputs(&layout, rows.as_deref(), n, action_scale, &mut rng);
     // DeepMimic's Kd range (10 to 100), random per dof; the root's six dofs undamped.
     let damping: Vec<f32> = (0..NV)
         .map(|k| {
@@ -154,9 +195,14 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, seed: u64) -> Check {
         })
         .collect();
     let j = layout.num_joints();
+    let mode = match residual {
+        Some(clip) => format!("residual on {}", clip.name),
+        None => "absolute".to_string(),
+    };
     let mut p = Program::new(format!(
-        "pd_control: {n} envs x {j} joints, action_scale {action_scale}"
+        "pd_control: {n} envs x {j} joints, action_scale {action_scale}, {mode}"
     ));
+    let table = residual.map_or_else(|| fx.main.data(), Clip::data);
     let args = vec![
         p.f32("actions", &[n, NU], actions),
         p.f32("qpos", &[n, NQ], qpos),
@@ -169,6 +215,10 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, seed: u64) -> Check {
         p.f32("joint_limit", &[j], layout.limit.clone()),
         p.f32("joint_scale", &[j], layout.scale.clone()),
         p.f32("joint_center", &[j], layout.center.clone()),
+        p.f32("table", &[table.len()], table),
+        p.f32("ref_time", &[n], ref_time),
+        Arg::Scalar(Scalar::F32(DT)),
+        Arg::Scalar(Scalar::I32(i32::from(residual.is_some()))),
         Arg::Scalar(Scalar::F32(action_scale)),
         p.f32("ctrl", &[n, NU], nan_f32(n * NU)),
     ];
@@ -177,6 +227,7 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, seed: u64) -> Check {
         let mut r = Report::new(&p.name);
         let (expected, counts) = reference(
             &layout,
+            rows.as_deref(),
             p.input_f32("actions"),
             p.input_f32("qpos"),
             p.input_f32("qvel"),
@@ -219,5 +270,10 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, seed: u64) -> Check {
 }
 
 pub fn checks(fx: &Fixture) -> Vec<Check> {
-    vec![case(fx, 64, 1.0, 11), case(fx, 37, 0.5, 12)]
+    vec![
+        case(fx, 64, 1.0, None, 11),
+        case(fx, 37, 0.5, None, 12),
+        case(fx, 64, 0.875, Some(&fx.main), 13),
+        case(fx, 37, 1.0, Some(&fx.clamped), 14),
+    ]
 }
