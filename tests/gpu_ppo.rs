@@ -479,6 +479,8 @@ fn small_setup(
     config.policy.actor_hidden = vec![64, 32];
     config.policy.critic_hidden = vec![64, 32];
     config.policy.init_log_std = -1.0;
+    // The update's checks read the values the rollout stored (values_in_update has its own test).
+    config.ppo.values_in_update = false;
     config.seed = seed;
     config.validate("test").expect("valid config");
     let policy = GaussianPolicy::new(&gpu, &config.policy, d, a, n, seed).expect("policy");

@@ -84,6 +84,72 @@ fn the_synthetic_search_runs_and_draws_its_trajectory() {
     assert!(line_black > 1000, "{line_black} best-line pixels");
 }
 
+/// `--seeds`, `--max-candidates` and `--budget` replace the configuration's values in the run
+/// directory of a new search (so a resume keeps them), are checked like the file's values, and
+/// are refused on --resume.
+#[test]
+fn command_line_overrides_shape_a_new_search_only() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    let hpo = |extra: &[&str]| {
+        Command::new(binary())
+            .args(["hpo", "--cycles", "1"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let config = repo("configs/hpo/synthetic.toml");
+    let config = config.to_str().unwrap();
+    let run_arg = run.to_str().unwrap();
+    let output = hpo(&[
+        "--config",
+        config,
+        "--out",
+        run_arg,
+        "--seeds",
+        "4,5",
+        "--max-candidates",
+        "2",
+        "--budget",
+        "12.5",
+    ]);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let saved: serde_json::Value = serde_json::from_str(&read(&run.join("config.json"))).unwrap();
+    assert_eq!(saved["search"]["seeds"], serde_json::json!([4, 5]));
+    assert_eq!(saved["search"]["max_candidates"], 2);
+    assert_eq!(saved["objective"]["budget_s"], 12.5);
+    let history: Vec<CycleRecord> = read(&run.join("history.jsonl"))
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let seeds: Vec<u64> = history[1].candidates[0]
+        .trials
+        .iter()
+        .map(|t| t.seed)
+        .collect();
+    assert_eq!(seeds, [4, 5]);
+    assert!(history[1].candidates.len() <= 2);
+
+    let output = hpo(&["--resume", run_arg, "--seeds", "1"]);
+    assert!(!output.status.success());
+    let output = hpo(&[
+        "--config",
+        config,
+        "--out",
+        tmp.path().join("bad").to_str().unwrap(),
+        "--seeds",
+        "3,3",
+    ]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success());
+    assert!(stderr.contains("repeated seed"), "{stderr}");
+    assert!(stderr.contains("--seeds"), "{stderr}");
+}
+
 #[test]
 fn the_backflip_configuration_loads_and_names_the_missing_trainer() {
     let config = HpoConfig::load(&repo("configs/hpo/backflip.toml")).unwrap();

@@ -201,7 +201,7 @@ pub struct PpoConfig {
     /// Where the critic's values of the rollout's observations come from: false, a forward
     /// pass per control step inside the rollout (beside the actor's); true, one batched forward
     /// over all T + 1 observation rows at the start of the update (the rollout runs the actor
-    /// only). Same values, a different cost split (docs/ppo.md).
+    /// only; the default). Same values, a different cost split (docs/ppo.md).
     pub values_in_update: bool,
 }
 
@@ -220,7 +220,7 @@ impl Default for PpoConfig {
             value_coef: 2.0,
             clip_value_loss: true,
             adaptive_learning_rate: true,
-            values_in_update: false,
+            values_in_update: true,
             max_grad_norm: 1.0,
         }
     }
