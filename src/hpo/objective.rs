@@ -35,12 +35,13 @@ pub fn score(value: Option<ParamValue>, trials: Vec<SeedTrial>, budget_s: f64) -
     }
 }
 
-/// The index of the lowest objective; the first one on a tie.
+/// The index of the best candidate by [`Rank`](crate::hpo::record::Rank): the lowest objective,
+/// then the higher success rate and the lower pose error; the first one on a full tie.
 pub fn winner(candidates: &[CandidateResult]) -> Option<usize> {
     candidates
         .iter()
         .enumerate()
-        .min_by(|(i, a), (j, b)| a.objective_s.total_cmp(&b.objective_s).then(i.cmp(j)))
+        .min_by(|(i, a), (j, b)| a.rank().order(&b.rank()).then(i.cmp(j)))
         .map(|(i, _)| i)
 }
 
@@ -96,6 +97,43 @@ mod tests {
         );
         assert_eq!(result.objective_s, 3.0);
         assert_eq!(result.successes, 2);
+    }
+
+    fn failed(seed: u64, rate: f64, ape: Option<f64>) -> SeedTrial {
+        let mut t = trial(seed, false, 10.0);
+        t.outcome.success_rate = rate;
+        t.outcome.ape_m = ape;
+        t
+    }
+
+    #[test]
+    fn failures_at_the_budget_rank_by_success_rate_then_pose_error() {
+        let budget = 10.0;
+        let collapse = score(None, vec![failed(0, 0.0, Some(0.30))], budget);
+        let closer = score(None, vec![failed(0, 0.0, Some(0.12))], budget);
+        let near_miss = score(None, vec![failed(0, 0.75, Some(0.20))], budget);
+        let unknown = score(None, vec![failed(0, 0.0, None)], budget);
+        assert_eq!(collapse.objective_s, closer.objective_s);
+        assert_eq!(winner(&[collapse.clone(), closer.clone()]), Some(1));
+        assert_eq!(winner(&[closer.clone(), near_miss.clone()]), Some(1));
+        // A missing pose error ranks below any measured one.
+        assert_eq!(winner(&[unknown.clone(), collapse.clone()]), Some(1));
+        // A success within the budget beats every failure, whatever their diagnostics.
+        let mut success = score(None, vec![trial(0, true, 9.9)], budget);
+        success.trials[0].outcome.ape_m = Some(0.5);
+        assert_eq!(winner(&[near_miss.clone(), success]), Some(1));
+        // Seeds average: (0.5 + 1.0) / 2 above 0.7.
+        let two = score(
+            None,
+            vec![failed(0, 0.5, Some(0.2)), failed(1, 1.0, Some(0.2))],
+            budget,
+        );
+        assert!((two.rank().success_rate - 0.75).abs() < 1e-12);
+        assert!(
+            two.rank()
+                .is_better_than(&score(None, vec![failed(0, 0.7, Some(0.1))], budget).rank())
+        );
+        assert!(!closer.rank().is_better_than(&closer.rank()));
     }
 
     #[test]

@@ -158,14 +158,12 @@ impl Search {
             assignment: assignment.clone(),
         }];
         let results = self.experiment(pool, &candidates)?;
-        let objective_s = results
-            .first()
-            .map_or(self.config.objective.budget_s, |r| r.objective_s);
-        let kept = Kept {
-            cycle: 0,
-            objective_s,
-            assignment: assignment.clone(),
-        };
+        let kept = Kept::new(
+            0,
+            assignment.clone(),
+            results.first(),
+            self.config.objective.budget_s,
+        );
         let record = CycleRecord {
             cycle: 0,
             status: CycleStatus::Baseline,
@@ -275,8 +273,8 @@ impl Search {
         let base = self
             .history
             .get(proposal.base_cycle as usize)
-            .and_then(|r| Some((r.assignment.clone()?, r.winner()?.objective_s)));
-        let Some((base_assignment, base_objective)) = base else {
+            .and_then(|r| Some((r.assignment.clone()?, r.winner()?.clone())));
+        let Some((base_assignment, base_result)) = base else {
             return Err(HpoError::StateCorrupt {
                 path: self.dir.path().join("history.jsonl"),
                 problem: format!("{} has no configuration", cycle_name(proposal.base_cycle)),
@@ -284,11 +282,12 @@ impl Search {
         };
         // Building on another cycle moves the incumbent there.
         if proposal.base_cycle != state.incumbent.cycle {
-            state.incumbent = Kept {
-                cycle: proposal.base_cycle,
-                objective_s: base_objective,
-                assignment: base_assignment.clone(),
-            };
+            state.incumbent = Kept::new(
+                proposal.base_cycle,
+                base_assignment.clone(),
+                Some(&base_result),
+                self.config.objective.budget_s,
+            );
         }
         let candidates = candidates_of(&base_assignment, &proposal.param, &proposal.values);
         let results = self.experiment(pool, &candidates)?;
@@ -296,17 +295,19 @@ impl Search {
         let won_assignment = won
             .and_then(|i| candidates.get(i))
             .map(|c| c.assignment.clone());
-        if let (Some(i), Some(assignment)) = (won, &won_assignment) {
-            let objective_s = results.get(i).map_or(f64::INFINITY, |r| r.objective_s);
-            let kept = Kept {
+        if let (Some(result), Some(assignment)) =
+            (won.and_then(|i| results.get(i)), &won_assignment)
+        {
+            let kept = Kept::new(
                 cycle,
-                objective_s,
-                assignment: assignment.clone(),
-            };
-            if objective_s < state.incumbent.objective_s {
+                assignment.clone(),
+                Some(result),
+                self.config.objective.budget_s,
+            );
+            if kept.rank().is_better_than(&state.incumbent.rank()) {
                 state.incumbent = kept.clone();
             }
-            if objective_s < state.best.objective_s {
+            if kept.rank().is_better_than(&state.best.rank()) {
                 state.best = kept;
             }
         }
