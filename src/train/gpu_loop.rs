@@ -84,7 +84,13 @@ pub fn train_with(
         session.progress().note(&format!("warning: {warning}"));
     }
     let config = session.config().clone();
+    let setup = std::time::Instant::now();
     let mut trainer = Trainer::new(gpu, store, motion, &config)?;
+    // Outside the active time; printed so that a user (or a search) sees what a run costs.
+    session.progress().note(&format!(
+        "setup {:.2} s (plans, kernels, CUDA graphs; not active time)",
+        setup.elapsed().as_secs_f64()
+    ));
     if let Some(checkpoint) = &checkpoint {
         trainer.restore(checkpoint)?;
         session.progress().note(&format!(
