@@ -2,7 +2,7 @@
 # Build the release binary and the GPU test binaries here, and stage them for the GPU machine.
 #   tests/device/stage.sh [DIR]      (default .device-bin; ignored by git via .git/info/exclude)
 # DIR then holds bin.txz: `instantmimic`, one stripped binary per tests/gpu_*.rs (named after
-# the file), and a copy of the motions directory ($INSTANTMIMIC_MOTIONS, default
+# the file), one per benches/*.rs (bench_<name>), and a copy of the motions directory ($INSTANTMIMIC_MOTIONS, default
 # ../shared/data/motions) under motions/. Carry DIR in the device call and run tests/device/session.sh there.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -21,6 +21,15 @@ for line in sys.stdin:
     if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"].startswith("gpu_"):
         print(m["target"]["name"], m["executable"])
 ' | while read -r name exe; do cp "$exe" "$DIR/$name"; done
+# The cargo benchmarks (benches/*.rs), as bench_<name>.
+cargo bench --features gpu --no-run --message-format=json 2>/dev/null \
+  | python3 -c '
+import json, sys
+for line in sys.stdin:
+    m = json.loads(line)
+    if m.get("reason") == "compiler-artifact" and m.get("executable") and "bench" in m["target"]["kind"]:
+        print(m["target"]["name"], m["executable"])
+' | while read -r name exe; do cp "$exe" "$DIR/bench_$name"; done
 strip "$DIR"/*
 cp -r "$MOTIONS" "$DIR/motions"
 # Unpacked the binaries pass the 64 MiB a device call carries: ship them xz-packed
