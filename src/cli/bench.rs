@@ -7,7 +7,7 @@ use clap::{Args, Subcommand, ValueEnum};
 
 use std::fmt::Write as _;
 
-use crate::bench::{RolloutBench, bench_physics, bench_rollout};
+use crate::bench::{GemmBench, RolloutBench, bench_gemm, bench_physics, bench_rollout};
 use crate::cuda::Gpu;
 use crate::motion::library::{motions_dir_from_env, resolve_motion};
 use crate::motion::{Character, ReferenceMotion};
@@ -36,6 +36,29 @@ enum BenchCommand {
     /// Frames per second of the rollout graph against its physics-only floor, with the time of
     /// each phase (policy, physics, post-physics, reset, observation).
     Rollout(RolloutArgs),
+    /// The policy's GEMMs: Warp's tile kernel against cuBLAS (f32 and TF32; cuBLAS comes with
+    /// the CUDA toolkit and is found through the library path).
+    Gemm(GemmArgs),
+}
+
+#[derive(Args, Debug)]
+struct GemmArgs {
+    /// Row counts (comma-separated): a rollout step is num_envs rows, an update minibatch
+    /// num_envs x horizon / minibatches (32768 for the baseline, 8192 for the tuned configs).
+    #[arg(long, value_delimiter = ',', default_values_t = [4096usize, 8192, 32768])]
+    rows: Vec<usize>,
+    /// Layer sizes of the policy, observation first (default: the committed configs' actor).
+    #[arg(long, value_delimiter = ',', default_values_t = [362usize, 400, 200, 100, 28])]
+    layers: Vec<usize>,
+    /// Timed GEMMs per measurement.
+    #[arg(long, default_value_t = 200)]
+    reps: u32,
+    /// CUDA device ordinal.
+    #[arg(long, default_value_t = 0)]
+    device: usize,
+    /// Print the result as JSON.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args, Debug)]
@@ -109,7 +132,61 @@ pub fn run(args: BenchArgs) -> Result<()> {
     match args.command {
         BenchCommand::Physics(args) => physics(args),
         BenchCommand::Rollout(args) => rollout(args),
+        BenchCommand::Gemm(args) => gemm(args),
     }
+}
+
+fn gemm(args: GemmArgs) -> Result<()> {
+    if args.reps == 0 {
+        bail!("--reps must be at least 1");
+    }
+    if args.layers.len() < 2 || args.layers.contains(&0) || args.rows.contains(&0) {
+        bail!("--layers needs at least two sizes and --rows and --layers must be positive");
+    }
+    let shapes: Vec<(usize, usize)> = args.layers.windows(2).map(|w| (w[0], w[1])).collect();
+    let gpu = Gpu::open(args.device)?;
+    let result = bench_gemm(&gpu, &shapes, &args.rows, args.reps).context("GEMM benchmark")?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&result)?);
+    } else {
+        print!("{}", gemm_report(&result));
+    }
+    Ok(())
+}
+
+fn gemm_report(r: &GemmBench) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "GPU: {} ({} GEMMs per measurement)", r.gpu, r.reps);
+    if let Some(why) = &r.cublas_unavailable {
+        let _ = writeln!(out, "cuBLAS not measured: {why}");
+    }
+    let _ = writeln!(
+        out,
+        "| rows | in | out | Warp tile ms (TFLOP/s) | cuBLAS f32 ms (TFLOP/s) | cuBLAS TF32 ms (TFLOP/s) | max diff f32 / TF32 |"
+    );
+    let _ = writeln!(out, "|---|---|---|---|---|---|---|");
+    let cell = |ms: Option<f64>, flops: f64| {
+        ms.map_or_else(
+            || "-".to_owned(),
+            |ms| format!("{ms:.4} ({:.1})", flops / (ms * 1e-3) / 1e12),
+        )
+    };
+    for c in &r.cases {
+        let diff = |d: Option<f64>| d.map_or_else(|| "-".to_owned(), |d| format!("{d:.1e}"));
+        let _ = writeln!(
+            out,
+            "| {} | {} | {} | {} | {} | {} | {} / {} |",
+            c.rows,
+            c.inputs,
+            c.outputs,
+            cell(Some(c.warp_ms), c.flops()),
+            cell(c.cublas_f32_ms, c.flops()),
+            cell(c.cublas_tf32_ms, c.flops()),
+            diff(c.cublas_f32_difference),
+            diff(c.cublas_tf32_difference),
+        );
+    }
+    out
 }
 
 fn physics(args: PhysicsArgs) -> Result<()> {

@@ -10,7 +10,9 @@
 //!   [`Stream::capture_while`] and [`Stream::capture_if`] for conditional nodes.
 //! - [`Event`] timing and [`NvtxRange`] profiler ranges.
 //! - [`Readback`]: device bytes copied to pinned host memory without stalling the stream.
+//! - [`Blas`]: optional cuBLAS GEMMs (toolkit, not driver), for `bench gemm` only.
 
+mod blas;
 mod conditional;
 mod context;
 mod error;
@@ -24,6 +26,7 @@ pub mod ptx;
 mod readback;
 mod stream;
 
+pub use blas::{Blas, GemmMath};
 pub use conditional::{
     Branch, GRAPH_CONDITIONAL_ENTRIES, GRAPH_CONDITIONAL_MODULE, GRAPH_CONDITIONAL_PTX,
     SET_FROM_NEGATION_ENTRY, SET_FROM_VALUE_ENTRY, SET_PAIR_ENTRY,

@@ -14,7 +14,7 @@ pub mod adam;
 pub mod backward;
 pub mod batch;
 pub mod loss;
-mod policy;
+pub(crate) mod policy;
 pub mod reduce;
 mod update;
 

@@ -16,9 +16,9 @@ use crate::env::{DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels};
 use crate::train::PolicyConfig;
 
 /// Edge of the output tile of one thread block of `linear_elu` / `linear` (policy.py).
-const TILE: usize = 64;
+pub(crate) const TILE: usize = 64;
 /// Threads per tile (policy.py `TILE_THREADS`, the module's block size).
-const TILE_THREADS: usize = 128;
+pub(crate) const TILE_THREADS: usize = 128;
 
 #[derive(Debug, Error)]
 pub enum PolicyError {

@@ -2,7 +2,7 @@
 # One call on the GPU machine: GPU tests, rollout benchmarks and training runs, with a short
 # table printed last and full logs under $OUT. Stage the binaries first (tests/device/stage.sh)
 # and carry that directory:
-#   BIN=.device-bin tests/device/session.sh [tests] [bench] [train] [hpo]
+#   BIN=.device-bin tests/device/session.sh [tests] [bench] [gemm] [train] [hpo]
 #   (default: tests bench train; hpo runs HPO_CYCLES (10) offline cycles on backflip)
 # Environment: BIN (staged binaries), OUT (logs; default /tmp/instantmimic-out),
 # SEEDS (train: default "0 1 2"), MOTIONS_LIST (train: default all five clips),
@@ -34,13 +34,21 @@ budget() { # budget SECONDS: the smaller of SECONDS and the time left (1 when no
 nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.sm,clocks.max.sm --format=csv,noheader \
   | tee "$OUT/gpu.txt"
 
+# The CUDA toolkit's library directory (cuBLAS), appended to LD_LIBRARY_PATH.
+toolkit_libs() {
+  local dir; dir=$(ls -d /usr/local/cuda*/lib64 2>/dev/null | sort -V | tail -1)
+  echo "${LD_LIBRARY_PATH:+$LD_LIBRARY_PATH:}$dir"
+}
+
 run_tests() {
   for t in "$BIN"/gpu_*; do
     name=$(basename "$t")
     # GPU_TESTS: the test binaries to run (default: every gpu_* binary)
     case " ${GPU_TESTS:-$name} " in *" $name "*) ;; *) continue ;; esac
     start=$(date +%s)
-    if timeout "$(budget "${TEST_TIMEOUT:-180}")" "$t" --nocapture --test-threads 1 > "$OUT/test_$name.log" 2>&1; then status=PASS; else status=FAIL; fi
+    # Only the cuBLAS test sees the toolkit's libraries: everything else must run on the driver.
+    libs=${LD_LIBRARY_PATH:-}; [ "$name" = gpu_blas ] && libs=$(toolkit_libs)
+    if LD_LIBRARY_PATH=$libs timeout "$(budget "${TEST_TIMEOUT:-180}")" "$t" --nocapture --test-threads 1 > "$OUT/test_$name.log" 2>&1; then status=PASS; else status=FAIL; fi
     note "test  $name  $status  $(( $(date +%s) - start )) s  $(grep -o 'test result: .*; [0-9]* ignored' "$OUT/test_$name.log" | tail -1)"
     [ "$status" = FAIL ] && grep -E "panicked|FAILED|failed" "$OUT/test_$name.log" | head -5
   done
@@ -67,6 +75,15 @@ PY
       note "bench $variant FAILED: $(tail -2 "$OUT/bench_$tag.err")"
     fi
   done
+}
+
+run_gemm() {
+  # Issue 4: Warp's tile GEMM against cuBLAS on the policy's shapes.
+  if LD_LIBRARY_PATH=$(toolkit_libs) timeout "$(budget 120)" "$BIN/instantmimic" bench gemm > "$OUT/gemm.txt" 2> "$OUT/gemm.err"; then
+    cat "$OUT/gemm.txt" | tee -a "$summary"
+  else
+    note "bench gemm FAILED: $(tail -2 "$OUT/gemm.err")"
+  fi
 }
 
 run_train() {
@@ -107,9 +124,10 @@ for s in $sections; do
   case "$s" in
     tests) run_tests ;;
     bench) run_bench ;;
+    gemm) run_gemm ;;
     train) run_train ;;
     hpo) run_hpo ;;
-    *) echo "unknown section $s (tests, bench, train, hpo)" >&2; exit 2 ;;
+    *) echo "unknown section $s (tests, bench, gemm, train, hpo)" >&2; exit 2 ;;
   esac
 done
 # The device hands back at most 8 files: pack the logs, metrics and curves (not checkpoints).

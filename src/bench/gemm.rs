@@ -1,0 +1,150 @@
+//! Warp's tile GEMM (the policy's `linear` kernel, kernels_py/env/policy.py) against cuBLAS in
+//! f32 and TF32 on the layer shapes of the policy, at the row counts of a rollout step and of
+//! the update's minibatches. Issue 4 asks to measure both and keep the faster; cuBLAS is
+//! optional (toolkit, not driver), so a machine without it still times the Warp kernel.
+
+use std::time::Instant;
+
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use serde::Serialize;
+
+use crate::cuda::{Blas, GemmMath, Gpu};
+use crate::env::{DeviceArray, EnvError, EnvKernels};
+use crate::ppo::policy::{TILE, TILE_THREADS};
+
+/// One GEMM shape: `[rows, inputs] x [inputs, outputs]`.
+#[derive(Clone, Debug, Serialize)]
+pub struct GemmCase {
+    pub rows: usize,
+    pub inputs: usize,
+    pub outputs: usize,
+    /// Milliseconds per GEMM (the mean over the timed repetitions).
+    pub warp_ms: f64,
+    pub cublas_f32_ms: Option<f64>,
+    pub cublas_tf32_ms: Option<f64>,
+    /// Largest |cuBLAS - Warp| over the largest |Warp| output (the bias is 0).
+    pub cublas_f32_difference: Option<f64>,
+    pub cublas_tf32_difference: Option<f64>,
+}
+
+impl GemmCase {
+    pub fn flops(&self) -> f64 {
+        2.0 * (self.rows * self.inputs * self.outputs) as f64
+    }
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct GemmBench {
+    pub gpu: String,
+    pub reps: u32,
+    /// Why cuBLAS was not measured, when it was not.
+    pub cublas_unavailable: Option<String>,
+    pub cases: Vec<GemmCase>,
+    pub seconds: f64,
+}
+
+/// Mean milliseconds of `f` over `reps` queued calls, after 3 untimed ones.
+fn time_ms(
+    gpu: &Gpu,
+    reps: u32,
+    mut f: impl FnMut() -> Result<(), EnvError>,
+) -> Result<f64, EnvError> {
+    for _ in 0..3 {
+        f()?;
+    }
+    let (start, end) = (gpu.new_event()?, gpu.new_event()?);
+    start.record(gpu.stream())?;
+    for _ in 0..reps {
+        f()?;
+    }
+    end.record(gpu.stream())?;
+    end.synchronize()?;
+    Ok(f64::from(start.elapsed_ms(&end)?) / f64::from(reps.max(1)))
+}
+
+fn max_difference(got: &[f32], reference: &[f32]) -> f64 {
+    let scale = reference
+        .iter()
+        .fold(0.0f64, |m, v| m.max(f64::from(v.abs())))
+        .max(f64::MIN_POSITIVE);
+    got.iter()
+        .zip(reference)
+        .fold(0.0f64, |m, (a, b)| m.max(f64::from((a - b).abs())))
+        / scale
+}
+
+/// Times every `(inputs, outputs)` of `shapes` at every row count of `rows`.
+pub fn bench_gemm(
+    gpu: &Gpu,
+    shapes: &[(usize, usize)],
+    rows: &[usize],
+    reps: u32,
+) -> Result<GemmBench, EnvError> {
+    let started = Instant::now();
+    let kernels = EnvKernels::load(gpu)?;
+    let blas = Blas::open(gpu.stream());
+    let mut rng = StdRng::seed_from_u64(7);
+    let mut random =
+        |n: usize| -> Vec<f32> { (0..n).map(|_| rng.random_range(-1.0..1.0)).collect() };
+    let mut cases = Vec::new();
+    for &m in rows {
+        for &(k, n) in shapes {
+            let x = DeviceArray::<f32, 2>::zeros(gpu, [m, k])?;
+            let w = DeviceArray::<f32, 2>::zeros(gpu, [k, n])?;
+            let bias = DeviceArray::<f32, 1>::zeros(gpu, [n])?;
+            let y = DeviceArray::<f32, 2>::zeros(gpu, [m, n])?;
+            let y_blas = DeviceArray::<f32, 2>::zeros(gpu, [m, n])?;
+            x.upload(&random(m * k))?;
+            // Scaled like an initialized layer, so outputs stay O(1).
+            w.upload(
+                &random(k * n)
+                    .iter()
+                    .map(|v| v / (k as f32).sqrt())
+                    .collect::<Vec<_>>(),
+            )?;
+            let threads = m.div_ceil(TILE) * n.div_ceil(TILE) * TILE_THREADS;
+            let stream = gpu.stream();
+            let warp_ms = time_ms(gpu, reps, || {
+                kernels.linear(stream, threads, &x, &w, &bias, &y)
+            })?;
+            let reference = y.download()?;
+            let timed = |math: GemmMath| -> Result<Option<(f64, f64)>, EnvError> {
+                let Ok(blas) = &blas else { return Ok(None) };
+                let run = || {
+                    blas.matmul(
+                        m,
+                        n,
+                        k,
+                        x.device_ptr(),
+                        w.device_ptr(),
+                        y_blas.device_ptr(),
+                        math,
+                    )
+                    .map_err(EnvError::from)
+                };
+                let ms = time_ms(gpu, reps, run)?;
+                Ok(Some((ms, max_difference(&y_blas.download()?, &reference))))
+            };
+            let f32_result = timed(GemmMath::F32)?;
+            let tf32_result = timed(GemmMath::Tf32)?;
+            cases.push(GemmCase {
+                rows: m,
+                inputs: k,
+                outputs: n,
+                warp_ms,
+                cublas_f32_ms: f32_result.map(|r| r.0),
+                cublas_tf32_ms: tf32_result.map(|r| r.0),
+                cublas_f32_difference: f32_result.map(|r| r.1),
+                cublas_tf32_difference: tf32_result.map(|r| r.1),
+            });
+        }
+    }
+    Ok(GemmBench {
+        gpu: gpu.info().name.clone(),
+        reps,
+        cublas_unavailable: blas.err().map(|e| e.to_string()),
+        cases,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
