@@ -110,6 +110,39 @@ fn count(counts: &BTreeMap<String, usize>, kind: &str) -> usize {
     counts.get(kind).copied().unwrap_or(0)
 }
 
+/// The same name and PTX load once per GPU (the HPO builds a trainer per trial on one `Gpu`);
+/// other PTX or another name is another module, and the cached one still launches.
+#[test]
+fn loading_the_same_ptx_again_returns_the_loaded_module() {
+    let k = setup();
+    let again = k
+        .gpu
+        .clone()
+        .load_ptx("test_kernels", KERNELS_PTX.as_bytes())
+        .unwrap();
+    assert!(again.is_same_module(&k.module));
+    let renamed = k
+        .gpu
+        .load_ptx("test_kernels_2", KERNELS_PTX.as_bytes())
+        .unwrap();
+    assert!(!renamed.is_same_module(&k.module));
+    let other = k.gpu.load_ptx("warp", WARP_PTX).unwrap();
+    assert!(!other.is_same_module(&k.module));
+    let out = k.gpu.alloc_zeroed(4 * 4).unwrap();
+    let fill = again.function("fill_scaled").unwrap();
+    let s = k.gpu.stream();
+    s.launch(
+        &fill,
+        [1, 1, 1],
+        [4, 1, 1],
+        0,
+        &fill_args(out.device_ptr(), 4, 2.0),
+    )
+    .unwrap();
+    s.synchronize().unwrap();
+    println!("a second load of test_kernels returned the first module, which launches");
+}
+
 #[test]
 fn open_reports_device_facts_and_bad_ordinals() {
     let gpu = Gpu::open(0).unwrap();

@@ -1,13 +1,14 @@
 //! Opening a GPU: driver checks, the primary context, the main stream and device facts.
 
-use std::sync::{Arc, OnceLock};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use cudarc::driver::{CudaContext, result, sys};
 
 use super::conditional::ConditionalKernels;
 use super::error::{CheckResult, from_cudarc};
 use super::ptx::PtxIsa;
-use super::{CudaError, Stream};
+use super::{CudaError, Module, Stream};
 
 /// The oldest driver (as `cuDriverGetVersion` reports it) with everything this layer calls:
 /// conditional WHILE/IF nodes, `cuStreamBeginCaptureToGraph`, `cuGraphAddNode_v2`. Warp asks
@@ -45,6 +46,10 @@ pub(crate) struct DeviceShared {
     /// module load must not happen inside a capture). Holds the load error, if any, so that
     /// plain captures still work and only conditional nodes report it.
     pub(crate) conditional: OnceLock<Result<ConditionalKernels, CudaError>>,
+    /// Modules already loaded, by name and a hash of their PTX: the hyperparameter search
+    /// builds a trainer per trial on one `Gpu`, and loading the same ~60 modules again (JIT or
+    /// the driver's cache) would repeat work whose result is identical (kernels hold no state).
+    pub(crate) modules: Mutex<HashMap<(String, u64, usize), Module>>,
 }
 
 impl DeviceShared {
@@ -109,6 +114,7 @@ impl Gpu {
             ctx,
             info,
             conditional: OnceLock::new(),
+            modules: Mutex::new(HashMap::new()),
         });
         let stream = Stream::wrap(shared.clone(), cu_stream);
         Ok(Gpu { shared, stream })

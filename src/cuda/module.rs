@@ -56,8 +56,29 @@ impl std::fmt::Debug for Module {
 impl Gpu {
     /// Loads a PTX module: [`prepare_ptx`] (NUL strip, `.version` lowered to what this driver
     /// accepts), then `cuModuleLoadDataEx`. The error names `name` and carries the JIT log.
+    /// The same name and PTX loaded again on this `Gpu` (or a clone) returns the module
+    /// loaded the first time.
     pub fn load_ptx(&self, name: &str, ptx: &[u8]) -> Result<Module, CudaError> {
-        load_module(&self.shared.ctx, self.info().max_ptx_isa, name, ptx)
+        let mut hasher = std::hash::DefaultHasher::new();
+        std::hash::Hasher::write(&mut hasher, ptx);
+        let key = (
+            name.to_owned(),
+            std::hash::Hasher::finish(&hasher),
+            ptx.len(),
+        );
+        // A poisoned lock only means another thread panicked while holding it; the map of
+        // loaded modules is still valid.
+        let mut modules = self
+            .shared
+            .modules
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(module) = modules.get(&key) {
+            return Ok(module.clone());
+        }
+        let module = load_module(&self.shared.ctx, self.info().max_ptx_isa, name, ptx)?;
+        modules.insert(key, module.clone());
+        Ok(module)
     }
 }
 
@@ -127,6 +148,12 @@ pub(crate) fn load_module(
 }
 
 impl Module {
+    /// Whether both handles are the same loaded module (`Gpu::load_ptx` returns the module it
+    /// loaded before for the same name and PTX).
+    pub fn is_same_module(&self, other: &Module) -> bool {
+        Arc::ptr_eq(&self.inner, &other.inner)
+    }
+
     /// The name given at load time.
     pub fn name(&self) -> &str {
         &self.inner.name
