@@ -1,6 +1,8 @@
 //! `trajectory.png`: the best objective against cycle as a step line, and every candidate as a
-//! point (failed candidates, scored at the budget, as crosses). Drawn into a pixel buffer with
-//! an embedded font, so it needs no system fonts or libraries.
+//! point (failed candidates, scored at the budget, as crosses); below it, each candidate's
+//! average pose error at the end of its trials (mean over seeds), which shows a search's
+//! progress while every candidate still fails at the budget. Drawn into a pixel buffer with an embedded font, so
+//! it needs no system fonts or libraries.
 
 use plotters::prelude::*;
 
@@ -22,12 +24,14 @@ pub fn trajectory_png(
     title: &str,
     budget_s: f64,
 ) -> Result<Vec<u8>, HpoError> {
-    let mut points: Vec<(f64, f64, bool)> = Vec::new();
+    // (cycle, objective, pose error at the trials' end (NaN: none), succeeded)
+    let mut points: Vec<(f64, f64, f64, bool)> = Vec::new();
     for record in history.iter().filter(|r| r.status != CycleStatus::Skipped) {
         for c in &record.candidates {
             points.push((
                 f64::from(record.cycle),
                 c.objective_s,
+                c.rank().ape_m.unwrap_or(f64::NAN),
                 c.successes > 0 && c.objective_s < budget_s,
             ));
         }
@@ -62,13 +66,17 @@ pub fn trajectory_png(
         1.0
     };
 
+    let x_range = -0.5f64..f64::from(last_cycle) + 0.5;
+    let ok = RGBColor(60, 110, 200);
+    let failed = RGBColor(210, 60, 50);
     crate::plot::render_png(WIDTH, HEIGHT, plot_error, |root| {
-        let mut chart = ChartBuilder::on(root)
+        let (upper, lower) = root.split_vertically(HEIGHT * 2 / 3);
+        let mut chart = ChartBuilder::on(&upper)
             .caption(title, ("sans-serif", 24))
             .margin(16)
             .x_label_area_size(48)
             .y_label_area_size(72)
-            .build_cartesian_2d(-0.5f64..f64::from(last_cycle) + 0.5, 0f64..y_hi)
+            .build_cartesian_2d(x_range.clone(), 0f64..y_hi)
             .map_err(plot_error)?;
         chart
             .configure_mesh()
@@ -81,15 +89,13 @@ pub fn trajectory_png(
             .axis_desc_style(("sans-serif", 17))
             .draw()
             .map_err(plot_error)?;
-        let ok = RGBColor(60, 110, 200);
-        let failed = RGBColor(210, 60, 50);
         let best = RGBColor(20, 20, 20);
         chart
             .draw_series(
                 points
                     .iter()
-                    .filter(|p| p.2)
-                    .map(|&(x, y, _)| Circle::new((x, y), 4, ok.filled())),
+                    .filter(|p| p.3)
+                    .map(|&(x, y, _, _)| Circle::new((x, y), 4, ok.filled())),
             )
             .map_err(plot_error)?
             .label("candidate")
@@ -98,8 +104,8 @@ pub fn trajectory_png(
             .draw_series(
                 points
                     .iter()
-                    .filter(|p| !p.2)
-                    .map(|&(x, y, _)| Cross::new((x, y), 5, failed.stroke_width(2))),
+                    .filter(|p| !p.3)
+                    .map(|&(x, y, _, _)| Cross::new((x, y), 5, failed.stroke_width(2))),
             )
             .map_err(plot_error)?
             .label("failed candidate (budget)")
@@ -121,6 +127,43 @@ pub fn trajectory_png(
             .label_font(("sans-serif", 15))
             .position(SeriesLabelPosition::UpperRight)
             .draw()
+            .map_err(plot_error)?;
+
+        let ape_hi = points
+            .iter()
+            .map(|p| p.2)
+            .filter(|a| a.is_finite())
+            .fold(0.0f64, f64::max)
+            .max(0.01)
+            * 1.1;
+        let mut rates = ChartBuilder::on(&lower)
+            .margin(16)
+            .x_label_area_size(40)
+            .y_label_area_size(72)
+            .build_cartesian_2d(x_range.clone(), 0f64..ape_hi)
+            .map_err(plot_error)?;
+        rates
+            .configure_mesh()
+            .x_labels((last_cycle as usize + 1).min(21))
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .y_labels(3)
+            .light_line_style(RGBColor(235, 235, 235))
+            .y_desc("pose error at end (m)")
+            .label_style(("sans-serif", 15))
+            .axis_desc_style(("sans-serif", 17))
+            .draw()
+            .map_err(plot_error)?;
+        rates
+            .draw_series(points.iter().filter(|p| p.2.is_finite()).map(
+                |&(x, _, ape, succeeded)| {
+                    let style = if succeeded {
+                        ok.filled()
+                    } else {
+                        failed.filled()
+                    };
+                    Circle::new((x, ape), 4, style)
+                },
+            ))
             .map_err(plot_error)?;
         Ok(())
     })
