@@ -663,6 +663,30 @@ mod tests {
     }
 
     #[test]
+    fn action_mode_is_residual_unless_the_config_says_absolute() {
+        assert_eq!(
+            TrainConfig::with_motion("walk").env.action_mode,
+            ActionMode::Residual
+        );
+        let absolute = TrainConfig::from_toml(
+            "motion = \"walk\"\n[env]\naction_mode = \"absolute\"",
+            "c.toml",
+        )
+        .unwrap();
+        assert_eq!(absolute.env.action_mode, ActionMode::Absolute);
+        let err = TrainConfig::from_toml(
+            "motion = \"walk\"\n[env]\naction_mode = \"relative\"",
+            "c.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("action_mode") && err.contains("residual"),
+            "{err}"
+        );
+    }
+
+    #[test]
     fn run_errors_name_the_key() {
         let err = |run: &str| {
             TrainConfig::from_toml(&format!("motion = \"walk\"\n[run]\n{run}"), "c.toml")
