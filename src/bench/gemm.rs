@@ -9,6 +9,7 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
+use super::timing::timed_seconds;
 use crate::cuda::{Blas, GemmMath, Gpu};
 use crate::env::{DeviceArray, EnvError, EnvKernels};
 use crate::ppo::policy::{TILE, TILE_THREADS};
@@ -45,22 +46,8 @@ pub struct GemmBench {
 }
 
 /// Mean milliseconds of `f` over `reps` queued calls, after 3 untimed ones.
-fn time_ms(
-    gpu: &Gpu,
-    reps: u32,
-    mut f: impl FnMut() -> Result<(), EnvError>,
-) -> Result<f64, EnvError> {
-    for _ in 0..3 {
-        f()?;
-    }
-    let (start, end) = (gpu.new_event()?, gpu.new_event()?);
-    start.record(gpu.stream())?;
-    for _ in 0..reps {
-        f()?;
-    }
-    end.record(gpu.stream())?;
-    end.synchronize()?;
-    Ok(f64::from(start.elapsed_ms(&end)?) / f64::from(reps.max(1)))
+fn time_ms(gpu: &Gpu, reps: u32, f: impl FnMut() -> Result<(), EnvError>) -> Result<f64, EnvError> {
+    Ok(timed_seconds(gpu, "gemm", 3, reps, f)? * 1000.0 / f64::from(reps.max(1)))
 }
 
 fn max_difference(got: &[f32], reference: &[f32]) -> f64 {

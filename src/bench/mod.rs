@@ -3,6 +3,7 @@
 mod gemm;
 mod physics;
 pub mod rollout;
+mod timing;
 
 pub use gemm::{GemmBench, GemmCase, bench_gemm};
 pub use physics::{PhysicsBench, bench_physics};

@@ -10,7 +10,8 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use crate::cuda::{Gpu, NvtxRange};
+use super::timing::timed_seconds;
+use crate::cuda::Gpu;
 use crate::plan::{PlanStore, ReplayOrder, Simulation, SimulationError};
 
 /// The result of [`bench_physics`].
@@ -45,25 +46,7 @@ pub fn bench_physics(
     let load_seconds = started.elapsed().as_secs_f64();
     let graph_nodes = sim.graph("step")?.node_counts()?;
 
-    let stream = gpu.stream();
-    {
-        let _range = NvtxRange::push("physics warmup");
-        for _ in 0..warmup {
-            sim.run("step")?;
-        }
-    }
-    let start = gpu.new_event()?;
-    let end = gpu.new_event()?;
-    {
-        let _range = NvtxRange::push("physics timed");
-        start.record(stream)?;
-        for _ in 0..steps {
-            sim.run("step")?;
-        }
-        end.record(stream)?;
-    }
-    end.synchronize()?;
-    let seconds = f64::from(start.elapsed_ms(&end)?) / 1000.0;
+    let seconds = timed_seconds(gpu, "physics", warmup, steps, || sim.run("step"))?;
     Ok(PhysicsBench {
         gpu: gpu.info().name.clone(),
         nworld,

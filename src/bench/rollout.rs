@@ -9,6 +9,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
+use super::timing::timed_seconds;
 use crate::cuda::{Gpu, Graph, NvtxRange};
 use crate::env::{Phase, Rollout, RolloutError};
 use crate::motion::ReferenceMotion;
@@ -24,19 +25,9 @@ pub fn time_graph(
     warmup: u32,
     launches: u32,
 ) -> Result<f64, SimulationError> {
-    let stream = gpu.stream();
-    for _ in 0..warmup {
-        graph.launch(stream)?;
-    }
-    let start = gpu.new_event()?;
-    let end = gpu.new_event()?;
-    start.record(stream)?;
-    for _ in 0..launches {
-        graph.launch(stream)?;
-    }
-    end.record(stream)?;
-    end.synchronize()?;
-    let seconds = f64::from(start.elapsed_ms(&end)?) / 1000.0;
+    let seconds = timed_seconds(gpu, "graph", warmup, launches, || {
+        graph.launch(gpu.stream()).map_err(SimulationError::from)
+    })?;
     Ok(frames_per_launch as f64 * f64::from(launches) / seconds)
 }
 
