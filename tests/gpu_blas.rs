@@ -47,16 +47,8 @@ fn cublas_row_major_matmul_matches_f64() {
     dw.upload(&w).unwrap();
     for (math, tolerance) in [(GemmMath::F32, 1e-5), (GemmMath::Tf32, 5e-3)] {
         let y = DeviceArray::<f32, 2>::zeros(&gpu, [m, n]).unwrap();
-        blas.matmul(
-            m,
-            n,
-            k,
-            dx.device_ptr(),
-            dw.device_ptr(),
-            y.device_ptr(),
-            math,
-        )
-        .unwrap();
+        blas.matmul((m, n, k), dx.memory(), dw.memory(), y.memory(), math)
+            .unwrap();
         let got = y.download().unwrap();
         let error = got
             .iter()
@@ -66,6 +58,19 @@ fn cublas_row_major_matmul_matches_f64() {
         println!("cuBLAS {math:?}: max error {error:.2e} of the largest output");
         assert!(error <= tolerance, "{math:?}: {error:.2e} > {tolerance:e}");
     }
+    // An operand buffer smaller than its shape is refused before cuBLAS sees it.
+    let small = DeviceArray::<f32, 2>::zeros(&gpu, [m, n - 1]).unwrap();
+    let err = blas
+        .matmul(
+            (m, n, k),
+            dx.memory(),
+            dw.memory(),
+            small.memory(),
+            GemmMath::F32,
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("y needs"), "{err}");
 }
 
 #[test]

@@ -99,16 +99,8 @@ pub fn bench_gemm(
             let timed = |math: GemmMath| -> Result<Option<(f64, f64)>, EnvError> {
                 let Ok(blas) = &blas else { return Ok(None) };
                 let run = || {
-                    blas.matmul(
-                        m,
-                        n,
-                        k,
-                        x.device_ptr(),
-                        w.device_ptr(),
-                        y_blas.device_ptr(),
-                        math,
-                    )
-                    .map_err(EnvError::from)
+                    blas.matmul((m, n, k), x.memory(), w.memory(), y_blas.memory(), math)
+                        .map_err(EnvError::from)
                 };
                 let ms = time_ms(gpu, reps, run)?;
                 Ok(Some((ms, max_difference(&y_blas.download()?, &reference))))

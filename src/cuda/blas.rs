@@ -5,12 +5,13 @@
 
 use cudarc::cublas::{result, sys};
 
-use super::{CudaError, Stream};
+use super::{CudaError, DeviceMemory, Stream};
 
 /// Arithmetic of a cuBLAS GEMM on f32 storage.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GemmMath {
-    /// Plain f32 (CUDA cores), the arithmetic of Warp's tile GEMM without MathDx.
+    /// Plain f32 (CUDA cores; `CUBLAS_COMPUTE_32F`), the arithmetic of Warp's tile GEMM without
+    /// MathDx.
     F32,
     /// f32 in and out, TF32 tensor-core products (`CUBLAS_COMPUTE_32F_FAST_TF32`).
     Tf32,
@@ -53,82 +54,70 @@ impl Blas {
         })
     }
 
-    /// Queues row-major `y[m, n] = x[m, k] w[k, n]` on f32 device buffers at `x`, `w`, `y`
-    /// (`m * k`, `k * n` and `m * n` values). In cuBLAS's column-major terms this is
-    /// `y^T = w^T x^T`, so `w` is the first operand.
-    #[allow(clippy::too_many_arguments)]
+    /// Queues row-major `y[m, n] = x[m, k] w[k, n]` on f32 buffers that start at the
+    /// allocations' first byte. In cuBLAS's column-major terms this is `y^T = w^T x^T`, so `w`
+    /// is the first operand. A buffer too small for its operand is an error, not a call.
     pub fn matmul(
         &self,
-        m: usize,
-        n: usize,
-        k: usize,
-        x: u64,
-        w: u64,
-        y: u64,
+        (m, n, k): (usize, usize, usize),
+        x: &DeviceMemory,
+        w: &DeviceMemory,
+        y: &DeviceMemory,
         math: GemmMath,
     ) -> Result<(), CudaError> {
+        let invalid = |reason: String| CudaError::InvalidArgument {
+            operation: "cuBLAS matmul",
+            reason,
+        };
         let dim = |v: usize| {
-            i32::try_from(v).map_err(|_| CudaError::InvalidArgument {
-                operation: "cuBLAS matmul",
-                reason: format!("dimension {v} does not fit an int"),
-            })
+            i32::try_from(v).map_err(|_| invalid(format!("dimension {v} does not fit an int")))
         };
         let (mi, ni, ki) = (dim(m)?, dim(n)?, dim(k)?);
-        if x == 0 || w == 0 || y == 0 {
-            return Err(CudaError::InvalidArgument {
-                operation: "cuBLAS matmul",
-                reason: "null device pointer".to_string(),
-            });
+        for (name, buffer, values) in [("x", x, m * k), ("w", w, k * n), ("y", y, m * n)] {
+            let bytes = values
+                .checked_mul(4)
+                .ok_or_else(|| invalid(format!("{name}: {values} values overflow")))?;
+            if buffer.len() < bytes || buffer.device_ptr() == 0 {
+                return Err(invalid(format!(
+                    "{name} needs {bytes} bytes, the buffer has {}",
+                    buffer.len()
+                )));
+            }
         }
+        let (x, w, y) = (x.device_ptr(), w.device_ptr(), y.device_ptr());
         self.stream.bind()?;
         let (alpha, beta) = (1.0f32, 0.0f32);
         let op = sys::cublasOperation_t::CUBLAS_OP_N;
-        match math {
-            // SAFETY: the caller's buffers hold m*k, k*n and m*n f32 values (checked by the
-            // safe callers in src/bench/gemm.rs); alpha and beta are host scalars that outlive
-            // the call (cuBLAS reads them before returning in host pointer mode).
-            GemmMath::F32 => unsafe {
-                result::sgemm(
-                    self.handle,
-                    op,
-                    op,
-                    ni,
-                    mi,
-                    ki,
-                    &alpha,
-                    w as *const f32,
-                    ni,
-                    x as *const f32,
-                    ki,
-                    &beta,
-                    y as *mut f32,
-                    ni,
-                )
-            },
-            // SAFETY: as above, with f32 storage declared for all three operands.
-            GemmMath::Tf32 => unsafe {
-                result::gemm_ex(
-                    self.handle,
-                    op,
-                    op,
-                    ni,
-                    mi,
-                    ki,
-                    (&alpha as *const f32).cast(),
-                    w as *const std::ffi::c_void,
-                    sys::cudaDataType::CUDA_R_32F,
-                    ni,
-                    x as *const std::ffi::c_void,
-                    sys::cudaDataType::CUDA_R_32F,
-                    ki,
-                    (&beta as *const f32).cast(),
-                    y as *mut std::ffi::c_void,
-                    sys::cudaDataType::CUDA_R_32F,
-                    ni,
-                    sys::cublasComputeType_t::CUBLAS_COMPUTE_32F_FAST_TF32,
-                    sys::cublasGemmAlgo_t::CUBLAS_GEMM_DEFAULT,
-                )
-            },
+        let f32_data = sys::cudaDataType::CUDA_R_32F;
+        let compute = match math {
+            GemmMath::F32 => sys::cublasComputeType_t::CUBLAS_COMPUTE_32F,
+            GemmMath::Tf32 => sys::cublasComputeType_t::CUBLAS_COMPUTE_32F_FAST_TF32,
+        };
+        // SAFETY: the three live allocations hold at least m*k, k*n and m*n f32 values (checked
+        // above) and f32 storage is declared for all three; alpha and beta are host scalars read before the call returns (host pointer
+        // mode, the default).
+        unsafe {
+            result::gemm_ex(
+                self.handle,
+                op,
+                op,
+                ni,
+                mi,
+                ki,
+                (&alpha as *const f32).cast(),
+                w as *const std::ffi::c_void,
+                f32_data,
+                ni,
+                x as *const std::ffi::c_void,
+                f32_data,
+                ki,
+                (&beta as *const f32).cast(),
+                y as *mut std::ffi::c_void,
+                f32_data,
+                ni,
+                compute,
+                sys::cublasGemmAlgo_t::CUBLAS_GEMM_DEFAULT,
+            )
         }
         .map_err(|e| blas_error("cuBLAS matmul", e))
     }
