@@ -80,7 +80,7 @@ PY
 run_gemm() {
   # Issue 4: Warp's tile GEMM against cuBLAS on the policy's shapes.
   if LD_LIBRARY_PATH=$(toolkit_libs) timeout "$(budget 120)" "$BIN/instantmimic" bench gemm > "$OUT/gemm.txt" 2> "$OUT/gemm.err"; then
-    cat "$OUT/gemm.txt" | tee -a "$summary"
+    tee -a "$summary" < "$OUT/gemm.txt"
   else
     note "bench gemm FAILED: $(tail -2 "$OUT/gemm.err")"
   fi
