@@ -10,7 +10,7 @@ use hpo_support::{offline_config, valid_plan};
 use instantmimic::hpo::backend::{AgentRequest, Backend, BackendError};
 use instantmimic::hpo::experiment::{Candidate, run_experiment};
 use instantmimic::hpo::record::CycleStatus;
-use instantmimic::hpo::space::ParamValue;
+use instantmimic::hpo::space::{ParamKind, ParamValue};
 use instantmimic::hpo::trial::{BoxedRunner, build_runners};
 use instantmimic::hpo::{HpoError, RunnerPool, Search, TrialOutcome, TrialRunner};
 
@@ -224,4 +224,82 @@ fn a_failed_trial_leaves_the_last_complete_cycle_on_disk() {
     let resumed = Search::resume(tmp.path(), None).unwrap();
     assert_eq!(resumed.cycles_done(), 2);
     assert_eq!(resumed.history(), search.history());
+}
+
+/// The offline proposer follows a move that improved the incumbent further along its line (the
+/// synthetic optimum of the KL threshold, 0.12, lies far above the baseline's 0.008), and
+/// otherwise moves on to the next parameter in the configured order.
+#[test]
+fn the_offline_line_search_continues_a_move_that_improved_and_moves_on_otherwise() {
+    let config = offline_config("", "");
+    let order: Vec<String> = config.space.params.iter().map(|p| p.name.clone()).collect();
+    let tmp = tempfile::tempdir().unwrap();
+    let mut search = Search::new(config.clone(), tmp.path()).unwrap();
+    let mut pool =
+        RunnerPool::new(build_runners(&config.runner, config.objective).unwrap()).unwrap();
+    search
+        .run(
+            &mut instantmimic::hpo::backend::offline::OfflineProposer,
+            &mut pool,
+            6,
+            &mut std::io::sink(),
+        )
+        .unwrap();
+    let history = search.history();
+    let value_of = |cycle: u32, name: &str| {
+        history
+            .iter()
+            .find(|r| r.cycle == cycle)
+            .and_then(|r| r.assignment.as_ref())
+            .and_then(|a| a.get(name))
+            .and_then(|v| v.as_f64())
+            .unwrap()
+    };
+    let mut continued = 0;
+    for pair in history[1..].windows(2) {
+        let (a, b) = (&pair[0], &pair[1]);
+        let param = a.param.clone().unwrap();
+        let from = value_of(a.base_cycle.unwrap(), &param);
+        let to = value_of(a.cycle, &param);
+        let at_bound = config.space.params.iter().any(|p| {
+            p.name == param
+                && matches!(&p.kind, ParamKind::Numeric { bounds, .. } if to == bounds.lo || to == bounds.hi)
+        });
+        let improved = a.incumbent.cycle == a.cycle && from != to && !at_bound;
+        let next = b.param.clone().unwrap();
+        let values: Vec<f64> = b
+            .candidates
+            .iter()
+            .map(|c| c.value.as_ref().unwrap().as_f64().unwrap_or(f64::NAN))
+            .collect();
+        if improved {
+            continued += 1;
+            assert_eq!(next, param, "cycle {} continues cycle {}", b.cycle, a.cycle);
+            assert!(
+                values.iter().all(|v| (v - to) * (to - from) > 0.0),
+                "cycle {}: {values:?} lie beyond {to} seen from {from}",
+                b.cycle
+            );
+        } else {
+            let i = order.iter().position(|p| *p == param).unwrap();
+            assert_eq!(
+                next,
+                order[(i + 1) % order.len()],
+                "cycle {} moves on after cycle {}",
+                b.cycle,
+                a.cycle
+            );
+        }
+    }
+    assert!(continued > 0, "no cycle continued a line: {history:#?}");
+    // The KL line runs to the bound it may not cross (0.03; the optimum 0.12 lies beyond).
+    assert!(
+        history
+            .iter()
+            .any(|r| r.param.as_deref() == Some("ppo.kl_threshold")
+                && r.candidates
+                    .iter()
+                    .any(|c| c.value == Some(ParamValue::Float(0.03)))),
+        "{history:#?}"
+    );
 }

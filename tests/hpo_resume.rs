@@ -191,3 +191,46 @@ fn a_killed_command_resumes_where_it_stopped() {
     assert_same_state(&straight, &killed);
     assert!(killed.join("trajectory.png").exists() && killed.join("summary.md").exists());
 }
+
+/// A time limit stops the search between cycles (here at once: the limit has passed when the
+/// baseline ends), and resuming without one gives the state of a straight run.
+#[test]
+fn a_time_limit_stops_between_cycles_and_resume_finishes_the_same_search() {
+    let config = offline_config("", "");
+    let (straight, limited) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    straight_run(&config, straight.path(), 3);
+    let mut search = Search::new(config.clone(), limited.path()).unwrap();
+    let mut pool =
+        RunnerPool::new(build_runners(&config.runner, config.objective).unwrap()).unwrap();
+    let mut progress = Vec::new();
+    let complete = search
+        .run_until(
+            &mut OfflineProposer,
+            &mut pool,
+            3,
+            Some(Instant::now()),
+            &mut progress,
+        )
+        .unwrap();
+    assert!(!complete);
+    assert_eq!(search.cycles_done(), 0, "only the baseline ran");
+    let progress = String::from_utf8(progress).unwrap();
+    assert!(
+        progress.contains("stopping before cycle 1") && progress.contains("--resume"),
+        "{progress}"
+    );
+    // A limit far away does not stop it.
+    let complete = search
+        .run_until(
+            &mut OfflineProposer,
+            &mut pool,
+            1,
+            Some(Instant::now() + Duration::from_secs(3600)),
+            &mut std::io::sink(),
+        )
+        .unwrap();
+    assert!(complete);
+    let mut resumed = Search::resume(limited.path(), None).unwrap();
+    run_to(&mut resumed, 3);
+    assert_same_state(straight.path(), limited.path());
+}

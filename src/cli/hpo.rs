@@ -31,6 +31,11 @@ pub struct HpoArgs {
     /// Active seconds allowed to one trial, overriding `[objective] budget_s` (a new search).
     #[arg(long, conflicts_with = "resume")]
     budget: Option<f64>,
+    /// Start no cycle that would end later than this many seconds after launch (judged by the
+    /// slowest trial so far), so that a time-limited session stops between cycles and
+    /// `--resume` loses nothing.
+    #[arg(long, value_name = "SECONDS")]
+    stop_after: Option<f64>,
 }
 
 /// Runs `hpo`: progress on stderr, the summary table on stdout.
@@ -45,11 +50,19 @@ pub fn run_hpo(args: HpoArgs) -> Result<()> {
             max_candidates: args.max_candidates,
             budget_s: args.budget,
         },
+        stop_after_s: args.stop_after,
     };
     let mut progress = std::io::stderr();
     let summary = run(&request, &mut progress).context("hyperparameter search")?;
     print!("{}", summary.table);
     println!("\nRun directory: {}", summary.dir.display());
     println!("Trajectory: {}", summary.plot.display());
+    if !summary.complete {
+        println!(
+            "Stopped by --stop-after after cycle {}; continue with: instantmimic hpo --resume {}",
+            summary.cycles_done,
+            summary.dir.display()
+        );
+    }
     Ok(())
 }

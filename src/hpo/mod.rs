@@ -31,6 +31,7 @@ pub mod trial;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
 pub use config::{HpoConfig, SearchOverrides};
 pub use error::HpoError;
@@ -53,6 +54,8 @@ pub struct HpoRequest {
     pub out: Option<PathBuf>,
     /// Replacements of the configuration's seeds, candidate limit and budget (a new search).
     pub overrides: SearchOverrides,
+    /// Wall-clock seconds after which no new cycle starts ([`Search::run_until`]).
+    pub stop_after_s: Option<f64>,
 }
 
 /// What a finished search reports.
@@ -63,11 +66,24 @@ pub struct HpoSummary {
     pub table: String,
     pub plot: PathBuf,
     pub best: Kept,
+    /// Cycles done, and whether the requested last cycle was reached (false when the time
+    /// limit stopped the search first).
+    pub cycles_done: u32,
+    pub complete: bool,
 }
 
 /// Runs or resumes a search with the runner and agent its configuration names, then writes
 /// the summary and the plot.
 pub fn run(request: &HpoRequest, progress: &mut dyn Write) -> Result<HpoSummary, HpoError> {
+    let started = Instant::now();
+    if let Some(s) = request.stop_after_s
+        && !(s.is_finite() && s > 0.0)
+    {
+        return Err(HpoError::Config {
+            path: "(command line)".to_string(),
+            problem: format!("--stop-after must be a positive number of seconds, not {s}"),
+        });
+    }
     let given = request.config.as_deref().map(HpoConfig::load).transpose()?;
     let mut search = match (&request.resume, given) {
         (Some(_), _) if request.overrides != SearchOverrides::default() => {
@@ -109,8 +125,13 @@ pub fn run(request: &HpoRequest, progress: &mut dyn Write) -> Result<HpoSummary,
         search.dir().display(),
         pool.workers()
     );
-    search.run(backend.as_mut(), &mut pool, last_cycle, progress)?;
-    finish(&search)
+    let deadline = request
+        .stop_after_s
+        .map(|s| started + Duration::from_secs_f64(s));
+    let complete = search.run_until(backend.as_mut(), &mut pool, last_cycle, deadline, progress)?;
+    let mut summary = finish(&search)?;
+    summary.complete = complete;
+    Ok(summary)
 }
 
 /// Fails early when the runner or the agent cannot be built.
@@ -138,6 +159,8 @@ pub fn finish(search: &Search) -> Result<HpoSummary, HpoError> {
         table,
         plot: search.dir().join("trajectory.png"),
         best: state.best.clone(),
+        cycles_done: search.cycles_done(),
+        complete: true,
     })
 }
 

@@ -10,6 +10,7 @@
 
 use std::io::Write;
 use std::path::Path;
+use std::time::{Duration, Instant};
 
 use crate::hpo::backend::{AgentRequest, Backend, BackendError, Stage};
 use crate::hpo::config::HpoConfig;
@@ -138,13 +139,66 @@ impl Search {
         last_cycle: u32,
         progress: &mut dyn Write,
     ) -> Result<(), HpoError> {
+        self.run_until(backend, pool, last_cycle, None, progress)
+            .map(|_| ())
+    }
+
+    /// Like [`Search::run`], but starts no cycle that would end after `deadline`, judged by
+    /// the slowest trial seen so far times the trials of a full cycle (the first cycle of a
+    /// call always starts). Returns whether `last_cycle` was reached; when not, the state on
+    /// disk is the last complete cycle and `--resume` continues from there, so a search split
+    /// over time-limited sessions loses no half-run cycle.
+    pub fn run_until(
+        &mut self,
+        backend: &mut dyn Backend,
+        pool: &mut RunnerPool,
+        last_cycle: u32,
+        deadline: Option<Instant>,
+        progress: &mut dyn Write,
+    ) -> Result<bool, HpoError> {
+        let workers = pool.workers().max(1);
+        let mut slowest_trial: Option<Duration> = None;
+        // The wall time of one round of trials (one trial per worker) since `started`.
+        let note = |slowest: &mut Option<Duration>, started: Instant, rounds: usize| {
+            let per_round = started.elapsed() / rounds.max(1) as u32;
+            *slowest = Some(slowest.map_or(per_round, |s| s.max(per_round)));
+        };
         if self.state.is_none() {
+            let started = Instant::now();
             self.baseline(pool, progress)?;
+            let rounds = self.config.search.seeds.len().div_ceil(workers);
+            note(&mut slowest_trial, started, rounds);
         }
         while self.cycles_done() < last_cycle {
+            let rounds = (self.config.search.max_candidates * self.config.search.seeds.len())
+                .div_ceil(workers);
+            if let (Some(deadline), Some(trial)) = (deadline, slowest_trial)
+                && Instant::now() + trial * rounds as u32 > deadline
+            {
+                let _ = writeln!(
+                    progress,
+                    "stopping before cycle {}: up to {rounds} trials of {:.0} s would pass the \
+                     time limit; resume with --resume {}",
+                    self.cycles_done() + 1,
+                    trial.as_secs_f64(),
+                    self.dir().display()
+                );
+                return Ok(false);
+            }
+            let started = Instant::now();
+            let before = self.cycles_done();
             self.cycle(backend, pool, last_cycle, progress)?;
+            let trials: usize = self
+                .history
+                .iter()
+                .filter(|r| r.cycle > before)
+                .map(|r| r.candidates.iter().map(|c| c.trials.len()).sum::<usize>())
+                .sum();
+            if trials > 0 {
+                note(&mut slowest_trial, started, trials.div_ceil(workers));
+            }
         }
-        Ok(())
+        Ok(true)
     }
 
     fn baseline(

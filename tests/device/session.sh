@@ -111,7 +111,9 @@ run_hpo() {
   else
     args=(--config "${HPO_CONFIG:-configs/hpo/backflip.toml}" --out "$dir" ${HPO_ARGS:-})
   fi
-  if timeout "$(budget 600)" "$BIN/instantmimic" hpo "${args[@]}" --cycles "${HPO_CYCLES:-10}" \
+  # Stop between cycles 15 s before the session's end, so no half-run cycle is lost.
+  local stop=$(( deadline - $(date +%s) - 15 )); [ "$stop" -lt 1 ] && stop=1
+  if timeout "$(budget 600)" "$BIN/instantmimic" hpo "${args[@]}" --cycles "${HPO_CYCLES:-10}" --stop-after "$stop" \
       > "$OUT/hpo.log" 2>&1; then
     note "hpo: $(tail -3 "$OUT/hpo.log" | tr '\n' ' ')"
   else

@@ -1,12 +1,19 @@
 //! The built-in proposer: a coordinate line search over the configured space, with no LLM.
-//! Cycle k searches parameter (k - 1) mod n around the incumbent's value:
-//! - log-scale numbers: × 0.7, 1.4, 0.5, 2;
-//! - linear floats: ± 10% and ± 20% of the range; linear ints: ± 1, ± 2;
-//! - bools: the other value; choices: the others.
+//!
+//! Each cycle moves one parameter from the incumbent:
+//! - **Continue**: when the last cycle's winner became the incumbent by moving its parameter
+//!   away from the base value, the line search goes on along that line: the next candidates are
+//!   one and two more of the same step (× r and × r² on a log scale, + d and + 2d otherwise),
+//!   so a parameter whose optimum lies far from the baseline is reached in a few cycles.
+//! - **Explore** otherwise: the parameter after the last one searched (in the configured order),
+//!   with candidates around the incumbent's value:
+//!   - log-scale numbers: × 0.7, 1.4, 0.5, 2;
+//!   - linear floats: ± 10% and ± 20% of the range; linear ints: ± 1, ± 2;
+//!   - bools: the other value; choices: the others.
 //!
 //! Candidates are clipped to the current bounds (it never widens them: this is the
 //! fixed-space baseline), nearest first up to `max_candidates`, and written as the same JSON
-//! an LLM returns, so they pass the same validation. Deterministic: the same state gives the
+//! an LLM returns, so they pass the same validation. Deterministic: the same history gives the
 //! same proposal.
 
 use crate::hpo::backend::{AgentRequest, Backend, BackendError, Stage};
@@ -26,21 +33,123 @@ impl Backend for OfflineProposer {
     }
 }
 
-/// The parameter and candidates of this cycle: the first parameter from (cycle - 1) mod n on
-/// that has candidates other than the incumbent's value.
-pub fn next_step<'a>(view: &SearchView<'a>) -> Option<(&'a ParamSpec, Vec<ParamValue>)> {
+/// One cycle's move: the parameter, its candidates, and whether it continues the last line.
+pub struct Step<'a> {
+    pub spec: &'a ParamSpec,
+    pub values: Vec<ParamValue>,
+    pub continues: bool,
+}
+
+/// The parameter and candidates of this cycle: the continuation of the last cycle's line when
+/// it moved the incumbent, otherwise the first parameter after the last one searched that has
+/// candidates other than the incumbent's value.
+pub fn next_step<'a>(view: &SearchView<'a>) -> Option<Step<'a>> {
     let params = &view.space.params;
     let n = params.len();
     if n == 0 {
         return None;
     }
-    let start = (view.cycle.saturating_sub(1) as usize) % n;
+    if let Some(step) = continuation(view) {
+        return Some(step);
+    }
+    let last = view
+        .history
+        .iter()
+        .rev()
+        .find(|r| r.status == CycleStatus::Completed)
+        .and_then(|r| r.param.as_deref())
+        .and_then(|p| params.iter().position(|s| s.name == p));
+    let start = last.map_or(0, |i| i + 1);
     (0..n).find_map(|k| {
         let spec = params.get((start + k) % n)?;
         let current = view.state.incumbent.assignment.get(&spec.name)?;
         let values = candidates(spec, current, view.config.search.max_candidates);
-        (values.len() >= view.config.search.min_candidates).then_some((spec, values))
+        (values.len() >= view.config.search.min_candidates).then_some(Step {
+            spec,
+            values,
+            continues: false,
+        })
     })
+}
+
+/// The next step along the last cycle's line: only when that cycle's winner is the incumbent
+/// now and differs from the value it started from.
+fn continuation<'a>(view: &SearchView<'a>) -> Option<Step<'a>> {
+    let last = view
+        .history
+        .iter()
+        .rev()
+        .find(|r| r.status == CycleStatus::Completed)?;
+    if last.incumbent.cycle != last.cycle || view.state.incumbent.cycle != last.cycle {
+        return None;
+    }
+    let spec = view
+        .space
+        .params
+        .iter()
+        .find(|s| Some(&s.name) == last.param.as_ref())?;
+    let base = view
+        .history
+        .iter()
+        .find(|r| Some(r.cycle) == last.base_cycle)?
+        .assignment
+        .as_ref()?
+        .get(&spec.name)?
+        .as_f64()?;
+    let won = view.state.incumbent.assignment.get(&spec.name)?.clone();
+    let values = further_along(spec, base, &won, view.config.search.max_candidates);
+    (!values.is_empty() && values.len() >= view.config.search.min_candidates).then_some(Step {
+        spec,
+        values,
+        continues: true,
+    })
+}
+
+/// One and two more steps of the move `from -> to`, clipped to the bounds, nearest first, at
+/// most `max`; empty for bools, choices and a move of zero.
+pub fn further_along(spec: &ParamSpec, from: f64, to: &ParamValue, max: usize) -> Vec<ParamValue> {
+    let ParamKind::Numeric {
+        integer,
+        bounds,
+        log,
+        ..
+    } = &spec.kind
+    else {
+        return Vec::new();
+    };
+    let Some(x) = to.as_f64() else {
+        return Vec::new();
+    };
+    let steps: Vec<f64> = if *log {
+        if from <= 0.0 || x <= 0.0 || from == x {
+            return Vec::new();
+        }
+        let r = x / from;
+        vec![x * r, x * r * r]
+    } else {
+        let d = x - from;
+        if d == 0.0 {
+            return Vec::new();
+        }
+        vec![x + d, x + 2.0 * d]
+    };
+    let mut out: Vec<ParamValue> = Vec::new();
+    for step in steps {
+        let value = numeric_value(step.clamp(bounds.lo, bounds.hi), *integer);
+        if !choice_eq(&value, to) && !out.iter().any(|o| choice_eq(o, &value)) {
+            out.push(value);
+        }
+    }
+    out.truncate(max);
+    out
+}
+
+fn numeric_value(x: f64, integer: bool) -> ParamValue {
+    if integer {
+        ParamValue::Int(x.round() as i64)
+    } else {
+        ParamValue::Float(round_significant(x, 6))
+    }
 }
 
 /// Candidates around `current`, nearest first, at most `max`, then sorted for reading.
@@ -73,12 +182,7 @@ pub fn candidates(spec: &ParamSpec, current: &ParamValue, max: usize) -> Vec<Par
                 (false, true) => [-1.0, 1.0, -2.0, 2.0].iter().map(|d| x + d).collect(),
             };
             for step in steps {
-                let clipped = step.clamp(bounds.lo, bounds.hi);
-                push(if *integer {
-                    ParamValue::Int(clipped.round() as i64)
-                } else {
-                    ParamValue::Float(round_significant(clipped, 6))
-                });
+                push(numeric_value(step.clamp(bounds.lo, bounds.hi), *integer));
             }
         }
         ParamKind::Bool => {
@@ -112,17 +216,23 @@ fn round_significant(x: f64, digits: i32) -> f64 {
 fn propose(view: &SearchView<'_>) -> String {
     let incumbent = view.state.incumbent.cycle;
     let (name, values, summary) = match next_step(view) {
-        Some((spec, values)) => {
+        Some(Step {
+            spec,
+            values,
+            continues,
+        }) => {
             let current = view
                 .state
                 .incumbent
                 .assignment
                 .get(&spec.name)
                 .map_or_else(String::new, ToString::to_string);
-            let summary = format!(
-                "Coordinate line search: {} around the incumbent value {current}.",
-                spec.name
-            );
+            let how = if continues {
+                "further along the line that moved the incumbent to"
+            } else {
+                "around the incumbent value"
+            };
+            let summary = format!("Coordinate line search: {} {how} {current}.", spec.name);
             (spec.name.clone(), values, summary)
         }
         // Every parameter is pinned by its bounds: measure the incumbent again.
@@ -184,10 +294,15 @@ fn plan(view: &SearchView<'_>) -> String {
         }
     };
     let next = match next_step(view) {
-        Some((spec, values)) => {
+        Some(Step {
+            spec,
+            values,
+            continues,
+        }) => {
             let values: Vec<String> = values.iter().map(ToString::to_string).collect();
             format!(
-                "Sweep {} over [{}] from the incumbent {}.",
+                "{} {} over [{}] from the incumbent {}.",
+                if continues { "Continue" } else { "Sweep" },
                 spec.name,
                 values.join(", "),
                 cycle_name(state.incumbent.cycle)
@@ -198,7 +313,8 @@ fn plan(view: &SearchView<'_>) -> String {
     format!(
         "# Current Strategy\n\
          Offline coordinate line search over the configured space: one parameter per cycle, in \
-         the configured order, with candidates around the incumbent's value.\n\n\
+         the configured order, with candidates around the incumbent's value; a move that \
+         improved the incumbent is followed further along its line.\n\n\
          ## Best Baseline\n\
          Best {} at {:.3} s; the incumbent is {} at {:.3} s.\n\n\
          ## What Seems Promising\n\
@@ -279,5 +395,36 @@ mod tests {
             candidates(&spec, &ParamValue::Text("a".into()), 6),
             vec![ParamValue::Text("b".into())]
         );
+    }
+
+    #[test]
+    fn a_line_continues_by_the_same_step_and_stops_at_the_bounds() {
+        let log = numeric(false, true, 0.002, 0.05);
+        assert_eq!(
+            further_along(&log, 0.008, &ParamValue::Float(0.016), 2),
+            vec![ParamValue::Float(0.032), ParamValue::Float(0.05)]
+        );
+        assert_eq!(
+            further_along(&log, 0.008, &ParamValue::Float(0.0056), 1),
+            vec![ParamValue::Float(0.00392)]
+        );
+        // At the bound already: nothing further.
+        assert!(further_along(&log, 0.025, &ParamValue::Float(0.05), 2).is_empty());
+        let int = numeric(true, false, 1.0, 10.0);
+        assert_eq!(
+            further_along(&int, 5.0, &ParamValue::Int(4), 4),
+            vec![ParamValue::Int(3), ParamValue::Int(2)]
+        );
+        let lin = numeric(false, false, 0.0, 1.0);
+        assert_eq!(
+            further_along(&lin, 0.5, &ParamValue::Float(0.6), 4),
+            vec![ParamValue::Float(0.7), ParamValue::Float(0.8)]
+        );
+        let flag = ParamSpec {
+            name: "b".into(),
+            kind: ParamKind::Bool,
+            description: None,
+        };
+        assert!(further_along(&flag, 0.0, &ParamValue::Bool(true), 2).is_empty());
     }
 }
