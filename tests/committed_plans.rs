@@ -8,7 +8,7 @@ use instantmimic::plan::{DeviceType, OpKind, PlanStore, ptx_file_name, walk_ops}
 
 #[test]
 fn every_committed_plan_loads_and_finds_its_modules() {
-    let store = PlanStore::Embedded;
+    let store = PlanStore::new(None);
     let manifest = store.manifest().expect("the embedded plan manifest");
     assert!(!manifest.plans.is_empty());
     let mut sizes: BTreeMap<u32, BTreeMap<String, u64>> = BTreeMap::new();
@@ -84,4 +84,28 @@ fn every_committed_plan_loads_and_finds_its_modules() {
             plan.bindings.len()
         );
     }
+}
+
+/// A store decodes each plan once: after the first request the plan comes from memory (here
+/// its file is gone), and a clone of the store shares what was decoded.
+#[test]
+fn a_store_decodes_each_plan_once_and_clones_share_it() {
+    let entry = PlanStore::new(None).manifest().unwrap().plans[0].clone();
+    let dir = tempfile::tempdir().unwrap();
+    let plans = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("ptx/plans");
+    std::fs::create_dir(dir.path().join("plans")).unwrap();
+    for file in ["manifest.json", entry.file.as_str()] {
+        std::fs::copy(plans.join(file), dir.path().join("plans").join(file)).unwrap();
+    }
+    let store = PlanStore::new(Some(dir.path()));
+    let first = store.plan(&entry.name, entry.nworld).unwrap();
+    std::fs::remove_file(dir.path().join("plans").join(&entry.file)).unwrap();
+    let again = store.clone().plan(&entry.name, entry.nworld).unwrap();
+    assert_eq!(first, again);
+    // A new store reads the directory again, and says the file is missing.
+    let err = PlanStore::new(Some(dir.path()))
+        .plan(&entry.name, entry.nworld)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains(&entry.file), "{err}");
 }

@@ -9,7 +9,9 @@
 //! ```
 
 use std::borrow::Cow;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
 
 use serde::Deserialize;
 
@@ -42,36 +44,52 @@ pub struct PlanEntry {
     pub file: String,
 }
 
-/// Embedded assets or a directory.
-#[derive(Clone, Debug)]
-pub enum PlanStore {
+/// Where a store's files come from.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum PlanSource {
     Embedded,
     Directory(PathBuf),
+}
+
+/// Embedded assets or a directory, with the plans it has decoded so far: an HPO runner trains
+/// trial after trial from one store, and each trial's simulations (training, evaluation,
+/// preflight) then share one decoding of each plan. Clones share the decoded plans.
+#[derive(Clone, Debug)]
+pub struct PlanStore {
+    source: PlanSource,
+    decoded: Arc<Mutex<HashMap<(String, u32), Plan>>>,
 }
 
 impl PlanStore {
     /// The embedded assets, or `dir` when given.
     pub fn new(dir: Option<&Path>) -> PlanStore {
-        match dir {
-            Some(dir) => PlanStore::Directory(dir.to_path_buf()),
-            None => PlanStore::Embedded,
+        PlanStore {
+            source: match dir {
+                Some(dir) => PlanSource::Directory(dir.to_path_buf()),
+                None => PlanSource::Embedded,
+            },
+            decoded: Arc::default(),
         }
     }
 
+    pub fn source(&self) -> &PlanSource {
+        &self.source
+    }
+
     fn describe(&self) -> String {
-        match self {
-            PlanStore::Embedded => "the plans built into this binary".to_string(),
-            PlanStore::Directory(dir) => dir.display().to_string(),
+        match &self.source {
+            PlanSource::Embedded => "the plans built into this binary".to_string(),
+            PlanSource::Directory(dir) => dir.display().to_string(),
         }
     }
 
     /// A file by its path relative to the store's root.
     pub fn read(&self, rel: &str) -> Result<Cow<'static, [u8]>, PlanError> {
-        match self {
-            PlanStore::Embedded => crate::assets::get(rel)
+        match &self.source {
+            PlanSource::Embedded => crate::assets::get(rel)
                 .map(Cow::Borrowed)
                 .ok_or_else(|| PlanError::Asset(format!("{rel} is not built into this binary"))),
-            PlanStore::Directory(dir) => {
+            PlanSource::Directory(dir) => {
                 let path = dir.join(rel);
                 std::fs::read(&path)
                     .map(Cow::Owned)
@@ -91,8 +109,22 @@ impl PlanStore {
         })
     }
 
-    /// The plan `name` captured for `nworld` worlds.
+    /// The plan `name` captured for `nworld` worlds, decoded on the first request and kept
+    /// (a directory's plan files are read once per store).
     pub fn plan(&self, name: &str, nworld: u32) -> Result<Plan, PlanError> {
+        let key = (name.to_string(), nworld);
+        // A poisoned lock only means another thread panicked while inserting: decode again.
+        if let Some(plan) = self.decoded.lock().ok().and_then(|d| d.get(&key).cloned()) {
+            return Ok(plan);
+        }
+        let plan = self.decode(name, nworld)?;
+        if let Ok(mut decoded) = self.decoded.lock() {
+            decoded.insert(key, plan.clone());
+        }
+        Ok(plan)
+    }
+
+    fn decode(&self, name: &str, nworld: u32) -> Result<Plan, PlanError> {
         let manifest = self.manifest()?;
         let entry = manifest
             .plans
