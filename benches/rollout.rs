@@ -35,8 +35,9 @@ fn main() -> Result<()> {
         let total: f64 = r.phase_ms.values().sum();
         let physics = r.phase_ms.get(&Phase::Physics);
         println!(
-            "{name}: {:.3} M frames/s; floor from the rollout's states {:.3} (ratio {:.3}), \
+            "{name} (GEMMs: {}): {:.3} M frames/s; floor from the rollout's states {:.3} (ratio {:.3}), \
              from reset states {:.3} (ratio {:.3}); physics share {:.3}",
+            r.gemm,
             r.frames_per_s / 1e6,
             r.physics_only_from_rollout_states_frames_per_s / 1e6,
             r.ratio_to_rollout_states,

@@ -24,7 +24,7 @@ fn run_on_cpu(kernel: &str, checks: impl FnOnce(&Fixture) -> Vec<Check>) {
 /// All check families, as the two executions run them.
 fn all_checks(fixture: &Fixture) -> Vec<Check> {
     use kernel_checks::{
-        control, evaluate, normalize, observe, policy, reset, statistics, tracking,
+        control, evaluate, gemm_epilogue, normalize, observe, policy, reset, statistics, tracking,
     };
     [
         control::checks(fixture),
@@ -36,6 +36,7 @@ fn all_checks(fixture: &Fixture) -> Vec<Check> {
         normalize::normalize_checks(fixture),
         policy::linear_checks(fixture),
         policy::sample_checks(fixture),
+        gemm_epilogue::checks(fixture),
         evaluate::checks(fixture),
         statistics::checks(fixture),
     ]
@@ -136,6 +137,14 @@ fn linear_layers_match_the_f64_reference() {
 #[test]
 fn gaussian_sample_matches_the_f64_reference() {
     run_on_cpu("gaussian_sample", kernel_checks::policy::sample_checks);
+}
+
+#[test]
+fn gemm_epilogues_match_the_f64_reference() {
+    run_on_cpu(
+        "bias_elu / bias_add / elu_input_gradient",
+        kernel_checks::gemm_epilogue::checks,
+    );
 }
 
 #[test]

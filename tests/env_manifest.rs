@@ -24,10 +24,13 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 27] = [
+const EXPECTED_KERNELS: [(&str, &str); 30] = [
     ("control", "pd_control"),
     ("evaluate", "evaluation_accumulate"),
     ("gae", "gae_advantages"),
+    ("gemm_epilogue", "bias_elu"),
+    ("gemm_epilogue", "bias_add"),
+    ("gemm_epilogue", "elu_input_gradient"),
     ("minibatch", "shuffle_indices"),
     ("minibatch", "gather_minibatch"),
     ("mlp_backward", "linear_backward_weight"),

@@ -283,6 +283,9 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             kernels.linear_elu(s, dim, &a.array(0), &a.array(1), &a.array(2), &a.array(3))
         }
         "linear" => kernels.linear(s, dim, &a.array(0), &a.array(1), &a.array(2), &a.array(3)),
+        "bias_elu" => kernels.bias_elu(s, dim, &a.array(0), &a.array(1)),
+        "bias_add" => kernels.bias_add(s, dim, &a.array(0), &a.array(1)),
+        "elu_input_gradient" => kernels.elu_input_gradient(s, dim, &a.array(0), &a.array(1)),
         "gaussian_sample" => kernels.gaussian_sample(
             s,
             dim,
@@ -449,6 +452,14 @@ fn gpu_linear_layers_match_the_f64_reference() {
 #[test]
 fn gpu_gaussian_sample_matches_the_f64_reference() {
     run_on_gpu("gaussian_sample", kernel_checks::policy::sample_checks);
+}
+
+#[test]
+fn gpu_gemm_epilogues_match_the_f64_reference() {
+    run_on_gpu(
+        "bias_elu / bias_add / elu_input_gradient",
+        kernel_checks::gemm_epilogue::checks,
+    );
 }
 
 #[test]

@@ -7,6 +7,9 @@ Warp's CPU device against numpy float64.
 - `linear_backward_input_elu`: (dz @ w^T) * elu'(y) written over y.
 - A whole MLP (policy.py's forward kernels, then the backward kernels layer by layer, as
   src/ppo/backward.rs records them) against float64 backpropagation.
+- The same MLP through the cuBLAS path's steps (src/ppo/gemm.rs): products in numpy float32
+  (standing in for cuBLAS), then gemm_epilogue.py's `bias_elu` / `bias_add` and
+  `elu_input_gradient` and reduce.py's `column_sums`, against the same float64 backprop.
 - `column_sums`, `sum_of_squares`, `sum_and_squares`.
 
     python kernels_py/checks/ppo_backward.py
@@ -14,9 +17,9 @@ Warp's CPU device against numpy float64.
 
 import sys
 
-from check_support import Verdict, array, np, wp, zeros
+from check_support import Verdict, array, f32, np, wp, zeros
 
-from env import mlp_backward, policy, reduce
+from env import gemm_epilogue, mlp_backward, policy, reduce
 
 TILE = 64
 TILE_K = 32
@@ -117,6 +120,61 @@ def check_mlp(v: Verdict, rng):
         v.error(f"MLP backward db[{i}]", dbd[i].numpy(), ref_db[i])
 
 
+def launch_elementwise(kernel, a, y):
+    wp.launch(kernel, dim=y.shape[0] * y.shape[1], inputs=[a, y], device="cpu")
+
+
+def check_mlp_cublas_path(v: Verdict, rng):
+    """The cuBLAS path of src/ppo/gemm.rs: each product in float32 (cuBLAS's role), each
+    epilogue a kernel, in the order the Rust side records them."""
+    m, sizes = 150, [37, 70, 45, 5]
+    layers = len(sizes) - 1
+    ws = [f32(rng.standard_normal((sizes[i], sizes[i + 1])) * np.sqrt(2.0 / sizes[i])) for i in range(layers)]
+    bs = [f32(0.1 * rng.standard_normal(sizes[i + 1])) for i in range(layers)]
+    x = f32(rng.standard_normal((m, sizes[0])))
+    d_out = f32(rng.standard_normal((m, sizes[-1])) / m)
+
+    acts = [x]
+    for i in range(layers):
+        z = acts[-1] @ ws[i] + bs[i]
+        acts.append(z if i == layers - 1 else elu(z))
+    ref_dw, ref_db = [None] * layers, [None] * layers
+    dz = d_out
+    for i in reversed(range(layers)):
+        ref_dw[i] = acts[i].T @ dz
+        ref_db[i] = dz.sum(axis=0)
+        if i > 0:
+            dz = (dz @ ws[i].T) * np.where(acts[i] > 0.0, 1.0, acts[i] + 1.0)
+
+    def gemm(a, b):
+        return a.astype(np.float32) @ b.astype(np.float32)
+
+    ys = []
+    inp = x
+    for i in range(layers):
+        y = array(gemm(inp, ws[i]))
+        launch_elementwise(gemm_epilogue.bias_add if i == layers - 1 else gemm_epilogue.bias_elu, array(bs[i]), y)
+        ys.append(y)
+        inp = y.numpy()
+    v.error("MLP forward, cuBLAS path (product + bias_elu / bias_add)", ys[-1].numpy(), acts[-1])
+    dz_np = d_out
+    dz_d = array(d_out)
+    for i in reversed(range(layers)):
+        below = x if i == 0 else ys[i - 1].numpy()
+        dw0 = rng.standard_normal(ws[i].shape)
+        dw = dw0.astype(np.float32) + gemm(below.T, dz_np)  # cuBLAS with beta = 1
+        db = zeros(bs[i].shape)
+        blocks = -(-bs[i].shape[0] // 64) * -(-m // 64)
+        wp.launch_tiled(reduce.column_sums, dim=[blocks], inputs=[dz_d, 1, db], block_dim=THREADS, device="cpu")
+        v.error(f"MLP backward dw[{i}], cuBLAS path (beta 1 onto earlier values)", dw, f32(dw0) + ref_dw[i])
+        v.error(f"MLP backward db[{i}], cuBLAS path (column_sums)", db.numpy(), ref_db[i])
+        if i > 0:
+            g = array(gemm(dz_np, ws[i].T))
+            launch_elementwise(gemm_epilogue.elu_input_gradient, g, ys[i - 1])
+            dz_d = ys[i - 1]
+            dz_np = dz_d.numpy()
+
+
 def check_reductions(v: Verdict, rng):
     for rows, cols, chunks in [(300, 33, 1), (300, 33, 2), (1000, 130, 3), (5, 70, 1)]:
         x = rng.standard_normal((rows, cols))
@@ -142,6 +200,7 @@ def main() -> int:
     check_weight_grad(v, rng)
     check_input_grad(v, rng)
     check_mlp(v, rng)
+    check_mlp_cublas_path(v, rng)
     check_reductions(v, rng)
     return v.finish()
 

@@ -70,7 +70,7 @@ pub fn bench_gemm(
 ) -> Result<GemmBench, EnvError> {
     let started = Instant::now();
     let kernels = EnvKernels::load(gpu)?;
-    let blas = Blas::open(gpu.stream());
+    let blas = Blas::open(gpu);
     let mut rng = StdRng::seed_from_u64(7);
     let mut random =
         |n: usize| -> Vec<f32> { (0..n).map(|_| rng.random_range(-1.0..1.0)).collect() };
@@ -98,8 +98,9 @@ pub fn bench_gemm(
             let reference = y.download()?;
             let timed = |math: GemmMath| -> Result<Option<(f64, f64)>, EnvError> {
                 let Ok(blas) = &blas else { return Ok(None) };
+                let (xm, wm, ym) = (x.blas_matrix()?, w.blas_matrix()?, y_blas.blas_matrix()?);
                 let run = || {
-                    blas.matmul((m, n, k), x.memory(), w.memory(), y_blas.memory(), math)
+                    blas.gemm(stream, xm.plain(), wm.plain(), ym, 0.0, math)
                         .map_err(EnvError::from)
                 };
                 let ms = time_ms(gpu, reps, run)?;

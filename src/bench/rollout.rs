@@ -91,6 +91,8 @@ pub struct RolloutBench {
     pub substeps: usize,
     pub horizon: usize,
     pub observation_size: usize,
+    /// What computed the policy's GEMMs (`policy.gemm` and what it resolved to).
+    pub gemm: String,
     /// Timed rollouts per measurement, and measurements (rollout and floor alternate).
     pub launches: u32,
     pub rounds: u32,
@@ -190,6 +192,7 @@ pub fn bench_rollout(
         substeps: rollout.substeps(),
         horizon: rollout.horizon(),
         observation_size: rollout.observation_size(),
+        gemm: rollout.policy.gemm().describe(),
         launches,
         rounds: rounds.max(1),
         frames_per_s,

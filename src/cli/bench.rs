@@ -12,7 +12,31 @@ use crate::cuda::Gpu;
 use crate::motion::library::{motions_dir_from_env, resolve_motion};
 use crate::motion::{Character, ReferenceMotion};
 use crate::plan::{PlanStore, ReplayOrder};
-use crate::train::TrainConfig;
+use crate::train::{GemmSetting, TrainConfig};
+
+/// `bench rollout --gemm`: `policy.gemm` (src/train/config.rs, `GemmSetting`).
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum GemmArg {
+    /// cuBLAS f32 when libcublas can be loaded, else Warp tiles.
+    Auto,
+    /// Warp's tile kernels.
+    Warp,
+    /// cuBLAS, f32 products (an error without libcublas).
+    Cublas,
+    /// cuBLAS, TF32 tensor-core products (an error without libcublas).
+    CublasTf32,
+}
+
+impl From<GemmArg> for GemmSetting {
+    fn from(arg: GemmArg) -> GemmSetting {
+        match arg {
+            GemmArg::Auto => GemmSetting::Auto,
+            GemmArg::Warp => GemmSetting::Warp,
+            GemmArg::Cublas => GemmSetting::Cublas,
+            GemmArg::CublasTf32 => GemmSetting::CublasTf32,
+        }
+    }
+}
 
 /// `--order`: how the step graph orders the plan's operations.
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -79,6 +103,10 @@ struct RolloutArgs {
     /// Control steps per rollout, overriding `ppo.horizon`.
     #[arg(long)]
     horizon: Option<u32>,
+    /// What computes the policy's GEMMs, overriding `policy.gemm` (cuBLAS comes with the CUDA
+    /// toolkit and is found through the library path).
+    #[arg(long, value_enum)]
+    gemm: Option<GemmArg>,
     /// Timed rollouts per measurement.
     #[arg(long, default_value_t = 20)]
     launches: u32,
@@ -247,6 +275,9 @@ fn rollout(args: RolloutArgs) -> Result<()> {
     if let Some(horizon) = args.horizon {
         config.ppo.horizon = horizon;
     }
+    if let Some(gemm) = args.gemm {
+        config.policy.gemm = gemm.into();
+    }
     let name = args.config.as_ref().map_or_else(
         || "the command line".to_owned(),
         |p| p.display().to_string(),
@@ -286,6 +317,7 @@ fn rollout_report(r: &RolloutBench) -> String {
          (setup {:.1} s)",
         r.motion, r.num_envs, r.horizon, r.substeps, r.observation_size, r.setup_seconds
     );
+    let _ = writeln!(out, "GEMMs: {}", r.gemm);
     let host = r.graph_nodes.get("host").copied().unwrap_or(0);
     let from_host = r
         .graph_nodes

@@ -64,6 +64,20 @@ pub enum CudaError {
         reason: String,
     },
 
+    /// libcublas cannot be used here. It comes with the CUDA toolkit, not with the driver, so
+    /// only `policy.gemm = "cublas"` / `"cublas_tf32"` and `bench gemm` need it.
+    #[error(
+        "cuBLAS is not available ({reason}): libcublas comes with the CUDA toolkit, not the driver; put the toolkit's lib64 on LD_LIBRARY_PATH (e.g. LD_LIBRARY_PATH=/usr/local/cuda/lib64) or `pip install nvidia-cublas-cu12` and put its nvidia/cublas/lib on LD_LIBRARY_PATH, or set policy.gemm = \"warp\""
+    )]
+    BlasUnavailable { reason: String },
+
+    /// A cuBLAS call failed.
+    #[error("{operation}: cuBLAS returned {status}")]
+    Blas {
+        operation: &'static str,
+        status: String,
+    },
+
     /// A graph-building call made on a stream that is not inside [`crate::cuda::Stream::capture`].
     #[error("{operation} needs an active stream capture: call it inside Stream::capture")]
     NotCapturing { operation: &'static str },

@@ -10,7 +10,8 @@
 //!   [`Stream::capture_while`] and [`Stream::capture_if`] for conditional nodes.
 //! - [`Event`] timing and [`NvtxRange`] profiler ranges.
 //! - [`Readback`]: device bytes copied to pinned host memory without stalling the stream.
-//! - [`Blas`]: optional cuBLAS GEMMs (toolkit, not driver), for `bench gemm` only.
+//! - [`Blas`]: optional cuBLAS GEMMs (toolkit, not driver) on [`BlasMatrix`] views, capturable:
+//!   the policy's layers when `policy.gemm` picks cuBLAS, and `bench gemm`.
 
 mod blas;
 mod conditional;
@@ -26,7 +27,7 @@ pub mod ptx;
 mod readback;
 mod stream;
 
-pub use blas::{Blas, GemmMath};
+pub use blas::{BLAS_WORKSPACE_BYTES, Blas, BlasMatrix, GemmMath, GemmOperand};
 pub use conditional::{
     Branch, GRAPH_CONDITIONAL_ENTRIES, GRAPH_CONDITIONAL_MODULE, GRAPH_CONDITIONAL_PTX,
     SET_FROM_NEGATION_ENTRY, SET_FROM_VALUE_ENTRY, SET_PAIR_ENTRY,

@@ -3,7 +3,7 @@
 use std::marker::PhantomData;
 use std::sync::Arc;
 
-use crate::cuda::{DeviceMemory, Gpu};
+use crate::cuda::{BlasMatrix, DeviceMemory, Gpu};
 use crate::plan::Simulation;
 
 use super::abi::{ARRAY_DESCRIPTOR_BYTES, Element, array_descriptor};
@@ -215,5 +215,14 @@ impl<T: Element, const N: usize> DeviceArray<T, N> {
     /// Warp's `array_t<T>` descriptor of this array, as a kernel parameter.
     pub fn descriptor(&self) -> Result<[u8; ARRAY_DESCRIPTOR_BYTES], EnvError> {
         array_descriptor(self.device_ptr(), &self.shape, T::SIZE)
+    }
+}
+
+impl DeviceArray<f32, 2> {
+    /// This matrix as cuBLAS reads it: row-major, at its offset in its allocation (a view of a
+    /// flat parameter buffer stays a view).
+    pub fn blas_matrix(&self) -> Result<BlasMatrix<'_>, EnvError> {
+        let [rows, cols] = self.shape;
+        Ok(BlasMatrix::new(&self.memory, self.offset, rows, cols)?)
     }
 }

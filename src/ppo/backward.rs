@@ -139,7 +139,10 @@ pub fn record_linear_backward_input_elu(
 /// Queues the backward pass of `mlp` after its forward pass of `input`: from `d_output`
 /// (`dL/d output`, `[M, outputs]`), every layer's `dw` and `db` are added to `grads` (clear it
 /// first). The hidden activations of `mlp` are overwritten with the gradients of their
-/// pre-activations; run the forward pass again before reading them.
+/// pre-activations; run the forward pass again before reading them. The GEMMs run as
+/// `mlp.gemm` says; its cuBLAS path needs `scratch` of at least M x (the widest hidden layer)
+/// values ([`input_gradient_scratch_len`]).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn record_mlp_backward(
     kernels: &EnvKernels,
     stream: &Stream,
@@ -148,6 +151,7 @@ pub(crate) fn record_mlp_backward(
     d_output: &DeviceArray2<f32>,
     grads: &MlpGradients,
     target_blocks: usize,
+    scratch: Option<&DeviceArray<f32>>,
 ) -> Result<(), PpoError> {
     let last = mlp.layers.len() - 1;
     if d_output.shape() != mlp.activations[last].shape() {
@@ -157,6 +161,7 @@ pub(crate) fn record_mlp_backward(
             mlp.activations[last].shape()
         )));
     }
+    let gemm = &mlp.gemm;
     for l in (0..=last).rev() {
         let dz = if l == last {
             d_output
@@ -173,12 +178,24 @@ pub(crate) fn record_mlp_backward(
             .ok_or_else(|| PpoError::Shape(format!("no gradient buffer for layer {l}")))?;
         // The weight gradient reads x (the layer below's output) before the input gradient
         // overwrites it.
-        record_linear_backward_weight(kernels, stream, x, dz, dw, db, target_blocks)?;
+        gemm.record_weight_gradient(kernels, stream, x, dz, dw, db, target_blocks)?;
         if l > 0 {
-            record_linear_backward_input_elu(kernels, stream, dz, &mlp.layers[l].0, x)?;
+            gemm.record_input_gradient_elu(kernels, stream, dz, &mlp.layers[l].0, x, scratch)?;
         }
     }
     Ok(())
+}
+
+/// Values of the scratch buffer the cuBLAS input gradients of `rows` rows need: the product
+/// `dz w^T` of the widest layer input past the first (M x K; the first layer has no input
+/// gradient).
+pub fn input_gradient_scratch_len(rows: usize, networks: &[&[LayerShape]]) -> usize {
+    let widest = networks
+        .iter()
+        .flat_map(|layers| layers.iter().skip(1).map(|l| l.inputs))
+        .max()
+        .unwrap_or(0);
+    rows * widest
 }
 
 #[cfg(test)]

@@ -6,6 +6,8 @@
 //!   gradient clipping, Adam, KL-adaptive learning rate, statistics) recorded onto a stream with
 //!   no host work, for capture into a CUDA graph (`kernels_py/env/{gae, minibatch, ppo_loss,
 //!   mlp_backward, reduce, optimizer, ppo_statistics}.py`).
+//! - [`PolicyGemm`]: what computes the networks' GEMMs (`policy.gemm`): Warp's tile kernels, or
+//!   cuBLAS with elementwise epilogues (`kernels_py/env/gemm_epilogue.py`), in the same graphs.
 //! - The parts, each with the shape checks its kernels cannot do: [`batch`] (what the rollout
 //!   hands over, GAE, shuffle, gather), [`loss`] (loss gradients, the statistics layout),
 //!   [`backward`] (MLP backward, split weight-gradient reductions), [`reduce`], [`adam`].
@@ -13,12 +15,14 @@
 pub mod adam;
 pub mod backward;
 pub mod batch;
+pub mod gemm;
 pub mod loss;
 pub(crate) mod policy;
 pub mod reduce;
 mod update;
 
 pub use batch::PpoBatch;
+pub use gemm::{GemmPath, PolicyGemm};
 pub use loss::PpoStatistics;
 pub use policy::{
     ActStorage, GaussianPolicy, LayerShape, PolicyError, initial_parameters, mlp_layout,

@@ -3,8 +3,9 @@
 //! Each network's parameters are one flat `f32` device buffer (so the optimizer is one kernel
 //! over all of them), laid out layer by layer as `w [in, out]` row-major then `b [out]`; the
 //! actor's buffer ends with the state-independent `log_std [A]`. Layers are views into it.
-//! The forward pass is `kernels_py/env/policy.py` (tile GEMMs with bias and ELU), queued on a
-//! stream only: it records into a CUDA graph like any other launch.
+//! The forward pass is `kernels_py/env/policy.py` (tile GEMMs with bias and ELU) or cuBLAS with
+//! `gemm_epilogue.py`, as `policy.gemm` says ([`PolicyGemm`]), queued on a stream only: it
+//! records into a CUDA graph like any other launch.
 
 use rand::SeedableRng;
 use rand::rngs::StdRng;
@@ -14,6 +15,8 @@ use thiserror::Error;
 use crate::cuda::{Gpu, Stream};
 use crate::env::{DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels};
 use crate::train::PolicyConfig;
+
+use super::gemm::PolicyGemm;
 
 /// Edge of the output tile of one thread block of `linear_elu` / `linear` (policy.py).
 pub(crate) const TILE: usize = 64;
@@ -95,6 +98,8 @@ pub(crate) struct Mlp {
     /// Each layer's `w [in, out]` and `b [out]`.
     pub(crate) layers: Vec<(DeviceArray2<f32>, DeviceArray<f32>)>,
     pub(crate) activations: Vec<DeviceArray2<f32>>,
+    /// What computes the layers (shared with the other networks of the policy).
+    pub(crate) gemm: PolicyGemm,
 }
 
 impl Mlp {
@@ -103,6 +108,7 @@ impl Mlp {
         shapes: &[LayerShape],
         params: DeviceArray<f32>,
         batch: usize,
+        gemm: PolicyGemm,
     ) -> Result<Mlp, EnvError> {
         let mut layers = Vec::new();
         let mut activations = Vec::new();
@@ -117,6 +123,7 @@ impl Mlp {
             params,
             layers,
             activations,
+            gemm,
         })
     }
 
@@ -126,17 +133,12 @@ impl Mlp {
         kernels: &EnvKernels,
         stream: &Stream,
         input: &DeviceArray2<f32>,
-    ) -> Result<(), EnvError> {
+    ) -> Result<(), PolicyError> {
         let mut x = input;
         let last = self.layers.len() - 1;
         for (l, ((w, b), y)) in self.layers.iter().zip(&self.activations).enumerate() {
-            let [m, n] = y.shape();
-            let threads = m.div_ceil(TILE) * n.div_ceil(TILE) * TILE_THREADS;
-            if l == last {
-                kernels.linear(stream, threads, x, w, b, y)?;
-            } else {
-                kernels.linear_elu(stream, threads, x, w, b, y)?;
-            }
+            self.gemm
+                .record_linear(kernels, stream, x, w, b, y, l != last)?;
             x = y;
         }
         Ok(())
@@ -154,6 +156,7 @@ pub struct GaussianPolicy {
     actor: Mlp,
     critic: Mlp,
     log_std: DeviceArray<f32>,
+    gemm: PolicyGemm,
     observation_size: usize,
     action_size: usize,
     batch: usize,
@@ -163,6 +166,8 @@ pub struct GaussianPolicy {
 impl GaussianPolicy {
     /// A freshly initialized policy for `observation_size` inputs and `action_size` actions,
     /// with activations for `batch` envs; `seed` seeds the initialization and the sampling.
+    /// Its GEMMs run as `config.gemm` says (an error when it asks for cuBLAS and libcublas
+    /// cannot be loaded).
     pub fn new(
         gpu: &Gpu,
         config: &PolicyConfig,
@@ -187,12 +192,14 @@ impl GaussianPolicy {
         let actor_params = DeviceArray::from_slice(gpu, [actor_values.len()], &actor_values)?;
         let critic_params = DeviceArray::from_slice(gpu, [critic_values.len()], &critic_values)?;
         let log_std = actor_params.view(log_std_offset, [action_size])?;
+        let gemm = PolicyGemm::open(gpu, config.gemm).map_err(EnvError::from)?;
         Ok(GaussianPolicy {
-            actor: Mlp::new(gpu, &actor_shapes, actor_params, batch)?,
-            critic: Mlp::new(gpu, &critic_shapes, critic_params, batch)?,
+            actor: Mlp::new(gpu, &actor_shapes, actor_params, batch, gemm.clone())?,
+            critic: Mlp::new(gpu, &critic_shapes, critic_params, batch, gemm.clone())?,
             actor_shapes,
             critic_shapes,
             log_std,
+            gemm,
             observation_size,
             action_size,
             batch,
@@ -212,17 +219,31 @@ impl GaussianPolicy {
             self.actor_shapes.last().map_or(0, LayerShape::end),
             [self.action_size],
         )?;
+        let gemm = || self.gemm.clone();
         Ok(GaussianPolicy {
-            actor: Mlp::new(gpu, &self.actor_shapes, actor_params, batch)?,
-            critic: Mlp::new(gpu, &self.critic_shapes, share(&self.critic.params)?, batch)?,
+            actor: Mlp::new(gpu, &self.actor_shapes, actor_params, batch, gemm())?,
+            critic: Mlp::new(
+                gpu,
+                &self.critic_shapes,
+                share(&self.critic.params)?,
+                batch,
+                gemm(),
+            )?,
             actor_shapes: self.actor_shapes.clone(),
             critic_shapes: self.critic_shapes.clone(),
             log_std,
+            gemm: self.gemm.clone(),
             observation_size: self.observation_size,
             action_size: self.action_size,
             batch,
             seed: self.seed,
         })
+    }
+
+    /// What computes the GEMMs (shared by [`GaussianPolicy::with_batch`] copies and the
+    /// update).
+    pub fn gemm(&self) -> &PolicyGemm {
+        &self.gemm
     }
 
     pub fn actor_layers(&self) -> &[LayerShape] {

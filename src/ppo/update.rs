@@ -13,7 +13,9 @@
 //!    the column sums of their per-sample terms into row s of the loss sums; the backward
 //!    passes (`mlp_backward.py`); the schedule (`optimizer.py`: log-std gradient, KL-adaptive
 //!    learning rate, Adam step count); the squared global gradient norm into slot s; Adam on
-//!    the actor's and the critic's parameters (clipped by that norm);
+//!    the actor's and the critic's parameters (clipped by that norm). The forward and backward
+//!    GEMMs run through cuBLAS and `gemm_epilogue.py` instead when `policy.gemm` says so
+//!    (gemm.rs);
 //! 4. the statistics (`ppo_statistics.py`) into one small buffer, and the update counter.
 //!
 //! Every hyperparameter is a kernel argument (recorded with the launch; change it by
@@ -32,7 +34,7 @@ use crate::train::TrainConfig;
 use super::adam::{
     AdamMoments, LEARNING_RATE_MAX, LEARNING_RATE_MIN, adam_params, record_schedule,
 };
-use super::backward::{MlpGradients, record_mlp_backward};
+use super::backward::{MlpGradients, input_gradient_scratch_len, record_mlp_backward};
 use super::batch::{Advantages, Minibatch, PpoBatch, record_shuffle};
 use super::loss::{LOSS_TERMS, LossGradients, PpoStatistics};
 use super::policy::{GaussianPolicy, LayerShape, Mlp, PolicyError};
@@ -141,6 +143,9 @@ pub struct PpoUpdate {
     actor_grads: MlpGradients,
     critic_grads: MlpGradients,
     log_std_grad: DeviceArray<f32>,
+    /// The cuBLAS path's input-gradient products `dz w^T` (`[rows x widest hidden layer]`,
+    /// shared by the actor's and the critic's backward passes); none for Warp tiles.
+    input_gradient_scratch: Option<DeviceArray<f32>>,
     actor_moments: AdamMoments,
     critic_moments: AdamMoments,
     advantages: Advantages,
@@ -195,6 +200,13 @@ impl PpoUpdate {
         let critic_grads = MlpGradients::new(gpu, &critic_shapes, critic_params.len())?;
         let log_std_grad = actor_grads.flat.view(log_std_offset, [a])?;
         let steps = epochs * minibatches;
+        let gemm = policy.gemm();
+        let input_gradient_scratch = if gemm.uses_cublas() {
+            let len = input_gradient_scratch_len(rows, &[&actor_shapes, &critic_shapes]);
+            Some(DeviceArray::zeros(gpu, [len.max(1)])?)
+        } else {
+            None
+        };
         Ok(PpoUpdate {
             gpu: gpu.clone(),
             horizon,
@@ -221,8 +233,20 @@ impl PpoUpdate {
             },
             adam: adam_params(q.max_grad_norm),
             target_blocks: gpu.info().sm_count.max(1) as usize * WEIGHT_GRAD_BLOCKS_PER_SM,
-            actor: Mlp::new(gpu, &actor_shapes, share(&actor_params)?, rows)?,
-            critic: Mlp::new(gpu, &critic_shapes, share(&critic_params)?, rows)?,
+            actor: Mlp::new(
+                gpu,
+                &actor_shapes,
+                share(&actor_params)?,
+                rows,
+                gemm.clone(),
+            )?,
+            critic: Mlp::new(
+                gpu,
+                &critic_shapes,
+                share(&critic_params)?,
+                rows,
+                gemm.clone(),
+            )?,
             // With `values_in_update` the critic values every observation row of the rollout
             // (T + 1 rows of N) in one pass; otherwise only the bootstrap row T.
             bootstrap: Mlp::new(
@@ -234,6 +258,7 @@ impl PpoUpdate {
                 } else {
                     envs
                 },
+                gemm.clone(),
             )?,
             values_in_update: q.values_in_update,
             log_std: policy.log_std().view(0, [a])?,
@@ -246,6 +271,7 @@ impl PpoUpdate {
             actor_grads,
             critic_grads,
             log_std_grad,
+            input_gradient_scratch,
             advantages: Advantages::zeros(gpu, horizon, envs)?,
             permutation: DeviceArray::zeros(gpu, [samples])?,
             minibatch: Minibatch::zeros(gpu, rows, d, a)?,
@@ -366,6 +392,7 @@ impl PpoUpdate {
             &self.loss.d_mean,
             &self.actor_grads,
             blocks,
+            self.input_gradient_scratch.as_ref(),
         )?;
         record_mlp_backward(
             k,
@@ -375,6 +402,7 @@ impl PpoUpdate {
             &self.loss.d_value,
             &self.critic_grads,
             blocks,
+            self.input_gradient_scratch.as_ref(),
         )?;
         record_schedule(
             k,

@@ -163,6 +163,8 @@ pub struct PolicyConfig {
     pub actor_hidden: Vec<u32>,
     pub critic_hidden: Vec<u32>,
     pub init_log_std: f32,
+    /// What computes the layers' GEMMs (forward in the rollout and the update, backward).
+    pub gemm: GemmSetting,
 }
 
 impl Default for PolicyConfig {
@@ -171,8 +173,24 @@ impl Default for PolicyConfig {
             actor_hidden: vec![400, 200, 100],
             critic_hidden: vec![400, 200, 100],
             init_log_std: -2.0,
+            gemm: GemmSetting::Auto,
         }
     }
+}
+
+/// `policy.gemm` (docs/ppo.md, "GEMMs"): cuBLAS comes with the CUDA toolkit, not the driver.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum GemmSetting {
+    /// cuBLAS in f32 when libcublas can be loaded, else Warp's tile kernels.
+    #[default]
+    Auto,
+    /// Warp's tile kernels (plain f32; needs only the driver).
+    Warp,
+    /// cuBLAS, f32 arithmetic; an error at setup when libcublas cannot be loaded.
+    Cublas,
+    /// cuBLAS with TF32 tensor-core products (about 1e-3 relative error); as `cublas`.
+    CublasTf32,
 }
 
 /// `[ppo]`: the update (issue 5).
@@ -684,6 +702,22 @@ mod tests {
             err.contains("action_mode") && err.contains("residual"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn gemm_is_auto_unless_the_config_names_a_path() {
+        assert_eq!(TrainConfig::with_motion("w").policy.gemm, GemmSetting::Auto);
+        let parse = |v: &str| {
+            TrainConfig::from_toml(&format!("motion = \"w\"\n[policy]\ngemm = {v}"), "c.toml")
+        };
+        for (text, setting) in [
+            ("\"warp\"", GemmSetting::Warp),
+            ("\"cublas_tf32\"", GemmSetting::CublasTf32),
+        ] {
+            assert_eq!(parse(text).unwrap().policy.gemm, setting);
+        }
+        let err = parse("\"tf32\"").unwrap_err().to_string();
+        assert!(err.contains("gemm") && err.contains("cublas_tf32"), "{err}");
     }
 
     #[test]

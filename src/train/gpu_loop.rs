@@ -91,6 +91,9 @@ pub fn train_with(
         "setup {:.2} s (plans, kernels, CUDA graphs; not active time)",
         setup.elapsed().as_secs_f64()
     ));
+    session
+        .progress()
+        .note(&format!("GEMMs: {}", trainer.gemm().describe()));
     if let Some(checkpoint) = &checkpoint {
         trainer.restore(checkpoint)?;
         session.progress().note(&format!(

@@ -12,7 +12,7 @@ use crate::cuda::{DeviceMemory, Gpu, Graph, Readback};
 use crate::env::{DeviceArray, EpisodeScore, Rollout, RolloutTotals, TOTALS};
 use crate::motion::ReferenceMotion;
 use crate::plan::PlanStore;
-use crate::ppo::{PpoBatch, PpoOptimizerState, PpoStatistics, PpoUpdate};
+use crate::ppo::{PolicyGemm, PpoBatch, PpoOptimizerState, PpoStatistics, PpoUpdate};
 
 use super::checkpoint::{Checkpoint, CheckpointError};
 use super::config::TrainConfig;
@@ -140,6 +140,11 @@ impl Trainer {
             .ok_or_else(|| TrainError::Setup("the evaluation rollout keeps no scores".to_owned()))?
             .download()?;
         Ok(scores.iter().map(env_evaluation).collect())
+    }
+
+    /// What computes the policy's GEMMs (rollout, update and evaluation share it).
+    pub fn gemm(&self) -> &PolicyGemm {
+        self.rollout.policy.gemm()
     }
 
     /// Control steps of one evaluation episode.

@@ -8,6 +8,12 @@
 # SEEDS (train: default "0 1 2"), MOTIONS_LIST (train: default all five clips),
 # TRAIN_ARGS (extra flags for every `instantmimic train`), GPU_TESTS (test binaries to run;
 # default every gpu_*).
+# GEMMs (`policy.gemm`): GEMMS="warp cublas cublas_tf32" runs every bench variant and every
+# training run once per setting (default: none given, so each config's own, `auto`); bench
+# passes `--gemm`, train a copy of the config with `gemm` replaced. cuBLAS comes with the CUDA
+# toolkit, not the driver: CUBLAS=1 puts the toolkit's lib64 on LD_LIBRARY_PATH for every test,
+# bench and train run (a GEMMS entry starting with "cublas" does so for its own runs; gpu_blas
+# always gets it). Without it the tests run on the driver alone, so `auto` takes Warp tiles.
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 BIN=${BIN:-.device-bin}
@@ -40,14 +46,30 @@ toolkit_libs() {
   echo "${LD_LIBRARY_PATH:+$LD_LIBRARY_PATH:}$dir"
 }
 
+# The library path for a run with GEMM setting $1 (empty: the config's own): the toolkit's
+# libraries when CUBLAS=1 or the setting is a cuBLAS one, else the path as it is.
+libs_for() {
+  case "${CUBLAS:-0}:${1:-}" in 1:*|*:cublas*) toolkit_libs ;; *) echo "${LD_LIBRARY_PATH:-}" ;; esac
+}
+
+# A copy of config $1 with `gemm = "$2"` in its [policy] section; prints the copy's path.
+config_with_gemm() {
+  local out="$OUT/configs/$(basename "$1" .toml)-$2.toml"
+  mkdir -p "$OUT/configs"
+  awk -v g="$2" '/^gemm *=/ {next} {print} /^\[policy\]/ {print "gemm = \"" g "\""}' "$1" > "$out"
+  grep -q '^\[policy\]' "$1" || printf '\n[policy]\ngemm = "%s"\n' "$2" >> "$out"
+  echo "$out"
+}
+
 run_tests() {
   for t in "$BIN"/gpu_*; do
     name=$(basename "$t")
     # GPU_TESTS: the test binaries to run (default: every gpu_* binary)
     case " ${GPU_TESTS:-$name} " in *" $name "*) ;; *) continue ;; esac
     start=$(date +%s)
-    # Only the cuBLAS test sees the toolkit's libraries: everything else must run on the driver.
-    libs=${LD_LIBRARY_PATH:-}; [ "$name" = gpu_blas ] && libs=$(toolkit_libs)
+    # The cuBLAS tests see the toolkit's libraries; everything else runs on the driver alone
+    # (`policy.gemm = "auto"` then takes Warp tiles) unless CUBLAS=1.
+    libs=$(libs_for); [ "$name" = gpu_blas ] && libs=$(toolkit_libs)
     if LD_LIBRARY_PATH=$libs timeout "$(budget "${TEST_TIMEOUT:-180}")" "$t" --nocapture --test-threads 1 > "$OUT/test_$name.log" 2>&1; then status=PASS; else status=FAIL; fi
     note "test  $name  $status  $(( $(date +%s) - start )) s  $(grep -o 'test result: .*; [0-9]* ignored' "$OUT/test_$name.log" | tail -1)"
     [ "$status" = FAIL ] && grep -E "panicked|FAILED|failed" "$OUT/test_$name.log" | head -5
@@ -58,9 +80,11 @@ run_bench() {
   # BENCH_VARIANTS: flag sets separated by ';'
   IFS=';' read -ra variants <<< "${BENCH_VARIANTS:---envs 4096 --substeps 4 --horizon 32;--envs 4096 --substeps 4 --horizon 8}"
   for variant in "${variants[@]}"; do
-    tag=$(echo "$variant" | tr -cd 'A-Za-z0-9_')
-    if timeout "$(budget 180)" "$BIN/instantmimic" bench rollout --motion backflip $variant --json > "$OUT/bench_$tag.json" 2> "$OUT/bench_$tag.err"; then
-      python3 - "$OUT/bench_$tag.json" "$variant" <<'PY' | tee -a "$summary"
+    for gemm in "${gemm_settings[@]}"; do
+      tag=$(echo "$variant $gemm" | tr -cd 'A-Za-z0-9_')
+      label="$variant${gemm:+ --gemm $gemm}"
+      if LD_LIBRARY_PATH=$(libs_for "$gemm") timeout "$(budget 180)" "$BIN/instantmimic" bench rollout --motion backflip $variant ${gemm:+--gemm "$gemm"} --json > "$OUT/bench_$tag.json" 2> "$OUT/bench_$tag.err"; then
+        python3 - "$OUT/bench_$tag.json" "$label" <<'PY' | tee -a "$summary"
 import json, sys
 # MuJoCo Warp's kernels printf their overflow warnings to stdout, before the JSON.
 text = open(sys.argv[1]).read()
@@ -69,11 +93,12 @@ print(f"bench {sys.argv[2]}: {r['frames_per_s']/1e6:.3f} M frames/s, physics onl
       f"{r['physics_only_frames_per_s']/1e6:.3f}, ratio {r['ratio']:.3f}; from the rollout's states "
       f"{r['physics_only_from_rollout_states_frames_per_s']/1e6:.3f}, ratio {r['ratio_to_rollout_states']:.3f}; physics share "
       f"{r['phase_ms']['physics'] / sum(r['phase_ms'].values()):.3f}; "
-      + ", ".join(f"{k} {v:.2f} ms" for k, v in r["phase_ms"].items()))
+      + ", ".join(f"{k} {v:.2f} ms" for k, v in r["phase_ms"].items()) + f"; GEMMs: {r['gemm']}")
 PY
-    else
-      note "bench $variant FAILED: $(tail -2 "$OUT/bench_$tag.err")"
-    fi
+      else
+        note "bench $label FAILED: $(tail -2 "$OUT/bench_$tag.err")"
+      fi
+    done
   done
 }
 
@@ -88,14 +113,19 @@ run_gemm() {
 
 run_train() {
   for motion in ${MOTIONS_LIST:-walk run spinkick backflip cartwheel}; do
-    for seed in ${SEEDS:-0 1 2}; do
-      dir="$OUT/runs/${motion}_$seed"
-      if timeout "$(budget "${TRAIN_TIMEOUT:-150}")" "$BIN/instantmimic" train --motion "$motion" --config "${CONFIG_DIR:-configs/train}/$motion${CONFIG_SUFFIX:-}.toml" --seed "$seed" \
-          --out "$dir" ${TRAIN_ARGS:-} > "$OUT/train_${motion}_$seed.log" 2>&1; then
-        note "train $motion seed $seed: $(tail -1 "$OUT/train_${motion}_$seed.log")"
-      else
-        note "train $motion seed $seed FAILED: $(tail -2 "$OUT/train_${motion}_$seed.log" | tr '\n' ' ')"
-      fi
+    for gemm in "${gemm_settings[@]}"; do
+      config="${CONFIG_DIR:-configs/train}/$motion${CONFIG_SUFFIX:-}.toml"
+      [ -n "$gemm" ] && config=$(config_with_gemm "$config" "$gemm")
+      for seed in ${SEEDS:-0 1 2}; do
+        run="${motion}${gemm:+_$gemm}_$seed"
+        dir="$OUT/runs/$run"
+        if LD_LIBRARY_PATH=$(libs_for "$gemm") timeout "$(budget "${TRAIN_TIMEOUT:-150}")" "$BIN/instantmimic" train --motion "$motion" --config "$config" --seed "$seed" \
+            --out "$dir" ${TRAIN_ARGS:-} > "$OUT/train_$run.log" 2>&1; then
+          note "train $motion${gemm:+ gemm $gemm} seed $seed: $(grep -m1 '^GEMMs:' "$OUT/train_$run.log" | cut -c1-60); $(tail -1 "$OUT/train_$run.log")"
+        else
+          note "train $motion${gemm:+ gemm $gemm} seed $seed FAILED: $(tail -2 "$OUT/train_$run.log" | tr '\n' ' ')"
+        fi
+      done
     done
   done
 }
@@ -121,6 +151,9 @@ run_hpo() {
   fi
 }
 
+# GEMMS as an array; one empty entry (the config's own setting) when none is given.
+read -ra gemm_settings <<< "${GEMMS:-}"
+[ "${#gemm_settings[@]}" -eq 0 ] && gemm_settings=("")
 sections=${*:-tests bench train}
 for s in $sections; do
   case "$s" in

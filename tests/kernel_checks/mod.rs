@@ -17,6 +17,7 @@ pub mod compare;
 pub mod control;
 pub mod cpu;
 pub mod evaluate;
+pub mod gemm_epilogue;
 pub mod normalize;
 pub mod observe;
 pub mod physics;

@@ -1,0 +1,59 @@
+"""Elementwise epilogues of the policy's GEMMs when cuBLAS computes the products
+(`policy.gemm = "cublas"` or `"cublas_tf32"`, src/ppo/gemm.rs).
+
+Warp's tile kernels fuse these steps into their GEMMs (policy.py's `linear_elu` / `linear`,
+mlp_backward.py's `linear_backward_input_elu`). cuBLAS writes the plain product; these kernels
+finish it in place, with the same formulas (`elu` and `elu_backward` are imported from those
+modules):
+
+- `bias_elu`: `y <- elu(y + b)`, the hidden layers' forward after `y = x @ w`;
+- `bias_add`: `y <- y + b`, the output layer's;
+- `elu_input_gradient`: `y <- g * elu'(y)`, where `y` is the ELU output of the layer below
+  (this layer's input) and `g = dz @ w^T` (cuBLAS into a scratch buffer):
+  `elu'(z) = 1 if z > 0 else exp(z) = y + 1`. Like the tile kernel, the gradient of the
+  pre-activation replaces the stored activation.
+
+The weight gradient is cuBLAS's `x^T dz` and the bias gradient reduce.py's `column_sums`.
+
+One thread per element of the `[M, N]` matrix `y`: launch `M * N` threads (element `tid`,
+row-major). Memory-bound: each element is read and written once (`elu_input_gradient` also
+reads `g`).
+"""
+
+import warp as wp
+
+from env.mlp_backward import elu_backward
+from env.policy import elu
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.kernel
+def bias_elu(bias: wp.array(dtype=wp.float32), y: wp.array2d(dtype=wp.float32)):
+    """y[i, j] <- elu(y[i, j] + bias[j]), in place; y [M, N], bias [N]. Launch M * N threads."""
+    tid = wp.tid()
+    n = y.shape[1]
+    i = tid // n
+    j = tid - i * n
+    y[i, j] = elu(y[i, j] + bias[j])
+
+
+@wp.kernel
+def bias_add(bias: wp.array(dtype=wp.float32), y: wp.array2d(dtype=wp.float32)):
+    """y[i, j] <- y[i, j] + bias[j], in place; y [M, N], bias [N]. Launch M * N threads."""
+    tid = wp.tid()
+    n = y.shape[1]
+    i = tid // n
+    j = tid - i * n
+    y[i, j] = y[i, j] + bias[j]
+
+
+@wp.kernel
+def elu_input_gradient(g: wp.array2d(dtype=wp.float32), y: wp.array2d(dtype=wp.float32)):
+    """y[i, j] <- g[i, j] * elu'(y[i, j]), in place; g and y [M, K], y the ELU output of the
+    layer below. Launch M * K threads."""
+    tid = wp.tid()
+    k = y.shape[1]
+    i = tid // k
+    j = tid - i * k
+    y[i, j] = elu_backward(g[i, j], y[i, j])

@@ -1,0 +1,243 @@
+//! What computes the policy's GEMMs (`policy.gemm`; docs/ppo.md, "GEMMs"): the forward pass of
+//! a layer (rollout and update), and the two backward products (weight and input gradient).
+//!
+//! - Warp tiles: `policy.py`'s `linear_elu` / `linear` and `mlp_backward.py`'s kernels, each a
+//!   shared-memory tile GEMM with its epilogue fused (bias and ELU; bias gradient; ELU
+//!   derivative). Plain f32 PTX: needs only the driver.
+//! - cuBLAS (`cublasGemmEx`, f32 or TF32 products; src/cuda/blas.rs), then an elementwise
+//!   `gemm_epilogue.py` kernel in place: `y = x w` then `bias_elu` / `bias_add`; `dw += x^T dz`
+//!   (beta 1: the gradients are cleared, then accumulated, as the tile kernel does) then
+//!   `column_sums` for `db`; `g = dz w^T` into a scratch buffer then `elu_input_gradient`.
+//!
+//! Every call is queued on a stream with no host synchronization, so it records into the
+//! rollout's and the update's CUDA graphs like any other launch.
+
+use std::sync::Arc;
+
+use crate::cuda::{Blas, CudaError, GemmMath, Gpu, Stream};
+use crate::env::{DeviceArray, DeviceArray2, EnvError, EnvKernels};
+use crate::train::GemmSetting;
+
+use super::PpoError;
+use super::backward::{record_linear_backward_input_elu, record_linear_backward_weight};
+use super::policy::{PolicyError, TILE, TILE_THREADS};
+use super::reduce::record_column_sums;
+
+/// The resolved path of the GEMMs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GemmPath {
+    WarpTiles,
+    Cublas(GemmMath),
+}
+
+/// The policy's GEMM path and, for cuBLAS, the handle (shared by the rollout's policy, the
+/// evaluation's and the update: all record onto the GPU's main stream).
+#[derive(Clone)]
+pub struct PolicyGemm {
+    setting: GemmSetting,
+    path: GemmPath,
+    blas: Option<Arc<Blas>>,
+    /// Why `auto` runs Warp tiles (cuBLAS could not be opened).
+    fallback: Option<String>,
+}
+
+impl std::fmt::Debug for PolicyGemm {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "PolicyGemm({})", self.describe())
+    }
+}
+
+impl PolicyGemm {
+    /// Warp's tile kernels, whatever the setting.
+    pub fn warp_tiles() -> PolicyGemm {
+        PolicyGemm {
+            setting: GemmSetting::Warp,
+            path: GemmPath::WarpTiles,
+            blas: None,
+            fallback: None,
+        }
+    }
+
+    /// The path `setting` asks for on `gpu`: `auto` is cuBLAS f32 when libcublas opens, else
+    /// Warp tiles; `cublas` and `cublas_tf32` are a [`CudaError::BlasUnavailable`] when it
+    /// does not. Not inside a capture (cuBLAS allocates its workspace here).
+    pub fn open(gpu: &Gpu, setting: GemmSetting) -> Result<PolicyGemm, CudaError> {
+        let math = match setting {
+            GemmSetting::Warp => return Ok(PolicyGemm::warp_tiles()),
+            GemmSetting::Auto | GemmSetting::Cublas => GemmMath::F32,
+            GemmSetting::CublasTf32 => GemmMath::Tf32,
+        };
+        match Blas::open(gpu) {
+            Ok(blas) => Ok(PolicyGemm {
+                setting,
+                path: GemmPath::Cublas(math),
+                blas: Some(blas),
+                fallback: None,
+            }),
+            Err(e) if setting == GemmSetting::Auto => Ok(PolicyGemm {
+                setting,
+                path: GemmPath::WarpTiles,
+                blas: None,
+                fallback: Some(match e {
+                    CudaError::BlasUnavailable { reason } => reason,
+                    other => other.to_string(),
+                }),
+            }),
+            Err(e) => Err(e),
+        }
+    }
+
+    pub fn path(&self) -> GemmPath {
+        self.path
+    }
+
+    pub fn uses_cublas(&self) -> bool {
+        matches!(self.path, GemmPath::Cublas(_))
+    }
+
+    /// One line for the setup output, e.g. "cuBLAS 12.8.4, f32 products (policy.gemm =
+    /// \"auto\")".
+    pub fn describe(&self) -> String {
+        let setting = match self.setting {
+            GemmSetting::Auto => "auto",
+            GemmSetting::Warp => "warp",
+            GemmSetting::Cublas => "cublas",
+            GemmSetting::CublasTf32 => "cublas_tf32",
+        };
+        let path = match (&self.path, &self.blas) {
+            (GemmPath::Cublas(math), Some(blas)) => format!(
+                "cuBLAS {}, {} products",
+                blas.version(),
+                match math {
+                    GemmMath::F32 => "f32",
+                    GemmMath::Tf32 => "TF32",
+                }
+            ),
+            _ => "Warp tiles (f32)".to_owned(),
+        };
+        match &self.fallback {
+            Some(why) => format!("{path} (policy.gemm = \"{setting}\"; cuBLAS: {why})"),
+            None => format!("{path} (policy.gemm = \"{setting}\")"),
+        }
+    }
+
+    fn blas(&self) -> Result<(&Blas, GemmMath), PolicyError> {
+        match (&self.path, &self.blas) {
+            (GemmPath::Cublas(math), Some(blas)) => Ok((blas, *math)),
+            _ => Err(PolicyError::Shape(
+                "the cuBLAS path has no handle".to_owned(),
+            )),
+        }
+    }
+
+    /// Queues `y = elu(x @ w + b)` (`elu`) or `y = x @ w + b`; x `[M, K]`, w `[K, N]`, b `[N]`,
+    /// y `[M, N]`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_linear(
+        &self,
+        kernels: &EnvKernels,
+        stream: &Stream,
+        x: &DeviceArray2<f32>,
+        w: &DeviceArray2<f32>,
+        b: &DeviceArray<f32>,
+        y: &DeviceArray2<f32>,
+        elu: bool,
+    ) -> Result<(), PolicyError> {
+        let ([m, k], [k2, n]) = (x.shape(), w.shape());
+        if k != k2 || b.shape() != [n] || y.shape() != [m, n] {
+            return Err(PolicyError::Shape(format!(
+                "layer of x {:?}, w {:?}, b {:?} into y {:?}: expected x [M, K], w [K, N], b [N], y [M, N]",
+                x.shape(),
+                w.shape(),
+                b.shape(),
+                y.shape()
+            )));
+        }
+        if self.path == GemmPath::WarpTiles {
+            let threads = m.div_ceil(TILE) * n.div_ceil(TILE) * TILE_THREADS;
+            if elu {
+                kernels.linear_elu(stream, threads, x, w, b, y)?;
+            } else {
+                kernels.linear(stream, threads, x, w, b, y)?;
+            }
+            return Ok(());
+        }
+        let (blas, math) = self.blas()?;
+        let (xm, wm, ym) = (x.blas_matrix()?, w.blas_matrix()?, y.blas_matrix()?);
+        blas.gemm(stream, xm.plain(), wm.plain(), ym, 0.0, math)
+            .map_err(EnvError::from)?;
+        if elu {
+            kernels.bias_elu(stream, m * n, b, y)?;
+        } else {
+            kernels.bias_add(stream, m * n, b, y)?;
+        }
+        Ok(())
+    }
+
+    /// Queues `dw += x^T dz`, `db += sum_rows dz` (x `[M, K]`, dz `[M, N]`, dw `[K, N]`, db
+    /// `[N]`); `target_blocks` sizes the split-K reduction of the Warp path.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_weight_gradient(
+        &self,
+        kernels: &EnvKernels,
+        stream: &Stream,
+        x: &DeviceArray2<f32>,
+        dz: &DeviceArray2<f32>,
+        dw: &DeviceArray2<f32>,
+        db: &DeviceArray<f32>,
+        target_blocks: usize,
+    ) -> Result<(), PpoError> {
+        let ([m, k], [m2, n]) = (x.shape(), dz.shape());
+        if m != m2 || dw.shape() != [k, n] || db.shape() != [n] {
+            return Err(PpoError::Shape(format!(
+                "weight gradient of x {:?}, dz {:?} into dw {:?}, db {:?}: expected x [M, K], dz [M, N], dw [K, N], db [N]",
+                x.shape(),
+                dz.shape(),
+                dw.shape(),
+                db.shape()
+            )));
+        }
+        if self.path == GemmPath::WarpTiles {
+            return record_linear_backward_weight(kernels, stream, x, dz, dw, db, target_blocks);
+        }
+        let (blas, math) = self.blas()?;
+        let (xm, dzm, dwm) = (x.blas_matrix()?, dz.blas_matrix()?, dw.blas_matrix()?);
+        blas.gemm(stream, xm.transposed(), dzm.plain(), dwm, 1.0, math)?;
+        record_column_sums(kernels, stream, dz, db)
+    }
+
+    /// Queues `y_prev <- (dz @ w^T) * elu'(y_prev)` in place (dz `[M, N]`, w `[K, N]`, y_prev
+    /// `[M, K]`, the ELU output of the layer below). The cuBLAS path writes the product into
+    /// `scratch` first (at least M x K values; the Warp path needs none).
+    pub fn record_input_gradient_elu(
+        &self,
+        kernels: &EnvKernels,
+        stream: &Stream,
+        dz: &DeviceArray2<f32>,
+        w: &DeviceArray2<f32>,
+        y_prev: &DeviceArray2<f32>,
+        scratch: Option<&DeviceArray<f32>>,
+    ) -> Result<(), PpoError> {
+        let ([m, n], [k, n2], [m2, k2]) = (dz.shape(), w.shape(), y_prev.shape());
+        if n != n2 || m != m2 || k != k2 {
+            return Err(PpoError::Shape(format!(
+                "input gradient of dz {:?}, w {:?} into y_prev {:?}: expected dz [M, N], w [K, N], y_prev [M, K]",
+                dz.shape(),
+                w.shape(),
+                y_prev.shape()
+            )));
+        }
+        if self.path == GemmPath::WarpTiles {
+            return record_linear_backward_input_elu(kernels, stream, dz, w, y_prev);
+        }
+        let (blas, math) = self.blas()?;
+        let scratch = scratch.ok_or_else(|| {
+            PpoError::Shape("the cuBLAS input gradient needs a scratch buffer".to_owned())
+        })?;
+        let product = scratch.view(0, [m, k])?;
+        let (dzm, wm, gm) = (dz.blas_matrix()?, w.blas_matrix()?, product.blas_matrix()?);
+        blas.gemm(stream, dzm.plain(), wm.transposed(), gm, 0.0, math)?;
+        kernels.elu_input_gradient(stream, m * k, &product, y_prev)?;
+        Ok(())
+    }
+}
