@@ -418,3 +418,19 @@ fn every_committed_config_passes_the_dry_run_with_its_clip() {
         );
     }
 }
+
+/// Every `policy.gemm` value is also a `bench rollout --gemm` value, spelled the same: the
+/// command gets past its arguments and stops at the missing clip directory.
+#[test]
+fn bench_rollout_takes_every_gemm_setting_by_its_config_name() {
+    let dir = workspace();
+    for gemm in ["auto", "warp", "cublas", "cublas_tf32"] {
+        let out = run(
+            &["bench", "rollout", "--motion", "backflip", "--gemm", gemm],
+            None,
+            dir.path(),
+        );
+        let err = one_line_error(&out);
+        assert!(err.contains("no motion file"), "--gemm {gemm}: {err}");
+    }
+}

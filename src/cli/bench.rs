@@ -24,6 +24,7 @@ enum GemmArg {
     /// cuBLAS, f32 products (an error without libcublas).
     Cublas,
     /// cuBLAS, TF32 tensor-core products (an error without libcublas).
+    #[value(name = "cublas_tf32")]
     CublasTf32,
 }
 
