@@ -388,30 +388,13 @@ impl Batch {
             )
             .unwrap(),
         };
-        let current = DeviceArray::zeros(gpu, [n, a]).unwrap();
-        let iteration = DeviceArray::zeros(gpu, [1]).unwrap();
         let storage = ActStorage {
             actions: &batch.actions,
             log_probs: &batch.log_probs,
             values: &batch.values,
             values_in_update: false,
         };
-        for step in 0..t {
-            let obs = batch.observations.view(step * n * d, [n, d]).unwrap();
-            policy
-                .record_act(
-                    kernels,
-                    gpu.stream(),
-                    &obs,
-                    &current,
-                    &storage,
-                    &iteration,
-                    step,
-                    false,
-                )
-                .expect("policy act");
-        }
-        gpu.synchronize().expect("rollout");
+        ppo_support::act_over_rows(policy, kernels, gpu, &batch.observations, &storage, t);
         batch
     }
 

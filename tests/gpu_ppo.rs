@@ -128,30 +128,13 @@ impl Rollout {
             policy.action_size(),
         );
         let mut r = Rollout::random(gpu, rng, t, n, d, a);
-        let current = DeviceArray::zeros(gpu, [n, a]).unwrap();
-        let iteration = DeviceArray::zeros(gpu, [1]).unwrap();
         let storage = ActStorage {
             actions: &r.actions,
             log_probs: &r.log_probs,
             values: &r.values,
             values_in_update: false,
         };
-        for step in 0..t {
-            let obs = r.observations.view(step * n * d, [n, d]).unwrap();
-            policy
-                .record_act(
-                    kernels,
-                    gpu.stream(),
-                    &obs,
-                    &current,
-                    &storage,
-                    &iteration,
-                    step,
-                    false,
-                )
-                .expect("policy act");
-        }
-        gpu.synchronize().expect("rollout");
+        ppo_support::act_over_rows(policy, kernels, gpu, &r.observations, &storage, t);
         let actions = r.actions.download().unwrap();
         let rewards: Vec<f32> = actions
             .chunks(a)

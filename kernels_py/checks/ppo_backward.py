@@ -50,6 +50,24 @@ def launch_forward(kernel, x, w, b, y):
     wp.launch(kernel, dim=tiles * THREADS, inputs=[x, w, b, y], block_dim=THREADS, device="cpu")
 
 
+def reference_backprop(x, ws, bs, d_out):
+    """The MLP's activations (ELU hidden layers, linear output) and its weight and bias
+    gradients for the output gradient `d_out`, by plain backprop in x's precision."""
+    layers = len(ws)
+    acts = [x]
+    for i in range(layers):
+        z = acts[-1] @ ws[i] + bs[i]
+        acts.append(z if i == layers - 1 else elu(z))
+    ref_dw, ref_db = [None] * layers, [None] * layers
+    dz = d_out
+    for i in reversed(range(layers)):
+        ref_dw[i] = acts[i].T @ dz
+        ref_db[i] = dz.sum(axis=0)
+        if i > 0:
+            dz = (dz @ ws[i].T) * np.where(acts[i] > 0.0, 1.0, acts[i] + 1.0)
+    return acts, ref_dw, ref_db
+
+
 def check_weight_grad(v: Verdict, rng):
     for m, k, n, splits in [(200, 70, 45, 1), (200, 70, 45, 3), (333, 130, 1, 4), (40, 9, 28, 7), (1000, 64, 64, 5)]:
         x = rng.standard_normal((m, k))
@@ -84,17 +102,7 @@ def check_mlp(v: Verdict, rng):
     d_out = rng.standard_normal((m, sizes[-1])) / m
 
     # float64 reference
-    acts = [x]
-    for i in range(layers):
-        z = acts[-1] @ ws[i] + bs[i]
-        acts.append(z if i == layers - 1 else elu(z))
-    ref_dw, ref_db = [None] * layers, [None] * layers
-    dz = d_out
-    for i in reversed(range(layers)):
-        ref_dw[i] = acts[i].T @ dz
-        ref_db[i] = dz.sum(axis=0)
-        if i > 0:
-            dz = (dz @ ws[i].T) * np.where(acts[i] > 0.0, 1.0, acts[i] + 1.0)
+    acts, ref_dw, ref_db = reference_backprop(x, ws, bs, d_out)
 
     # kernels
     xd = array(x)
@@ -134,17 +142,7 @@ def check_mlp_cublas_path(v: Verdict, rng):
     x = f32(rng.standard_normal((m, sizes[0])))
     d_out = f32(rng.standard_normal((m, sizes[-1])) / m)
 
-    acts = [x]
-    for i in range(layers):
-        z = acts[-1] @ ws[i] + bs[i]
-        acts.append(z if i == layers - 1 else elu(z))
-    ref_dw, ref_db = [None] * layers, [None] * layers
-    dz = d_out
-    for i in reversed(range(layers)):
-        ref_dw[i] = acts[i].T @ dz
-        ref_db[i] = dz.sum(axis=0)
-        if i > 0:
-            dz = (dz @ ws[i].T) * np.where(acts[i] > 0.0, 1.0, acts[i] + 1.0)
+    acts, ref_dw, ref_db = reference_backprop(x, ws, bs, d_out)
 
     def gemm(a, b):
         return a.astype(np.float32) @ b.astype(np.float32)

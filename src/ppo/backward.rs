@@ -79,6 +79,46 @@ impl WeightGradSplit {
     }
 }
 
+/// `[M, K, N]` of `dw += x^T dz`, `db += sum_rows dz` (x `[M, K]`, dz `[M, N]`, dw `[K, N]`,
+/// db `[N]`), or an error naming the shapes that do not fit.
+pub(crate) fn weight_gradient_shape(
+    x: &DeviceArray2<f32>,
+    dz: &DeviceArray2<f32>,
+    dw: &DeviceArray2<f32>,
+    db: &DeviceArray<f32>,
+) -> Result<[usize; 3], PpoError> {
+    let ([m, k], [m2, n]) = (x.shape(), dz.shape());
+    if m != m2 || dw.shape() != [k, n] || db.shape() != [n] {
+        return Err(PpoError::Shape(format!(
+            "weight gradient of x {:?}, dz {:?} into dw {:?}, db {:?}: expected x [M, K], dz [M, N], dw [K, N], db [N]",
+            x.shape(),
+            dz.shape(),
+            dw.shape(),
+            db.shape()
+        )));
+    }
+    Ok([m, k, n])
+}
+
+/// `[M, K, N]` of `y_prev <- (dz @ w^T) * elu'(y_prev)` (dz `[M, N]`, w `[K, N]`, y_prev
+/// `[M, K]`), or an error naming the shapes that do not fit.
+pub(crate) fn input_gradient_shape(
+    dz: &DeviceArray2<f32>,
+    w: &DeviceArray2<f32>,
+    y_prev: &DeviceArray2<f32>,
+) -> Result<[usize; 3], PpoError> {
+    let ([m, n], [k, n2], [m2, k2]) = (dz.shape(), w.shape(), y_prev.shape());
+    if n != n2 || m != m2 || k != k2 {
+        return Err(PpoError::Shape(format!(
+            "input gradient of dz {:?}, w {:?} into y_prev {:?}: expected dz [M, N], w [K, N], y_prev [M, K]",
+            dz.shape(),
+            w.shape(),
+            y_prev.shape()
+        )));
+    }
+    Ok([m, k, n])
+}
+
 /// Queues `dw += x^T dz`, `db += sum_rows dz` with the reduction over rows split for
 /// `target_blocks` blocks.
 pub fn record_linear_backward_weight(
@@ -90,16 +130,7 @@ pub fn record_linear_backward_weight(
     db: &DeviceArray<f32>,
     target_blocks: usize,
 ) -> Result<(), PpoError> {
-    let ([m, k], [m2, n]) = (x.shape(), dz.shape());
-    if m != m2 || dw.shape() != [k, n] || db.shape() != [n] {
-        return Err(PpoError::Shape(format!(
-            "weight gradient of x {:?}, dz {:?} into dw {:?}, db {:?}: expected x [M, K], dz [M, N], dw [K, N], db [N]",
-            x.shape(),
-            dz.shape(),
-            dw.shape(),
-            db.shape()
-        )));
-    }
+    let [m, k, n] = weight_gradient_shape(x, dz, dw, db)?;
     let split = WeightGradSplit::plan(m, k, n, target_blocks);
     kernels.linear_backward_weight(
         stream,
@@ -122,15 +153,7 @@ pub fn record_linear_backward_input_elu(
     w: &DeviceArray2<f32>,
     y_prev: &DeviceArray2<f32>,
 ) -> Result<(), PpoError> {
-    let ([m, n], [k, n2], [m2, k2]) = (dz.shape(), w.shape(), y_prev.shape());
-    if n != n2 || m != m2 || k != k2 {
-        return Err(PpoError::Shape(format!(
-            "input gradient of dz {:?}, w {:?} into y_prev {:?}: expected dz [M, N], w [K, N], y_prev [M, K]",
-            dz.shape(),
-            w.shape(),
-            y_prev.shape()
-        )));
-    }
+    let [m, k, _] = input_gradient_shape(dz, w, y_prev)?;
     let blocks = m.div_ceil(TILE) * k.div_ceil(TILE);
     kernels.linear_backward_input_elu(stream, [blocks, TILE_THREADS], dz, w, y_prev)?;
     Ok(())

@@ -19,7 +19,10 @@ use crate::env::{DeviceArray, DeviceArray2, EnvError, EnvKernels};
 use crate::train::GemmSetting;
 
 use super::PpoError;
-use super::backward::{record_linear_backward_input_elu, record_linear_backward_weight};
+use super::backward::{
+    input_gradient_shape, record_linear_backward_input_elu, record_linear_backward_weight,
+    weight_gradient_shape,
+};
 use super::policy::{PolicyError, TILE, TILE_THREADS};
 use super::reduce::record_column_sums;
 
@@ -187,16 +190,7 @@ impl PolicyGemm {
         db: &DeviceArray<f32>,
         target_blocks: usize,
     ) -> Result<(), PpoError> {
-        let ([m, k], [m2, n]) = (x.shape(), dz.shape());
-        if m != m2 || dw.shape() != [k, n] || db.shape() != [n] {
-            return Err(PpoError::Shape(format!(
-                "weight gradient of x {:?}, dz {:?} into dw {:?}, db {:?}: expected x [M, K], dz [M, N], dw [K, N], db [N]",
-                x.shape(),
-                dz.shape(),
-                dw.shape(),
-                db.shape()
-            )));
-        }
+        weight_gradient_shape(x, dz, dw, db)?;
         if self.path == GemmPath::WarpTiles {
             return record_linear_backward_weight(kernels, stream, x, dz, dw, db, target_blocks);
         }
@@ -218,15 +212,7 @@ impl PolicyGemm {
         y_prev: &DeviceArray2<f32>,
         scratch: Option<&DeviceArray<f32>>,
     ) -> Result<(), PpoError> {
-        let ([m, n], [k, n2], [m2, k2]) = (dz.shape(), w.shape(), y_prev.shape());
-        if n != n2 || m != m2 || k != k2 {
-            return Err(PpoError::Shape(format!(
-                "input gradient of dz {:?}, w {:?} into y_prev {:?}: expected dz [M, N], w [K, N], y_prev [M, K]",
-                dz.shape(),
-                w.shape(),
-                y_prev.shape()
-            )));
-        }
+        let [m, k, _] = input_gradient_shape(dz, w, y_prev)?;
         if self.path == GemmPath::WarpTiles {
             return record_linear_backward_input_elu(kernels, stream, dz, w, y_prev);
         }

@@ -416,3 +416,39 @@ impl HostPolicy {
         (actor, critic)
     }
 }
+
+/// Fills `storage` the way a rollout does: the policy acts on each of the first `t` rows of
+/// `observations` (`[T(+1), N, D]`), then the GPU synchronizes.
+pub fn act_over_rows(
+    policy: &instantmimic::ppo::GaussianPolicy,
+    kernels: &instantmimic::env::EnvKernels,
+    gpu: &instantmimic::cuda::Gpu,
+    observations: &instantmimic::env::DeviceArray3<f32>,
+    storage: &instantmimic::ppo::ActStorage<'_>,
+    t: usize,
+) {
+    use instantmimic::env::DeviceArray;
+    let (n, d, a) = (
+        policy.batch(),
+        policy.observation_size(),
+        policy.action_size(),
+    );
+    let current = DeviceArray::zeros(gpu, [n, a]).unwrap();
+    let iteration = DeviceArray::zeros(gpu, [1]).unwrap();
+    for step in 0..t {
+        let obs = observations.view(step * n * d, [n, d]).unwrap();
+        policy
+            .record_act(
+                kernels,
+                gpu.stream(),
+                &obs,
+                &current,
+                storage,
+                &iteration,
+                step,
+                false,
+            )
+            .expect("policy act");
+    }
+    gpu.synchronize().expect("rollout");
+}
