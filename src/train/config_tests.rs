@@ -1,0 +1,187 @@
+//! Unit tests of src/train/config.rs: defaults, the committed files, and every validation
+//! message naming its key.
+
+use super::*;
+
+#[test]
+fn defaults_are_the_paper_baseline_and_valid() {
+    let c = TrainConfig::from_toml("motion = \"backflip\"", "t").unwrap();
+    assert_eq!((c.env.num_envs, c.ppo.horizon, c.ppo.epochs), (4096, 32, 5));
+    assert_eq!(
+        (c.ppo.gamma, c.ppo.lambda, c.ppo.learning_rate),
+        (0.99, 0.95, 5e-4)
+    );
+    assert_eq!(
+        (c.ppo.kl_threshold, c.ppo.clip, c.ppo.value_coef),
+        (0.008, 0.2, 2.0)
+    );
+    assert_eq!(c.policy.init_log_std, -2.0);
+    assert!(c.ppo.clip_value_loss && c.ppo.adaptive_learning_rate);
+}
+
+#[test]
+fn errors_name_the_key() {
+    let err = |text: &str| {
+        TrainConfig::from_toml(text, "c.toml")
+            .unwrap_err()
+            .to_string()
+    };
+    let e = err("motion = \"walk\"\n[env]\nnum_env = 3");
+    assert!(e.contains("num_env"), "{e}");
+    let e = err("motion = \"walk\"\n[reward]\ncom_weight = -1.0");
+    assert!(e.contains("`reward.com_weight` = -1"), "{e}");
+    let e = err("motion = \"walk\"\n[ppo]\nminibatches = 3");
+    assert!(e.contains("ppo.minibatches") && e.contains("131072"), "{e}");
+    let e = err("motion = \"walk\"\n[policy]\nactor_hidden = []");
+    assert!(e.contains("policy.actor_hidden"), "{e}");
+    let e = err("motion = 3");
+    assert!(e.contains("c.toml") && e.contains("motion"), "{e}");
+}
+
+#[test]
+fn run_defaults_are_the_paper_protocol() {
+    let c = TrainConfig::from_toml("motion = \"walk\"", "t").unwrap();
+    assert_eq!((c.run.eval_interval, c.run.eval_envs), (5, 32));
+    assert_eq!(c.run.success_rate, 0.9);
+    assert_eq!(c.run.eval_steps, None);
+    assert_eq!(c.run.eval_start, EvalStart::Spread);
+    assert!(c.run.stop_on_success);
+}
+
+#[test]
+fn action_mode_is_residual_unless_the_config_says_absolute() {
+    assert_eq!(
+        TrainConfig::with_motion("walk").env.action_mode,
+        ActionMode::Residual
+    );
+    let absolute = TrainConfig::from_toml(
+        "motion = \"walk\"\n[env]\naction_mode = \"absolute\"",
+        "c.toml",
+    )
+    .unwrap();
+    assert_eq!(absolute.env.action_mode, ActionMode::Absolute);
+    let err = TrainConfig::from_toml(
+        "motion = \"walk\"\n[env]\naction_mode = \"relative\"",
+        "c.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("action_mode") && err.contains("residual"),
+        "{err}"
+    );
+}
+
+#[test]
+fn gemm_is_auto_unless_the_config_names_a_path() {
+    assert_eq!(TrainConfig::with_motion("w").policy.gemm, GemmSetting::Auto);
+    let parse = |v: &str| {
+        TrainConfig::from_toml(&format!("motion = \"w\"\n[policy]\ngemm = {v}"), "c.toml")
+    };
+    for (text, setting) in [
+        ("\"warp\"", GemmSetting::Warp),
+        ("\"cublas_tf32\"", GemmSetting::CublasTf32),
+    ] {
+        assert_eq!(parse(text).unwrap().policy.gemm, setting);
+    }
+    let err = parse("\"tf32\"").unwrap_err().to_string();
+    assert!(err.contains("gemm") && err.contains("cublas_tf32"), "{err}");
+}
+
+#[test]
+fn run_errors_name_the_key() {
+    let err = |run: &str| {
+        TrainConfig::from_toml(&format!("motion = \"walk\"\n[run]\n{run}"), "c.toml")
+            .unwrap_err()
+            .to_string()
+    };
+    for (text, key) in [
+        ("eval_interval = 0", "`run.eval_interval` = 0"),
+        ("eval_envs = 0", "`run.eval_envs` = 0"),
+        ("eval_steps = 0", "`run.eval_steps` = 0"),
+        ("success_rate = 1.5", "`run.success_rate` = 1.5"),
+        ("success_rate = 0.0", "`run.success_rate` = 0"),
+        ("time_budget_s = -1.0", "`run.time_budget_s` = -1"),
+        ("time_budget_s = inf", "`run.time_budget_s` = inf"),
+        ("time_budget_s = nan", "`run.time_budget_s` = NaN"),
+        ("max_iterations = 0", "`run.max_iterations` = 0"),
+        ("keep_checkpoints = 0", "`run.keep_checkpoints` = 0"),
+    ] {
+        let e = err(text);
+        assert!(e.starts_with("c.toml: ") && e.contains(key), "{text}: {e}");
+    }
+    let e = err("eval_every = 3");
+    assert!(e.contains("eval_every"), "{e}");
+    let e = err("eval_start = \"middle\"");
+    assert!(e.contains("eval_start") || e.contains("middle"), "{e}");
+}
+
+#[test]
+fn toml_round_trip_is_exact() {
+    let mut c = TrainConfig::with_motion("cartwheel");
+    c.seed = 7;
+    c.ppo.learning_rate = 6.25e-4;
+    c.run.eval_steps = Some(90);
+    c.run.eval_start = EvalStart::ClipStart;
+    c.run.time_budget_s = 12.5;
+    let text = c.to_toml().unwrap();
+    let back = TrainConfig::from_toml(&text, "round trip").unwrap();
+    assert_eq!(back, c, "{text}");
+    // The baseline has no eval_steps: the key is left out, not written as a sentinel.
+    let baseline = TrainConfig::with_motion("walk").to_toml().unwrap();
+    assert!(!baseline.contains("eval_steps"), "{baseline}");
+}
+
+#[test]
+fn committed_configs_are_the_tuned_baseline_with_their_run_settings() {
+    // The baseline with the paper's tuned backflip values (the committed files' header).
+    let mut tuned = TrainConfig::with_motion("x");
+    tuned.env.action_mode = ActionMode::Residual;
+    tuned.env.action_scale = 0.875;
+    tuned.env.termination_height = 0.6;
+    tuned.env.grace_steps = 3;
+    tuned.env.motion_noise_std = 0.01;
+    tuned.reward.pose_weight = 12.0;
+    tuned.reward.com_weight = 8.0;
+    tuned.reward.ee_rot_weight = 1.0;
+    tuned.obs.root_target = true;
+    tuned.policy.init_log_std = -1.5;
+    tuned.ppo.horizon = 8;
+    tuned.ppo.epochs = 3;
+    tuned.ppo.gamma = 0.98;
+    tuned.ppo.lambda = 0.99;
+    tuned.ppo.learning_rate = 6.25e-4;
+    tuned.ppo.kl_threshold = 0.12;
+    tuned.ppo.clip = 0.32;
+    tuned.ppo.entropy_coef = 2.5e-4;
+    tuned.ppo.value_coef = 4.0;
+    for (name, _) in COMMITTED_CONFIGS {
+        let (label, config) = TrainConfig::committed(name).unwrap();
+        let config = config.unwrap_or_else(|e| panic!("{label}: {e}"));
+        assert_eq!(config.motion, name);
+        assert_eq!(
+            (
+                &config.env,
+                &config.reward,
+                &config.obs,
+                &config.policy,
+                &config.ppo
+            ),
+            (
+                &tuned.env,
+                &tuned.reward,
+                &tuned.obs,
+                &tuned.policy,
+                &tuned.ppo
+            ),
+            "{name}"
+        );
+        let budget = match name {
+            "walk" | "run" => 30.0,
+            "backflip" => 120.0,
+            _ => 60.0,
+        };
+        assert_eq!(config.run.time_budget_s, budget, "{name}");
+    }
+    assert!(TrainConfig::committed("moonwalk").is_none());
+}
