@@ -86,10 +86,11 @@ fn every_committed_plan_loads_and_finds_its_modules() {
     }
 }
 
-/// A store decodes each plan once: after the first request the plan comes from memory (here
-/// its file is gone), and a clone of the store shares what was decoded.
+/// A store that keeps decoded plans decodes each plan once: after the first request the plan
+/// comes from memory (here its file is gone), and a clone of the store shares what was
+/// decoded. A plain store reads the file every time.
 #[test]
-fn a_store_decodes_each_plan_once_and_clones_share_it() {
+fn a_keeping_store_decodes_each_plan_once_and_clones_share_it() {
     let entry = PlanStore::new(None).manifest().unwrap().plans[0].clone();
     let dir = tempfile::tempdir().unwrap();
     let plans = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("ptx/plans");
@@ -97,13 +98,15 @@ fn a_store_decodes_each_plan_once_and_clones_share_it() {
     for file in ["manifest.json", entry.file.as_str()] {
         std::fs::copy(plans.join(file), dir.path().join("plans").join(file)).unwrap();
     }
-    let store = PlanStore::new(Some(dir.path()));
+    let plain = PlanStore::new(Some(dir.path()));
+    let store = PlanStore::new(Some(dir.path())).keeping_decoded();
     let first = store.plan(&entry.name, entry.nworld).unwrap();
+    assert_eq!(plain.plan(&entry.name, entry.nworld).unwrap(), first);
     std::fs::remove_file(dir.path().join("plans").join(&entry.file)).unwrap();
     let again = store.clone().plan(&entry.name, entry.nworld).unwrap();
     assert_eq!(first, again);
-    // A new store reads the directory again, and says the file is missing.
-    let err = PlanStore::new(Some(dir.path()))
+    // A plain store reads the directory again, and says the file is missing.
+    let err = plain
         .plan(&entry.name, entry.nworld)
         .unwrap_err()
         .to_string();

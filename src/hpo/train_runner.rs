@@ -40,7 +40,7 @@ impl TrainRunner {
         Ok(TrainRunner {
             gpu,
             spec,
-            store: PlanStore::new(None),
+            store: PlanStore::new(None).keeping_decoded(),
             motions: HashMap::new(),
         })
     }

@@ -51,14 +51,19 @@ pub enum PlanSource {
     Directory(PathBuf),
 }
 
-/// Embedded assets or a directory, with the plans it has decoded so far: an HPO runner trains
-/// trial after trial from one store, and each trial's simulations (training, evaluation,
-/// preflight) then share one decoding of each plan. Clones share the decoded plans.
+/// Embedded assets or a directory. A store made with [`PlanStore::keeping_decoded`] also keeps
+/// the plans it has decoded: an HPO runner trains trial after trial from one store, and its
+/// trials then share one decoding of each plan. A plain store keeps nothing, so a training run
+/// does not hold the plans' initial bytes (~70 MB per 4096-world plan) on the host once they
+/// are uploaded. Clones share what was kept.
 #[derive(Clone, Debug)]
 pub struct PlanStore {
     source: PlanSource,
-    decoded: Arc<Mutex<HashMap<(String, u32), Plan>>>,
+    decoded: Option<Arc<Mutex<DecodedPlans>>>,
 }
+
+/// Decoded plans by name and world count.
+type DecodedPlans = HashMap<(String, u32), Plan>;
 
 impl PlanStore {
     /// The embedded assets, or `dir` when given.
@@ -68,7 +73,15 @@ impl PlanStore {
                 Some(dir) => PlanSource::Directory(dir.to_path_buf()),
                 None => PlanSource::Embedded,
             },
-            decoded: Arc::default(),
+            decoded: None,
+        }
+    }
+
+    /// This store, keeping every plan it decodes from now on.
+    pub fn keeping_decoded(self) -> PlanStore {
+        PlanStore {
+            decoded: Some(Arc::default()),
+            ..self
         }
     }
 
@@ -109,16 +122,19 @@ impl PlanStore {
         })
     }
 
-    /// The plan `name` captured for `nworld` worlds, decoded on the first request and kept
-    /// (a directory's plan files are read once per store).
+    /// The plan `name` captured for `nworld` worlds (kept after the first request when the
+    /// store keeps decoded plans: a directory's plan file is then read once).
     pub fn plan(&self, name: &str, nworld: u32) -> Result<Plan, PlanError> {
+        let Some(decoded) = &self.decoded else {
+            return self.decode(name, nworld);
+        };
         let key = (name.to_string(), nworld);
         // A poisoned lock only means another thread panicked while inserting: decode again.
-        if let Some(plan) = self.decoded.lock().ok().and_then(|d| d.get(&key).cloned()) {
+        if let Some(plan) = decoded.lock().ok().and_then(|d| d.get(&key).cloned()) {
             return Ok(plan);
         }
         let plan = self.decode(name, nworld)?;
-        if let Ok(mut decoded) = self.decoded.lock() {
+        if let Ok(mut decoded) = decoded.lock() {
             decoded.insert(key, plan.clone());
         }
         Ok(plan)
