@@ -392,3 +392,46 @@ esac
         "{stderr}"
     );
 }
+
+/// `--stop-after` must be a positive number of seconds: anything else fails with one line
+/// before a run directory exists. With room to spare the search runs to its last cycle.
+#[test]
+fn stop_after_is_checked_before_the_search_starts() {
+    let tmp = tempfile::tempdir().unwrap();
+    for bad in ["0", "-5", "nan", "x"] {
+        let run = tmp.path().join(format!("run-{bad}"));
+        let output = Command::new(binary())
+            .args(["hpo", "--config"])
+            .arg(repo("configs/hpo/synthetic.toml"))
+            .arg("--out")
+            .arg(&run)
+            .arg(format!("--stop-after={bad}"))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(!output.status.success(), "--stop-after {bad} accepted");
+        assert!(stderr.contains("stop-after"), "{bad}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{bad}: {stderr}");
+        assert!(
+            !run.exists(),
+            "--stop-after {bad} created {}",
+            run.display()
+        );
+    }
+    let run = tmp.path().join("run");
+    let output = Command::new(binary())
+        .args(["hpo", "--config"])
+        .arg(repo("configs/hpo/synthetic.toml"))
+        .args(["--cycles", "2", "--stop-after", "3600", "--out"])
+        .arg(&run)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(!stdout.contains("Stopped by --stop-after"), "{stdout}");
+    assert_eq!(read(&run.join("history.jsonl")).lines().count(), 3);
+}
