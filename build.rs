@@ -1,5 +1,6 @@
 //! Build steps:
-//! - embeds every file under `ptx/` (module PTX, plans, manifests) into the binary
+//! - embeds every file under `ptx/` (module PTX, plans, manifests) into the binary, except the
+//!   deterministic physics variant in `ptx/deterministic/` (read from its directory)
 //!   (`src/assets.rs`);
 //! - generates the typed launchers of our own env kernels from `ptx/env/manifest.json`
 //!   (`$OUT_DIR/env_kernels.rs`, included by `src/env/kernels.rs`), after checking the manifest
@@ -31,6 +32,11 @@ fn collect(dir: &Path, root: &Path, out: &mut Vec<(String, PathBuf)>) {
     for entry in entries {
         let path = entry.path();
         if path.is_dir() {
+            // The deterministic physics variant is read from its directory (`--assets
+            // ptx/deterministic`), not embedded: most of its PTX duplicates ptx/mjwarp.
+            if dir == root && entry.file_name() == "deterministic" {
+                continue;
+            }
             collect(&path, root, out);
         } else if let Ok(rel) = path.strip_prefix(root) {
             let rel = rel.to_string_lossy().replace('\\', "/");

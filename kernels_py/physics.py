@@ -181,9 +181,19 @@ def make_model_data(config: dict, nworld: int):
     mujoco.mj_forward(mjm, mjd)
     m = mjw.put_model(mjm)
     m.opt.graph_conditional = config["graph_conditional"]
-    # Stable contact order, canonical constraint rows and order-invariant atomic sums: the same
-    # inputs give the same bits on every run, at some cost (measured in BENCHMARKS.md).
-    m.opt.deterministic = int(DeterminismType.ALL if config.get("deterministic", False) else DeterminismType.NONE)
+    # Stable contact order and canonical constraint rows (determinism.py fills MuJoCo Warp's
+    # empty hooks for both), and the solver's racing float sums in a fixed order
+    # (deterministic_solver.py). Not DeterminismType.ATOMICS: Warp cannot record its
+    # deterministic atomics into a plan.
+    if config.get("deterministic", False):
+        import determinism
+        import deterministic_solver
+
+        determinism.install()
+        deterministic_solver.install()
+        m.opt.deterministic = int(DeterminismType.CONTACTS | DeterminismType.CONSTRAINT)
+    else:
+        m.opt.deterministic = int(DeterminismType.NONE)
     d = mjw.put_data(mjm, mjd, nworld=nworld, nconmax=config["nconmax"], njmax=config["njmax"])
     return mjm, m, d
 

@@ -1,5 +1,6 @@
 //! The generated files under version control regenerate from `kernels_py/` byte for byte: the
-//! PTX of MuJoCo Warp's modules and of our own kernels (`compile.py --check`), the character
+//! PTX of MuJoCo Warp's modules and of our own kernels (`compile.py --check`, for the default
+//! physics and for the deterministic variant in `ptx/deterministic/`), the character
 //! facts (`export_character.py --check`) and the kinematics fixture
 //! (`golden_kinematics.py --check`). Runs when `INSTANTMIMIC_BUILD_PYTHON` names a Python with
 //! `kernels_py/requirements.txt` installed (tests/run.sh sets one up); otherwise it skips.
@@ -14,13 +15,24 @@ fn generated_files_regenerate_byte_for_byte() {
         return;
     };
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for script in [
-        "kernels_py/compile.py",
-        "kernels_py/export_character.py",
-        "kernels_py/golden_kinematics.py",
+    // The deterministic physics variant (ptx/deterministic/) has its own plans and PTX.
+    let deterministic: &[&str] = &[
+        "--only",
+        "mjwarp",
+        "--manifest",
+        "ptx/deterministic/plans/manifest.json",
+        "--out",
+        "ptx/deterministic",
+    ];
+    for (script, args) in [
+        ("kernels_py/compile.py", &[][..]),
+        ("kernels_py/compile.py", deterministic),
+        ("kernels_py/export_character.py", &[]),
+        ("kernels_py/golden_kinematics.py", &[]),
     ] {
         let out = Command::new(&python)
             .arg(root.join(script))
+            .args(args)
             .arg("--check")
             .current_dir(root)
             .output()
@@ -32,10 +44,10 @@ fn generated_files_regenerate_byte_for_byte() {
             .collect();
         assert!(
             out.status.success(),
-            "{script} --check failed:\n{}\n{}",
+            "{script} {args:?} --check failed:\n{}\n{}",
             String::from_utf8_lossy(&out.stdout),
             problems.join("\n")
         );
-        println!("{script} --check: ok");
+        println!("{script} {args:?} --check: ok");
     }
 }

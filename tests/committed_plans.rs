@@ -8,8 +8,27 @@ use instantmimic::plan::{DeviceType, OpKind, PlanStore, ptx_file_name, walk_ops}
 
 #[test]
 fn every_committed_plan_loads_and_finds_its_modules() {
-    let store = PlanStore::new(None);
-    let manifest = store.manifest().expect("the embedded plan manifest");
+    check_plans(&PlanStore::new(None));
+}
+
+/// The deterministic physics variant (configs/physics/deterministic.toml), shipped as a
+/// directory that `--assets` names.
+#[test]
+fn every_deterministic_plan_loads_and_finds_its_modules() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("ptx/deterministic");
+    let store = PlanStore::new(Some(&dir));
+    let manifest = store
+        .manifest()
+        .expect("ptx/deterministic/plans/manifest.json");
+    assert_eq!(
+        manifest.physics["config"]["deterministic"],
+        serde_json::json!(true)
+    );
+    check_plans(&store);
+}
+
+fn check_plans(store: &PlanStore) {
+    let manifest = store.manifest().expect("the plan manifest");
     assert!(!manifest.plans.is_empty());
     let mut sizes: BTreeMap<u32, BTreeMap<String, u64>> = BTreeMap::new();
     for entry in &manifest.plans {

@@ -24,22 +24,68 @@ const ARCHS: [(&str, i32); 5] = [
 /// Driver 580 (CUDA 13.0), the one on our benchmark machine.
 const MEASURED_DRIVER: i32 = 13000;
 
-fn shipped_ptx() -> Vec<PathBuf> {
+fn ptx_in(dir: &str) -> Vec<PathBuf> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut files = Vec::new();
-    for dir in ["ptx/mjwarp", "ptx/env", "src/cuda"] {
-        let Ok(entries) = std::fs::read_dir(root.join(dir)) else {
-            continue;
-        };
-        for entry in entries.flatten() {
-            let path = entry.path();
-            if path.extension().is_some_and(|e| e == "ptx") {
-                files.push(path);
-            }
-        }
-    }
+    let Ok(entries) = std::fs::read_dir(root.join(dir)) else {
+        return Vec::new();
+    };
+    let mut files: Vec<PathBuf> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "ptx"))
+        .collect();
     files.sort();
     files
+}
+
+/// Every PTX file the repository ships, each module once: the deterministic physics variant
+/// (ptx/deterministic/mjwarp) shares most modules with ptx/mjwarp, under the same names (a
+/// module's name carries its content hash; `shared_modules_are_identical` checks the bytes).
+fn shipped_ptx() -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = ["ptx/mjwarp", "ptx/env", "src/cuda"]
+        .iter()
+        .flat_map(|dir| ptx_in(dir))
+        .collect();
+    let names: std::collections::HashSet<_> = files
+        .iter()
+        .filter_map(|p| p.file_name().map(|n| n.to_owned()))
+        .collect();
+    files.extend(
+        ptx_in("ptx/deterministic/mjwarp")
+            .into_iter()
+            .filter(|p| p.file_name().is_some_and(|n| !names.contains(n))),
+    );
+    files.sort();
+    files
+}
+
+#[test]
+fn shared_modules_are_identical() {
+    let variant = ptx_in("ptx/deterministic/mjwarp");
+    assert!(
+        variant.len() > 40,
+        "expected the deterministic variant's PTX, found {} files",
+        variant.len()
+    );
+    let mut shared = 0;
+    for file in variant {
+        let default = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("ptx/mjwarp")
+            .join(file.file_name().unwrap());
+        if default.is_file() {
+            shared += 1;
+            assert!(
+                std::fs::read(&default).unwrap() == std::fs::read(&file).unwrap(),
+                "{} and {} have the same module name but differ",
+                file.display(),
+                default.display()
+            );
+        }
+    }
+    assert!(
+        shared > 30,
+        "expected most modules shared with ptx/mjwarp, found {shared}"
+    );
 }
 
 #[test]
