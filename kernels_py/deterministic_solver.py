@@ -8,10 +8,12 @@ and the Hessian's J'DJ terms, both in full and incrementally). Measured on the H
 bit-identical; on any fewer, they are not. Warp cannot record those atomics into a plan, so the
 kernels below compute the same sums in a fixed order instead, each addend owned by one thread:
 
-- qfrc_constraint: thread (world, dof) sums over the world's rows in row order;
+- qfrc_constraint: one warp per world takes the rows in row order, its lanes splitting each
+  row's nonzeros (distinct dofs) with a warp barrier between rows;
 - gradient: every thread writes its dof's gradient, thread 0 of the world sums the squares;
-- Hessian (full and incremental): lane k of a world owns the upper-triangle entries whose
-  index is k modulo the lane count, and adds the rows' terms to them in row order.
+- Hessian (full and incremental): one warp per world takes the rows (or Newton blocks) in row
+  order, its lanes splitting each row's entries (distinct Hessian entries) with a warp barrier
+  between rows, so every entry receives its terms in row order.
 
 `install()` swaps them in for MuJoCo Warp's kernel factories (same launch arguments). Pyramidal
 cones and sparse Jacobians only (the humanoid's physics); other settings raise.
@@ -28,9 +30,24 @@ from mujoco_warp._src import solver, types
 LANES = wp.constant(solver._JTDAJ_THREADS_PER_GROUP)
 
 
+@wp.func_native(snippet="""
+#if defined(__CUDA_ARCH__)
+__syncwarp();
+#endif
+""")
+def _sync_lanes():
+    """The LANES lanes of a world are one warp (the launch's last dimension): each sees the
+    others' writes from before the barrier. On the CPU threads run one after another."""
+    pass
+
+
 @functools.cache
 def qfrc_constraint_sparse(compact: bool, nv: int = 0, deterministic: bool = False):
-    """Replaces solver._update_constraint_init_qfrc_constraint_sparse (launched (nworld, njmax))."""
+    """Replaces solver._update_constraint_init_qfrc_constraint_sparse (launched (nworld, njmax)).
+
+    The launch's threads are regrouped into one warp per world (flat thread index / LANES; njmax
+    >= LANES gives enough, physics.py checks it): the rows one after another, the lanes
+    splitting a row's nonzeros (distinct dofs), a warp barrier between rows."""
     COMPACT = compact
 
     @wp.kernel(module="unique", enable_backward=False, grid_stride=True)
@@ -46,26 +63,30 @@ def qfrc_constraint_sparse(compact: bool, nv: int = 0, deterministic: bool = Fal
         ctx_done_in: wp.array(dtype=bool),
         qfrc_constraint_out: wp.array2d(dtype=float),
     ):
-        worldid, dofid = wp.tid()
-        if dofid >= qfrc_constraint_out.shape[1]:
+        launch_world, launch_row = wp.tid()
+        njmax = efc_J_rownnz_in.shape[1]
+        flat = launch_world * njmax + launch_row
+        worldid = flat / LANES
+        lane = flat - worldid * LANES
+        if worldid >= nefc_in.shape[0]:
             return
         if ctx_done_in[worldid]:
             return
         if state_changed_count_in[worldid] == 0:
             return
-        total = float(0.0)
-        nefc = wp.min(nefc_in[worldid], efc_J_rownnz_in.shape[1])
+        nefc = wp.min(nefc_in[worldid], njmax)
         for efcid in range(nefc):
             force = efc_force_in[worldid, efcid]
             if force != 0.0:
                 rowadr = efc_J_rowadr_in[worldid, efcid]
-                for i in range(efc_J_rownnz_in[worldid, efcid]):
+                for i in range(lane, efc_J_rownnz_in[worldid, efcid], LANES):
                     colind = efc_J_colind_in[worldid, 0, rowadr + i]
                     if wp.static(COMPACT):
                         colind = dof_cdof_in[worldid, colind]
-                    if colind == dofid:
-                        total += efc_J_in[worldid, 0, rowadr + i] * force
-        qfrc_constraint_out[worldid, dofid] = qfrc_constraint_out[worldid, dofid] + total
+                    if colind >= 0:
+                        value = efc_J_in[worldid, 0, rowadr + i] * force
+                        qfrc_constraint_out[worldid, colind] = qfrc_constraint_out[worldid, colind] + value
+            _sync_lanes()
 
     return kernel
 
@@ -104,12 +125,6 @@ def gradient(stable_fast: bool, deterministic: bool = False):
     return kernel
 
 
-@wp.func
-def _owner(row: int, col: int, nh: int) -> int:
-    """The lane that owns upper-triangle entry (min, max) of an nh x nh Hessian."""
-    return (wp.min(row, col) * nh + wp.max(row, col)) % LANES
-
-
 @functools.cache
 def hessian_incremental_sparse(compact: bool, max_records: int = 0, deterministic: bool = False):
     """Replaces solver._update_gradient_h_incremental_sparse (launched (nworld, slots, LANES))."""
@@ -130,9 +145,11 @@ def hessian_incremental_sparse(compact: bool, max_records: int = 0, deterministi
         ctx_h_out: wp.array3d(dtype=float),
     ):
         worldid, slot, lane = wp.tid()
+        # One warp per world (slot 0) takes the changed rows one after another, its lanes
+        # splitting a row's entries as MuJoCo Warp's kernel does; a row's entries are distinct
+        # Hessian entries, so no two lanes write one entry between barriers.
         if slot != 0:
             return
-        nh = ctx_h_out.shape[1]
         n_changes = quad_changed_count_in[worldid]
         # The changed rows arrive in atomic order: take them in increasing row id instead.
         last = int(-1)
@@ -149,21 +166,24 @@ def hessian_incremental_sparse(compact: bool, max_records: int = 0, deterministi
                 sign = D
             rownnz = efc_J_rownnz_in[worldid, efcid]
             rowadr = efc_J_rowadr_in[worldid, efcid]
-            for ii in range(rownnz):
-                for jj in range(ii + 1):
+            n_entries = rownnz * (rownnz + 1) // 2
+            for entry in range(lane, n_entries, LANES):
+                ii = int((wp.sqrt(float(8 * entry + 1)) - 1.0) * 0.5)
+                jj = entry - ii * (ii + 1) // 2
+                h = sign * efc_J_in[worldid, 0, rowadr + ii] * efc_J_in[worldid, 0, rowadr + jj]
+                if h != 0.0:
                     colindi = efc_J_colind_in[worldid, 0, rowadr + ii]
                     colindj = efc_J_colind_in[worldid, 0, rowadr + jj]
+                    skip = False
                     if wp.static(COMPACT):
                         colindi = dof_cdof_in[worldid, colindi]
                         colindj = dof_cdof_in[worldid, colindj]
-                        if colindi < 0 or colindj < 0:
-                            continue
-                    if _owner(colindi, colindj, nh) == lane:
-                        h = sign * efc_J_in[worldid, 0, rowadr + ii] * efc_J_in[worldid, 0, rowadr + jj]
-                        if h != 0.0:
-                            r = wp.min(colindi, colindj)
-                            c = wp.max(colindi, colindj)
-                            ctx_h_out[worldid, r, c] = ctx_h_out[worldid, r, c] + h
+                        skip = colindi < 0 or colindj < 0
+                    if not skip:
+                        r = wp.min(colindi, colindj)
+                        c = wp.max(colindi, colindj)
+                        ctx_h_out[worldid, r, c] = ctx_h_out[worldid, r, c] + h
+            _sync_lanes()
 
     return kernel
 
@@ -182,6 +202,8 @@ def hessian_sparse(
         raise NotImplementedError(
             "deterministic physics supports pyramidal cones only (set cone = \"pyramidal\" or deterministic = false)"
         )
+    if block_dim % LANES != 0:
+        raise NotImplementedError(f"the Hessian kernel needs whole warps per block, got block_dim {block_dim}")
     COMPACT = compact
 
     @wp.kernel(module="unique", enable_backward=False, grid_stride=True, module_options={"block_dim": block_dim})
@@ -206,39 +228,41 @@ def hessian_sparse(
         h_out: wp.array3d(dtype=float),
     ):
         worldid, slot, lane = wp.tid()
+        # As hessian_incremental_sparse: one warp per world, blocks one after another (they
+        # are in row order: determinism.sort_constraints lists them so).
         if slot != 0:
             return
         if ctx_done_in[worldid]:
             return
-        nh = h_out.shape[1]
-        # Blocks are in row order (determinism.sort_constraints lists them so).
         for groupid in range(efc_jtdaj_nblock_in[worldid]):
             head_row = efc_jtdaj_adr_in[worldid, groupid]
             block_rows = efc_jtdaj_nrow_in[worldid, groupid]
             head_adr = efc_J_rowadr_in[worldid, head_row]
             support = efc_J_rownnz_in[worldid, head_row]
-            for block_col in range(support):
-                for block_row in range(block_col + 1):
-                    dof_row = efc_J_colind_in[worldid, 0, head_adr + block_row]
-                    dof_col = efc_J_colind_in[worldid, 0, head_adr + block_col]
-                    if wp.static(COMPACT):
-                        dof_row = dof_cdof_in[worldid, dof_row]
-                        dof_col = dof_cdof_in[worldid, dof_col]
-                        if dof_row < 0 or dof_col < 0:
-                            continue
-                    if _owner(dof_row, dof_col, nh) == lane:
-                        hval = float(0.0)
-                        for member in range(block_rows):
-                            member_row = head_row + member
-                            if efc_state_in[worldid, member_row] == types.ConstraintState.QUADRATIC.value:
-                                member_adr = efc_J_rowadr_in[worldid, member_row]
-                                j_row = efc_J_in[worldid, 0, member_adr + block_row]
-                                j_col = efc_J_in[worldid, 0, member_adr + block_col]
-                                hval += j_row * efc_D_in[worldid, member_row] * j_col
-                        if hval != 0.0:
-                            r = wp.min(dof_row, dof_col)
-                            c = wp.max(dof_row, dof_col)
-                            h_out[worldid, r, c] = h_out[worldid, r, c] + hval
+            n_entries = support * (support + 1) // 2
+            for entry in range(lane, n_entries, LANES):
+                block_col = int((wp.sqrt(float(8 * entry + 1)) - 1.0) * 0.5)
+                block_row = entry - block_col * (block_col + 1) // 2
+                dof_row = efc_J_colind_in[worldid, 0, head_adr + block_row]
+                dof_col = efc_J_colind_in[worldid, 0, head_adr + block_col]
+                hval = float(0.0)
+                for member in range(block_rows):
+                    member_row = head_row + member
+                    if efc_state_in[worldid, member_row] == types.ConstraintState.QUADRATIC.value:
+                        member_adr = efc_J_rowadr_in[worldid, member_row]
+                        j_row = efc_J_in[worldid, 0, member_adr + block_row]
+                        j_col = efc_J_in[worldid, 0, member_adr + block_col]
+                        hval += j_row * efc_D_in[worldid, member_row] * j_col
+                skip = hval == 0.0
+                if wp.static(COMPACT):
+                    dof_row = dof_cdof_in[worldid, dof_row]
+                    dof_col = dof_cdof_in[worldid, dof_col]
+                    skip = skip or dof_row < 0 or dof_col < 0
+                if not skip:
+                    r = wp.min(dof_row, dof_col)
+                    c = wp.max(dof_row, dof_col)
+                    h_out[worldid, r, c] = h_out[worldid, r, c] + hval
+            _sync_lanes()
 
     return kernel
 

@@ -74,6 +74,10 @@ def load_physics_config(path: str | pathlib.Path) -> dict:
     for key in ("iterations", "ls_iterations", "nconmax", "njmax"):
         if raw[key] <= 0:
             raise ConfigError(f"{path}: `{key}` must be positive, got {raw[key]}")
+    if raw["deterministic"] and raw["njmax"] < 32:
+        # deterministic_solver.qfrc_constraint_sparse regroups its (nworld, njmax) launch into
+        # one 32-lane warp per world.
+        raise ConfigError(f"{path}: `njmax` must be at least 32 with `deterministic = true`, got {raw['njmax']}")
     if not 0.0 < raw["timestep"] <= 0.05:
         raise ConfigError(f"{path}: `timestep` must be in (0, 0.05] s, got {raw['timestep']}")
     return raw

@@ -4,7 +4,7 @@
 # see ../shared/tools/stage-device-python.sh) and the staged binaries (tests/device/stage.sh):
 #   BIN=.device-bin tests/device/determinism.sh [capture] [reference] [test] [timing] [train]
 #     capture    capture the variant's plans and PTX again ($WORK/det; what ptx/deterministic
-#                should hold is copied to $OUT/committed)
+#                should then hold is packed into $OUT/committed.tgz), and use them below
 #     reference  MuJoCo Warp's reference states with the variant, and its run-to-run spread
 #     test       gpu_physics: the Rust replay of ASSETS (default ptx/deterministic) against them
 #     timing     steps/s at 4096 worlds: Warp's own graph replay and Rust, then the default plans
@@ -28,7 +28,9 @@ for step in "${steps[@]}"; do
   case $step in
     capture)
       bash $S capture det $DET "32 4096" 2>&1 | tee "$OUT/capture.log" | tail -3
-      cp -r "$WORK/det/committed" "$OUT/committed" ;;
+      tar czf "$OUT/committed.tgz" -C "$WORK/det" committed
+      # Later steps of this call test and time the new capture.
+      ASSETS=$WORK/det/assets ;;
     reference)
       bash $S reference det $DET 2>&1 | tee "$OUT/reference.log" | grep "exact reference" ;;
     test)
