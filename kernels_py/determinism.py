@@ -273,6 +273,7 @@ def _efc_gather(
     njmax: int,
     nefc: wp.array(dtype=int),
     old_row: wp.array2d(dtype=int),
+    copy: int,
     type_in: wp.array2d(dtype=int),
     id_in: wp.array2d(dtype=int),
     rownnz_in: wp.array2d(dtype=int),
@@ -300,15 +301,21 @@ def _efc_gather(
     frictionloss_out: wp.array2d(dtype=float),
     Jqvel_out: wp.array2d(dtype=float),
 ):
-    """Row k of the canonical order from row old_row[k]; Jacobian rows packed in that order."""
+    """Row k of the canonical order from row old_row[k], Jacobian rows packed in that order; with
+    `copy` set, row k from row k (the packed rows back into d.efc)."""
     w, k = wp.tid()
     n = wp.min(nefc[w], njmax)
     if k >= n:
         return
-    src = old_row[w, k]
+    src = k
+    if copy == 0:
+        src = old_row[w, k]
     adr = int(0)
     for j in range(k):
-        adr += rownnz_in[w, old_row[w, j]]
+        if copy == 0:
+            adr += rownnz_in[w, old_row[w, j]]
+        else:
+            adr += rownnz_in[w, j]
     nnz = rownnz_in[w, src]
     src_adr = rowadr_in[w, src]
     for t in range(nnz):
@@ -325,70 +332,6 @@ def _efc_gather(
     aref_out[w, k] = aref_in[w, src]
     frictionloss_out[w, k] = frictionloss_in[w, src]
     Jqvel_out[w, k] = Jqvel_in[w, src]
-
-
-@wp.kernel(module="unique", enable_backward=False)
-def _efc_copy_back(
-    njmax: int,
-    nefc: wp.array(dtype=int),
-    rownnz: wp.array2d(dtype=int),
-    rowadr: wp.array2d(dtype=int),
-    colind_in: wp.array3d(dtype=int),
-    J_in: wp.array3d(dtype=float),
-    colind_out: wp.array3d(dtype=int),
-    J_out: wp.array3d(dtype=float),
-):
-    """The packed Jacobian rows back into d.efc (row fields are copied by _efc_copy_rows)."""
-    w, k = wp.tid()
-    if k >= wp.min(nefc[w], njmax):
-        return
-    adr = rowadr[w, k]
-    for t in range(rownnz[w, k]):
-        colind_out[w, 0, adr + t] = colind_in[w, 0, adr + t]
-        J_out[w, 0, adr + t] = J_in[w, 0, adr + t]
-
-
-@wp.kernel(module="unique", enable_backward=False)
-def _efc_copy_rows(
-    njmax: int,
-    nefc: wp.array(dtype=int),
-    type_in: wp.array2d(dtype=int),
-    id_in: wp.array2d(dtype=int),
-    rownnz_in: wp.array2d(dtype=int),
-    rowadr_in: wp.array2d(dtype=int),
-    pos_in: wp.array2d(dtype=float),
-    margin_in: wp.array2d(dtype=float),
-    D_in: wp.array2d(dtype=float),
-    vel_in: wp.array2d(dtype=float),
-    aref_in: wp.array2d(dtype=float),
-    frictionloss_in: wp.array2d(dtype=float),
-    Jqvel_in: wp.array2d(dtype=float),
-    type_out: wp.array2d(dtype=int),
-    id_out: wp.array2d(dtype=int),
-    rownnz_out: wp.array2d(dtype=int),
-    rowadr_out: wp.array2d(dtype=int),
-    pos_out: wp.array2d(dtype=float),
-    margin_out: wp.array2d(dtype=float),
-    D_out: wp.array2d(dtype=float),
-    vel_out: wp.array2d(dtype=float),
-    aref_out: wp.array2d(dtype=float),
-    frictionloss_out: wp.array2d(dtype=float),
-    Jqvel_out: wp.array2d(dtype=float),
-):
-    w, k = wp.tid()
-    if k >= wp.min(nefc[w], njmax):
-        return
-    type_out[w, k] = type_in[w, k]
-    id_out[w, k] = id_in[w, k]
-    rownnz_out[w, k] = rownnz_in[w, k]
-    rowadr_out[w, k] = rowadr_in[w, k]
-    pos_out[w, k] = pos_in[w, k]
-    margin_out[w, k] = margin_in[w, k]
-    D_out[w, k] = D_in[w, k]
-    vel_out[w, k] = vel_in[w, k]
-    aref_out[w, k] = aref_in[w, k]
-    frictionloss_out[w, k] = frictionloss_in[w, k]
-    Jqvel_out[w, k] = Jqvel_in[w, k]
 
 
 @wp.kernel(module="unique", enable_backward=False)
@@ -413,39 +356,30 @@ def _efc_renumber_blocks(
     njmax: int,
     nblock: wp.array(dtype=int),
     new_row: wp.array2d(dtype=int),
+    copy: int,
     adr_in: wp.array2d(dtype=int),
     nrow_in: wp.array2d(dtype=int),
     adr_out: wp.array2d(dtype=int),
     nrow_out: wp.array2d(dtype=int),
 ):
-    """JTDAJ blocks (first row, row count) renumbered and listed in row order."""
+    """JTDAJ blocks (first row, row count) renumbered and listed in row order; with `copy` set,
+    copied as they are (back into d.efc)."""
     w, b = wp.tid()
     n = wp.min(nblock[w], njmax)
     if b >= n:
         return
-    first = new_row[w, adr_in[w, b]]
+    first = adr_in[w, b]
+    if copy == 0:
+        first = new_row[w, first]
     rank = int(0)
     for other in range(n):
-        if new_row[w, adr_in[w, other]] < first:
+        first_other = adr_in[w, other]
+        if copy == 0:
+            first_other = new_row[w, first_other]
+        if first_other < first:
             rank += 1
     adr_out[w, rank] = first
     nrow_out[w, rank] = nrow_in[w, b]
-
-
-@wp.kernel(module="unique", enable_backward=False)
-def _efc_copy_blocks(
-    njmax: int,
-    nblock: wp.array(dtype=int),
-    adr_in: wp.array2d(dtype=int),
-    nrow_in: wp.array2d(dtype=int),
-    adr_out: wp.array2d(dtype=int),
-    nrow_out: wp.array2d(dtype=int),
-):
-    w, b = wp.tid()
-    if b >= wp.min(nblock[w], njmax):
-        return
-    adr_out[w, b] = adr_in[w, b]
-    nrow_out[w, b] = nrow_in[w, b]
 
 
 EFC_ROW_FIELDS = ("type", "id", "J_rownnz", "J_rowadr")
@@ -472,19 +406,16 @@ def sort_constraints(m, d):
     values_tmp = [wp.empty(shape, dtype=float) for _ in values]
     colind_tmp = wp.empty_like(e.J_colind)
     J_tmp = wp.empty_like(e.J)
-    wp.launch(
-        _efc_gather,
-        dim=shape,
-        inputs=[njmax, d.nefc, old_row, *rows, e.J_colind, e.J, *values],
-        outputs=[*rows_tmp, colind_tmp, J_tmp, *values_tmp],
-    )
-    wp.launch(_efc_copy_rows, dim=shape, inputs=[njmax, d.nefc, *rows_tmp, *values_tmp], outputs=[*rows, *values])
-    wp.launch(
-        _efc_copy_back,
-        dim=shape,
-        inputs=[njmax, d.nefc, e.J_rownnz, e.J_rowadr, colind_tmp, J_tmp],
-        outputs=[e.J_colind, e.J],
-    )
+    for copy, src, dst in (
+        (0, (rows, e.J_colind, e.J, values), (rows_tmp, colind_tmp, J_tmp, values_tmp)),
+        (1, (rows_tmp, colind_tmp, J_tmp, values_tmp), (rows, e.J_colind, e.J, values)),
+    ):
+        wp.launch(
+            _efc_gather,
+            dim=shape,
+            inputs=[njmax, d.nefc, old_row, copy, *src[0], src[1], src[2], *src[3]],
+            outputs=[*dst[0], dst[1], dst[2], *dst[3]],
+        )
     c = d.contact
     wp.launch(
         _efc_renumber_contacts,
@@ -495,18 +426,14 @@ def sort_constraints(m, d):
     if m.opt.solver == types.SolverType.NEWTON:  # its JTDAJ blocks name rows
         adr_tmp = wp.empty(shape, dtype=int)
         nrow_tmp = wp.empty(shape, dtype=int)
-        wp.launch(
-            _efc_renumber_blocks,
-            dim=shape,
-            inputs=[njmax, e.jtdaj_nblock, new_row, e.jtdaj_adr, e.jtdaj_nrow],
-            outputs=[adr_tmp, nrow_tmp],
-        )
-        wp.launch(
-            _efc_copy_blocks,
-            dim=shape,
-            inputs=[njmax, e.jtdaj_nblock, adr_tmp, nrow_tmp],
-            outputs=[e.jtdaj_adr, e.jtdaj_nrow],
-        )
+        for copy, src, dst in ((0, (e.jtdaj_adr, e.jtdaj_nrow), (adr_tmp, nrow_tmp)),
+                               (1, (adr_tmp, nrow_tmp), (e.jtdaj_adr, e.jtdaj_nrow))):
+            wp.launch(
+                _efc_renumber_blocks,
+                dim=shape,
+                inputs=[njmax, e.jtdaj_nblock, new_row, copy, *src],
+                outputs=list(dst),
+            )
 
 
 def install():
