@@ -8,6 +8,8 @@
    the variant's contacts are in canonical order, its constraint rows sorted by (type, id) with
    their Jacobian rows packed, and each contact's rows and the Newton blocks point back
    correctly.
+3. The same step with contacts and constraint rows shuffled before each sort (as GPU atomics
+   leave them) gives the same bits: the sorts undo any order.
 Prints one line per check; exits non-zero if any fails (tests/physics_determinism_cpu.rs).
 """
 
@@ -79,6 +81,66 @@ def step(deterministic: bool, nworld: int):
     return d
 
 
+def shuffle_contacts(d, rng):
+    """Contacts in a random order, as GPU atomics might leave them."""
+    n = int(d.nacon.numpy()[0])
+    perm = rng.permutation(n)
+    for name in determinism.CONTACT_FIELDS:
+        field = getattr(d.contact, name)
+        if field.shape[0] > 0:
+            values = field.numpy().copy()
+            values[:n] = values[perm]
+            field.assign(values)
+
+
+def shuffle_constraints(d, rng):
+    """Each world's constraint rows in a random order of their (type, id) groups, Jacobian rows
+    stored in yet another order, Newton blocks listed in random order, all references renumbered:
+    a state the GPU's atomics could leave."""
+    e, c = d.efc, d.contact
+    cols = {name: getattr(e, name).numpy().copy() for name in ("type", "id", "J_rownnz", "J_rowadr", "pos", "margin",
+                                                               "D", "vel", "aref", "frictionloss", "Jqvel")}
+    colind, J = e.J_colind.numpy().copy(), e.J.numpy().copy()
+    new_colind, new_J = colind.copy(), J.copy()
+    address = c.efc_address.numpy().copy()
+    worldid, nacon = c.worldid.numpy(), int(d.nacon.numpy()[0])
+    nblock, badr, bnrow = e.jtdaj_nblock.numpy(), e.jtdaj_adr.numpy().copy(), e.jtdaj_nrow.numpy().copy()
+    for w in range(d.nworld):
+        n = int(d.nefc.numpy()[w])
+        groups = []
+        for r in range(n):
+            if r and (cols["type"][w, r], cols["id"][w, r]) == (cols["type"][w, r - 1], cols["id"][w, r - 1]):
+                groups[-1].append(r)
+            else:
+                groups.append([r])
+        old = [r for g in rng.permutation(len(groups)) for r in groups[g]]
+        new = np.empty(n, int)
+        new[old] = np.arange(n)
+        for values in cols.values():
+            values[w, :n] = values[w, old]
+        # Jacobian rows stored in reverse row order.
+        adr = 0
+        for k in reversed(range(n)):
+            nnz, src = cols["J_rownnz"][w, k], cols["J_rowadr"][w, k]
+            new_colind[w, 0, adr:adr + nnz] = colind[w, 0, src:src + nnz]
+            new_J[w, 0, adr:adr + nnz] = J[w, 0, src:src + nnz]
+            cols["J_rowadr"][w, k] = adr
+            adr += nnz
+        for con in range(nacon):
+            if worldid[con] == w:
+                address[con] = [new[r] if 0 <= r < n else r for r in address[con]]
+        nb = int(nblock[w])
+        order = rng.permutation(nb)
+        badr[w, :nb], bnrow[w, :nb] = new[badr[w, :nb][order]], bnrow[w, :nb][order]
+    for name, values in cols.items():
+        getattr(e, name).assign(values)
+    e.J_colind.assign(new_colind)
+    e.J.assign(new_J)
+    c.efc_address.assign(address)
+    e.jtdaj_adr.assign(badr)
+    e.jtdaj_nrow.assign(bnrow)
+
+
 def humanoid_step():
     nworld = 8
     plain = step(False, nworld)
@@ -86,6 +148,35 @@ def humanoid_step():
     for name in ("qpos", "qvel", "qacc"):
         a, b = getattr(plain, name).numpy(), getattr(det, name).numpy()
         check(f"step: {name} as MuJoCo Warp's", bool((a == b).all()), f"max |diff| {np.abs(a - b).max():.3g}")
+    # The same step from contacts and rows in random orders: the sorts restore the canonical
+    # order, so the result must not change by a bit.
+    # (physics.make_model_data installs determinism.sort_contacts/sort_constraints as they are
+    # when it runs.)
+    rng = np.random.default_rng(11)
+    sorts = determinism.sort_contacts, determinism.sort_constraints
+    shuffles = []
+
+    def contacts(m, d):
+        shuffles.append("contacts")
+        shuffle_contacts(d, rng)
+        sorts[0](m, d)
+
+    def constraints(m, d):
+        shuffles.append("constraints")
+        shuffle_constraints(d, rng)
+        sorts[1](m, d)
+
+    determinism.sort_contacts, determinism.sort_constraints = contacts, constraints
+    try:
+        shuffled = step(True, nworld)
+    finally:
+        determinism.sort_contacts, determinism.sort_constraints = sorts
+    check("step from shuffled contacts and rows: both shuffles ran", shuffles == ["contacts", "constraints"],
+          str(shuffles))
+    for name in ("qpos", "qvel", "qacc"):
+        a, b = getattr(det, name).numpy(), getattr(shuffled, name).numpy()
+        check(f"step from shuffled contacts and rows: {name} unchanged", bool((a == b).all()),
+              f"max |diff| {np.abs(a - b).max():.3g}")
     n = int(det.nacon.numpy()[0])
     w, g, i = det.contact.worldid.numpy()[:n], det.contact.geom.numpy()[:n], det.contact.geomcollisionid.numpy()[:n]
     check("step: contacts in canonical order", bool((np.lexsort((i, g[:, 1], g[:, 0], w)) == np.arange(n)).all()), f"{n} contacts")
