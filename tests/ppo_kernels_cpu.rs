@@ -8,8 +8,9 @@
 //! - The constants the Rust side shares with the kernels (tile sizes, the loss-term and
 //!   statistics layouts) are read from the Python sources and compared (always runs).
 
+mod python_checks;
+
 use std::path::Path;
-use std::process::Command;
 
 use instantmimic::ppo::PpoStatistics;
 use instantmimic::ppo::{backward, loss, reduce};
@@ -24,33 +25,14 @@ const CHECKS: [&str; 5] = [
 
 #[test]
 fn ppo_kernels_match_float64_references_on_warps_cpu_device() {
-    let Some(python) = std::env::var_os("INSTANTMIMIC_BUILD_PYTHON") else {
-        println!("INSTANTMIMIC_BUILD_PYTHON is not set: skipping (tests/run.sh sets it)");
+    let Some(python) = python_checks::build_python() else {
         return;
     };
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut failed = Vec::new();
     for script in CHECKS {
-        let out = Command::new(&python)
-            .arg(root.join(script))
-            .current_dir(root)
-            .output()
-            .unwrap_or_else(|e| panic!("running {script}: {e}"));
-        let stdout = String::from_utf8_lossy(&out.stdout);
-        let summary = stdout.lines().last().unwrap_or("(no output)");
-        println!("{script}: {summary}");
-        if !out.status.success() {
-            let stderr = String::from_utf8_lossy(&out.stderr);
-            let problems: Vec<&str> = stdout
-                .lines()
-                .filter(|l| l.ends_with("FAIL"))
-                .chain(
-                    stderr
-                        .lines()
-                        .filter(|l| !l.starts_with("Module ") && !l.contains("CUDA driver")),
-                )
-                .collect();
-            failed.push(format!("{script}:\n{}", problems.join("\n")));
+        match python_checks::run(&python, script) {
+            Ok(summary) => println!("{script}: {summary}"),
+            Err(problems) => failed.push(problems),
         }
     }
     assert!(failed.is_empty(), "{}", failed.join("\n\n"));
