@@ -185,6 +185,13 @@ def make_model_data(config: dict, nworld: int):
     mujoco.mj_forward(mjm, mjd)
     m = mjw.put_model(mjm)
     m.opt.graph_conditional = config["graph_conditional"]
+    # MuJoCo Warp prints from its kernels when a world's solver or linesearch stops at its
+    # iteration limit: routine with a few Newton iterations, and its advice names Python settings
+    # a user of the binary does not have. The per-world flags in d.overflow are still set.
+    # Capacity overflows (contacts, constraint rows: physics silently dropped) keep their warning.
+    from mujoco_warp._src.types import OverflowType
+
+    m.opt.warn_overflow = int(OverflowType.ALL & ~(OverflowType.ITERATIONS | OverflowType.LS_ITERATIONS))
     # Stable contact order and canonical constraint rows (determinism.py fills MuJoCo Warp's
     # empty hooks for both), and the solver's racing float sums in a fixed order
     # (deterministic_solver.py). Not DeterminismType.ATOMICS: Warp cannot record its
