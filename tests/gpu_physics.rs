@@ -18,7 +18,7 @@
 use std::path::{Path, PathBuf};
 
 use instantmimic::cuda::Gpu;
-use instantmimic::plan::{PlanStore, ReplayOrder, Simulation};
+use instantmimic::plan::{PhysicsOverflow, PlanStore, ReplayOrder, Simulation};
 
 fn read_f32(path: &Path) -> Vec<f32> {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
@@ -176,6 +176,12 @@ fn stepping_leaves_model_arrays_unchanged() {
         "{} model arrays unchanged after 100 steps with contacts",
         names.len()
     );
+    // The capacities (nconmax, njmax) hold every contact and constraint row of these states;
+    // only the solver's iteration limits may show up in the flags.
+    let overflow = PhysicsOverflow::read(&sim).unwrap();
+    println!("overflow flags after 100 steps: {overflow:?}");
+    assert_eq!(overflow.worlds, r.nworld as usize);
+    assert_eq!((overflow.constraint_rows, overflow.contacts), (0, 0));
 }
 
 #[test]

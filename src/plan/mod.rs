@@ -17,6 +17,7 @@ pub mod format;
 pub mod launch_args;
 mod model;
 mod ops;
+mod overflow;
 mod pack;
 mod reader;
 pub mod replay;
@@ -42,6 +43,7 @@ pub use ops::{
     LaunchParam, MemcpyD2D, MemcpyH2D, Memset, Memtile, Op, RadixSort, Reduction, RegionRef,
     Relocation, RelocationTarget, RunlengthEncode, Scan, SegmentedSort, WhileOp, walk_ops,
 };
+pub use overflow::PhysicsOverflow;
 pub use pack::{
     MAX_DECOMPRESSED_SIZE, PACK_LEVEL, PACK_WINDOW_LOG, compress, decompress, load_plan,
     load_plan_with_limit, pack,

@@ -119,6 +119,18 @@ pub fn train_with(
             session.save_checkpoint(&checkpoint)?;
         }
         if let Some(reason) = next.stop {
+            // Iteration limits no longer print from the kernels (kernels_py/physics.py); the
+            // flags they set are summed here, once, outside the timed loop.
+            match trainer.physics_overflow() {
+                Ok(overflow) => {
+                    if let Some(line) = overflow.describe() {
+                        session.progress().note(&line);
+                    }
+                }
+                Err(e) => session.progress().note(&format!(
+                    "warning: could not read the physics' overflow flags: {e}"
+                )),
+            }
             return session.finish(reason);
         }
     }

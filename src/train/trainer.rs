@@ -21,6 +21,7 @@ use super::evaluation::EnvEvaluation;
 use super::metrics::UpdateStats;
 use super::preflight::tensor_names;
 use super::session::IterationStats;
+use crate::plan::PhysicsOverflow;
 
 /// Bytes of the rollout's totals (float64) at the start of the report, then the update's
 /// statistics (float32).
@@ -140,6 +141,13 @@ impl Trainer {
             .ok_or_else(|| TrainError::Setup("the evaluation rollout keeps no scores".to_owned()))?
             .download()?;
         Ok(scores.iter().map(env_evaluation).collect())
+    }
+
+    /// Overflow flags of the training worlds' physics since the plans were loaded (waits for
+    /// the GPU; read once, at the end of a run).
+    pub fn physics_overflow(&self) -> Result<PhysicsOverflow, TrainError> {
+        PhysicsOverflow::read(self.rollout.simulation())
+            .map_err(|e| TrainError::from(crate::env::RolloutError::from(e)))
     }
 
     /// What computes the policy's GEMMs (rollout, update and evaluation share it).
