@@ -27,11 +27,9 @@ use instantmimic::bench::bench_gemm;
 use instantmimic::cuda::{Blas, BlasMatrix, GemmMath, GemmOperand, Gpu};
 use instantmimic::env::{DeviceArray, DeviceArray2, EnvKernels};
 use instantmimic::ppo::reduce::record_clear;
-use instantmimic::ppo::{
-    ActStorage, GaussianPolicy, GemmPath, PolicyGemm, PpoBatch, PpoUpdate, mlp_layout,
-};
+use instantmimic::ppo::{GaussianPolicy, GemmPath, PolicyGemm, PpoUpdate, mlp_layout};
 use instantmimic::train::{GemmSetting, TrainConfig};
-use ppo_support::{mlp_backward, mlp_forward, normal, relative_error, to_f64};
+use ppo_support::{RolloutStorage, mlp_backward, mlp_forward, normal, relative_error, to_f64};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 
@@ -343,74 +341,6 @@ fn mlp_forward_and_backward_of_every_gemm_path_match_f64_under_capture() {
     }
 }
 
-/// Storage of a rollout of `t` steps sampled by `policy` (its forward and sampling).
-struct Batch {
-    observations: instantmimic::env::DeviceArray3<f32>,
-    actions: instantmimic::env::DeviceArray3<f32>,
-    log_probs: DeviceArray2<f32>,
-    values: DeviceArray2<f32>,
-    rewards: DeviceArray2<f32>,
-    terminated: DeviceArray2<i32>,
-    truncated: DeviceArray2<i32>,
-}
-
-impl Batch {
-    fn sampled(gpu: &Gpu, kernels: &EnvKernels, policy: &GaussianPolicy, t: usize) -> Batch {
-        let mut rng = StdRng::seed_from_u64(21);
-        let (n, d, a) = (
-            policy.batch(),
-            policy.observation_size(),
-            policy.action_size(),
-        );
-        let zeros2 = || DeviceArray::zeros(gpu, [t, n]).unwrap();
-        let batch = Batch {
-            observations: DeviceArray::from_slice(
-                gpu,
-                [t + 1, n, d],
-                &normal(&mut rng, (t + 1) * n * d, 0.0, 1.0),
-            )
-            .unwrap(),
-            actions: DeviceArray::zeros(gpu, [t, n, a]).unwrap(),
-            log_probs: zeros2(),
-            values: zeros2(),
-            rewards: DeviceArray::from_slice(gpu, [t, n], &normal(&mut rng, t * n, 0.5, 0.3))
-                .unwrap(),
-            terminated: DeviceArray::from_slice(
-                gpu,
-                [t, n],
-                &ppo_support::flags(&mut rng, t * n, 0.03),
-            )
-            .unwrap(),
-            truncated: DeviceArray::from_slice(
-                gpu,
-                [t, n],
-                &ppo_support::flags(&mut rng, t * n, 0.03),
-            )
-            .unwrap(),
-        };
-        let storage = ActStorage {
-            actions: &batch.actions,
-            log_probs: &batch.log_probs,
-            values: &batch.values,
-            values_in_update: false,
-        };
-        ppo_support::act_over_rows(policy, kernels, gpu, &batch.observations, &storage, t);
-        batch
-    }
-
-    fn ppo(&self) -> PpoBatch<'_> {
-        PpoBatch {
-            observations: &self.observations,
-            actions: &self.actions,
-            log_probs: &self.log_probs,
-            values: &self.values,
-            rewards: &self.rewards,
-            terminated: &self.terminated,
-            truncated: &self.truncated,
-        }
-    }
-}
-
 /// The rollout's forward (actor mean, critic value) and one captured PPO update step (1 epoch
 /// x 1 minibatch: its gradients are those of the sampled parameters) with `policy.gemm` =
 /// "cublas" and "cublas_tf32", against "warp": same seed, so the same initial parameters.
@@ -433,7 +363,13 @@ fn ppo_update_and_rollout_forward_with_cublas_match_warp_tiles() {
         GaussianPolicy::new(&gpu, &c.policy, d, a, n, 9)
     };
     let warp_policy = build(GemmSetting::Warp).expect("policy");
-    let batch = Batch::sampled(&gpu, &kernels, &warp_policy, t);
+    let batch = RolloutStorage::sampled(
+        &gpu,
+        &kernels,
+        &warp_policy,
+        t,
+        &mut StdRng::seed_from_u64(21),
+    );
     let step = |policy: &GaussianPolicy| {
         let obs = batch.observations.view(0, [n, d]).unwrap();
         policy
@@ -446,7 +382,7 @@ fn ppo_update_and_rollout_forward_with_cublas_match_warp_tiles() {
         let update = PpoUpdate::new(&gpu, kernels.clone(), policy, &config).expect("update");
         let graph = gpu
             .stream()
-            .capture(|s| update.record(s, &batch.ppo()))
+            .capture(|s| update.record(s, &batch.batch()))
             .expect("capture");
         graph.launch(gpu.stream()).expect("launch");
         gpu.synchronize().expect("update");

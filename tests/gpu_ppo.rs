@@ -21,7 +21,7 @@ use std::sync::Arc;
 
 use instantmimic::cuda::Gpu;
 use instantmimic::env::ScheduleParams;
-use instantmimic::env::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels, PpoLossParams};
+use instantmimic::env::{DeviceArray, DeviceArray2, EnvKernels, PpoLossParams};
 use instantmimic::ppo::adam::{AdamMoments, adam_params, record_schedule};
 use instantmimic::ppo::backward::{
     record_linear_backward_input_elu, record_linear_backward_weight,
@@ -31,7 +31,7 @@ use instantmimic::ppo::loss::{LOSS_TERMS, LossGradients};
 use instantmimic::ppo::reduce::{
     record_column_sums, record_sum_and_squares, record_sum_of_squares,
 };
-use instantmimic::ppo::{ActStorage, GaussianPolicy, LayerShape, PpoBatch, PpoUpdate};
+use instantmimic::ppo::{GaussianPolicy, LayerShape, PpoUpdate};
 use instantmimic::train::TrainConfig;
 use ppo_support::*;
 use rand::SeedableRng;
@@ -62,100 +62,12 @@ fn download2(a: &DeviceArray2<f32>) -> Vec<f64> {
     to_f64(&a.download().expect("download"))
 }
 
-/// A rollout's storage on the device.
-struct Rollout {
-    t: usize,
-    n: usize,
-    observations: DeviceArray3<f32>,
-    actions: DeviceArray3<f32>,
-    log_probs: DeviceArray2<f32>,
-    values: DeviceArray2<f32>,
-    rewards: DeviceArray2<f32>,
-    terminated: DeviceArray2<i32>,
-    truncated: DeviceArray2<i32>,
-}
-
-impl Rollout {
-    fn batch(&self) -> PpoBatch<'_> {
-        PpoBatch {
-            observations: &self.observations,
-            actions: &self.actions,
-            log_probs: &self.log_probs,
-            values: &self.values,
-            rewards: &self.rewards,
-            terminated: &self.terminated,
-            truncated: &self.truncated,
-        }
-    }
-
-    /// Random storage (observations, actions, log-probabilities and values unrelated).
-    fn random(gpu: &Gpu, rng: &mut StdRng, t: usize, n: usize, d: usize, a: usize) -> Rollout {
-        let arr2 = |v: &[f32]| DeviceArray::from_slice(gpu, [t, n], v).unwrap();
-        let flags = |rng: &mut StdRng| {
-            DeviceArray::from_slice(gpu, [t, n], &ppo_support::flags(rng, t * n, 0.1)).unwrap()
-        };
-        Rollout {
-            t,
-            n,
-            observations: DeviceArray::from_slice(
-                gpu,
-                [t + 1, n, d],
-                &normal(rng, (t + 1) * n * d, 0.0, 1.0),
-            )
-            .unwrap(),
-            actions: DeviceArray::from_slice(gpu, [t, n, a], &normal(rng, t * n * a, 0.0, 1.0))
-                .unwrap(),
-            log_probs: arr2(&normal(rng, t * n, -5.0, 1.0)),
-            values: arr2(&normal(rng, t * n, 5.0, 2.0)),
-            rewards: arr2(&normal(rng, t * n, 0.5, 0.2)),
-            terminated: flags(rng),
-            truncated: flags(rng),
-        }
-    }
-
-    /// Actions, log-probabilities and values sampled by `policy` from random observations (as
-    /// the rollout does), rewards for actions near 0.3, some failures and truncations.
-    fn sampled(
-        gpu: &Gpu,
-        kernels: &EnvKernels,
-        policy: &GaussianPolicy,
-        t: usize,
-        rng: &mut StdRng,
-    ) -> Rollout {
-        let (n, d, a) = (
-            policy.batch(),
-            policy.observation_size(),
-            policy.action_size(),
-        );
-        let mut r = Rollout::random(gpu, rng, t, n, d, a);
-        let storage = ActStorage {
-            actions: &r.actions,
-            log_probs: &r.log_probs,
-            values: &r.values,
-            values_in_update: false,
-        };
-        ppo_support::act_over_rows(policy, kernels, gpu, &r.observations, &storage, t);
-        let actions = r.actions.download().unwrap();
-        let rewards: Vec<f32> = actions
-            .chunks(a)
-            .map(|row| {
-                let e: f32 = row.iter().map(|x| (x - 0.3) * (x - 0.3)).sum::<f32>() / a as f32;
-                (-e).exp()
-            })
-            .collect();
-        r.rewards = DeviceArray::from_slice(gpu, [t, n], &rewards).unwrap();
-        r.terminated = DeviceArray::from_slice(gpu, [t, n], &flags(rng, t * n, 0.03)).unwrap();
-        r.truncated = DeviceArray::from_slice(gpu, [t, n], &flags(rng, t * n, 0.03)).unwrap();
-        r
-    }
-}
-
 #[test]
 fn gae_matches_the_float64_reference() {
     let (gpu, kernels) = gpu();
     let mut rng = StdRng::seed_from_u64(1);
     let (t, n) = (32, 1000);
-    let r = Rollout::random(&gpu, &mut rng, t, n, 3, 2);
+    let r = RolloutStorage::random(&gpu, &mut rng, t, n, 3, 2);
     let last = normal(&mut rng, n, 5.0, 2.0);
     let last_d = DeviceArray::from_slice(&gpu, [n, 1], &last).unwrap();
     let adv = Advantages::zeros(&gpu, t, n).unwrap();
@@ -448,7 +360,7 @@ fn small_setup(
     Arc<EnvKernels>,
     GaussianPolicy,
     PpoUpdate,
-    Rollout,
+    RolloutStorage,
     TrainConfig,
 ) {
     let (gpu, kernels) = gpu();
@@ -468,7 +380,7 @@ fn small_setup(
     config.validate("test").expect("valid config");
     let policy = GaussianPolicy::new(&gpu, &config.policy, d, a, n, seed).expect("policy");
     let mut rng = StdRng::seed_from_u64(seed);
-    let rollout = Rollout::sampled(&gpu, &kernels, &policy, t, &mut rng);
+    let rollout = RolloutStorage::sampled(&gpu, &kernels, &policy, t, &mut rng);
     let update = PpoUpdate::new(&gpu, kernels.clone(), &policy, &config).expect("update");
     (gpu, kernels, policy, update, rollout, config)
 }
@@ -477,7 +389,7 @@ fn small_setup(
 /// rows 0..T as `[B, D]`, targets with advantages from GAE (bootstrap values from `host`'s
 /// critic) normalized over the batch, the loss's hyperparameters, and the raw advantages.
 fn host_targets(
-    r: &Rollout,
+    r: &RolloutStorage,
     host: &HostPolicy,
     config: &TrainConfig,
 ) -> (Vec<f64>, LossTargets, LossConfig, Vec<f64>) {
@@ -686,7 +598,8 @@ fn baseline_update_replay_time() {
     config.validate("test").expect("the baseline");
     let (t, n) = (config.ppo.horizon as usize, config.env.num_envs as usize);
     let policy = GaussianPolicy::new(&gpu, &config.policy, 353, 28, n, 7).expect("policy");
-    let rollout = Rollout::sampled(&gpu, &kernels, &policy, t, &mut StdRng::seed_from_u64(7));
+    let rollout =
+        RolloutStorage::sampled(&gpu, &kernels, &policy, t, &mut StdRng::seed_from_u64(7));
     let update = PpoUpdate::new(&gpu, kernels, &policy, &config).expect("update");
     let graph = gpu
         .stream()

@@ -7,7 +7,9 @@
 // Index loops: the references read like the formulas they check.
 #![allow(clippy::needless_range_loop)]
 
-use instantmimic::ppo::LayerShape;
+use instantmimic::cuda::Gpu;
+use instantmimic::env::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
+use instantmimic::ppo::{ActStorage, GaussianPolicy, LayerShape};
 use rand::Rng;
 use rand::rngs::StdRng;
 use rand_distr::StandardNormal;
@@ -420,14 +422,13 @@ impl HostPolicy {
 /// Fills `storage` the way a rollout does: the policy acts on each of the first `t` rows of
 /// `observations` (`[T(+1), N, D]`), then the GPU synchronizes.
 pub fn act_over_rows(
-    policy: &instantmimic::ppo::GaussianPolicy,
-    kernels: &instantmimic::env::EnvKernels,
-    gpu: &instantmimic::cuda::Gpu,
-    observations: &instantmimic::env::DeviceArray3<f32>,
-    storage: &instantmimic::ppo::ActStorage<'_>,
+    policy: &GaussianPolicy,
+    kernels: &EnvKernels,
+    gpu: &Gpu,
+    observations: &DeviceArray3<f32>,
+    storage: &ActStorage<'_>,
     t: usize,
 ) {
-    use instantmimic::env::DeviceArray;
     let (n, d, a) = (
         policy.batch(),
         policy.observation_size(),
@@ -451,4 +452,99 @@ pub fn act_over_rows(
             .expect("policy act");
     }
     gpu.synchronize().expect("rollout");
+}
+
+/// A rollout's storage on the device, for the GPU tests of the update.
+pub struct RolloutStorage {
+    pub t: usize,
+    pub n: usize,
+    pub observations: DeviceArray3<f32>,
+    pub actions: DeviceArray3<f32>,
+    pub log_probs: DeviceArray2<f32>,
+    pub values: DeviceArray2<f32>,
+    pub rewards: DeviceArray2<f32>,
+    pub terminated: DeviceArray2<i32>,
+    pub truncated: DeviceArray2<i32>,
+}
+
+impl RolloutStorage {
+    pub fn batch(&self) -> instantmimic::ppo::PpoBatch<'_> {
+        instantmimic::ppo::PpoBatch {
+            observations: &self.observations,
+            actions: &self.actions,
+            log_probs: &self.log_probs,
+            values: &self.values,
+            rewards: &self.rewards,
+            terminated: &self.terminated,
+            truncated: &self.truncated,
+        }
+    }
+
+    /// Random storage (observations, actions, log-probabilities and values unrelated).
+    pub fn random(
+        gpu: &Gpu,
+        rng: &mut StdRng,
+        t: usize,
+        n: usize,
+        d: usize,
+        a: usize,
+    ) -> RolloutStorage {
+        let arr2 = |v: &[f32]| DeviceArray::from_slice(gpu, [t, n], v).unwrap();
+        let flags = |rng: &mut StdRng| {
+            DeviceArray::from_slice(gpu, [t, n], &flags(rng, t * n, 0.1)).unwrap()
+        };
+        RolloutStorage {
+            t,
+            n,
+            observations: DeviceArray::from_slice(
+                gpu,
+                [t + 1, n, d],
+                &normal(rng, (t + 1) * n * d, 0.0, 1.0),
+            )
+            .unwrap(),
+            actions: DeviceArray::from_slice(gpu, [t, n, a], &normal(rng, t * n * a, 0.0, 1.0))
+                .unwrap(),
+            log_probs: arr2(&normal(rng, t * n, -5.0, 1.0)),
+            values: arr2(&normal(rng, t * n, 5.0, 2.0)),
+            rewards: arr2(&normal(rng, t * n, 0.5, 0.2)),
+            terminated: flags(rng),
+            truncated: flags(rng),
+        }
+    }
+
+    /// Actions, log-probabilities and values sampled by `policy` from random observations (as
+    /// the rollout does), rewards for actions near 0.3, some failures and truncations.
+    pub fn sampled(
+        gpu: &Gpu,
+        kernels: &EnvKernels,
+        policy: &GaussianPolicy,
+        t: usize,
+        rng: &mut StdRng,
+    ) -> RolloutStorage {
+        let (n, d, a) = (
+            policy.batch(),
+            policy.observation_size(),
+            policy.action_size(),
+        );
+        let mut r = RolloutStorage::random(gpu, rng, t, n, d, a);
+        let storage = ActStorage {
+            actions: &r.actions,
+            log_probs: &r.log_probs,
+            values: &r.values,
+            values_in_update: false,
+        };
+        act_over_rows(policy, kernels, gpu, &r.observations, &storage, t);
+        let actions = r.actions.download().unwrap();
+        let rewards: Vec<f32> = actions
+            .chunks(a)
+            .map(|row| {
+                let e: f32 = row.iter().map(|x| (x - 0.3) * (x - 0.3)).sum::<f32>() / a as f32;
+                (-e).exp()
+            })
+            .collect();
+        r.rewards = DeviceArray::from_slice(gpu, [t, n], &rewards).unwrap();
+        r.terminated = DeviceArray::from_slice(gpu, [t, n], &flags(rng, t * n, 0.03)).unwrap();
+        r.truncated = DeviceArray::from_slice(gpu, [t, n], &flags(rng, t * n, 0.03)).unwrap();
+        r
+    }
 }
