@@ -190,10 +190,11 @@ impl PolicyGemm {
         db: &DeviceArray<f32>,
         target_blocks: usize,
     ) -> Result<(), PpoError> {
-        weight_gradient_shape(x, dz, dw, db)?;
         if self.path == GemmPath::WarpTiles {
+            // It checks the shapes itself.
             return record_linear_backward_weight(kernels, stream, x, dz, dw, db, target_blocks);
         }
+        weight_gradient_shape(x, dz, dw, db)?;
         let (blas, math) = self.blas()?;
         let (xm, dzm, dwm) = (x.blas_matrix()?, dz.blas_matrix()?, dw.blas_matrix()?);
         blas.gemm(stream, xm.transposed(), dzm.plain(), dwm, 1.0, math)?;
@@ -212,10 +213,11 @@ impl PolicyGemm {
         y_prev: &DeviceArray2<f32>,
         scratch: Option<&DeviceArray<f32>>,
     ) -> Result<(), PpoError> {
-        let [m, k, _] = input_gradient_shape(dz, w, y_prev)?;
         if self.path == GemmPath::WarpTiles {
+            // It checks the shapes itself.
             return record_linear_backward_input_elu(kernels, stream, dz, w, y_prev);
         }
+        let [m, k, _] = input_gradient_shape(dz, w, y_prev)?;
         let (blas, math) = self.blas()?;
         let scratch = scratch.ok_or_else(|| {
             PpoError::Shape("the cuBLAS input gradient needs a scratch buffer".to_owned())
