@@ -74,6 +74,9 @@ def load_physics_config(path: str | pathlib.Path) -> dict:
     for key in ("iterations", "ls_iterations", "nconmax", "njmax"):
         if raw[key] <= 0:
             raise ConfigError(f"{path}: `{key}` must be positive, got {raw[key]}")
+    if raw["deterministic"] and raw["cone"] != "pyramidal":
+        # deterministic_solver.py replaces the Hessian kernel of pyramidal cones only.
+        raise ConfigError(f"{path}: `cone` must be \"pyramidal\" with `deterministic = true`, got {raw['cone']!r}")
     if raw["deterministic"] and raw["njmax"] < 32:
         # deterministic_solver.qfrc_constraint_sparse regroups its (nworld, njmax) launch into
         # one 32-lane warp per world.

@@ -10,6 +10,7 @@
    correctly.
 3. The same step with contacts and constraint rows shuffled before each sort (as GPU atomics
    leave them) gives the same bits: the sorts undo any order.
+4. A deterministic physics config with an elliptic cone or njmax < 32 is refused at load.
 Prints one line per check; exits non-zero if any fails (tests/physics_determinism_cpu.rs).
 """
 
@@ -196,6 +197,24 @@ def humanoid_step():
     check("step: Newton blocks in row order", all((np.diff(badr[world, :nblock[world]]) > 0).all() for world in range(nworld)))
 
 
+def config_validation():
+    """The variant's limits are refused when the physics config is read, naming the key."""
+    import tempfile
+
+    text = (physics.REPO / "configs/physics/deterministic.toml").read_text()
+    for key, old, new in (("cone", 'cone = "pyramidal"', 'cone = "elliptic"'), ("njmax", "njmax = 200", "njmax = 16")):
+        assert old in text, old
+        with tempfile.NamedTemporaryFile("w", suffix=".toml", delete=False) as f:
+            f.write(text.replace(old, new))
+        try:
+            physics.load_physics_config(f.name)
+            message = "accepted"
+        except physics.ConfigError as e:
+            message = str(e)
+        check(f"config: deterministic with {new} refused", f"`{key}`" in message, message)
+
+
+config_validation()
 contact_sort()
 humanoid_step()
 print(f"{'FAILED: ' + ', '.join(failures) if failures else 'all determinism checks passed'}")
