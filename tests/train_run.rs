@@ -354,6 +354,7 @@ fn the_learning_curve_is_a_png_with_both_series() {
             mean_return: 1.0,
             mean_episode_length: 5.0 * i as f64,
             update: UpdateStats::default(),
+            termination: Default::default(),
             evaluation: (i % 5 == 0).then(|| evaluation(i, 30)),
         })
         .collect();

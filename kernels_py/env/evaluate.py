@@ -8,11 +8,15 @@ early termination; it reports average pose error, global MPJPE and end-effector 
 step's flags at row `t` and advanced `ref_time` to the time of the current state). Each env's first
 episode is scored: while its status is running, the step's errors are added to its sums; the first
 failure or truncation freezes it. The host reads the sums once, after the rollout.
+
+Failure here is the evaluation's own fixed yardstick (`Yardstick`, docs/train.md "Success"), not
+the training termination: the evaluation rollout runs `reward_termination` with its failures off,
+so that a change to the training termination cannot change what counts as success.
 """
 
 import warp as wp
 
-from env.reference import reference_locate, reference_position, reference_quat_wxyz
+from env.reference import reference_locate, reference_position, reference_quat_wxyz, reference_value
 from env.rotation import qdiff_angle
 
 wp.set_module_options({"enable_backward": False})
@@ -33,8 +37,19 @@ SUM_EE_ROT = wp.constant(3)
 SUM_REWARD = wp.constant(4)
 
 
+@wp.struct
+class Yardstick:
+    """Per-step failures of an evaluation episode (src/train/evaluation.rs: SUCCESS_*)."""
+
+    # A body farther than this from its reference (m).
+    max_body_distance: wp.float32
+    # The root more than this below the reference root (m).
+    max_root_drop: wp.float32
+
+
 @wp.kernel
 def evaluation_accumulate(
+    qpos: wp.array2d(dtype=wp.float32),
     xpos: wp.array3d(dtype=wp.float32),
     xquat: wp.array3d(dtype=wp.float32),
     table: wp.array(dtype=wp.float32),
@@ -44,6 +59,7 @@ def evaluation_accumulate(
     rewards: wp.array2d(dtype=wp.float32),
     terminated: wp.array2d(dtype=wp.int32),
     truncated: wp.array2d(dtype=wp.int32),
+    yardstick: Yardstick,
     status: wp.array(dtype=wp.int32),
     steps: wp.array(dtype=wp.int32),
     sums: wp.array2d(dtype=wp.float32),
@@ -52,8 +68,10 @@ def evaluation_accumulate(
     reference at `ref_time[n]`, the mean root-relative body position error (average pose error,
     m), the mean world body position error (global MPJPE, m), the mean end-effector position
     error (m) and orientation error (rad) over the 5 end effectors, and the step's reward to
-    `sums[n]`, counts the step, then sets the status to FAILED if `terminated[t, n]`, else
-    COMPLETED if `truncated[t, n]`."""
+    `sums[n]`, counts the step, then sets the status to FAILED if the step fails the yardstick
+    (a body farther than `max_body_distance` from its reference, or the root more than
+    `max_root_drop` below the reference root) or `terminated[t, n]`, else COMPLETED if
+    `truncated[t, n]`."""
     n = wp.tid()
     if status[n] != RUNNING:
         return
@@ -62,10 +80,13 @@ def evaluation_accumulate(
     root_ref = reference_position(table, at, REF_BODY_POS)
     pose = float(0.0)
     mpjpe = float(0.0)
+    far = float(0.0)
     for b in range(NUM_BODIES):
         p = wp.vec3(xpos[n, b + 1, 0], xpos[n, b + 1, 1], xpos[n, b + 1, 2])
         p_ref = reference_position(table, at, REF_BODY_POS + 3 * b)
-        mpjpe += wp.length(p - p_ref)
+        distance = wp.length(p - p_ref)
+        far = wp.max(far, distance)
+        mpjpe += distance
         pose += wp.length((p - root) - (p_ref - root_ref))
     ee_pos = float(0.0)
     ee_rot = float(0.0)
@@ -83,7 +104,8 @@ def evaluation_accumulate(
     sums[n, SUM_EE_ROT] = sums[n, SUM_EE_ROT] + ee_rot / wp.float32(effectors)
     sums[n, SUM_REWARD] = sums[n, SUM_REWARD] + rewards[t, n]
     steps[n] = steps[n] + 1
-    if terminated[t, n] != 0:
+    dropped = reference_value(table, at, 2) - qpos[n, 2] > yardstick.max_root_drop
+    if terminated[t, n] != 0 or far > yardstick.max_body_distance or dropped:
         status[n] = FAILED
     elif truncated[t, n] != 0:
         status[n] = COMPLETED

@@ -16,11 +16,33 @@ terminated and truncated is a failure: no bootstrap.
 
 with `done = terminated or truncated` and `V(s_T)` the critic's value of the bootstrap
 observation (row T of the stored observations). Arithmetic in float32, like rsl_rl.
+
+Value normalization (config `ppo.value_normalization`, rl_games' `normalize_value`): the critic
+then predicts values in units of the returns' running statistics, `V = mu + sigma v`. GAE reads
+the critic's normalized outputs, writes the values back in return units (the update's minibatch
+gather normalizes them again, with the statistics that include this batch), and
+`value_statistics_update` folds the batch's returns into the running count, mean and M2 (Chan et
+al.'s merge, as the observation normalizer). Clipping the value loss then happens in normalized
+units: `ppo.clip` of a return's standard deviation instead of `clip` raw return units.
 """
 
 import warp as wp
 
 wp.set_module_options({"enable_backward": False})
+
+# Added to the returns' variance before its square root.
+VALUE_VARIANCE_EPSILON = wp.constant(1.0e-8)
+
+
+@wp.func
+def value_scale(stats: wp.array(dtype=wp.float64)) -> wp.vec2d:
+    """(mean, standard deviation) of the running return statistics `stats` = [count, mean, M2];
+    (0, 1) before the first batch."""
+    count = stats[0]
+    if count <= wp.float64(0.0):
+        return wp.vec2d(wp.float64(0.0), wp.float64(1.0))
+    var = stats[2] / count
+    return wp.vec2d(stats[1], wp.sqrt(var + wp.float64(VALUE_VARIANCE_EPSILON)))
 
 
 @wp.kernel
@@ -32,19 +54,33 @@ def gae_advantages(
     truncated: wp.array2d(dtype=wp.int32),
     gamma: wp.float32,
     lam: wp.float32,
+    normalized_values: wp.int32,
+    value_stats: wp.array(dtype=wp.float64),
     advantages: wp.array2d(dtype=wp.float32),
     returns: wp.array2d(dtype=wp.float32),
 ):
     """One thread per env n: advantages and returns `[T, N]` backwards over t from the rewards,
     values and flags `[T, N]` and the bootstrap values `last_values [N, 1]` (the critic of
-    observation row T)."""
+    observation row T). With `normalized_values`, the values are the critic's normalized outputs:
+    each is mapped to return units with `value_stats` (`value_scale`) and written back to
+    `values[t, n]`."""
     n = wp.tid()
     horizon = rewards.shape[0]
+    scale = wp.vec2d(wp.float64(0.0), wp.float64(1.0))
+    if normalized_values != 0:
+        scale = value_scale(value_stats)
+    mu = wp.float32(scale[0])
+    sigma = wp.float32(scale[1])
     advantage = float(0.0)
     next_value = last_values[n, 0]
+    if normalized_values != 0:
+        next_value = mu + sigma * next_value
     for k in range(horizon):
         t = horizon - 1 - k
         value = values[t, n]
+        if normalized_values != 0:
+            value = mu + sigma * value
+            values[t, n] = value
         reward = rewards[t, n]
         not_done = float(1.0)
         if terminated[t, n] != 0:
@@ -57,3 +93,26 @@ def gae_advantages(
         advantages[t, n] = advantage
         returns[t, n] = advantage + value
         next_value = value
+
+
+@wp.kernel
+def value_statistics_update(
+    moments: wp.array(dtype=wp.float64),
+    samples: wp.int32,
+    value_stats: wp.array(dtype=wp.float64),
+):
+    """One thread: merges a batch of `samples` returns, given by their sum and sum of squares
+    `moments` [2], into the running `value_stats` = [count, mean, M2]."""
+    if wp.tid() != 0:
+        return
+    nb = wp.float64(samples)
+    if nb <= wp.float64(0.0):
+        return
+    na = value_stats[0]
+    total = na + nb
+    mb = moments[0] / nb
+    m2b = wp.max(moments[1] - nb * mb * mb, wp.float64(0.0))
+    delta = mb - value_stats[1]
+    value_stats[1] = value_stats[1] + delta * nb / total
+    value_stats[2] = value_stats[2] + m2b + delta * delta * na * nb / total
+    value_stats[0] = total

@@ -12,6 +12,8 @@ round keys hash `seed`, the epoch and a device counter that the update advances 
 
 import warp as wp
 
+from env.gae import value_scale
+
 wp.set_module_options({"enable_backward": False})
 
 FEISTEL_ROUNDS = wp.constant(4)
@@ -102,6 +104,8 @@ def gather_minibatch(
     advantages: wp.array2d(dtype=wp.float32),
     returns: wp.array2d(dtype=wp.float32),
     advantage_moments: wp.array(dtype=wp.float64),
+    normalized_values: wp.int32,
+    value_stats: wp.array(dtype=wp.float64),
     mb_observations: wp.array2d(dtype=wp.float32),
     mb_actions: wp.array2d(dtype=wp.float32),
     mb_log_probs: wp.array(dtype=wp.float32),
@@ -112,7 +116,9 @@ def gather_minibatch(
     """Row i of the minibatch is sample s = permutation[start + i] = t * N + n of the rollout
     (storage `[T(+1), N, ...]`). Thread (i, c) of a 1-D launch of M * W threads, W = max(D, A),
     copies observation column c (c < D), action column c (c < A) and, for c = 0, the
-    log-probability, value, return and the advantage normalized with the batch's moments."""
+    log-probability, value, return and the advantage normalized with the batch's moments. With
+    `normalized_values`, the value and the return (both in return units) are normalized with
+    the running return statistics `value_stats` (gae.py `value_scale`)."""
     tid = wp.tid()
     width = wp.max(observations.shape[2], actions.shape[2])
     i = tid // width
@@ -128,6 +134,14 @@ def gather_minibatch(
     if c == 0:
         stats = advantage_mean_std(advantage_moments, actions.shape[0] * num_envs)
         mb_log_probs[i] = log_probs[t, n]
-        mb_values[i] = values[t, n]
-        mb_returns[i] = returns[t, n]
+        value = values[t, n]
+        ret = returns[t, n]
+        if normalized_values != 0:
+            scale = value_scale(value_stats)
+            mu = wp.float32(scale[0])
+            inv_sigma = wp.float32(wp.float64(1.0) / scale[1])
+            value = (value - mu) * inv_sigma
+            ret = (ret - mu) * inv_sigma
+        mb_values[i] = value
+        mb_returns[i] = ret
         mb_advantages[i] = wp.float32((wp.float64(advantages[t, n]) - stats[0]) / (stats[1] + wp.float64(ADVANTAGE_EPSILON)))

@@ -17,7 +17,7 @@ rollout storage row `row`.
 import warp as wp
 
 from env.reference import reference_locate, reference_position, reference_quat_wxyz
-from env.rotation import heading_inverse, qmul, qrotate, tan_norm
+from env.rotation import heading_inverse, qconj, qmul, qrotate, tan_norm
 
 wp.set_module_options({"enable_backward": False})
 
@@ -39,6 +39,9 @@ class ObservationParams:
     dt: wp.float32
     prev_action: wp.int32
     root_target: wp.int32
+    # 1: every body's reference at `ref_time + dt` relative to the simulated body (PHC's
+    # difference observation), 9 values per body.
+    reference_bodies: wp.int32
 
 
 @wp.func
@@ -86,7 +89,11 @@ def observe(
     the root; orientations (6D), linear and angular velocities of the 15 bodies; for each future
     frame k = 1..K at `ref_time + k * spacing * dt`, each end effector's reference position
     relative to the root and orientation (6D); the last action (if `prev_action`); the reference
-    root at `ref_time + dt` relative to the root, position and orientation (if `root_target`)."""
+    root at `ref_time + dt` relative to the root, position and orientation (if `root_target`);
+    for each of the 15 bodies, the reference at `ref_time + dt` against the simulated body: the
+    position difference (reference minus simulated) in the heading frame and the rotation from
+    the simulated to the reference orientation, `conj(q) q_ref` in the body's frame, as 6D (if
+    `reference_bodies`)."""
     n = wp.tid()
     root_q = wp.vec4(qpos[n, 3], qpos[n, 4], qpos[n, 5], qpos[n, 6])
     root_p = body_vec3(xpos, n, 1, 0)
@@ -123,6 +130,13 @@ def observe(
         at = reference_locate(table, ref_time[n] + params.dt)
         k = put3(obs, n, k, qrotate(h, reference_position(table, at, 0) - root_p))
         k = put6(obs, n, k, qmul(h, reference_quat_wxyz(table, at, 3)))
+    if params.reference_bodies != 0:
+        at = reference_locate(table, ref_time[n] + params.dt)
+        for b in range(NUM_BODIES):
+            p_ref = reference_position(table, at, REF_BODY_POS + 3 * b)
+            k = put3(obs, n, k, qrotate(h, p_ref - body_vec3(xpos, n, b + 1, 0)))
+            q_ref = reference_quat_wxyz(table, at, REF_BODY_QUAT + 4 * b)
+            k = put6(obs, n, k, qmul(qconj(body_quat(xquat, n, b + 1)), q_ref))
 
 
 @wp.kernel

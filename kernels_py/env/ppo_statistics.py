@@ -38,8 +38,10 @@ def ppo_update_statistics(
     update_counter: wp.array(dtype=wp.int32),
     stats: wp.array(dtype=wp.float32),
 ):
-    """One thread, after the last minibatch. `loss_sums` [S, LOSS_TERMS + A] and `grad_norm_sq`
-    [S] hold one row per minibatch step (S = epochs * minibatches); `advantage_moments` the sum
+    """One thread, after the last minibatch. `loss_sums` [S, LOSS_TERMS + A] holds one row per
+    minibatch step (S = epochs * minibatches) and `grad_norm_sq` [2 S] two squared norms per
+    step, the actor's and the critic's (or the global one and 0, when they are clipped
+    together); `advantage_moments` the sum
     and sum of squares of the `samples` advantages. Writes `stats` [NUM_STATS] and adds 1 to
     `update_counter[0]` (the next update shuffles with new keys)."""
     if wp.tid() != 0:
@@ -57,7 +59,7 @@ def ppo_update_statistics(
         entropy += loss_sums[s, TERM_ENTROPY]
         kl += loss_sums[s, TERM_KL]
         clip_fraction += loss_sums[s, TERM_CLIP_FRACTION]
-        grad_norm += wp.sqrt(grad_norm_sq[s])
+        grad_norm += wp.sqrt(grad_norm_sq[2 * s] + grad_norm_sq[2 * s + 1])
     inv = 1.0 / float(steps)
     counter = update_counter[0] + 1
     update_counter[0] = counter

@@ -20,6 +20,10 @@ LENGTH_SUM = wp.constant(2)
 FAILED = wp.constant(3)
 REWARD_SUM = wp.constant(4)
 STEPS = wp.constant(5)
+# Then one count per failure cause bit of tracking.py (FELL, LOST, LOW_ROOT, LOW_REWARD,
+# DRIFT): the failed episodes in which that cause held (several can hold in one failure).
+CAUSE_COUNTS = wp.constant(6)
+NUM_CAUSES = wp.constant(5)
 
 
 @wp.kernel
@@ -29,14 +33,15 @@ def episode_statistics(
     terminated: wp.array2d(dtype=wp.int32),
     truncated: wp.array2d(dtype=wp.int32),
     episode_step: wp.array(dtype=wp.int32),
+    failure: wp.array(dtype=wp.int32),
     running_return: wp.array(dtype=wp.float32),
     reward_sum: wp.array(dtype=wp.float32),
     totals: wp.array(dtype=wp.float64),
 ):
     """One thread per env n: `running_return[n] += r`, `reward_sum[n] += r` with r =
     `rewards[t, n]`; if the step ended the episode (terminated or truncated), adds 1, the return
-    and `episode_step[n]` to the totals (and 1 to the failures if terminated), and clears the
-    running return."""
+    and `episode_step[n]` to the totals (and, if terminated, 1 to the failures and to the count of
+    every cause bit set in `failure[n]`), and clears the running return."""
     n = wp.tid()
     r = rewards[t, n]
     ret = running_return[n] + r
@@ -48,6 +53,10 @@ def episode_statistics(
         wp.atomic_add(totals, LENGTH_SUM, wp.float64(episode_step[n]))
         if failed != 0:
             wp.atomic_add(totals, FAILED, wp.float64(1.0))
+            causes = failure[n]
+            for c in range(NUM_CAUSES):
+                if (causes >> c) & 1 != 0:
+                    wp.atomic_add(totals, CAUSE_COUNTS + c, wp.float64(1.0))
         ret = 0.0
     running_return[n] = ret
 

@@ -31,6 +31,14 @@ NUM_BODIES = wp.constant(15)
 BALL = wp.constant(0)
 ROOT_DOFS = wp.constant(6)
 
+# Failure causes, bits of `failure[n]` (src/env/statistics.rs: FailureCause). Several can hold
+# at once; `terminated` is 1 when any does (after the grace steps).
+CAUSE_FELL = wp.constant(1)
+CAUSE_LOST = wp.constant(2)
+CAUSE_LOW_ROOT = wp.constant(4)
+CAUSE_LOW_REWARD = wp.constant(8)
+CAUSE_DRIFT = wp.constant(16)
+
 
 @wp.struct
 class TrackingParams:
@@ -45,8 +53,16 @@ class TrackingParams:
     dt: wp.float32
     termination_height: wp.float32
     tracking_distance: wp.float32
+    # Optional failures, each off when <= 0: the root's absolute height below this (m), the
+    # reward below this, the mean body distance to the reference above this (m).
+    min_root_height: wp.float32
+    min_reward: wp.float32
+    mean_tracking_distance: wp.float32
     grace_steps: wp.int32
     max_episode_steps: wp.int32
+    # 1: end-effector position errors relative to the root (sim and reference each relative to
+    # its own root, as DeepMimic); 0: world positions.
+    ee_relative: wp.int32
 
 
 @wp.func
@@ -79,18 +95,22 @@ def reward_termination(
     terminated: wp.array2d(dtype=wp.int32),
     truncated: wp.array2d(dtype=wp.int32),
     done: wp.array(dtype=wp.int32),
+    failure: wp.array(dtype=wp.int32),
     errors: wp.array2d(dtype=wp.float32),
     phase_visits: wp.array(dtype=wp.float32),
     phase_failures: wp.array(dtype=wp.float32),
 ):
     """One thread per env n: `r = exp(-(w . e))` over the pose, velocity, COM, end-effector
-    position and orientation errors against the reference at `ref_time[n] + dt`; failure when the
-    root is more than `termination_height` below the reference root or a body is farther than
-    `tracking_distance` from its reference (not within `grace_steps` of a reset); truncation at
-    `max_episode_steps` or the end of a clamped clip. Writes `rewards/terminated/truncated[t, n]`,
-    `done[n]`, `errors[n, 0..5]` (the five error terms, as used in the reward), advances
-    `ref_time[n]` by dt and `episode_step[n]` by 1, and counts the visit (and failure) in the
-    phase bin of `ref_time[n]`.
+    position and orientation errors against the reference at `ref_time[n] + dt`; failure (not
+    within `grace_steps` of a reset) when the root is more than `termination_height` below the
+    reference root (FELL), a body is farther than `tracking_distance` from its reference (LOST),
+    and, each only when its threshold is positive, the root is below `min_root_height` (LOW_ROOT),
+    the reward is below `min_reward` (LOW_REWARD), or the mean body distance to the reference
+    exceeds `mean_tracking_distance` (DRIFT); truncation at `max_episode_steps` or the end of a
+    clamped clip. Writes `rewards/terminated/truncated[t, n]`, `done[n]`, `failure[n]` (the
+    bits of every cause that held, 0 when the step did not fail), `errors[n, 0..5]` (the five
+    error terms, as used in the reward), advances `ref_time[n]` by dt and `episode_step[n]` by 1,
+    and counts the visit (and failure) in the phase bin of `ref_time[n]`.
 
     The error terms are means, not sums: over the joints (pose), the non-root dofs (velocity) and
     the end effectors (position, orientation); the COM error is one point's. With the paper's
@@ -125,12 +145,20 @@ def reward_termination(
     dc = com - reference_position(table, at, REF_COM_POS)
     e_com = wp.dot(dc, dc)
 
+    # The root-relative error subtracts each root (the root's own error is not an end
+    # effector's): a character off the reference's path by a constant offset is not penalized
+    # twice, through the COM and every end effector.
+    root_offset = wp.vec3(0.0)
+    if params.ee_relative != 0:
+        root_offset = wp.vec3(xpos[n, 1, 0], xpos[n, 1, 1], xpos[n, 1, 2]) - reference_position(
+            table, at, REF_BODY_POS
+        )
     e_eep = float(0.0)
     e_eer = float(0.0)
     for k in range(end_effectors.shape[0]):
         b = end_effectors[k]
         p = wp.vec3(xpos[n, b + 1, 0], xpos[n, b + 1, 1], xpos[n, b + 1, 2])
-        dp = p - reference_position(table, at, REF_BODY_POS + 3 * b)
+        dp = p - reference_position(table, at, REF_BODY_POS + 3 * b) - root_offset
         e_eep += wp.dot(dp, dp)
         q = wp.vec4(xquat[n, b + 1, 0], xquat[n, b + 1, 1], xquat[n, b + 1, 2], xquat[n, b + 1, 3])
         d = qdiff_angle(q, reference_quat_wxyz(table, at, REF_BODY_QUAT + 4 * b))
@@ -140,9 +168,13 @@ def reward_termination(
     e_eer = e_eer / ee_count
 
     far = float(0.0)
+    mean_distance = float(0.0)
     for b in range(NUM_BODIES):
         p = wp.vec3(xpos[n, b + 1, 0], xpos[n, b + 1, 1], xpos[n, b + 1, 2])
-        far = wp.max(far, wp.length(p - reference_position(table, at, REF_BODY_POS + 3 * b)))
+        distance = wp.length(p - reference_position(table, at, REF_BODY_POS + 3 * b))
+        far = wp.max(far, distance)
+        mean_distance += distance
+    mean_distance = mean_distance / float(NUM_BODIES)
 
     reward = wp.exp(
         -(
@@ -155,10 +187,21 @@ def reward_termination(
     )
 
     step = episode_step[n]
-    fell = reference_value(table, at, 2) - qpos[n, 2] > params.termination_height
-    lost = far > params.tracking_distance
+    causes = 0
+    if reference_value(table, at, 2) - qpos[n, 2] > params.termination_height:
+        causes = causes | CAUSE_FELL
+    if far > params.tracking_distance:
+        causes = causes | CAUSE_LOST
+    if params.min_root_height > 0.0 and qpos[n, 2] < params.min_root_height:
+        causes = causes | CAUSE_LOW_ROOT
+    if params.min_reward > 0.0 and reward < params.min_reward:
+        causes = causes | CAUSE_LOW_REWARD
+    if params.mean_tracking_distance > 0.0 and mean_distance > params.mean_tracking_distance:
+        causes = causes | CAUSE_DRIFT
+    if step < params.grace_steps:
+        causes = 0
     failed = 0
-    if step >= params.grace_steps and (fell or lost):
+    if causes != 0:
         failed = 1
     ended = 0
     if step + 1 >= params.max_episode_steps:
@@ -170,6 +213,7 @@ def reward_termination(
     terminated[t, n] = failed
     truncated[t, n] = ended
     done[n] = wp.max(failed, ended)
+    failure[n] = causes
     errors[n, 0] = e_pose
     errors[n, 1] = e_vel
     errors[n, 2] = e_com

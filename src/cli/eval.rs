@@ -68,7 +68,12 @@ pub fn run(args: EvalArgs) -> Result<()> {
             "evaluation           {} x {} envs x {} steps, success at {}",
             args.episodes,
             config.run.eval_envs,
-            evaluation_steps(&config, checks.clip_duration_s, checks.control_dt),
+            evaluation_steps(
+                &config,
+                checks.clip_duration_s,
+                checks.control_dt,
+                checks.loop_mode
+            ),
             config.run.success_rate
         );
     }

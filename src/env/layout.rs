@@ -5,7 +5,7 @@
 use crate::cuda::Gpu;
 use crate::motion::Character;
 use crate::motion::character::JointType;
-use crate::train::{ObsConfig, TrainConfig};
+use crate::train::{EndEffectorFrame, ObsConfig, TrainConfig};
 
 use super::{DeviceArray, EnvError, ObservationParams, ResetParams, TrackingParams};
 
@@ -186,6 +186,9 @@ pub fn observation_size(obs: &ObsConfig, motors: usize, effectors: usize) -> usi
     if obs.root_target {
         size += 9;
     }
+    if obs.reference_bodies {
+        size += 9 * b;
+    }
     size
 }
 
@@ -201,8 +204,29 @@ pub fn tracking_params(config: &TrainConfig, dt: f64) -> TrackingParams {
         dt: dt as f32,
         termination_height: e.termination_height,
         tracking_distance: e.tracking_distance,
+        min_root_height: e.min_root_height,
+        min_reward: e.min_reward,
+        mean_tracking_distance: e.mean_tracking_distance,
         grace_steps: e.grace_steps as i32,
         max_episode_steps: e.max_episode_steps as i32,
+        ee_relative: i32::from(r.ee_frame == EndEffectorFrame::Root),
+    }
+}
+
+/// Failure thresholds that never fire (the evaluation judges with its own yardstick).
+const NEVER: f32 = 1.0e30;
+
+/// `tracking` with every failure off: the evaluation rollout's termination, whose episodes
+/// end only by truncation; `evaluation_accumulate` applies the fixed success yardstick instead
+/// (docs/train.md, "Success").
+pub fn without_failures(tracking: &TrackingParams) -> TrackingParams {
+    TrackingParams {
+        termination_height: NEVER,
+        tracking_distance: NEVER,
+        min_root_height: 0.0,
+        min_reward: 0.0,
+        mean_tracking_distance: 0.0,
+        ..*tracking
     }
 }
 
@@ -231,6 +255,7 @@ pub fn observation_params(obs: &ObsConfig, dt: f64) -> ObservationParams {
         dt: dt as f32,
         prev_action: i32::from(obs.prev_action),
         root_target: i32::from(obs.root_target),
+        reference_bodies: i32::from(obs.reference_bodies),
     }
 }
 

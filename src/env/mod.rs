@@ -31,7 +31,7 @@ pub use evaluation::{COMPLETED, EpisodeScore, EpisodeScores, FAILED, RUNNING};
 pub use phases::{Phase, PhaseEvents, PhaseRecorder};
 pub use reference::DeviceReferenceTable;
 pub use rollout::{EpisodeState, PhysicsState, Rollout, RolloutError, RolloutStorage};
-pub use statistics::{RolloutStatistics, RolloutTotals, TOTALS};
+pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 // The launchers, their ABI constants and the Rust structs of Warp structs, all generated.
 pub use kernels::*;
 

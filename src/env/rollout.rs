@@ -16,18 +16,18 @@ use crate::motion::LoopMode;
 use crate::motion::{ReferenceMotion, ReferenceTable};
 use crate::plan::{PlanStore, Simulation, SimulationError};
 use crate::ppo::{ActStorage, GaussianPolicy, PolicyError};
-use crate::train::{ActionMode, EvalStart, TrainConfig, evaluation_steps};
+use crate::train::{ActionMode, EvalStart, TrainConfig, evaluation_steps, yardstick};
 
 use super::evaluation::EpisodeScores;
 use super::layout::{
     DeviceJointLayout, JointLayout, observation_params, observation_size, reset_params,
-    tracking_params,
+    tracking_params, without_failures,
 };
 use super::phases::{Phase, PhaseEvents, PhaseRecorder};
 use super::statistics::RolloutStatistics;
 use super::{
     DeviceArray, DeviceArray2, DeviceArray3, DeviceReferenceTable, EnvError, EnvKernels,
-    ObservationParams, ResetParams, TrackingParams,
+    ObservationParams, ResetParams, TrackingParams, Yardstick,
 };
 
 /// Why a rollout cannot be built or run.
@@ -135,6 +135,8 @@ pub struct EpisodeState {
     pub episode_step: DeviceArray<i32>,
     /// 1 where the last step ended the episode (the reset mask).
     pub done: DeviceArray<i32>,
+    /// The failure causes of the last step (tracking.py `CAUSE_*` bits; 0: it did not fail).
+    pub failure: DeviceArray<i32>,
     /// The action applied in the last control step `[N, A]` (the observation's previous action).
     pub actions: DeviceArray2<f32>,
     /// The five tracking errors of the last step `[N, 5]` (metrics; the reward's terms: means
@@ -176,8 +178,9 @@ enum Purpose {
     /// drawn from the adaptive statistics (updated once per rollout).
     Training,
     /// The paper's evaluation: mean actions, the training rollout's normalization frozen, every
-    /// env starting at the clip's start, each env's first episode scored.
-    Evaluation(EpisodeScores),
+    /// env starting at the clip's start, each env's first episode scored against the fixed
+    /// success yardstick (the training's failures are off).
+    Evaluation(EpisodeScores, Yardstick),
 }
 
 impl Rollout {
@@ -261,7 +264,13 @@ impl Rollout {
                         training.observation_size()
                     )));
                 }
-                let steps = evaluation_steps(config, host_table.duration(), control_dt) as usize;
+                let steps = evaluation_steps(
+                    config,
+                    host_table.duration(),
+                    control_dt,
+                    host_table.loop_mode(),
+                ) as usize;
+                tracking = without_failures(&tracking);
                 tracking.max_episode_steps = steps as i32;
                 reset.start_time = 0.0;
                 reset.start_spread = match (config.run.eval_start, host_table.loop_mode()) {
@@ -274,7 +283,7 @@ impl Rollout {
                     ObservationNormalizer::frozen(gpu, &training.normalizer, n)?,
                     training.policy.with_batch(gpu, n)?,
                     steps,
-                    Purpose::Evaluation(EpisodeScores::zeros(gpu, n)?),
+                    Purpose::Evaluation(EpisodeScores::zeros(gpu, n)?, yardstick()),
                 )
             }
         };
@@ -282,6 +291,7 @@ impl Rollout {
             ref_time: DeviceArray::zeros(gpu, [n])?,
             episode_step: DeviceArray::zeros(gpu, [n])?,
             done: DeviceArray::from_slice(gpu, [n], &vec![1; n])?,
+            failure: DeviceArray::zeros(gpu, [n])?,
             actions: DeviceArray::zeros(gpu, [n, NU])?,
             errors: DeviceArray::zeros(gpu, [n, 5])?,
         };
@@ -343,7 +353,7 @@ impl Rollout {
         let stream = self.gpu.stream();
         let n = self.num_envs;
         self.state.done.upload(&vec![1; n])?;
-        if let Purpose::Evaluation(scores) = &self.purpose {
+        if let Purpose::Evaluation(scores, _) = &self.purpose {
             scores.clear()?;
         }
         self.statistics.clear_running()?;
@@ -366,7 +376,7 @@ impl Rollout {
     /// The scores of the evaluation rollout's episodes (None for a training rollout).
     pub fn episode_scores(&self) -> Option<&EpisodeScores> {
         match &self.purpose {
-            Purpose::Evaluation(scores) => Some(scores),
+            Purpose::Evaluation(scores, _) => Some(scores),
             Purpose::Training => None,
         }
     }
@@ -451,13 +461,16 @@ impl Rollout {
                 self.sim.record("kinematics", s)?;
                 self.record_reward(s, t32)?;
                 match &self.purpose {
-                    Purpose::Evaluation(scores) => self.record_scores(s, scores, t32)?,
+                    Purpose::Evaluation(scores, yardstick) => {
+                        self.record_scores(s, scores, yardstick, t32)?
+                    }
                     Purpose::Training => self.statistics.record_step(
                         &self.kernels,
                         s,
                         t32,
                         &self.storage,
                         &self.state.episode_step,
+                        &self.state.failure,
                     )?,
                 }
                 Ok::<(), RolloutError>(())
@@ -503,12 +516,14 @@ impl Rollout {
         &self,
         s: &Stream,
         scores: &EpisodeScores,
+        yardstick: &Yardstick,
         t: i32,
     ) -> Result<(), RolloutError> {
         let p = &self.physics;
         self.kernels.evaluation_accumulate(
             s,
             self.num_envs,
+            &p.qpos,
             &p.xpos,
             &p.xquat,
             self.table.table(),
@@ -518,6 +533,7 @@ impl Rollout {
             &self.storage.rewards,
             &self.storage.terminated,
             &self.storage.truncated,
+            yardstick,
             &scores.status,
             &scores.steps,
             &scores.sums,
@@ -574,6 +590,7 @@ impl Rollout {
             &self.storage.terminated,
             &self.storage.truncated,
             &st.done,
+            &st.failure,
             &st.errors,
             &self.phase_statistics.visits,
             &self.phase_statistics.failures,

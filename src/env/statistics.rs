@@ -5,14 +5,53 @@ use crate::cuda::{Gpu, Stream};
 
 use super::{DeviceArray, EnvError, EnvKernels};
 
-/// Values in the device totals (statistics.py `ENDED .. STEPS`).
-pub const TOTALS: usize = 6;
+/// Values in the device totals (statistics.py `ENDED .. STEPS`, then one count per failure
+/// cause).
+pub const TOTALS: usize = 6 + FailureCause::ALL.len();
+
+/// Why an episode failed: the bits of tracking.py's `CAUSE_*`, in bit order (several can hold
+/// in one failure).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FailureCause {
+    /// The root fell more than `env.termination_height` below the reference root.
+    Fell,
+    /// A body farther than `env.tracking_distance` from its reference.
+    Lost,
+    /// The root below `env.min_root_height`.
+    LowRoot,
+    /// The reward below `env.min_reward`.
+    LowReward,
+    /// The mean body distance above `env.mean_tracking_distance`.
+    Drift,
+}
+
+impl FailureCause {
+    pub const ALL: [FailureCause; 5] = [
+        FailureCause::Fell,
+        FailureCause::Lost,
+        FailureCause::LowRoot,
+        FailureCause::LowReward,
+        FailureCause::Drift,
+    ];
+
+    /// The name in `metrics.jsonl` (`termination`).
+    pub fn name(self) -> &'static str {
+        match self {
+            FailureCause::Fell => "fell",
+            FailureCause::Lost => "lost",
+            FailureCause::LowRoot => "low_root",
+            FailureCause::LowReward => "low_reward",
+            FailureCause::Drift => "drift",
+        }
+    }
+}
 
 /// Device accumulators of one rollout's statistics.
 pub struct RolloutStatistics {
     running_return: DeviceArray<f32>,
     reward_sum: DeviceArray<f32>,
-    /// `[ended, return sum, length sum, failed, reward sum, steps]`, float64.
+    /// `[ended, return sum, length sum, failed, reward sum, steps, failures by cause..]`,
+    /// float64.
     totals: DeviceArray<f64>,
 }
 
@@ -46,6 +85,7 @@ impl RolloutStatistics {
         t: i32,
         storage: &super::RolloutStorage,
         episode_step: &DeviceArray<i32>,
+        failure: &DeviceArray<i32>,
     ) -> Result<(), EnvError> {
         kernels.episode_statistics(
             s,
@@ -55,6 +95,7 @@ impl RolloutStatistics {
             &storage.terminated,
             &storage.truncated,
             episode_step,
+            failure,
             &self.running_return,
             &self.reward_sum,
             &self.totals,
@@ -94,6 +135,8 @@ pub struct RolloutTotals {
     pub mean_episode_length: f64,
     /// Mean reward per env and control step.
     pub mean_reward: f64,
+    /// Per [`FailureCause`] (in `ALL`'s order), the failed episodes in which it held.
+    pub failures_by_cause: [f64; FailureCause::ALL.len()],
 }
 
 impl RolloutTotals {
@@ -113,6 +156,7 @@ impl RolloutTotals {
             mean_return: per(v[1], v[0]),
             mean_episode_length: per(v[2], v[0]),
             mean_reward: per(v[4], v[5]),
+            failures_by_cause: std::array::from_fn(|c| v[6 + c]),
         })
     }
 }
@@ -123,14 +167,16 @@ mod tests {
 
     #[test]
     fn totals_decode_into_means() {
-        let values = [4.0f64, 10.0, 120.0, 1.0, 300.0, 400.0];
+        let values = [4.0f64, 10.0, 120.0, 1.0, 300.0, 400.0, 1.0, 0.0, 0.0, 1.0, 0.0];
         let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
         let t = RolloutTotals::from_bytes(&bytes).expect("decodes");
         assert_eq!((t.episodes, t.failures), (4.0, 1.0));
         assert_eq!((t.mean_return, t.mean_episode_length), (2.5, 30.0));
         assert_eq!(t.mean_reward, 0.75);
+        assert_eq!(t.failures_by_cause, [1.0, 0.0, 0.0, 1.0, 0.0]);
         let none = RolloutTotals::from_bytes(&[0u8; TOTALS * 8]).expect("decodes");
         assert!(none.mean_return.is_nan() && none.mean_episode_length.is_nan());
         assert!(RolloutTotals::from_bytes(&bytes[..40]).is_none());
+        assert_eq!(FailureCause::ALL.len() + 6, TOTALS);
     }
 }

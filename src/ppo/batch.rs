@@ -81,6 +81,54 @@ impl PpoBatch<'_> {
     }
 }
 
+/// The running statistics of the returns that the critic's outputs are normalized by
+/// (`ppo.value_normalization`; kernels_py/env/gae.py).
+pub struct ValueNormalization {
+    pub enabled: bool,
+    /// `[count, mean, M2]` of every return seen, float64.
+    pub stats: DeviceArray<f64>,
+    /// The current batch's sum and sum of squares of returns.
+    moments: DeviceArray<f64>,
+}
+
+impl ValueNormalization {
+    pub fn new(gpu: &Gpu, enabled: bool) -> Result<ValueNormalization, PpoError> {
+        Ok(ValueNormalization {
+            enabled,
+            stats: DeviceArray::zeros(gpu, [3])?,
+            moments: DeviceArray::zeros(gpu, [2])?,
+        })
+    }
+
+    fn flag(&self) -> i32 {
+        i32::from(self.enabled)
+    }
+
+    /// Queues the merge of `returns` (the batch's, `[T, N]`) into the running statistics;
+    /// nothing when normalization is off.
+    pub fn record_update(
+        &self,
+        kernels: &EnvKernels,
+        stream: &Stream,
+        returns: &DeviceArray2<f32>,
+    ) -> Result<(), PpoError> {
+        if !self.enabled {
+            return Ok(());
+        }
+        let flat = returns.view(0, [returns.len()])?;
+        super::reduce::record_clear(stream, &self.moments)?;
+        super::reduce::record_sum_and_squares(kernels, stream, &flat, &self.moments)?;
+        kernels.value_statistics_update(
+            stream,
+            1,
+            &self.moments,
+            returns.len() as i32,
+            &self.stats,
+        )?;
+        Ok(())
+    }
+}
+
 /// Advantages and returns `[T, N]` of a batch.
 pub struct Advantages {
     pub advantages: DeviceArray2<f32>,
@@ -97,6 +145,9 @@ impl Advantages {
 
     /// Queues GAE (`kernels_py/env/gae.py`: truncated steps bootstrap with `gamma V(s_t)`) from
     /// the batch and the critic's values of the bootstrap observations `last_values [N, 1]`.
+    /// With value normalization on, the batch's values are the critic's normalized outputs and
+    /// are rewritten in return units.
+    #[allow(clippy::too_many_arguments)]
     pub fn record_gae(
         &self,
         kernels: &EnvKernels,
@@ -105,6 +156,7 @@ impl Advantages {
         last_values: &DeviceArray2<f32>,
         gamma: f32,
         lambda: f32,
+        values: &ValueNormalization,
     ) -> Result<(), PpoError> {
         let [t, n] = self.advantages.shape();
         batch.check(
@@ -130,6 +182,8 @@ impl Advantages {
             batch.truncated,
             gamma,
             lambda,
+            values.flag(),
+            &values.stats,
             &self.advantages,
             &self.returns,
         )?;
@@ -208,6 +262,7 @@ impl Minibatch {
         batch: &PpoBatch<'_>,
         advantages: &Advantages,
         advantage_moments: &DeviceArray<f64>,
+        values: &ValueNormalization,
         permutation: &DeviceArray<i32>,
         start: usize,
     ) -> Result<(), PpoError> {
@@ -233,6 +288,8 @@ impl Minibatch {
             &advantages.advantages,
             &advantages.returns,
             advantage_moments,
+            values.flag(),
+            &values.stats,
             &self.observations,
             &self.actions,
             &self.log_probs,

@@ -35,7 +35,7 @@ use super::adam::{
     AdamMoments, LEARNING_RATE_MAX, LEARNING_RATE_MIN, adam_params, record_schedule,
 };
 use super::backward::{MlpGradients, input_gradient_scratch_len, record_mlp_backward};
-use super::batch::{Advantages, Minibatch, PpoBatch, record_shuffle};
+use super::batch::{Advantages, Minibatch, PpoBatch, ValueNormalization, record_shuffle};
 use super::loss::{LOSS_TERMS, LossGradients, PpoStatistics};
 use super::policy::{GaussianPolicy, LayerShape, Mlp, PolicyError};
 use super::reduce::{
@@ -149,11 +149,15 @@ pub struct PpoUpdate {
     actor_moments: AdamMoments,
     critic_moments: AdamMoments,
     advantages: Advantages,
+    value_normalization: ValueNormalization,
+    /// `ppo.separate_grad_clipping`: the critic's gradient norm in its own slot.
+    separate_grad_clipping: bool,
     permutation: DeviceArray<i32>,
     minibatch: Minibatch,
     loss: LossGradients,
     /// Per minibatch step: column sums of the loss terms `[S, LOSS_TERMS + A]` and the squared
-    /// gradient norm `[S]`; the advantages' sum and sum of squares.
+    /// gradient norms `[2 S]` (actor, critic; or global, 0); the advantages' sum and sum of
+    /// squares.
     loss_sums: DeviceArray2<f32>,
     grad_norm_sq: DeviceArray<f64>,
     advantage_moments: DeviceArray<f64>,
@@ -273,11 +277,13 @@ impl PpoUpdate {
             log_std_grad,
             input_gradient_scratch,
             advantages: Advantages::zeros(gpu, horizon, envs)?,
+            value_normalization: ValueNormalization::new(gpu, q.value_normalization)?,
+            separate_grad_clipping: q.separate_grad_clipping,
             permutation: DeviceArray::zeros(gpu, [samples])?,
             minibatch: Minibatch::zeros(gpu, rows, d, a)?,
             loss: LossGradients::zeros(gpu, rows, a)?,
             loss_sums: DeviceArray::zeros(gpu, [steps, LOSS_TERMS + a])?,
-            grad_norm_sq: DeviceArray::zeros(gpu, [steps])?,
+            grad_norm_sq: DeviceArray::zeros(gpu, [2 * steps])?,
             advantage_moments: DeviceArray::zeros(gpu, [2])?,
             learning_rate: DeviceArray::from_slice(gpu, [1], &[q.learning_rate])?,
             adam_step: DeviceArray::zeros(gpu, [1])?,
@@ -320,8 +326,17 @@ impl PpoUpdate {
             let values = self.bootstrap.output();
             values.view(0, [n, 1])?
         };
-        self.advantages
-            .record_gae(k, stream, batch, &last_values, self.gamma, self.lambda)?;
+        self.advantages.record_gae(
+            k,
+            stream,
+            batch,
+            &last_values,
+            self.gamma,
+            self.lambda,
+            &self.value_normalization,
+        )?;
+        self.value_normalization
+            .record_update(k, stream, &self.advantages.returns)?;
         let flat_advantages = self.advantages.advantages.view(0, [t * n])?;
         record_sum_and_squares(k, stream, &flat_advantages, &self.advantage_moments)?;
 
@@ -343,6 +358,7 @@ impl PpoUpdate {
                     batch,
                     &self.advantages,
                     &self.advantage_moments,
+                    &self.value_normalization,
                     &self.permutation,
                     mb * rows,
                 )?;
@@ -413,14 +429,40 @@ impl PpoUpdate {
             &self.learning_rate,
             &self.adam_step,
         )?;
-        record_sum_of_squares(k, stream, &self.actor_grads.flat, &self.grad_norm_sq, slot)?;
-        record_sum_of_squares(k, stream, &self.critic_grads.flat, &self.grad_norm_sq, slot)?;
-        for (params, grads, moments) in [
-            (&self.actor_params, &self.actor_grads, &self.actor_moments),
+        // Slot 2s holds the actor's squared norm, 2s + 1 the critic's; clipped together, both
+        // add into 2s (and 2s + 1 stays 0).
+        let actor_slot = 2 * slot;
+        let critic_slot = if self.separate_grad_clipping {
+            actor_slot + 1
+        } else {
+            actor_slot
+        };
+        record_sum_of_squares(
+            k,
+            stream,
+            &self.actor_grads.flat,
+            &self.grad_norm_sq,
+            actor_slot,
+        )?;
+        record_sum_of_squares(
+            k,
+            stream,
+            &self.critic_grads.flat,
+            &self.grad_norm_sq,
+            critic_slot,
+        )?;
+        for (params, grads, moments, slot) in [
+            (
+                &self.actor_params,
+                &self.actor_grads,
+                &self.actor_moments,
+                actor_slot,
+            ),
             (
                 &self.critic_params,
                 &self.critic_grads,
                 &self.critic_moments,
+                critic_slot,
             ),
         ] {
             moments.record_step(
@@ -452,6 +494,12 @@ impl PpoUpdate {
     /// The current learning rate `[1]` (device; the schedule adapts it).
     pub fn learning_rate(&self) -> &DeviceArray<f32> {
         &self.learning_rate
+    }
+
+    /// The running return statistics `[count, mean, M2]` (value normalization; zeros when
+    /// off), for checkpoints.
+    pub fn value_statistics(&self) -> &DeviceArray<f64> {
+        &self.value_normalization.stats
     }
 
     /// Advantages and returns `[T, N]` of the last update.

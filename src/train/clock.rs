@@ -104,6 +104,8 @@ impl StopReason {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StopRule {
     pub stop_on_success: bool,
+    /// With `stop_on_success`: also wait for an evaluation at the pose-error target.
+    pub stop_on_pose_error: bool,
     pub time_budget_s: f64,
     pub max_iterations: u64,
     pub eval_interval: u32,
@@ -113,6 +115,7 @@ impl StopRule {
     pub fn new(run: &RunConfig) -> StopRule {
         StopRule {
             stop_on_success: run.stop_on_success,
+            stop_on_pose_error: run.stop_on_pose_error,
             time_budget_s: run.time_budget_s,
             max_iterations: run.max_iterations,
             eval_interval: run.eval_interval,
@@ -138,19 +141,44 @@ impl StopRule {
         }
     }
 
-    /// Whether to stop after `iteration`, given the evaluation that followed it (if any).
-    /// Success wins over a budget spent at the same iteration.
+    /// Whether to stop after `iteration`, given the evaluation that followed it (if any) and
+    /// no earlier one. Success wins over a budget spent at the same iteration.
     pub fn check(
         &self,
         iteration: u64,
         active_time_s: f64,
         evaluation: Option<&EvaluationSummary>,
     ) -> Option<StopReason> {
-        if self.stop_on_success && evaluation.is_some_and(|e| e.success) {
+        let reached = Milestones {
+            success: evaluation.is_some_and(|e| e.success),
+            pose_error: evaluation.is_some_and(EvaluationSummary::meets_pose_error_target),
+        };
+        self.check_milestones(iteration, active_time_s, reached)
+    }
+
+    /// Whether to stop after `iteration`, given what the run's evaluations have reached so
+    /// far (this iteration's included).
+    pub fn check_milestones(
+        &self,
+        iteration: u64,
+        active_time_s: f64,
+        reached: Milestones,
+    ) -> Option<StopReason> {
+        if self.stop_on_success && reached.success && (reached.pose_error || !self.stop_on_pose_error)
+        {
             return Some(StopReason::Success);
         }
         self.budget_spent(iteration, active_time_s)
     }
+}
+
+/// What a run's evaluations have reached so far.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Milestones {
+    /// An evaluation succeeded.
+    pub success: bool,
+    /// An evaluation's average pose error was at most the target (`POSE_ERROR_TARGET_M`).
+    pub pose_error: bool,
 }
 
 #[cfg(test)]
@@ -161,8 +189,10 @@ mod tests {
         EvaluationSummary {
             episodes: 32,
             completed: if success { 32 } else { 0 },
+            succeeded: if success { 32 } else { 0 },
             success_rate: if success { 1.0 } else { 0.0 },
             success,
+            clip_start_success: success,
             episode_steps: 53,
             mean_episode_steps: 53.0,
             pose_error_m: 0.1,
@@ -230,8 +260,24 @@ mod tests {
             rule.check(100, 3.0, Some(&eval(true))),
             Some(StopReason::Success)
         );
+        run.stop_on_pose_error = true;
+        let rule = StopRule::new(&run);
+        let success_only = Milestones {
+            success: true,
+            pose_error: false,
+        };
+        assert_eq!(rule.check_milestones(5, 1.0, success_only), None);
+        let both = Milestones {
+            success: true,
+            pose_error: true,
+        };
+        assert_eq!(
+            rule.check_milestones(5, 1.0, both),
+            Some(StopReason::Success)
+        );
         run.stop_on_success = false;
         let rule = StopRule::new(&run);
         assert_eq!(rule.check(5, 1.0, Some(&eval(true))), None);
+        assert_eq!(rule.check_milestones(5, 1.0, both), None);
     }
 }

@@ -65,6 +65,15 @@ pub struct EnvConfig {
     pub termination_height: f32,
     /// Largest body distance to the reference (m) before the episode fails.
     pub tracking_distance: f32,
+    /// The episode fails when the root's absolute height falls below this (m; 0: off). The
+    /// paper's code figure ends episodes at 0.55 m.
+    pub min_root_height: f32,
+    /// The episode fails when the step's reward falls below this (0: off). The paper's code
+    /// figure ends episodes at 0.15.
+    pub min_reward: f32,
+    /// The episode fails when the mean distance of the bodies to their references exceeds this
+    /// (m; 0: off). PHC ends episodes at 0.25 m.
+    pub mean_tracking_distance: f32,
     /// Control steps after a reset during which failures are ignored.
     pub grace_steps: u32,
     /// Reference state initialization noise (rad; velocities get 10x).
@@ -86,6 +95,9 @@ impl Default for EnvConfig {
             action_scale: 1.0,
             termination_height: 0.8,
             tracking_distance: 1.0,
+            min_root_height: 0.0,
+            min_reward: 0.0,
+            mean_tracking_distance: 0.0,
             grace_steps: 4,
             motion_noise_std: 0.02,
             max_episode_steps: 300,
@@ -117,6 +129,9 @@ pub struct RewardConfig {
     pub com_weight: f32,
     pub ee_pos_weight: f32,
     pub ee_rot_weight: f32,
+    /// Where end-effector positions are compared: in the world, or each relative to its own
+    /// root (DeepMimic, MimicKit).
+    pub ee_frame: EndEffectorFrame,
 }
 
 impl Default for RewardConfig {
@@ -127,8 +142,19 @@ impl Default for RewardConfig {
             com_weight: 10.0,
             ee_pos_weight: 40.0,
             ee_rot_weight: 2.0,
+            ee_frame: EndEffectorFrame::World,
         }
     }
+}
+
+/// `reward.ee_frame` (docs/env.md, "Reward").
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum EndEffectorFrame {
+    /// World positions: a character off the reference's path pays in every end effector.
+    World,
+    /// Positions relative to the root (simulated and reference each to its own).
+    Root,
 }
 
 /// `[obs]`: the optional observation blocks and normalization.
@@ -140,6 +166,9 @@ pub struct ObsConfig {
     pub future_spacing: u32,
     pub prev_action: bool,
     pub root_target: bool,
+    /// Every body's reference one step ahead relative to the simulated body (PHC's difference
+    /// observation): 135 values.
+    pub reference_bodies: bool,
     /// Normalized observations are clipped to [-clip, clip].
     pub clip: f32,
 }
@@ -151,6 +180,7 @@ impl Default for ObsConfig {
             future_spacing: 1,
             prev_action: true,
             root_target: false,
+            reference_bodies: false,
             clip: 5.0,
         }
     }
@@ -212,6 +242,12 @@ pub struct PpoConfig {
     /// Clip the value around the rollout's value by `clip` in the value loss (rsl_rl's
     /// `use_clipped_value_loss`, on in the baseline).
     pub clip_value_loss: bool,
+    /// The critic predicts values normalized by the returns' running mean and standard
+    /// deviation (rl_games' `normalize_value`); value clipping is then in those units.
+    pub value_normalization: bool,
+    /// Clip the actor's and the critic's gradients to `max_grad_norm` each, instead of their
+    /// joint norm (where the critic's gradient can shrink the actor's step).
+    pub separate_grad_clipping: bool,
     /// Adapt the learning rate to the approximate KL after each minibatch (rsl_rl's
     /// "adaptive" schedule, on in the baseline); off: the rate stays `learning_rate`.
     pub adaptive_learning_rate: bool,
@@ -237,6 +273,8 @@ impl Default for PpoConfig {
             entropy_coef: 0.0,
             value_coef: 2.0,
             clip_value_loss: true,
+            value_normalization: false,
+            separate_grad_clipping: false,
             adaptive_learning_rate: true,
             values_in_update: true,
             max_grad_norm: 1.0,
@@ -275,6 +313,10 @@ pub struct RunConfig {
     /// Stop at the first successful evaluation (the paper's time-to-success protocol); false
     /// keeps training until a budget runs out.
     pub stop_on_success: bool,
+    /// With `stop_on_success`, keep training after success until an evaluation also meets the
+    /// paper's second criterion (average pose error at most 0.06 m), so that both times are
+    /// measured in one run.
+    pub stop_on_pose_error: bool,
     /// Active training seconds (initialization, evaluation and checkpoints excluded) after
     /// which the run stops.
     pub time_budget_s: f64,
@@ -295,6 +337,7 @@ impl Default for RunConfig {
             eval_start: EvalStart::Spread,
             success_rate: 0.9,
             stop_on_success: true,
+            stop_on_pose_error: false,
             time_budget_s: 60.0,
             max_iterations: 5000,
             checkpoint_interval: 50,
@@ -420,6 +463,21 @@ impl TrainConfig {
             "env.tracking_distance",
             e.tracking_distance,
             "must be positive (metres)"
+        );
+        for (key, value) in [
+            ("env.min_root_height", e.min_root_height),
+            ("env.min_reward", e.min_reward),
+            ("env.mean_tracking_distance", e.mean_tracking_distance),
+        ] {
+            if !(value >= 0.0 && value.is_finite()) {
+                return Err(bad(key, value.to_string(), "must be >= 0 (0: off)"));
+            }
+        }
+        check!(
+            e.min_reward < 1.0,
+            "env.min_reward",
+            e.min_reward,
+            "must be below 1 (rewards are in (0, 1]; 0: off)"
         );
         check!(
             e.grace_steps <= 1000,
@@ -618,6 +676,46 @@ impl TrainConfig {
             "must be at least 1 (the final checkpoint is always written)"
         );
         Ok(())
+    }
+
+    /// This configuration with `key = value` overrides applied (`train --set`): `key` is
+    /// `section.name` or a top-level name, `value` a TOML value (`0.5`, `true`, `[400, 200]`,
+    /// `"root"`; a bare word is taken as a string). The result is validated; `label` names it
+    /// in errors.
+    pub fn with_overrides(
+        &self,
+        overrides: &[(String, String)],
+        label: &str,
+    ) -> Result<TrainConfig, ConfigError> {
+        let parse_error = |message: String| ConfigError::Parse {
+            path: label.to_string(),
+            message,
+        };
+        let mut root = toml::Value::try_from(self).map_err(|e| ConfigError::Serialize(e.to_string()))?;
+        for (key, text) in overrides {
+            let value = toml::from_str::<toml::Table>(&format!("v = {text}"))
+                .ok()
+                .and_then(|mut t| t.remove("v"))
+                .unwrap_or_else(|| toml::Value::String(text.clone()));
+            let parts: Vec<&str> = key.split('.').collect();
+            let table = match parts.as_slice() {
+                [_] => root.as_table_mut(),
+                [section, _] => root.get_mut(*section).and_then(toml::Value::as_table_mut),
+                _ => None,
+            }
+            .ok_or_else(|| {
+                parse_error(format!(
+                    "--set {key}={text}: no such key (use section.name, e.g. ppo.clip)"
+                ))
+            })?;
+            let name = parts[parts.len() - 1].to_string();
+            table.insert(name, value);
+        }
+        let config: TrainConfig = root.try_into().map_err(|e: toml::de::Error| {
+            parse_error(e.to_string().trim().replace('\n', " "))
+        })?;
+        config.validate(label)?;
+        Ok(config)
     }
 
     /// The configuration as TOML (what `config.toml` of a run directory holds).

@@ -1,8 +1,16 @@
 //! The evaluation protocol, CPU side (the paper's appendix, "Backflip Search"): every
 //! `run.eval_interval` iterations the policy's mean action drives `run.eval_envs` envs from
 //! deterministic initial states (no noise) for one pass of the clip; success when at least
-//! `run.success_rate` of them complete it without early termination. The GPU evaluation
-//! fills one [`EnvEvaluation`] per env; [`summarize`] turns them into the metrics.
+//! `run.success_rate` of them succeed. The GPU evaluation fills one [`EnvEvaluation`] per env;
+//! [`summarize`] turns them into the metrics.
+//!
+//! An env succeeds by a fixed yardstick, independent of the training termination (docs/train.md,
+//! "Success"): it plays the whole pass with no body ever farther than
+//! [`SUCCESS_MAX_BODY_DISTANCE_M`] from its reference and the root never more than
+//! [`SUCCESS_MAX_ROOT_DROP_M`] below the reference root (checked per step on the GPU: it
+//! "completes"), and its global MPJPE over the pass is at most [`SUCCESS_MAX_MEAN_MPJPE_M`]
+//! (checked here), so that a character that completes the motion while drifting away from the
+//! reference's path does not count.
 //!
 //! Error metrics are means over every evaluated control step of every env (a failed env
 //! contributes its steps up to the failure), so an env that falls early weighs less:
@@ -18,11 +26,33 @@ use serde::{Deserialize, Serialize};
 
 use super::config::{EvalStart, TrainConfig};
 use super::metrics::nan_from_null;
+use crate::env::Yardstick;
 use crate::motion::LoopMode;
 
+/// A body farther than this from its reference (m) fails the episode: the paper's committed
+/// `tracking_distance` before the yardstick was separated from the training termination.
+pub const SUCCESS_MAX_BODY_DISTANCE_M: f32 = 1.0;
+/// The root more than this below the reference root (m) fails the episode: the tuned backflip's
+/// termination height (the stricter of the committed 0.6 and the baseline's 0.8).
+pub const SUCCESS_MAX_ROOT_DROP_M: f32 = 0.6;
+/// Largest global MPJPE (m, mean over the episode's steps and the 15 bodies) of a successful
+/// episode: a completed backflip drifting off the reference's path measured 0.28-0.31 m; tuned
+/// policies that track it measure 0.09-0.11 m.
+pub const SUCCESS_MAX_MEAN_MPJPE_M: f64 = 0.2;
+/// The paper's second criterion: average pose error at most this (m).
+pub const POSE_ERROR_TARGET_M: f64 = 0.06;
+
+/// The per-step part of the yardstick, as the evaluation kernel reads it.
+pub fn yardstick() -> Yardstick {
+    Yardstick {
+        max_body_distance: SUCCESS_MAX_BODY_DISTANCE_M,
+        max_root_drop: SUCCESS_MAX_ROOT_DROP_M,
+    }
+}
+
 /// One env's evaluation episode, as the GPU evaluation reports it: whether it ran all
-/// `steps` control steps without early termination, how many it ran, and per-step error
-/// means summed over those steps.
+/// `steps` control steps without failing the per-step yardstick, how many it ran, and per-step
+/// error means summed over those steps.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct EnvEvaluation {
     pub completed: bool,
@@ -33,15 +63,40 @@ pub struct EnvEvaluation {
     pub ee_orientation_error_sum: f64,
 }
 
+impl EvaluationSummary {
+    /// The paper's second criterion: average pose error at most [`POSE_ERROR_TARGET_M`].
+    pub fn meets_pose_error_target(&self) -> bool {
+        self.pose_error_m <= POSE_ERROR_TARGET_M
+    }
+}
+
+impl EnvEvaluation {
+    /// Completed within the per-step bounds and within the global MPJPE bound.
+    pub fn succeeded(&self) -> bool {
+        self.completed
+            && self.global_position_error_sum
+                <= SUCCESS_MAX_MEAN_MPJPE_M * f64::from(self.steps.max(1))
+    }
+}
+
 /// The metrics of one evaluation (`metrics.jsonl`'s `evaluation`, `eval`'s report).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EvaluationSummary {
-    /// Env episodes evaluated and how many completed.
+    /// Env episodes evaluated; how many completed (the per-step yardstick held to the end);
+    /// how many of those also kept the global MPJPE bound (succeeded).
     pub episodes: u32,
     pub completed: u32,
+    #[serde(default)]
+    pub succeeded: u32,
+    /// `succeeded / episodes`.
     pub success_rate: f64,
     /// `success_rate >= run.success_rate`.
     pub success: bool,
+    /// Whether the episode of env 0, which starts at the clip's beginning, succeeded: the
+    /// `clip_start` protocol's result (its envs are identical but for the physics' run-to-run
+    /// variation), measured in the same evaluation.
+    #[serde(default)]
+    pub clip_start_success: bool,
     /// Control steps of a complete episode.
     pub episode_steps: u32,
     #[serde(deserialize_with = "nan_from_null")]
@@ -88,6 +143,7 @@ pub fn summarize(
         return Err(EvaluationError::Empty);
     }
     let mut completed = 0u32;
+    let mut succeeded = 0u32;
     let mut steps = 0u64;
     let mut sums = [0.0f64; 4];
     for (env, e) in episodes.iter().enumerate() {
@@ -119,10 +175,11 @@ pub fn summarize(
             *total += value;
         }
         completed += u32::from(e.completed);
+        succeeded += u32::from(e.succeeded());
         steps += u64::from(e.steps);
     }
     let n = episodes.len() as f64;
-    let success_rate = f64::from(completed) / n;
+    let success_rate = f64::from(succeeded) / n;
     // No step at all (every env failed at once): the errors are undefined, not zero.
     let per_step = |sum: f64| {
         if steps == 0 {
@@ -134,8 +191,10 @@ pub fn summarize(
     Ok(EvaluationSummary {
         episodes: episodes.len() as u32,
         completed,
+        succeeded,
         success_rate,
         success: success_rate >= success_threshold,
+        clip_start_success: episodes[0].succeeded(),
         episode_steps,
         mean_episode_steps: steps as f64 / n,
         pose_error_m: per_step(sums[0]),
@@ -146,16 +205,46 @@ pub fn summarize(
 }
 
 /// Control steps of an evaluation episode: `run.eval_steps`, or one pass of the clip,
-/// ceil(duration / control dt) (a step shorter than rounding noise is not counted).
-pub fn evaluation_steps(config: &TrainConfig, clip_duration_s: f64, control_dt_s: f64) -> u32 {
-    if let Some(steps) = config.run.eval_steps {
-        return steps;
+/// ceil(duration / control dt) (a step shorter than rounding noise is not counted). A clip that
+/// does not loop ends its episodes itself (`reward_termination` truncates when the next
+/// reference time would pass the clip's end): at most [`clamped_clip_steps`] of them.
+pub fn evaluation_steps(
+    config: &TrainConfig,
+    clip_duration_s: f64,
+    control_dt_s: f64,
+    loop_mode: LoopMode,
+) -> u32 {
+    let steps = config.run.eval_steps.unwrap_or_else(|| {
+        let steps = (clip_duration_s / control_dt_s - 1e-9).ceil();
+        if steps.is_finite() && steps >= 1.0 {
+            steps.min(f64::from(u32::MAX)) as u32
+        } else {
+            1
+        }
+    });
+    match loop_mode {
+        LoopMode::Wrap => steps,
+        LoopMode::Clamp => steps.min(clamped_clip_steps(clip_duration_s, control_dt_s)),
     }
-    let steps = (clip_duration_s / control_dt_s - 1e-9).ceil();
-    if steps.is_finite() && steps >= 1.0 {
-        steps.min(f64::from(u32::MAX)) as u32
-    } else {
-        1
+}
+
+/// Control steps from the start of a clip that does not loop until the kernel truncates the
+/// episode at its end, in the kernel's own float32 arithmetic: the reference time advances by
+/// dt per step, and the step whose next reference time would pass the duration is the last.
+pub fn clamped_clip_steps(clip_duration_s: f64, control_dt_s: f64) -> u32 {
+    let (duration, dt) = (clip_duration_s as f32, control_dt_s as f32);
+    if !(dt > 0.0 && duration.is_finite()) {
+        return 1;
+    }
+    let mut time = 0.0f32;
+    let mut steps = 1u32;
+    loop {
+        let reference = time + dt;
+        if reference + dt > duration || steps == u32::MAX {
+            return steps;
+        }
+        time = reference;
+        steps += 1;
     }
 }
 
@@ -185,11 +274,22 @@ pub fn format_evaluation_report(summary: &EvaluationSummary, threshold: f64) -> 
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "success              {} ({}/{} episodes complete = {:.3}; threshold {threshold})",
+        "success              {} ({}/{} episodes succeed = {:.3}; threshold {threshold}; {} complete, {} of them over the {SUCCESS_MAX_MEAN_MPJPE_M} m MPJPE bound)",
         if summary.success { "yes" } else { "no" },
-        summary.completed,
+        summary.succeeded,
         summary.episodes,
-        summary.success_rate
+        summary.success_rate,
+        summary.completed,
+        summary.completed - summary.succeeded
+    );
+    let _ = writeln!(
+        out,
+        "from the clip start  {} (env 0)",
+        if summary.clip_start_success {
+            "succeeds"
+        } else {
+            "fails"
+        }
     );
     let _ = writeln!(
         out,
@@ -292,12 +392,53 @@ mod tests {
     fn episode_length_is_one_pass_of_the_clip() {
         let mut c = TrainConfig::with_motion("backflip");
         // Backflip: 1.75 s at 30 Hz is 52.5 steps -> 53; walk 1.266616 s -> 38.
-        assert_eq!(evaluation_steps(&c, 1.75, 1.0 / 30.0), 53);
-        assert_eq!(evaluation_steps(&c, 1.266616, 1.0 / 30.0), 38);
+        assert_eq!(evaluation_steps(&c, 1.75, 1.0 / 30.0, LoopMode::Wrap), 53);
+        assert_eq!(evaluation_steps(&c, 1.266616, 1.0 / 30.0, LoopMode::Wrap), 38);
         // An exact multiple is not rounded up by floating-point noise: 0.8 s is 24 steps.
-        assert_eq!(evaluation_steps(&c, 0.8, 4.0 / 120.0), 24);
+        assert_eq!(evaluation_steps(&c, 0.8, 4.0 / 120.0, LoopMode::Wrap), 24);
         c.run.eval_steps = Some(90);
-        assert_eq!(evaluation_steps(&c, 1.75, 1.0 / 30.0), 90);
+        assert_eq!(evaluation_steps(&c, 1.75, 1.0 / 30.0, LoopMode::Wrap), 90);
+        // A clamped clip caps even a configured length at its end.
+        assert_eq!(
+            evaluation_steps(&c, 1.75, 1.0 / 30.0, LoopMode::Clamp),
+            clamped_clip_steps(1.75, 1.0 / 30.0)
+        );
+    }
+
+    /// The steps the kernel plays from t = 0 before its clip-end truncation, by its own rule
+    /// (f32 times advanced by dt; end when the next reference time passes the duration).
+    fn kernel_steps(duration: f32, dt: f32) -> u32 {
+        let mut ref_time = 0.0f32;
+        for step in 1.. {
+            let t_ref = ref_time + dt;
+            if t_ref + dt > duration {
+                return step;
+            }
+            ref_time = t_ref;
+        }
+        unreachable!()
+    }
+
+    #[test]
+    fn clamped_clips_end_where_the_kernel_truncates() {
+        // 65 frames at 30 fps (punch-like): 64 frame intervals, 2.1333 s; the evaluation must
+        // play exactly the steps the kernel plays (the crash of issue 15 was 63 of 64).
+        for (frames, fps) in [(65u32, 30.0), (17, 16.0), (49, 24.0), (121, 60.0), (241, 120.0)] {
+            let duration = f64::from(frames - 1) / fps;
+            for substeps in [1u32, 2, 4, 8] {
+                let dt = f64::from(substeps) / 120.0;
+                let steps = clamped_clip_steps(duration, dt);
+                assert_eq!(
+                    steps,
+                    kernel_steps(duration as f32, dt as f32),
+                    "{frames} frames at {fps} fps, dt {dt}"
+                );
+                // Every scored reference time is inside the clip.
+                assert!(f64::from(steps) * dt <= duration + 1e-5, "{steps} x {dt} > {duration}");
+                let c = TrainConfig::with_motion("punch");
+                assert!(evaluation_steps(&c, duration, dt, LoopMode::Clamp) <= steps);
+            }
+        }
     }
 
     #[test]
@@ -315,7 +456,8 @@ mod tests {
         let envs = [env(true, 4, [0.05, 0.07, 0.09, 0.2])];
         let text = format_evaluation_report(&summarize(&envs, 4, 0.9).unwrap(), 0.9);
         for expected in [
-            "success              yes (1/1 episodes complete = 1.000; threshold 0.9)",
+            "success              yes (1/1 episodes succeed = 1.000; threshold 0.9; 1 complete, 0 of them over the 0.2 m MPJPE bound)",
+            "from the clip start  succeeds (env 0)",
             "episode length       4.0 of 4 control steps (mean)",
             "average pose error   0.0500 m",
             "global MPJPE         0.0700 m",

@@ -33,6 +33,54 @@ pub struct UpdateStats {
     pub learning_rate: f64,
 }
 
+/// How this iteration's episodes ended (`metrics.jsonl`'s `termination`): fractions of the
+/// episodes that ended in the rollout; the causes can overlap (one failure can have several).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeEnds {
+    /// Episodes that ended in this iteration's rollout.
+    pub episodes: f64,
+    /// Ended by the time limit or a clamped clip's end (not a failure).
+    #[serde(deserialize_with = "nan_from_null")]
+    pub truncated: f64,
+    /// Failed, and per cause (docs/env.md, "Termination").
+    #[serde(deserialize_with = "nan_from_null")]
+    pub failed: f64,
+    #[serde(deserialize_with = "nan_from_null")]
+    pub fell: f64,
+    #[serde(deserialize_with = "nan_from_null")]
+    pub lost: f64,
+    #[serde(deserialize_with = "nan_from_null")]
+    pub low_root: f64,
+    #[serde(deserialize_with = "nan_from_null")]
+    pub low_reward: f64,
+    #[serde(deserialize_with = "nan_from_null")]
+    pub drift: f64,
+}
+
+impl EpisodeEnds {
+    /// From the rollout's counts: `episodes` ended, `failed` of them, and the failures by
+    /// cause in `FailureCause::ALL`'s order (fell, lost, low root, low reward, drift).
+    pub fn from_counts(episodes: f64, failed: f64, by_cause: [f64; 5]) -> EpisodeEnds {
+        let of = |count: f64| {
+            if episodes > 0.0 {
+                count / episodes
+            } else {
+                f64::NAN
+            }
+        };
+        EpisodeEnds {
+            episodes,
+            truncated: of(episodes - failed),
+            failed: of(failed),
+            fell: of(by_cause[0]),
+            lost: of(by_cause[1]),
+            low_root: of(by_cause[2]),
+            low_reward: of(by_cause[3]),
+            drift: of(by_cause[4]),
+        }
+    }
+}
+
 /// One line of `metrics.jsonl`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IterationRecord {
@@ -54,6 +102,9 @@ pub struct IterationRecord {
     pub mean_episode_length: f64,
     #[serde(flatten)]
     pub update: UpdateStats,
+    /// How the rollout's episodes ended (absent in logs written before it was recorded).
+    #[serde(default)]
+    pub termination: EpisodeEnds,
     /// Present on evaluation iterations.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub evaluation: Option<EvaluationSummary>,

@@ -27,16 +27,19 @@ pub use checkpoint::{
 };
 pub use clock::{ActiveClock, StopReason, StopRule};
 pub use config::{
-    ActionMode, COMMITTED_CONFIGS, ConfigError, EnvConfig, EvalStart, GemmSetting, ObsConfig,
+    ActionMode, COMMITTED_CONFIGS, ConfigError, EndEffectorFrame, EnvConfig, EvalStart, GemmSetting,
+    ObsConfig,
     PolicyConfig, PpoConfig, RewardConfig, RunConfig, TrainConfig,
 };
 pub use error::TrainError;
 pub use evaluation::{
-    EnvEvaluation, EvaluationError, EvaluationSummary, evaluation_start_times, evaluation_steps,
-    format_evaluation_report, summarize,
+    EnvEvaluation, EvaluationError, EvaluationSummary, POSE_ERROR_TARGET_M,
+    SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_MEAN_MPJPE_M, SUCCESS_MAX_ROOT_DROP_M,
+    clamped_clip_steps, evaluation_start_times, evaluation_steps, format_evaluation_report,
+    summarize, yardstick,
 };
 pub use gpu_loop::{RunStart, TrainSetup, evaluate_on_gpu, train_on_gpu, train_with};
-pub use metrics::{IterationRecord, MetricsLog, ResumedMetrics, UpdateStats};
+pub use metrics::{EpisodeEnds, IterationRecord, MetricsLog, ResumedMetrics, UpdateStats};
 pub use preflight::{PolicyShapes, Preflight, check_plans, load_motion, preflight};
 pub use progress::{Progress, ProgressMode};
 pub use run_dir::{ResumedRun, RunDir, default_run_dir};

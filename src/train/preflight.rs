@@ -178,7 +178,7 @@ pub fn preflight(
         physics_dt,
         control_dt,
         table_frames: table.num_rows(),
-        eval_steps: evaluation_steps(config, clip.duration(), control_dt),
+        eval_steps: evaluation_steps(config, clip.duration(), control_dt, clip.loop_mode()),
         plans,
         policy: PolicyShapes::new(config, motion.character())?,
     };

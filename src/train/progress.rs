@@ -183,6 +183,7 @@ mod tests {
             mean_return: 12.345,
             mean_episode_length: 45.67,
             update: UpdateStats::default(),
+            termination: Default::default(),
             evaluation: evaluated.then(|| EvaluationSummary {
                 episodes: 32,
                 completed: 29,

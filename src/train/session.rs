@@ -22,11 +22,11 @@
 use std::path::Path;
 
 use super::checkpoint::{Checkpoint, CheckpointDir, CheckpointMeta};
-use super::clock::{ActiveClock, StopReason, StopRule};
+use super::clock::{ActiveClock, Milestones, StopReason, StopRule};
 use super::config::TrainConfig;
 use super::error::TrainError;
 use super::evaluation::EvaluationSummary;
-use super::metrics::{IterationRecord, MetricsLog, UpdateStats};
+use super::metrics::{EpisodeEnds, IterationRecord, MetricsLog, UpdateStats};
 use super::progress::{Progress, ProgressMode};
 use super::run_dir::{ResumedRun, RunDir};
 use super::summary::RunSummary;
@@ -37,6 +37,7 @@ pub struct IterationStats {
     pub mean_return: f64,
     pub mean_episode_length: f64,
     pub update: UpdateStats,
+    pub termination: EpisodeEnds,
 }
 
 /// An iteration done on the GPU, not yet recorded.
@@ -71,7 +72,15 @@ pub struct RunSession {
     frames: u64,
     /// Active seconds when the current iteration started.
     iteration_start_s: f64,
+    /// When `curve.png` was last drawn (redrawn at most every [`CURVE_REDRAW_S`]).
+    curve_drawn: Option<std::time::Instant>,
+    /// What the evaluations have reached so far (the stop rule's history).
+    reached: Milestones,
 }
+
+/// Wall seconds between redraws of `curve.png` during a run (and once at its end): drawing
+/// and encoding the picture after every evaluation would cost more than a short run trains.
+const CURVE_REDRAW_S: f64 = 5.0;
 
 impl RunSession {
     /// A new run in `root` (see [`RunDir::create`]).
@@ -155,6 +164,11 @@ impl RunSession {
         let (iteration, active, frames) = checkpoint.map_or((0, 0.0, 0), |c| {
             (c.meta.iteration, c.meta.active_time_s, c.meta.frames)
         });
+        let evaluations = || records.iter().filter_map(|r| r.evaluation.as_ref());
+        let reached = Milestones {
+            success: evaluations().any(|e| e.success),
+            pose_error: evaluations().any(EvaluationSummary::meets_pose_error_target),
+        };
         RunSession {
             checkpoints: dir.checkpoints(&config),
             rule: StopRule::new(&config.run),
@@ -167,6 +181,8 @@ impl RunSession {
             iteration,
             frames,
             iteration_start_s: active,
+            curve_drawn: None,
+            reached,
         }
     }
 
@@ -218,6 +234,7 @@ impl RunSession {
             mean_return: stats.mean_return,
             mean_episode_length: stats.mean_episode_length,
             update: stats.update,
+            termination: stats.termination,
             evaluation: None,
         };
         IterationStep {
@@ -228,7 +245,8 @@ impl RunSession {
     }
 
     /// Records an iteration (with its evaluation, when one ran): appends it to
-    /// `metrics.jsonl`, redraws `curve.png` after an evaluation, updates the progress
+    /// `metrics.jsonl`, redraws `curve.png` after an evaluation (at most every few seconds;
+    /// [`RunSession::finish`] draws the final one), updates the progress
     /// display, and says whether to checkpoint and whether to stop.
     pub fn record(
         &mut self,
@@ -241,15 +259,21 @@ impl RunSession {
         self.metrics.append(&record)?;
         self.iteration = record.iteration;
         self.frames = record.frames;
-        let stop = self.rule.check(
-            record.iteration,
-            record.active_time_s,
-            record.evaluation.as_ref(),
-        );
+        if let Some(e) = &record.evaluation {
+            self.reached.success |= e.success;
+            self.reached.pose_error |= e.meets_pose_error_target();
+        }
+        let stop = self
+            .rule
+            .check_milestones(record.iteration, record.active_time_s, self.reached);
         self.progress.iteration(&record);
         self.records.push(record);
-        if evaluated {
+        let curve_due = self
+            .curve_drawn
+            .is_none_or(|at| at.elapsed().as_secs_f64() >= CURVE_REDRAW_S);
+        if evaluated && curve_due {
             self.dir.write_curve(&self.config, &self.records)?;
+            self.curve_drawn = Some(std::time::Instant::now());
         }
         let interval = u64::from(self.config.run.checkpoint_interval);
         let checkpoint_due =

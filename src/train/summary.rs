@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use serde::{Deserialize, Serialize};
 
 use super::clock::StopReason;
-use super::evaluation::EvaluationSummary;
+use super::evaluation::{EvaluationSummary, POSE_ERROR_TARGET_M};
 use super::metrics::IterationRecord;
 use crate::hpo::trial::TrialOutcome;
 
@@ -25,6 +25,17 @@ pub struct RunSummary {
     /// Active seconds at the end of the iteration whose evaluation first succeeded.
     pub time_to_success_s: Option<f64>,
     pub success_iteration: Option<u64>,
+    /// Frames at the first successful evaluation.
+    #[serde(default)]
+    pub frames_to_success: Option<u64>,
+    /// Active seconds at the first evaluation whose average pose error was at most 0.06 m
+    /// (the paper's second criterion).
+    #[serde(default)]
+    pub time_to_pose_error_s: Option<f64>,
+    /// Active seconds at the first evaluation in which env 0, starting at the clip's beginning,
+    /// succeeded (the `clip_start` protocol, beside the `spread` headline).
+    #[serde(default)]
+    pub time_to_clip_start_success_s: Option<f64>,
     pub last_evaluation: Option<EvaluationSummary>,
 }
 
@@ -40,6 +51,13 @@ impl RunSummary {
         let first_success = records
             .iter()
             .find(|r| r.evaluation.as_ref().is_some_and(|e| e.success));
+        let first = |reached: &dyn Fn(&EvaluationSummary) -> bool| {
+            records
+                .iter()
+                .find(|r| r.evaluation.as_ref().is_some_and(reached))
+        };
+        let pose = first(&EvaluationSummary::meets_pose_error_target);
+        let clip_start = first(&|e| e.clip_start_success);
         let active_time_s = last.map_or(0.0, |r| r.active_time_s);
         let frames = last.map_or(0, |r| r.frames);
         RunSummary {
@@ -56,6 +74,9 @@ impl RunSummary {
             },
             time_to_success_s: first_success.map(|r| r.active_time_s),
             success_iteration: first_success.map(|r| r.iteration),
+            frames_to_success: first_success.map(|r| r.frames),
+            time_to_pose_error_s: pose.map(|r| r.active_time_s),
+            time_to_clip_start_success_s: clip_start.map(|r| r.active_time_s),
             last_evaluation: records.iter().rev().find_map(|r| r.evaluation.clone()),
         }
     }
@@ -98,6 +119,13 @@ impl RunSummary {
                 let _ = writeln!(out, "no success");
             }
         }
+        let at = |t: Option<f64>| t.map_or("not reached".to_string(), |t| format!("{t:.3} s"));
+        let _ = writeln!(
+            out,
+            "time to pose error <= {POSE_ERROR_TARGET_M} m {}; from the clip start (env 0) {}",
+            at(self.time_to_pose_error_s),
+            at(self.time_to_clip_start_success_s)
+        );
         if let Some(e) = &self.last_evaluation {
             let _ = writeln!(
                 out,
@@ -129,6 +157,7 @@ mod tests {
             mean_return: 10.0,
             mean_episode_length: 20.0,
             update: UpdateStats::default(),
+            termination: Default::default(),
             evaluation: success.map(|s| EvaluationSummary {
                 episodes: 32,
                 completed: if s { 30 } else { 3 },

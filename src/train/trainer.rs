@@ -18,7 +18,7 @@ use super::checkpoint::{Checkpoint, CheckpointError};
 use super::config::TrainConfig;
 use super::error::TrainError;
 use super::evaluation::EnvEvaluation;
-use super::metrics::UpdateStats;
+use super::metrics::{EpisodeEnds, UpdateStats};
 use super::preflight::tensor_names;
 use super::session::IterationStats;
 use crate::plan::PhysicsOverflow;
@@ -42,6 +42,8 @@ mod state_names {
     pub const PHASE_CDF: &str = "phase.cdf";
     /// i32 `[1]`: the rollout's iteration counter (its random streams).
     pub const RNG_ITERATION: &str = "rng.iteration";
+    /// f64 `[3]`: the returns' running count, mean and M2 (value normalization).
+    pub const VALUE_STATISTICS: &str = "value_norm.stats";
 }
 
 /// Everything on the GPU that a run trains and evaluates with.
@@ -119,6 +121,11 @@ impl Trainer {
         Ok(IterationStats {
             mean_return: totals.mean_return,
             mean_episode_length: totals.mean_episode_length,
+            termination: EpisodeEnds::from_counts(
+                totals.episodes,
+                totals.failures,
+                totals.failures_by_cause,
+            ),
             update: UpdateStats {
                 policy_loss: f64::from(ppo.surrogate_loss),
                 value_loss: f64::from(ppo.value_loss),
@@ -185,6 +192,7 @@ impl Trainer {
         put_f32(checkpoint, PHASE_FAILURES, failures)?;
         put_f32(checkpoint, PHASE_CDF, cdf)?;
         checkpoint.insert(RNG_ITERATION, &[1], iteration.download()?)?;
+        put_f64(checkpoint, VALUE_STATISTICS, self.update.value_statistics())?;
         Ok(())
     }
 
@@ -222,6 +230,10 @@ impl Trainer {
             get_f32(checkpoint, PHASE_FAILURES, failures)?;
             get_f32(checkpoint, PHASE_CDF, cdf)?;
             iteration.upload(checkpoint.get::<i32>(RNG_ITERATION, &[1])?)?;
+            // Checkpoints written before value normalization have none (it was off then).
+            if checkpoint.tensor(VALUE_STATISTICS).is_some() {
+                get_f64(checkpoint, VALUE_STATISTICS, self.update.value_statistics())?;
+            }
         }
         self.rollout.reset_all()?;
         Ok(())
