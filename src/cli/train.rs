@@ -42,7 +42,7 @@ pub struct TrainArgs {
     out: Option<PathBuf>,
     /// Continue the run in this directory from its newest good checkpoint (its config.toml;
     /// only budgets and evaluation settings may be overridden).
-    #[arg(long, conflicts_with_all = ["motion", "config", "seed", "out", "overwrite", "envs", "horizon"])]
+    #[arg(long, conflicts_with_all = ["motion", "config", "seed", "out", "overwrite", "envs", "horizon", "set"])]
     resume: Option<PathBuf>,
     /// Replace the run files of a non-empty --out directory.
     #[arg(long)]
@@ -65,6 +65,10 @@ pub struct TrainArgs {
     /// Iterations between evaluations, overriding `run.eval_interval`.
     #[arg(long)]
     eval_interval: Option<u32>,
+    /// Override any configuration key: `--set ppo.clip=0.25 --set reward.ee_frame=root`
+    /// (repeatable; applied after the other flags; values are TOML).
+    #[arg(long = "set", value_name = "KEY=VALUE", value_parser = parse_override)]
+    set: Vec<(String, String)>,
     /// Directory of DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
     motions_dir: Option<PathBuf>,
@@ -132,11 +136,24 @@ fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
         flags.push("--horizon");
     }
     args.apply_run_overrides(&mut config, &mut flags);
+    if !args.set.is_empty() {
+        flags.push("--set");
+    }
     if !flags.is_empty() {
         label = format!("{label} with {}", flags.join(", "));
     }
-    config.validate(&label)?;
+    let config = config.with_overrides(&args.set, &label)?;
     Ok((config, label))
+}
+
+/// `--set KEY=VALUE`.
+fn parse_override(text: &str) -> Result<(String, String), String> {
+    match text.split_once('=') {
+        Some((key, value)) if !key.trim().is_empty() => {
+            Ok((key.trim().to_string(), value.trim().to_string()))
+        }
+        _ => Err(format!("expected KEY=VALUE (e.g. ppo.clip=0.25), got {text:?}")),
+    }
 }
 
 /// Runs `train`.

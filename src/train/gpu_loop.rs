@@ -102,23 +102,30 @@ pub fn train_with(
         ));
     }
     let threshold = config.run.success_rate;
+    let mut wall = WallTime::starting(setup.elapsed().as_secs_f64());
     loop {
         session.start_iteration();
         let stats = trainer.iterate()?;
         let step = session.finish_iteration(stats);
         let evaluation = if step.evaluate {
+            let started = std::time::Instant::now();
             let episodes = trainer.evaluate()?;
+            wall.evaluation(started);
             Some(summarize(&episodes, trainer.evaluation_steps(), threshold)?)
         } else {
             None
         };
+        let started = std::time::Instant::now();
         let next = session.record(step, evaluation)?;
         if next.checkpoint_due {
             let mut checkpoint = session.new_checkpoint()?;
             trainer.save_into(&mut checkpoint)?;
             session.save_checkpoint(&checkpoint)?;
         }
+        wall.bookkeeping(started);
         if let Some(reason) = next.stop {
+            let line = wall.describe(session.active_time_s());
+            session.progress().note(&line);
             // Iteration limits no longer print from the kernels (kernels_py/physics.py); the
             // flags they set are summed here, once, outside the timed loop.
             match trainer.physics_overflow() {
@@ -133,6 +140,54 @@ pub fn train_with(
             }
             return session.finish(reason);
         }
+    }
+}
+
+/// Where a run's wall time went, printed at its end, so that a user (or a search) sees what
+/// the evaluations and the files cost beside the active training time.
+struct WallTime {
+    start: std::time::Instant,
+    setup_s: f64,
+    evaluation_s: f64,
+    evaluations: u32,
+    bookkeeping_s: f64,
+}
+
+impl WallTime {
+    fn starting(setup_s: f64) -> WallTime {
+        WallTime {
+            start: std::time::Instant::now(),
+            setup_s,
+            evaluation_s: 0.0,
+            evaluations: 0,
+            bookkeeping_s: 0.0,
+        }
+    }
+
+    fn evaluation(&mut self, started: std::time::Instant) {
+        self.evaluation_s += started.elapsed().as_secs_f64();
+        self.evaluations += 1;
+    }
+
+    fn bookkeeping(&mut self, started: std::time::Instant) {
+        self.bookkeeping_s += started.elapsed().as_secs_f64();
+    }
+
+    fn describe(&self, active_s: f64) -> String {
+        let each = if self.evaluations > 0 {
+            self.evaluation_s / f64::from(self.evaluations)
+        } else {
+            0.0
+        };
+        format!(
+            "wall {:.2} s after setup {:.2} s: active {active_s:.2} s, {} evaluations {:.2} s ({:.3} s each), metrics/curve/checkpoints {:.2} s",
+            self.start.elapsed().as_secs_f64(),
+            self.setup_s,
+            self.evaluations,
+            self.evaluation_s,
+            each,
+            self.bookkeeping_s
+        )
     }
 }
 
