@@ -129,8 +129,16 @@ fn inspect_report(s: &ClipSummary) -> String {
     }
     let _ = writeln!(
         out,
-        "quaternion lengths   max |len - 1| = {:.2e} (frame {}, column {}); {} beyond 1e-6; all renormalized",
-        norms.worst_deviation, norms.worst_frame, norms.worst_column, norms.beyond_rounding
+        "quaternion lengths   {:.4} .. {:.4}, max |len - 1| = {:.2e} (frame {}, column {}); \
+         {} of {} beyond 1%, {} beyond 1e-6; all renormalized",
+        norms.shortest,
+        norms.longest,
+        norms.worst_deviation,
+        norms.worst_frame,
+        norms.worst_column,
+        norms.beyond_one_percent,
+        norms.count,
+        norms.beyond_rounding
     );
     let _ = writeln!(
         out,

@@ -103,7 +103,8 @@ pub enum MotionError {
     ZeroDuration { file: String, frames: usize },
     #[error(
         "{file}: frame {frame}, columns {column}-{end} ({joint} rotation): the quaternion has length {norm}, \
-         too far from 1 to be a rotation (accepted: within {tolerance} of 1, then renormalized)",
+         which is not a rotation (any finite quaternion of length {min} or more is renormalized, \
+         as DeepMimic does)",
         end = column + 3
     )]
     QuaternionNorm {
@@ -112,7 +113,7 @@ pub enum MotionError {
         column: usize,
         joint: &'static str,
         norm: f64,
-        tolerance: f64,
+        min: f64,
     },
     #[error(
         "{file}: the character does not fit DeepMimic's humanoid: {problem}; DeepMimic frames \
