@@ -4,7 +4,8 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 use instantmimic::motion::SyntheticMotion;
-use instantmimic::motion::library::MOTIONS_ENV;
+use instantmimic::motion::built_in::BUILT_IN_CLIPS;
+use instantmimic::motion::library::{MOTIONS_ENV, directory_clips, motions_dir_from_env};
 
 fn run(args: &[&str], motions_dir: Option<&Path>) -> Output {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_instantmimic"));
@@ -100,14 +101,35 @@ fn fk_rejects_a_frame_out_of_range() {
 }
 
 #[test]
-fn a_name_without_a_motions_directory_says_what_to_set() {
-    let out = run(&["motion", "inspect", "walk"], None);
+fn an_unknown_name_lists_the_built_in_clips_and_says_what_to_set() {
+    let out = run(&["motion", "inspect", "nosuch"], None);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains(MOTIONS_ENV) && err.contains("--motions-dir"),
+        err.contains("no motion \"nosuch\"")
+            && err.contains("backflip, cartwheel")
+            && err.contains(MOTIONS_ENV)
+            && err.contains("--motions-dir"),
         "{err}"
     );
+}
+
+#[test]
+fn a_motions_directory_that_does_not_exist_is_an_error() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let missing = dir.path().join("missing");
+    for args in [
+        &["motion", "inspect", "walk"][..],
+        &["motion", "fk", "walk", "--frame", "0"][..],
+    ] {
+        let out = run(args, Some(&missing));
+        assert!(!out.status.success(), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("missing: it is not a directory") && err.contains(MOTIONS_ENV),
+            "{args:?}: {err}"
+        );
+    }
 }
 
 #[test]
@@ -130,26 +152,91 @@ fn a_malformed_file_names_the_file_frame_and_column() {
     );
 }
 
+/// Every clip shipped in assets/motions/ (DeepMimic's, as in ../shared/data/motions/) loads
+/// by name with no motions directory, from the copy built into the binary.
 #[test]
-fn inspect_reads_every_deepmimic_clip_by_name() {
-    let Some(dir) = instantmimic::motion::library::motions_dir_from_env() else {
-        println!(
-            "note: {MOTIONS_ENV} is not set; skipping `motion inspect` on the DeepMimic clips"
-        );
-        return;
-    };
-    for name in instantmimic::motion::library::CLIP_NAMES {
-        let out = run(&["motion", "inspect", name], Some(&dir));
+fn inspect_reads_every_built_in_clip_by_name() {
+    for clip in &BUILT_IN_CLIPS {
+        let out = run(&["motion", "inspect", clip.name], None);
         assert!(
             out.status.success(),
-            "{name}: {}",
+            "{}: {}",
+            clip.name,
             String::from_utf8_lossy(&out.stderr)
         );
         let text = String::from_utf8_lossy(&out.stdout);
+        let loop_mode = if ["punch", "getup_facedown", "getup_faceup"].contains(&clip.name) {
+            "none"
+        } else {
+            "wrap"
+        };
         assert!(
-            text.contains(&format!("humanoid3d_{name}.txt"))
-                && text.contains("loop                 wrap"),
+            text.contains(&format!(
+                "file                 assets/motions/{} (built in)",
+                clip.file_name
+            )) && text.contains(&format!("loop                 {loop_mode}")),
             "{text}"
         );
     }
+}
+
+/// DeepMimic's long clips (3.6 MB each) stay out of the repository: they are checked when
+/// INSTANTMIMIC_MOTIONS names a directory with `long/` (../shared/data/motions on CI).
+#[test]
+fn inspect_reads_every_long_deepmimic_clip_when_the_motions_directory_has_them() {
+    let Some(long) = motions_dir_from_env()
+        .map(|dir| dir.join("long"))
+        .filter(|long| long.is_dir())
+    else {
+        println!(
+            "note: {MOTIONS_ENV} names no directory with long/; the long clips are not checked"
+        );
+        return;
+    };
+    let clips = directory_clips(&long).expect("the long clips are listed");
+    assert!(!clips.is_empty(), "no clips in {}", long.display());
+    for clip in clips {
+        let path = clip.path.to_str().expect("utf-8 path");
+        let out = run(&["motion", "inspect", path], None);
+        assert!(
+            out.status.success(),
+            "{path}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}
+
+/// Issue 15: a clip with a 0.58-length quaternion (DeepMimic's kick has one) was refused; it
+/// loads, renormalized, with one warning line that counts it.
+#[test]
+fn inspect_renormalizes_a_short_quaternion_with_one_warning() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let mut frames = SyntheticMotion::default().deepmimic_frames();
+    for v in &mut frames[21][16..20] {
+        *v *= 0.58;
+    }
+    let rows: Vec<String> = frames
+        .iter()
+        .map(|row| {
+            let values: Vec<String> = row.iter().map(|v| format!("{v:?}")).collect();
+            format!("[{}]", values.join(", "))
+        })
+        .collect();
+    let text = format!("{{\"Loop\": \"wrap\", \"Frames\": [{}]}}", rows.join(",\n"));
+    std::fs::write(dir.path().join("humanoid3d_short.txt"), text).expect("write clip");
+    let out = run(&["motion", "inspect", "short"], Some(dir.path()));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stdout.contains("quaternion lengths   0.5800 .. ")
+            && stdout.contains("(frame 21, column 16); 1 of 279 beyond 1%"),
+        "{stdout}"
+    );
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with("warning: ")
+            && stderr.contains("humanoid3d_short.txt: 1 of 279 quaternions are more than 1%"),
+        "{stderr}"
+    );
 }

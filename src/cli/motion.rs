@@ -22,12 +22,12 @@ enum MotionCommand {
     /// lowest foot point of a clip.
     Inspect {
         #[command(flatten)]
-        source: MotionSource,
+        source: ClipArgs,
     },
     /// Print the body positions and orientations of one key frame.
     Fk {
         #[command(flatten)]
-        source: MotionSource,
+        source: ClipArgs,
         /// Key frame index (0-based).
         #[arg(long)]
         frame: usize,
@@ -36,11 +36,12 @@ enum MotionCommand {
 
 /// Which clip, for which character.
 #[derive(Args, Debug)]
-struct MotionSource {
-    /// A DeepMimic motion file, or a clip name (e.g. `walk` for humanoid3d_walk.txt) in the
-    /// motions directory.
+struct ClipArgs {
+    /// A DeepMimic motion file, or a clip's name (e.g. `walk` for humanoid3d_walk.txt): one in
+    /// the motions directory, else a built-in clip (backflip, walk, ...).
     motion: String,
-    /// Directory of DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
+    /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
+    /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
     motions_dir: Option<PathBuf>,
     /// Character description written by kernels_py/export_character.py (default: the humanoid).
@@ -48,16 +49,20 @@ struct MotionSource {
     character: Option<PathBuf>,
 }
 
-impl MotionSource {
+impl ClipArgs {
     fn load(&self) -> Result<ReferenceMotion> {
         let character = match &self.character {
             Some(path) => Character::load(path)?,
             None => Character::humanoid()?,
         };
         let dir = self.motions_dir.clone().or_else(motions_dir_from_env);
-        let path = resolve_motion(&self.motion, dir.as_deref())?;
+        let resolved = resolve_motion(&self.motion, dir.as_deref())?;
         // The error names the file (and frame and column): no context to add.
-        Ok(ReferenceMotion::load(&path, &character)?)
+        let motion = resolved.load(&character)?;
+        for line in resolved.notices(motion.clip()) {
+            eprintln!("{line}");
+        }
+        Ok(motion)
     }
 }
 

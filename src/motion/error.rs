@@ -137,10 +137,16 @@ pub enum MotionError {
         max: usize,
     },
     #[error(
-        "no motion file for {name:?} (looked for: {tried}); pass a path to a DeepMimic motion file, or a name \
-         (e.g. `walk` for humanoid3d_walk.txt) with --motions-dir or {env} set to the \
-         directory of the clips",
+        "no motion {name:?}: not a built-in clip ({built_in}) and no such file (looked for: \
+         {tried}); pass a path to a DeepMimic motion file, or a clip's name (e.g. `walk` for \
+         humanoid3d_walk.txt) in the directory given by --motions-dir or {env}",
         env = super::library::MOTIONS_ENV
     )]
-    NotFound { name: String, tried: String },
+    NotFound {
+        name: String,
+        tried: String,
+        built_in: String,
+    },
+    #[error("the motions directory {dir}: {problem} (--motions-dir or {env})", env = super::library::MOTIONS_ENV)]
+    MotionsDir { dir: String, problem: String },
 }
