@@ -1,4 +1,4 @@
-//! `instantmimic motion inspect` and `motion fk`, run as a user would.
+//! `instantmimic motion list`, `motion inspect` and `motion fk`, run as a user would.
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -121,6 +121,7 @@ fn a_motions_directory_that_does_not_exist_is_an_error() {
     for args in [
         &["motion", "inspect", "walk"][..],
         &["motion", "fk", "walk", "--frame", "0"][..],
+        &["motion", "list"][..],
     ] {
         let out = run(args, Some(&missing));
         assert!(!out.status.success(), "{args:?}");
@@ -239,4 +240,106 @@ fn inspect_renormalizes_a_short_quaternion_with_one_warning() {
             && stderr.contains("humanoid3d_short.txt: 1 of 279 quaternions are more than 1%"),
         "{stderr}"
     );
+}
+
+#[test]
+fn list_shows_the_built_in_clips_and_the_directorys() {
+    let out = run(&["motion", "list"], None);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.starts_with("built-in clips (13, "), "{text}");
+    let row = |name: &str| {
+        text.lines()
+            .find(|l| l.split_whitespace().next() == Some(name))
+            .unwrap_or_else(|| panic!("no row for {name} in:\n{text}"))
+            .split_whitespace()
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(
+        row("backflip"),
+        [
+            "backflip",
+            "29",
+            "1.750",
+            "s",
+            "16.000",
+            "wrap",
+            "configs/train/backflip.toml",
+            "humanoid3d_backflip.txt"
+        ]
+    );
+    assert_eq!(
+        row("punch"),
+        [
+            "punch",
+            "65",
+            "2.133",
+            "s",
+            "30.000",
+            "none",
+            "-",
+            "humanoid3d_punch.txt"
+        ]
+    );
+    assert!(text.contains("motions directory: none"), "{text}");
+
+    // A directory: a new clip, one replacing the built-in walk, a broken one, a non-clip file.
+    let dir = synthetic_dir();
+    let synthetic = SyntheticMotion::default().to_json();
+    std::fs::write(dir.path().join("humanoid3d_walk.txt"), &synthetic).expect("write clip");
+    std::fs::write(dir.path().join("broken.txt"), "{}").expect("write file");
+    std::fs::write(dir.path().join("README.md"), "not a clip").expect("write file");
+    let out = run(&["motion", "list"], Some(dir.path()));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let listed = &text[text
+        .find("motions directory ")
+        .expect("the directory's section")..];
+    assert!(
+        listed.contains(&format!("({MOTIONS_ENV}): 3 clips")),
+        "{listed}"
+    );
+    assert!(
+        listed.contains("broken           does not load: ")
+            && listed.contains("\"Loop\" is missing"),
+        "{listed}"
+    );
+    let synth: Vec<&str> = listed
+        .lines()
+        .find(|l| l.trim_start().starts_with("synth "))
+        .expect("the synthetic clip's row")
+        .split_whitespace()
+        .collect();
+    assert_eq!(
+        synth,
+        [
+            "synth",
+            "31",
+            "1.000",
+            "s",
+            "30.000",
+            "wrap",
+            "-",
+            "humanoid3d_synth.txt"
+        ]
+    );
+    let walk = listed
+        .lines()
+        .find(|l| l.trim_start().starts_with("walk "))
+        .expect("the walk's row");
+    assert!(
+        walk.contains(" 31 ")
+            && walk.contains("configs/train/walk.toml")
+            && walk.ends_with("humanoid3d_walk.txt (replaces the built-in clip)"),
+        "{walk}"
+    );
+    assert!(!listed.contains("README"), "{listed}");
 }

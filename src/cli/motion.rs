@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::{Args, Subcommand};
 
-use crate::motion::library::{motions_dir_from_env, resolve_motion};
+use crate::motion::library::{MOTIONS_ENV, motions_dir_from_env, resolve_motion};
 use crate::motion::summary::JointRange;
 use crate::motion::{Character, ClipSummary, ReferenceMotion};
 
@@ -18,6 +18,13 @@ pub struct MotionArgs {
 
 #[derive(Subcommand, Debug)]
 enum MotionCommand {
+    /// List the built-in clips and those in the motions directory: frames, duration, frame
+    /// rate, loop mode and committed training config.
+    List {
+        /// Directory of your own DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
+        #[arg(long)]
+        motions_dir: Option<PathBuf>,
+    },
     /// Print frames, fps, duration, loop mode, per-cycle root displacement, joint ranges and the
     /// lowest foot point of a clip.
     Inspect {
@@ -38,7 +45,7 @@ enum MotionCommand {
 #[derive(Args, Debug)]
 struct ClipArgs {
     /// A DeepMimic motion file, or a clip's name (e.g. `walk` for humanoid3d_walk.txt): one in
-    /// the motions directory, else a built-in clip (backflip, walk, ...).
+    /// the motions directory, else a built-in clip (`motion list` shows them).
     motion: String,
     /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
     /// (default: $INSTANTMIMIC_MOTIONS).
@@ -69,6 +76,14 @@ impl ClipArgs {
 /// Runs `motion <subcommand>`.
 pub fn run(args: MotionArgs) -> Result<()> {
     match args.command {
+        MotionCommand::List { motions_dir } => {
+            let dir = match motions_dir {
+                Some(dir) => Some((dir, "--motions-dir")),
+                None => motions_dir_from_env().map(|dir| (dir, MOTIONS_ENV)),
+            };
+            let dir = dir.as_ref().map(|(dir, from)| (dir.as_path(), *from));
+            print!("{}", super::motion_list::list_report(dir)?);
+        }
         MotionCommand::Inspect { source } => {
             let motion = source.load()?;
             print!("{}", inspect_report(&ClipSummary::of(&motion)));
