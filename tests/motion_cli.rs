@@ -16,6 +16,22 @@ fn run(args: &[&str], motions_dir: Option<&Path>) -> Output {
     cmd.output().expect("the binary runs")
 }
 
+/// The stdout of a command that must succeed (`what` names it if it fails).
+fn succeeded(out: &Output, what: &str) -> String {
+    assert!(
+        out.status.success(),
+        "{what}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The stderr of a command that must fail.
+fn failed(out: &Output, what: &str) -> String {
+    assert!(!out.status.success(), "{what} succeeded");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
 fn synthetic_dir() -> tempfile::TempDir {
     let dir = tempfile::tempdir().expect("temporary directory");
     std::fs::write(
@@ -30,12 +46,7 @@ fn synthetic_dir() -> tempfile::TempDir {
 fn inspect_prints_the_clip_facts() {
     let dir = synthetic_dir();
     let out = run(&["motion", "inspect", "synth"], Some(dir.path()));
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = succeeded(&out, "motion");
     for expected in [
         "frames               31",
         "fps                  30.000",
@@ -64,12 +75,7 @@ fn fk_prints_every_body() {
         ],
         None,
     );
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = succeeded(&out, "motion");
     assert!(text.contains("frame 3 (t = 0.100000 s)"), "{text}");
     for body in [
         "pelvis",
@@ -92,8 +98,7 @@ fn fk_rejects_a_frame_out_of_range() {
         &["motion", "fk", "synth", "--frame", "31"],
         Some(dir.path()),
     );
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = failed(&out, "motion");
     assert!(
         err.contains("--frame 31 is out of range") && err.contains("0..=30"),
         "{err}"
@@ -103,8 +108,7 @@ fn fk_rejects_a_frame_out_of_range() {
 #[test]
 fn an_unknown_name_lists_the_built_in_clips_and_says_what_to_set() {
     let out = run(&["motion", "inspect", "nosuch"], None);
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = failed(&out, "motion");
     assert!(
         err.contains("no motion \"nosuch\"")
             && err.contains("backflip, cartwheel")
@@ -124,8 +128,7 @@ fn a_motions_directory_that_does_not_exist_is_an_error() {
         &["motion", "list"][..],
     ] {
         let out = run(args, Some(&missing));
-        assert!(!out.status.success(), "{args:?}");
-        let err = String::from_utf8_lossy(&out.stderr);
+        let err = failed(&out, &format!("{args:?}"));
         assert!(
             err.contains("missing: it is not a directory") && err.contains(MOTIONS_ENV),
             "{args:?}: {err}"
@@ -145,8 +148,7 @@ fn a_malformed_file_names_the_file_frame_and_column() {
         &["motion", "inspect", path.to_str().expect("utf-8 path")],
         None,
     );
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = failed(&out, "motion");
     assert!(
         err.contains("bad.txt") && err.contains("frame 0, column 0"),
         "{err}"
@@ -159,13 +161,7 @@ fn a_malformed_file_names_the_file_frame_and_column() {
 fn inspect_reads_every_built_in_clip_by_name() {
     for clip in &BUILT_IN_CLIPS {
         let out = run(&["motion", "inspect", clip.name], None);
-        assert!(
-            out.status.success(),
-            "{}: {}",
-            clip.name,
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let text = String::from_utf8_lossy(&out.stdout);
+        let text = succeeded(&out, clip.name);
         let loop_mode = if ["punch", "getup_facedown", "getup_faceup"].contains(&clip.name) {
             "none"
         } else {
@@ -199,11 +195,7 @@ fn inspect_reads_every_long_deepmimic_clip_when_the_motions_directory_has_them()
     for clip in clips {
         let path = clip.path.to_str().expect("utf-8 path");
         let out = run(&["motion", "inspect", path], None);
-        assert!(
-            out.status.success(),
-            "{path}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        succeeded(&out, path);
     }
 }
 
@@ -226,9 +218,8 @@ fn inspect_renormalizes_a_short_quaternion_with_one_warning() {
     let text = format!("{{\"Loop\": \"wrap\", \"Frames\": [{}]}}", rows.join(",\n"));
     std::fs::write(dir.path().join("humanoid3d_short.txt"), text).expect("write clip");
     let out = run(&["motion", "inspect", "short"], Some(dir.path()));
-    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stdout = succeeded(&out, "inspect short");
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stderr}");
     assert!(
         stdout.contains("quaternion lengths   0.5800 .. ")
             && stdout.contains("(frame 21, column 16); 1 of 279 beyond 1%"),
@@ -245,12 +236,7 @@ fn inspect_renormalizes_a_short_quaternion_with_one_warning() {
 #[test]
 fn list_shows_the_built_in_clips_and_the_directorys() {
     let out = run(&["motion", "list"], None);
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = succeeded(&out, "motion");
     assert!(text.starts_with("built-in clips (13, "), "{text}");
     let row = |name: &str| {
         text.lines()
@@ -294,12 +280,7 @@ fn list_shows_the_built_in_clips_and_the_directorys() {
     std::fs::write(dir.path().join("broken.txt"), "{}").expect("write file");
     std::fs::write(dir.path().join("README.md"), "not a clip").expect("write file");
     let out = run(&["motion", "list"], Some(dir.path()));
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = succeeded(&out, "motion");
     let listed = &text[text
         .find("motions directory ")
         .expect("the directory's section")..];
