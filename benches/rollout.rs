@@ -3,14 +3,14 @@
 //! physics-only floors (from reset states and from the rollout's own states). The same code as
 //! `instantmimic bench rollout`; results go in BENCHMARKS.md.
 //!
-//!   INSTANTMIMIC_MOTIONS=../shared/data/motions cargo bench --features gpu --bench rollout
+//!   cargo bench --features gpu --bench rollout
 
 use anyhow::{Context, Result};
 use instantmimic::bench::bench_rollout;
 use instantmimic::cuda::Gpu;
 use instantmimic::env::Phase;
+use instantmimic::motion::Character;
 use instantmimic::motion::library::{motions_dir_from_env, resolve_motion};
-use instantmimic::motion::{Character, ReferenceMotion};
 use instantmimic::plan::PlanStore;
 use instantmimic::train::TrainConfig;
 
@@ -18,8 +18,7 @@ fn main() -> Result<()> {
     let gpu = Gpu::open(0)?;
     let store = PlanStore::new(None);
     let character = Character::humanoid()?;
-    let path = resolve_motion("backflip", motions_dir_from_env().as_deref())?;
-    let motion = ReferenceMotion::load(&path, &character)?;
+    let motion = resolve_motion("backflip", motions_dir_from_env().as_deref())?.load(&character)?;
     let (label, committed) =
         TrainConfig::committed("backflip").context("the committed backflip config")?;
     let committed = committed.with_context(|| label.clone())?;

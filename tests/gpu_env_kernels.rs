@@ -1,7 +1,7 @@
 //! Every env kernel on the GPU, through the generated launchers (`EnvKernels::<kernel>`),
 //! against the same cases and f64 references as the Warp CPU run (tests/env_kernels_cpu.rs,
 //! tests/kernel_checks/). Run on a machine with an NVIDIA GPU:
-//! `INSTANTMIMIC_MOTIONS=../shared/data/motions cargo test --features gpu --test gpu_env_kernels -- --nocapture`
+//! `cargo test --features gpu --test gpu_env_kernels -- --nocapture`
 #![cfg(feature = "gpu")]
 
 mod kernel_checks;

@@ -1,7 +1,7 @@
 //! The GPU reference-table lookup (`kernels_py/env/reference.py`, launched through the
 //! generated `EnvKernels::lookup_reference`) against its CPU twin `ReferenceTable::lookup`.
 //! Run on a machine with an NVIDIA GPU:
-//! `INSTANTMIMIC_MOTIONS=../shared/data/motions cargo test --features gpu --test gpu_reference_table -- --nocapture`
+//! `cargo test --features gpu --test gpu_reference_table -- --nocapture`
 //!
 //! Every value of ~10 000 looked-up rows per clip must agree with the CPU in f64 within
 //! `1e-6 * max(1, |cpu|)`: 1e-6 absolute for values up to 1 (quaternions, most positions and
@@ -14,11 +14,10 @@
 
 use instantmimic::cuda::Gpu;
 use instantmimic::env::{DeviceArray, DeviceArray2, DeviceReferenceTable, EnvKernels};
-use instantmimic::motion::library::{CLIP_NAMES, motions_dir_from_env, resolve_motion};
+use instantmimic::motion::built_in::BUILT_IN_CLIPS;
+use instantmimic::motion::library::MotionSource;
 use instantmimic::motion::table::{HEADER_LEN, HUMANOID_LAYOUT};
-use instantmimic::motion::{
-    Character, LoopMode, ReferenceMotion, ReferenceTable, SyntheticMotion, TableLayout,
-};
+use instantmimic::motion::{Character, LoopMode, ReferenceTable, SyntheticMotion, TableLayout};
 
 const CONTROL_DT: f64 = 1.0 / 30.0;
 const LOOKUPS: usize = 10_000;
@@ -190,8 +189,7 @@ fn synthetic_table(motion: &SyntheticMotion) -> ReferenceTable {
     ReferenceTable::build(&reference, CONTROL_DT).expect("table")
 }
 
-/// The tables to check: synthetic ones always, the five DeepMimic clips when
-/// INSTANTMIMIC_MOTIONS is set.
+/// The tables to check: synthetic ones and every built-in DeepMimic clip.
 fn tables() -> Vec<(String, ReferenceTable)> {
     let mut out = vec![
         (
@@ -220,20 +218,13 @@ fn tables() -> Vec<(String, ReferenceTable)> {
             }),
         ),
     ];
-    match motions_dir_from_env() {
-        None => println!(
-            "note: INSTANTMIMIC_MOTIONS is not set; checking synthetic clips only (set it to check the five DeepMimic clips)"
-        ),
-        Some(dir) => {
-            let character = humanoid();
-            for name in CLIP_NAMES {
-                let path =
-                    resolve_motion(name, Some(&dir)).expect("the clip is in the motions directory");
-                let reference = ReferenceMotion::load(&path, &character).expect("the clip loads");
-                let table = ReferenceTable::build(&reference, CONTROL_DT).expect("table");
-                out.push((format!("{name} ({:?})", table.loop_mode()), table));
-            }
-        }
+    let character = humanoid();
+    for clip in &BUILT_IN_CLIPS {
+        let reference = MotionSource::BuiltIn(clip)
+            .load(&character)
+            .expect("the clip loads");
+        let table = ReferenceTable::build(&reference, CONTROL_DT).expect("table");
+        out.push((format!("{} ({:?})", clip.name, table.loop_mode()), table));
     }
     out
 }

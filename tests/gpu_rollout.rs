@@ -1,6 +1,6 @@
 //! The rollout graph (`src/env/rollout.rs`) on the GPU: what it contains and what a replay leaves.
 //! Run on a machine with an NVIDIA GPU:
-//! `INSTANTMIMIC_MOTIONS=../shared/data/motions cargo test --release --features gpu --test gpu_rollout -- --nocapture`
+//! `cargo test --release --features gpu --test gpu_rollout -- --nocapture`
 //!
 //! - The graph holds no host node and no copy from or to host memory: nothing in a rollout waits
 //!   for the CPU, and a replay needs nothing from it.
@@ -11,27 +11,17 @@
 
 use instantmimic::cuda::Gpu;
 use instantmimic::env::Rollout;
-use instantmimic::motion::library::{motions_dir_from_env, resolve_motion};
-use instantmimic::motion::{Character, ReferenceMotion, SyntheticMotion};
+use instantmimic::motion::library::resolve_motion;
+use instantmimic::motion::{Character, ReferenceMotion};
 use instantmimic::plan::PlanStore;
 use instantmimic::train::TrainConfig;
 
-/// The backflip clip when the motions directory is set, else a synthetic clip.
+/// The built-in backflip clip.
 fn motion() -> ReferenceMotion {
     let character = Character::humanoid().expect("the humanoid");
-    match motions_dir_from_env() {
-        Some(dir) => {
-            let path =
-                resolve_motion("backflip", Some(&dir)).expect("backflip in INSTANTMIMIC_MOTIONS");
-            ReferenceMotion::load(&path, &character).expect("backflip loads")
-        }
-        None => {
-            eprintln!("note: INSTANTMIMIC_MOTIONS is not set; using a synthetic clip");
-            SyntheticMotion::default()
-                .reference_motion(&character)
-                .expect("synthetic clip")
-        }
-    }
+    resolve_motion("backflip", None)
+        .and_then(|resolved| resolved.load(&character))
+        .expect("the built-in backflip loads")
 }
 
 fn config(num_envs: u32, horizon: u32) -> TrainConfig {

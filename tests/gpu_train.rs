@@ -1,5 +1,5 @@
 //! `instantmimic train` / `eval` on a GPU, run through the binary as a user would (feature
-//! `gpu`; `INSTANTMIMIC_MOTIONS` names the DeepMimic clips):
+//! `gpu`; the backflip is the binary's built-in clip):
 //! `cargo test --release --features gpu --test gpu_train -- --nocapture --test-threads 1`
 //!
 //! - A short run on the 32-world plans writes a metrics line per iteration with finite losses,
@@ -13,12 +13,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use instantmimic::motion::library::motions_dir_from_env;
+use instantmimic::motion::library::MOTIONS_ENV;
 use instantmimic::train::TrainConfig;
-
-fn motions_dir() -> PathBuf {
-    motions_dir_from_env().expect("INSTANTMIMIC_MOTIONS names the DeepMimic clips")
-}
 
 /// The binary under test: `INSTANTMIMIC_BIN` where the test runs away from its build tree (the
 /// device machine), else the one cargo built beside this test.
@@ -27,7 +23,7 @@ fn binary() -> Command {
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_instantmimic")));
     let mut c = Command::new(exe);
-    c.env("INSTANTMIMIC_MOTIONS", motions_dir());
+    c.env_remove(MOTIONS_ENV);
     c
 }
 

@@ -1,10 +1,11 @@
-//! `instantmimic motion inspect` and `motion fk`, run as a user would.
+//! `instantmimic motion list`, `motion inspect` and `motion fk`, run as a user would.
 
 use std::path::Path;
 use std::process::{Command, Output};
 
 use instantmimic::motion::SyntheticMotion;
-use instantmimic::motion::library::MOTIONS_ENV;
+use instantmimic::motion::built_in::BUILT_IN_CLIPS;
+use instantmimic::motion::library::{MOTIONS_ENV, directory_clips, motions_dir_from_env};
 
 fn run(args: &[&str], motions_dir: Option<&Path>) -> Output {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_instantmimic"));
@@ -13,6 +14,22 @@ fn run(args: &[&str], motions_dir: Option<&Path>) -> Output {
         cmd.env(MOTIONS_ENV, dir);
     }
     cmd.output().expect("the binary runs")
+}
+
+/// The stdout of a command that must succeed (`what` names it if it fails).
+fn succeeded(out: &Output, what: &str) -> String {
+    assert!(
+        out.status.success(),
+        "{what}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The stderr of a command that must fail.
+fn failed(out: &Output, what: &str) -> String {
+    assert!(!out.status.success(), "{what} succeeded");
+    String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
 fn synthetic_dir() -> tempfile::TempDir {
@@ -29,12 +46,7 @@ fn synthetic_dir() -> tempfile::TempDir {
 fn inspect_prints_the_clip_facts() {
     let dir = synthetic_dir();
     let out = run(&["motion", "inspect", "synth"], Some(dir.path()));
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = succeeded(&out, "motion");
     for expected in [
         "frames               31",
         "fps                  30.000",
@@ -63,12 +75,7 @@ fn fk_prints_every_body() {
         ],
         None,
     );
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = succeeded(&out, "motion");
     assert!(text.contains("frame 3 (t = 0.100000 s)"), "{text}");
     for body in [
         "pelvis",
@@ -91,8 +98,7 @@ fn fk_rejects_a_frame_out_of_range() {
         &["motion", "fk", "synth", "--frame", "31"],
         Some(dir.path()),
     );
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = failed(&out, "motion");
     assert!(
         err.contains("--frame 31 is out of range") && err.contains("0..=30"),
         "{err}"
@@ -100,14 +106,34 @@ fn fk_rejects_a_frame_out_of_range() {
 }
 
 #[test]
-fn a_name_without_a_motions_directory_says_what_to_set() {
-    let out = run(&["motion", "inspect", "walk"], None);
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+fn an_unknown_name_lists_the_built_in_clips_and_says_what_to_set() {
+    let out = run(&["motion", "inspect", "nosuch"], None);
+    let err = failed(&out, "motion");
     assert!(
-        err.contains(MOTIONS_ENV) && err.contains("--motions-dir"),
+        err.contains("no motion \"nosuch\"")
+            && err.contains("backflip, cartwheel")
+            && err.contains(MOTIONS_ENV)
+            && err.contains("--motions-dir"),
         "{err}"
     );
+}
+
+#[test]
+fn a_motions_directory_that_does_not_exist_is_an_error() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let missing = dir.path().join("missing");
+    for args in [
+        &["motion", "inspect", "walk"][..],
+        &["motion", "fk", "walk", "--frame", "0"][..],
+        &["motion", "list"][..],
+    ] {
+        let out = run(args, Some(&missing));
+        let err = failed(&out, &format!("{args:?}"));
+        assert!(
+            err.contains("missing: it is not a directory") && err.contains(MOTIONS_ENV),
+            "{args:?}: {err}"
+        );
+    }
 }
 
 #[test]
@@ -122,34 +148,179 @@ fn a_malformed_file_names_the_file_frame_and_column() {
         &["motion", "inspect", path.to_str().expect("utf-8 path")],
         None,
     );
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = failed(&out, "motion");
     assert!(
         err.contains("bad.txt") && err.contains("frame 0, column 0"),
         "{err}"
     );
 }
 
+/// Every clip shipped in assets/motions/ (DeepMimic's, as in ../shared/data/motions/) loads
+/// by name with no motions directory, from the copy built into the binary.
 #[test]
-fn inspect_reads_every_deepmimic_clip_by_name() {
-    let Some(dir) = instantmimic::motion::library::motions_dir_from_env() else {
-        println!(
-            "note: {MOTIONS_ENV} is not set; skipping `motion inspect` on the DeepMimic clips"
-        );
-        return;
-    };
-    for name in instantmimic::motion::library::CLIP_NAMES {
-        let out = run(&["motion", "inspect", name], Some(&dir));
+fn inspect_reads_every_built_in_clip_by_name() {
+    for clip in &BUILT_IN_CLIPS {
+        let out = run(&["motion", "inspect", clip.name], None);
+        let text = succeeded(&out, clip.name);
+        let loop_mode = if ["punch", "getup_facedown", "getup_faceup"].contains(&clip.name) {
+            "none"
+        } else {
+            "wrap"
+        };
         assert!(
-            out.status.success(),
-            "{name}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let text = String::from_utf8_lossy(&out.stdout);
-        assert!(
-            text.contains(&format!("humanoid3d_{name}.txt"))
-                && text.contains("loop                 wrap"),
+            text.contains(&format!(
+                "file                 assets/motions/{} (built in)",
+                clip.file_name
+            )) && text.contains(&format!("loop                 {loop_mode}")),
             "{text}"
         );
     }
+}
+
+/// DeepMimic's long clips (3.6 MB each) stay out of the repository: they are checked when
+/// INSTANTMIMIC_MOTIONS names a directory with `long/` (../shared/data/motions on CI).
+#[test]
+fn inspect_reads_every_long_deepmimic_clip_when_the_motions_directory_has_them() {
+    let Some(long) = motions_dir_from_env()
+        .map(|dir| dir.join("long"))
+        .filter(|long| long.is_dir())
+    else {
+        println!(
+            "note: {MOTIONS_ENV} names no directory with long/; the long clips are not checked"
+        );
+        return;
+    };
+    let clips = directory_clips(&long).expect("the long clips are listed");
+    assert!(!clips.is_empty(), "no clips in {}", long.display());
+    for clip in clips {
+        let path = clip.path.to_str().expect("utf-8 path");
+        let out = run(&["motion", "inspect", path], None);
+        succeeded(&out, path);
+    }
+}
+
+/// Issue 15: a clip with a 0.58-length quaternion (DeepMimic's kick has one) was refused; it
+/// loads, renormalized, with one warning line that counts it.
+#[test]
+fn inspect_renormalizes_a_short_quaternion_with_one_warning() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let mut frames = SyntheticMotion::default().deepmimic_frames();
+    for v in &mut frames[21][16..20] {
+        *v *= 0.58;
+    }
+    let rows: Vec<String> = frames
+        .iter()
+        .map(|row| {
+            let values: Vec<String> = row.iter().map(|v| format!("{v:?}")).collect();
+            format!("[{}]", values.join(", "))
+        })
+        .collect();
+    let text = format!("{{\"Loop\": \"wrap\", \"Frames\": [{}]}}", rows.join(",\n"));
+    std::fs::write(dir.path().join("humanoid3d_short.txt"), text).expect("write clip");
+    let out = run(&["motion", "inspect", "short"], Some(dir.path()));
+    let stdout = succeeded(&out, "inspect short");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stdout.contains("quaternion lengths   0.5800 .. ")
+            && stdout.contains("(frame 21, column 16); 1 of 279 beyond 1%"),
+        "{stdout}"
+    );
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with("warning: ")
+            && stderr.contains("humanoid3d_short.txt: 1 of 279 quaternions are more than 1%"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn list_shows_the_built_in_clips_and_the_directorys() {
+    let out = run(&["motion", "list"], None);
+    let text = succeeded(&out, "motion");
+    assert!(text.starts_with("built-in clips (13, "), "{text}");
+    let row = |name: &str| {
+        text.lines()
+            .find(|l| l.split_whitespace().next() == Some(name))
+            .unwrap_or_else(|| panic!("no row for {name} in:\n{text}"))
+            .split_whitespace()
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(
+        row("backflip"),
+        [
+            "backflip",
+            "29",
+            "1.750",
+            "s",
+            "16.000",
+            "wrap",
+            "configs/train/backflip.toml",
+            "humanoid3d_backflip.txt"
+        ]
+    );
+    assert_eq!(
+        row("punch"),
+        [
+            "punch",
+            "65",
+            "2.133",
+            "s",
+            "30.000",
+            "none",
+            "-",
+            "humanoid3d_punch.txt"
+        ]
+    );
+    assert!(text.contains("motions directory: none"), "{text}");
+
+    // A directory: a new clip, one replacing the built-in walk, a broken one, a non-clip file.
+    let dir = synthetic_dir();
+    let synthetic = SyntheticMotion::default().to_json();
+    std::fs::write(dir.path().join("humanoid3d_walk.txt"), &synthetic).expect("write clip");
+    std::fs::write(dir.path().join("broken.txt"), "{}").expect("write file");
+    std::fs::write(dir.path().join("README.md"), "not a clip").expect("write file");
+    let out = run(&["motion", "list"], Some(dir.path()));
+    let text = succeeded(&out, "motion");
+    let listed = &text[text
+        .find("motions directory ")
+        .expect("the directory's section")..];
+    assert!(
+        listed.contains(&format!("({MOTIONS_ENV}): 3 clips")),
+        "{listed}"
+    );
+    assert!(
+        listed.contains("broken           does not load: ")
+            && listed.contains("\"Loop\" is missing"),
+        "{listed}"
+    );
+    let synth: Vec<&str> = listed
+        .lines()
+        .find(|l| l.trim_start().starts_with("synth "))
+        .expect("the synthetic clip's row")
+        .split_whitespace()
+        .collect();
+    assert_eq!(
+        synth,
+        [
+            "synth",
+            "31",
+            "1.000",
+            "s",
+            "30.000",
+            "wrap",
+            "-",
+            "humanoid3d_synth.txt"
+        ]
+    );
+    let walk = listed
+        .lines()
+        .find(|l| l.trim_start().starts_with("walk "))
+        .expect("the walk's row");
+    assert!(
+        walk.contains(" 31 ")
+            && walk.contains("configs/train/walk.toml")
+            && walk.ends_with("humanoid3d_walk.txt (replaces the built-in clip)"),
+        "{walk}"
+    );
+    assert!(!listed.contains("README"), "{listed}");
 }

@@ -1,25 +1,59 @@
-//! The five DeepMimic clips, read from the directory in INSTANTMIMIC_MOTIONS (CI sets it to
-//! `../shared/data/motions`). Without it these tests print a note and pass.
+//! DeepMimic's clips as shipped in `assets/motions/` and built into the binary: the table of
+//! built-in clips matches the files, and the five tuned clips have the documented facts.
 //! Expected numbers are the ones `../shared/data/README.md` lists for these files.
 
-use std::path::PathBuf;
+use std::path::Path;
 
-use instantmimic::motion::library::{
-    CLIP_NAMES, MOTIONS_ENV, motions_dir_from_env, resolve_motion,
-};
-use instantmimic::motion::{Character, ClipSummary, ReferenceMotion, ReferenceTable};
+use instantmimic::motion::built_in::BUILT_IN_CLIPS;
+use instantmimic::motion::library::{CLIP_NAMES, MotionSource, resolve_motion};
+use instantmimic::motion::{Character, ClipSummary, LoopMode, ReferenceMotion, ReferenceTable};
 
-fn motions_dir() -> Option<PathBuf> {
-    let dir = motions_dir_from_env();
-    if dir.is_none() {
-        println!("note: {MOTIONS_ENV} is not set; skipping the tests on DeepMimic clips");
-    }
-    dir
+/// A clip by name with no motions directory: the built-in one.
+fn load(name: &str) -> ReferenceMotion {
+    let resolved = resolve_motion(name, None).expect("a built-in clip");
+    assert!(
+        matches!(resolved.source, MotionSource::BuiltIn(clip) if clip.name == name),
+        "{name}: {:?}",
+        resolved.source
+    );
+    resolved
+        .load(&Character::humanoid().expect("humanoid"))
+        .expect("the clip loads")
 }
 
-fn load(dir: &std::path::Path, name: &str) -> ReferenceMotion {
-    let path = resolve_motion(name, Some(dir)).expect("the clip is in the motions directory");
-    ReferenceMotion::load(&path, &Character::humanoid().expect("humanoid")).expect("the clip loads")
+/// Every `humanoid3d_*.txt` in assets/motions/ is built in, verbatim, and the licence is beside
+/// them; every built-in clip loads, the non-looping ones as clamped clips.
+#[test]
+fn every_shipped_clip_is_built_in_verbatim_and_loads() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/motions");
+    let mut shipped: Vec<String> = std::fs::read_dir(&dir)
+        .expect("assets/motions")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .filter(|name| name.starts_with("humanoid3d_") && name.ends_with(".txt"))
+        .collect();
+    shipped.sort();
+    let built_in: Vec<&str> = BUILT_IN_CLIPS.iter().map(|c| c.file_name).collect();
+    assert_eq!(shipped, built_in);
+    assert!(
+        std::fs::read_to_string(dir.join("LICENSE"))
+            .expect("DeepMimic's licence beside the clips")
+            .contains("Copyright (c) 2018 Xue Bin Peng")
+    );
+    let character = Character::humanoid().expect("humanoid");
+    for clip in &BUILT_IN_CLIPS {
+        let text = std::fs::read_to_string(dir.join(clip.file_name)).expect("the shipped file");
+        assert!(text == clip.text, "{} differs from its file", clip.name);
+        let motion = MotionSource::BuiltIn(clip)
+            .load_clip(&character)
+            .unwrap_or_else(|e| panic!("{}: {e}", clip.name));
+        let clamped = ["punch", "getup_facedown", "getup_faceup"].contains(&clip.name);
+        let expected = if clamped {
+            LoopMode::Clamp
+        } else {
+            LoopMode::Wrap
+        };
+        assert_eq!(motion.loop_mode(), expected, "{}", clip.name);
+    }
 }
 
 /// (name, frames, fps, duration s, displacement x, y, frame-0 root height)
@@ -33,10 +67,9 @@ const EXPECTED: [(&str, usize, f64, f64, f64, f64, f64); 5] = [
 
 #[test]
 fn all_five_clips_load_with_the_documented_timing_and_displacement() {
-    let Some(dir) = motions_dir() else { return };
     assert_eq!(CLIP_NAMES.len(), EXPECTED.len());
     for (name, frames, fps, duration, dx, dy, height) in EXPECTED {
-        let r = load(&dir, name);
+        let r = load(name);
         let clip = r.clip();
         assert_eq!(clip.num_frames(), frames, "{name}");
         assert!(
@@ -61,7 +94,6 @@ fn all_five_clips_load_with_the_documented_timing_and_displacement() {
 
 #[test]
 fn converted_poses_are_upright_with_hands_on_the_right_sides() {
-    let Some(dir) = motions_dir() else { return };
     let c = Character::humanoid().expect("humanoid");
     let (pelvis, head) = (0, c.body_id("head").expect("head") - 1);
     let (rhand, lhand) = (
@@ -69,7 +101,7 @@ fn converted_poses_are_upright_with_hands_on_the_right_sides() {
         c.body_id("left_hand").expect("lh") - 1,
     );
     for name in CLIP_NAMES {
-        let motion = load(&dir, name);
+        let motion = load(name);
         let s = &motion.frames()[0];
         let head_z = s.body_pos[head].z;
         // The data README rounds this range to 1.20 .. 1.35 m.
@@ -86,9 +118,8 @@ fn converted_poses_are_upright_with_hands_on_the_right_sides() {
 
 #[test]
 fn feet_stay_near_the_floor() {
-    let Some(dir) = motions_dir() else { return };
     for name in CLIP_NAMES {
-        let summary = ClipSummary::of(&load(&dir, name));
+        let summary = ClipSummary::of(&load(name));
         let lowest = summary.lowest_foot.expect("the humanoid has feet");
         // The data README: between -0.005 m (walk) and -0.068 m (run, a foot-box corner).
         assert!((-0.07..0.0).contains(&lowest.height), "{name}: {lowest:?}");
@@ -97,9 +128,8 @@ fn feet_stay_near_the_floor() {
 
 #[test]
 fn tables_of_the_clips_look_up_their_rows() {
-    let Some(dir) = motions_dir() else { return };
     for name in CLIP_NAMES {
-        let r = load(&dir, name);
+        let r = load(name);
         let table = ReferenceTable::build(&r, 1.0 / 30.0).expect("table");
         assert!(table.data().iter().all(|v| v.is_finite()), "{name}");
         for row in (0..table.num_rows() - 1).step_by(5) {

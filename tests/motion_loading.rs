@@ -162,30 +162,88 @@ fn nearly_unit_quaternions_are_renormalized() {
     assert!((norms.worst_deviation - 0.15).abs() < 1e-12);
 }
 
+/// Issue 15: DeepMimic's reader normalizes every quaternion, and its released clips need it
+/// (the kick's right hip is 0.58 long). Such a clip loads, renormalized, with a warning.
 #[test]
-fn quaternion_far_from_unit_is_an_error() {
-    let mut frames = SyntheticMotion::default().deepmimic_frames();
-    for v in &mut frames[5][21..25] {
-        *v *= 0.5;
+fn a_quaternion_of_length_0_58_is_renormalized_like_deepmimic_does() {
+    let unedited = SyntheticMotion::default().deepmimic_frames();
+    let mut frames = unedited.clone();
+    for v in &mut frames[5][16..20] {
+        *v *= 0.58;
     }
-    let err = MotionClip::from_deepmimic_frames("half.txt", &frames, LoopMode::Wrap, &humanoid())
-        .expect_err("a half-length quaternion is not a rotation");
+    let clip = MotionClip::from_deepmimic_frames("short.txt", &frames, LoopMode::Wrap, &humanoid())
+        .expect("a 0.58-length quaternion is a rotation");
+    let reference =
+        MotionClip::from_deepmimic_frames("unedited.txt", &unedited, LoopMode::Wrap, &humanoid())
+            .expect("the unedited clip loads");
+    // The right hip's qpos (25-28) is the unit quaternion of the unedited frame.
+    let (got, want) = (
+        clip.frame_qpos(5).expect("frame 5"),
+        reference.frame_qpos(5).expect("frame 5"),
+    );
+    for (a, b) in got.iter().zip(want) {
+        assert!((a - b).abs() < 1e-12, "{got:?} vs {want:?}");
+    }
+    let norms = clip.quaternion_norms();
+    assert_eq!((norms.worst_frame, norms.worst_column), (5, 16));
+    assert!((norms.shortest - 0.58).abs() < 1e-9, "{norms:?}");
+    assert_eq!(norms.beyond_one_percent, 1);
+    assert_eq!(norms.count, 9 * frames.len());
+    let warning = norms
+        .warning()
+        .expect("a quaternion 42% short is warned about");
+    assert!(
+        warning.contains("1 of ") && warning.contains("frame 5, column 16"),
+        "{warning}"
+    );
+    assert!(reference.quaternion_norms().warning().is_none());
+}
+
+#[test]
+fn a_quaternion_that_cannot_be_a_rotation_is_an_error_naming_frame_and_columns() {
+    for (scale, what) in [(0.0, "zero"), (1e-5, "near zero"), (1e300, "overflowing")] {
+        let mut frames = SyntheticMotion::default().deepmimic_frames();
+        for v in &mut frames[5][21..25] {
+            *v *= scale;
+        }
+        let err =
+            MotionClip::from_deepmimic_frames("bad.txt", &frames, LoopMode::Wrap, &humanoid())
+                .expect_err(what);
+        assert!(
+            matches!(
+                err,
+                MotionError::QuaternionNorm {
+                    frame: 5,
+                    column: 21,
+                    joint: "right_ankle",
+                    ..
+                }
+            ),
+            "{what}: {err:?}"
+        );
+        let msg = err.to_string();
+        assert!(
+            msg.contains("bad.txt")
+                && msg.contains("frame 5")
+                && msg.contains("columns 21-24")
+                && msg.contains("not a rotation"),
+            "{what}: {msg}"
+        );
+    }
+    let mut frames = SyntheticMotion::default().deepmimic_frames();
+    frames[7][40] = f64::NAN;
+    let err = MotionClip::from_deepmimic_frames("nan.txt", &frames, LoopMode::Wrap, &humanoid())
+        .expect_err("NaN is not a rotation");
     assert!(
         matches!(
             err,
-            MotionError::QuaternionNorm {
-                frame: 5,
-                column: 21,
-                joint: "right_ankle",
+            MotionError::NonFinite {
+                frame: 7,
+                column: 40,
                 ..
             }
         ),
         "{err:?}"
-    );
-    let msg = err.to_string();
-    assert!(
-        msg.contains("half.txt") && msg.contains("frame 5") && msg.contains("columns 21-24"),
-        "{msg}"
     );
 }
 

@@ -3,9 +3,10 @@
 #
 # Sets up the build-step Python once (kernels_py/requirements.txt, in .venv) so that the tests
 # also check that ptx/ regenerates from kernels_py/ byte for byte and that every shipped PTX
-# assembles with ptxas for every supported GPU, then runs `cargo test`. Reference motions are
-# read from $INSTANTMIMIC_MOTIONS (default ../shared/data/motions; tests that need them skip
-# with a note when the directory is missing).
+# assembles with ptxas for every supported GPU, then runs `cargo test`. The tests read the
+# DeepMimic clips shipped in assets/motions/ (built into the binary) and need no other data;
+# DeepMimic's long clips, kept out of the repository, are checked too when
+# $INSTANTMIMIC_MOTIONS names a directory with long/ (default ../shared/data/motions if present).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=${INSTANTMIMIC_VENV:-.venv}
@@ -19,8 +20,8 @@ fi
 INSTANTMIMIC_BUILD_PYTHON="$venv/bin/python"
 PTXAS=$("$INSTANTMIMIC_BUILD_PYTHON" -c 'import nvidia.cu13, pathlib; print(pathlib.Path(nvidia.cu13.__path__[0]) / "bin" / "ptxas")')
 export INSTANTMIMIC_BUILD_PYTHON PTXAS
-# The default only where it exists: tests that need the clips skip with a note when the
-# variable is unset, and fail (rightly) when it names a directory that is not there.
+# The default only where it exists: without a long/ there the long clips are not checked (the
+# test prints a note and passes).
 if [ -z "${INSTANTMIMIC_MOTIONS:-}" ] && [ -d ../shared/data/motions ]; then
   INSTANTMIMIC_MOTIONS=$(cd ../shared/data/motions && pwd)
   export INSTANTMIMIC_MOTIONS

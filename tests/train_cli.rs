@@ -5,7 +5,7 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-use instantmimic::motion::library::{CLIP_NAMES, MOTIONS_ENV, motions_dir_from_env};
+use instantmimic::motion::library::{CLIP_NAMES, MOTIONS_ENV};
 use instantmimic::motion::{Character, SyntheticMotion};
 use instantmimic::train::preflight::tensor_names;
 use instantmimic::train::{
@@ -200,7 +200,7 @@ fn bad_inputs_give_one_clear_line() {
         ),
         (
             vec!["train", "--motion", "nosuch", "--dry-run"],
-            "no motion file for \"nosuch\"",
+            "no motion \"nosuch\": not a built-in clip",
         ),
         (vec!["train", "--dry-run"], "name a motion with --motion"),
         (
@@ -384,20 +384,20 @@ fn eval_checks_the_checkpoint_then_needs_the_gpu() {
     assert!(err.contains("tensor `actor.params` is f32 ["), "{err}");
 }
 
+/// The committed configs with the built-in clips, and no motions directory: the README's first
+/// command (`train --motion backflip`) needs nothing but the binary.
 #[test]
-fn every_committed_config_passes_the_dry_run_with_its_clip() {
-    let Some(dir) = motions_dir_from_env() else {
-        println!("note: {MOTIONS_ENV} is not set; skipping the dry runs of the committed configs");
-        return;
-    };
+fn every_committed_config_passes_the_dry_run_with_its_built_in_clip() {
     let ws = tempfile::tempdir().unwrap();
     for (name, steps) in CLIP_NAMES.iter().zip([38, 24, 39, 53, 82]) {
-        let out = run(
-            &["train", "--motion", name, "--dry-run"],
-            Some(&dir),
-            ws.path(),
-        );
+        let out = run(&["train", "--motion", name, "--dry-run"], None, ws.path());
         let text = succeeded(&out);
+        assert!(
+            text.contains(&format!(
+                "motion        assets/motions/humanoid3d_{name}.txt (built in)"
+            )),
+            "{text}"
+        );
         assert!(
             text.contains(&format!(
                 "configuration configs/train/{name}.toml (built in)"
@@ -420,17 +420,63 @@ fn every_committed_config_passes_the_dry_run_with_its_clip() {
 }
 
 /// Every `policy.gemm` value is also a `bench rollout --gemm` value, spelled the same: the
-/// command gets past its arguments and stops at the missing clip directory.
+/// command gets past its arguments and stops at the unknown clip.
 #[test]
 fn bench_rollout_takes_every_gemm_setting_by_its_config_name() {
     let dir = workspace();
     for gemm in ["auto", "warp", "cublas", "cublas_tf32"] {
         let out = run(
-            &["bench", "rollout", "--motion", "backflip", "--gemm", gemm],
+            &["bench", "rollout", "--motion", "nosuch", "--gemm", gemm],
             None,
             dir.path(),
         );
         let err = one_line_error(&out);
-        assert!(err.contains("no motion file"), "--gemm {gemm}: {err}");
+        assert!(err.contains("no motion \"nosuch\""), "--gemm {gemm}: {err}");
     }
+}
+
+/// A clip in the motions directory with a built-in clip's name replaces it, and the run says so
+/// in one line on stderr.
+#[test]
+fn a_users_clip_replaces_the_built_in_one_of_the_same_name_and_the_run_says_so() {
+    let ws = workspace();
+    let motions = ws.path().join("motions");
+    std::fs::write(
+        motions.join("humanoid3d_walk.txt"),
+        SyntheticMotion::default().to_json(),
+    )
+    .unwrap();
+    let out = run(
+        &["train", "--motion", "walk", "--dry-run"],
+        Some(&motions),
+        ws.path(),
+    );
+    let text = succeeded(&out);
+    // The synthetic clip (31 frames), with the walk's committed config (chosen by name).
+    assert!(
+        text.contains("humanoid3d_walk.txt (31 frames, 1.0000 s, loop wrap)")
+            && !text.contains("(built in) ("),
+        "{text}"
+    );
+    assert!(
+        text.contains("configuration configs/train/walk.toml (built in)"),
+        "{text}"
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    let notes: Vec<&str> = err.lines().filter(|l| l.starts_with("note: ")).collect();
+    assert_eq!(notes.len(), 1, "{err}");
+    assert!(
+        notes[0].contains("\"walk\"")
+            && notes[0].contains("motions/humanoid3d_walk.txt")
+            && notes[0].contains("not the built-in humanoid3d_walk.txt"),
+        "{err}"
+    );
+    // Without the directory the built-in walk (39 frames) is used, with no note.
+    let out = run(&["train", "--motion", "walk", "--dry-run"], None, ws.path());
+    assert!(succeeded(&out).contains("(built in) (39 frames"));
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains("note:"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }

@@ -9,8 +9,8 @@ use std::fmt::Write as _;
 
 use crate::bench::{GemmBench, RolloutBench, bench_gemm, bench_physics, bench_rollout};
 use crate::cuda::Gpu;
+use crate::motion::Character;
 use crate::motion::library::{motions_dir_from_env, resolve_motion};
-use crate::motion::{Character, ReferenceMotion};
 use crate::plan::{PlanStore, ReplayOrder};
 use crate::train::{GemmSetting, TrainConfig};
 
@@ -88,7 +88,7 @@ struct GemmArgs {
 
 #[derive(Args, Debug)]
 struct RolloutArgs {
-    /// A DeepMimic motion file, or a clip name (e.g. `backflip`) in the motions directory.
+    /// A DeepMimic motion file, or a clip name (e.g. `backflip`; see `motion list`).
     #[arg(long)]
     motion: String,
     /// Training configuration (TOML); its `motion` key is replaced by --motion. Default: the
@@ -117,7 +117,8 @@ struct RolloutArgs {
     /// Measurements of the rollout and of the physics-only floor, alternating.
     #[arg(long, default_value_t = 3)]
     rounds: u32,
-    /// Directory of DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
+    /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
+    /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
     motions_dir: Option<PathBuf>,
     /// A directory laid out like ptx/ instead of the plans built into the binary.
@@ -287,8 +288,11 @@ fn rollout(args: RolloutArgs) -> Result<()> {
 
     let character = Character::humanoid()?;
     let dir = args.motions_dir.clone().or_else(motions_dir_from_env);
-    let path = resolve_motion(&config.motion, dir.as_deref())?;
-    let motion = ReferenceMotion::load(&path, &character)?;
+    let resolved = resolve_motion(&config.motion, dir.as_deref())?;
+    let motion = resolved.load(&character)?;
+    for line in resolved.notices(motion.clip()) {
+        eprintln!("{line}");
+    }
     let gpu = Gpu::open(args.device)?;
     let store = PlanStore::new(args.assets.as_deref());
     let result = bench_rollout(

@@ -22,7 +22,8 @@ pub struct EvalArgs {
     /// Evaluation rounds; each runs the configuration's `run.eval_envs` envs once.
     #[arg(long, default_value_t = 1)]
     episodes: u32,
-    /// Directory of DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
+    /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
+    /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
     motions_dir: Option<PathBuf>,
     /// A directory laid out like ptx/ instead of the plans built into the binary.
@@ -61,6 +62,9 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
     let store = PlanStore::new(args.assets.as_deref());
     let (checks, motion) = preflight(&config, motions_dir.as_deref(), &store)?;
+    for line in &checks.motion_notices {
+        eprintln!("{line}");
+    }
     checks.policy.check(&checkpoint)?;
     if !args.json {
         print!("{}", checkpoint_report(&checkpoint));

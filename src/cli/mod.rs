@@ -5,6 +5,7 @@ mod eval;
 mod gpu;
 mod hpo;
 mod motion;
+mod motion_list;
 mod plan;
 mod train;
 
@@ -28,7 +29,7 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Inspect or pack physics plans (.wrp / .wrp.zst).
     Plan(plan::PlanArgs),
-    /// Reference motions: inspect DeepMimic clips and their kinematics.
+    /// Reference motions: list the clips, inspect a clip and its kinematics.
     Motion(motion::MotionArgs),
     /// Show the GPU, its driver and the PTX ISA it accepts.
     Gpu(gpu::GpuArgs),

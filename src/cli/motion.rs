@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::{Args, Subcommand};
 
-use crate::motion::library::{motions_dir_from_env, resolve_motion};
+use crate::motion::library::{MOTIONS_ENV, motions_dir_from_env, resolve_motion};
 use crate::motion::summary::JointRange;
 use crate::motion::{Character, ClipSummary, ReferenceMotion};
 
@@ -18,16 +18,23 @@ pub struct MotionArgs {
 
 #[derive(Subcommand, Debug)]
 enum MotionCommand {
+    /// List the built-in clips and those in the motions directory: frames, duration, frame
+    /// rate, loop mode and committed training config.
+    List {
+        /// Directory of your own DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
+        #[arg(long)]
+        motions_dir: Option<PathBuf>,
+    },
     /// Print frames, fps, duration, loop mode, per-cycle root displacement, joint ranges and the
     /// lowest foot point of a clip.
     Inspect {
         #[command(flatten)]
-        source: MotionSource,
+        source: ClipArgs,
     },
     /// Print the body positions and orientations of one key frame.
     Fk {
         #[command(flatten)]
-        source: MotionSource,
+        source: ClipArgs,
         /// Key frame index (0-based).
         #[arg(long)]
         frame: usize,
@@ -36,11 +43,12 @@ enum MotionCommand {
 
 /// Which clip, for which character.
 #[derive(Args, Debug)]
-struct MotionSource {
-    /// A DeepMimic motion file, or a clip name (e.g. `walk` for humanoid3d_walk.txt) in the
-    /// motions directory.
+struct ClipArgs {
+    /// A DeepMimic motion file, or a clip's name (e.g. `walk` for humanoid3d_walk.txt): one in
+    /// the motions directory, else a built-in clip (`motion list` shows them).
     motion: String,
-    /// Directory of DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
+    /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
+    /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
     motions_dir: Option<PathBuf>,
     /// Character description written by kernels_py/export_character.py (default: the humanoid).
@@ -48,22 +56,34 @@ struct MotionSource {
     character: Option<PathBuf>,
 }
 
-impl MotionSource {
+impl ClipArgs {
     fn load(&self) -> Result<ReferenceMotion> {
         let character = match &self.character {
             Some(path) => Character::load(path)?,
             None => Character::humanoid()?,
         };
         let dir = self.motions_dir.clone().or_else(motions_dir_from_env);
-        let path = resolve_motion(&self.motion, dir.as_deref())?;
+        let resolved = resolve_motion(&self.motion, dir.as_deref())?;
         // The error names the file (and frame and column): no context to add.
-        Ok(ReferenceMotion::load(&path, &character)?)
+        let motion = resolved.load(&character)?;
+        for line in resolved.notices(motion.clip()) {
+            eprintln!("{line}");
+        }
+        Ok(motion)
     }
 }
 
 /// Runs `motion <subcommand>`.
 pub fn run(args: MotionArgs) -> Result<()> {
     match args.command {
+        MotionCommand::List { motions_dir } => {
+            let dir = match motions_dir {
+                Some(dir) => Some((dir, "--motions-dir")),
+                None => motions_dir_from_env().map(|dir| (dir, MOTIONS_ENV)),
+            };
+            let dir = dir.as_ref().map(|(dir, from)| (dir.as_path(), *from));
+            print!("{}", super::motion_list::list_report(dir)?);
+        }
         MotionCommand::Inspect { source } => {
             let motion = source.load()?;
             print!("{}", inspect_report(&ClipSummary::of(&motion)));
@@ -129,8 +149,16 @@ fn inspect_report(s: &ClipSummary) -> String {
     }
     let _ = writeln!(
         out,
-        "quaternion lengths   max |len - 1| = {:.2e} (frame {}, column {}); {} beyond 1e-6; all renormalized",
-        norms.worst_deviation, norms.worst_frame, norms.worst_column, norms.beyond_rounding
+        "quaternion lengths   {:.4} .. {:.4}, max |len - 1| = {:.2e} (frame {}, column {}); \
+         {} of {} beyond 1%, {} beyond 1e-6; all renormalized",
+        norms.shortest,
+        norms.longest,
+        norms.worst_deviation,
+        norms.worst_frame,
+        norms.worst_column,
+        norms.beyond_one_percent,
+        norms.count,
+        norms.beyond_rounding
     );
     let _ = writeln!(
         out,

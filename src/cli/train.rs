@@ -26,8 +26,8 @@ enum ProgressArg {
 
 #[derive(Args, Debug)]
 pub struct TrainArgs {
-    /// A motion name (`walk`, `run`, `spinkick`, `backflip`, `cartwheel`, or another clip in the
-    /// motions directory) or a DeepMimic motion file. A committed name without --config uses
+    /// A motion name (a built-in clip such as `walk` or `backflip`, see `motion list`, or a clip
+    /// in the motions directory) or a DeepMimic motion file. A committed name without --config uses
     /// configs/train/<name>.toml (built in); other motions start from the paper's baseline.
     #[arg(long)]
     motion: Option<String>,
@@ -69,7 +69,8 @@ pub struct TrainArgs {
     /// (repeatable; applied after the other flags; values are TOML).
     #[arg(long = "set", value_name = "KEY=VALUE", value_parser = parse_override)]
     set: Vec<(String, String)>,
-    /// Directory of DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
+    /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
+    /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
     motions_dir: Option<PathBuf>,
     /// A directory laid out like ptx/ instead of the plans built into the binary.
@@ -217,6 +218,9 @@ pub fn run(args: TrainArgs) -> Result<()> {
         }
     };
     let (checks, motion) = preflight(&config, motions_dir.as_deref(), &store)?;
+    for line in &checks.motion_notices {
+        eprintln!("{line}");
+    }
     if let Some(checkpoint) = &resume_checkpoint {
         // The checkpoint must hold the policy this configuration builds.
         checks.policy.check(checkpoint)?;

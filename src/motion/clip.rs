@@ -13,7 +13,8 @@ use nalgebra::Vector3;
 
 use super::character::Character;
 use super::deepmimic::{
-    self, COLUMN_NAMES, DeepMimicFrame, QUATERNION_NORM_TOLERANCE, QposMapping,
+    self, COLUMN_NAMES, DeepMimicFrame, MIN_QUATERNION_NORM, QUATERNION_WARNING_DEVIATION,
+    QposMapping,
 };
 use super::error::MotionError;
 use super::rotation::blend;
@@ -60,6 +61,11 @@ pub fn cycle_and_phase(t: f64, d: f64, loop_mode: LoopMode) -> (i64, f64) {
 /// How far the file's quaternions were from unit length before renormalization.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct QuaternionNorms {
+    /// How many quaternions the clip holds (rotations per frame times frames).
+    pub count: usize,
+    /// The shortest and the longest length.
+    pub shortest: f64,
+    pub longest: f64,
     /// The largest |length - 1| over all quaternions of all frames.
     pub worst_deviation: f64,
     /// Frame and first column of that quaternion.
@@ -67,6 +73,59 @@ pub struct QuaternionNorms {
     pub worst_column: usize,
     /// How many quaternions were more than 1e-6 off (more than rounding to 6 decimals explains).
     pub beyond_rounding: usize,
+    /// How many were more than 1% off ([`QUATERNION_WARNING_DEVIATION`]).
+    pub beyond_one_percent: usize,
+}
+
+impl QuaternionNorms {
+    fn new() -> QuaternionNorms {
+        QuaternionNorms {
+            count: 0,
+            shortest: f64::INFINITY,
+            longest: 0.0,
+            worst_deviation: 0.0,
+            worst_frame: 0,
+            worst_column: 0,
+            beyond_rounding: 0,
+            beyond_one_percent: 0,
+        }
+    }
+
+    /// Counts the quaternion of length `norm` at `frame`, `column`.
+    fn record(&mut self, norm: f64, frame: usize, column: usize) {
+        let deviation = (norm - 1.0).abs();
+        self.count += 1;
+        self.shortest = self.shortest.min(norm);
+        self.longest = self.longest.max(norm);
+        if deviation > self.worst_deviation {
+            self.worst_deviation = deviation;
+            self.worst_frame = frame;
+            self.worst_column = column;
+        }
+        if deviation > 1e-6 {
+            self.beyond_rounding += 1;
+        }
+        if deviation > QUATERNION_WARNING_DEVIATION {
+            self.beyond_one_percent += 1;
+        }
+    }
+
+    /// The warning a clip with quaternions more than 1% off gets (once per file), without the
+    /// file's name; `None` when every quaternion is within 1%.
+    pub fn warning(&self) -> Option<String> {
+        (self.beyond_one_percent > 0).then(|| {
+            format!(
+                "{} of {} quaternions are more than 1% from unit length (lengths {:.3} .. {:.3}, \
+                 worst at frame {}, column {}); renormalized, as DeepMimic does",
+                self.beyond_one_percent,
+                self.count,
+                self.shortest,
+                self.longest,
+                self.worst_frame,
+                self.worst_column
+            )
+        })
+    }
 }
 
 /// A point of a clip's timeline: the cycle, the key frame before it and the blend weight toward
@@ -107,12 +166,19 @@ impl MotionClip {
         )
     }
 
+    /// Parses the text of a DeepMimic motion file (e.g. a clip built into the binary) and
+    /// converts it; `name` names the clip in errors.
+    pub fn parse(text: &str, name: &str, character: &Character) -> Result<MotionClip, MotionError> {
+        let file = deepmimic::parse(text, name)?;
+        MotionClip::from_deepmimic_frames(name, &file.frames, file.loop_mode, character)
+    }
+
     /// Checks DeepMimic frames and converts them to `character`'s qpos; `name` names the clip in
     /// errors (a path, or e.g. `synthetic`).
     ///
     /// Checks: at least two frames and a positive duration, finite values, a positive duration
-    /// for every frame but the last (whose duration is ignored), quaternions within
-    /// [`QUATERNION_NORM_TOLERANCE`] of unit length. Quaternions are then renormalized.
+    /// for every frame but the last (whose duration is ignored), quaternions of length at least
+    /// [`MIN_QUATERNION_NORM`]. Every quaternion is then renormalized, as DeepMimic's reader does.
     pub fn from_deepmimic_frames(
         name: &str,
         frames: &[DeepMimicFrame],
@@ -154,12 +220,7 @@ impl MotionClip {
         }
 
         let mapping = QposMapping::new(character, name)?;
-        let mut norms = QuaternionNorms {
-            worst_deviation: 0.0,
-            worst_frame: 0,
-            worst_column: 0,
-            beyond_rounding: 0,
-        };
+        let mut norms = QuaternionNorms::new();
         let nq = character.nq();
         let mut qpos = Vec::with_capacity(frames.len() * nq);
         let mut times = Vec::with_capacity(frames.len());
@@ -169,28 +230,18 @@ impl MotionClip {
             for (column, joint) in mapping.rotation_columns() {
                 let q = &mut row[column..column + 4];
                 let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
-                let deviation = (norm - 1.0).abs();
-                if deviation > QUATERNION_NORM_TOLERANCE {
+                // Finite values can still square to infinity (components near 1e155 and up).
+                if !(norm >= MIN_QUATERNION_NORM && norm.is_finite()) {
                     return Err(MotionError::QuaternionNorm {
                         file: file(),
                         frame,
                         column,
                         joint,
                         norm,
-                        tolerance: QUATERNION_NORM_TOLERANCE,
+                        min: MIN_QUATERNION_NORM,
                     });
                 }
-                if deviation > norms.worst_deviation {
-                    norms = QuaternionNorms {
-                        worst_deviation: deviation,
-                        worst_frame: frame,
-                        worst_column: column,
-                        ..norms
-                    };
-                }
-                if deviation > 1e-6 {
-                    norms.beyond_rounding += 1;
-                }
+                norms.record(norm, frame, column);
                 q.iter_mut().for_each(|v| *v /= norm);
             }
             let start = qpos.len();

@@ -20,10 +20,15 @@ use super::error::MotionError;
 /// Columns of a DeepMimic humanoid frame.
 pub const FRAME_LEN: usize = 44;
 
-/// A quaternion whose length is within this distance of 1 is renormalized; a longer or shorter
-/// one is an error. DeepMimic's own clips need the slack: hand-edited key frames of the backflip
-/// are up to 0.12 off (norm 1.118, left shoulder), the cartwheel's up to 0.034.
-pub const QUATERNION_NORM_TOLERANCE: f64 = 0.2;
+/// The shortest quaternion that is renormalized into a rotation; a shorter one is an error.
+/// DeepMimic's reader normalizes every quaternion it reads, and its released humanoid clips
+/// rely on it: joint quaternions range from 0.58 (the kick) to 1.12 (the sideflip) in length.
+/// Below this length the direction is rounding noise, not a rotation.
+pub const MIN_QUATERNION_NORM: f64 = 1e-3;
+
+/// A quaternion further than this from unit length counts in the once-per-file warning
+/// (`QuaternionNorms::beyond_one_percent`).
+pub const QUATERNION_WARNING_DEVIATION: f64 = 0.01;
 
 /// One DeepMimic humanoid frame, columns as in the file.
 pub type DeepMimicFrame = [f64; FRAME_LEN];

@@ -103,7 +103,8 @@ pub enum MotionError {
     ZeroDuration { file: String, frames: usize },
     #[error(
         "{file}: frame {frame}, columns {column}-{end} ({joint} rotation): the quaternion has length {norm}, \
-         too far from 1 to be a rotation (accepted: within {tolerance} of 1, then renormalized)",
+         which is not a rotation (any finite quaternion of length {min} or more is renormalized, \
+         as DeepMimic does)",
         end = column + 3
     )]
     QuaternionNorm {
@@ -112,7 +113,7 @@ pub enum MotionError {
         column: usize,
         joint: &'static str,
         norm: f64,
-        tolerance: f64,
+        min: f64,
     },
     #[error(
         "{file}: the character does not fit DeepMimic's humanoid: {problem}; DeepMimic frames \
@@ -136,10 +137,16 @@ pub enum MotionError {
         max: usize,
     },
     #[error(
-        "no motion file for {name:?} (looked for: {tried}); pass a path to a DeepMimic motion file, or a name \
-         (e.g. `walk` for humanoid3d_walk.txt) with --motions-dir or {env} set to the \
-         directory of the clips",
+        "no motion {name:?}: not a built-in clip ({built_in}) and no such file (looked for: \
+         {tried}); pass a path to a DeepMimic motion file, or a clip's name (e.g. `walk` for \
+         humanoid3d_walk.txt) in the directory given by --motions-dir or {env}",
         env = super::library::MOTIONS_ENV
     )]
-    NotFound { name: String, tried: String },
+    NotFound {
+        name: String,
+        tried: String,
+        built_in: String,
+    },
+    #[error("the motions directory {dir}: {problem} (--motions-dir or {env})", env = super::library::MOTIONS_ENV)]
+    MotionsDir { dir: String, problem: String },
 }

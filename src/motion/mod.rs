@@ -10,10 +10,12 @@
 //! - [`table`]: the reference resampled at the control rate into the GPU table.
 //! - [`summary`]: what `motion inspect` reports.
 //! - [`synthetic`]: generated clips for tests.
-//! - [`library`]: finding motion files by name.
+//! - [`built_in`]: the clips built into the binary (`assets/motions/`).
+//! - [`library`]: finding clips by name: the motions directory, then the built-in clips.
 //!
 //! `docs/motions.md` and `docs/reference_table.md` describe the conventions.
 
+pub mod built_in;
 pub mod character;
 pub mod clip;
 pub mod deepmimic;

@@ -4,13 +4,13 @@
 //! module they launch, and the sizes of the policy a checkpoint must hold.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use super::config::TrainConfig;
 use super::error::TrainError;
 use super::evaluation::evaluation_steps;
 use crate::env::layout::{JointLayout, observation_size};
-use crate::motion::library::resolve_motion;
+use crate::motion::library::{ResolvedMotion, resolve_motion};
 use crate::motion::{Character, LoopMode, ReferenceMotion, ReferenceTable};
 use crate::plan::PlanStore;
 use crate::ppo::mlp_layout;
@@ -85,7 +85,10 @@ pub struct PlanCheck {
 /// What the checks found.
 #[derive(Clone, Debug)]
 pub struct Preflight {
-    pub motion_path: PathBuf,
+    /// The clip's path, or `assets/motions/<file> (built in)`.
+    pub motion_source: String,
+    /// Lines for stderr about the clip (`ResolvedMotion::notices`).
+    pub motion_notices: Vec<String>,
     pub clip_frames: usize,
     pub clip_duration_s: f64,
     pub loop_mode: LoopMode,
@@ -98,15 +101,16 @@ pub struct Preflight {
     pub policy: PolicyShapes,
 }
 
-/// Loads the motion named by `config.motion` (a file, or a name in `motions_dir`).
+/// Loads the motion named by `config.motion` (a file, a name in `motions_dir`, or a built-in
+/// clip's name).
 pub fn load_motion(
     config: &TrainConfig,
     motions_dir: Option<&Path>,
-) -> Result<(PathBuf, ReferenceMotion), TrainError> {
+) -> Result<(ResolvedMotion, ReferenceMotion), TrainError> {
     let character = Character::humanoid().map_err(crate::motion::MotionError::from)?;
-    let path = resolve_motion(&config.motion, motions_dir)?;
-    let motion = ReferenceMotion::load(&path, &character)?;
-    Ok((path, motion))
+    let resolved = resolve_motion(&config.motion, motions_dir)?;
+    let motion = resolved.load(&character)?;
+    Ok((resolved, motion))
 }
 
 /// Checks that `store` has the run's plans for `nworld` worlds and the PTX of their modules.
@@ -155,7 +159,7 @@ pub fn preflight(
     motions_dir: Option<&Path>,
     store: &PlanStore,
 ) -> Result<(Preflight, ReferenceMotion), TrainError> {
-    let (motion_path, motion) = load_motion(config, motions_dir)?;
+    let (resolved, motion) = load_motion(config, motions_dir)?;
     let mut plans = check_plans(store, config.env.num_envs)?;
     if config.run.eval_envs != config.env.num_envs {
         plans.extend(check_plans(store, config.run.eval_envs)?);
@@ -171,7 +175,8 @@ pub fn preflight(
     let table = ReferenceTable::build(&motion, control_dt)?;
     let clip = motion.clip();
     let checks = Preflight {
-        motion_path,
+        motion_source: resolved.source.label(),
+        motion_notices: resolved.notices(clip),
         clip_frames: clip.num_frames(),
         clip_duration_s: clip.duration(),
         loop_mode: clip.loop_mode(),
@@ -192,7 +197,7 @@ impl Preflight {
         let _ = writeln!(
             out,
             "motion        {} ({} frames, {:.4} s, loop {})",
-            self.motion_path.display(),
+            self.motion_source,
             self.clip_frames,
             self.clip_duration_s,
             self.loop_mode.deepmimic_name()

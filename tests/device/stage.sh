@@ -2,12 +2,14 @@
 # Build the release binary and the GPU test binaries here, and stage them for the GPU machine.
 #   tests/device/stage.sh [DIR]      (default .device-bin; ignored by git via .git/info/exclude)
 # DIR then holds bin.txz: `instantmimic`, one stripped binary per tests/gpu_*.rs (named after
-# the file), one per benches/*.rs (bench_<name>), and a copy of the motions directory ($INSTANTMIMIC_MOTIONS, default
-# ../shared/data/motions) under motions/. Carry DIR in the device call and run tests/device/session.sh there.
+# the file), one per benches/*.rs (bench_<name>), and motions/ (session.sh's INSTANTMIMIC_MOTIONS): the
+# shipped clips are built into the binaries, so it holds only DeepMimic's long clips
+# (../shared/data/motions/long, kept out of the repository) when they are there.
+# Carry DIR in the device call and run tests/device/session.sh there.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 DIR=${1:-.device-bin}
-MOTIONS=${INSTANTMIMIC_MOTIONS:-$(cd .. && pwd)/shared/data/motions}
+LONG_MOTIONS=$(cd .. && pwd)/shared/data/motions/long
 mkdir -p .git/info
 grep -qx "/$DIR/" .git/info/exclude 2>/dev/null || echo "/$DIR/" >> .git/info/exclude
 rm -rf "$DIR"; mkdir -p "$DIR"
@@ -31,7 +33,8 @@ for line in sys.stdin:
         print(m["target"]["name"], m["executable"])
 ' | while read -r name exe; do cp "$exe" "$DIR/bench_$name"; done
 strip "$DIR"/*
-cp -r "$MOTIONS" "$DIR/motions"
+mkdir -p "$DIR/motions"
+if [ -d "$LONG_MOTIONS" ]; then cp -r "$LONG_MOTIONS" "$DIR/motions/long"; fi
 # Unpacked the binaries pass the 64 MiB a device call carries: ship them xz-packed
 # (session.sh unpacks DIR/bin.txz).
 tar cJf /tmp/instantmimic-bin.txz -C "$DIR" . && rm -rf "${DIR:?}"/* && mv /tmp/instantmimic-bin.txz "$DIR/bin.txz"

@@ -30,7 +30,7 @@ pub mod statistics;
 pub mod tracking;
 
 use instantmimic::env::layout::JointLayout;
-use instantmimic::motion::library::{motions_dir_from_env, resolve_motion};
+use instantmimic::motion::library::resolve_motion;
 use instantmimic::motion::{Character, LoopMode, ReferenceMotion, ReferenceTable, SyntheticMotion};
 
 use compare::Report;
@@ -98,8 +98,7 @@ impl Clip {
 pub struct Fixture {
     pub character: Character,
     pub layout: JointLayout,
-    /// The backflip when INSTANTMIMIC_MOTIONS is set (a wrapped clip), else a synthetic
-    /// turning run (wrapped, so that positions shift per cycle).
+    /// The built-in backflip (a wrapped clip, so that positions shift per cycle).
     pub main: Clip,
     /// A synthetic clamped clip (episode end at the clip's end, clamped start times).
     pub clamped: Clip,
@@ -112,34 +111,12 @@ impl Fixture {
         let table = |motion: &ReferenceMotion| {
             ReferenceTable::build(motion, CONTROL_DT).expect("the reference table builds")
         };
-        let main = match motions_dir_from_env() {
-            Some(dir) => {
-                let path = resolve_motion("backflip", Some(&dir)).expect("the backflip clip");
-                let motion = ReferenceMotion::load(&path, &character).expect("the backflip loads");
-                Clip {
-                    name: "backflip".to_owned(),
-                    table: table(&motion),
-                }
-            }
-            None => {
-                println!(
-                    "note: INSTANTMIMIC_MOTIONS is not set; using a synthetic clip instead of the backflip"
-                );
-                let motion = SyntheticMotion {
-                    frames: 49,
-                    frame_dt: 1.0 / 60.0,
-                    forward_speed: 3.0,
-                    turn_rate: 0.8,
-                    amplitude: 1.0,
-                    ..SyntheticMotion::default()
-                }
-                .reference_motion(&character)
-                .expect("synthetic frames are valid");
-                Clip {
-                    name: "synthetic turning run".to_owned(),
-                    table: table(&motion),
-                }
-            }
+        let backflip = resolve_motion("backflip", None)
+            .and_then(|resolved| resolved.load(&character))
+            .expect("the built-in backflip loads");
+        let main = Clip {
+            name: "backflip".to_owned(),
+            table: table(&backflip),
         };
         let clamped_motion = SyntheticMotion {
             frames: 46,
