@@ -187,8 +187,10 @@ mod tests {
             evaluation: evaluated.then(|| EvaluationSummary {
                 episodes: 32,
                 completed: 29,
+                succeeded: 29,
                 success_rate: 29.0 / 32.0,
                 success: true,
+                clip_start_success: true,
                 episode_steps: 53,
                 mean_episode_steps: 51.0,
                 pose_error_m: 0.04321,

@@ -161,8 +161,10 @@ mod tests {
             evaluation: success.map(|s| EvaluationSummary {
                 episodes: 32,
                 completed: if s { 30 } else { 3 },
+                succeeded: if s { 30 } else { 3 },
                 success_rate: if s { 30.0 / 32.0 } else { 3.0 / 32.0 },
                 success: s,
+                clip_start_success: s,
                 episode_steps: 53,
                 mean_episode_steps: 50.0,
                 pose_error_m: 0.05,

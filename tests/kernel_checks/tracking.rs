@@ -441,8 +441,12 @@ pub fn default_params() -> TrackingParams {
         dt: super::CONTROL_DT as f32,
         termination_height: 0.8,
         tracking_distance: 1.0,
+        min_root_height: 0.0,
+        min_reward: 0.0,
+        mean_tracking_distance: 0.0,
         grace_steps: 4,
         max_episode_steps: 300,
+        ee_relative: 0,
     }
 }
 
