@@ -6,7 +6,7 @@ use std::io::Write;
 use std::path::Path;
 
 use instantmimic::train::{
-    EvaluationSummary, IterationRecord, IterationStats, MetricsLog, ProgressMode, RunDir,
+    EpisodeEnds, EvaluationSummary, IterationRecord, IterationStats, MetricsLog, ProgressMode, RunDir,
     RunSession, StopReason, TrainConfig, TrainError, UpdateStats, curve,
 };
 
@@ -32,6 +32,7 @@ fn stats(iteration: u64) -> IterationStats {
             kl: if iteration == 3 { f64::NAN } else { 0.007 },
             learning_rate: 5e-4,
         },
+        termination: EpisodeEnds::from_counts(10.0, 4.0, [1.0, 3.0, 0.0, 0.0, 1.0]),
     }
 }
 
@@ -45,8 +46,10 @@ fn evaluation(iteration: u64, success_from: u64) -> EvaluationSummary {
     EvaluationSummary {
         episodes: 32,
         completed,
+        succeeded: completed,
         success_rate: f64::from(completed) / 32.0,
         success: f64::from(completed) / 32.0 >= 0.9,
+        clip_start_success: iteration >= success_from,
         episode_steps: 38,
         mean_episode_steps: 20.0,
         pose_error_m: 0.1,
