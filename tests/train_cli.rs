@@ -126,6 +126,44 @@ fn dry_run_checks_everything_and_prints_the_resolved_config() {
     assert!(!ws.path().join("runs").exists());
 }
 
+#[test]
+fn set_overrides_reach_the_resolved_config_and_the_observation_size() {
+    let ws = workspace();
+    let motions = ws.path().join("motions");
+    let out = run(
+        &[
+            "train",
+            "--motion",
+            "synth",
+            "--envs",
+            "32",
+            "--set",
+            "obs.reference_bodies=true",
+            "--set",
+            "env.mean_tracking_distance=0.3",
+            "--set",
+            "ppo.value_normalization=true",
+            "--dry-run",
+        ],
+        Some(&motions),
+        ws.path(),
+    );
+    let text = succeeded(&out);
+    // 353 + 15 bodies x (3 + 6).
+    assert!(
+        text.contains("policy        observation 488, action 28"),
+        "{text}"
+    );
+    assert!(text.contains("with --envs, --set"), "{text}");
+    let config = resolved_config(&text);
+    let mut expected = TrainConfig::with_motion("synth");
+    expected.env.num_envs = 32;
+    expected.obs.reference_bodies = true;
+    expected.env.mean_tracking_distance = 0.3;
+    expected.ppo.value_normalization = true;
+    assert_eq!(config, expected);
+}
+
 /// On a machine without a driver, the training loop's first step (opening the GPU) fails with
 /// one line; on a GPU machine the commands would train, which these CPU tests do not do.
 fn without_a_gpu() -> bool {
@@ -204,6 +242,17 @@ fn bad_inputs_give_one_clear_line() {
         ),
         (vec!["train", "--dry-run"], "name a motion with --motion"),
         (
+            vec![
+                "train",
+                "--motion",
+                "synth",
+                "--set",
+                "ppo.clip=3",
+                "--dry-run",
+            ],
+            "with --set: `ppo.clip` = 3: must be in (0, 1)",
+        ),
+        (
             vec!["train", "--motion", "synth", "--out", full_arg, "--dry-run"],
             "is not empty: continue that run with --resume",
         ),
@@ -223,6 +272,24 @@ fn bad_inputs_give_one_clear_line() {
         let err = one_line_error(&run(&args, Some(&motions), ws.path()));
         assert!(err.contains(expected), "{args:?}: {err}");
     }
+    // clap reports a malformed --set itself (with a usage hint on further lines).
+    let out = run(
+        &[
+            "train",
+            "--motion",
+            "synth",
+            "--set",
+            "ppo.clip",
+            "--dry-run",
+        ],
+        Some(&motions),
+        ws.path(),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("expected KEY=VALUE"),
+        "{err}"
+    );
     // --overwrite accepts the non-empty directory (in a dry run, it only says so).
     let out = run(
         &[

@@ -6,8 +6,8 @@ use std::io::Write;
 use std::path::Path;
 
 use instantmimic::train::{
-    EpisodeEnds, EvaluationSummary, IterationRecord, IterationStats, MetricsLog, ProgressMode, RunDir,
-    RunSession, StopReason, TrainConfig, TrainError, UpdateStats, curve,
+    EpisodeEnds, EvaluationSummary, IterationRecord, IterationStats, MetricsLog, ProgressMode,
+    RunDir, RunSession, StopReason, TrainConfig, TrainError, UpdateStats, curve,
 };
 
 fn config(max_iterations: u64) -> TrainConfig {

@@ -153,7 +153,9 @@ fn parse_override(text: &str) -> Result<(String, String), String> {
         Some((key, value)) if !key.trim().is_empty() => {
             Ok((key.trim().to_string(), value.trim().to_string()))
         }
-        _ => Err(format!("expected KEY=VALUE (e.g. ppo.clip=0.25), got {text:?}")),
+        _ => Err(format!(
+            "expected KEY=VALUE (e.g. ppo.clip=0.25), got {text:?}"
+        )),
     }
 }
 

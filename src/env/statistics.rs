@@ -167,7 +167,9 @@ mod tests {
 
     #[test]
     fn totals_decode_into_means() {
-        let values = [4.0f64, 10.0, 120.0, 1.0, 300.0, 400.0, 1.0, 0.0, 0.0, 1.0, 0.0];
+        let values = [
+            4.0f64, 10.0, 120.0, 1.0, 300.0, 400.0, 1.0, 0.0, 0.0, 1.0, 0.0,
+        ];
         let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
         let t = RolloutTotals::from_bytes(&bytes).expect("decodes");
         assert_eq!((t.episodes, t.failures), (4.0, 1.0));

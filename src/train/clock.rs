@@ -164,7 +164,9 @@ impl StopRule {
         active_time_s: f64,
         reached: Milestones,
     ) -> Option<StopReason> {
-        if self.stop_on_success && reached.success && (reached.pose_error || !self.stop_on_pose_error)
+        if self.stop_on_success
+            && reached.success
+            && (reached.pose_error || !self.stop_on_pose_error)
         {
             return Some(StopReason::Success);
         }

@@ -691,7 +691,8 @@ impl TrainConfig {
             path: label.to_string(),
             message,
         };
-        let mut root = toml::Value::try_from(self).map_err(|e| ConfigError::Serialize(e.to_string()))?;
+        let mut root =
+            toml::Value::try_from(self).map_err(|e| ConfigError::Serialize(e.to_string()))?;
         for (key, text) in overrides {
             let value = toml::from_str::<toml::Table>(&format!("v = {text}"))
                 .ok()
@@ -711,9 +712,9 @@ impl TrainConfig {
             let name = parts[parts.len() - 1].to_string();
             table.insert(name, value);
         }
-        let config: TrainConfig = root.try_into().map_err(|e: toml::de::Error| {
-            parse_error(e.to_string().trim().replace('\n', " "))
-        })?;
+        let config: TrainConfig = root
+            .try_into()
+            .map_err(|e: toml::de::Error| parse_error(e.to_string().trim().replace('\n', " ")))?;
         config.validate(label)?;
         Ok(config)
     }

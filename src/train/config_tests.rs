@@ -185,3 +185,80 @@ fn committed_configs_are_the_tuned_baseline_with_their_run_settings() {
     }
     assert!(TrainConfig::committed("moonwalk").is_none());
 }
+
+#[test]
+fn new_failure_keys_are_off_by_default_and_checked() {
+    let c = TrainConfig::with_motion("walk");
+    assert_eq!(
+        (
+            c.env.min_root_height,
+            c.env.min_reward,
+            c.env.mean_tracking_distance
+        ),
+        (0.0, 0.0, 0.0)
+    );
+    assert_eq!(c.reward.ee_frame, EndEffectorFrame::World);
+    assert!(!c.obs.reference_bodies);
+    assert!(!c.ppo.value_normalization && !c.ppo.separate_grad_clipping);
+    assert!(!c.run.stop_on_pose_error);
+    let err = |env: &str| {
+        TrainConfig::from_toml(&format!("motion = \"walk\"\n[env]\n{env}"), "c.toml")
+            .unwrap_err()
+            .to_string()
+    };
+    for (text, key) in [
+        ("min_root_height = -0.1", "`env.min_root_height` = -0.1"),
+        ("min_reward = 1.0", "`env.min_reward` = 1"),
+        ("min_reward = nan", "`env.min_reward` = NaN"),
+        ("mean_tracking_distance = -1", "mean_tracking_distance"),
+    ] {
+        let e = err(text);
+        assert!(e.contains(key), "{text}: {e}");
+    }
+    let e = TrainConfig::from_toml("motion = \"w\"\n[reward]\nee_frame = \"local\"", "c.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("ee_frame") && e.contains("root"), "{e}");
+}
+
+#[test]
+fn overrides_set_any_key_and_are_validated() {
+    let base = TrainConfig::with_motion("walk");
+    let set = |pairs: &[(&str, &str)]| {
+        let pairs: Vec<(String, String)> = pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect();
+        base.with_overrides(&pairs, "walk with --set")
+    };
+    let c = set(&[
+        ("ppo.clip", "0.25"),
+        ("reward.ee_frame", "root"),
+        ("obs.reference_bodies", "true"),
+        ("policy.actor_hidden", "[256, 128]"),
+        ("run.eval_steps", "90"),
+        ("seed", "7"),
+    ])
+    .unwrap();
+    assert_eq!(c.ppo.clip, 0.25);
+    assert_eq!(c.reward.ee_frame, EndEffectorFrame::Root);
+    assert!(c.obs.reference_bodies);
+    assert_eq!(c.policy.actor_hidden, [256, 128]);
+    assert_eq!(c.run.eval_steps, Some(90));
+    assert_eq!(c.seed, 7);
+    // An integer where a float is expected is accepted as the float.
+    assert_eq!(set(&[("ppo.gamma", "1")]).unwrap().ppo.gamma, 1.0);
+    for (pairs, needle) in [
+        (vec![("ppo.bogus", "1")], "bogus"),
+        (vec![("bogus.clip", "1")], "no such key"),
+        (vec![("a.b.c", "1")], "no such key"),
+        (vec![("ppo.clip", "2.0")], "`ppo.clip` = 2"),
+        (vec![("ppo.clip", "\"high\"")], "clip"),
+    ] {
+        let e = set(&pairs).unwrap_err().to_string();
+        assert!(
+            e.contains(needle) && e.contains("walk with --set"),
+            "{pairs:?}: {e}"
+        );
+    }
+}

@@ -344,15 +344,57 @@ mod tests {
     }
 
     #[test]
+    fn a_completed_episode_that_drifts_does_not_succeed() {
+        // 30 complete episodes; 2 of them at a global MPJPE of 0.3 m (drifting off the path),
+        // over the 0.2 m bound: 28 of 32 succeed, 0.875 < 0.9.
+        let mut envs = vec![env(true, 53, [0.05, 0.1, 0.08, 0.2]); 30];
+        envs.extend(vec![env(false, 20, [0.05, 0.1, 0.08, 0.2]); 2]);
+        envs[5] = env(true, 53, [0.05, 0.3, 0.08, 0.2]);
+        envs[6] = env(true, 53, [0.05, 0.3, 0.08, 0.2]);
+        let s = summarize(&envs, 53, 0.9).unwrap();
+        assert_eq!((s.completed, s.succeeded), (30, 28));
+        assert_eq!(s.success_rate, 28.0 / 32.0);
+        assert!(!s.success);
+        // Exactly at the bound succeeds.
+        envs[5] = env(true, 53, [0.05, SUCCESS_MAX_MEAN_MPJPE_M, 0.08, 0.2]);
+        envs[6] = env(true, 53, [0.05, 0.19, 0.08, 0.2]);
+        assert!(summarize(&envs, 53, 0.9).unwrap().success);
+        // The clip-start result is env 0's alone.
+        assert!(summarize(&envs, 53, 0.9).unwrap().clip_start_success);
+        envs[0] = env(true, 53, [0.05, 0.25, 0.08, 0.2]);
+        let s = summarize(&envs, 53, 0.9).unwrap();
+        assert!(!s.clip_start_success);
+        envs[0] = env(false, 53, [0.0; 4]);
+        assert!(!summarize(&envs, 53, 0.9).unwrap().clip_start_success);
+    }
+
+    #[test]
+    fn the_yardstick_is_the_documented_one() {
+        let y = yardstick();
+        assert_eq!(
+            (y.max_body_distance, y.max_root_drop),
+            (SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M)
+        );
+        assert_eq!((y.max_body_distance, y.max_root_drop), (1.0, 0.6));
+        let summary = |pose: f64| EvaluationSummary {
+            pose_error_m: pose,
+            ..summarize(&[env(true, 1, [0.0; 4])], 1, 0.9).unwrap()
+        };
+        assert!(summary(0.06).meets_pose_error_target());
+        assert!(!summary(0.0601).meets_pose_error_target());
+        assert!(!summary(f64::NAN).meets_pose_error_target());
+    }
+
+    #[test]
     fn errors_are_step_weighted_means() {
         // Env A: 10 steps at pose error 0.1; env B: 30 steps at 0.3 -> (1 + 9) / 40 = 0.25.
         let envs = [
-            env(false, 10, [0.1, 0.2, 0.4, 1.0]),
-            env(true, 30, [0.3, 0.6, 0.8, 2.0]),
+            env(false, 10, [0.1, 0.3, 0.4, 1.0]),
+            env(true, 30, [0.3, 0.1, 0.8, 2.0]),
         ];
         let s = summarize(&envs, 30, 0.5).unwrap();
         assert!((s.pose_error_m - 0.25).abs() < 1e-12, "{}", s.pose_error_m);
-        assert!((s.global_mpjpe_m - 0.5).abs() < 1e-12);
+        assert!((s.global_mpjpe_m - 0.15).abs() < 1e-12);
         assert!((s.ee_position_error_m - 0.7).abs() < 1e-12);
         assert!((s.ee_orientation_error_rad - 1.75).abs() < 1e-12);
         assert_eq!(s.mean_episode_steps, 20.0);
@@ -393,7 +435,10 @@ mod tests {
         let mut c = TrainConfig::with_motion("backflip");
         // Backflip: 1.75 s at 30 Hz is 52.5 steps -> 53; walk 1.266616 s -> 38.
         assert_eq!(evaluation_steps(&c, 1.75, 1.0 / 30.0, LoopMode::Wrap), 53);
-        assert_eq!(evaluation_steps(&c, 1.266616, 1.0 / 30.0, LoopMode::Wrap), 38);
+        assert_eq!(
+            evaluation_steps(&c, 1.266616, 1.0 / 30.0, LoopMode::Wrap),
+            38
+        );
         // An exact multiple is not rounded up by floating-point noise: 0.8 s is 24 steps.
         assert_eq!(evaluation_steps(&c, 0.8, 4.0 / 120.0, LoopMode::Wrap), 24);
         c.run.eval_steps = Some(90);
@@ -423,7 +468,13 @@ mod tests {
     fn clamped_clips_end_where_the_kernel_truncates() {
         // 65 frames at 30 fps (punch-like): 64 frame intervals, 2.1333 s; the evaluation must
         // play exactly the steps the kernel plays (the crash of issue 15 was 63 of 64).
-        for (frames, fps) in [(65u32, 30.0), (17, 16.0), (49, 24.0), (121, 60.0), (241, 120.0)] {
+        for (frames, fps) in [
+            (65u32, 30.0),
+            (17, 16.0),
+            (49, 24.0),
+            (121, 60.0),
+            (241, 120.0),
+        ] {
             let duration = f64::from(frames - 1) / fps;
             for substeps in [1u32, 2, 4, 8] {
                 let dt = f64::from(substeps) / 120.0;
@@ -434,7 +485,10 @@ mod tests {
                     "{frames} frames at {fps} fps, dt {dt}"
                 );
                 // Every scored reference time is inside the clip.
-                assert!(f64::from(steps) * dt <= duration + 1e-5, "{steps} x {dt} > {duration}");
+                assert!(
+                    f64::from(steps) * dt <= duration + 1e-5,
+                    "{steps} x {dt} > {duration}"
+                );
                 let c = TrainConfig::with_motion("punch");
                 assert!(evaluation_steps(&c, duration, dt, LoopMode::Clamp) <= steps);
             }

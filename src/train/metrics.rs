@@ -289,3 +289,23 @@ impl MetricsLog {
         ))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn episode_ends_are_fractions_of_the_episodes_that_ended() {
+        // 10 episodes: 6 truncated, 4 failed (3 lost a body, 2 drifted: one failure had both).
+        let ends = EpisodeEnds::from_counts(10.0, 4.0, [0.0, 3.0, 0.0, 0.0, 2.0]);
+        assert_eq!((ends.truncated, ends.failed), (0.6, 0.4));
+        assert_eq!((ends.fell, ends.lost, ends.drift), (0.0, 0.3, 0.2));
+        assert_eq!((ends.low_root, ends.low_reward), (0.0, 0.0));
+        let none = EpisodeEnds::from_counts(0.0, 0.0, [0.0; 5]);
+        assert!(none.failed.is_nan() && none.truncated.is_nan());
+        // Written and read back, NaN included (as null).
+        let text = serde_json::to_string(&none).unwrap();
+        let back: EpisodeEnds = serde_json::from_str(&text).unwrap();
+        assert!(back.failed.is_nan() && back.episodes == 0.0);
+    }
+}

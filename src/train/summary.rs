@@ -215,4 +215,33 @@ mod tests {
         let empty = RunSummary::from_records("walk", 0, &[], StopReason::Interrupted);
         assert_eq!((empty.iterations, empty.frames_per_s), (0, 0.0));
     }
+
+    #[test]
+    fn pose_error_and_clip_start_times_are_their_first_evaluations() {
+        let mut records: Vec<_> = (1..=20)
+            .map(|i| record(i, (i % 5 == 0).then_some(i >= 15)))
+            .collect();
+        // The pose error target is met first at iteration 10 (0.05 <= 0.06 in every
+        // evaluation of `record`; earlier ones are made worse), the clip start succeeds from
+        // iteration 5, spread success from 15.
+        records[4].evaluation.as_mut().unwrap().pose_error_m = 0.07;
+        records[4].evaluation.as_mut().unwrap().clip_start_success = true;
+        let s = RunSummary::from_records("backflip", 0, &records, StopReason::Success);
+        assert_eq!(s.time_to_success_s, Some(3.75));
+        assert_eq!(s.frames_to_success, Some(131_072 * 15));
+        assert_eq!(s.time_to_pose_error_s, Some(2.5));
+        assert_eq!(s.time_to_clip_start_success_s, Some(1.25));
+        let text = s.report();
+        assert!(
+            text.contains(
+                "time to pose error <= 0.06 m 2.500 s; from the clip start (env 0) 1.250 s"
+            ),
+            "{text}"
+        );
+        let none = RunSummary::from_records("backflip", 0, &records[..3], StopReason::Success);
+        assert!(
+            none.report()
+                .contains("not reached; from the clip start (env 0) not reached")
+        );
+    }
 }
