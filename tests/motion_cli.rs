@@ -267,7 +267,7 @@ fn list_shows_the_built_in_clips_and_the_directorys() {
             "s",
             "30.000",
             "none",
-            "-",
+            "configs/train/default.toml",
             "humanoid3d_punch.txt"
         ]
     );
@@ -308,7 +308,7 @@ fn list_shows_the_built_in_clips_and_the_directorys() {
             "s",
             "30.000",
             "wrap",
-            "-",
+            "configs/train/default.toml",
             "humanoid3d_synth.txt"
         ]
     );

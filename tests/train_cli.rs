@@ -97,14 +97,14 @@ fn dry_run_checks_everything_and_prints_the_resolved_config() {
     );
     let text = succeeded(&out);
     for expected in [
-        "configuration the baseline (src/train/config.rs) with --seed, --envs, --horizon, --max-iterations, --time-budget, --eval-interval",
+        "configuration configs/train/default.toml (built in; no committed config for this motion) with --seed, --envs, --horizon, --max-iterations, --time-budget, --eval-interval",
         "run directory runs/synth-seed7 (new)",
         "humanoid3d_synth.txt (31 frames, 1.0000 s, loop wrap)",
         "control       0.033333 s (4 physics steps of 0.008333 s)",
         "plan          step for 32 worlds (41 modules, PTX present)",
         "plan          kinematics for 32 worlds (1 module, PTX present)",
-        "policy        observation 353, action 28",
-        "iteration     32 envs x 16 steps = 512 frames; 5 epochs x 4 minibatches",
+        "policy        observation 362, action 28",
+        "iteration     32 envs x 16 steps = 512 frames; 3 epochs x 4 minibatches",
         "evaluation    every 2 iterations: 32 envs x 30 steps (1.000 s), success at 0.9",
         "budgets       12.5 s active, 40 iterations",
         "dry run: everything that needs no GPU checks out",
@@ -114,7 +114,8 @@ fn dry_run_checks_everything_and_prints_the_resolved_config() {
     // The training and evaluation world counts are the same: one set of plans listed.
     assert_eq!(text.matches("plan          ").count(), 2, "{text}");
     let config = resolved_config(&text);
-    let mut expected = TrainConfig::with_motion("synth");
+    let (_, default) = TrainConfig::general_default("synth");
+    let mut expected = default.unwrap();
     expected.seed = 7;
     expected.env.num_envs = 32;
     expected.ppo.horizon = 16;
@@ -140,27 +141,28 @@ fn set_overrides_reach_the_resolved_config_and_the_observation_size() {
             "--set",
             "obs.reference_bodies=true",
             "--set",
-            "env.mean_tracking_distance=0.3",
+            "env.mean_tracking_distance=0.25",
             "--set",
-            "ppo.value_normalization=true",
+            "ppo.value_normalization=false",
             "--dry-run",
         ],
         Some(&motions),
         ws.path(),
     );
     let text = succeeded(&out);
-    // 353 + 15 bodies x (3 + 6).
+    // 362 + 15 bodies x (3 + 6).
     assert!(
-        text.contains("policy        observation 488, action 28"),
+        text.contains("policy        observation 497, action 28"),
         "{text}"
     );
     assert!(text.contains("with --envs, --set"), "{text}");
     let config = resolved_config(&text);
-    let mut expected = TrainConfig::with_motion("synth");
+    let (_, default) = TrainConfig::general_default("synth");
+    let mut expected = default.unwrap();
     expected.env.num_envs = 32;
     expected.obs.reference_bodies = true;
-    expected.env.mean_tracking_distance = 0.3;
-    expected.ppo.value_normalization = true;
+    expected.env.mean_tracking_distance = 0.25;
+    expected.ppo.value_normalization = false;
     assert_eq!(config, expected);
 }
 

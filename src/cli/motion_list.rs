@@ -36,7 +36,7 @@ fn committed_config(name: &str) -> String {
         .iter()
         .find(|(committed, _)| *committed == name)
         .map_or_else(
-            || "-".to_string(),
+            || "configs/train/default.toml".to_string(),
             |(committed, _)| format!("configs/train/{committed}.toml"),
         )
 }

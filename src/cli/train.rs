@@ -28,7 +28,7 @@ enum ProgressArg {
 pub struct TrainArgs {
     /// A motion name (a built-in clip such as `walk` or `backflip`, see `motion list`, or a clip
     /// in the motions directory) or a DeepMimic motion file. A committed name without --config uses
-    /// configs/train/<name>.toml (built in); other motions start from the paper's baseline.
+    /// configs/train/<name>.toml (built in); other motions use configs/train/default.toml (built in).
     #[arg(long)]
     motion: Option<String>,
     /// Training configuration (TOML); --motion, if given, replaces its `motion`.
@@ -106,13 +106,11 @@ impl TrainArgs {
 fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
     let (mut config, mut label) = match (&args.config, &args.motion) {
         (Some(path), _) => (TrainConfig::load(path)?, path.display().to_string()),
-        (None, Some(motion)) => match TrainConfig::committed(motion) {
-            Some((label, config)) => (config?, label),
-            None => (
-                TrainConfig::with_motion(motion),
-                "the baseline (src/train/config.rs)".to_string(),
-            ),
-        },
+        (None, Some(motion)) => {
+            let (label, config) = TrainConfig::committed(motion)
+                .unwrap_or_else(|| TrainConfig::general_default(motion));
+            (config?, label)
+        }
         (None, None) => bail!(
             "name a motion with --motion, a configuration with --config, or a run to continue with --resume"
         ),

@@ -307,8 +307,8 @@ pub struct RunConfig {
     pub eval_steps: Option<u32>,
     /// Initial states of the evaluation episodes (no noise, mean action: deterministic).
     pub eval_start: EvalStart,
-    /// Fraction of evaluation envs that must complete the episode without early termination
-    /// (the paper: 0.9).
+    /// Fraction of evaluation envs that must pass the fixed success yardstick (the paper: 0.9
+    /// completing the episode; src/train/evaluation.rs).
     pub success_rate: f64,
     /// Stop at the first successful evaluation (the paper's time-to-success protocol); false
     /// keeps training until a budget runs out.
@@ -365,7 +365,21 @@ pub const COMMITTED_CONFIGS: [(&str, &str); 5] = [
     ),
 ];
 
+/// The general default for clips with no committed config (`configs/train/default.toml`,
+/// built in): the backflip's tuned configuration.
+pub const DEFAULT_CONFIG: &str = include_str!("../../configs/train/default.toml");
+
 impl TrainConfig {
+    /// The built-in general default for `motion` (a name or a path) and its label.
+    pub fn general_default(motion: &str) -> (String, Result<TrainConfig, ConfigError>) {
+        let label = "configs/train/default.toml (built in; no committed config for this motion)";
+        let config = TrainConfig::from_toml(DEFAULT_CONFIG, label).map(|mut c| {
+            c.motion = motion.to_owned();
+            c
+        });
+        (label.to_owned(), config)
+    }
+
     /// The committed configuration of a motion name (`None` for other names), and the label
     /// that names it in messages.
     pub fn committed(motion: &str) -> Option<(String, Result<TrainConfig, ConfigError>)> {

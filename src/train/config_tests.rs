@@ -155,10 +155,21 @@ fn committed_configs_are_the_tuned_baseline_with_their_run_settings() {
     tuned.ppo.clip = 0.32;
     tuned.ppo.entropy_coef = 2.5e-4;
     tuned.ppo.value_coef = 4.0;
+    // Issue 16's changes, measured on the backflip (BENCHMARKS.md, "Sample efficiency").
+    let mut issue16 = tuned.clone();
+    issue16.env.mean_tracking_distance = 0.3;
+    issue16.reward.ee_frame = EndEffectorFrame::Root;
+    issue16.ppo.value_normalization = true;
+    issue16.ppo.separate_grad_clipping = true;
     for (name, _) in COMMITTED_CONFIGS {
         let (label, config) = TrainConfig::committed(name).unwrap();
         let config = config.unwrap_or_else(|e| panic!("{label}: {e}"));
         assert_eq!(config.motion, name);
+        let tuned = if ISSUE16_CONFIGS.contains(&name) {
+            &issue16
+        } else {
+            &tuned
+        };
         assert_eq!(
             (
                 &config.env,
@@ -184,7 +195,23 @@ fn committed_configs_are_the_tuned_baseline_with_their_run_settings() {
         assert_eq!(config.run.time_budget_s, budget, "{name}");
     }
     assert!(TrainConfig::committed("moonwalk").is_none());
+    // The general default is the backflip's configuration, for any motion.
+    let (_, default) = TrainConfig::general_default("moonwalk");
+    let default = default.unwrap();
+    let (_, backflip) = TrainConfig::committed("backflip").unwrap();
+    let backflip = backflip.unwrap();
+    assert_eq!(default.motion, "moonwalk");
+    assert_eq!(
+        TrainConfig {
+            motion: "backflip".to_owned(),
+            ..default
+        },
+        backflip
+    );
 }
+
+/// The committed configs that carry issue 16's changes.
+const ISSUE16_CONFIGS: [&str; 1] = ["backflip"];
 
 #[test]
 fn new_failure_keys_are_off_by_default_and_checked() {
