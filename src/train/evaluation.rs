@@ -113,6 +113,49 @@ pub struct EvaluationSummary {
     pub ee_orientation_error_rad: f64,
 }
 
+/// One env's episode of an evaluation, as `evaluation.json` of a run directory lists them: where
+/// each of the evaluation's start states fails shows which phases of the clip are hard.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EnvEpisodeRow {
+    pub env: u32,
+    /// Clip time (s) the episode started at.
+    pub start_s: f64,
+    pub completed: bool,
+    pub succeeded: bool,
+    pub steps: u32,
+    /// Per-step means over the episode's steps (NaN, written null, when it had none).
+    #[serde(deserialize_with = "nan_from_null")]
+    pub global_mpjpe_m: f64,
+    #[serde(deserialize_with = "nan_from_null")]
+    pub pose_error_m: f64,
+}
+
+/// The rows of one evaluation's `episodes`, which started at `start_times`.
+pub fn episode_rows(episodes: &[EnvEvaluation], start_times: &[f64]) -> Vec<EnvEpisodeRow> {
+    episodes
+        .iter()
+        .enumerate()
+        .map(|(i, e)| {
+            let mean = |sum: f64| {
+                if e.steps > 0 {
+                    sum / f64::from(e.steps)
+                } else {
+                    f64::NAN
+                }
+            };
+            EnvEpisodeRow {
+                env: i as u32,
+                start_s: start_times.get(i).copied().unwrap_or(f64::NAN),
+                completed: e.completed,
+                succeeded: e.succeeded(),
+                steps: e.steps,
+                global_mpjpe_m: mean(e.global_position_error_sum),
+                pose_error_m: mean(e.pose_error_sum),
+            }
+        })
+        .collect()
+}
+
 /// Evaluation results that do not describe an evaluation.
 #[derive(Debug, thiserror::Error)]
 pub enum EvaluationError {
@@ -366,6 +409,25 @@ mod tests {
         assert!(!s.clip_start_success);
         envs[0] = env(false, 53, [0.0; 4]);
         assert!(!summarize(&envs, 53, 0.9).unwrap().clip_start_success);
+    }
+
+    #[test]
+    fn episode_rows_name_each_start_and_its_outcome() {
+        let envs = [
+            env(true, 10, [0.05, 0.1, 0.0, 0.0]),
+            env(true, 10, [0.05, 0.3, 0.0, 0.0]),
+            env(false, 0, [0.0; 4]),
+        ];
+        let rows = episode_rows(&envs, &[0.0, 0.5, 1.0]);
+        assert_eq!(rows.len(), 3);
+        assert_eq!((rows[1].env, rows[1].start_s), (1, 0.5));
+        assert!(rows[0].succeeded && rows[1].completed && !rows[1].succeeded);
+        assert!((rows[1].global_mpjpe_m - 0.3).abs() < 1e-12);
+        assert!(rows[2].global_mpjpe_m.is_nan() && !rows[2].completed);
+        let text = serde_json::to_string(&rows).unwrap();
+        let back: Vec<EnvEpisodeRow> = serde_json::from_str(&text).unwrap();
+        assert_eq!(back[1], rows[1]);
+        assert!(back[2].pose_error_m.is_nan());
     }
 
     #[test]

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use super::checkpoint::Checkpoint;
 use super::config::TrainConfig;
 use super::error::TrainError;
-use super::evaluation::{EvaluationSummary, summarize};
+use super::evaluation::{EvaluationSummary, episode_rows, evaluation_start_times, summarize};
 use super::preflight::Preflight;
 use super::progress::ProgressMode;
 use super::session::RunSession;
@@ -102,6 +102,14 @@ pub fn train_with(
         ));
     }
     let threshold = config.run.success_rate;
+    let clip = motion.clip();
+    let start_times = evaluation_start_times(
+        config.run.eval_start,
+        config.run.eval_envs,
+        clip.duration(),
+        clip.loop_mode(),
+    );
+    let mut last_episodes = Vec::new();
     let mut wall = WallTime::starting(setup.elapsed().as_secs_f64());
     loop {
         session.start_iteration();
@@ -111,7 +119,9 @@ pub fn train_with(
             let started = std::time::Instant::now();
             let episodes = trainer.evaluate()?;
             wall.evaluation(started);
-            Some(summarize(&episodes, trainer.evaluation_steps(), threshold)?)
+            let summary = summarize(&episodes, trainer.evaluation_steps(), threshold)?;
+            last_episodes = episodes;
+            Some(summary)
         } else {
             None
         };
@@ -126,6 +136,9 @@ pub fn train_with(
         if let Some(reason) = next.stop {
             let line = wall.describe(session.active_time_s());
             session.progress().note(&line);
+            session
+                .run_dir()
+                .write_last_evaluation(&episode_rows(&last_episodes, &start_times))?;
             // Iteration limits no longer print from the kernels (kernels_py/physics.py); the
             // flags they set are summed here, once, outside the timed loop.
             match trainer.physics_overflow() {

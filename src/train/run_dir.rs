@@ -6,6 +6,7 @@
 //! curve.png        the learning curve, redrawn after every evaluation
 //! checkpoints/     iter_<iteration>.safetensors, the last run.keep_checkpoints of them
 //! summary.json     the final report (written when the run stops)
+//! evaluation.json  every env's episode of the last evaluation (written when the run stops)
 //! ```
 //!
 //! A new run refuses a directory that holds files unless told to overwrite it; a resumed run
@@ -19,21 +20,34 @@ use super::checkpoint::{Checkpoint, CheckpointDir};
 use super::config::TrainConfig;
 use super::curve::write_learning_curve;
 use super::error::TrainError;
+use super::evaluation::EnvEpisodeRow;
 use super::metrics::{IterationRecord, MetricsLog};
 use super::summary::RunSummary;
+
+/// Writes `value` as pretty JSON, atomically.
+fn write_json<T: serde::Serialize + ?Sized>(path: &Path, value: &T) -> Result<(), TrainError> {
+    let mut text = serde_json::to_string_pretty(value).map_err(|e| TrainError::Metrics {
+        path: path.display().to_string(),
+        problem: e.to_string(),
+    })?;
+    text.push('\n');
+    write_bytes_atomically(path, text.as_bytes()).map_err(|e| TrainError::io(path, e))
+}
 
 pub const CONFIG_FILE: &str = "config.toml";
 pub const METRICS_FILE: &str = "metrics.jsonl";
 pub const CURVE_FILE: &str = "curve.png";
 pub const CHECKPOINTS_DIR: &str = "checkpoints";
 pub const SUMMARY_FILE: &str = "summary.json";
+pub const EVALUATION_FILE: &str = "evaluation.json";
 /// Everything a run writes (what `--overwrite` removes; other files are left alone).
-const RUN_ENTRIES: [&str; 5] = [
+const RUN_ENTRIES: [&str; 6] = [
     CONFIG_FILE,
     METRICS_FILE,
     CURVE_FILE,
     CHECKPOINTS_DIR,
     SUMMARY_FILE,
+    EVALUATION_FILE,
 ];
 
 /// The directory of one run.
@@ -196,13 +210,12 @@ impl RunDir {
 
     /// Writes `summary.json`.
     pub fn write_summary(&self, summary: &RunSummary) -> Result<(), TrainError> {
-        let path = self.summary_path();
-        let mut text = serde_json::to_string_pretty(summary).map_err(|e| TrainError::Metrics {
-            path: path.display().to_string(),
-            problem: e.to_string(),
-        })?;
-        text.push('\n');
-        write_bytes_atomically(&path, text.as_bytes()).map_err(|e| TrainError::io(&path, e))
+        write_json(&self.summary_path(), summary)
+    }
+
+    /// Writes `evaluation.json`: every env's episode of the last evaluation.
+    pub fn write_last_evaluation(&self, rows: &[EnvEpisodeRow]) -> Result<(), TrainError> {
+        write_json(&self.root.join(EVALUATION_FILE), rows)
     }
 
     /// Reopens a run to continue it: its configuration, the newest good checkpoint (newer
