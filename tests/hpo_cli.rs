@@ -153,7 +153,7 @@ fn command_line_overrides_shape_a_new_search_only() {
 #[test]
 fn the_backflip_configuration_loads_and_names_the_missing_trainer() {
     let config = HpoConfig::load(&repo("configs/hpo/backflip.toml")).unwrap();
-    assert_eq!(config.space.params.len(), 18);
+    assert_eq!(config.space.params.len(), 24);
     assert_eq!(config.search.seeds, [0, 1, 2]);
     let baseline = config.baseline().unwrap();
     assert_eq!(
@@ -163,6 +163,15 @@ fn the_backflip_configuration_loads_and_names_the_missing_trainer() {
     assert_eq!(
         baseline["ppo.kl_threshold"],
         instantmimic::hpo::space::ParamValue::Float(0.008)
+    );
+    // Issue 16's keys start from the paper's baseline (off), not the committed backflip's.
+    assert_eq!(
+        baseline["env.mean_tracking_distance"],
+        instantmimic::hpo::space::ParamValue::Float(0.0)
+    );
+    assert_eq!(
+        baseline["ppo.value_normalization"],
+        instantmimic::hpo::space::ParamValue::Bool(false)
     );
     assert!(config.prompts.plan.contains("{recent_results}"));
 
