@@ -575,6 +575,34 @@ fn assert_no_host_work(nodes: &std::collections::BTreeMap<String, usize>) {
     );
 }
 
+/// Captures one update of `rollout`, checks that its graph does no host work, runs it once;
+/// the graph's node counts.
+fn run_one_update(
+    gpu: &Gpu,
+    update: &PpoUpdate,
+    rollout: &RolloutStorage,
+) -> std::collections::BTreeMap<String, usize> {
+    let graph = gpu
+        .stream()
+        .capture(|s| update.record(s, &rollout.batch()))
+        .expect("capture");
+    let nodes = graph.node_counts().expect("node counts");
+    assert_no_host_work(&nodes);
+    graph.launch(gpu.stream()).expect("launch");
+    gpu.synchronize().expect("update");
+    nodes
+}
+
+/// The norm of the actor's and the critic's gradients together.
+fn global_norm(actor: &[f64], critic: &[f64]) -> f64 {
+    actor
+        .iter()
+        .chain(critic)
+        .map(|g| g * g)
+        .sum::<f64>()
+        .sqrt()
+}
+
 #[test]
 fn one_update_step_has_the_float64_gradients_of_the_ppo_loss() {
     let (gpu, _kernels, policy, update, rollout, config) = small_setup(1, 1, 5);
@@ -583,15 +611,8 @@ fn one_update_step_has_the_float64_gradients_of_the_ppo_loss() {
     let rows = obs.len() / policy.observation_size();
     let (ref_actor, ref_critic) = host.gradients(&obs, rows, &targets, &c);
 
-    let graph = gpu
-        .stream()
-        .capture(|s| update.record(s, &rollout.batch()))
-        .expect("capture");
-    let nodes = graph.node_counts().expect("node counts");
+    let nodes = run_one_update(&gpu, &update, &rollout);
     println!("update graph (1 x 1): {nodes:?}");
-    assert_no_host_work(&nodes);
-    graph.launch(gpu.stream()).expect("launch");
-    gpu.synchronize().expect("update");
 
     check(
         "advantages (device bootstrap critic and GAE)",
@@ -641,16 +662,10 @@ fn one_update_step_has_the_float64_gradients_of_the_ppo_loss() {
         stats.approx_kl
     );
     assert_eq!(stats.clip_fraction, 0.0);
-    let norm = ref_actor
-        .iter()
-        .chain(&ref_critic)
-        .map(|g| g * g)
-        .sum::<f64>()
-        .sqrt();
     check(
         "gradient norm statistic",
         &[f64::from(stats.grad_norm)],
-        &[norm],
+        &[global_norm(&ref_actor, &ref_critic)],
     );
     assert!(
         stats.learning_rate == 5e-4 || stats.learning_rate == 7.5e-4,
@@ -684,13 +699,7 @@ fn one_update_step_with_value_normalization_has_the_float64_gradients() {
     let (ref_actor, ref_critic) = host.gradients(&obs, rows, &targets, &c);
     let values_before = download2(&rollout.values);
 
-    let graph = gpu
-        .stream()
-        .capture(|s| update.record(s, &rollout.batch()))
-        .expect("capture");
-    assert_no_host_work(&graph.node_counts().expect("node counts"));
-    graph.launch(gpu.stream()).expect("launch");
-    gpu.synchronize().expect("update");
+    run_one_update(&gpu, &update, &rollout);
 
     let stats = update.value_statistics().download().unwrap();
     assert_eq!(stats[0], b, "returns counted");
@@ -715,16 +724,10 @@ fn one_update_step_with_value_normalization_has_the_float64_gradients() {
         &[f64::from(statistics.value_loss)],
         &[parts[2]],
     );
-    let norm = ref_actor
-        .iter()
-        .chain(&ref_critic)
-        .map(|g| g * g)
-        .sum::<f64>()
-        .sqrt();
     check(
         "gradient norm statistic (actor and critic slots)",
         &[f64::from(statistics.grad_norm)],
-        &[norm],
+        &[global_norm(&ref_actor, &ref_critic)],
     );
 }
 
