@@ -24,10 +24,11 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 30] = [
+const EXPECTED_KERNELS: [(&str, &str); 31] = [
     ("control", "pd_control"),
     ("evaluate", "evaluation_accumulate"),
     ("gae", "gae_advantages"),
+    ("gae", "value_statistics_update"),
     ("gemm_epilogue", "bias_elu"),
     ("gemm_epilogue", "bias_add"),
     ("gemm_epilogue", "elu_input_gradient"),

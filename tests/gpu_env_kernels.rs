@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 
 use instantmimic::cuda::{Gpu, Stream};
 use instantmimic::env::{
-    DeviceArray, Element, EnvKernels, ObservationParams, ResetParams, TrackingParams,
+    DeviceArray, Element, EnvKernels, ObservationParams, ResetParams, TrackingParams, Yardstick,
 };
 use kernel_checks::program::{Arg, HostData, Outputs, Program, Scalar, Step, StructArg};
 use kernel_checks::{Check, Fixture, run_checks};
@@ -158,6 +158,13 @@ impl Args<'_> {
             other => panic!("argument {i} is {other:?}"),
         }
     }
+
+    fn yardstick(&self, i: usize) -> Yardstick {
+        match &self.args[i] {
+            Arg::Struct(StructArg::Yardstick(p)) => *p,
+            other => panic!("argument {i} is {other:?}"),
+        }
+    }
 }
 
 /// One launch through the kernel's generated launcher.
@@ -207,6 +214,7 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             &a.array(17),
             &a.array(18),
             &a.array(19),
+            &a.array(20),
         ),
         "reset_masked" => kernels.reset_masked(
             s,
@@ -310,13 +318,15 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             &a.array(2),
             &a.array(3),
             &a.array(4),
-            a.i32(5),
-            &a.array(6),
+            &a.array(5),
+            a.i32(6),
             &a.array(7),
             &a.array(8),
             &a.array(9),
-            &a.array(10),
+            &a.yardstick(10),
             &a.array(11),
+            &a.array(12),
+            &a.array(13),
         ),
         "episode_statistics" => kernels.episode_statistics(
             s,
@@ -329,6 +339,7 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             &a.array(5),
             &a.array(6),
             &a.array(7),
+            &a.array(8),
         ),
         "rollout_statistics" => {
             kernels.rollout_statistics(s, dim, a.i32(0), &a.array(1), &a.array(2))

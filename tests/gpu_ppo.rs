@@ -2,13 +2,17 @@
 //! checked against finite differences by `tests/ppo_reference.rs`). Run on a machine with an
 //! NVIDIA GPU: `cargo test --release --features gpu --test gpu_ppo -- --nocapture`
 //!
-//! - GAE; the loss gradients against central finite differences of the float64 loss (and the
-//!   analytic ones), the loss statistics; Adam with clipping over three steps; the backward
-//!   GEMMs at the baseline's sizes (split-K atomics, in-place input gradient) and the reductions.
+//! - GAE, with value normalization off, on and before the first batch, and the merge of the
+//!   returns into the running statistics; the loss gradients against central finite
+//!   differences of the float64 loss (and the analytic ones), the loss statistics; Adam with
+//!   clipping over three steps; the backward GEMMs at the baseline's sizes (split-K atomics,
+//!   in-place input gradient) and the reductions.
 //! - A whole recorded update, captured with `Stream::capture`: no host node and no host copy in
 //!   the graph; with 1 epoch x 1 minibatch its gradients equal the float64 gradients of the PPO
-//!   loss at the rollout's parameters; with 3 epochs x 4 minibatches two replays each lower
-//!   the PPO loss of the fixed batch, and the statistics count the updates.
+//!   loss at the rollout's parameters (also with value normalization, whose targets are then
+//!   normalized, and the actor and critic norms clipped separately); with 3 epochs x 4
+//!   minibatches two replays each lower the PPO loss of the fixed batch, and the statistics
+//!   count the updates.
 //! - The baseline's update (4096 envs, horizon 32, 5 x 4 minibatches): replay time and FLOP
 //!   rate, printed.
 //!
@@ -26,7 +30,7 @@ use instantmimic::ppo::adam::{AdamMoments, adam_params, record_schedule};
 use instantmimic::ppo::backward::{
     record_linear_backward_input_elu, record_linear_backward_weight,
 };
-use instantmimic::ppo::batch::{Advantages, Minibatch};
+use instantmimic::ppo::batch::{Advantages, Minibatch, ValueNormalization};
 use instantmimic::ppo::loss::{LOSS_TERMS, LossGradients};
 use instantmimic::ppo::reduce::{
     record_column_sums, record_sum_and_squares, record_sum_of_squares,
@@ -71,9 +75,26 @@ fn gae_matches_the_float64_reference() {
     let last = normal(&mut rng, n, 5.0, 2.0);
     let last_d = DeviceArray::from_slice(&gpu, [n, 1], &last).unwrap();
     let adv = Advantages::zeros(&gpu, t, n).unwrap();
-    adv.record_gae(&kernels, gpu.stream(), &r.batch(), &last_d, 0.99, 0.95)
-        .expect("gae");
+    // Value normalization off: running statistics, however set, are not read.
+    let values = ValueNormalization::new(&gpu, false).unwrap();
+    values.stats.upload(&[100.0, 3.0, 250.0]).unwrap();
+    let stored = download2(&r.values);
+    adv.record_gae(
+        &kernels,
+        gpu.stream(),
+        &r.batch(),
+        &last_d,
+        0.99,
+        0.95,
+        &values,
+    )
+    .expect("gae");
+    values
+        .record_update(&kernels, gpu.stream(), &adv.returns)
+        .expect("no statistics update");
     gpu.synchronize().unwrap();
+    assert_eq!(download2(&r.values), stored, "values untouched");
+    assert_eq!(values.stats.download().unwrap(), vec![100.0, 3.0, 250.0]);
     let (ref_adv, ref_ret) = gae(
         &download2(&r.rewards),
         &download2(&r.values),
@@ -86,6 +107,94 @@ fn gae_matches_the_float64_reference() {
     );
     check("GAE advantages", &download2(&adv.advantages), &ref_adv);
     check("GAE returns", &download2(&adv.returns), &ref_ret);
+}
+
+/// `V = mu + sigma v` with the running return statistics `[count, mean, M2]` (gae.py
+/// `value_scale`: mean 0, deviation 1 before the first batch).
+fn value_scale(stats: &[f64]) -> (f64, f64) {
+    if stats[0] <= 0.0 {
+        (0.0, 1.0)
+    } else {
+        (stats[1], (stats[2] / stats[0] + 1e-8).sqrt())
+    }
+}
+
+/// Value normalization on: GAE maps the critic's normalized values to return units with the
+/// running statistics and writes them back (before the first batch, count 0, they stay as they
+/// are); the batch's returns are then merged into the statistics (Chan et al.).
+#[test]
+fn gae_with_value_normalization_matches_the_float64_reference() {
+    let (gpu, kernels) = gpu();
+    let mut rng = StdRng::seed_from_u64(9);
+    let (t, n) = (32, 1000);
+    let s = gpu.stream();
+    for stats in [[100.0, 3.0, 250.0], [0.0, 3.0, 250.0]] {
+        let r = RolloutStorage::random(&gpu, &mut rng, t, n, 3, 2);
+        let normalized = normal(&mut rng, t * n, 0.5, 1.0);
+        r.values.upload(&normalized).unwrap();
+        let last = normal(&mut rng, n, 0.5, 1.0);
+        let last_d = DeviceArray::from_slice(&gpu, [n, 1], &last).unwrap();
+        let values = ValueNormalization::new(&gpu, true).unwrap();
+        values.stats.upload(&stats).unwrap();
+        let adv = Advantages::zeros(&gpu, t, n).unwrap();
+        adv.record_gae(&kernels, s, &r.batch(), &last_d, 0.99, 0.95, &values)
+            .expect("gae");
+        values
+            .record_update(&kernels, s, &adv.returns)
+            .expect("statistics update");
+        gpu.synchronize().unwrap();
+
+        let (mu, sigma) = value_scale(&stats);
+        let map =
+            |v: &[f32]| -> Vec<f64> { v.iter().map(|&x| mu + sigma * f64::from(x)).collect() };
+        let (mapped, mapped_last) = (map(&normalized), map(&last));
+        let (ref_adv, ref_ret) = gae(
+            &download2(&r.rewards),
+            &mapped,
+            &mapped_last,
+            &r.terminated.download().unwrap(),
+            &r.truncated.download().unwrap(),
+            n,
+            f64::from(0.99f32),
+            f64::from(0.95f32),
+        );
+        let what = format!("statistics {stats:?}");
+        check(
+            &format!("GAE advantages, {what}"),
+            &download2(&adv.advantages),
+            &ref_adv,
+        );
+        check(
+            &format!("GAE returns, {what}"),
+            &download2(&adv.returns),
+            &ref_ret,
+        );
+        check(
+            &format!("values in return units, {what}"),
+            &download2(&r.values),
+            &mapped,
+        );
+
+        // The merge of the kernel's returns into the statistics, in float64.
+        let returns = download2(&adv.returns);
+        let (na, nb) = (stats[0], returns.len() as f64);
+        let mean_b = returns.iter().sum::<f64>() / nb;
+        let m2_b: f64 = returns.iter().map(|x| (x - mean_b) * (x - mean_b)).sum();
+        let delta = mean_b - stats[1];
+        let total = na + nb;
+        let got = values.stats.download().unwrap();
+        assert_eq!(got[0], total, "{what}: count");
+        check(
+            &format!("merged mean, {what}"),
+            &got[1..2],
+            &[stats[1] + delta * nb / total],
+        );
+        check(
+            &format!("merged M2, {what}"),
+            &got[2..3],
+            &[stats[2] + m2_b + delta * delta * na * nb / total],
+        );
+    }
 }
 
 #[test]
@@ -351,18 +460,26 @@ fn backward_gemms_and_reductions_match_float64_at_the_baselines_sizes() {
 }
 
 /// A small policy, an update of it, and a batch it sampled.
-fn small_setup(
-    epochs: u32,
-    minibatches: u32,
-    seed: u64,
-) -> (
+type SmallSetup = (
     Gpu,
     Arc<EnvKernels>,
     GaussianPolicy,
     PpoUpdate,
     RolloutStorage,
     TrainConfig,
-) {
+);
+
+fn small_setup(epochs: u32, minibatches: u32, seed: u64) -> SmallSetup {
+    small_setup_with(epochs, minibatches, seed, |_| {})
+}
+
+/// [`small_setup`] with `configure` applied to the config.
+fn small_setup_with(
+    epochs: u32,
+    minibatches: u32,
+    seed: u64,
+    configure: impl FnOnce(&mut TrainConfig),
+) -> SmallSetup {
     let (gpu, kernels) = gpu();
     let (t, n, d, a) = (8usize, 64usize, 24usize, 6usize);
     let mut config = TrainConfig::with_motion("test");
@@ -377,6 +494,7 @@ fn small_setup(
     // The update's checks read the values the rollout stored (values_in_update has its own test).
     config.ppo.values_in_update = false;
     config.seed = seed;
+    configure(&mut config);
     config.validate("test").expect("valid config");
     let policy = GaussianPolicy::new(&gpu, &config.policy, d, a, n, seed).expect("policy");
     let mut rng = StdRng::seed_from_u64(seed);
@@ -457,6 +575,34 @@ fn assert_no_host_work(nodes: &std::collections::BTreeMap<String, usize>) {
     );
 }
 
+/// Captures one update of `rollout`, checks that its graph does no host work, runs it once;
+/// the graph's node counts.
+fn run_one_update(
+    gpu: &Gpu,
+    update: &PpoUpdate,
+    rollout: &RolloutStorage,
+) -> std::collections::BTreeMap<String, usize> {
+    let graph = gpu
+        .stream()
+        .capture(|s| update.record(s, &rollout.batch()))
+        .expect("capture");
+    let nodes = graph.node_counts().expect("node counts");
+    assert_no_host_work(&nodes);
+    graph.launch(gpu.stream()).expect("launch");
+    gpu.synchronize().expect("update");
+    nodes
+}
+
+/// The norm of the actor's and the critic's gradients together.
+fn global_norm(actor: &[f64], critic: &[f64]) -> f64 {
+    actor
+        .iter()
+        .chain(critic)
+        .map(|g| g * g)
+        .sum::<f64>()
+        .sqrt()
+}
+
 #[test]
 fn one_update_step_has_the_float64_gradients_of_the_ppo_loss() {
     let (gpu, _kernels, policy, update, rollout, config) = small_setup(1, 1, 5);
@@ -465,15 +611,8 @@ fn one_update_step_has_the_float64_gradients_of_the_ppo_loss() {
     let rows = obs.len() / policy.observation_size();
     let (ref_actor, ref_critic) = host.gradients(&obs, rows, &targets, &c);
 
-    let graph = gpu
-        .stream()
-        .capture(|s| update.record(s, &rollout.batch()))
-        .expect("capture");
-    let nodes = graph.node_counts().expect("node counts");
+    let nodes = run_one_update(&gpu, &update, &rollout);
     println!("update graph (1 x 1): {nodes:?}");
-    assert_no_host_work(&nodes);
-    graph.launch(gpu.stream()).expect("launch");
-    gpu.synchronize().expect("update");
 
     check(
         "advantages (device bootstrap critic and GAE)",
@@ -523,21 +662,72 @@ fn one_update_step_has_the_float64_gradients_of_the_ppo_loss() {
         stats.approx_kl
     );
     assert_eq!(stats.clip_fraction, 0.0);
-    let norm = ref_actor
-        .iter()
-        .chain(&ref_critic)
-        .map(|g| g * g)
-        .sum::<f64>()
-        .sqrt();
     check(
         "gradient norm statistic",
         &[f64::from(stats.grad_norm)],
-        &[norm],
+        &[global_norm(&ref_actor, &ref_critic)],
     );
     assert!(
         stats.learning_rate == 5e-4 || stats.learning_rate == 7.5e-4,
         "the first step keeps the rate or raises it by 1.5 (KL ~ 0): {}",
         stats.learning_rate
+    );
+}
+
+/// `ppo.value_normalization` and `ppo.separate_grad_clipping` in a whole update (1 x 1): before
+/// the first batch GAE reads the critic's values as they are, the batch's returns become the
+/// running statistics, and the gather normalizes the values and returns with them, so the
+/// gradients are those of the PPO loss with normalized value targets; the gradient norm
+/// statistic stays the global norm when the actor's and the critic's are clipped separately.
+#[test]
+fn one_update_step_with_value_normalization_has_the_float64_gradients() {
+    let (gpu, _kernels, policy, update, rollout, config) = small_setup_with(1, 1, 5, |c| {
+        c.ppo.value_normalization = true;
+        c.ppo.separate_grad_clipping = true;
+    });
+    let host = host_policy(&policy);
+    let (obs, mut targets, c, _) = host_targets(&rollout, &host, &config);
+    let returns = targets.returns.clone();
+    let b = returns.len() as f64;
+    let mean = returns.iter().sum::<f64>() / b;
+    let m2: f64 = returns.iter().map(|r| (r - mean) * (r - mean)).sum();
+    let (mu, sigma) = value_scale(&[b, mean, m2]);
+    let normalize_values = |x: &[f64]| -> Vec<f64> { x.iter().map(|v| (v - mu) / sigma).collect() };
+    targets.old_values = normalize_values(&targets.old_values);
+    targets.returns = normalize_values(&returns);
+    let rows = obs.len() / policy.observation_size();
+    let (ref_actor, ref_critic) = host.gradients(&obs, rows, &targets, &c);
+    let values_before = download2(&rollout.values);
+
+    run_one_update(&gpu, &update, &rollout);
+
+    let stats = update.value_statistics().download().unwrap();
+    assert_eq!(stats[0], b, "returns counted");
+    check("running return mean", &stats[1..2], &[mean]);
+    check("running return M2", &stats[2..3], &[m2]);
+    // Count 0 maps the values to themselves.
+    check(
+        "values after GAE (count 0)",
+        &download2(&rollout.values),
+        &values_before,
+    );
+    let (actor_grads, critic_grads) = update.gradients();
+    let (ga, gc) = (download(&actor_grads.flat), download(&critic_grads.flat));
+    check("actor gradients", &ga, &ref_actor);
+    check("critic gradients (normalized targets)", &gc, &ref_critic);
+
+    let statistics = update.read_statistics().expect("statistics");
+    println!("statistics after one update: {statistics:?}");
+    let parts = host.loss(&obs, rows, &targets, &c);
+    check(
+        "value loss statistic (normalized units)",
+        &[f64::from(statistics.value_loss)],
+        &[parts[2]],
+    );
+    check(
+        "gradient norm statistic (actor and critic slots)",
+        &[f64::from(statistics.grad_norm)],
+        &[global_norm(&ref_actor, &ref_critic)],
     );
 }
 

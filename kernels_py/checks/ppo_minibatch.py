@@ -7,7 +7,9 @@
   displacement |pi(j) - j| near B / 3.
 - `gather_minibatch` copies the rows the permutation names and normalizes the advantages with
   the batch's moments (reduce.py `sum_and_squares`), against numpy float64 (unbiased std, as
-  torch's `std()`).
+  torch's `std()`); with value normalization, the values and returns with the running return
+  statistics (gae.py `value_scale`): copied as they are when it is off or before the first
+  batch (count 0), `(x - mu) / sigma` when on.
 
     python kernels_py/checks/ppo_minibatch.py
 """
@@ -17,6 +19,11 @@ import sys
 from check_support import Verdict, array, f32, np, wp, zeros
 
 from env import minibatch, reduce
+
+# Running return statistics [count, mean, M2] (mean 2, deviation ~2.83), and the same before
+# any batch.
+STATS = np.array([50.0, 2.0, 400.0])
+STATS_EMPTY = np.array([0.0, 2.0, 400.0])
 
 
 def shuffle(size, counter, seed, epoch):
@@ -69,15 +76,26 @@ def check_gather(v: Verdict, rng):
         mean, std = adv.mean(), adv.std(ddof=1)
         flat = perm.reshape(minibatches, m)
         for k in range(minibatches):
-            outs = [zeros((m, d)), zeros((m, a)), zeros(m), zeros(m), zeros(m), zeros(m)]
-            wp.launch(minibatch.gather_minibatch, dim=m * max(d, a), inputs=[perm_d, k * m, *inputs, *outs], device="cpu")
             rows = flat[k]
             t, e = rows // n, rows % n
             what = f"T={horizon} N={n} D={d} A={a}, minibatch {k} of {minibatches}"
-            v.error(f"gathered observations, {what}", outs[0].numpy(), obs[t, e], limit=0.0)
-            v.error(f"gathered actions, {what}", outs[1].numpy(), act[t, e], limit=0.0)
-            v.error(f"gathered log-probs, values, returns, {what}", np.stack([o.numpy() for o in (outs[2], outs[3], outs[5])]), np.stack([logp[t, e], val[t, e], ret[t, e]]), limit=0.0)
-            v.error(f"normalized advantages, {what}", outs[4].numpy(), (adv[t, e] - mean) / (std + 1e-8))
+            for normalized, stats, mode in [(0, STATS, "off"), (1, STATS, "on"), (1, STATS_EMPTY, "on, count 0")]:
+                outs = [zeros((m, d)), zeros((m, a)), zeros(m), zeros(m), zeros(m), zeros(m)]
+                values = [normalized, array(stats, dtype=wp.float64)]
+                wp.launch(minibatch.gather_minibatch, dim=m * max(d, a), inputs=[perm_d, k * m, *inputs, *values, *outs], device="cpu")
+                how = f"{what}, value normalization {mode}"
+                v.error(f"gathered observations, {how}", outs[0].numpy(), obs[t, e], limit=0.0)
+                v.error(f"gathered actions, {how}", outs[1].numpy(), act[t, e], limit=0.0)
+                v.error(f"gathered log-probs, {how}", outs[2].numpy(), logp[t, e], limit=0.0)
+                v.error(f"normalized advantages, {how}", outs[4].numpy(), (adv[t, e] - mean) / (std + 1e-8))
+                got = np.stack([outs[3].numpy(), outs[5].numpy()])
+                raw = np.stack([val[t, e], ret[t, e]])
+                if mode == "on":
+                    mu, sigma = stats[1], np.sqrt(stats[2] / stats[0] + 1e-8)
+                    v.error(f"values and returns normalized, {how}", got, (raw - mu) / sigma)
+                    v.check(f"the normalization matters, {how}", np.max(np.abs((raw - mu) / sigma - raw)) > 0.5)
+                else:
+                    v.error(f"values and returns as they are, {how}", got, raw, limit=0.0)
 
 
 def main() -> int:

@@ -7,7 +7,8 @@
 - `adam_update`: torch's Adam with global-norm clipping (a norm above the threshold and one
   below), at steps 1 and 7, several steps in a row against the reference's own trajectory.
 - `ppo_update_statistics`: means over minibatch slots, the learning rate, advantage moments,
-  the update counter.
+  the update counter; the mean gradient norm from two squared norms per step (actor and
+  critic clipped separately, or the global norm and 0).
 
     python kernels_py/checks/ppo_optimizer.py
 """
@@ -123,21 +124,33 @@ def check_adam(v: Verdict, rng):
 
 def check_statistics(v: Verdict, rng):
     steps, a, samples = 20, 4, 1000
-    sums = f32(rng.uniform(0.0, 1.0, (steps, TERMS + a)))
-    norm_sq = rng.uniform(0.1, 4.0, steps)
-    adv = rng.standard_normal(samples) * 2.0 + 0.3
-    moments = np.array([adv.sum(), (adv * adv).sum()])
-    counter = array(np.array([41]))
-    stats = zeros(10)
-    wp.launch(
-        ppo_statistics.ppo_update_statistics,
-        dim=1,
-        inputs=[array(sums), array(norm_sq, dtype=wp.float64), array(moments, dtype=wp.float64), samples, array(np.array([3e-4])), counter, stats],
-        device="cpu",
-    )
-    ref = np.concatenate([sums[:, :TERMS].mean(axis=0), [float(np.float32(3e-4)), np.sqrt(norm_sq).mean(), adv.mean(), adv.std(ddof=1), 42.0]])
-    v.error("update statistics", stats.numpy(), ref, limit=1e-6)
-    v.check("update counter advanced", counter.numpy()[0] == 42, f"{counter.numpy()[0]}")
+    for separate in [True, False]:
+        sums = f32(rng.uniform(0.0, 1.0, (steps, TERMS + a)))
+        # Slot 2s: the actor's squared norm (or the global one), 2s + 1: the critic's (or 0).
+        norm_sq = rng.uniform(0.1, 4.0, (steps, 2))
+        if not separate:
+            norm_sq[:, 1] = 0.0
+        adv = rng.standard_normal(samples) * 2.0 + 0.3
+        moments = np.array([adv.sum(), (adv * adv).sum()])
+        counter = array(np.array([41]))
+        stats = zeros(10)
+        wp.launch(
+            ppo_statistics.ppo_update_statistics,
+            dim=1,
+            inputs=[array(sums), array(norm_sq.reshape(-1), dtype=wp.float64), array(moments, dtype=wp.float64), samples, array(np.array([3e-4])), counter, stats],
+            device="cpu",
+        )
+        grad_norm = np.sqrt(norm_sq.sum(axis=1)).mean()
+        ref = np.concatenate([sums[:, :TERMS].mean(axis=0), [float(np.float32(3e-4)), grad_norm, adv.mean(), adv.std(ddof=1), 42.0]])
+        what = "actor and critic norms" if separate else "global norms"
+        v.error(f"update statistics, {what}", stats.numpy(), ref, limit=1e-6)
+        v.error(f"mean gradient norm, {what}", stats.numpy()[6], grad_norm, limit=1e-6)
+        v.check(f"update counter advanced, {what}", counter.numpy()[0] == 42, f"{counter.numpy()[0]}")
+        if separate:
+            # The case tells the norm of both parameter sets from either alone and the sum of
+            # the two norms.
+            others = [np.sqrt(norm_sq[:, 0]).mean(), np.sqrt(norm_sq[:, 1]).mean(), np.sqrt(norm_sq).sum(axis=1).mean()]
+            v.check("the slots' combination matters", min(abs(o - grad_norm) for o in others) > 0.1 * grad_norm)
 
 
 def main() -> int:

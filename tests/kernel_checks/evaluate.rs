@@ -4,16 +4,19 @@
 //! over the 15 bodies of the root-relative position error (average pose error) and of the world
 //! position error (global MPJPE), means over the end effectors of the position error and the
 //! orientation angle, added to the sums with the step's reward; the step count advanced; the
-//! status set to FAILED on `terminated[t]`, else COMPLETED on `truncated[t]`. Envs already
-//! COMPLETED or FAILED are untouched, bit for bit.
+//! status set to FAILED when the step fails the yardstick (a body farther than
+//! `max_body_distance` from its reference, or the root more than `max_root_drop` below the
+//! reference root) or `terminated[t]`, else COMPLETED on `truncated[t]`. Running envs are built
+//! to fail each way alone and with a truncation. Envs already COMPLETED or FAILED are
+//! untouched, bit for bit.
 
-use instantmimic::env::EVALUATION_ACCUMULATE;
 use instantmimic::env::layout::JointLayout;
+use instantmimic::env::{EVALUATION_ACCUMULATE, Yardstick};
 use instantmimic::motion::table::HUMANOID_LAYOUT;
 
-use super::compare::{Report, wide};
-use super::physics::{BODIES, NBODY, PhysicsBatch};
-use super::program::{Arg, Program, Scalar};
+use super::compare::Report;
+use super::physics::{BODIES, NBODY, NQ, PhysicsBatch};
+use super::program::{Arg, Program, Scalar, StructArg};
 use super::quat::{angle, quat_at, quat_at64, vec3, vec3_64};
 use super::rng::Sampler;
 use super::{Check, Clip, Fixture};
@@ -23,24 +26,26 @@ const RUNNING: i32 = 0;
 const COMPLETED: i32 = 1;
 const FAILED: i32 = 2;
 
-/// The f64 per-step means [pose, mpjpe, ee position, ee rotation] of env `e` at time `t`.
+/// The f64 per-step means [pose, mpjpe, ee position, ee rotation] of env `e` at time `t`, and
+/// the largest body distance.
 fn step_errors(
     clip: &Clip,
     layout: &JointLayout,
     physics: &PhysicsBatch,
     e: usize,
     t: f64,
-) -> [f64; 4] {
+) -> ([f64; 4], f64) {
     let l = HUMANOID_LAYOUT;
     let row = clip.table.lookup(t);
     let body = |b: usize| (e * NBODY + b + 1) * 3;
     let root = vec3(&physics.xpos, body(0));
     let root_ref = vec3_64(&row, l.body_pos);
-    let (mut pose, mut mpjpe) = (0.0, 0.0);
+    let (mut pose, mut mpjpe, mut far) = (0.0, 0.0, 0.0f64);
     for b in 0..BODIES {
         let p = vec3(&physics.xpos, body(b));
         let p_ref = vec3_64(&row, l.body_pos + 3 * b);
         mpjpe += (p - p_ref).norm();
+        far = far.max((p - p_ref).norm());
         pose += ((p - root) - (p_ref - root_ref)).norm();
     }
     let (mut ee_pos, mut ee_rot) = (0.0, 0.0);
@@ -51,15 +56,67 @@ fn step_errors(
         ee_rot += angle(&q, &quat_at64(&row, l.body_quat + 4 * b));
     }
     let k = layout.end_effectors.len() as f64;
-    [
+    let means = [
         pose / BODIES as f64,
         mpjpe / BODIES as f64,
         ee_pos / k,
         ee_rot / k,
-    ]
+    ];
+    (means, far)
 }
 
-fn case(fx: &Fixture, clip_index: usize, n: usize, horizon: usize, t: usize, seed: u64) -> Check {
+/// How a running env's state relates to the yardstick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Kind {
+    Near,
+    /// One body near `max_body_distance` from its reference, mostly past it.
+    FarBody,
+    /// The root near `max_root_drop` below the reference root, mostly past it.
+    Dropped,
+}
+
+/// What the yardstick says of env `e` at time `t`: (body too far, root dropped, the smaller
+/// distance of the two quantities to their thresholds).
+fn yardstick_failures(
+    clip: &Clip,
+    physics: &PhysicsBatch,
+    yardstick: &Yardstick,
+    far: f64,
+    e: usize,
+    t: f64,
+) -> (bool, bool, f64) {
+    let ref_z = clip.table.lookup(t)[HUMANOID_LAYOUT.qpos + 2];
+    let drop = ref_z - f64::from(physics.qpos[e * NQ + 2]);
+    let (max_far, max_drop) = (
+        f64::from(yardstick.max_body_distance),
+        f64::from(yardstick.max_root_drop),
+    );
+    let margin = (far - max_far).abs().min((drop - max_drop).abs());
+    (far > max_far, drop > max_drop, margin)
+}
+
+/// Why a running env's status changes: (a body too far, root dropped, terminated, truncated).
+type Reasons = (bool, bool, bool, bool);
+
+/// An offset from a threshold: 2 to 20 mm past it (two thirds of the time) or short of it.
+fn near_threshold(rng: &mut Sampler) -> f64 {
+    let offset = rng.uniform(0.002, 0.02);
+    if rng.chance(2.0 / 3.0) {
+        offset
+    } else {
+        -offset
+    }
+}
+
+fn case(
+    fx: &Fixture,
+    clip_index: usize,
+    n: usize,
+    horizon: usize,
+    t: usize,
+    yardstick: Yardstick,
+    seed: u64,
+) -> Check {
     let clip = fx.clips()[clip_index];
     let (clip_name, table) = (clip.name.clone(), clip.table.clone());
     let layout = fx.layout.clone();
@@ -67,18 +124,6 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, horizon: usize, t: usize, see
     let duration = table.duration();
     let mut physics = PhysicsBatch::new(n);
     let ref_time: Vec<f32> = (0..n).map(|_| rng.uniform(0.0, duration) as f32).collect();
-    for (e, &time) in ref_time.iter().enumerate() {
-        let scale = rng.uniform(0.2, 4.0);
-        physics.set_near_reference(e, clip, f64::from(time), scale, &mut rng);
-    }
-    let flags = |rng: &mut Sampler, p: f64| -> Vec<i32> {
-        (0..horizon * n).map(|_| i32::from(rng.chance(p))).collect()
-    };
-    let rewards: Vec<f32> = (0..horizon * n)
-        .map(|_| rng.uniform(0.0, 1.0) as f32)
-        .collect();
-    let terminated = flags(&mut rng, 0.2);
-    let truncated = flags(&mut rng, 0.2);
     // A third of the envs already scored; the rest running with earlier sums.
     let status: Vec<i32> = (0..n)
         .map(|e| match e % 6 {
@@ -87,6 +132,45 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, horizon: usize, t: usize, see
             _ => RUNNING,
         })
         .collect();
+    // Each kind in turn, per group of 6 envs (scored envs too: the yardstick must not touch them).
+    let kinds: Vec<Kind> = (0..n)
+        .map(|e| [Kind::Near, Kind::FarBody, Kind::Near, Kind::Dropped][(e / 6) % 4])
+        .collect();
+    for (e, &time) in ref_time.iter().enumerate() {
+        let time = f64::from(time);
+        let scale = rng.uniform(0.2, 4.0);
+        physics.set_near_reference(e, clip, time, scale, &mut rng);
+        match kinds[e] {
+            Kind::Near => {}
+            // Within 2 cm of the threshold, on either side: closer than the reference moves
+            // in a step, so that the time it is looked up at matters.
+            Kind::FarBody => {
+                let b = rng.index(0, BODIES);
+                let dir = rng.normal3(1.0);
+                let len = dir.iter().map(|x| x * x).sum::<f64>().sqrt();
+                let distance = f64::from(yardstick.max_body_distance) + near_threshold(&mut rng);
+                let p_ref = table.lookup(time);
+                let at = (e * NBODY + b + 1) * 3;
+                for (c, x) in dir.iter().enumerate() {
+                    let p = p_ref[HUMANOID_LAYOUT.body_pos + 3 * b + c] + distance * x / len;
+                    physics.xpos[at + c] = p as f32;
+                }
+            }
+            Kind::Dropped => {
+                let ref_z = table.lookup(time)[HUMANOID_LAYOUT.qpos + 2];
+                let drop = f64::from(yardstick.max_root_drop) + near_threshold(&mut rng);
+                physics.qpos[e * NQ + 2] = (ref_z - drop) as f32;
+            }
+        }
+    }
+    let flags = |rng: &mut Sampler, p: f64| -> Vec<i32> {
+        (0..horizon * n).map(|_| i32::from(rng.chance(p))).collect()
+    };
+    let rewards: Vec<f32> = (0..horizon * n)
+        .map(|_| rng.uniform(0.0, 1.0) as f32)
+        .collect();
+    let terminated = flags(&mut rng, 0.2);
+    let truncated = flags(&mut rng, 0.35);
     let steps: Vec<i32> = (0..n).map(|_| rng.index(0, 50) as i32).collect();
     let sums: Vec<f32> = (0..n * SUMS)
         .map(|_| rng.uniform(0.0, 3.0) as f32)
@@ -94,9 +178,11 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, horizon: usize, t: usize, see
 
     let ee = layout.end_effectors.clone();
     let mut p = Program::new(format!(
-        "evaluation_accumulate: {clip_name}, {n} envs, step {t} of {horizon}"
+        "evaluation_accumulate: {clip_name}, {n} envs, step {t} of {horizon}, max body distance {}, max root drop {}",
+        yardstick.max_body_distance, yardstick.max_root_drop
     ));
     let args = vec![
+        p.f32("qpos", &[n, NQ], physics.qpos.clone()),
         p.f32("xpos", &[n, NBODY, 3], physics.xpos.clone()),
         p.f32("xquat", &[n, NBODY, 4], physics.xquat.clone()),
         p.f32("table", &[table.data().len()], table.data().to_vec()),
@@ -106,6 +192,7 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, horizon: usize, t: usize, see
         p.f32("rewards", &[horizon, n], rewards.clone()),
         p.i32("terminated", &[horizon, n], terminated.clone()),
         p.i32("truncated", &[horizon, n], truncated.clone()),
+        Arg::Struct(StructArg::Yardstick(yardstick)),
         p.i32("status", &[n], status.clone()),
         p.i32("steps", &[n], steps.clone()),
         p.f32("sums", &[n, SUMS], sums.clone()),
@@ -124,8 +211,14 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, horizon: usize, t: usize, see
         let mut got_sums = Vec::new();
         let mut expected_status = Vec::new();
         let mut expected_steps = Vec::new();
+        let mut reasons: Vec<Reasons> = Vec::new();
+        let mut margin = f64::INFINITY;
         for &e in &running {
-            let errors = step_errors(&clip, &layout, &physics, e, f64::from(ref_time[e]));
+            let time = f64::from(ref_time[e]);
+            let (errors, far) = step_errors(&clip, &layout, &physics, e, time);
+            let (too_far, dropped, m) =
+                yardstick_failures(&clip, &physics, &yardstick, far, e, time);
+            margin = margin.min(m);
             let i = t * n + e;
             for c in 0..SUMS {
                 let add = if c < 4 {
@@ -137,13 +230,15 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, horizon: usize, t: usize, see
                 got_sums.push(f64::from(out.f32("sums")[e * SUMS + c]));
             }
             expected_steps.push(steps[e] + 1);
-            expected_status.push(if terminated[i] != 0 {
+            let (term, trunc) = (terminated[i] != 0, truncated[i] != 0);
+            expected_status.push(if term || too_far || dropped {
                 FAILED
-            } else if truncated[i] != 0 {
+            } else if trunc {
                 COMPLETED
             } else {
                 RUNNING
             });
+            reasons.push((too_far, dropped, term, trunc));
         }
         r.relative("sums of running envs", &got_sums, &expected_sums);
         let pick = |v: &[i32], envs: &[usize]| envs.iter().map(|&e| v[e]).collect::<Vec<i32>>();
@@ -174,18 +269,56 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, horizon: usize, t: usize, see
                 .collect()
         };
         r.bitwise_f32("sums of scored envs", &rows(out.f32("sums")), &rows(&sums));
-        let outcomes: Vec<i32> = expected_status.clone();
         r.check(
-            [RUNNING, COMPLETED, FAILED]
-                .iter()
-                .all(|s| outcomes.contains(s)),
-            "coverage: running envs continue, complete and fail",
+            margin > 1e-4,
+            format!(
+                "every yardstick decision clear of its threshold: smallest margin {margin:.2e}"
+            ),
         );
-        let _ = wide(&[]);
+        let count = |f: &dyn Fn(&Reasons) -> bool| reasons.iter().filter(|x| f(x)).count();
+        let short = running
+            .iter()
+            .zip(&reasons)
+            .filter(|(e, x)| kinds[**e] != Kind::Near && !x.0 && !x.1)
+            .count();
+        let coverage = [
+            ("running on", count(&|x| *x == (false, false, false, false))),
+            ("completed", count(&|x| *x == (false, false, false, true))),
+            (
+                "failed: terminated alone",
+                count(&|x| *x == (false, false, true, false)),
+            ),
+            (
+                "failed: a body too far alone",
+                count(&|x| *x == (true, false, false, false)),
+            ),
+            (
+                "failed: root dropped alone",
+                count(&|x| *x == (false, true, false, false)),
+            ),
+            (
+                "failed by the yardstick, truncated",
+                count(&|x| (x.0 || x.1) && !x.2 && x.3),
+            ),
+            ("just short of a yardstick threshold", short),
+        ];
+        r.check(
+            coverage.iter().all(|(_, c)| *c > 0),
+            format!("coverage: {coverage:?}"),
+        );
         r
     })
 }
 
 pub fn checks(fx: &Fixture) -> Vec<Check> {
-    vec![case(fx, 0, 96, 8, 3, 51), case(fx, 1, 61, 53, 52, 52)]
+    let stricter = Yardstick {
+        max_body_distance: 0.5,
+        max_root_drop: 0.3,
+    };
+    vec![
+        case(fx, 0, 96, 8, 3, instantmimic::train::yardstick(), 51),
+        case(fx, 1, 61, 53, 52, instantmimic::train::yardstick(), 52),
+        case(fx, 0, 96, 4, 0, stricter, 53),
+        case(fx, 1, 96, 2, 1, stricter, 54),
+    ]
 }

@@ -4,8 +4,11 @@
 //! simulated root (`H` = minus the yaw of the root's forward axis), positions relative to the root
 //! body's origin, rotations as the first two columns of the rotation matrix, body velocities at
 //! the body origins (`cvel` is COM-based), future reference end effectors and the root target
-//! from `ReferenceTable::lookup`. Each block is compared on its own; the row is as wide as
-//! `layout::observation_size` says, and padding columns after it must stay untouched.
+//! from `ReferenceTable::lookup`; with `reference_bodies`, each body's reference at
+//! `ref_time + dt` against the simulated body (position difference in the heading frame, the
+//! rotation `conj(q) q_ref` in the body's frame, 6D). Each block is compared on its own; the row
+//! is as wide as `layout::observation_size` says, and padding columns after it must stay
+//! untouched.
 
 use instantmimic::env::layout::{JointLayout, observation_params, observation_size};
 use instantmimic::env::{OBSERVE, ObservationParams};
@@ -173,6 +176,31 @@ pub fn reference_blocks(
             tan_norm(&(h * quat_at64(&row, l.qpos + 3))).to_vec(),
         );
     }
+    if params.reference_bodies != 0 {
+        let row = clip.table.lookup(f64::from(ref_time + params.dt));
+        let values: Vec<f64> = (0..BODIES)
+            .flat_map(|b| {
+                let p = vec3(&physics.xpos, body(b) * 3);
+                let q = quat_at(&physics.xquat, body(b) * 4);
+                let position = rotated(&h, vec3_64(&row, l.body_pos + 3 * b) - p);
+                let rotation = tan_norm(&(q.inverse() * quat_at64(&row, l.body_quat + 4 * b)));
+                position.into_iter().chain(rotation)
+            })
+            .collect();
+        let columns = |offset: usize, count: usize| -> Vec<usize> {
+            (0..BODIES)
+                .flat_map(|b| (0..count).map(move |c| 9 * b + offset + c))
+                .collect()
+        };
+        blocks.push(Block {
+            name: "reference bodies".into(),
+            values,
+            parts: vec![
+                ("reference body positions".into(), columns(0, 3)),
+                ("reference body rotations 6D".into(), columns(3, 6)),
+            ],
+        });
+    }
     blocks
 }
 
@@ -214,8 +242,12 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, obs: ObsConfig, seed: u64) ->
     let actions: Vec<f32> = (0..n * NU).map(|_| rng.uniform(-1.5, 1.5) as f32).collect();
 
     let mut p = Program::new(format!(
-        "observe: {clip_name}, {n} envs, {} future frames every {} steps, prev action {}, root target {} ({width} values)",
-        obs.future_frames, obs.future_spacing, obs.prev_action, obs.root_target
+        "observe: {clip_name}, {n} envs, {} future frames every {} steps, prev action {}, root target {}, reference bodies {} ({width} values)",
+        obs.future_frames,
+        obs.future_spacing,
+        obs.prev_action,
+        obs.root_target,
+        obs.reference_bodies
     ));
     let ee = layout.end_effectors.clone();
     let args = vec![
@@ -280,18 +312,24 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, obs: ObsConfig, seed: u64) ->
 }
 
 pub fn checks(fx: &Fixture) -> Vec<Check> {
-    let obs = |future_frames, future_spacing, prev_action, root_target| ObsConfig {
-        future_frames,
-        future_spacing,
-        prev_action,
-        root_target,
-        ..ObsConfig::default()
-    };
+    let obs =
+        |future_frames, future_spacing, prev_action, root_target, reference_bodies| ObsConfig {
+            future_frames,
+            future_spacing,
+            prev_action,
+            root_target,
+            reference_bodies,
+            ..ObsConfig::default()
+        };
     vec![
         case(fx, 0, 64, ObsConfig::default(), 51),
-        case(fx, 0, 48, obs(1, 2, false, true), 52),
-        case(fx, 1, 48, obs(3, 1, true, true), 53),
-        case(fx, 1, 48, obs(3, 2, false, false), 54),
-        case(fx, 0, 48, obs(2, 2, true, true), 55),
+        case(fx, 0, 48, obs(1, 2, false, true, false), 52),
+        case(fx, 1, 48, obs(3, 1, true, true, false), 53),
+        case(fx, 1, 48, obs(3, 2, false, false, false), 54),
+        case(fx, 0, 48, obs(2, 2, true, true, false), 55),
+        // The reference bodies after the root target, after the previous action, and last.
+        case(fx, 0, 64, obs(2, 1, true, true, true), 56),
+        case(fx, 1, 48, obs(1, 1, true, false, true), 57),
+        case(fx, 0, 48, obs(0, 1, false, false, true), 58),
     ]
 }

@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use instantmimic::env::manifest::{EnvManifest, SlotType};
 use instantmimic::env::{
     KernelAbi, MANIFEST_ASSET, ObservationParams, ParamKind, ResetParams, ScalarType,
-    TrackingParams,
+    TrackingParams, Yardstick,
 };
 
 /// Values of a buffer, row-major.
@@ -129,6 +129,7 @@ pub enum StructArg {
     Tracking(TrackingParams),
     Reset(ResetParams),
     Observation(ObservationParams),
+    Yardstick(Yardstick),
 }
 
 impl StructArg {
@@ -137,6 +138,7 @@ impl StructArg {
             StructArg::Tracking(_) => "TrackingParams",
             StructArg::Reset(_) => "ResetParams",
             StructArg::Observation(_) => "ObservationParams",
+            StructArg::Yardstick(_) => "Yardstick",
         }
     }
 
@@ -153,8 +155,12 @@ impl StructArg {
                 ("dt", F32(p.dt)),
                 ("termination_height", F32(p.termination_height)),
                 ("tracking_distance", F32(p.tracking_distance)),
+                ("min_root_height", F32(p.min_root_height)),
+                ("min_reward", F32(p.min_reward)),
+                ("mean_tracking_distance", F32(p.mean_tracking_distance)),
                 ("grace_steps", I32(p.grace_steps)),
                 ("max_episode_steps", I32(p.max_episode_steps)),
+                ("ee_relative", I32(p.ee_relative)),
             ],
             StructArg::Reset(p) => vec![
                 ("seed", I32(p.seed)),
@@ -170,6 +176,11 @@ impl StructArg {
                 ("dt", F32(p.dt)),
                 ("prev_action", I32(p.prev_action)),
                 ("root_target", I32(p.root_target)),
+                ("reference_bodies", I32(p.reference_bodies)),
+            ],
+            StructArg::Yardstick(p) => vec![
+                ("max_body_distance", F32(p.max_body_distance)),
+                ("max_root_drop", F32(p.max_root_drop)),
             ],
         }
     }

@@ -2,11 +2,15 @@
 //!
 //! Reference: the reference state at `t = ref_time + dt` (`ReferenceTable::lookup`, f64), the
 //! five tracking errors (means over the joints, the non-root dofs and the end effectors; the
-//! COM's one point), `r = exp(-w . e)`, failure (root fallen more than
-//! `termination_height` below the reference root, or a body farther than `tracking_distance`
-//! from its reference) from `grace_steps` on, truncation at `max_episode_steps` or when a
-//! clamped clip's next reference time would pass its end, the phase bin counts, the advanced
-//! clocks. Envs are built to hit every outcome, inside and after the grace steps.
+//! COM's one point; end-effector positions in the world or, with `ee_relative`, each relative to
+//! its own root), `r = exp(-w . e)`, the failure causes (FELL: root fallen more than
+//! `termination_height` below the reference root; LOST: a body farther than
+//! `tracking_distance` from its reference; and, each only with a positive threshold, LOW_ROOT:
+//! root below `min_root_height`; LOW_REWARD: reward below `min_reward`; DRIFT: mean body
+//! distance above `mean_tracking_distance`) as the bitmask `failure`, from `grace_steps` on,
+//! truncation at `max_episode_steps` or when a clamped clip's next reference time would pass
+//! its end, the phase bin counts, the advanced clocks. Envs are built to hit every cause alone
+//! and several at once, inside and after the grace steps, and to cross thresholds that are off.
 
 use instantmimic::env::layout::{BALL, JointLayout};
 use instantmimic::env::{REWARD_TERMINATION, TrackingParams};
@@ -36,13 +40,49 @@ pub fn phase_bin(table: &[f32], t: f32, bins: usize) -> usize {
     ((x * bins as f32).floor() as i64).clamp(0, bins as i64 - 1) as usize
 }
 
+/// Failure cause bits of `failure[n]` (tracking.py `CAUSE_*`), in bit order, with the names of
+/// `FailureCause` (src/env/statistics.rs) that decode them.
+pub const FELL: i32 = 1;
+pub const LOST: i32 = 2;
+pub const LOW_ROOT: i32 = 4;
+pub const LOW_REWARD: i32 = 8;
+pub const DRIFT: i32 = 16;
+pub const CAUSES: [(i32, &str); 5] = [
+    (FELL, "fell"),
+    (LOST, "lost"),
+    (LOW_ROOT, "low_root"),
+    (LOW_REWARD, "low_reward"),
+    (DRIFT, "drift"),
+];
+
+/// The causes whose threshold is on (FELL and LOST always are).
+pub fn enabled_causes(params: &TrackingParams) -> i32 {
+    let mut on = FELL | LOST;
+    if params.min_root_height > 0.0 {
+        on |= LOW_ROOT;
+    }
+    if params.min_reward > 0.0 {
+        on |= LOW_REWARD;
+    }
+    if params.mean_tracking_distance > 0.0 {
+        on |= DRIFT;
+    }
+    on
+}
+
 /// What one env's step gives.
 #[derive(Clone, Debug, Default)]
 pub struct EnvOutcome {
     pub errors: [f64; 5],
+    /// The end-effector position error in the frame `ee_relative` does not choose.
+    pub ee_pos_other_frame: f64,
     pub reward: f64,
-    pub fell: bool,
-    pub lost: bool,
+    /// Every cause whose quantity is past its threshold, on or off.
+    pub crossed: i32,
+    /// The causes that hold (`crossed` of the causes that are on), grace steps aside.
+    pub causes: i32,
+    /// What the kernel writes: `causes` from `grace_steps` on, else 0.
+    pub failure: i32,
     pub terminated: bool,
     pub truncated: bool,
     /// Truncated because a clamped clip ends (not only by the step limit).
@@ -50,6 +90,9 @@ pub struct EnvOutcome {
     pub ref_time: f32,
     pub episode_step: i32,
     pub bin: usize,
+    /// The smallest distance of a failure quantity to its threshold (of the causes that are on;
+    /// the reward's relative to its threshold): f32 rounding must not decide a case.
+    pub margin: f64,
 }
 
 /// The f64 reference of env `e`.
@@ -90,19 +133,33 @@ pub fn reference_env(
     errors[1] /= (NV - 6).max(1) as f64;
     let com = vec3(&physics.subtree_com, (e * NBODY + 1) * 3);
     errors[2] = (com - vec3_64(&row, l.com_pos)).norm_squared();
+    // Root-relative: each position relative to its own root (body index 0).
+    let root = vec3(&physics.xpos, body(0));
+    let root_ref = vec3_64(&row, l.body_pos);
+    let (mut ee_world, mut ee_relative) = (0.0, 0.0);
     for &b in &HUMANOID_END_EFFECTORS {
         let p = vec3(&physics.xpos, body(b));
-        errors[3] += (p - vec3_64(&row, l.body_pos + 3 * b)).norm_squared();
+        let p_ref = vec3_64(&row, l.body_pos + 3 * b);
+        ee_world += (p - p_ref).norm_squared();
+        ee_relative += ((p - root) - (p_ref - root_ref)).norm_squared();
         let q = quat_at(&physics.xquat, (e * NBODY + b + 1) * 4);
         let d = angle(&q, &quat_at64(&row, l.body_quat + 4 * b));
         errors[4] += d * d;
     }
     let ee_count = HUMANOID_END_EFFECTORS.len().max(1) as f64;
-    errors[3] /= ee_count;
+    let (ee_world, ee_relative) = (ee_world / ee_count, ee_relative / ee_count);
+    let ee_pos_other_frame;
+    (errors[3], ee_pos_other_frame) = if params.ee_relative != 0 {
+        (ee_relative, ee_world)
+    } else {
+        (ee_world, ee_relative)
+    };
     errors[4] /= ee_count;
-    let far = (0..BODIES)
+    let distances: Vec<f64> = (0..BODIES)
         .map(|b| (vec3(&physics.xpos, body(b)) - vec3_64(&row, l.body_pos + 3 * b)).norm())
-        .fold(0.0, f64::max);
+        .collect();
+    let far = distances.iter().copied().fold(0.0, f64::max);
+    let mean_distance = distances.iter().sum::<f64>() / BODIES as f64;
     let weights = [
         params.pose_weight,
         params.velocity_weight,
@@ -115,25 +172,72 @@ pub fn reference_env(
         .zip(&errors)
         .map(|(w, e)| f64::from(*w) * e)
         .sum();
+    let reward = (-exponent).exp();
 
-    let fell = row[l.qpos + 2] - f64::from(qpos[2]) > f64::from(params.termination_height);
-    let lost = far > f64::from(params.tracking_distance);
-    let terminated = episode_step >= params.grace_steps && (fell || lost);
+    let root_z = f64::from(qpos[2]);
+    let drop = row[l.qpos + 2] - root_z;
+    // (cause, past its threshold, distance to the threshold)
+    let quantities = [
+        (
+            FELL,
+            drop > f64::from(params.termination_height),
+            (drop - f64::from(params.termination_height)).abs(),
+        ),
+        (
+            LOST,
+            far > f64::from(params.tracking_distance),
+            (far - f64::from(params.tracking_distance)).abs(),
+        ),
+        (
+            LOW_ROOT,
+            root_z < f64::from(params.min_root_height),
+            (root_z - f64::from(params.min_root_height)).abs(),
+        ),
+        (
+            LOW_REWARD,
+            reward < f64::from(params.min_reward),
+            ((reward - f64::from(params.min_reward)) / f64::from(params.min_reward)).abs(),
+        ),
+        (
+            DRIFT,
+            mean_distance > f64::from(params.mean_tracking_distance),
+            (mean_distance - f64::from(params.mean_tracking_distance)).abs(),
+        ),
+    ];
+    let on = enabled_causes(params);
+    let crossed = quantities
+        .iter()
+        .filter(|q| q.1)
+        .fold(0, |bits, q| bits | q.0);
+    let margin = quantities
+        .iter()
+        .filter(|q| on & q.0 != 0)
+        .map(|q| q.2)
+        .fold(f64::INFINITY, f64::min);
+    let causes = crossed & on;
+    let failure = if episode_step >= params.grace_steps {
+        causes
+    } else {
+        0
+    };
     // The next step would compare with a reference past a clamped clip's end (f32, as the
     // kernel's times are).
     let clip_end = data[HEADER_WRAP] == 0.0 && t_ref + params.dt > data[HEADER_DURATION];
     let truncated = episode_step + 1 >= params.max_episode_steps || clip_end;
     EnvOutcome {
         errors,
-        reward: (-exponent).exp(),
-        fell,
-        lost,
-        terminated,
+        ee_pos_other_frame,
+        reward,
+        crossed,
+        causes,
+        failure,
+        terminated: failure != 0,
         truncated,
         clip_end,
         ref_time: t_ref,
         episode_step: episode_step + 1,
         bin: phase_bin(data, ref_time, bins),
+        margin,
     }
 }
 
@@ -143,21 +247,102 @@ enum Kind {
     Tracking,
     Fallen,
     Lost,
+    /// The root below `min_root_height` but not fallen (below an off threshold if off).
+    LowRoot,
+    /// Joint velocities far off: a reward below any `min_reward` in use, nothing else.
+    LowReward,
+    /// Every body shifted by one offset: the mean distance above `mean_tracking_distance`, no
+    /// body past `tracking_distance`, root-relative end-effector errors unchanged.
+    Drift,
     LastStep,
     LastStepFallen,
     NearClipEnd,
 }
 
-const KINDS: [Kind; 8] = [
+const KINDS: [Kind; 11] = [
     Kind::Tracking,
     Kind::Fallen,
     Kind::Lost,
+    Kind::LowRoot,
     Kind::Tracking,
+    Kind::LowReward,
+    Kind::Drift,
     Kind::LastStep,
     Kind::LastStepFallen,
     Kind::NearClipEnd,
     Kind::Tracking,
 ];
+
+/// The mean body distance of the drift envs when `mean_tracking_distance` is off.
+const DRIFT_WHEN_OFF: f64 = 0.25;
+
+/// Moves env `e` of `physics` (near the reference `row`) to the failure `kind` stands for.
+fn make_kind(
+    kind: Kind,
+    physics: &mut PhysicsBatch,
+    e: usize,
+    row: &[f64],
+    params: &TrackingParams,
+    rng: &mut Sampler,
+) {
+    let ref_z = row[HUMANOID_LAYOUT.qpos + 2];
+    let height = f64::from(params.termination_height);
+    match kind {
+        Kind::Fallen | Kind::LastStepFallen => {
+            let drop = height + rng.uniform(0.1, 0.5);
+            physics.qpos[e * NQ + 2] = (ref_z - drop) as f32;
+        }
+        Kind::Lost => {
+            let b = rng.index(0, BODIES);
+            let dir = rng.normal3(1.0);
+            let len = dir.iter().map(|x| x * x).sum::<f64>().sqrt();
+            let at = (e * NBODY + b + 1) * 3;
+            // Not so far that the mean distance drifts too.
+            let push = f64::from(params.tracking_distance) + rng.uniform(0.2, 0.6);
+            for (c, x) in dir.iter().enumerate() {
+                physics.xpos[at + c] += (push * x / len) as f32;
+            }
+        }
+        Kind::LowRoot => {
+            let threshold = f64::from(params.min_root_height);
+            let z = if threshold > 0.0 {
+                // Below the threshold, not so far below the reference root that it fell (where
+                // the reference root is high enough, both hold).
+                let (lo, hi) = (ref_z - height + 0.02, threshold - 0.02);
+                if lo < hi { rng.uniform(lo, hi) } else { hi }
+            } else {
+                // Below an off threshold: only the guard keeps the cause off.
+                threshold.min(0.0) - rng.uniform(0.05, 0.3)
+            };
+            physics.qpos[e * NQ + 2] = z as f32;
+        }
+        Kind::LowReward => {
+            // velocity_weight * e_vel >= 20: a reward below 2e-9 times the rest.
+            let off = (20.0 / f64::from(params.velocity_weight).max(1e-3)).sqrt();
+            for k in 6..NV {
+                let sign = if rng.chance(0.5) { 1.0 } else { -1.0 };
+                physics.qvel[e * NV + k] += (sign * off) as f32;
+            }
+        }
+        Kind::Drift => {
+            let m = match f64::from(params.mean_tracking_distance) {
+                m if m > 0.0 => m,
+                _ => DRIFT_WHEN_OFF,
+            };
+            let hi = (m + 0.25).min(f64::from(params.tracking_distance) - 0.15);
+            let length = rng.uniform(m + 0.08, hi);
+            let dir = rng.normal3(1.0);
+            let len = dir.iter().map(|x| x * x).sum::<f64>().sqrt();
+            for b in 0..BODIES {
+                let at = (e * NBODY + b + 1) * 3;
+                for (c, x) in dir.iter().enumerate() {
+                    physics.xpos[at + c] += (length * x / len) as f32;
+                }
+            }
+        }
+        Kind::Tracking | Kind::LastStep | Kind::NearClipEnd => {}
+    }
+}
 
 #[allow(clippy::too_many_arguments)]
 fn case(
@@ -205,25 +390,15 @@ fn case(
             _ => rng.index(grace as usize, max as usize - 1) as i32,
         };
         let t_ref = f64::from(ref_time[e] + params.dt);
-        physics.set_near_reference(e, clip, t_ref, rng.uniform(0.3, 2.0), &mut rng);
+        // Drift envs stay close to the reference apart from their offset: no body lost.
+        let scale = if kind == Kind::Drift {
+            rng.uniform(0.3, 1.0)
+        } else {
+            rng.uniform(0.3, 2.0)
+        };
+        physics.set_near_reference(e, clip, t_ref, scale, &mut rng);
         let row = clip.table.lookup(t_ref);
-        match kind {
-            Kind::Fallen | Kind::LastStepFallen => {
-                let drop = f64::from(params.termination_height) + rng.uniform(0.1, 0.5);
-                physics.qpos[e * NQ + 2] = (row[2] - drop) as f32;
-            }
-            Kind::Lost => {
-                let b = rng.index(0, BODIES);
-                let dir = rng.normal3(1.0);
-                let len = dir.iter().map(|x| x * x).sum::<f64>().sqrt();
-                let at = (e * NBODY + b + 1) * 3;
-                let push = f64::from(params.tracking_distance) + rng.uniform(0.2, 1.0);
-                for (c, x) in dir.iter().enumerate() {
-                    physics.xpos[at + c] += (push * x / len) as f32;
-                }
-            }
-            _ => {}
-        }
+        make_kind(kind, &mut physics, e, &row, &params, &mut rng);
     }
     let visits: Vec<f32> = (0..bins).map(|_| rng.uniform(0.0, 60.0) as f32).collect();
     let failures: Vec<f32> = visits
@@ -239,14 +414,18 @@ fn case(
         "the character's end effectors"
     );
     let mut p = Program::new(format!(
-        "reward_termination: {clip_name}, {n} envs, weights [{}, {}, {}, {}, {}], grace {}, max steps {}",
+        "reward_termination: {clip_name}, {n} envs, weights [{}, {}, {}, {}, {}], grace {}, max steps {}, min root height {}, min reward {}, mean distance {}, ee relative {}",
         params.pose_weight,
         params.velocity_weight,
         params.com_weight,
         params.ee_pos_weight,
         params.ee_rot_weight,
         params.grace_steps,
-        params.max_episode_steps
+        params.max_episode_steps,
+        params.min_root_height,
+        params.min_reward,
+        params.mean_tracking_distance,
+        params.ee_relative
     ));
     let args = vec![
         p.f32("qpos", &[n, NQ], physics.qpos.clone()),
@@ -274,6 +453,7 @@ fn case(
             vec![POISON_I32; STORAGE_ROWS * n],
         ),
         p.i32("done", &[n], vec![POISON_I32; n]),
+        p.i32("failure", &[n], vec![POISON_I32; n]),
         p.f32("errors", &[n, 5], nan_f32(n * 5)),
         p.f32("phase_visits", &[bins], visits.clone()),
         p.f32("phase_failures", &[bins], failures.clone()),
@@ -309,6 +489,14 @@ fn case(
             let expected: Vec<f64> = outcomes.iter().map(|o| o.errors[k]).collect();
             r.relative(&format!("errors[{name}]"), &column(&got_errors), &expected);
         }
+        // The case tells the two end-effector frames apart (at the tolerance, by far).
+        let ee_pos: Vec<f64> = outcomes.iter().map(|o| o.errors[3]).collect();
+        let other: Vec<f64> = outcomes.iter().map(|o| o.ee_pos_other_frame).collect();
+        let apart = super::compare::relative_error(&other, &ee_pos);
+        r.check(
+            apart > 100.0 * super::compare::TOLERANCE,
+            format!("the other end-effector frame differs by {apart:.2e} (relative)"),
+        );
         let rows = |v: &[f64]| v[ROW * n..(ROW + 1) * n].to_vec();
         let rewards = wide(out.f32("rewards"));
         let expected: Vec<f64> = outcomes.iter().map(|o| o.reward).collect();
@@ -337,6 +525,8 @@ fn case(
             .map(|o| i32::from(o.terminated || o.truncated))
             .collect();
         r.exact("done", out.i32("done"), &done);
+        let failure: Vec<i32> = outcomes.iter().map(|o| o.failure).collect();
+        r.exact("failure (cause bits)", out.i32("failure"), &failure);
         let steps: Vec<i32> = outcomes.iter().map(|o| o.episode_step).collect();
         r.exact("episode_step", out.i32("episode_step"), &steps);
         let times: Vec<f64> = outcomes.iter().map(|o| f64::from(o.ref_time)).collect();
@@ -361,54 +551,15 @@ fn case(
             &failures_expected,
         );
 
-        let count = |f: &dyn Fn(&EnvOutcome, i32) -> bool| {
-            outcomes
-                .iter()
-                .zip(&episode_step)
-                .filter(|(o, s)| f(o, **s))
-                .count()
-        };
-        let grace = params.grace_steps;
-        let coverage = [
-            (
-                "fell, terminated",
-                count(&|o, _| o.fell && !o.lost && o.terminated),
-            ),
-            (
-                "fell within grace",
-                count(&|o, s| o.fell && s < grace && !o.terminated),
-            ),
-            (
-                "failed at the last grace step",
-                count(&|o, s| (o.fell || o.lost) && s == grace - 1),
-            ),
-            (
-                "failed at the first step after grace",
-                count(&|o, s| (o.fell || o.lost) && s == grace),
-            ),
-            (
-                "one step before the limit",
-                count(&|o, s| s == params.max_episode_steps - 2 && !o.clip_end),
-            ),
-            (
-                "lost, terminated",
-                count(&|o, _| o.lost && !o.fell && o.terminated),
-            ),
-            (
-                "lost within grace",
-                count(&|o, s| o.lost && s < grace && !o.terminated),
-            ),
-            ("step limit", count(&|o, _| o.truncated && !o.clip_end)),
-            (
-                "step limit and failure",
-                count(&|o, _| o.truncated && o.terminated),
-            ),
-            (
-                "tracking, running on",
-                count(&|o, _| !o.fell && !o.lost && !o.truncated),
-            ),
-            ("clip end", count(&|o, _| o.clip_end)),
-        ];
+        let margin = outcomes
+            .iter()
+            .map(|o| o.margin)
+            .fold(f64::INFINITY, f64::min);
+        r.check(
+            margin > 1e-4,
+            format!("every failure decision clear of its threshold: smallest margin {margin:.2e}"),
+        );
+        let coverage = coverage(&outcomes, &episode_step, &params);
         let needed = |name: &str| !(wraps && name == "clip end");
         r.check(
             coverage.iter().all(|(name, c)| !needed(name) || *c > 0),
@@ -428,6 +579,87 @@ fn case(
         );
         r
     })
+}
+
+/// How many envs of a case hit each outcome that must be covered.
+fn coverage(
+    outcomes: &[EnvOutcome],
+    episode_step: &[i32],
+    params: &TrackingParams,
+) -> Vec<(String, usize)> {
+    let count = |f: &dyn Fn(&EnvOutcome, i32) -> bool| {
+        outcomes
+            .iter()
+            .zip(episode_step)
+            .filter(|(o, s)| f(o, **s))
+            .count()
+    };
+    let grace = params.grace_steps;
+    let mut coverage = vec![
+        (
+            "failed at the last grace step",
+            count(&|o, s| o.causes != 0 && s == grace - 1),
+        ),
+        (
+            "failed at the first step after grace",
+            count(&|o, s| o.causes != 0 && s == grace),
+        ),
+        (
+            "one step before the limit",
+            count(&|o, s| s == params.max_episode_steps - 2 && !o.clip_end),
+        ),
+        ("step limit", count(&|o, _| o.truncated && !o.clip_end)),
+        (
+            "step limit and failure",
+            count(&|o, _| o.truncated && o.terminated),
+        ),
+        (
+            "tracking, running on",
+            count(&|o, _| o.causes == 0 && !o.truncated),
+        ),
+        ("clip end", count(&|o, _| o.clip_end)),
+    ]
+    .into_iter()
+    .map(|(name, c)| (name.to_owned(), c))
+    .collect::<Vec<_>>();
+    let on = enabled_causes(params);
+    if on != FELL | LOST {
+        coverage.push((
+            "several causes at once".to_owned(),
+            count(&|o, _| o.failure.count_ones() > 1),
+        ));
+    }
+    for (bit, name) in CAUSES {
+        // The cases' falls (root more than termination_height below a reference root under
+        // min_root_height + termination_height) also put the root below min_root_height.
+        let alone = !(bit == FELL && on & LOW_ROOT != 0);
+        if on & bit != 0 && alone {
+            coverage.push((
+                format!("{name} alone, terminated"),
+                count(&|o, _| o.failure == bit),
+            ));
+            coverage.push((
+                format!("{name} alone within grace"),
+                count(&|o, s| o.causes == bit && s < grace),
+            ));
+        } else if on & bit != 0 {
+            coverage.push((
+                format!("{name}, terminated"),
+                count(&|o, _| o.failure & bit != 0),
+            ));
+            coverage.push((
+                format!("{name} within grace"),
+                count(&|o, s| o.causes & bit != 0 && s < grace),
+            ));
+        } else if bit != LOW_REWARD {
+            // An off threshold crossed (a reward is never below an off threshold, <= 0).
+            coverage.push((
+                format!("{name} past its threshold, off"),
+                count(&|o, _| o.crossed & bit != 0),
+            ));
+        }
+    }
+    coverage
 }
 
 /// The default config's parameters at the control timestep.
@@ -451,6 +683,13 @@ pub fn default_params() -> TrackingParams {
 }
 
 pub fn checks(fx: &Fixture) -> Vec<Check> {
+    // The optional failures on.
+    let causes = TrackingParams {
+        min_root_height: 0.5,
+        min_reward: 1e-3,
+        mean_tracking_distance: 0.25,
+        ..default_params()
+    };
     let tuned = TrackingParams {
         pose_weight: 3.0,
         velocity_weight: 0.5,
@@ -461,12 +700,42 @@ pub fn checks(fx: &Fixture) -> Vec<Check> {
         tracking_distance: 0.7,
         grace_steps: 2,
         max_episode_steps: 40,
+        ..causes
+    };
+    // Off by negative thresholds, crossed by the low-root envs.
+    let negative = TrackingParams {
+        min_root_height: -0.2,
+        min_reward: -1.0,
+        mean_tracking_distance: -0.5,
+        ee_relative: 1,
         ..default_params()
     };
     vec![
         case(fx, 0, 96, default_params(), 20, 21),
-        case(fx, 1, 96, default_params(), 20, 22),
-        case(fx, 0, 80, tuned, 7, 23),
+        case(fx, 1, 96, negative, 20, 22),
+        case(
+            fx,
+            0,
+            96,
+            TrackingParams {
+                ee_relative: 1,
+                ..causes
+            },
+            20,
+            25,
+        ),
+        case(fx, 1, 96, causes, 20, 26),
+        case(
+            fx,
+            0,
+            80,
+            TrackingParams {
+                ee_relative: 1,
+                ..tuned
+            },
+            7,
+            23,
+        ),
         case(fx, 1, 80, tuned, 7, 24),
     ]
 }
