@@ -155,7 +155,7 @@ fn committed_configs_are_the_tuned_baseline_with_their_run_settings() {
     tuned.ppo.clip = 0.32;
     tuned.ppo.entropy_coef = 2.5e-4;
     tuned.ppo.value_coef = 4.0;
-    // Issue 16's changes, measured on the backflip (BENCHMARKS.md, "Sample efficiency").
+    // Issue 16's changes, measured on every clip (BENCHMARKS.md, "Sample efficiency").
     let mut issue16 = tuned.clone();
     issue16.env.mean_tracking_distance = 0.3;
     issue16.reward.ee_frame = EndEffectorFrame::Root;
@@ -165,11 +165,7 @@ fn committed_configs_are_the_tuned_baseline_with_their_run_settings() {
         let (label, config) = TrainConfig::committed(name).unwrap();
         let config = config.unwrap_or_else(|e| panic!("{label}: {e}"));
         assert_eq!(config.motion, name);
-        let tuned = if ISSUE16_CONFIGS.contains(&name) {
-            &issue16
-        } else {
-            &tuned
-        };
+        let tuned = &issue16;
         assert_eq!(
             (
                 &config.env,
@@ -209,9 +205,6 @@ fn committed_configs_are_the_tuned_baseline_with_their_run_settings() {
         backflip
     );
 }
-
-/// The committed configs that carry issue 16's changes.
-const ISSUE16_CONFIGS: [&str; 1] = ["backflip"];
 
 #[test]
 fn new_failure_keys_are_off_by_default_and_checked() {
