@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # A training campaign on the GPU machine: every trial of a plan file, one `instantmimic train`
 # each, a table of medians printed last and the per-trial rows in $OUT/campaign.tsv.
-#   BIN=.device-bin tests/device/campaign.sh PLAN [PLAN...]
+#   tests/device/stage.sh --train-only      (here; or stage.sh for the GPU tests too)
+#   BIN=.device-bin tests/device/campaign.sh PLAN [PLAN...]      (there)
 # A plan line is `name|motion|seeds|budget_s|flags`: flags are passed to `train` as they are
 # (e.g. `--set ppo.value_normalization=true --set env.substeps=2`); seeds are space-separated.
 # Lines starting with # are skipped. Trials run in file order, seed by seed; a trial that would
@@ -9,17 +10,11 @@
 # come back inside the device call's 600 s.
 set -uo pipefail
 cd "$(dirname "$0")/../.."
-BIN=${BIN:-.device-bin}
-if [ -f "$BIN/bin.txz" ]; then
-  mkdir -p /tmp/instantmimic-bin && tar xJf "$BIN/bin.txz" -C /tmp/instantmimic-bin && BIN=/tmp/instantmimic-bin
-fi
-BIN=$(cd "$BIN" && pwd)
-OUT=${OUT:-/tmp/instantmimic-out}
+. tests/device/common.sh
 mkdir -p "$OUT/runs"
-export INSTANTMIMIC_MOTIONS=${INSTANTMIMIC_MOTIONS:-$BIN/motions}
 # cuBLAS for the policy's GEMMs (policy.gemm = "auto"), as the committed configs measure.
-toolkit=$(ls -d /usr/local/cuda*/lib64 2>/dev/null | sort -V | tail -1)
-export LD_LIBRARY_PATH=${LD_LIBRARY_PATH:+$LD_LIBRARY_PATH:}$toolkit
+LD_LIBRARY_PATH=$(toolkit_libs)
+export LD_LIBRARY_PATH
 deadline=$(( $(date +%s) + ${SESSION_S:-540} ))
 tsv="$OUT/campaign.tsv"
 [ -f "$tsv" ] || printf 'name\tmotion\tseed\tsuccess\ttime_s\tframes_M\tpose_time_s\tclip_start_time_s\tactive_s\tfps_M\tlast_rate\tlast_mpjpe\tlast_ape\twall_s\tstop\n' > "$tsv"

@@ -16,14 +16,7 @@
 # always gets it). Without it the tests run on the driver alone, so `auto` takes Warp tiles.
 set -uo pipefail
 cd "$(dirname "$0")/../.."
-BIN=${BIN:-.device-bin}
-if [ -f "$BIN/bin.txz" ]; then
-  mkdir -p /tmp/instantmimic-bin && tar xJf "$BIN/bin.txz" -C /tmp/instantmimic-bin && BIN=/tmp/instantmimic-bin
-fi
-BIN=$(cd "$BIN" && pwd)
-OUT=${OUT:-/tmp/instantmimic-out}
-mkdir -p "$OUT"
-export INSTANTMIMIC_MOTIONS=${INSTANTMIMIC_MOTIONS:-$BIN/motions}
+. tests/device/common.sh
 export PYTHONPATH=
 export INSTANTMIMIC_BIN=$BIN/instantmimic
 summary="$OUT/summary.txt"
@@ -39,12 +32,6 @@ budget() { # budget SECONDS: the smaller of SECONDS and the time left (1 when no
 
 nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.sm,clocks.max.sm --format=csv,noheader \
   | tee "$OUT/gpu.txt"
-
-# The CUDA toolkit's library directory (cuBLAS), appended to LD_LIBRARY_PATH.
-toolkit_libs() {
-  local dir; dir=$(ls -d /usr/local/cuda*/lib64 2>/dev/null | sort -V | tail -1)
-  echo "${LD_LIBRARY_PATH:+$LD_LIBRARY_PATH:}$dir"
-}
 
 # The library path for a run with GEMM setting $1 (empty: the config's own): the toolkit's
 # libraries when CUBLAS=1 or the setting is a cuBLAS one, else the path as it is.

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Build the release binary and the GPU test binaries here, and stage them for the GPU machine.
-#   tests/device/stage.sh [DIR]      (default .device-bin; ignored by git via .git/info/exclude)
+#   tests/device/stage.sh [--train-only] [DIR]   (default .device-bin; ignored by git via .git/info/exclude)
+# --train-only stages the release binary alone (a training campaign, tests/device/campaign.sh).
 # DIR then holds bin.txz: `instantmimic`, one stripped binary per tests/gpu_*.rs (named after
 # the file), one per benches/*.rs (bench_<name>), and motions/ (session.sh's INSTANTMIMIC_MOTIONS): the
 # shipped clips are built into the binaries, so it holds only DeepMimic's long clips
@@ -8,6 +9,8 @@
 # Carry DIR in the device call and run tests/device/session.sh there.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
+TRAIN_ONLY=0
+if [ "${1:-}" = --train-only ]; then TRAIN_ONLY=1; shift; fi
 DIR=${1:-.device-bin}
 LONG_MOTIONS=$(cd .. && pwd)/shared/data/motions/long
 mkdir -p .git/info
@@ -15,6 +18,7 @@ grep -qx "/$DIR/" .git/info/exclude 2>/dev/null || echo "/$DIR/" >> .git/info/ex
 rm -rf "$DIR"; mkdir -p "$DIR"
 cargo build --release --quiet
 cp target/release/instantmimic "$DIR/"
+if [ "$TRAIN_ONLY" = 0 ]; then
 cargo test --release --features gpu --no-run --message-format=json 2>/dev/null \
   | python3 -c '
 import json, sys
@@ -32,6 +36,7 @@ for line in sys.stdin:
     if m.get("reason") == "compiler-artifact" and m.get("executable") and "bench" in m["target"]["kind"]:
         print(m["target"]["name"], m["executable"])
 ' | while read -r name exe; do cp "$exe" "$DIR/bench_$name"; done
+fi
 strip "$DIR"/*
 mkdir -p "$DIR/motions"
 if [ -d "$LONG_MOTIONS" ]; then cp -r "$LONG_MOTIONS" "$DIR/motions/long"; fi
