@@ -24,7 +24,8 @@ fn run_on_cpu(kernel: &str, checks: impl FnOnce(&Fixture) -> Vec<Check>) {
 /// All check families, as the two executions run them.
 fn all_checks(fixture: &Fixture) -> Vec<Check> {
     use kernel_checks::{
-        control, evaluate, gemm_epilogue, normalize, observe, policy, reset, statistics, tracking,
+        control, episode, evaluate, gemm_epilogue, normalize, observe, policy, reset, statistics,
+        tracking,
     };
     [
         control::checks(fixture),
@@ -38,6 +39,7 @@ fn all_checks(fixture: &Fixture) -> Vec<Check> {
         policy::sample_checks(fixture),
         gemm_epilogue::checks(fixture),
         evaluate::checks(fixture),
+        episode::checks(fixture),
         statistics::checks(fixture),
     ]
     .into_iter()
@@ -93,6 +95,14 @@ fn pd_control_matches_the_f64_reference() {
 #[test]
 fn reward_termination_matches_the_f64_reference() {
     run_on_cpu("reward_termination", kernel_checks::tracking::checks);
+}
+
+#[test]
+fn an_evaluation_episode_on_a_clamped_clip_ends_where_the_evaluation_expects() {
+    run_on_cpu(
+        "reward_termination + evaluation_accumulate",
+        kernel_checks::episode::checks,
+    );
 }
 
 #[test]

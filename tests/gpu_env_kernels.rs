@@ -422,6 +422,14 @@ fn gpu_reward_termination_matches_the_f64_reference() {
 }
 
 #[test]
+fn gpu_an_evaluation_episode_on_a_clamped_clip_ends_where_the_evaluation_expects() {
+    run_on_gpu(
+        "reward_termination + evaluation_accumulate",
+        kernel_checks::episode::checks,
+    );
+}
+
+#[test]
 fn gpu_reset_masked_matches_the_f64_reference() {
     run_on_gpu("reset_masked", kernel_checks::reset::reset_checks);
 }

@@ -16,6 +16,7 @@
 pub mod compare;
 pub mod control;
 pub mod cpu;
+pub mod episode;
 pub mod evaluate;
 pub mod gemm_epilogue;
 pub mod normalize;
