@@ -1,6 +1,11 @@
 #!/usr/bin/env bash
 # The test command (README; CI runs exactly this). No GPU needed.
 #
+# With no arguments (CI): the gates first, `cargo fmt --check`, `cargo clippy --all-targets
+# --all-features -- -D warnings` and a build of the GPU tests and benchmarks (`--features gpu`:
+# they run on the GPU machine, tests/device/session.sh, but must compile everywhere), then
+# `cargo test`. With arguments, only `cargo test ARGS` (e.g. `tests/run.sh --test train_cli`).
+#
 # Sets up the build-step Python once (kernels_py/requirements.txt, in .venv) so that the tests
 # also check that ptx/ regenerates from kernels_py/ byte for byte and that every shipped PTX
 # assembles with ptxas for every supported GPU, then runs `cargo test`. The tests read the
@@ -25,5 +30,10 @@ export INSTANTMIMIC_BUILD_PYTHON PTXAS
 if [ -z "${INSTANTMIMIC_MOTIONS:-}" ] && [ -d ../shared/data/motions ]; then
   INSTANTMIMIC_MOTIONS=$(cd ../shared/data/motions && pwd)
   export INSTANTMIMIC_MOTIONS
+fi
+if [ "$#" -eq 0 ]; then
+  cargo fmt --check
+  cargo clippy --all-targets --all-features -- -D warnings
+  cargo test --features gpu --no-run --quiet
 fi
 exec cargo test "$@"
