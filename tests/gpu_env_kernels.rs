@@ -309,6 +309,7 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             &a.array(9),
             &a.array(10),
             &a.array(11),
+            &a.array(12),
         ),
         "evaluation_accumulate" => kernels.evaluation_accumulate(
             s,

@@ -33,7 +33,7 @@ use instantmimic::ppo::backward::{
 use instantmimic::ppo::batch::{Advantages, Minibatch, ValueNormalization};
 use instantmimic::ppo::loss::{LOSS_TERMS, LossGradients};
 use instantmimic::ppo::reduce::{
-    record_column_sums, record_sum_and_squares, record_sum_of_squares,
+    record_clear, record_column_sums, record_sum_and_squares, record_sum_of_squares,
 };
 use instantmimic::ppo::{GaussianPolicy, LayerShape, PpoUpdate};
 use instantmimic::train::TrainConfig;
@@ -232,22 +232,70 @@ fn loss_gradients_match_finite_differences() {
     let log_std_d = DeviceArray::from_slice(&gpu, [a], &log_std).unwrap();
     let value_d = DeviceArray::from_slice(&gpu, [m, 1], &value).unwrap();
     let grads = LossGradients::zeros(&gpu, m, a).unwrap();
-    let params = PpoLossParams {
+    // The rollout's means and log std, for the analytic KL (read only with analytic_kl on).
+    let old_means: Vec<f32> = mean
+        .iter()
+        .zip(normal(&mut rng, m * a, 0.0, 0.05))
+        .map(|(mu, d)| mu + d)
+        .collect();
+    let old_log_std: Vec<f32> = log_std
+        .iter()
+        .zip(normal(&mut rng, a, 0.0, 0.05))
+        .map(|(s, d)| s + d)
+        .collect();
+    mb.means.upload(&old_means).unwrap();
+    let old_log_std_d = DeviceArray::from_slice(&gpu, [a], &old_log_std).unwrap();
+    let mut params = PpoLossParams {
         clip: 0.2,
         value_coef: 2.0,
         clip_value_loss: 1,
+        analytic_kl: 0,
     };
     let sums = DeviceArray::zeros(&gpu, [LOSS_TERMS + a]).unwrap();
     let s = gpu.stream();
-    grads
-        .record(&kernels, s, &mb, &mean_d, &log_std_d, &value_d, &params)
-        .expect("loss");
-    record_column_sums(&kernels, s, &grads.terms, &sums).expect("sums");
-    gpu.synchronize().unwrap();
+    let run = |params: &PpoLossParams| {
+        record_clear(s, &sums).expect("clear");
+        grads
+            .record(
+                &kernels,
+                s,
+                &mb,
+                &mean_d,
+                &log_std_d,
+                &old_log_std_d,
+                &value_d,
+                params,
+            )
+            .expect("loss");
+        record_column_sums(&kernels, s, &grads.terms, &sums).expect("sums");
+        gpu.synchronize().unwrap();
+        download(&sums)
+    };
+    // The analytic KL(old || new) of the Gaussians, mean over the samples, in float64; every
+    // other column is the same as with the sampled estimate.
+    params.analytic_kl = 1;
+    let analytic = run(&params);
+    let kl: f64 = (0..m * a)
+        .map(|k| {
+            let j = k % a;
+            let (s_new, s_old) = (f64::from(log_std[j]), f64::from(old_log_std[j]));
+            let dm = f64::from(old_means[k]) - f64::from(mean[k]);
+            s_new - s_old + ((2.0 * s_old).exp() + dm * dm) / (2.0 * (2.0 * s_new).exp()) - 0.5
+        })
+        .sum::<f64>()
+        / m as f64;
+    check("analytic KL (column sum)", &analytic[3..4], &[kl]);
+    params.analytic_kl = 0;
+    let sums = run(&params);
+    let other = |v: &[f64]| [&v[..3], &v[4..]].concat();
+    check(
+        "the other columns do not depend on the KL measure",
+        &other(&analytic),
+        &other(&sums),
+    );
 
     let d_mean = download2(&grads.d_mean);
     let d_value = download2(&grads.d_value);
-    let sums = download(&sums);
     let d_log_std: Vec<f64> = sums[LOSS_TERMS..]
         .iter()
         .map(|g| g - c.entropy_coef)

@@ -153,7 +153,7 @@ fn command_line_overrides_shape_a_new_search_only() {
 #[test]
 fn the_backflip_configuration_loads_and_names_the_missing_trainer() {
     let config = HpoConfig::load(&repo("configs/hpo/backflip.toml")).unwrap();
-    assert_eq!(config.space.params.len(), 24);
+    assert_eq!(config.space.params.len(), 25);
     assert_eq!(config.search.seeds, [0, 1, 2]);
     let baseline = config.baseline().unwrap();
     assert_eq!(

@@ -93,18 +93,29 @@ def make_batch(rng, m, a, clip, ratio_spread=0.3):
     return mean, log_std, value, (actions, old_logp, old_values, adv, returns)
 
 
-def run_kernel(mean, log_std, value, batch, clip, value_coef, clip_value):
+def analytic_kl(mean, log_std, old_mean, old_log_std):
+    """Mean over the samples of KL(old || new) between the Gaussians, in float64."""
+    dm = old_mean.astype(np.float64) - mean
+    per = log_std - old_log_std + (np.exp(2.0 * old_log_std) + dm * dm) / (2.0 * np.exp(2.0 * log_std)) - 0.5
+    return per.sum(axis=1).mean()
+
+
+def run_kernel(mean, log_std, value, batch, clip, value_coef, clip_value, old=None):
+    """The kernel's outputs; `old` = (rollout means, rollout log std) turns the analytic KL on
+    (otherwise the old values are garbage the kernel must not read)."""
     actions, old_logp, old_values, adv, returns = batch
     m, a = mean.shape
     params = ppo_loss.PpoLossParams()
     params.clip = clip
     params.value_coef = value_coef
     params.clip_value_loss = 1 if clip_value else 0
+    params.analytic_kl = 0 if old is None else 1
+    old_mean, old_log_std = old if old is not None else (np.full((m, a), np.nan, np.float32), np.full(a, np.nan, np.float32))
     d_mean, d_value, terms = zeros((m, a)), zeros((m, 1)), zeros((m, TERMS + a))
     wp.launch(
         ppo_loss.ppo_loss_gradients,
         dim=m,
-        inputs=[array(mean), array(log_std), array(value[:, None]), array(actions), array(old_logp), array(old_values), array(adv), array(returns), params],
+        inputs=[array(mean), array(log_std), array(value[:, None]), array(actions), array(f32(old_mean)), array(f32(old_log_std)), array(old_logp), array(old_values), array(adv), array(returns), params],
         outputs=[d_mean, d_value, terms],
         device="cpu",
     )
@@ -177,6 +188,15 @@ def main() -> int:
         v.error(f"d_value vs finite differences ({len(keys)} entries), {what}", [d_value[k] for k in keys], [fd_value[k] for k in keys])
         for k, (name, ref) in enumerate(parts.items()):
             v.error(f"{name} (column sum of terms), {what}", sums[k], ref)
+        # The analytic KL: only the KL column changes, to the closed form.
+        old = (f32(mean + rng.normal(0.0, 0.05, mean.shape)), f32(log_std + rng.normal(0.0, 0.05, log_std.shape)))
+        d_mean_a, d_value_a, terms_a = run_kernel(mean, log_std, value, batch, clip32, coef32, clip_value, old)
+        sums_a = terms_a.sum(axis=0)
+        v.error(f"analytic KL (column sum), {what}", sums_a[3], analytic_kl(mean, log_std, *old))
+        v.check(f"analytic KL differs from the sampled one, {what}", abs(sums_a[3] - sums[3]) > 1e-3 * abs(sums[3]))
+        same = np.concatenate([sums_a[:3], sums_a[4:]]), np.concatenate([sums[:3], sums[4:]])
+        v.error(f"other columns unchanged by the KL measure, {what}", same[0], same[1], limit=0.0)
+        v.error(f"gradients unchanged by the KL measure, {what}", np.concatenate([d_mean_a.ravel(), d_value_a]), np.concatenate([d_mean.ravel(), d_value]), limit=0.0)
     # Near-identical policies (the first minibatch of an update): the approximate KL is tiny and
     # must not cancel to noise (or below zero) in float32. (At log ratios ~1e-4 the log ratio
     # itself, a difference of log-probabilities ~20 apart from float32 steps of 2e-6, is the

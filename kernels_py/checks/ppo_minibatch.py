@@ -63,6 +63,7 @@ def check_gather(v: Verdict, rng):
         m = batch // minibatches
         obs = f32(rng.standard_normal((horizon + 1, n, d)))
         act = f32(rng.standard_normal((horizon, n, a)))
+        means = f32(rng.standard_normal((horizon, n, a)))
         logp = f32(rng.standard_normal((horizon, n)))
         val = f32(rng.standard_normal((horizon, n)))
         adv = f32(rng.standard_normal((horizon, n)) * 3.0 + 1.5)
@@ -72,7 +73,7 @@ def check_gather(v: Verdict, rng):
         wp.launch_tiled(reduce.sum_and_squares, dim=[-(-batch // 2048)], inputs=[adv_d.flatten(), moments], block_dim=128, device="cpu")
         perm = shuffle(batch, 1, 5, 0)
         perm_d = array(perm)
-        inputs = [array(obs), array(act), array(logp), array(val), adv_d, array(ret), moments]
+        inputs = [array(obs), array(act), array(means), array(logp), array(val), adv_d, array(ret), moments]
         mean, std = adv.mean(), adv.std(ddof=1)
         flat = perm.reshape(minibatches, m)
         for k in range(minibatches):
@@ -80,15 +81,16 @@ def check_gather(v: Verdict, rng):
             t, e = rows // n, rows % n
             what = f"T={horizon} N={n} D={d} A={a}, minibatch {k} of {minibatches}"
             for normalized, stats, mode in [(0, STATS, "off"), (1, STATS, "on"), (1, STATS_EMPTY, "on, count 0")]:
-                outs = [zeros((m, d)), zeros((m, a)), zeros(m), zeros(m), zeros(m), zeros(m)]
+                outs = [zeros((m, d)), zeros((m, a)), zeros((m, a)), zeros(m), zeros(m), zeros(m), zeros(m)]
                 values = [normalized, array(stats, dtype=wp.float64)]
                 wp.launch(minibatch.gather_minibatch, dim=m * max(d, a), inputs=[perm_d, k * m, *inputs, *values, *outs], device="cpu")
                 how = f"{what}, value normalization {mode}"
                 v.error(f"gathered observations, {how}", outs[0].numpy(), obs[t, e], limit=0.0)
                 v.error(f"gathered actions, {how}", outs[1].numpy(), act[t, e], limit=0.0)
-                v.error(f"gathered log-probs, {how}", outs[2].numpy(), logp[t, e], limit=0.0)
-                v.error(f"normalized advantages, {how}", outs[4].numpy(), (adv[t, e] - mean) / (std + 1e-8))
-                got = np.stack([outs[3].numpy(), outs[5].numpy()])
+                v.error(f"gathered rollout means, {how}", outs[2].numpy(), means[t, e], limit=0.0)
+                v.error(f"gathered log-probs, {how}", outs[3].numpy(), logp[t, e], limit=0.0)
+                v.error(f"normalized advantages, {how}", outs[5].numpy(), (adv[t, e] - mean) / (std + 1e-8))
+                got = np.stack([outs[4].numpy(), outs[6].numpy()])
                 raw = np.stack([val[t, e], ret[t, e]])
                 if mode == "on":
                     mu, sigma = stats[1], np.sqrt(stats[2] / stats[0] + 1e-8)

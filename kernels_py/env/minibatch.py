@@ -99,6 +99,7 @@ def gather_minibatch(
     start: wp.int32,
     observations: wp.array3d(dtype=wp.float32),
     actions: wp.array3d(dtype=wp.float32),
+    means: wp.array3d(dtype=wp.float32),
     log_probs: wp.array2d(dtype=wp.float32),
     values: wp.array2d(dtype=wp.float32),
     advantages: wp.array2d(dtype=wp.float32),
@@ -108,6 +109,7 @@ def gather_minibatch(
     value_stats: wp.array(dtype=wp.float64),
     mb_observations: wp.array2d(dtype=wp.float32),
     mb_actions: wp.array2d(dtype=wp.float32),
+    mb_means: wp.array2d(dtype=wp.float32),
     mb_log_probs: wp.array(dtype=wp.float32),
     mb_values: wp.array(dtype=wp.float32),
     mb_advantages: wp.array(dtype=wp.float32),
@@ -115,7 +117,7 @@ def gather_minibatch(
 ):
     """Row i of the minibatch is sample s = permutation[start + i] = t * N + n of the rollout
     (storage `[T(+1), N, ...]`). Thread (i, c) of a 1-D launch of M * W threads, W = max(D, A),
-    copies observation column c (c < D), action column c (c < A) and, for c = 0, the
+    copies observation column c (c < D), action and rollout-mean column c (c < A) and, for c = 0, the
     log-probability, value, return and the advantage normalized with the batch's moments. With
     `normalized_values`, the value and the return (both in return units) are normalized with
     the running return statistics `value_stats` (gae.py `value_scale`)."""
@@ -131,6 +133,7 @@ def gather_minibatch(
         mb_observations[i, c] = observations[t, n, c]
     if c < actions.shape[2]:
         mb_actions[i, c] = actions[t, n, c]
+        mb_means[i, c] = means[t, n, c]
     if c == 0:
         stats = advantage_mean_std(advantage_moments, actions.shape[0] * num_envs)
         mb_log_probs[i] = log_probs[t, n]

@@ -108,11 +108,13 @@ def gaussian_sample(
     stored_actions: wp.array3d(dtype=wp.float32),
     stored_log_probs: wp.array2d(dtype=wp.float32),
     stored_values: wp.array2d(dtype=wp.float32),
+    stored_means: wp.array3d(dtype=wp.float32),
 ):
     """One thread per env n: `a = mean + exp(log_std) g` (g ~ N(0, 1) per component; g = 0 when
     `deterministic`), its log-probability under the Gaussian, written to `actions[n]` (the env's
-    action) and to rollout storage row t with the critic's `value[n, 0]`. Random stream: seed,
-    offset `(iteration[0] * horizon + t) * N + n`."""
+    action) and to rollout storage row t with the critic's `value[n, 0]` and the mean (the
+    update's analytic KL reads it). Random stream: seed, offset `(iteration[0] * horizon + t) * N
+    + n`."""
     n = wp.tid()
     num_envs = mean.shape[0]
     state = wp.rand_init(seed, (iteration[0] * horizon + t) * num_envs + n)
@@ -124,6 +126,7 @@ def gaussian_sample(
         a = mean[n, j] + wp.exp(log_std[j]) * g
         actions[n, j] = a
         stored_actions[t, n, j] = a
+        stored_means[t, n, j] = mean[n, j]
         log_prob += -0.5 * g * g - log_std[j] - HALF_LOG_TWO_PI
     stored_log_probs[t, n] = log_prob
     stored_values[t, n] = value[n, 0]

@@ -20,9 +20,13 @@ dL/dV` [M, 1], and per sample the terms of `dL/ds_j` from L_surr, `g_i (z_ij^2 -
 larger it is 0 (the clamp is flat there), as autograd gives.
 
 Per-sample terms `terms [M, LOSS_TERMS + A]`, each divided by M so that column sums are means:
-surrogate loss, value loss (without its coefficient), entropy, approximate KL
-`(ratio - 1) - log ratio` (never negative; its mean estimates KL(old || new)), clipped
-(1 where |ratio - 1| > clip), then the A log-std gradient terms.
+surrogate loss, value loss (without its coefficient), entropy, the KL term, clipped
+(1 where |ratio - 1| > clip), then the A log-std gradient terms. The KL term (config
+`ppo.kl_measure`) is the sampled estimate `(ratio - 1) - log ratio` (never negative; its mean
+estimates KL(old || new)), or the analytic KL(old || new) of the two Gaussians, rsl_rl's:
+`sum_j s_j - s_old_j + (exp(2 s_old_j) + (mu_old_j - mu_j)^2) / (2 exp(2 s_j)) - 1/2`, from the
+rollout's means and log std. Both have the same expectation; the analytic one has no sampling
+noise.
 """
 
 import math
@@ -62,6 +66,8 @@ class PpoLossParams:
     value_coef: wp.float32
     # 1: clip the value around the rollout's value by `clip` (rsl_rl's use_clipped_value_loss).
     clip_value_loss: wp.int32
+    # 1: the KL term is the analytic Gaussian KL (module docstring); 0: the sampled estimate.
+    analytic_kl: wp.int32
 
 
 @wp.kernel
@@ -70,6 +76,8 @@ def ppo_loss_gradients(
     log_std: wp.array(dtype=wp.float32),
     value: wp.array2d(dtype=wp.float32),
     actions: wp.array2d(dtype=wp.float32),
+    old_means: wp.array2d(dtype=wp.float32),
+    old_log_std: wp.array(dtype=wp.float32),
     old_log_probs: wp.array(dtype=wp.float32),
     old_values: wp.array(dtype=wp.float32),
     advantages: wp.array(dtype=wp.float32),
@@ -125,7 +133,14 @@ def ppo_loss_gradients(
     terms[i, TERM_SURROGATE] = surrogate * inv_m
     terms[i, TERM_VALUE] = value_loss * inv_m
     terms[i, TERM_ENTROPY] = entropy * inv_m
-    terms[i, TERM_KL] = kl_term(log_ratio) * inv_m
+    kl = kl_term(log_ratio)
+    if params.analytic_kl != 0:
+        kl = float(0.0)
+        for j in range(num_actions):
+            dm = old_means[i, j] - mean[i, j]
+            var_old = wp.exp(2.0 * old_log_std[j])
+            kl += log_std[j] - old_log_std[j] + (var_old + dm * dm) * 0.5 * wp.exp(-2.0 * log_std[j]) - 0.5
+    terms[i, TERM_KL] = kl * inv_m
     terms[i, TERM_CLIP_FRACTION] = clipped * inv_m
     for j in range(num_actions):
         inv_std = wp.exp(-log_std[j])

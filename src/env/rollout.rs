@@ -54,6 +54,8 @@ pub struct RolloutStorage {
     pub observations: DeviceArray3<f32>,
     /// Sampled actions `[T, N, A]` and their log-probabilities `[T, N]`.
     pub actions: DeviceArray3<f32>,
+    /// The policy's means of those actions `[T, N, A]` (the update's analytic KL).
+    pub means: DeviceArray3<f32>,
     pub log_probs: DeviceArray2<f32>,
     /// Critic values of the observations `[T, N]`.
     pub values: DeviceArray2<f32>,
@@ -68,6 +70,7 @@ impl RolloutStorage {
         Ok(RolloutStorage {
             observations: DeviceArray::zeros(gpu, [t + 1, n, obs])?,
             actions: DeviceArray::zeros(gpu, [t, n, act])?,
+            means: DeviceArray::zeros(gpu, [t, n, act])?,
             log_probs: DeviceArray::zeros(gpu, [t, n])?,
             values: DeviceArray::zeros(gpu, [t, n])?,
             rewards: DeviceArray::zeros(gpu, [t, n])?,
@@ -494,6 +497,7 @@ impl Rollout {
     fn record_policy(&self, s: &Stream, t: usize) -> Result<(), RolloutError> {
         let storage = ActStorage {
             actions: &self.storage.actions,
+            means: &self.storage.means,
             log_probs: &self.storage.log_probs,
             values: &self.storage.values,
             // Evaluation needs no values at all.

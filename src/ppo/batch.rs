@@ -13,6 +13,8 @@ pub struct PpoBatch<'a> {
     /// Normalized observations `[T + 1, N, D]`; row T is the bootstrap observation.
     pub observations: &'a DeviceArray3<f32>,
     pub actions: &'a DeviceArray3<f32>,
+    /// The policy's means of the sampled actions `[T, N, A]` (the analytic KL).
+    pub means: &'a DeviceArray3<f32>,
     pub log_probs: &'a DeviceArray2<f32>,
     /// The critic's values of rows 0..T of the observations, from the rollout.
     pub values: &'a DeviceArray2<f32>,
@@ -26,6 +28,7 @@ impl<'a> From<&'a RolloutStorage> for PpoBatch<'a> {
         PpoBatch {
             observations: &s.observations,
             actions: &s.actions,
+            means: &s.means,
             log_probs: &s.log_probs,
             values: &s.values,
             rewards: &s.rewards,
@@ -64,11 +67,13 @@ impl PpoBatch<'_> {
                 t + 1
             ));
         }
-        if self.actions.shape() != [t, n, actions] {
-            wrong.push(format!(
-                "actions {:?} (expected [{t}, {n}, {actions}])",
-                self.actions.shape()
-            ));
+        for (name, shape) in [
+            ("actions", self.actions.shape()),
+            ("means", self.means.shape()),
+        ] {
+            if shape != [t, n, actions] {
+                wrong.push(format!("{name} {shape:?} (expected [{t}, {n}, {actions}])"));
+            }
         }
         if wrong.is_empty() {
             Ok(())
@@ -223,6 +228,8 @@ pub fn record_shuffle(
 pub struct Minibatch {
     pub observations: DeviceArray2<f32>,
     pub actions: DeviceArray2<f32>,
+    /// The rollout's means of the actions.
+    pub means: DeviceArray2<f32>,
     pub log_probs: DeviceArray<f32>,
     pub values: DeviceArray<f32>,
     /// Normalized with the whole batch's mean and (unbiased) standard deviation.
@@ -240,6 +247,7 @@ impl Minibatch {
         Ok(Minibatch {
             observations: DeviceArray::zeros(gpu, [rows, observations])?,
             actions: DeviceArray::zeros(gpu, [rows, actions])?,
+            means: DeviceArray::zeros(gpu, [rows, actions])?,
             log_probs: DeviceArray::zeros(gpu, [rows])?,
             values: DeviceArray::zeros(gpu, [rows])?,
             advantages: DeviceArray::zeros(gpu, [rows])?,
@@ -283,6 +291,7 @@ impl Minibatch {
             start as i32,
             batch.observations,
             batch.actions,
+            batch.means,
             batch.log_probs,
             batch.values,
             &advantages.advantages,
@@ -292,6 +301,7 @@ impl Minibatch {
             &values.stats,
             &self.observations,
             &self.actions,
+            &self.means,
             &self.log_probs,
             &self.values,
             &self.advantages,

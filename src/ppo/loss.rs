@@ -47,6 +47,7 @@ impl LossGradients {
         minibatch: &Minibatch,
         mean: &DeviceArray2<f32>,
         log_std: &DeviceArray<f32>,
+        old_log_std: &DeviceArray<f32>,
         value: &DeviceArray2<f32>,
         params: &PpoLossParams,
     ) -> Result<(), PpoError> {
@@ -55,6 +56,8 @@ impl LossGradients {
             || minibatch.actions.shape() != [m, a]
             || mean.shape() != [m, a]
             || log_std.shape() != [a]
+            || old_log_std.shape() != [a]
+            || minibatch.means.shape() != [m, a]
             || value.shape() != [m, 1]
         {
             return Err(PpoError::Shape(format!(
@@ -73,6 +76,8 @@ impl LossGradients {
             log_std,
             value,
             &minibatch.actions,
+            &minibatch.means,
+            old_log_std,
             &minibatch.log_probs,
             &minibatch.values,
             &minibatch.advantages,

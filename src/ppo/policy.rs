@@ -361,6 +361,7 @@ impl GaussianPolicy {
             storage.actions,
             storage.log_probs,
             storage.values,
+            storage.means,
         )?;
         Ok(())
     }
@@ -369,6 +370,7 @@ impl GaussianPolicy {
 /// Rollout storage rows the policy writes.
 pub struct ActStorage<'a> {
     pub actions: &'a DeviceArray3<f32>,
+    pub means: &'a DeviceArray3<f32>,
     pub log_probs: &'a DeviceArray2<f32>,
     pub values: &'a DeviceArray2<f32>,
     /// The update computes the values (`ppo.values_in_update`): the critic does not run here,

@@ -29,7 +29,7 @@ use crate::cuda::{CudaError, Gpu, Stream};
 use crate::env::{
     AdamParams, DeviceArray, DeviceArray2, EnvError, EnvKernels, PpoLossParams, ScheduleParams,
 };
-use crate::train::TrainConfig;
+use crate::train::{KlMeasure, TrainConfig};
 
 use super::adam::{
     AdamMoments, LEARNING_RATE_MAX, LEARNING_RATE_MIN, adam_params, record_schedule,
@@ -133,6 +133,8 @@ pub struct PpoUpdate {
     actor_params: DeviceArray<f32>,
     critic_params: DeviceArray<f32>,
     log_std: DeviceArray<f32>,
+    /// The log std the rollout sampled with (copied at the update's start: the analytic KL).
+    old_log_std: DeviceArray<f32>,
     /// The networks over a minibatch (sharing the policy's parameters), and the critic over
     /// the bootstrap row.
     actor: Mlp,
@@ -227,6 +229,7 @@ impl PpoUpdate {
                 clip: q.clip,
                 value_coef: q.value_coef,
                 clip_value_loss: i32::from(q.clip_value_loss),
+                analytic_kl: i32::from(q.kl_measure == KlMeasure::Analytic),
             },
             schedule: ScheduleParams {
                 kl_target: q.kl_threshold,
@@ -266,6 +269,7 @@ impl PpoUpdate {
             )?,
             values_in_update: q.values_in_update,
             log_std: policy.log_std().view(0, [a])?,
+            old_log_std: DeviceArray::zeros(gpu, [a])?,
             actor_moments: AdamMoments::zeros(gpu, actor_params.len())?,
             critic_moments: AdamMoments::zeros(gpu, critic_params.len())?,
             actor_shapes,
@@ -307,6 +311,12 @@ impl PpoUpdate {
         record_clear(stream, &self.loss_sums)?;
         record_clear(stream, &self.grad_norm_sq)?;
         record_clear(stream, &self.advantage_moments)?;
+        // The rollout that precedes this update sampled with the current log std.
+        stream.memcpy_dtod(
+            self.old_log_std.device_ptr(),
+            self.log_std.device_ptr(),
+            self.action_size * std::mem::size_of::<f32>(),
+        )?;
 
         let last_values = if self.values_in_update {
             // One forward over all rows; rows 0..T are the rollout's values (what GAE, the
@@ -393,6 +403,7 @@ impl PpoUpdate {
             &self.minibatch,
             self.actor.output(),
             &self.log_std,
+            &self.old_log_std,
             self.critic.output(),
             &self.loss_params,
         )?;

@@ -248,6 +248,9 @@ pub struct PpoConfig {
     /// Clip the actor's and the critic's gradients to `max_grad_norm` each, instead of their
     /// joint norm (where the critic's gradient can shrink the actor's step).
     pub separate_grad_clipping: bool,
+    /// What the adaptive learning rate measures as the KL between the rollout's policy and the
+    /// current one: the sampled estimate (default) or the analytic Gaussian KL (rsl_rl's).
+    pub kl_measure: KlMeasure,
     /// Adapt the learning rate to the approximate KL after each minibatch (rsl_rl's
     /// "adaptive" schedule, on in the baseline); off: the rate stays `learning_rate`.
     pub adaptive_learning_rate: bool,
@@ -275,11 +278,22 @@ impl Default for PpoConfig {
             clip_value_loss: true,
             value_normalization: false,
             separate_grad_clipping: false,
+            kl_measure: KlMeasure::Sample,
             adaptive_learning_rate: true,
             values_in_update: true,
             max_grad_norm: 1.0,
         }
     }
+}
+
+/// `ppo.kl_measure` (docs/ppo.md, "KL").
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum KlMeasure {
+    /// `mean((r - 1) - log r)` over the minibatch's sampled actions.
+    Sample,
+    /// The closed-form KL between the rollout's Gaussians and the current ones.
+    Analytic,
 }
 
 /// Where the evaluation episodes start (docs/train.md, "Evaluation").

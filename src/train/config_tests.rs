@@ -220,6 +220,15 @@ fn new_failure_keys_are_off_by_default_and_checked() {
     assert_eq!(c.reward.ee_frame, EndEffectorFrame::World);
     assert!(!c.obs.reference_bodies);
     assert!(!c.ppo.value_normalization && !c.ppo.separate_grad_clipping);
+    assert_eq!(c.ppo.kl_measure, KlMeasure::Sample);
+    let analytic =
+        TrainConfig::from_toml("motion = \"w\"\n[ppo]\nkl_measure = \"analytic\"", "c.toml")
+            .unwrap();
+    assert_eq!(analytic.ppo.kl_measure, KlMeasure::Analytic);
+    let e = TrainConfig::from_toml("motion = \"w\"\n[ppo]\nkl_measure = \"exact\"", "c.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("kl_measure") && e.contains("analytic"), "{e}");
     assert!(!c.run.stop_on_pose_error);
     let err = |env: &str| {
         TrainConfig::from_toml(&format!("motion = \"walk\"\n[env]\n{env}"), "c.toml")

@@ -28,7 +28,8 @@ pub use checkpoint::{
 pub use clock::{ActiveClock, StopReason, StopRule};
 pub use config::{
     ActionMode, COMMITTED_CONFIGS, ConfigError, EndEffectorFrame, EnvConfig, EvalStart,
-    GemmSetting, ObsConfig, PolicyConfig, PpoConfig, RewardConfig, RunConfig, TrainConfig,
+    GemmSetting, KlMeasure, ObsConfig, PolicyConfig, PpoConfig, RewardConfig, RunConfig,
+    TrainConfig,
 };
 pub use error::TrainError;
 pub use evaluation::{

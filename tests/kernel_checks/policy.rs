@@ -162,6 +162,11 @@ fn sample_case(n: usize, a: usize, deterministic: bool, seed: u64) -> Check {
             &[STORAGE_ROWS, n],
             nan_f32(STORAGE_ROWS * n),
         ),
+        p.f32(
+            "stored_means",
+            &[STORAGE_ROWS, n, a],
+            nan_f32(STORAGE_ROWS * n * a),
+        ),
     ];
     p.launch(&GAUSSIAN_SAMPLE, n, args);
     let t = t as usize;
@@ -178,6 +183,7 @@ fn sample_case(n: usize, a: usize, deterministic: bool, seed: u64) -> Check {
             ("stored_actions", a),
             ("stored_log_probs", 1),
             ("stored_values", 1),
+            ("stored_means", a),
         ] {
             r.bitwise_f32(
                 &format!("{name} (other rows)"),
@@ -194,6 +200,11 @@ fn sample_case(n: usize, a: usize, deterministic: bool, seed: u64) -> Check {
             "stored_values (row t) = value",
             &row("stored_values", 1),
             &value,
+        );
+        r.bitwise_f32(
+            "stored_means (row t) = mean",
+            &row("stored_means", a),
+            &mean,
         );
 
         // The exact reference, for both evaluation orders of randn's draws.

@@ -460,6 +460,8 @@ pub struct RolloutStorage {
     pub n: usize,
     pub observations: DeviceArray3<f32>,
     pub actions: DeviceArray3<f32>,
+    /// The policy's means of the actions (random in `random`, the policy's in `sampled`).
+    pub means: DeviceArray3<f32>,
     pub log_probs: DeviceArray2<f32>,
     pub values: DeviceArray2<f32>,
     pub rewards: DeviceArray2<f32>,
@@ -472,6 +474,7 @@ impl RolloutStorage {
         instantmimic::ppo::PpoBatch {
             observations: &self.observations,
             actions: &self.actions,
+            means: &self.means,
             log_probs: &self.log_probs,
             values: &self.values,
             rewards: &self.rewards,
@@ -504,6 +507,8 @@ impl RolloutStorage {
             .unwrap(),
             actions: DeviceArray::from_slice(gpu, [t, n, a], &normal(rng, t * n * a, 0.0, 1.0))
                 .unwrap(),
+            means: DeviceArray::from_slice(gpu, [t, n, a], &normal(rng, t * n * a, 0.0, 1.0))
+                .unwrap(),
             log_probs: arr2(&normal(rng, t * n, -5.0, 1.0)),
             values: arr2(&normal(rng, t * n, 5.0, 2.0)),
             rewards: arr2(&normal(rng, t * n, 0.5, 0.2)),
@@ -529,6 +534,7 @@ impl RolloutStorage {
         let mut r = RolloutStorage::random(gpu, rng, t, n, d, a);
         let storage = ActStorage {
             actions: &r.actions,
+            means: &r.means,
             log_probs: &r.log_probs,
             values: &r.values,
             values_in_update: false,
