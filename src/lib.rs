@@ -13,6 +13,7 @@
 //! - [`hpo`]: hyperparameter search by an agent (plan → propose → experiment).
 //! - [`assets`]: PTX and plans embedded in the binary at build time.
 //! - [`plot`]: PNG charts with an embedded font.
+//! - [`recording`]: body poses per control step (reference and simulated) for the page and the exporters.
 //! - [`cli`]: the command line.
 
 pub mod assets;
@@ -25,4 +26,5 @@ pub mod motion;
 pub mod plan;
 pub mod plot;
 pub mod ppo;
+pub mod recording;
 pub mod train;
