@@ -14,6 +14,7 @@
 //! - [`assets`]: PTX and plans embedded in the binary at build time.
 //! - [`plot`]: PNG charts with an embedded font.
 //! - [`recording`]: body poses per control step (reference and simulated) for the page and the exporters.
+//! - [`viewer`]: the replay page, one self-contained HTML file (three.js inlined).
 //! - [`cli`]: the command line.
 
 pub mod assets;
@@ -28,3 +29,4 @@ pub mod plot;
 pub mod ppo;
 pub mod recording;
 pub mod train;
+pub mod viewer;

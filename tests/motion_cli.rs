@@ -324,3 +324,44 @@ fn list_shows_the_built_in_clips_and_the_directorys() {
     );
     assert!(!listed.contains("README"), "{listed}");
 }
+
+#[test]
+fn view_writes_a_page_and_refuses_a_missing_directory() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let page = dir.path().join("walk.html");
+    let recording = dir.path().join("walk.safetensors");
+    let out = run(
+        &[
+            "motion",
+            "view",
+            "walk",
+            "--out",
+            page.to_str().expect("utf-8 path"),
+            "--fps",
+            "60",
+            "--save-recording",
+            recording.to_str().expect("utf-8 path"),
+        ],
+        None,
+    );
+    let text = succeeded(&out, "motion view");
+    assert!(text.contains("77 frames at 60 Hz"), "{text}");
+    let html = std::fs::read_to_string(&page).expect("page written");
+    assert!(html.starts_with("<!doctype html>") && html.contains("walk: reference clip"));
+    assert!(recording.is_file());
+
+    let missing = dir.path().join("no/such/dir/walk.html");
+    let out = run(
+        &[
+            "motion",
+            "view",
+            "walk",
+            "--out",
+            missing.to_str().expect("utf-8 path"),
+        ],
+        None,
+    );
+    let err = failed(&out, "motion view into a missing directory");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("does not exist"), "{err}");
+}

@@ -6,6 +6,7 @@ mod gpu;
 mod hpo;
 mod motion;
 mod motion_list;
+mod output;
 mod plan;
 mod train;
 
