@@ -15,6 +15,7 @@
 //! - [`plot`]: PNG charts with an embedded font.
 //! - [`recording`]: body poses per control step (reference and simulated) for the page and the exporters.
 //! - [`viewer`]: the replay page, one self-contained HTML file (three.js inlined).
+//! - [`export`]: recordings to glTF, BVH and DeepMimic files; a checkpoint's policy to ONNX.
 //! - [`cli`]: the command line.
 
 pub mod assets;
@@ -22,6 +23,7 @@ pub mod bench;
 pub mod cli;
 pub mod cuda;
 pub mod env;
+pub mod export;
 pub mod hpo;
 pub mod motion;
 pub mod plan;

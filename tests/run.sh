@@ -13,7 +13,7 @@
 # DeepMimic's long clips, kept out of the repository, are checked too when
 # $INSTANTMIMIC_MOTIONS names a directory with long/ (default ../shared/data/motions if present).
 # The exports' and the replay page's checks need outside tools, installed here when missing:
-# Debian's chromium (the page in a headless browser).
+# Debian's chromium (the page in a headless browser), and npm's gltf-validator (tests/tools).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=${INSTANTMIMIC_VENV:-.venv}
@@ -43,6 +43,20 @@ if [ -z "${INSTANTMIMIC_CHROMIUM:-}" ] && ! command -v chromium >/dev/null 2>&1;
 fi
 INSTANTMIMIC_CHROMIUM=${INSTANTMIMIC_CHROMIUM:-$(command -v chromium)}
 export INSTANTMIMIC_CHROMIUM
+# The .glb export is checked by the Khronos glTF validator (npm, pinned in tests/tools).
+if ! command -v npm >/dev/null 2>&1; then
+  echo "installing nodejs and npm (Debian) for the glTF validator"
+  sudo=; [ "$(id -u)" -eq 0 ] || sudo=sudo
+  $sudo apt-get update -qq && DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq nodejs npm >/dev/null \
+    || { echo "error: cannot install nodejs and npm (the glTF validator runs on node)" >&2; exit 1; }
+fi
+if [ ! -d tests/tools/node_modules/gltf-validator ] \
+  || ! cmp -s tests/tools/package-lock.json tests/tools/node_modules/.installed-lock.json; then
+  npm ci --prefix tests/tools --no-audit --no-fund --silent
+  cp tests/tools/package-lock.json tests/tools/node_modules/.installed-lock.json
+fi
+INSTANTMIMIC_GLTF_VALIDATOR=$PWD/tests/tools/validate_gltf.mjs
+export INSTANTMIMIC_GLTF_VALIDATOR
 if [ "$#" -eq 0 ]; then
   cargo fmt --check
   cargo clippy --all-targets --all-features -- -D warnings

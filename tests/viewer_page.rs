@@ -12,8 +12,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use instantmimic::motion::{Character, SyntheticMotion};
-use instantmimic::recording::{EpisodeInfo, Outcome, Recording, RecordingMeta, Track};
+use instantmimic::motion::Character;
+use instantmimic::recording::synthetic::lagging_replay;
 use instantmimic::viewer::page_html;
 use serde_json::Value;
 
@@ -248,45 +248,6 @@ fn read_png(path: &Path) -> (Vec<u8>, u32) {
     (rgb, info.width)
 }
 
-/// A replay-like recording without a GPU: the walk as the reference, and a "simulated" walk
-/// that lags behind and sinks, in two episodes, the second failing.
-fn replay_like(character: &Character) -> Recording {
-    let motion = SyntheticMotion::default()
-        .reference_motion(character)
-        .expect("clip");
-    let (mut reference, mut simulated) = (
-        Track::for_character(character),
-        Track::for_character(character),
-    );
-    let mut meta = RecordingMeta::new(character, "synthetic", "synthetic", "replay");
-    meta.control_dt = 1.0 / 30.0;
-    for (e, start) in [0.0, 0.5].into_iter().enumerate() {
-        for f in 0..45 {
-            let t = start + f64::from(f) / 30.0;
-            reference
-                .push_pose(character, &motion.clip().sample_qpos(t))
-                .expect("kinematics");
-            let mut qpos = motion
-                .clip()
-                .sample_qpos(t - 0.05 * e as f64 * f64::from(f) / 45.0);
-            qpos[2] -= 0.004 * e as f64 * f64::from(f);
-            simulated.push_pose(character, &qpos).expect("kinematics");
-        }
-        meta.episodes.push(EpisodeInfo {
-            start_time_s: start,
-            frames: 45,
-            outcome: if e == 0 {
-                Outcome::Succeeded
-            } else {
-                Outcome::Failed
-            },
-            failed_frame: (e == 1).then_some(30),
-            failure: (e == 1).then(|| "the root more than 0.6 m below the reference's".into()),
-        });
-    }
-    Recording::new(meta, reference, Some(simulated), character).expect("recording")
-}
-
 #[test]
 fn a_replay_page_with_a_ghost_and_errors_works_in_a_browser() {
     let Some(chromium) = chromium() else {
@@ -294,7 +255,12 @@ fn a_replay_page_with_a_ghost_and_errors_works_in_a_browser() {
         return;
     };
     let character = Character::humanoid().expect("humanoid");
-    let html = page_html(&replay_like(&character), &character, "synthetic replay").expect("page");
+    let html = page_html(
+        &lagging_replay(&character, 2, 45).expect("recording"),
+        &character,
+        "synthetic replay",
+    )
+    .expect("page");
     let dir = tempfile::tempdir().expect("temporary directory");
     let page = dir.path().join("replay.html");
     std::fs::write(&page, html).expect("write page");

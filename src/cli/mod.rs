@@ -2,6 +2,7 @@
 
 mod bench;
 mod eval;
+mod export;
 mod gpu;
 mod hpo;
 mod motion;
@@ -40,6 +41,8 @@ enum Command {
     Train(train::TrainArgs),
     /// Evaluate a checkpoint by the paper's protocol.
     Eval(eval::EvalArgs),
+    /// Export a recording or a clip (glb, bvh, deepmimic) or a checkpoint's policy (onnx).
+    Export(export::ExportArgs),
 }
 
 /// Parses the command line and runs the command.
@@ -53,5 +56,6 @@ pub fn run() -> Result<()> {
         Command::Hpo(args) => hpo::run_hpo(args),
         Command::Train(args) => train::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Export(args) => export::run(args),
     }
 }

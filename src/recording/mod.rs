@@ -16,6 +16,7 @@
 mod errors;
 mod file;
 mod from_motion;
+pub mod synthetic;
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};

@@ -1,6 +1,7 @@
 use super::*;
 use crate::motion::SyntheticMotion;
-use crate::recording::{ClipRecordingSpec, EpisodeInfo, Outcome, RecordingMeta, Track};
+use crate::recording::ClipRecordingSpec;
+use crate::recording::synthetic::lagging_replay;
 
 fn humanoid() -> Character {
     Character::humanoid().expect("embedded humanoid")
@@ -58,35 +59,7 @@ fn the_page_inlines_everything_and_carries_the_recording() {
 #[test]
 fn a_ten_second_four_episode_replay_page_stays_under_5_mb() {
     let character = humanoid();
-    let motion = SyntheticMotion::default()
-        .reference_motion(&character)
-        .expect("clip");
-    let (mut reference, mut simulated) = (
-        Track::for_character(&character),
-        Track::for_character(&character),
-    );
-    let mut meta = RecordingMeta::new(&character, "synthetic", "synthetic", "test");
-    meta.control_dt = 1.0 / 30.0;
-    for e in 0..4 {
-        for f in 0..300 {
-            let qpos = motion
-                .clip()
-                .sample_qpos(0.25 * f64::from(e) + f64::from(f) / 30.0);
-            reference.push_pose(&character, &qpos).expect("kinematics");
-            let mut moved = qpos;
-            moved[1] += 0.01 * f64::from(f).sqrt();
-            simulated.push_pose(&character, &moved).expect("kinematics");
-        }
-        meta.episodes.push(EpisodeInfo {
-            start_time_s: 0.25 * f64::from(e),
-            frames: 300,
-            outcome: Outcome::Completed,
-            failed_frame: None,
-            failure: None,
-        });
-    }
-    let recording =
-        Recording::new(meta, reference, Some(simulated), &character).expect("recording");
+    let recording = lagging_replay(&character, 4, 300).expect("recording");
     let html = page_html(&recording, &character, "replay").expect("page");
     let mb = html.len() as f64 / 1e6;
     assert!(mb < 5.0, "{mb:.2} MB");
