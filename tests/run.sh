@@ -13,7 +13,8 @@
 # DeepMimic's long clips, kept out of the repository, are checked too when
 # $INSTANTMIMIC_MOTIONS names a directory with long/ (default ../shared/data/motions if present).
 # The exports' and the replay page's checks need outside tools, installed here when missing:
-# Debian's chromium (the page in a headless browser), and npm's gltf-validator (tests/tools).
+# Debian's chromium (the page in a headless browser), and npm's gltf-validator (tests/tools);
+# onnxruntime (the ONNX export's check) comes with kernels_py/requirements.txt.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=${INSTANTMIMIC_VENV:-.venv}

@@ -1,7 +1,7 @@
 //! `instantmimic export`: a recording (or a clip, through CPU kinematics) to glTF, BVH or a
 //! DeepMimic motion file, and a checkpoint's policy to ONNX (docs/replay.md). No GPU.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
 use clap::Args;
@@ -10,10 +10,13 @@ use crate::export::Format;
 use crate::export::bvh::bvh_text;
 use crate::export::deepmimic::deepmimic_text;
 use crate::export::glb::glb_bytes;
+use crate::export::onnx::export_policy;
 use crate::motion::Character;
 use crate::motion::library::{motions_dir_from_env, resolve_motion};
+use crate::plan::PlanStore;
 use crate::recording::{ClipRecordingSpec, Recording};
 use crate::train::write_bytes_atomically;
+use crate::train::{Checkpoint, check_plans};
 
 use super::output::check_output_path;
 
@@ -45,6 +48,10 @@ pub struct ExportArgs {
     /// Directory of your own DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
     motions_dir: Option<PathBuf>,
+    /// With --format onnx: a directory laid out like ptx/ instead of the plans built into the
+    /// binary (the contract's physics timestep is the plans').
+    #[arg(long)]
+    assets: Option<PathBuf>,
 }
 
 /// The recording named by `--recording` or built from `--motion`.
@@ -81,6 +88,42 @@ fn source_recording(args: &ExportArgs, character: &Character) -> Result<Recordin
     }
 }
 
+/// The policy of the checkpoint at `path` as ONNX bytes, with its contract written beside
+/// `args.out` as JSON (`policy.onnx` -> `policy.json`).
+fn onnx_export(path: &Path, args: &ExportArgs, character: &Character) -> Result<(Vec<u8>, String)> {
+    let sidecar = args.out.with_extension("json");
+    if sidecar == args.out {
+        bail!(
+            "{}: name the ONNX file with another extension (its contract goes to a .json beside it)",
+            args.out.display()
+        );
+    }
+    let checkpoint = Checkpoint::load(path)?;
+    let config = checkpoint.meta.config(checkpoint.source())?;
+    // The physics timestep is the plans' (the contract states it); the evaluation's plans are
+    // the smallest.
+    let store = PlanStore::new(args.assets.as_deref());
+    let physics_dt = check_plans(&store, config.run.eval_envs)?
+        .first()
+        .map(|p| p.physics_dt)
+        .ok_or_else(|| anyhow!("no plans for {} worlds", config.run.eval_envs))?;
+    let export = export_policy(&checkpoint, character, physics_dt)?;
+    write_bytes_atomically(&sidecar, export.contract_json()?.as_bytes())
+        .with_context(|| format!("writing {}", sidecar.display()))?;
+    let c = &export.contract;
+    Ok((
+        export.to_bytes(),
+        format!(
+            "{} policy, observation {} -> action {}, opset {}; contract in {}",
+            c.motion,
+            c.observation.size,
+            c.action.size,
+            crate::export::onnx::OPSET,
+            sidecar.display()
+        ),
+    ))
+}
+
 /// Runs `export`.
 pub fn run(args: ExportArgs) -> Result<()> {
     let format: Format = args.format.parse().map_err(|e: String| anyhow!(e))?;
@@ -92,11 +135,11 @@ pub fn run(args: ExportArgs) -> Result<()> {
                 "--format onnx exports a checkpoint's policy: give --checkpoint, not a recording or a motion"
             );
         }
-        let _path = args
+        let path = args
             .checkpoint
             .as_ref()
             .ok_or_else(|| anyhow!("--format onnx: give --checkpoint <file>"))?;
-        bail!("--format onnx is not built yet")
+        onnx_export(path, &args, &character)?
     } else {
         if args.checkpoint.is_some() {
             bail!(

@@ -10,6 +10,7 @@ pub mod bvh;
 pub mod deepmimic;
 pub mod glb;
 mod mesh;
+pub mod onnx;
 pub mod skeleton;
 
 use std::fmt;
@@ -20,6 +21,7 @@ use thiserror::Error;
 
 use crate::motion::MotionError;
 use crate::recording::RecordingError;
+use crate::train::TrainError;
 
 /// An export that cannot be made.
 #[derive(Debug, Error)]
@@ -30,6 +32,8 @@ pub enum ExportError {
     Recording(#[from] RecordingError),
     #[error(transparent)]
     Motion(#[from] MotionError),
+    #[error(transparent)]
+    Train(#[from] TrainError),
     #[error("{0}")]
     Unsupported(String),
     #[error("cannot encode the {format}: {problem}")]
