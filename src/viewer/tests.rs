@@ -62,6 +62,7 @@ fn a_ten_second_four_episode_replay_page_stays_under_5_mb() {
     let recording = lagging_replay(&character, 4, 300).expect("recording");
     let html = page_html(&recording, &character, "replay").expect("page");
     let mb = html.len() as f64 / 1e6;
+    eprintln!("a 10-s, 4-episode replay page: {mb:.2} MB");
     assert!(mb < 5.0, "{mb:.2} MB");
     let data = embedded_data(&html);
     assert_eq!(decode(&data["errors"]["pose"]).len(), 1200);
