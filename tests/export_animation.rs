@@ -52,6 +52,21 @@ fn path_str(path: &Path) -> &str {
     path.to_str().expect("utf-8 path")
 }
 
+/// `export --<source> <value> --format <format> --out <out>` with `extra` arguments.
+fn export(source: &str, value: &str, format: &str, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "export",
+        source,
+        value,
+        "--format",
+        format,
+        "--out",
+        path_str(out),
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
 /// A saved replay-like recording (two tracks, three episodes, the last two failing).
 fn saved_replay(dir: &Path) -> (PathBuf, Recording) {
     let recording = lagging_replay(&humanoid(), 3, 40).expect("recording");
@@ -146,15 +161,7 @@ fn glb_passes_the_validator_and_puts_every_body_where_the_recording_has_it() {
     let (recording_path, recording) = saved_replay(dir.path());
     let glb = dir.path().join("replay.glb");
     let text = ok(
-        &run(&[
-            "export",
-            "--recording",
-            path_str(&recording_path),
-            "--format",
-            "glb",
-            "--out",
-            path_str(&glb),
-        ]),
+        &export("--recording", path_str(&recording_path), "glb", &glb, &[]),
         "export glb",
     );
     assert!(text.contains("3 episode(s), 2 skeleton(s)"), "{text}");
@@ -207,17 +214,13 @@ fn bvh_reads_back_to_the_recorded_joint_rotations() {
     let (recording_path, recording) = saved_replay(dir.path());
     let bvh = dir.path().join("episode1.bvh");
     ok(
-        &run(&[
-            "export",
+        &export(
             "--recording",
             path_str(&recording_path),
-            "--format",
             "bvh",
-            "--episode",
-            "1",
-            "--out",
-            path_str(&bvh),
-        ]),
+            &bvh,
+            &["--episode", "1"],
+        ),
         "export bvh",
     );
     let file = read_bvh(&std::fs::read_to_string(&bvh).expect("bvh")).expect("a BVH file");
@@ -264,17 +267,13 @@ fn deepmimic_export_reads_back_through_the_motion_reader() {
     let (recording_path, recording) = saved_replay(dir.path());
     let clip_path = dir.path().join("episode2.txt");
     ok(
-        &run(&[
-            "export",
+        &export(
             "--recording",
             path_str(&recording_path),
-            "--format",
             "deepmimic",
-            "--episode",
-            "2",
-            "--out",
-            path_str(&clip_path),
-        ]),
+            &clip_path,
+            &["--episode", "2"],
+        ),
         "export deepmimic",
     );
     let inspect = ok(
@@ -309,15 +308,7 @@ fn a_clip_exports_without_a_recording() {
     let dir = tempfile::tempdir().expect("temporary directory");
     let clip_path = dir.path().join("walk.txt");
     ok(
-        &run(&[
-            "export",
-            "--motion",
-            "walk",
-            "--format",
-            "deepmimic",
-            "--out",
-            path_str(&clip_path),
-        ]),
+        &export("--motion", "walk", "deepmimic", &clip_path, &[]),
         "export a clip",
     );
     let character = humanoid();
@@ -336,18 +327,7 @@ fn a_clip_exports_without_a_recording() {
     assert!(off < 1e-5, "{off}");
     for format in ["glb", "bvh"] {
         let out = dir.path().join(format!("walk.{format}"));
-        ok(
-            &run(&[
-                "export",
-                "--motion",
-                "walk",
-                "--format",
-                format,
-                "--out",
-                path_str(&out),
-            ]),
-            format,
-        );
+        ok(&export("--motion", "walk", format, &out, &[]), format);
     }
 }
 
@@ -357,15 +337,13 @@ fn bad_input_fails_with_one_line() {
     let (recording_path, _) = saved_replay(dir.path());
     let out_file = dir.path().join("x.glb");
     let err = one_line_error(
-        &run(&[
-            "export",
+        &export(
             "--recording",
             path_str(&recording_path),
-            "--format",
             "fbx",
-            "--out",
-            path_str(&out_file),
-        ]),
+            &out_file,
+            &[],
+        ),
         "an unknown format",
     );
     assert!(
@@ -375,15 +353,13 @@ fn bad_input_fails_with_one_line() {
 
     let missing = dir.path().join("nowhere/x.glb");
     let err = one_line_error(
-        &run(&[
-            "export",
+        &export(
             "--recording",
             path_str(&recording_path),
-            "--format",
             "glb",
-            "--out",
-            path_str(&missing),
-        ]),
+            &missing,
+            &[],
+        ),
         "a missing directory",
     );
     assert!(err.contains("does not exist"), "{err}");
@@ -397,15 +373,7 @@ fn bad_input_fails_with_one_line() {
         .save(&other)
         .expect("save");
     let err = one_line_error(
-        &run(&[
-            "export",
-            "--recording",
-            path_str(&other),
-            "--format",
-            "bvh",
-            "--out",
-            path_str(&out_file),
-        ]),
+        &export("--recording", path_str(&other), "bvh", &out_file, &[]),
         "another character's recording",
     );
     assert!(
@@ -417,31 +385,19 @@ fn bad_input_fails_with_one_line() {
     let bytes = std::fs::read(&recording_path).expect("recording");
     std::fs::write(&truncated, &bytes[..bytes.len() / 2]).expect("write");
     let err = one_line_error(
-        &run(&[
-            "export",
-            "--recording",
-            path_str(&truncated),
-            "--format",
-            "glb",
-            "--out",
-            path_str(&out_file),
-        ]),
+        &export("--recording", path_str(&truncated), "glb", &out_file, &[]),
         "a truncated recording",
     );
     assert!(err.contains("corrupt or truncated recording"), "{err}");
 
     let err = one_line_error(
-        &run(&[
-            "export",
+        &export(
             "--recording",
             path_str(&recording_path),
-            "--format",
             "bvh",
-            "--episode",
-            "7",
-            "--out",
-            path_str(&out_file),
-        ]),
+            &out_file,
+            &["--episode", "7"],
+        ),
         "a missing episode",
     );
     assert!(err.contains("no episode 7"), "{err}");

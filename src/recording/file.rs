@@ -13,17 +13,17 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
-use safetensors::tensor::{Dtype, SafeTensors, TensorView};
+use safetensors::tensor::{Dtype, TensorView};
 
 use super::{
     RECORDING_FORMAT_VERSION, Recording, RecordingError, RecordingMeta, Track, TrackingErrors,
 };
 use crate::motion::Character;
+use crate::train::tagged_file::{FORMAT_KEY, TaggedFileError, open_tagged};
 use crate::train::write_bytes_atomically;
 
 /// The `format` metadata value that marks a recording.
 pub const RECORDING_FORMAT_NAME: &str = "instantmimic-recording";
-const FORMAT_KEY: &str = "format";
 const META_KEY: &str = "instantmimic-recording";
 
 /// Tensor names.
@@ -101,32 +101,21 @@ impl Recording {
             path: source.to_string(),
             problem,
         };
-        let (_, header) = SafeTensors::read_metadata(bytes).map_err(|e| {
-            corrupt(format!(
-                "the file is shorter or longer than its header says, or not safetensors ({e})"
-            ))
-        })?;
-        let file = SafeTensors::deserialize(bytes).map_err(|e| corrupt(e.to_string()))?;
-        let metadata = header.metadata().clone().unwrap_or_default();
-        if metadata.get(FORMAT_KEY).map(String::as_str) != Some(RECORDING_FORMAT_NAME) {
-            return Err(corrupt(format!(
-                "a safetensors file, but not a recording (no `{FORMAT_KEY}` = \"{RECORDING_FORMAT_NAME}\" metadata)"
-            )));
-        }
-        let meta_text = metadata
-            .get(META_KEY)
-            .ok_or_else(|| corrupt(format!("no `{META_KEY}` metadata")))?;
-        // The version first, so a newer file is reported as such even if its fields changed.
-        let version = serde_json::from_str::<serde_json::Value>(meta_text)
-            .ok()
-            .and_then(|v| v.get("format_version").and_then(serde_json::Value::as_u64))
-            .ok_or_else(|| corrupt("the metadata has no format_version".to_string()))?;
-        if version > u64::from(RECORDING_FORMAT_VERSION) {
-            return Err(RecordingError::NewerFormat {
+        let tagged = open_tagged(
+            bytes,
+            RECORDING_FORMAT_NAME,
+            "a recording",
+            META_KEY,
+            RECORDING_FORMAT_VERSION,
+        )
+        .map_err(|e| match e {
+            TaggedFileError::Corrupt(problem) => corrupt(problem),
+            TaggedFileError::Newer(found) => RecordingError::NewerFormat {
                 path: source.to_string(),
-                found: u32::try_from(version).unwrap_or(u32::MAX),
-            });
-        }
+                found,
+            },
+        })?;
+        let (file, meta_text) = (tagged.tensors, &tagged.meta_text);
         let meta: RecordingMeta = serde_json::from_str(meta_text)
             .map_err(|e| corrupt(format!("bad `{META_KEY}` metadata: {e}")))?;
         // The character before the shapes: a recording of another character has other shapes,
