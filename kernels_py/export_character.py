@@ -2,7 +2,7 @@
 
 The Rust crate does not parse MJCF. It reads `configs/characters/humanoid.json`, which this
 script writes from the model MuJoCo compiles out of `configs/characters/humanoid.xml`:
-bodies (tree, offsets, inertial frames, masses), joints (type, addresses, axes, ranges),
+bodies (tree, offsets, inertial frames, masses), joints (type, addresses, axes, ranges, damping),
 geoms (shapes, for foot clearance), actuators, `qpos0`, the end-effector bodies and the feet.
 
 The output is deterministic (sorted keys, fixed float formatting) so that CI can check that the
@@ -94,6 +94,9 @@ def character_facts(m, xml_path):
                 "dofadr": int(m.jnt_dofadr[j]),
                 "axis": vec(m.jnt_axis[j]),
                 "pos": vec(m.jnt_pos[j]),
+                # The PD's Kd (docs/env.md): one value per joint in the MJCF, the same for all
+                # of a joint's dofs. The ONNX export's deployment contract states it.
+                "damping": float(m.dof_damping[m.jnt_dofadr[j]]),
                 "limited": bool(m.jnt_limited[j]),
                 "range": vec(m.jnt_range[j]),
             }

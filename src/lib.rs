@@ -13,6 +13,9 @@
 //! - [`hpo`]: hyperparameter search by an agent (plan → propose → experiment).
 //! - [`assets`]: PTX and plans embedded in the binary at build time.
 //! - [`plot`]: PNG charts with an embedded font.
+//! - [`recording`]: body poses per control step (reference and simulated) for the page and the exporters.
+//! - [`viewer`]: the replay page, one self-contained HTML file (three.js inlined).
+//! - [`export`]: recordings to glTF, BVH and DeepMimic files; a checkpoint's policy to ONNX.
 //! - [`cli`]: the command line.
 
 pub mod assets;
@@ -20,9 +23,12 @@ pub mod bench;
 pub mod cli;
 pub mod cuda;
 pub mod env;
+pub mod export;
 pub mod hpo;
 pub mod motion;
 pub mod plan;
 pub mod plot;
 pub mod ppo;
+pub mod recording;
 pub mod train;
+pub mod viewer;

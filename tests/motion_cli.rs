@@ -324,3 +324,39 @@ fn list_shows_the_built_in_clips_and_the_directorys() {
     );
     assert!(!listed.contains("README"), "{listed}");
 }
+
+#[test]
+fn view_writes_a_page_and_refuses_a_missing_directory() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let utf8 = |p: &Path| p.to_str().expect("utf-8 path").to_string();
+    let view = |out: &Path, extra: &[String]| {
+        let mut args = vec![
+            "motion".to_string(),
+            "view".into(),
+            "walk".into(),
+            "--out".into(),
+        ];
+        args.push(utf8(out));
+        args.extend_from_slice(extra);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        run(&args, None)
+    };
+    let page = dir.path().join("walk.html");
+    let recording = dir.path().join("walk.safetensors");
+    let extra = [
+        "--fps".to_string(),
+        "60".into(),
+        "--save-recording".into(),
+        utf8(&recording),
+    ];
+    let text = succeeded(&view(&page, &extra), "motion view");
+    assert!(text.contains("77 frames at 60 Hz"), "{text}");
+    let html = std::fs::read_to_string(&page).expect("page written");
+    assert!(html.starts_with("<!doctype html>") && html.contains("walk: reference clip"));
+    assert!(recording.is_file());
+
+    let missing = dir.path().join("no/such/dir/walk.html");
+    let err = failed(&view(&missing, &[]), "motion view into a missing directory");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("does not exist"), "{err}");
+}

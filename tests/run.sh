@@ -12,6 +12,9 @@
 # DeepMimic clips shipped in assets/motions/ (built into the binary) and need no other data;
 # DeepMimic's long clips, kept out of the repository, are checked too when
 # $INSTANTMIMIC_MOTIONS names a directory with long/ (default ../shared/data/motions if present).
+# The exports' and the replay page's checks need outside tools, installed here when missing:
+# Debian's chromium (the page in a headless browser), and npm's gltf-validator (tests/tools);
+# onnxruntime (the ONNX export's check) comes with kernels_py/requirements.txt.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=${INSTANTMIMIC_VENV:-.venv}
@@ -31,6 +34,30 @@ if [ -z "${INSTANTMIMIC_MOTIONS:-}" ] && [ -d ../shared/data/motions ]; then
   INSTANTMIMIC_MOTIONS=$(cd ../shared/data/motions && pwd)
   export INSTANTMIMIC_MOTIONS
 fi
+# The replay page's test opens it in headless Chromium (tests/viewer_page.rs): Debian's package,
+# installed here when missing (INSTANTMIMIC_CHROMIUM names another binary).
+if [ -z "${INSTANTMIMIC_CHROMIUM:-}" ] && ! command -v chromium >/dev/null 2>&1; then
+  echo "installing chromium (Debian) for the replay page's browser test"
+  sudo=; [ "$(id -u)" -eq 0 ] || sudo=sudo
+  $sudo apt-get update -qq && DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq chromium >/dev/null \
+    || { echo "error: cannot install chromium; install it, or set INSTANTMIMIC_CHROMIUM to a Chromium binary" >&2; exit 1; }
+fi
+INSTANTMIMIC_CHROMIUM=${INSTANTMIMIC_CHROMIUM:-$(command -v chromium)}
+export INSTANTMIMIC_CHROMIUM
+# The .glb export is checked by the Khronos glTF validator (npm, pinned in tests/tools).
+if ! command -v npm >/dev/null 2>&1; then
+  echo "installing nodejs and npm (Debian) for the glTF validator"
+  sudo=; [ "$(id -u)" -eq 0 ] || sudo=sudo
+  $sudo apt-get update -qq && DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq nodejs npm >/dev/null \
+    || { echo "error: cannot install nodejs and npm (the glTF validator runs on node)" >&2; exit 1; }
+fi
+if [ ! -d tests/tools/node_modules/gltf-validator ] \
+  || ! cmp -s tests/tools/package-lock.json tests/tools/node_modules/.installed-lock.json; then
+  npm ci --prefix tests/tools --no-audit --no-fund --silent
+  cp tests/tools/package-lock.json tests/tools/node_modules/.installed-lock.json
+fi
+INSTANTMIMIC_GLTF_VALIDATOR=$PWD/tests/tools/validate_gltf.mjs
+export INSTANTMIMIC_GLTF_VALIDATOR
 if [ "$#" -eq 0 ]; then
   cargo fmt --check
   cargo clippy --all-targets --all-features -- -D warnings

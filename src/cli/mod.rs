@@ -2,10 +2,12 @@
 
 mod bench;
 mod eval;
+mod export;
 mod gpu;
 mod hpo;
 mod motion;
 mod motion_list;
+mod output;
 mod plan;
 mod train;
 
@@ -39,6 +41,8 @@ enum Command {
     Train(train::TrainArgs),
     /// Evaluate a checkpoint by the paper's protocol.
     Eval(eval::EvalArgs),
+    /// Export a recording or a clip (glb, bvh, deepmimic) or a checkpoint's policy (onnx).
+    Export(export::ExportArgs),
 }
 
 /// Parses the command line and runs the command.
@@ -52,5 +56,6 @@ pub fn run() -> Result<()> {
         Command::Hpo(args) => hpo::run_hpo(args),
         Command::Train(args) => train::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Export(args) => export::run(args),
     }
 }

@@ -6,9 +6,11 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::{Args, Subcommand};
 
-use crate::motion::library::{MOTIONS_ENV, motions_dir_from_env, resolve_motion};
+use crate::motion::library::{MOTIONS_ENV, ResolvedMotion, motions_dir_from_env, resolve_motion};
 use crate::motion::summary::JointRange;
 use crate::motion::{Character, ClipSummary, ReferenceMotion};
+use crate::recording::{ClipRecordingSpec, Recording};
+use crate::viewer::save_page;
 
 #[derive(Args, Debug)]
 pub struct MotionArgs {
@@ -39,6 +41,25 @@ enum MotionCommand {
         #[arg(long)]
         frame: usize,
     },
+    /// Write a self-contained HTML page that plays the clip in a browser (three.js inlined, no
+    /// network needed); see docs/replay.md.
+    View {
+        #[command(flatten)]
+        source: ClipArgs,
+        /// The HTML file to write (its directory must exist).
+        #[arg(long)]
+        out: PathBuf,
+        /// Frames per second of the page (the control rate of the committed configs: 30).
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
+        /// Seconds of the clip to show from its start (default: its duration; a looping clip
+        /// goes on into its next cycles).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Also write the recording the page shows (safetensors; `export --recording` reads it).
+        #[arg(long)]
+        save_recording: Option<PathBuf>,
+    },
 }
 
 /// Which clip, for which character.
@@ -58,6 +79,11 @@ struct ClipArgs {
 
 impl ClipArgs {
     fn load(&self) -> Result<ReferenceMotion> {
+        self.load_resolved().map(|(_, motion)| motion)
+    }
+
+    /// The clip with where it came from.
+    fn load_resolved(&self) -> Result<(ResolvedMotion, ReferenceMotion)> {
         let character = match &self.character {
             Some(path) => Character::load(path)?,
             None => Character::humanoid()?,
@@ -69,7 +95,7 @@ impl ClipArgs {
         for line in resolved.notices(motion.clip()) {
             eprintln!("{line}");
         }
-        Ok(motion)
+        Ok((resolved, motion))
     }
 }
 
@@ -98,6 +124,45 @@ pub fn run(args: MotionArgs) -> Result<()> {
                 );
             };
             print!("{}", fk_report(&motion, frame, state));
+        }
+        MotionCommand::View {
+            source,
+            out,
+            fps,
+            duration,
+            save_recording,
+        } => {
+            super::output::check_output_path(&out)?;
+            if let Some(path) = &save_recording {
+                super::output::check_output_path(path)?;
+            }
+            if !(fps.is_finite() && fps > 0.0) {
+                bail!("--fps {fps}: give a positive frame rate");
+            }
+            let (resolved, motion) = source.load_resolved()?;
+            let label = resolved.source.label();
+            let recording = Recording::from_motion(
+                &motion,
+                &ClipRecordingSpec {
+                    motion: &source.motion,
+                    motion_source: &label,
+                    producer: "motion view",
+                    frame_dt: 1.0 / fps,
+                    duration_s: duration,
+                },
+            )?;
+            let title = format!("{}: reference clip", source.motion);
+            let bytes = save_page(&out, &recording, motion.character(), &title)?;
+            println!(
+                "wrote {} ({:.2} MB, {} frames at {fps} Hz)",
+                out.display(),
+                bytes as f64 / 1e6,
+                recording.meta.total_frames()
+            );
+            if let Some(path) = save_recording {
+                recording.save(&path)?;
+                println!("wrote {}", path.display());
+            }
         }
     }
     Ok(())

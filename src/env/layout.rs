@@ -192,6 +192,107 @@ pub fn observation_size(obs: &ObsConfig, motors: usize, effectors: usize) -> usi
     size
 }
 
+/// One block of the observation row (docs/env.md, "Observation"): what a deployment must
+/// compute, where it goes and in which frame.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ObservationBlock {
+    pub name: String,
+    pub offset: usize,
+    pub size: usize,
+    pub frame: String,
+    pub description: String,
+}
+
+/// The blocks of the raw observation for `obs` with `motors` actions and `effectors` end
+/// effectors, in the order `observe` (kernels_py/env/observe.py) writes them. Their sizes add up
+/// to [`observation_size`].
+pub fn observation_blocks(
+    obs: &ObsConfig,
+    motors: usize,
+    effectors: usize,
+) -> Vec<ObservationBlock> {
+    let b = OBSERVED_BODIES;
+    const SIX_D: &str = "6D: the first two columns of the rotation matrix, column by column";
+    let mut blocks: Vec<(&str, usize, &str, String)> = vec![
+        ("root_height", 1, "world", "qpos[2], the root's height (m)".to_string()),
+        ("root_orientation", 6, "heading", format!("the root's orientation, {SIX_D}")),
+        (
+            "root_velocity",
+            6,
+            "heading",
+            "the root's linear velocity (qvel[0:3]), then its angular velocity (qvel[3:6] in world axes)".to_string(),
+        ),
+        (
+            "body_positions",
+            3 * (b - 1),
+            "heading, relative to the root",
+            format!("bodies 1..{} (the pelvis left out), x y z each", b - 1),
+        ),
+        ("body_orientations", 6 * b, "heading", format!("the {b} bodies, {SIX_D}")),
+        (
+            "body_linear_velocities",
+            3 * b,
+            "heading",
+            format!("the {b} bodies' origins, world velocity rotated into the heading frame"),
+        ),
+        ("body_angular_velocities", 3 * b, "heading", format!("the {b} bodies")),
+        (
+            "future_end_effectors",
+            9 * effectors * obs.future_frames as usize,
+            "heading, relative to the simulated root",
+            format!(
+                "for k = 1..{} (reference time + k * {} control steps), each of the {effectors} end effectors: \
+                 the reference position relative to the simulated root (3), then its orientation ({SIX_D})",
+                obs.future_frames, obs.future_spacing
+            ),
+        ),
+    ];
+    if obs.prev_action {
+        blocks.push((
+            "prev_action",
+            motors,
+            "action",
+            "the previous control step's action".to_string(),
+        ));
+    }
+    if obs.root_target {
+        blocks.push((
+            "root_target",
+            9,
+            "heading, relative to the simulated root",
+            format!(
+                "the reference root one control step ahead: position (3), orientation ({SIX_D})"
+            ),
+        ));
+    }
+    if obs.reference_bodies {
+        blocks.push((
+            "reference_bodies",
+            9 * b,
+            "heading (positions), body (rotations)",
+            format!(
+                "each body's reference one control step ahead: position minus the simulated body's (3), \
+                 then the rotation conj(q) q_ref ({SIX_D})"
+            ),
+        ));
+    }
+    let mut offset = 0;
+    blocks
+        .into_iter()
+        .map(|(name, size, frame, description)| {
+            let block = ObservationBlock {
+                name: name.to_string(),
+                offset,
+                size,
+                frame: frame.to_string(),
+                description,
+            };
+            offset += size;
+            block
+        })
+        .collect()
+}
+
 /// The reward and termination parameters of `config` at control timestep `dt`.
 pub fn tracking_params(config: &TrainConfig, dt: f64) -> TrackingParams {
     let (r, e) = (&config.reward, &config.env);
@@ -262,6 +363,31 @@ pub fn observation_params(obs: &ObsConfig, dt: f64) -> ObservationParams {
 #[cfg(test)]
 mod seed_tests {
     use super::*;
+
+    #[test]
+    fn observation_blocks_tile_the_observation() {
+        for (prev_action, root_target, reference_bodies) in [
+            (true, false, false),
+            (false, true, true),
+            (true, true, true),
+        ] {
+            let obs = ObsConfig {
+                prev_action,
+                root_target,
+                reference_bodies,
+                future_frames: 3,
+                ..ObsConfig::default()
+            };
+            let blocks = observation_blocks(&obs, 28, 5);
+            let end = blocks.last().map_or(0, |b| b.offset + b.size);
+            assert_eq!(end, observation_size(&obs, 28, 5));
+            assert!(
+                blocks
+                    .windows(2)
+                    .all(|w| w[0].offset + w[0].size == w[1].offset)
+            );
+        }
+    }
 
     #[test]
     fn the_reset_and_the_policy_draw_from_different_streams() {

@@ -80,6 +80,8 @@ pub struct Joint {
     pub pos: Vector3<f64>,
     /// Limits (radians for hinges), if the joint is limited.
     pub range: Option<[f64; 2]>,
+    /// Damping of each of the joint's dofs (MuJoCo's `dof_damping`): the PD's Kd.
+    pub damping: f64,
 }
 
 /// The shape of a geom, with MuJoCo's size conventions (half sizes).
@@ -216,6 +218,7 @@ struct JointFile {
     dofadr: usize,
     axis: [f64; 3],
     pos: [f64; 3],
+    damping: f64,
     limited: bool,
     range: [f64; 2],
 }
@@ -455,6 +458,9 @@ fn build(file: CharacterFile, source_name: &str) -> Result<Character, String> {
         body.joint = Some(id);
         finite(&format!("joint {name} axis"), &j.axis)?;
         finite(&format!("joint {name} pos"), &j.pos)?;
+        if !(j.damping.is_finite() && j.damping >= 0.0) {
+            return Err(format!("joint {name} has damping {}", j.damping));
+        }
         let axis = vec3(j.axis);
         if j.kind == JointType::Hinge && (axis.norm() - 1.0).abs() > 1e-9 {
             return Err(format!(
@@ -470,6 +476,7 @@ fn build(file: CharacterFile, source_name: &str) -> Result<Character, String> {
             axis,
             pos: vec3(j.pos),
             range: j.limited.then_some(j.range),
+            damping: j.damping,
         });
     }
     if next_qpos != file.nq || next_dof != file.nv {

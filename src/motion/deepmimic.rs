@@ -295,3 +295,57 @@ impl QposMapping {
         }
     }
 }
+
+impl QposMapping {
+    /// The DeepMimic frame of `qpos` lasting `duration` seconds: [`Self::convert`] inverted.
+    pub(crate) fn to_frame(&self, qpos: &[f64], duration: f64) -> DeepMimicFrame {
+        let mut frame = [0.0; FRAME_LEN];
+        frame[0] = duration;
+        let at = |adr: usize| qpos.get(adr).copied().unwrap_or(0.0);
+        let r = self.root_position;
+        let p = ROOT_POSITION_COLUMN;
+        // MuJoCo (x, y, z) = DeepMimic (x, -z, y).
+        frame[p..p + 3].copy_from_slice(&[at(r), at(r + 2), -at(r + 1)]);
+        for &(column, adr, _) in &self.rotations {
+            let (w, x, y, z) = (at(adr), at(adr + 1), at(adr + 2), at(adr + 3));
+            frame[column..column + 4].copy_from_slice(&[w, x, z, -y]);
+        }
+        for &(column, adr, sign) in &self.angles {
+            frame[column] = sign * at(adr);
+        }
+        frame
+    }
+}
+
+/// DeepMimic frames of `character` poses `qpos_rows`, `frame_dt` seconds apart (the last frame's
+/// duration 0, as in DeepMimic's files).
+pub fn frames_from_qpos<'a>(
+    character: &Character,
+    qpos_rows: impl ExactSizeIterator<Item = &'a [f64]>,
+    frame_dt: f64,
+    name: &str,
+) -> Result<Vec<DeepMimicFrame>, MotionError> {
+    let mapping = QposMapping::new(character, name)?;
+    let n = qpos_rows.len();
+    Ok(qpos_rows
+        .enumerate()
+        .map(|(i, qpos)| mapping.to_frame(qpos, if i + 1 == n { 0.0 } else { frame_dt }))
+        .collect())
+}
+
+/// The text of a DeepMimic motion file: `{"Loop": ..., "Frames": [[...], ...]}`, one frame per
+/// line, numbers in Rust's shortest round-trip form (read back exactly).
+pub fn to_text(loop_mode: LoopMode, frames: &[DeepMimicFrame]) -> String {
+    let rows: Vec<String> = frames
+        .iter()
+        .map(|row| {
+            let values: Vec<String> = row.iter().map(|v| format!("{:?}", v + 0.0)).collect();
+            format!("    [{}]", values.join(", "))
+        })
+        .collect();
+    format!(
+        "{{\n  \"Loop\": \"{}\",\n  \"Frames\": [\n{}\n  ]\n}}\n",
+        loop_mode.deepmimic_name(),
+        rows.join(",\n")
+    )
+}

@@ -8,17 +8,17 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
-use safetensors::tensor::{Dtype, SafeTensorError, SafeTensors, TensorView};
+use safetensors::tensor::{Dtype, TensorView};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use super::atomic_file::{is_temporary, write_bytes_atomically};
 use super::config::TrainConfig;
+use super::tagged_file::{FORMAT_KEY, TaggedFileError, open_tagged};
 
 /// The version of the layout below; a reader refuses newer files.
 pub const CHECKPOINT_FORMAT_VERSION: u32 = 1;
 /// `__metadata__` keys: a marker, our metadata (JSON) and the checksums (JSON).
-const FORMAT_KEY: &str = "format";
 const FORMAT_NAME: &str = "instantmimic-checkpoint";
 const META_KEY: &str = "instantmimic";
 const CHECKSUMS_KEY: &str = "crc32";
@@ -372,28 +372,21 @@ impl Checkpoint {
             path: source.to_string(),
             problem,
         };
-        let (_, header) = SafeTensors::read_metadata(bytes).map_err(|e| corrupt(describe(&e)))?;
-        let file = SafeTensors::deserialize(bytes).map_err(|e| corrupt(describe(&e)))?;
-        let metadata = header.metadata().clone().unwrap_or_default();
-        if metadata.get(FORMAT_KEY).map(String::as_str) != Some(FORMAT_NAME) {
-            return Err(corrupt(format!(
-                "a safetensors file, but not an instantmimic checkpoint (no `{FORMAT_KEY}` = \"{FORMAT_NAME}\" metadata)"
-            )));
-        }
-        let meta_text = metadata
-            .get(META_KEY)
-            .ok_or_else(|| corrupt(format!("no `{META_KEY}` metadata")))?;
-        // The version first, so a newer file is reported as such even if its fields changed.
-        let version = serde_json::from_str::<serde_json::Value>(meta_text)
-            .ok()
-            .and_then(|v| v.get("format_version").and_then(serde_json::Value::as_u64))
-            .ok_or_else(|| corrupt("the metadata has no format_version".to_string()))?;
-        if version > u64::from(CHECKPOINT_FORMAT_VERSION) {
-            return Err(CheckpointError::NewerFormat {
+        let tagged = open_tagged(
+            bytes,
+            FORMAT_NAME,
+            "an instantmimic checkpoint",
+            META_KEY,
+            CHECKPOINT_FORMAT_VERSION,
+        )
+        .map_err(|e| match e {
+            TaggedFileError::Corrupt(problem) => corrupt(problem),
+            TaggedFileError::Newer(found) => CheckpointError::NewerFormat {
                 path: source.to_string(),
-                found: u32::try_from(version).unwrap_or(u32::MAX),
-            });
-        }
+                found,
+            },
+        })?;
+        let (file, metadata, meta_text) = (tagged.tensors, tagged.metadata, &tagged.meta_text);
         let meta: CheckpointMeta = serde_json::from_str(meta_text)
             .map_err(|e| corrupt(format!("bad `{META_KEY}` metadata: {e}")))?;
         let checksums: BTreeMap<String, u32> = metadata
@@ -457,18 +450,6 @@ impl Checkpoint {
             error,
         })?;
         Checkpoint::from_bytes(&bytes, &name)
-    }
-}
-
-/// safetensors' error in words a user can act on.
-fn describe(e: &SafeTensorError) -> String {
-    match e {
-        SafeTensorError::HeaderTooSmall
-        | SafeTensorError::InvalidHeaderLength
-        | SafeTensorError::MetadataIncompleteBuffer => {
-            format!("the file is shorter or longer than its header says ({e})")
-        }
-        other => other.to_string(),
     }
 }
 

@@ -18,6 +18,7 @@ mod progress;
 pub mod run_dir;
 mod session;
 mod summary;
+pub mod tagged_file;
 mod trainer;
 
 pub use atomic_file::{is_temporary, write_atomically, write_bytes_atomically};

@@ -1,0 +1,178 @@
+//! `instantmimic export`: a recording (or a clip, through CPU kinematics) to glTF, BVH or a
+//! DeepMimic motion file, and a checkpoint's policy to ONNX (docs/replay.md). No GPU.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, anyhow, bail};
+use clap::Args;
+
+use crate::export::Format;
+use crate::export::bvh::bvh_text;
+use crate::export::deepmimic::deepmimic_text;
+use crate::export::glb::glb_bytes;
+use crate::export::onnx::export_policy;
+use crate::motion::Character;
+use crate::motion::library::{motions_dir_from_env, resolve_motion};
+use crate::plan::PlanStore;
+use crate::recording::{ClipRecordingSpec, Recording};
+use crate::train::write_bytes_atomically;
+use crate::train::{Checkpoint, check_plans};
+
+use super::output::check_output_path;
+
+#[derive(Args, Debug)]
+pub struct ExportArgs {
+    /// What to write: glb (both skeletons, animated), bvh (the simulated motion), deepmimic (a
+    /// motion file this tool trains on) from a recording or a clip; onnx (the policy) from a
+    /// checkpoint.
+    #[arg(long)]
+    format: String,
+    /// The file to write (its directory must exist).
+    #[arg(long)]
+    out: PathBuf,
+    /// A recording (`motion view --save-recording`, `replay --save-recording`).
+    #[arg(long)]
+    recording: Option<PathBuf>,
+    /// A clip (a name or a DeepMimic file): its reference, sampled at --fps on the CPU.
+    #[arg(long)]
+    motion: Option<String>,
+    /// A checkpoint, for --format onnx.
+    #[arg(long)]
+    checkpoint: Option<PathBuf>,
+    /// The episode of the recording to write (bvh, deepmimic; glb holds every episode).
+    #[arg(long, default_value_t = 0)]
+    episode: usize,
+    /// Frames per second when sampling --motion.
+    #[arg(long, default_value_t = 30.0)]
+    fps: f64,
+    /// Directory of your own DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
+    #[arg(long)]
+    motions_dir: Option<PathBuf>,
+    /// With --format onnx: a directory laid out like ptx/ instead of the plans built into the
+    /// binary (the contract's physics timestep is the plans').
+    #[arg(long)]
+    assets: Option<PathBuf>,
+}
+
+/// The recording named by `--recording` or built from `--motion`.
+fn source_recording(args: &ExportArgs, character: &Character) -> Result<Recording> {
+    match (&args.recording, &args.motion) {
+        (Some(path), None) => Ok(Recording::load(path, character)?),
+        (None, Some(motion)) => {
+            if !(args.fps.is_finite() && args.fps > 0.0) {
+                bail!("--fps {}: give a positive frame rate", args.fps);
+            }
+            let dir = args.motions_dir.clone().or_else(motions_dir_from_env);
+            let resolved = resolve_motion(motion, dir.as_deref())?;
+            let reference = resolved.load(character)?;
+            for line in resolved.notices(reference.clip()) {
+                eprintln!("{line}");
+            }
+            let label = resolved.source.label();
+            Ok(Recording::from_motion(
+                &reference,
+                &ClipRecordingSpec {
+                    motion,
+                    motion_source: &label,
+                    producer: "export",
+                    frame_dt: 1.0 / args.fps,
+                    duration_s: None,
+                },
+            )?)
+        }
+        (Some(_), Some(_)) => bail!("give --recording or --motion, not both"),
+        (None, None) => bail!(
+            "--format {}: give --recording <file> or --motion <clip>",
+            args.format
+        ),
+    }
+}
+
+/// The policy of the checkpoint at `path` as ONNX bytes, with its contract written beside
+/// `args.out` as JSON (`policy.onnx` -> `policy.json`).
+fn onnx_export(path: &Path, args: &ExportArgs, character: &Character) -> Result<(Vec<u8>, String)> {
+    let sidecar = args.out.with_extension("json");
+    if sidecar == args.out {
+        bail!(
+            "{}: name the ONNX file with another extension (its contract goes to a .json beside it)",
+            args.out.display()
+        );
+    }
+    let checkpoint = Checkpoint::load(path)?;
+    let config = checkpoint.meta.config(checkpoint.source())?;
+    // The physics timestep is the plans' (the contract states it); the evaluation's plans are
+    // the smallest.
+    let store = PlanStore::new(args.assets.as_deref());
+    let physics_dt = check_plans(&store, config.run.eval_envs)?
+        .first()
+        .map(|p| p.physics_dt)
+        .ok_or_else(|| anyhow!("no plans for {} worlds", config.run.eval_envs))?;
+    let export = export_policy(&checkpoint, character, physics_dt)?;
+    write_bytes_atomically(&sidecar, export.contract_json()?.as_bytes())
+        .with_context(|| format!("writing {}", sidecar.display()))?;
+    let c = &export.contract;
+    Ok((
+        export.to_bytes(),
+        format!(
+            "{} policy, observation {} -> action {}, opset {}; contract in {}",
+            c.motion,
+            c.observation.size,
+            c.action.size,
+            crate::export::onnx::OPSET,
+            sidecar.display()
+        ),
+    ))
+}
+
+/// Runs `export`.
+pub fn run(args: ExportArgs) -> Result<()> {
+    let format: Format = args.format.parse().map_err(|e: String| anyhow!(e))?;
+    check_output_path(&args.out)?;
+    let character = Character::humanoid()?;
+    let (bytes, what) = if format == Format::Onnx {
+        if args.recording.is_some() || args.motion.is_some() {
+            bail!(
+                "--format onnx exports a checkpoint's policy: give --checkpoint, not a recording or a motion"
+            );
+        }
+        let path = args
+            .checkpoint
+            .as_ref()
+            .ok_or_else(|| anyhow!("--format onnx: give --checkpoint <file>"))?;
+        onnx_export(path, &args, &character)?
+    } else {
+        if args.checkpoint.is_some() {
+            bail!(
+                "--checkpoint goes with --format onnx; --format {format} exports a recording or a motion"
+            );
+        }
+        let recording = source_recording(&args, &character)?;
+        let frames = recording.episode_rows(args.episode)?.len();
+        match format {
+            Format::Glb => (
+                glb_bytes(&recording, &character)?,
+                format!(
+                    "{} episode(s), {} skeleton(s)",
+                    recording.episodes().len(),
+                    1 + usize::from(recording.simulated().is_some())
+                ),
+            ),
+            Format::Bvh => (
+                bvh_text(&recording, &character, args.episode)?.into_bytes(),
+                format!("episode {}, {frames} frames", args.episode),
+            ),
+            Format::DeepMimic | Format::Onnx => (
+                deepmimic_text(&recording, &character, args.episode)?.into_bytes(),
+                format!("episode {}, {frames} frames", args.episode),
+            ),
+        }
+    };
+    write_bytes_atomically(&args.out, &bytes)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    println!(
+        "wrote {} ({format}, {:.1} KB): {what}",
+        args.out.display(),
+        bytes.len() as f64 / 1e3
+    );
+    Ok(())
+}
