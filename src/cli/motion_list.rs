@@ -85,7 +85,7 @@ pub fn list_report(dir: Option<(&Path, &str)>) -> Result<String> {
         .collect();
     let _ = writeln!(
         out,
-        "built-in clips ({}, from DeepMimic, MIT licence: assets/motions/LICENSE)",
+        "built-in clips ({}, from DeepMimic, MIT licence: NOTICE)",
         built_in.len()
     );
     write_rows(&mut out, &built_in);
