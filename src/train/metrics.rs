@@ -15,6 +15,7 @@ use serde::{Deserialize, Deserializer, Serialize};
 use super::atomic_file::write_bytes_atomically;
 use super::error::TrainError;
 use super::evaluation::EvaluationSummary;
+use crate::env::FailureCause;
 
 /// What the PPO update of one iteration reports (means over its minibatches).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -59,8 +60,12 @@ pub struct EpisodeEnds {
 
 impl EpisodeEnds {
     /// From the rollout's counts: `episodes` ended, `failed` of them, and the failures by
-    /// cause in `FailureCause::ALL`'s order (fell, lost, low root, low reward, drift).
-    pub fn from_counts(episodes: f64, failed: f64, by_cause: [f64; 5]) -> EpisodeEnds {
+    /// cause in `FailureCause::ALL`'s order.
+    pub fn from_counts(
+        episodes: f64,
+        failed: f64,
+        by_cause: [f64; FailureCause::ALL.len()],
+    ) -> EpisodeEnds {
         let of = |count: f64| {
             if episodes > 0.0 {
                 count / episodes
@@ -68,16 +73,24 @@ impl EpisodeEnds {
                 f64::NAN
             }
         };
-        EpisodeEnds {
+        let mut ends = EpisodeEnds {
             episodes,
             truncated: of(episodes - failed),
             failed: of(failed),
-            fell: of(by_cause[0]),
-            lost: of(by_cause[1]),
-            low_root: of(by_cause[2]),
-            low_reward: of(by_cause[3]),
-            drift: of(by_cause[4]),
+            ..EpisodeEnds::default()
+        };
+        for (cause, count) in FailureCause::ALL.into_iter().zip(by_cause) {
+            // Exhaustive: a new cause needs its field here.
+            let field = match cause {
+                FailureCause::Fell => &mut ends.fell,
+                FailureCause::Lost => &mut ends.lost,
+                FailureCause::LowRoot => &mut ends.low_root,
+                FailureCause::LowReward => &mut ends.low_reward,
+                FailureCause::Drift => &mut ends.drift,
+            };
+            *field = of(count);
         }
+        ends
     }
 }
 
