@@ -13,6 +13,7 @@
 //! - [`hpo`]: hyperparameter search by an agent (plan → propose → experiment).
 //! - [`assets`]: PTX and plans embedded in the binary at build time.
 //! - [`plot`]: PNG charts with an embedded font.
+//! - [`files`]: atomic file replacement and tagged safetensors headers, below every other layer.
 //! - [`recording`]: body poses per control step (reference and simulated) for the page and the exporters.
 //! - [`viewer`]: the replay page, one self-contained HTML file (three.js inlined).
 //! - [`export`]: recordings to glTF, BVH and DeepMimic files; a checkpoint's policy to ONNX.
@@ -24,6 +25,7 @@ pub mod cli;
 pub mod cuda;
 pub mod env;
 pub mod export;
+pub mod files;
 pub mod hpo;
 pub mod motion;
 pub mod plan;

@@ -11,11 +11,11 @@ use crate::export::bvh::bvh_text;
 use crate::export::deepmimic::deepmimic_text;
 use crate::export::glb::glb_bytes;
 use crate::export::onnx::export_policy;
+use crate::files::write_bytes_atomically;
 use crate::motion::Character;
 use crate::motion::library::{motions_dir_from_env, resolve_motion};
 use crate::plan::PlanStore;
 use crate::recording::{ClipRecordingSpec, Recording};
-use crate::train::write_bytes_atomically;
 use crate::train::{Checkpoint, check_plans};
 
 use super::output::check_output_path;

@@ -18,9 +18,9 @@ use safetensors::tensor::{Dtype, TensorView};
 use super::{
     RECORDING_FORMAT_VERSION, Recording, RecordingError, RecordingMeta, Track, TrackingErrors,
 };
+use crate::files::tagged::{FORMAT_KEY, TaggedFileError, open_tagged};
+use crate::files::write_bytes_atomically;
 use crate::motion::Character;
-use crate::train::tagged_file::{FORMAT_KEY, TaggedFileError, open_tagged};
-use crate::train::write_bytes_atomically;
 
 /// The `format` metadata value that marks a recording.
 pub const RECORDING_FORMAT_NAME: &str = "instantmimic-recording";

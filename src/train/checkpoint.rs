@@ -12,9 +12,9 @@ use safetensors::tensor::{Dtype, TensorView};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use super::atomic_file::{is_temporary, write_bytes_atomically};
 use super::config::TrainConfig;
-use super::tagged_file::{FORMAT_KEY, TaggedFileError, open_tagged};
+use crate::files::tagged::{FORMAT_KEY, TaggedFileError, open_tagged};
+use crate::files::{is_temporary, write_bytes_atomically};
 
 /// The version of the layout below; a reader refuses newer files.
 pub const CHECKPOINT_FORMAT_VERSION: u32 = 1;

@@ -7,9 +7,9 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::atomic_file::write_bytes_atomically;
 use super::error::TrainError;
 use super::metrics::IterationRecord;
+use crate::files::write_bytes_atomically;
 
 pub const CURVE_WIDTH: u32 = 1000;
 pub const CURVE_HEIGHT: u32 = 600;

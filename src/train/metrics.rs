@@ -12,10 +12,10 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Deserializer, Serialize};
 
-use super::atomic_file::write_bytes_atomically;
 use super::error::TrainError;
 use super::evaluation::EvaluationSummary;
 use crate::env::FailureCause;
+use crate::files::write_bytes_atomically;
 
 /// What the PPO update of one iteration reports (means over its minibatches).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]

@@ -4,7 +4,6 @@
 //! `train --dry-run` (docs/train.md); and the GPU side, [`Trainer`] (rollout, PPO update and
 //! evaluation as CUDA graphs), which `train_on_gpu` drives through a [`RunSession`].
 
-mod atomic_file;
 pub mod checkpoint;
 mod clock;
 mod config;
@@ -18,10 +17,9 @@ mod progress;
 pub mod run_dir;
 mod session;
 mod summary;
-pub mod tagged_file;
 mod trainer;
 
-pub use atomic_file::{is_temporary, write_atomically, write_bytes_atomically};
+pub use crate::files::{is_temporary, write_atomically, write_bytes_atomically};
 pub use checkpoint::{
     CHECKPOINT_FORMAT_VERSION, Checkpoint, CheckpointDir, CheckpointError, CheckpointMeta,
     CheckpointScan, Tensor, TensorData,

@@ -15,7 +15,6 @@
 
 use std::path::{Path, PathBuf};
 
-use super::atomic_file::write_bytes_atomically;
 use super::checkpoint::{Checkpoint, CheckpointDir};
 use super::config::TrainConfig;
 use super::curve::write_learning_curve;
@@ -23,6 +22,7 @@ use super::error::TrainError;
 use super::evaluation::EnvEpisodeRow;
 use super::metrics::{IterationRecord, MetricsLog};
 use super::summary::RunSummary;
+use crate::files::write_bytes_atomically;
 
 /// Writes `value` as pretty JSON, atomically.
 fn write_json<T: serde::Serialize + ?Sized>(path: &Path, value: &T) -> Result<(), TrainError> {

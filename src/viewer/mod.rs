@@ -14,9 +14,9 @@ use std::path::Path;
 
 use thiserror::Error;
 
+use crate::files::write_bytes_atomically;
 use crate::motion::Character;
 use crate::recording::Recording;
-use crate::train::write_bytes_atomically;
 
 pub use data::{PageData, page_data};
 

@@ -1,6 +1,6 @@
-//! Safetensors files that carry a format marker and versioned JSON metadata (checkpoints here,
-//! recordings in `crate::recording`): the header checks they share, so that both report a
-//! truncated file, a foreign file and a newer version in the same words.
+//! Safetensors files that carry a format marker and versioned JSON metadata (checkpoints in
+//! `crate::train`, recordings in `crate::recording`): the header checks they share, so that both
+//! report a truncated file, a foreign file and a newer version in the same words.
 
 use std::collections::HashMap;
 
