@@ -39,7 +39,7 @@ SUM_REWARD = wp.constant(4)
 
 @wp.struct
 class Yardstick:
-    """Per-step failures of an evaluation episode (src/train/evaluation.rs: SUCCESS_*)."""
+    """Per-step failures of an evaluation episode (src/env/evaluation.rs: SUCCESS_*)."""
 
     # A body farther than this from its reference (m).
     max_body_distance: wp.float32

@@ -7,7 +7,23 @@
 
 use crate::cuda::Gpu;
 
-use super::{DeviceArray, DeviceArray2, EnvError};
+use super::{DeviceArray, DeviceArray2, EnvError, Yardstick};
+
+/// A body farther than this from its reference (m) fails an evaluation episode: the committed
+/// `tracking_distance` before the success yardstick was separated from the training termination
+/// (docs/train.md, "Success"; the episode-level bound is src/train/evaluation.rs's).
+pub const SUCCESS_MAX_BODY_DISTANCE_M: f32 = 1.0;
+/// The root more than this below the reference root (m) fails an evaluation episode: the tuned
+/// backflip's termination height (the stricter of the committed 0.6 and the baseline's 0.8).
+pub const SUCCESS_MAX_ROOT_DROP_M: f32 = 0.6;
+
+/// The per-step part of the yardstick, as `evaluation_accumulate` reads it.
+pub fn yardstick() -> Yardstick {
+    Yardstick {
+        max_body_distance: SUCCESS_MAX_BODY_DISTANCE_M,
+        max_root_drop: SUCCESS_MAX_ROOT_DROP_M,
+    }
+}
 
 /// Status of an env's scored episode (evaluate.py `RUNNING/COMPLETED/FAILED`).
 pub const RUNNING: i32 = 0;

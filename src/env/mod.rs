@@ -27,7 +27,10 @@ mod statistics;
 pub use abi::{ArgBuffer, Element, KernelAbi, ParamAbi, ParamKind, ScalarType, WarpStruct};
 pub use array::{DeviceArray, DeviceArray2, DeviceArray3, DeviceArray4};
 pub use error::EnvError;
-pub use evaluation::{COMPLETED, EpisodeScore, EpisodeScores, FAILED, RUNNING};
+pub use evaluation::{
+    COMPLETED, EpisodeScore, EpisodeScores, FAILED, RUNNING, SUCCESS_MAX_BODY_DISTANCE_M,
+    SUCCESS_MAX_ROOT_DROP_M, yardstick,
+};
 pub use phases::{Phase, PhaseEvents, PhaseRecorder};
 pub use reference::DeviceReferenceTable;
 pub use rollout::{EpisodeState, PhysicsState, Rollout, RolloutError, RolloutStorage};

@@ -16,9 +16,9 @@ use crate::motion::LoopMode;
 use crate::motion::{ReferenceMotion, ReferenceTable};
 use crate::plan::{PlanStore, Simulation, SimulationError};
 use crate::ppo::{ActStorage, GaussianPolicy, PolicyError};
-use crate::train::{ActionMode, EvalStart, TrainConfig, evaluation_steps, yardstick};
+use crate::train::{ActionMode, EvalStart, TrainConfig, evaluation_steps};
 
-use super::evaluation::EpisodeScores;
+use super::evaluation::{EpisodeScores, yardstick};
 use super::layout::{
     DeviceJointLayout, JointLayout, observation_params, observation_size, reset_params,
     tracking_params, without_failures,

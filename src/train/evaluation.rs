@@ -26,29 +26,15 @@ use serde::{Deserialize, Serialize};
 
 use super::config::{EvalStart, TrainConfig};
 use super::metrics::nan_from_null;
-use crate::env::Yardstick;
+pub use crate::env::{SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M, yardstick};
 use crate::motion::LoopMode;
 
-/// A body farther than this from its reference (m) fails the episode: the paper's committed
-/// `tracking_distance` before the yardstick was separated from the training termination.
-pub const SUCCESS_MAX_BODY_DISTANCE_M: f32 = 1.0;
-/// The root more than this below the reference root (m) fails the episode: the tuned backflip's
-/// termination height (the stricter of the committed 0.6 and the baseline's 0.8).
-pub const SUCCESS_MAX_ROOT_DROP_M: f32 = 0.6;
 /// Largest global MPJPE (m, mean over the episode's steps and the 15 bodies) of a successful
 /// episode: a completed backflip drifting off the reference's path measured 0.28-0.31 m; tuned
 /// policies that track it measure 0.09-0.11 m.
 pub const SUCCESS_MAX_MEAN_MPJPE_M: f64 = 0.2;
 /// The paper's second criterion: average pose error at most this (m).
 pub const POSE_ERROR_TARGET_M: f64 = 0.06;
-
-/// The per-step part of the yardstick, as the evaluation kernel reads it.
-pub fn yardstick() -> Yardstick {
-    Yardstick {
-        max_body_distance: SUCCESS_MAX_BODY_DISTANCE_M,
-        max_root_drop: SUCCESS_MAX_ROOT_DROP_M,
-    }
-}
 
 /// One env's evaluation episode, as the GPU evaluation reports it: whether it ran all
 /// `steps` control steps without failing the per-step yardstick, how many it ran, and per-step
