@@ -19,6 +19,20 @@ deadline=$(( $(date +%s) + ${SESSION_S:-540} ))
 tsv="$OUT/campaign.tsv"
 [ -f "$tsv" ] || printf 'name\tmotion\tseed\tsuccess\ttime_s\tframes_M\tpose_time_s\tclip_start_time_s\tactive_s\tfps_M\tlast_rate\tlast_mpjpe\tlast_ape\twall_s\tstop\n' > "$tsv"
 nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.max.sm --format=csv,noheader | tee "$OUT/gpu.txt"
+# Check every plan before the first trial: a malformed line fails the call at once, in one line.
+[ "$#" -ge 1 ] || { echo "usage: campaign.sh PLAN [PLAN...]" >&2; exit 2; }
+for plan in "$@"; do
+  [ -f "$plan" ] || { echo "$plan: no such plan file" >&2; exit 2; }
+  n=0
+  while IFS='|' read -r name motion seeds budget flags; do
+    n=$((n + 1))
+    case "$name" in ''|'#'*) continue ;; esac
+    if [ -z "$motion" ] || ! [[ "$seeds" =~ ^[0-9]+( [0-9]+)*$ ]] || ! [[ "$budget" =~ ^[0-9]+$ ]]; then
+      echo "$plan:$n: expected name|motion|seeds (integers)|budget_s (integer)|flags, got: $name|$motion|$seeds|$budget|$flags" >&2
+      exit 2
+    fi
+  done < "$plan"
+done
 for plan in "$@"; do
   while IFS='|' read -r name motion seeds budget flags; do
     case "$name" in ''|'#'*) continue ;; esac
