@@ -41,7 +41,7 @@ fn seeded_checkpoint(config: &TrainConfig, seed: u64) -> Checkpoint {
     let shapes = PolicyShapes::new(config, &character).expect("shapes");
     let mut rng = StdRng::seed_from_u64(seed);
     let layers = actor_layers(config, &shapes);
-    let mut actor = initial_parameters(&layers, 1.0, &mut rng);
+    let mut actor = initial_parameters(&layers, 2f64.sqrt(), 1.0, &mut rng);
     for layer in &layers {
         for b in &mut actor[layer.bias_offset()..layer.end()] {
             *b = rng.random_range(-0.2..0.2);
@@ -50,7 +50,7 @@ fn seeded_checkpoint(config: &TrainConfig, seed: u64) -> Checkpoint {
     actor.extend(std::iter::repeat_n(-1.5f32, shapes.action_size));
     let critic_layers =
         instantmimic::ppo::mlp_layout(shapes.observation_size, &config.policy.critic_hidden, 1);
-    let critic = initial_parameters(&critic_layers, 1.0, &mut rng);
+    let critic = initial_parameters(&critic_layers, 2f64.sqrt(), 1.0, &mut rng);
     let d = shapes.observation_size;
     let count = 5000.0;
     let mean: Vec<f64> = (0..d)

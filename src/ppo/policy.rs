@@ -70,17 +70,22 @@ pub fn mlp_layout(inputs: usize, hidden: &[u32], outputs: usize) -> Vec<LayerSha
         .collect()
 }
 
-/// Initial parameters: weights N(0, gain^2 / inputs) (He-like scaling; the output layers' gain
-/// is small so that the first actions stay near the reference pose and the first values near
-/// 0), biases 0.
-pub fn initial_parameters(layers: &[LayerShape], last_gain: f64, rng: &mut StdRng) -> Vec<f32> {
+/// Initial parameters: weights N(0, gain^2 / inputs), `hidden_gain` for every layer but the
+/// last and `last_gain` for the last (config `policy.init_hidden_gain`, He's sqrt(2), and
+/// `policy.init_output_gain`), biases 0.
+pub fn initial_parameters(
+    layers: &[LayerShape],
+    hidden_gain: f64,
+    last_gain: f64,
+    rng: &mut StdRng,
+) -> Vec<f32> {
     let total = layers.last().map_or(0, LayerShape::end);
     let mut params = vec![0.0f32; total];
     for (l, layer) in layers.iter().enumerate() {
         let gain = if l + 1 == layers.len() {
             last_gain
         } else {
-            2f64.sqrt()
+            hidden_gain
         };
         let std = gain / (layer.inputs as f64).sqrt();
         for w in &mut params[layer.offset..layer.bias_offset()] {
@@ -184,10 +189,16 @@ impl GaussianPolicy {
         let actor_shapes = mlp_layout(observation_size, &config.actor_hidden, action_size);
         let critic_shapes = mlp_layout(observation_size, &config.critic_hidden, 1);
         let mut rng = StdRng::seed_from_u64(seed);
-        let mut actor_values = initial_parameters(&actor_shapes, 0.01, &mut rng);
+        let hidden_gain = f64::from(config.init_hidden_gain);
+        let mut actor_values = initial_parameters(
+            &actor_shapes,
+            hidden_gain,
+            f64::from(config.init_output_gain),
+            &mut rng,
+        );
         let log_std_offset = actor_values.len();
         actor_values.extend(std::iter::repeat_n(config.init_log_std, action_size));
-        let critic_values = initial_parameters(&critic_shapes, 1.0, &mut rng);
+        let critic_values = initial_parameters(&critic_shapes, hidden_gain, 1.0, &mut rng);
 
         let actor_params = DeviceArray::from_slice(gpu, [actor_values.len()], &actor_values)?;
         let critic_params = DeviceArray::from_slice(gpu, [critic_values.len()], &critic_values)?;

@@ -193,6 +193,12 @@ pub struct PolicyConfig {
     pub actor_hidden: Vec<u32>,
     pub critic_hidden: Vec<u32>,
     pub init_log_std: f32,
+    /// Initial weights are N(0, gain^2 / inputs), biases 0: this gain for the hidden layers
+    /// (He's sqrt(2) for the ELU; torch's default Linear init is about 0.577)...
+    pub init_hidden_gain: f32,
+    /// ...and this for the actor's output layer (small: the first actions stay near the
+    /// reference pose; the critic's output layer uses 1).
+    pub init_output_gain: f32,
     /// What computes the layers' GEMMs (forward in the rollout and the update, backward).
     pub gemm: GemmSetting,
 }
@@ -203,6 +209,8 @@ impl Default for PolicyConfig {
             actor_hidden: vec![400, 200, 100],
             critic_hidden: vec![400, 200, 100],
             init_log_std: -2.0,
+            init_hidden_gain: std::f32::consts::SQRT_2,
+            init_output_gain: 0.01,
             gemm: GemmSetting::Auto,
         }
     }
@@ -584,6 +592,18 @@ impl TrainConfig {
             "policy.init_log_std",
             p.init_log_std,
             "must be in [-10, 2]"
+        );
+        check!(
+            p.init_hidden_gain > 0.0 && p.init_hidden_gain <= 10.0,
+            "policy.init_hidden_gain",
+            p.init_hidden_gain,
+            "must be in (0, 10]"
+        );
+        check!(
+            p.init_output_gain > 0.0 && p.init_output_gain <= 10.0,
+            "policy.init_output_gain",
+            p.init_output_gain,
+            "must be in (0, 10]"
         );
         check!(
             (1..=4096).contains(&q.horizon),

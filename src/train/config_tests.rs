@@ -161,6 +161,7 @@ fn committed_configs_are_the_tuned_baseline_with_their_run_settings() {
     issue16.reward.ee_frame = EndEffectorFrame::Root;
     issue16.ppo.value_normalization = true;
     issue16.ppo.separate_grad_clipping = true;
+    issue16.reward.ee_pos_weight = 10.0;
     for (name, _) in COMMITTED_CONFIGS {
         let (label, config) = TrainConfig::committed(name).unwrap();
         let config = config.unwrap_or_else(|e| panic!("{label}: {e}"));
@@ -248,6 +249,25 @@ fn new_failure_keys_are_off_by_default_and_checked() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("ee_frame") && e.contains("root"), "{e}");
+}
+
+#[test]
+fn init_gains_default_to_he_and_a_small_actor_output_and_are_checked() {
+    let c = TrainConfig::with_motion("walk");
+    assert_eq!(
+        (c.policy.init_hidden_gain, c.policy.init_output_gain),
+        (std::f32::consts::SQRT_2, 0.01)
+    );
+    for (text, key) in [
+        ("init_hidden_gain = 0.0", "`policy.init_hidden_gain` = 0"),
+        ("init_output_gain = -1", "`policy.init_output_gain` = -1"),
+        ("init_output_gain = 11", "`policy.init_output_gain` = 11"),
+    ] {
+        let e = TrainConfig::from_toml(&format!("motion = \"w\"\n[policy]\n{text}"), "c.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(key), "{text}: {e}");
+    }
 }
 
 #[test]
