@@ -153,7 +153,7 @@ fn command_line_overrides_shape_a_new_search_only() {
 #[test]
 fn the_backflip_configuration_loads_and_names_the_missing_trainer() {
     let config = HpoConfig::load(&repo("configs/hpo/backflip.toml")).unwrap();
-    assert_eq!(config.space.params.len(), 25);
+    assert_eq!(config.space.params.len(), 26);
     assert_eq!(config.search.seeds, [0, 1, 2]);
     let baseline = config.baseline().unwrap();
     assert_eq!(
@@ -168,6 +168,10 @@ fn the_backflip_configuration_loads_and_names_the_missing_trainer() {
     assert_eq!(
         baseline["env.mean_tracking_distance"],
         instantmimic::hpo::space::ParamValue::Float(0.0)
+    );
+    assert_eq!(
+        baseline["reward.ee_pos_weight"],
+        instantmimic::hpo::space::ParamValue::Float(40.0)
     );
     assert_eq!(
         baseline["ppo.value_normalization"],
