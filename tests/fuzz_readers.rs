@@ -1,0 +1,207 @@
+//! Every reader of outside input, fuzzed (issue 17): plans (raw and packed), DeepMimic motion
+//! files, training and search configurations, checkpoints, recordings and a search's state
+//! files. Each gets `INSTANTMIMIC_FUZZ_INPUTS` (default 100 000) mutations of valid inputs
+//! (tests/fuzz_support) and must return an error or a value, never panic.
+
+mod fuzz_support;
+mod hpo_support;
+mod plan_support;
+
+use std::path::Path;
+
+use fuzz_support::{Kind, campaign};
+use instantmimic::hpo::backend::offline::OfflineProposer;
+use instantmimic::hpo::state::RunDir;
+use instantmimic::hpo::trial::build_runners;
+use instantmimic::hpo::{HpoConfig, RunnerPool, Search};
+use instantmimic::motion::{Character, MotionClip};
+use instantmimic::plan::{Plan, PlanInfo, load_plan_with_limit, pack};
+use instantmimic::recording::{Recording, synthetic};
+use instantmimic::train::{Checkpoint, CheckpointMeta, TrainConfig};
+
+/// One `mujoco_warp.step` of a 2-link pendulum and a free box, 2 worlds (tests/plan_reader.rs).
+const PLAN_FIXTURE: &[u8] = include_bytes!("fixtures/pendulum_cpu.wrp");
+
+fn repo(rel: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
+}
+
+fn read(rel: &str) -> Vec<u8> {
+    std::fs::read(repo(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+}
+
+fn text(bytes: &[u8]) -> std::borrow::Cow<'_, str> {
+    String::from_utf8_lossy(bytes)
+}
+
+fn humanoid() -> Character {
+    Character::humanoid().expect("the built-in humanoid")
+}
+
+#[test]
+fn plan_reader_never_panics() {
+    let seeds = vec![
+        PLAN_FIXTURE.to_vec(),
+        plan_support::synthetic_plan().to_bytes(),
+        plan_support::every_kind_plan().to_bytes(),
+    ];
+    campaign("plan", &seeds, Kind::Binary, |b| Plan::parse(b).is_ok());
+}
+
+#[test]
+fn packed_plan_reader_never_panics() {
+    let info = PlanInfo {
+        name: "step".into(),
+        nworld: 2,
+        physics: serde_json::json!({"timestep": 0.005, "iterations": 4})
+            .as_object()
+            .cloned()
+            .unwrap_or_default(),
+    };
+    let seeds = vec![
+        pack(PLAN_FIXTURE, &info).expect("the fixture packs"),
+        pack(&plan_support::every_kind_plan().to_bytes(), &info).expect("a synthetic plan packs"),
+    ];
+    // 64 MiB: a mutated size field must not make the reader allocate more.
+    campaign("plan_packed", &seeds, Kind::Binary, |b| {
+        load_plan_with_limit(b, 64 << 20).is_ok()
+    });
+}
+
+#[test]
+fn motion_reader_never_panics() {
+    let character = humanoid();
+    // Two shipped clips, and the walk cut to its first 4 frames (a short seed mutates deeper).
+    let walk = text(&read("assets/motions/humanoid3d_walk.txt")).into_owned();
+    let frames: Vec<&str> = walk.split("],").collect();
+    let short = format!("{}]]\n}}\n", frames[..4].join("],"));
+    let seeds = vec![
+        read("assets/motions/humanoid3d_backflip.txt"),
+        read("assets/motions/humanoid3d_run.txt"),
+        short.into_bytes(),
+    ];
+    campaign("motion", &seeds, Kind::Text, |b| {
+        MotionClip::parse(&text(b), "fuzz", &character).is_ok()
+    });
+}
+
+#[test]
+fn train_config_reader_never_panics() {
+    let seeds: Vec<Vec<u8>> = [
+        "backflip",
+        "cartwheel",
+        "default",
+        "run",
+        "spinkick",
+        "walk",
+    ]
+    .iter()
+    .map(|n| read(&format!("configs/train/{n}.toml")))
+    .collect();
+    campaign("train_config", &seeds, Kind::Text, |b| {
+        TrainConfig::from_toml(&text(b), "fuzz.toml").is_ok()
+    });
+}
+
+#[test]
+fn hpo_config_reader_never_panics() {
+    let dir = repo("configs/hpo");
+    let seeds = vec![read("configs/hpo/backflip.toml")];
+    campaign("hpo_config", &seeds, Kind::Text, |b| {
+        HpoConfig::parse(&text(b), "fuzz.toml", &dir, "fuzz").is_ok()
+    });
+}
+
+#[test]
+fn checkpoint_reader_never_panics() {
+    let config = TrainConfig::committed("backflip")
+        .expect("committed")
+        .1
+        .expect("valid");
+    let meta = CheckpointMeta::new(&config, 7, 1.25, 229_376).expect("meta");
+    let mut checkpoint = Checkpoint::new(meta);
+    checkpoint
+        .insert(
+            "policy.actor",
+            &[3, 2],
+            vec![0.5f32, -1.0, 2.0, 0.0, 1e-3, 7.0],
+        )
+        .expect("actor");
+    checkpoint
+        .insert("obs_norm.count", &[2], vec![10.0f64, 10.0])
+        .expect("count");
+    checkpoint
+        .insert("adam.step", &[2], vec![3i32, 1])
+        .expect("step");
+    let seeds = vec![checkpoint.to_bytes().expect("a checkpoint serializes")];
+    campaign("checkpoint", &seeds, Kind::Binary, |b| {
+        Checkpoint::from_bytes(b, "fuzz.safetensors")
+            .and_then(|c| c.meta.config("fuzz.safetensors"))
+            .is_ok()
+    });
+}
+
+#[test]
+fn recording_reader_never_panics() {
+    let character = humanoid();
+    let recording = synthetic::lagging_replay(&character, 2, 12).expect("a synthetic recording");
+    let seeds = vec![recording.to_bytes().expect("a recording serializes")];
+    campaign("recording", &seeds, Kind::Binary, |b| {
+        Recording::from_bytes(b, "fuzz.safetensors", &character).is_ok()
+    });
+}
+
+/// A finished two-cycle offline search (synthetic objective) whose state files seed the
+/// search-state campaigns.
+fn finished_search() -> tempfile::TempDir {
+    let config = hpo_support::offline_config("", "");
+    let tmp = tempfile::tempdir().expect("a scratch directory");
+    let mut search = Search::new(config.clone(), tmp.path()).expect("a new search");
+    let mut pool =
+        RunnerPool::new(build_runners(&config.runner, config.objective).expect("runners"))
+            .expect("a pool");
+    search
+        .run(&mut OfflineProposer, &mut pool, 2, &mut std::io::sink())
+        .expect("two cycles");
+    tmp
+}
+
+/// Fuzzes one of a search's state files (`file`), the others left valid: `open` and `load`
+/// (what `hpo --resume` reads) must return, never panic.
+fn search_state_campaign(name: &str, file: &str) {
+    let search = finished_search();
+    let scratch = tempfile::tempdir().expect("a scratch directory");
+    for entry in std::fs::read_dir(search.path()).expect("the search directory") {
+        let path = entry.expect("an entry").path();
+        if path.is_file() {
+            std::fs::copy(
+                &path,
+                scratch.path().join(path.file_name().expect("a name")),
+            )
+            .expect("copy");
+        }
+    }
+    let seeds = vec![std::fs::read(search.path().join(file)).expect("the state file")];
+    let target = scratch.path().join(file);
+    campaign(name, &seeds, Kind::Text, |b| {
+        std::fs::write(&target, b).expect("a scratch write");
+        RunDir::open(scratch.path())
+            .and_then(|d| d.read_config().and_then(|_| d.load()))
+            .is_ok_and(|state| state.is_some())
+    });
+}
+
+#[test]
+fn search_state_reader_never_panics() {
+    search_state_campaign("hpo_state", "state.json");
+}
+
+#[test]
+fn search_history_reader_never_panics() {
+    search_state_campaign("hpo_history", "history.jsonl");
+}
+
+#[test]
+fn search_config_reader_never_panics() {
+    search_state_campaign("hpo_run_config", "config.json");
+}
