@@ -5,13 +5,15 @@
 //! (`golden_kinematics.py --check`). Runs when `INSTANTMIMIC_BUILD_PYTHON` names a Python with
 //! `kernels_py/requirements.txt` installed (tests/run.sh sets one up); otherwise it skips.
 
+mod skip_support;
+
 use std::path::Path;
 use std::process::Command;
 
 #[test]
 fn generated_files_regenerate_byte_for_byte() {
     let Some(python) = std::env::var_os("INSTANTMIMIC_BUILD_PYTHON") else {
-        println!("INSTANTMIMIC_BUILD_PYTHON is not set: skipping (tests/run.sh sets it)");
+        skip_support::skip("INSTANTMIMIC_BUILD_PYTHON is not set (tests/run.sh sets it)");
         return;
     };
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));

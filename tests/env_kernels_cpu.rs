@@ -4,6 +4,7 @@
 //! note. `-- --nocapture` prints the error of every case and the largest per output.
 
 mod kernel_checks;
+mod skip_support;
 
 use std::collections::BTreeSet;
 

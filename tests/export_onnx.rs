@@ -7,6 +7,8 @@
 //! onnxruntime comes from the build-step Python (`kernels_py/requirements.txt`, set up by
 //! tests/run.sh as `INSTANTMIMIC_BUILD_PYTHON`); without it that part prints a note.
 
+mod skip_support;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -265,8 +267,8 @@ fn the_onnx_policy_matches_the_checkpoint_and_carries_its_contract() {
 
     // onnxruntime against the f64 forward.
     let Some(python) = python() else {
-        eprintln!(
-            "note: INSTANTMIMIC_BUILD_PYTHON is not set (tests/run.sh sets it): onnxruntime not run"
+        skip_support::skip(
+            "INSTANTMIMIC_BUILD_PYTHON is not set (tests/run.sh sets it): onnxruntime not run",
         );
         return;
     };

@@ -20,6 +20,7 @@
 #![cfg(feature = "gpu")]
 
 mod ppo_support;
+mod skip_support;
 
 use std::sync::Arc;
 
@@ -76,7 +77,7 @@ fn open_blas(gpu: &Gpu) -> Option<Arc<Blas>> {
             Some(blas)
         }
         Err(e) => {
-            println!("skipped (cuBLAS): {e}");
+            skip_support::skip(&format!("cuBLAS: {e}"));
             None
         }
     }
@@ -197,7 +198,7 @@ fn gemm_paths(gpu: &Gpu) -> Vec<(PolicyGemm, f64)> {
     ] {
         match PolicyGemm::open(gpu, setting) {
             Ok(gemm) => paths.push((gemm, limit)),
-            Err(e) => println!("skipped ({setting:?}): {e}"),
+            Err(e) => skip_support::skip(&format!("{setting:?}: {e}")),
         }
     }
     paths
@@ -406,7 +407,7 @@ fn ppo_update_and_rollout_forward_with_cublas_match_warp_tiles() {
         let policy = match build(setting) {
             Ok(policy) => policy,
             Err(e) => {
-                println!("skipped ({setting:?}): {e}");
+                skip_support::skip(&format!("{setting:?}: {e}"));
                 continue;
             }
         };

@@ -5,6 +5,7 @@
 #![cfg(feature = "gpu")]
 
 mod kernel_checks;
+mod skip_support;
 
 use std::collections::BTreeMap;
 

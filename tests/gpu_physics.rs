@@ -15,6 +15,8 @@
 //! ptx/deterministic`) must agree bit for bit at every checkpoint, contacts or not.
 #![cfg(feature = "gpu")]
 
+mod skip_support;
+
 use std::path::{Path, PathBuf};
 
 use instantmimic::cuda::Gpu;
@@ -57,7 +59,7 @@ struct Reference {
 
 fn reference() -> Option<Reference> {
     let Some(dir) = std::env::var_os("INSTANTMIMIC_PHYSICS_REFERENCE").map(PathBuf::from) else {
-        println!("skipped: INSTANTMIMIC_PHYSICS_REFERENCE is not set (see the file's header)");
+        skip_support::skip("INSTANTMIMIC_PHYSICS_REFERENCE is not set (see the file's header)");
         return None;
     };
     let summary: serde_json::Value =
@@ -189,11 +191,11 @@ fn kinematics_plan_reads_the_state_the_step_plan_writes() {
     let assets = std::env::var_os("INSTANTMIMIC_ASSETS").map(PathBuf::from);
     let store = PlanStore::new(assets.as_deref());
     let Ok(manifest) = store.manifest() else {
-        println!("skipped: no plan manifest in the store");
+        skip_support::skip("no plan manifest in the store");
         return;
     };
     let Some(nworld) = manifest.plans.iter().map(|p| p.nworld).min() else {
-        println!("skipped: the manifest lists no plans");
+        skip_support::skip("the manifest lists no plans");
         return;
     };
     let gpu = Gpu::open(0).expect("a GPU");

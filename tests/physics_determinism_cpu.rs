@@ -6,6 +6,7 @@
 //! (tests/run.sh sets it); otherwise it skips.
 
 mod python_checks;
+mod skip_support;
 
 #[test]
 fn deterministic_physics_kernels_on_warps_cpu_device() {

@@ -9,6 +9,7 @@
 //!   statistics layouts) are read from the Python sources and compared (always runs).
 
 mod python_checks;
+mod skip_support;
 
 use std::path::Path;
 

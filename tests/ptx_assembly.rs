@@ -6,6 +6,8 @@
 //! Each arch is checked at two PTX ISA versions: the one the oldest driver that can run that
 //! arch accepts (the runtime lowers to it there) and 9.0 (driver 580, where we measure).
 
+mod skip_support;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Mutex;
@@ -91,7 +93,7 @@ fn shared_modules_are_identical() {
 #[test]
 fn every_shipped_ptx_assembles_for_every_supported_arch() {
     let Some(ptxas) = std::env::var_os("PTXAS").map(PathBuf::from) else {
-        println!("PTXAS is not set: skipping (CI sets it to PyPI nvidia-cuda-nvcc's ptxas)");
+        skip_support::skip("PTXAS is not set (CI sets it to PyPI nvidia-cuda-nvcc's ptxas)");
         return;
     };
     let files = shipped_ptx();

@@ -9,6 +9,8 @@
 //! `INSTANTMIMIC_KEEP_PAGES=DIR` keeps the pages and screenshots there (docs/replay.md's
 //! pictures come from it).
 
+mod skip_support;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -161,7 +163,7 @@ fn assert_clean_self_test(result: &Value, what: &str) {
 #[test]
 fn the_clip_page_works_in_a_browser_and_fetches_nothing() {
     let Some(chromium) = chromium() else {
-        eprintln!("note: no chromium (set INSTANTMIMIC_CHROMIUM); the page was not opened");
+        skip_support::skip("no chromium (set INSTANTMIMIC_CHROMIUM): the page was not opened");
         return;
     };
     let dir = tempfile::tempdir().expect("temporary directory");
@@ -251,7 +253,7 @@ fn read_png(path: &Path) -> (Vec<u8>, u32) {
 #[test]
 fn a_replay_page_with_a_ghost_and_errors_works_in_a_browser() {
     let Some(chromium) = chromium() else {
-        eprintln!("note: no chromium (set INSTANTMIMIC_CHROMIUM); the page was not opened");
+        skip_support::skip("no chromium (set INSTANTMIMIC_CHROMIUM): the page was not opened");
         return;
     };
     let character = Character::humanoid().expect("humanoid");

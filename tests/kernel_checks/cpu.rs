@@ -17,8 +17,8 @@ pub fn build_python() -> Option<PathBuf> {
     match std::env::var_os("INSTANTMIMIC_BUILD_PYTHON") {
         Some(p) => Some(PathBuf::from(p)),
         None => {
-            println!(
-                "INSTANTMIMIC_BUILD_PYTHON is not set: skipping the Warp CPU run (tests/run.sh sets it)"
+            crate::skip_support::skip(
+                "INSTANTMIMIC_BUILD_PYTHON is not set: no Warp CPU run (tests/run.sh sets it)",
             );
             None
         }

@@ -9,7 +9,7 @@ use std::process::Command;
 pub fn build_python() -> Option<OsString> {
     let python = std::env::var_os("INSTANTMIMIC_BUILD_PYTHON");
     if python.is_none() {
-        println!("INSTANTMIMIC_BUILD_PYTHON is not set: skipping (tests/run.sh sets it)");
+        crate::skip_support::skip("INSTANTMIMIC_BUILD_PYTHON is not set (tests/run.sh sets it)");
     }
     python
 }
