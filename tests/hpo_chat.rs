@@ -4,6 +4,8 @@
 //! feedback in the next prompt, that the search goes on, the incumbent and best, and that the
 //! key appears nowhere the run wrote.
 
+#![cfg(feature = "chat")]
+
 mod hpo_support;
 
 use std::process::Command;

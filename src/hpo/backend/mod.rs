@@ -9,6 +9,8 @@
 //! program), which stop the search.
 
 pub mod chat;
+#[cfg(feature = "chat")]
+pub mod chat_client;
 pub mod command;
 pub mod offline;
 
@@ -60,6 +62,11 @@ pub enum BackendError {
     },
     #[error("{url}: the response is not a chat completion: {problem}")]
     Response { url: String, problem: String },
+    #[error(
+        "this binary was built without the `{feature}` cargo feature (on by default): rebuild \
+         without --no-default-features, or use backend = \"command\" or \"offline\""
+    )]
+    NotBuilt { feature: &'static str },
     #[error("{url}: the request cannot be sent: {problem}; check [agent.chat] base_url")]
     Request { url: String, problem: String },
     #[error(
@@ -101,12 +108,16 @@ impl BackendError {
 pub fn build_backend(settings: &AgentSettings) -> Result<Box<dyn Backend>, BackendError> {
     Ok(match settings {
         AgentSettings::Offline => Box::new(offline::OfflineProposer),
-        AgentSettings::Chat(chat) => Box::new(chat::ChatBackend::new(chat.clone())?),
+        #[cfg(feature = "chat")]
+        AgentSettings::Chat(chat) => Box::new(chat_client::ChatBackend::new(chat.clone())?),
+        #[cfg(not(feature = "chat"))]
+        AgentSettings::Chat(_) => return Err(BackendError::NotBuilt { feature: "chat" }),
         AgentSettings::Command(command) => Box::new(command::CommandBackend::new(command.clone())),
     })
 }
 
 /// Exponential backoff: `initial × 2^attempt`, at most `max` (seconds).
+#[cfg_attr(not(feature = "chat"), allow(dead_code))]
 pub(crate) fn backoff(initial_s: f64, max_s: f64, attempt: u32) -> std::time::Duration {
     let seconds = (initial_s * 2f64.powi(attempt.min(30) as i32))
         .min(max_s)
