@@ -31,8 +31,10 @@ fn stats(iteration: u64) -> IterationStats {
             entropy: 20.0,
             kl: if iteration == 3 { f64::NAN } else { 0.007 },
             learning_rate: 5e-4,
+            grad_norm: 0.5,
         },
         termination: EpisodeEnds::from_counts(10.0, 4.0, [1.0, 3.0, 0.0, 0.0, 1.0]),
+        parameter_squares: [100.0, 50.0],
     }
 }
 
@@ -359,6 +361,7 @@ fn the_learning_curve_is_a_png_with_both_series() {
             update: UpdateStats::default(),
             termination: Default::default(),
             evaluation: (i % 5 == 0).then(|| evaluation(i, 30)),
+            divergence: None,
         })
         .collect();
     let png_bytes = curve::learning_curve_png(&records, "walk (seed 0)", 300.0, 0.9).unwrap();

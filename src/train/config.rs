@@ -348,6 +348,9 @@ pub struct RunConfig {
     pub checkpoint_interval: u32,
     /// Checkpoints kept in `checkpoints/` (older ones are deleted).
     pub keep_checkpoints: u32,
+    /// Times a run goes back to its last good state (with half the learning rate) after a
+    /// non-finite iteration before it stops with an error (src/train/divergence.rs).
+    pub max_divergence_restores: u32,
 }
 
 impl Default for RunConfig {
@@ -364,6 +367,7 @@ impl Default for RunConfig {
             max_iterations: 5000,
             checkpoint_interval: 50,
             keep_checkpoints: 3,
+            max_divergence_restores: 3,
         }
     }
 }
@@ -722,6 +726,12 @@ impl TrainConfig {
             "run.keep_checkpoints",
             run.keep_checkpoints,
             "must be at least 1 (the final checkpoint is always written)"
+        );
+        check!(
+            run.max_divergence_restores <= 100,
+            "run.max_divergence_restores",
+            run.max_divergence_restores,
+            "must be 0 to 100"
         );
         Ok(())
     }

@@ -38,6 +38,15 @@ pub enum TrainError {
     RunDirNotEmpty { path: String },
     #[error("{path}: not a run directory: {problem}")]
     NotARunDir { path: String, problem: String },
+    /// Training kept producing non-finite values after every restore the run allows.
+    #[error(
+        "training diverged at iteration {iteration} ({cause} not finite) after {restores} restores of the last good state with a halved learning rate each: lower ppo.learning_rate or ppo.kl_threshold, or raise run.max_divergence_restores"
+    )]
+    Diverged {
+        iteration: u64,
+        cause: String,
+        restores: u32,
+    },
     /// The run's settings are inconsistent with the plans, the motion or a checkpoint.
     #[error("{0}")]
     Setup(String),

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use super::checkpoint::Checkpoint;
 use super::config::TrainConfig;
+use super::divergence::{DivergenceEvent, DivergenceGuard, non_finite_report};
 use super::error::TrainError;
 use super::evaluation::{EvaluationSummary, episode_rows, evaluation_start_times, summarize};
 use super::preflight::Preflight;
@@ -109,12 +110,24 @@ pub fn train_with(
         clip.duration(),
         clip.loop_mode(),
     );
+    // The state to go back to if training diverges: where this run starts (a resumed run's
+    // checkpoint, or the initial one), then every checkpoint it saves.
+    let mut guard = {
+        let mut initial = session.new_checkpoint()?;
+        trainer.save_into(&mut initial)?;
+        DivergenceGuard::new(initial, config.run.max_divergence_restores)?
+    };
     let mut last_episodes = Vec::new();
     let mut wall = WallTime::starting(setup.elapsed().as_secs_f64());
     loop {
         session.start_iteration();
         let stats = trainer.iterate()?;
-        let step = session.finish_iteration(stats);
+        let cause = non_finite_report(&stats);
+        let mut step = session.finish_iteration(stats);
+        if let Some(cause) = cause {
+            let event = go_back(&mut guard, &trainer, &mut session, step.iteration, &cause)?;
+            step.diverged(event);
+        }
         let evaluation = if step.evaluate {
             let started = std::time::Instant::now();
             let episodes = trainer.evaluate()?;
@@ -130,7 +143,15 @@ pub fn train_with(
         if next.checkpoint_due {
             let mut checkpoint = session.new_checkpoint()?;
             trainer.save_into(&mut checkpoint)?;
-            session.save_checkpoint(&checkpoint)?;
+            match guard.keep(&checkpoint) {
+                None => session.save_checkpoint(&checkpoint)?,
+                // The report was finite but a saved tensor is not (the normalizer's or the
+                // optimizer's state): not saved; training goes back instead.
+                Some(cause) => {
+                    let iteration = session.iteration();
+                    go_back(&mut guard, &trainer, &mut session, iteration, &cause)?;
+                }
+            }
         }
         wall.bookkeeping(started);
         if let Some(reason) = next.stop {
@@ -154,6 +175,28 @@ pub fn train_with(
             return session.finish(reason);
         }
     }
+}
+
+/// Restores the guard's last good state (learning rate halved) after `cause` was found not
+/// finite at `iteration`, and says so; errors when no restore is left.
+fn go_back(
+    guard: &mut DivergenceGuard,
+    trainer: &Trainer,
+    session: &mut RunSession,
+    iteration: u64,
+    cause: &str,
+) -> Result<DivergenceEvent, TrainError> {
+    let (state, event) = guard.restore_point(iteration, cause)?;
+    trainer.restore(&state)?;
+    let allowed = session.config().run.max_divergence_restores;
+    session.progress().note(&format!(
+        "warning: iteration {iteration}: {cause} not finite; training goes back to iteration {} with learning rate {:.3e} (restore {} of {})",
+        event.restored_iteration,
+        event.learning_rate,
+        event.restores,
+        allowed
+    ));
+    Ok(event)
 }
 
 /// Where a run's wall time went, printed at its end, so that a user (or a search) sees what

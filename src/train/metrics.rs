@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Deserializer, Serialize};
 
+use super::divergence::DivergenceEvent;
 use super::error::TrainError;
 use super::evaluation::EvaluationSummary;
 use crate::env::FailureCause;
@@ -32,6 +33,10 @@ pub struct UpdateStats {
     /// The learning rate after this iteration's KL adaptation.
     #[serde(deserialize_with = "nan_from_null")]
     pub learning_rate: f64,
+    /// Mean global gradient norm before clipping (absent in logs written before it was
+    /// recorded).
+    #[serde(default, deserialize_with = "nan_from_null")]
+    pub grad_norm: f64,
 }
 
 /// How this iteration's episodes ended (`metrics.jsonl`'s `termination`): fractions of the
@@ -121,6 +126,10 @@ pub struct IterationRecord {
     /// Present on evaluation iterations.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub evaluation: Option<EvaluationSummary>,
+    /// Present when this iteration was not finite and training went back to its last good
+    /// state (src/train/divergence.rs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub divergence: Option<DivergenceEvent>,
 }
 
 /// `null` read as NaN: serde_json writes non-finite floats as `null`.

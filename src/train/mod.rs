@@ -8,6 +8,7 @@ pub mod checkpoint;
 mod clock;
 mod config;
 pub mod curve;
+pub mod divergence;
 mod error;
 pub mod evaluation;
 mod gpu_loop;
@@ -30,6 +31,7 @@ pub use config::{
     GemmSetting, KlMeasure, ObsConfig, PolicyConfig, PpoConfig, RewardConfig, RunConfig,
     TrainConfig,
 };
+pub use divergence::{DivergenceEvent, DivergenceGuard};
 pub use error::TrainError;
 pub use evaluation::{
     EnvEvaluation, EvaluationError, EvaluationSummary, POSE_ERROR_TARGET_M,

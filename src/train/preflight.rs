@@ -18,19 +18,8 @@ use crate::ppo::mlp_layout;
 /// The plans a run replays: physics steps, and the kinematics a reset needs.
 pub const RUN_PLANS: [&str; 2] = ["step", "kinematics"];
 
-/// Checkpoint tensor names the policy needs (`eval` checks them; the trainer adds its own,
-/// docs/train.md lists the convention).
-pub mod tensor_names {
-    /// Actor parameters, f32 `[P]`: layer by layer `w [in, out]` then `b [out]`, then `log_std [A]`.
-    pub const ACTOR: &str = "actor.params";
-    /// Critic parameters, f32 `[P]`, the same layout without `log_std`.
-    pub const CRITIC: &str = "critic.params";
-    /// Observation normalizer: running count and merged count, f64 `[2]`.
-    pub const OBS_COUNT: &str = "obs_norm.count";
-    /// Running mean and sum of squared deviations, f64 `[D]`.
-    pub const OBS_MEAN: &str = "obs_norm.mean";
-    pub const OBS_M2: &str = "obs_norm.m2";
-}
+/// Checkpoint tensor names (`eval` checks the policy's; they live in src/train/checkpoint.rs).
+pub use super::checkpoint::tensor_names;
 
 /// Sizes of the networks of a configuration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

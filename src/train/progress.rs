@@ -198,6 +198,7 @@ mod tests {
                 ee_position_error_m: 0.1,
                 ee_orientation_error_rad: 0.1,
             }),
+            divergence: None,
         }
     }
 

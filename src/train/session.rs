@@ -24,6 +24,7 @@ use std::path::Path;
 use super::checkpoint::{Checkpoint, CheckpointDir, CheckpointMeta};
 use super::clock::{ActiveClock, Milestones, StopReason, StopRule};
 use super::config::TrainConfig;
+use super::divergence::DivergenceEvent;
 use super::error::TrainError;
 use super::evaluation::EvaluationSummary;
 use super::metrics::{EpisodeEnds, IterationRecord, MetricsLog, UpdateStats};
@@ -38,6 +39,9 @@ pub struct IterationStats {
     pub mean_episode_length: f64,
     pub update: UpdateStats,
     pub termination: EpisodeEnds,
+    /// Sums of squares of the actor's and the critic's parameters after the update (the
+    /// divergence guard's view of the parameters: NaN or infinite when one is).
+    pub parameter_squares: [f64; 2],
 }
 
 /// An iteration done on the GPU, not yet recorded.
@@ -48,6 +52,15 @@ pub struct IterationStep {
     /// Whether the protocol evaluates after this iteration.
     pub evaluate: bool,
     record: IterationRecord,
+}
+
+impl IterationStep {
+    /// Marks the iteration as diverged (src/train/divergence.rs): it is recorded with `event`
+    /// and not evaluated.
+    pub fn diverged(&mut self, event: DivergenceEvent) {
+        self.evaluate = false;
+        self.record.divergence = Some(event);
+    }
 }
 
 /// What the loop does after recording an iteration.
@@ -236,6 +249,7 @@ impl RunSession {
             update: stats.update,
             termination: stats.termination,
             evaluation: None,
+            divergence: None,
         };
         IterationStep {
             iteration,

@@ -172,6 +172,7 @@ mod tests {
                 ee_position_error_m: 0.07,
                 ee_orientation_error_rad: 0.3,
             }),
+            divergence: None,
         }
     }
 

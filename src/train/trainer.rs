@@ -12,39 +12,25 @@ use crate::cuda::{DeviceMemory, Gpu, Graph, Readback};
 use crate::env::{DeviceArray, EpisodeScore, Rollout, RolloutTotals, TOTALS};
 use crate::motion::ReferenceMotion;
 use crate::plan::PlanStore;
+use crate::ppo::reduce::{record_clear, record_sum_of_squares};
 use crate::ppo::{PolicyGemm, PpoBatch, PpoOptimizerState, PpoStatistics, PpoUpdate};
 
+use super::checkpoint::tensor_names;
 use super::checkpoint::{Checkpoint, CheckpointError};
 use super::config::TrainConfig;
 use super::error::TrainError;
 use super::evaluation::EnvEvaluation;
 use super::metrics::{EpisodeEnds, UpdateStats};
-use super::preflight::tensor_names;
 use super::session::IterationStats;
 use crate::plan::PhysicsOverflow;
 
 /// Bytes of the rollout's totals (float64) at the start of the report, then the update's
-/// statistics (float32).
+/// statistics (float32), then the parameters' sums of squares (float64, actor and critic: the
+/// divergence guard's view of the parameters).
 const TOTALS_BYTES: usize = TOTALS * 8;
-const REPORT_BYTES: usize = TOTALS_BYTES + PpoStatistics::LEN * 4;
-
-/// Checkpoint tensors beyond the policy's (docs/train.md): what an exact continuation needs.
-mod state_names {
-    pub const ADAM_ACTOR_M: &str = "adam.actor.m";
-    pub const ADAM_ACTOR_V: &str = "adam.actor.v";
-    pub const ADAM_CRITIC_M: &str = "adam.critic.m";
-    pub const ADAM_CRITIC_V: &str = "adam.critic.v";
-    /// i32 `[2]`: Adam's step count and the update counter (the shuffle's stream).
-    pub const ADAM_STEP: &str = "adam.step";
-    pub const LEARNING_RATE: &str = "ppo.learning_rate";
-    pub const PHASE_VISITS: &str = "phase.visits";
-    pub const PHASE_FAILURES: &str = "phase.failures";
-    pub const PHASE_CDF: &str = "phase.cdf";
-    /// i32 `[1]`: the rollout's iteration counter (its random streams).
-    pub const RNG_ITERATION: &str = "rng.iteration";
-    /// f64 `[3]`: the returns' running count, mean and M2 (value normalization).
-    pub const VALUE_STATISTICS: &str = "value_norm.stats";
-}
+const STATISTICS_BYTES: usize = PpoStatistics::LEN * 4;
+const PARAMETER_SQUARES_BYTES: usize = 2 * 8;
+const REPORT_BYTES: usize = TOTALS_BYTES + STATISTICS_BYTES + PARAMETER_SQUARES_BYTES;
 
 /// Everything on the GPU that a run trains and evaluates with.
 pub struct Trainer {
@@ -55,6 +41,10 @@ pub struct Trainer {
     iteration_graph: Graph,
     evaluation_graph: Graph,
     report: DeviceMemory,
+    /// The actor's and the critic's parameters' sums of squares after the update: written by
+    /// the iteration graph (copied into the report), so it lives as long as the graph.
+    #[expect(dead_code, reason = "only the captured graph addresses it")]
+    parameter_squares: DeviceArray<f64>,
     readback: Readback,
 }
 
@@ -72,16 +62,33 @@ impl Trainer {
         let evaluation = Rollout::evaluation(&rollout, store, motion, config)?;
         let update = PpoUpdate::new(gpu, rollout.kernels().clone(), &rollout.policy, config)?;
         let report = gpu.alloc_zeroed(REPORT_BYTES)?;
+        let parameter_squares = DeviceArray::<f64>::zeros(gpu, [2])?;
         let stream = gpu.stream();
         let iteration_graph = stream.capture(|s| {
             rollout.record(s)?;
             update.record(s, &PpoBatch::from(&rollout.storage))?;
+            let kernels = rollout.kernels();
+            record_clear(s, &parameter_squares)?;
+            let policy = &rollout.policy;
+            record_sum_of_squares(kernels, s, policy.actor_parameters(), &parameter_squares, 0)?;
+            record_sum_of_squares(
+                kernels,
+                s,
+                policy.critic_parameters(),
+                &parameter_squares,
+                1,
+            )?;
             let totals = rollout.statistics().totals();
             s.memcpy_dtod(report.device_ptr(), totals.device_ptr(), TOTALS_BYTES)?;
             s.memcpy_dtod(
                 report.device_ptr() + TOTALS_BYTES as u64,
                 update.statistics().device_ptr(),
-                PpoStatistics::LEN * 4,
+                STATISTICS_BYTES,
+            )?;
+            s.memcpy_dtod(
+                report.device_ptr() + (TOTALS_BYTES + STATISTICS_BYTES) as u64,
+                parameter_squares.device_ptr(),
+                PARAMETER_SQUARES_BYTES,
             )?;
             Ok::<(), TrainError>(())
         })?;
@@ -97,6 +104,7 @@ impl Trainer {
             iteration_graph,
             evaluation_graph,
             report,
+            parameter_squares,
         })
     }
 
@@ -113,11 +121,21 @@ impl Trainer {
             .ok_or_else(|| TrainError::Setup("the iteration report was not queued".to_owned()))?;
         let totals = RolloutTotals::from_bytes(&bytes[..TOTALS_BYTES])
             .ok_or_else(|| TrainError::Setup("malformed rollout totals".to_owned()))?;
-        let values: Vec<f32> = bytes[TOTALS_BYTES..]
+        let squares_at = TOTALS_BYTES + STATISTICS_BYTES;
+        let values: Vec<f32> = bytes[TOTALS_BYTES..squares_at]
             .chunks_exact(4)
             .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
             .collect();
         let ppo = PpoStatistics::from_values(&values)?;
+        let square = |i: usize| {
+            let at = squares_at + 8 * i;
+            bytes
+                .get(at..at + 8)
+                .and_then(|b| <[u8; 8]>::try_from(b).ok())
+                .map(f64::from_le_bytes)
+                .ok_or_else(|| TrainError::Setup("a short iteration report".to_owned()))
+        };
+        let parameter_squares = [square(0)?, square(1)?];
         Ok(IterationStats {
             mean_return: totals.mean_return,
             mean_episode_length: totals.mean_episode_length,
@@ -126,12 +144,14 @@ impl Trainer {
                 totals.failures,
                 totals.failures_by_cause,
             ),
+            parameter_squares,
             update: UpdateStats {
                 policy_loss: f64::from(ppo.surrogate_loss),
                 value_loss: f64::from(ppo.value_loss),
                 entropy: f64::from(ppo.entropy),
                 kl: f64::from(ppo.approx_kl),
                 learning_rate: f64::from(ppo.learning_rate),
+                grad_norm: f64::from(ppo.grad_norm),
             },
         })
     }
@@ -170,7 +190,6 @@ impl Trainer {
     /// Adds the policy, the normalization and everything an exact continuation needs to
     /// `checkpoint` (waits for the GPU).
     pub fn save_into(&self, checkpoint: &mut Checkpoint) -> Result<(), TrainError> {
-        use state_names::*;
         use tensor_names::*;
         self.gpu.synchronize()?;
         let policy = &self.rollout.policy;
@@ -200,7 +219,6 @@ impl Trainer {
     /// (a training checkpoint), the optimizer and the start-phase statistics; then puts every
     /// env at a new reference state (episodes in progress are not stored).
     pub fn restore(&self, checkpoint: &Checkpoint) -> Result<(), TrainError> {
-        use state_names::*;
         use tensor_names::*;
         self.gpu.synchronize()?;
         let policy = &self.rollout.policy;
