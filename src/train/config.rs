@@ -348,6 +348,9 @@ pub struct RunConfig {
     pub checkpoint_interval: u32,
     /// Checkpoints kept in `checkpoints/` (older ones are deleted).
     pub keep_checkpoints: u32,
+    /// Write `replay.html` into the run directory at the end: the final policy replayed as the
+    /// evaluation runs it (`train --no-replay` turns it off).
+    pub replay: bool,
 }
 
 impl Default for RunConfig {
@@ -364,6 +367,7 @@ impl Default for RunConfig {
             max_iterations: 5000,
             checkpoint_interval: 50,
             keep_checkpoints: 3,
+            replay: true,
         }
     }
 }
