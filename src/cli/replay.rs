@@ -16,8 +16,9 @@ use crate::replay::{DEFAULT_EPISODES, Replay, ReplayInput, chosen_envs, record_r
 use crate::train::{Checkpoint, EvalStart, format_evaluation_report, preflight};
 use crate::viewer::save_page;
 
-/// `--start`.
+/// `--start`, spelled as `run.eval_start` is.
 #[derive(Clone, Copy, Debug, ValueEnum)]
+#[value(rename_all = "snake_case")]
 enum StartArg {
     /// Env i of n starts at i/n of a looping clip (a clamped clip starts every env at 0).
     Spread,
