@@ -65,6 +65,8 @@ pub(super) struct ReplayJob<'a> {
     pub motions_dir: Option<&'a Path>,
     pub store: &'a PlanStore,
     pub device: usize,
+    /// Print the motion's notices (a user's clip replacing a built-in one); `train` has already.
+    pub motion_notices: bool,
 }
 
 /// Checks everything that needs no GPU (the output paths, the checkpoint and its policy's
@@ -83,8 +85,10 @@ pub(super) fn write_replay(job: &ReplayJob<'_>) -> Result<String> {
     // Only the evaluation's worlds are simulated: plans for the training count are not needed.
     config.env.num_envs = config.run.eval_envs;
     let (checks, motion) = preflight(&config, job.motions_dir, job.store)?;
-    for line in &checks.motion_notices {
-        eprintln!("{line}");
+    if job.motion_notices {
+        for line in &checks.motion_notices {
+            eprintln!("{line}");
+        }
     }
     checks.policy.check(&checkpoint).context(
         "the checkpoint does not hold the policy its stored configuration describes (replay it with the instantmimic build that trained it)",
@@ -175,6 +179,7 @@ pub fn run(args: ReplayArgs) -> Result<()> {
         motions_dir: motions_dir.as_deref(),
         store: &store,
         device: args.device,
+        motion_notices: true,
     })?;
     print!("{report}");
     Ok(())

@@ -1,6 +1,8 @@
 //! `instantmimic train`: resolve the configuration (committed config of the motion, a file, or
 //! the baseline; then command-line overrides), check everything that needs no GPU, and hand
 //! over to the GPU loop. `--dry-run` stops after the checks and prints the resolved config.
+//! After the run, `replay.html` of the final policy (`run.replay`, `--no-replay`): written here,
+//! above `train`, which does not import the viewer.
 
 use std::path::{Path, PathBuf};
 
@@ -298,6 +300,7 @@ fn replay_final_policy(
         motions_dir,
         store,
         device,
+        motion_notices: false,
     })?;
     Ok(format!(
         "replay               the final policy (iteration {iteration}) as the evaluation runs it (--no-replay: none)\n{report}"

@@ -113,11 +113,6 @@ impl RunDir {
         self.root.join(CURVE_FILE)
     }
 
-    /// The final policy's replay page (`run.replay`).
-    pub fn replay_path(&self) -> PathBuf {
-        self.root.join(REPLAY_FILE)
-    }
-
     pub fn summary_path(&self) -> PathBuf {
         self.root.join(SUMMARY_FILE)
     }
