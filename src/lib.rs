@@ -17,6 +17,8 @@
 //! - [`recording`]: body poses per control step (reference and simulated) for the page and the exporters.
 //! - [`viewer`]: the replay page, one self-contained HTML file (three.js inlined).
 //! - [`export`]: recordings to glTF, BVH and DeepMimic files; a checkpoint's policy to ONNX.
+//! - [`replay`]: a checkpoint's policy run as the evaluation runs it, every step recorded
+//!   (above `train`, `env` and `recording`; the command line writes its page).
 //! - [`cli`]: the command line.
 
 pub mod assets;
@@ -32,5 +34,6 @@ pub mod plan;
 pub mod plot;
 pub mod ppo;
 pub mod recording;
+pub mod replay;
 pub mod train;
 pub mod viewer;

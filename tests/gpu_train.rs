@@ -3,8 +3,8 @@
 //! `cargo test --release --features gpu --test gpu_train -- --nocapture --test-threads 1`
 //!
 //! - A short run on the 32-world plans writes a metrics line per iteration with finite losses,
-//!   evaluates on schedule, checkpoints, writes the curve and the summary, and `eval` reads its
-//!   checkpoint back.
+//!   evaluates on schedule, checkpoints, writes the curve, the summary and `replay.html`, and
+//!   `eval` reads its checkpoint back.
 //! - A run killed with SIGKILL mid-training resumes from its last checkpoint and its metrics
 //!   continue without a gap or a duplicate (issue 5's acceptance).
 #![cfg(feature = "gpu")]
@@ -118,7 +118,8 @@ fn a_short_run_trains_evaluates_checkpoints_and_its_checkpoint_evaluates() {
         times.windows(2).all(|w| w[1] > w[0]),
         "active time grows: {times:?}"
     );
-    for file in ["curve.png", "summary.json", "config.toml"] {
+    // replay.html: run.replay is on by default (tests/gpu_replay.rs checks its contents).
+    for file in ["curve.png", "summary.json", "config.toml", "replay.html"] {
         assert!(run.join(file).is_file(), "{file} written");
     }
     let checkpoint = run.join("checkpoints/iter_00000006.safetensors");

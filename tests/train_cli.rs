@@ -1,6 +1,7 @@
-//! `instantmimic train` and `eval`, run as a user would: `--dry-run` end to end, resume
-//! inspection, and bad inputs that must give one clear line. Without a GPU the training and
-//! evaluation themselves fail with one clear line (tests/gpu_train.rs runs them on a GPU).
+//! `instantmimic train`, `eval` and `replay`, run as a user would: `--dry-run` end to end,
+//! resume inspection, and bad inputs that must give one clear line. Without a GPU the training,
+//! evaluation and replay themselves fail with one clear line (tests/gpu_train.rs and
+//! tests/gpu_replay.rs run them on a GPU).
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -107,6 +108,7 @@ fn dry_run_checks_everything_and_prints_the_resolved_config() {
         "iteration     32 envs x 16 steps = 512 frames; 3 epochs x 4 minibatches",
         "evaluation    every 2 iterations: 32 envs x 30 steps (1.000 s), success at 0.9",
         "budgets       12.5 s active, 40 iterations",
+        "replay        replay.html of the final policy at the end (run.replay; --no-replay: none)",
         "dry run: everything that needs no GPU checks out",
     ] {
         assert!(text.contains(expected), "missing {expected:?} in\n{text}");
@@ -548,4 +550,118 @@ fn a_users_clip_replaces_the_built_in_one_of_the_same_name_and_the_run_says_so()
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+}
+
+#[test]
+fn no_replay_turns_the_runs_replay_page_off() {
+    let ws = workspace();
+    let motions = ws.path().join("motions");
+    let out = run(
+        &["train", "--motion", "synth", "--no-replay", "--dry-run"],
+        Some(&motions),
+        ws.path(),
+    );
+    let text = succeeded(&out);
+    assert!(
+        text.contains("replay        none (run.replay = false)"),
+        "{text}"
+    );
+    assert!(text.contains("with --no-replay"), "{text}");
+    assert!(!resolved_config(&text).run.replay);
+    // The default writes it, and a resumed run takes the flag too (a [run] key).
+    let (_, default) = TrainConfig::general_default("synth");
+    assert!(default.unwrap().run.replay);
+    let root = ws.path().join("runs/synth");
+    make_run(&root, &motions, 5);
+    let out = run(
+        &[
+            "train",
+            "--resume",
+            root.to_str().unwrap(),
+            "--no-replay",
+            "--dry-run",
+        ],
+        None,
+        ws.path(),
+    );
+    assert!(!resolved_config(&succeeded(&out)).run.replay);
+}
+
+#[test]
+fn replay_checks_its_input_then_needs_the_gpu() {
+    let ws = workspace();
+    let motions = ws.path().join("motions");
+    let root = ws.path().join("runs/synth");
+    let config = make_run(&root, &motions, 5);
+    let path = root.join("checkpoints/iter_00000005.safetensors");
+    let path_arg = path.to_str().unwrap();
+    let page = ws.path().join("replay.html");
+    let page_arg = page.to_str().unwrap();
+    let replay = |extra: &[&str]| {
+        let mut args = vec!["replay", "--checkpoint", path_arg];
+        args.extend_from_slice(extra);
+        run(&args, None, ws.path())
+    };
+    // Episodes: 1 to the evaluation's 32 envs.
+    for episodes in ["0", "33"] {
+        let err = one_line_error(&replay(&["--episodes", episodes, "--out", page_arg]));
+        assert!(
+            err.contains(&format!(
+                "--episodes {episodes}: the evaluation runs 32 envs (run.eval_envs, the worlds of its plan); give 1 to 32"
+            )),
+            "{err}"
+        );
+    }
+    // Output paths in a missing directory, the page's or the recording's.
+    let err = one_line_error(&replay(&["--out", "no/such/dir/replay.html"]));
+    assert!(err.contains("does not exist (create it first)"), "{err}");
+    let err = one_line_error(&replay(&[
+        "--out",
+        page_arg,
+        "--save-recording",
+        "no/such/dir/r.safetensors",
+    ]));
+    assert!(err.contains("no/such/dir"), "{err}");
+    // A checkpoint of another shape.
+    let mut wrong = Checkpoint::load(&path).unwrap();
+    let mut bigger = config.clone();
+    bigger.policy.actor_hidden = vec![64];
+    add_policy(&mut wrong, &bigger);
+    let wrong_path = ws.path().join("wrong.safetensors");
+    wrong.save(&wrong_path).unwrap();
+    let err = one_line_error(&run(
+        &[
+            "replay",
+            "--checkpoint",
+            wrong_path.to_str().unwrap(),
+            "--out",
+            page_arg,
+        ],
+        None,
+        ws.path(),
+    ));
+    assert!(
+        err.contains("the checkpoint does not hold the policy its stored configuration describes (replay it with the instantmimic build that trained it)")
+            && err.contains("tensor `actor.params` is f32 ["),
+        "{err}"
+    );
+    // A missing checkpoint.
+    let err = one_line_error(&run(
+        &[
+            "replay",
+            "--checkpoint",
+            "none.safetensors",
+            "--out",
+            page_arg,
+        ],
+        None,
+        ws.path(),
+    ));
+    assert!(err.contains("none.safetensors"), "{err}");
+    // Good input reaches the GPU, and writes nothing without one.
+    if without_a_gpu() {
+        let err = one_line_error(&replay(&["--start", "clip_start", "--out", page_arg]));
+        assert!(err.contains("needs an NVIDIA GPU"), "{err}");
+        assert!(!page.exists());
+    }
 }

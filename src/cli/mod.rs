@@ -9,6 +9,7 @@ mod motion;
 mod motion_list;
 mod output;
 mod plan;
+mod replay;
 mod train;
 
 use anyhow::Result;
@@ -41,6 +42,9 @@ enum Command {
     Train(train::TrainArgs),
     /// Evaluate a checkpoint by the paper's protocol.
     Eval(eval::EvalArgs),
+    /// Replay a checkpoint's policy as the evaluation runs it and write an HTML page to watch it
+    /// (see docs/replay.md).
+    Replay(replay::ReplayArgs),
     /// Export a recording or a clip (glb, bvh, deepmimic) or a checkpoint's policy (onnx).
     Export(export::ExportArgs),
 }
@@ -56,6 +60,7 @@ pub fn run() -> Result<()> {
         Command::Hpo(args) => hpo::run_hpo(args),
         Command::Train(args) => train::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Replay(args) => replay::run(args),
         Command::Export(args) => export::run(args),
     }
 }

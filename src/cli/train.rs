@@ -1,17 +1,22 @@
 //! `instantmimic train`: resolve the configuration (committed config of the motion, a file, or
 //! the baseline; then command-line overrides), check everything that needs no GPU, and hand
 //! over to the GPU loop. `--dry-run` stops after the checks and prints the resolved config.
+//! After the run, `replay.html` of the final policy (`run.replay`, `--no-replay`): written here,
+//! above `train`, which does not import the viewer.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 
+use super::replay::{ReplayJob, write_replay};
 use crate::motion::library::motions_dir_from_env;
 use crate::plan::PlanStore;
+use crate::replay::DEFAULT_EPISODES;
+use crate::train::run_dir::{CHECKPOINTS_DIR, REPLAY_FILE};
 use crate::train::{
-    ProgressMode, RunDir, RunStart, TrainConfig, TrainSetup, default_run_dir, preflight,
-    train_on_gpu,
+    CheckpointDir, ProgressMode, RunDir, RunStart, TrainConfig, TrainSetup, default_run_dir,
+    preflight, train_on_gpu,
 };
 
 /// `--progress`.
@@ -65,6 +70,9 @@ pub struct TrainArgs {
     /// Iterations between evaluations, overriding `run.eval_interval`.
     #[arg(long)]
     eval_interval: Option<u32>,
+    /// Write no `replay.html` at the end of the run (overriding `run.replay`).
+    #[arg(long)]
+    no_replay: bool,
     /// Override any configuration key: `--set ppo.clip=0.25 --set reward.ee_frame=root`
     /// (repeatable; applied after the other flags; values are TOML).
     #[arg(long = "set", value_name = "KEY=VALUE", value_parser = parse_override)]
@@ -98,6 +106,10 @@ impl TrainArgs {
         if let Some(n) = self.eval_interval {
             config.run.eval_interval = n;
             flags.push("--eval-interval");
+        }
+        if self.no_replay {
+            config.run.replay = false;
+            flags.push("--no-replay");
         }
     }
 }
@@ -236,10 +248,15 @@ pub fn run(args: TrainArgs) -> Result<()> {
         println!("dry run: everything that needs no GPU checks out");
         return Ok(());
     }
+    let root = match &start {
+        RunStart::New { root, .. } | RunStart::Resume { root } => root.clone(),
+    };
+    let replay = config.run.replay;
+    let keep = config.run.keep_checkpoints;
     let setup = TrainSetup {
         config,
         motion,
-        store,
+        store: store.clone(),
         preflight: checks,
         start,
         progress,
@@ -247,5 +264,45 @@ pub fn run(args: TrainArgs) -> Result<()> {
     };
     let summary = train_on_gpu(setup)?;
     print!("{}", summary.report());
+    if replay {
+        // The run's results are written; a replay that fails leaves them as they are.
+        match replay_final_policy(&root, keep, motions_dir.as_deref(), &store, args.device) {
+            Ok(report) => print!("{report}"),
+            Err(e) => eprintln!(
+                "warning: {} not written: {e:#}",
+                root.join(REPLAY_FILE).display()
+            ),
+        }
+    }
     Ok(())
+}
+
+/// Writes `replay.html` into the run directory from its newest checkpoint (the final policy:
+/// a run checkpoints when it stops), replayed as the evaluation runs it.
+fn replay_final_policy(
+    root: &Path,
+    keep: u32,
+    motions_dir: Option<&Path>,
+    store: &PlanStore,
+    device: usize,
+) -> Result<String> {
+    let checkpoints = CheckpointDir::new(&root.join(CHECKPOINTS_DIR), keep);
+    let Some((iteration, checkpoint)) = checkpoints.list()?.pop() else {
+        bail!("the run has no checkpoint to replay");
+    };
+    let page = root.join(REPLAY_FILE);
+    let report = write_replay(&ReplayJob {
+        checkpoint: &checkpoint,
+        episodes: DEFAULT_EPISODES,
+        start: None,
+        page: &page,
+        recording: None,
+        motions_dir,
+        store,
+        device,
+        motion_notices: false,
+    })?;
+    Ok(format!(
+        "replay               the final policy (iteration {iteration}) as the evaluation runs it (--no-replay: none)\n{report}"
+    ))
 }

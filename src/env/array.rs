@@ -3,7 +3,7 @@
 use std::marker::PhantomData;
 use std::sync::Arc;
 
-use crate::cuda::{BlasMatrix, DeviceMemory, Gpu};
+use crate::cuda::{BlasMatrix, DeviceMemory, Gpu, Stream};
 use crate::plan::Simulation;
 
 use super::abi::{ARRAY_DESCRIPTOR_BYTES, Element, array_descriptor};
@@ -187,6 +187,34 @@ impl<T: Element, const N: usize> DeviceArray<T, N> {
         self.memory
             .copy_to_host(self.offset * T::SIZE, &mut bytes)?;
         Ok(bytes.chunks_exact(T::SIZE).map(T::read_le).collect())
+    }
+
+    /// Queues on `stream` a copy of this whole array into `dst` from element `at` on (any
+    /// shape: elements in row-major order), e.g. one frame of a per-step record; inside a
+    /// capture it becomes a copy node of the graph.
+    pub fn copy_into<const M: usize>(
+        &self,
+        stream: &Stream,
+        dst: &DeviceArray<T, M>,
+        at: usize,
+    ) -> Result<(), EnvError> {
+        let len = self.len();
+        if at.checked_add(len).is_none_or(|end| end > dst.len()) {
+            return Err(EnvError::ArrayShape {
+                shape: dst.shape.to_vec(),
+                reason: format!(
+                    "a copy of {len} elements to element {at} does not fit in {} elements",
+                    dst.len()
+                ),
+            });
+        }
+        let byte_offset = (at * T::SIZE) as u64;
+        stream.memcpy_dtod(
+            dst.device_ptr() + byte_offset,
+            self.device_ptr(),
+            len * T::SIZE,
+        )?;
+        Ok(())
     }
 
     pub fn shape(&self) -> [usize; N] {

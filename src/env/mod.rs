@@ -7,7 +7,8 @@
 //! - [`DeviceArray`]: owned typed device arrays, passed as Warp `array_t` descriptors.
 //! - [`DeviceReferenceTable`]: a reference table on the GPU and its lookup.
 //! - [`Rollout`]: the rollout graph (policy, PD control and physics, reward and termination,
-//!   masked reset, observation), captured once and replayed; [`Phase`]s name its parts.
+//!   masked reset, observation), captured once and replayed; [`Phase`]s name its parts;
+//!   [`Trajectory`] records every env's state per control step (for `replay`).
 //! - [`layout`]: what the kernels need from the character and the config.
 //! - [`abi`]: Warp's kernel ABI (values as bytes, descriptors, packed argument buffers).
 //! - [`manifest`]: `ptx/env/manifest.json`, parsed and validated (shared with `build.rs`).
@@ -19,10 +20,12 @@ mod evaluation;
 mod kernels;
 pub mod layout;
 pub mod manifest;
+mod normalizer;
 mod phases;
 mod reference;
 mod rollout;
 mod statistics;
+mod trajectory;
 
 pub use abi::{ArgBuffer, Element, KernelAbi, ParamAbi, ParamKind, ScalarType, WarpStruct};
 pub use array::{DeviceArray, DeviceArray2, DeviceArray3, DeviceArray4};
@@ -35,6 +38,7 @@ pub use phases::{Phase, PhaseEvents, PhaseRecorder};
 pub use reference::DeviceReferenceTable;
 pub use rollout::{EpisodeState, PhysicsState, Rollout, RolloutError, RolloutStorage};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
+pub use trajectory::{Trajectory, TrajectoryFrames};
 // The launchers, their ABI constants and the Rust structs of Warp structs, all generated.
 pub use kernels::*;
 

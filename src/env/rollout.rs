@@ -23,8 +23,10 @@ use super::layout::{
     DeviceJointLayout, JointLayout, observation_params, observation_size, reset_params,
     tracking_params, without_failures,
 };
+use super::normalizer::ObservationNormalizer;
 use super::phases::{Phase, PhaseEvents, PhaseRecorder};
 use super::statistics::RolloutStatistics;
+use super::trajectory::Trajectory;
 use super::{
     DeviceArray, DeviceArray2, DeviceArray3, DeviceReferenceTable, EnvError, EnvKernels,
     ObservationParams, ResetParams, TrackingParams, Yardstick,
@@ -416,7 +418,7 @@ impl Rollout {
             } else {
                 PhaseRecorder::untimed()
             };
-            self.record_rollout(s, &mut phases)?;
+            self.record_rollout(s, &mut phases, None)?;
             events = phases.into_events();
             Ok::<(), RolloutError>(())
         })?;
@@ -427,7 +429,51 @@ impl Rollout {
     /// Queues the whole rollout on `s` (inside a capture: the training loop records it into one
     /// graph with the update).
     pub fn record(&self, s: &Stream) -> Result<(), RolloutError> {
-        self.record_rollout(s, &mut PhaseRecorder::untimed())
+        self.record_rollout(s, &mut PhaseRecorder::untimed(), None)
+    }
+
+    /// An empty record of every env's state for each of this rollout's frames: the state it
+    /// starts from and the one after each control step.
+    pub fn new_trajectory(&self) -> Result<Trajectory, RolloutError> {
+        Ok(Trajectory::zeros(
+            &self.gpu,
+            self.horizon + 1,
+            self.num_envs,
+            NQ,
+            NBODY,
+        )?)
+    }
+
+    /// Captures the rollout into a graph that also copies every env's state into
+    /// `trajectory` (from [`Rollout::new_trajectory`]) at the start and after every control
+    /// step, before the reset. The graph writes into `trajectory` at each launch: keep it
+    /// alive as long as the graph.
+    pub fn capture_recorded(&self, trajectory: &Trajectory) -> Result<Graph, RolloutError> {
+        if trajectory.frames() != self.horizon + 1 {
+            return Err(RolloutError::Setup(format!(
+                "a record of {} frames for a rollout of {} steps (make it with Rollout::new_trajectory)",
+                trajectory.frames(),
+                self.horizon
+            )));
+        }
+        let stream = self.gpu.stream();
+        let graph = stream
+            .capture(|s| self.record_rollout(s, &mut PhaseRecorder::untimed(), Some(trajectory)))?;
+        graph.upload(stream)?;
+        Ok(graph)
+    }
+
+    /// The reference table's rows at `times` (s), `[times.len(), stride]` row-major, as the
+    /// env kernels see them (`lookup_reference`); waits for the GPU.
+    pub fn reference_rows(&self, times: &[f32]) -> Result<Vec<f32>, RolloutError> {
+        if times.is_empty() {
+            return Ok(Vec::new());
+        }
+        let device_times = DeviceArray::from_slice(&self.gpu, [times.len()], times)?;
+        let rows = DeviceArray::zeros(&self.gpu, [times.len(), self.table.stride()])?;
+        self.table
+            .lookup(&self.kernels, self.gpu.stream(), &device_times, &rows)?;
+        Ok(rows.download()?)
     }
 
     /// The loaded kernels (shared with the PPO update).
@@ -435,8 +481,16 @@ impl Rollout {
         &self.kernels
     }
 
-    fn record_rollout(&self, s: &Stream, phases: &mut PhaseRecorder) -> Result<(), RolloutError> {
+    fn record_rollout(
+        &self,
+        s: &Stream,
+        phases: &mut PhaseRecorder,
+        trajectory: Option<&Trajectory>,
+    ) -> Result<(), RolloutError> {
         let gpu = &self.gpu;
+        if let Some(trajectory) = trajectory {
+            self.record_frame(s, trajectory, 0)?;
+        }
         if self.is_training() {
             self.statistics.record_clear(s)?;
             // Storage row 0 is this rollout's first input: the policy's input buffer, which
@@ -476,6 +530,9 @@ impl Rollout {
                         &self.state.failure,
                     )?,
                 }
+                if let Some(trajectory) = trajectory {
+                    self.record_frame(s, trajectory, t + 1)?;
+                }
                 Ok::<(), RolloutError>(())
             })?;
             phases.phase(gpu, s, Phase::Reset, |s| self.record_reset(s, t32))?;
@@ -491,6 +548,18 @@ impl Rollout {
             self.statistics.record_end(&self.kernels, s, self.horizon)?;
             Ok::<(), RolloutError>(())
         })?;
+        Ok(())
+    }
+
+    /// Frame `frame` of `trajectory`: the physics state and the episode times as they are now.
+    fn record_frame(
+        &self,
+        s: &Stream,
+        trajectory: &Trajectory,
+        frame: usize,
+    ) -> Result<(), RolloutError> {
+        let p = &self.physics;
+        trajectory.record_frame(s, frame, &p.qpos, &p.xpos, &p.xquat, &self.state.ref_time)?;
         Ok(())
     }
 
@@ -651,103 +720,6 @@ impl Rollout {
             &norm.raw,
         )?;
         norm.record(&self.kernels, s, &self.storage.observations, row, update)?;
-        Ok(())
-    }
-}
-
-/// Running normalization of the observation (kernels_py/env/observe.py): the raw rows, the
-/// normalized ones (the policy's input) and float64 moments.
-struct ObservationNormalizer {
-    raw: DeviceArray2<f32>,
-    normalized: DeviceArray2<f32>,
-    batch_sum: DeviceArray<f64>,
-    batch_sum_sq: DeviceArray<f64>,
-    /// [running count, merged count] (see `observation_moments_merge`).
-    count: DeviceArray<f64>,
-    mean: DeviceArray<f64>,
-    m2: DeviceArray<f64>,
-    clip: f32,
-    size: usize,
-}
-
-/// Envs summed by one thread of `observation_moments` (observe.py `MOMENT_CHUNK`).
-const MOMENT_CHUNK: usize = 64;
-
-impl ObservationNormalizer {
-    fn new(gpu: &Gpu, n: usize, size: usize, clip: f32) -> Result<Self, EnvError> {
-        Ok(ObservationNormalizer {
-            raw: DeviceArray::zeros(gpu, [n, size])?,
-            normalized: DeviceArray::zeros(gpu, [n, size])?,
-            batch_sum: DeviceArray::zeros(gpu, [size])?,
-            batch_sum_sq: DeviceArray::zeros(gpu, [size])?,
-            count: DeviceArray::zeros(gpu, [2])?,
-            mean: DeviceArray::zeros(gpu, [size])?,
-            m2: DeviceArray::zeros(gpu, [size])?,
-            clip,
-            size,
-        })
-    }
-
-    /// A normalizer for `n` envs that reads `source`'s statistics (shared device memory, so it
-    /// always sees the latest) and must never update them.
-    fn frozen(gpu: &Gpu, source: &ObservationNormalizer, n: usize) -> Result<Self, EnvError> {
-        let size = source.size;
-        let share = |a: &DeviceArray<f64>| a.view(0, [a.len()]);
-        Ok(ObservationNormalizer {
-            raw: DeviceArray::zeros(gpu, [n, size])?,
-            normalized: DeviceArray::zeros(gpu, [n, size])?,
-            batch_sum: DeviceArray::zeros(gpu, [size])?,
-            batch_sum_sq: DeviceArray::zeros(gpu, [size])?,
-            count: share(&source.count)?,
-            mean: share(&source.mean)?,
-            m2: share(&source.m2)?,
-            clip: source.clip,
-            size,
-        })
-    }
-
-    fn record(
-        &self,
-        kernels: &EnvKernels,
-        s: &Stream,
-        storage: &DeviceArray3<f32>,
-        row: usize,
-        update: bool,
-    ) -> Result<(), EnvError> {
-        let [n, d] = self.raw.shape();
-        if update {
-            kernels.observation_moments(
-                s,
-                n.div_ceil(MOMENT_CHUNK) * d,
-                &self.raw,
-                &self.batch_sum,
-                &self.batch_sum_sq,
-            )?;
-            kernels.observation_moments_merge(
-                s,
-                d,
-                n as f64,
-                &self.batch_sum,
-                &self.batch_sum_sq,
-                &self.count,
-                &self.mean,
-                &self.m2,
-            )?;
-            let ptr = self.count.device_ptr();
-            s.memcpy_dtod(ptr, ptr + 8, 8)?;
-        }
-        kernels.observation_normalize(
-            s,
-            n * d,
-            &self.raw,
-            &self.count,
-            &self.mean,
-            &self.m2,
-            self.clip,
-            row as i32,
-            &self.normalized,
-            storage,
-        )?;
         Ok(())
     }
 }

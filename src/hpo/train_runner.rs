@@ -68,6 +68,8 @@ impl TrainRunner {
         // Checkpoints cost time outside the objective but still cost wall time: only the last.
         config.run.checkpoint_interval = 0;
         config.run.keep_checkpoints = 1;
+        // Trials train through `train_with`, which writes no replay page (only `train` does).
+        config.run.replay = false;
         config
             .validate("the trial's configuration")
             .map_err(|e| problem(e.to_string()))?;

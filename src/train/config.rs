@@ -351,6 +351,9 @@ pub struct RunConfig {
     /// Times a run goes back to its last good state (with half the learning rate) after a
     /// non-finite iteration before it stops with an error (src/train/divergence.rs).
     pub max_divergence_restores: u32,
+    /// Write `replay.html` into the run directory at the end: the final policy replayed as the
+    /// evaluation runs it (`train --no-replay` turns it off).
+    pub replay: bool,
 }
 
 impl Default for RunConfig {
@@ -368,6 +371,7 @@ impl Default for RunConfig {
             checkpoint_interval: 50,
             keep_checkpoints: 3,
             max_divergence_restores: 3,
+            replay: true,
         }
     }
 }

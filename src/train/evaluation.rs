@@ -26,6 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use super::config::{EvalStart, TrainConfig};
 use super::metrics::nan_from_null;
+use crate::env::EpisodeScore;
 pub use crate::env::{SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M, yardstick};
 use crate::motion::LoopMode;
 
@@ -53,6 +54,20 @@ impl EvaluationSummary {
     /// The paper's second criterion: average pose error at most [`POSE_ERROR_TARGET_M`].
     pub fn meets_pose_error_target(&self) -> bool {
         self.pose_error_m <= POSE_ERROR_TARGET_M
+    }
+}
+
+impl From<&EpisodeScore> for EnvEvaluation {
+    /// The training report's view of one evaluation episode of the GPU.
+    fn from(score: &EpisodeScore) -> EnvEvaluation {
+        EnvEvaluation {
+            completed: score.completed,
+            steps: score.steps,
+            pose_error_sum: score.pose_error_sum,
+            global_position_error_sum: score.mpjpe_sum,
+            ee_position_error_sum: score.ee_position_error_sum,
+            ee_orientation_error_sum: score.ee_rotation_error_sum,
+        }
     }
 }
 

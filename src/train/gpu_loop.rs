@@ -8,7 +8,9 @@ use super::checkpoint::Checkpoint;
 use super::config::TrainConfig;
 use super::divergence::{DivergenceEvent, DivergenceGuard, non_finite_report};
 use super::error::TrainError;
-use super::evaluation::{EvaluationSummary, episode_rows, evaluation_start_times, summarize};
+use super::evaluation::{
+    EnvEvaluation, EvaluationSummary, episode_rows, evaluation_start_times, summarize,
+};
 use super::preflight::Preflight;
 use super::progress::ProgressMode;
 use super::session::RunSession;
@@ -247,9 +249,44 @@ impl WallTime {
     }
 }
 
+/// A [`Trainer`] at the evaluation's size holding `checkpoint`'s policy: what `eval` and
+/// `replay` run the evaluation rollout of. The policy's home is a training rollout; at the
+/// evaluation's own size it needs no other plans than the evaluation's.
+pub fn evaluation_trainer(
+    gpu: &Gpu,
+    config: &TrainConfig,
+    checkpoint: &Checkpoint,
+    motion: &ReferenceMotion,
+    store: &PlanStore,
+) -> Result<Trainer, TrainError> {
+    let mut small = config.clone();
+    small.env.num_envs = config.run.eval_envs;
+    let trainer = Trainer::new(gpu, store, motion, &small)?;
+    trainer.restore(checkpoint)?;
+    Ok(trainer)
+}
+
+/// Every env's episode of `episodes` evaluation rounds of a checkpoint's policy on the GPU
+/// (the same start states each round; rounds differ only by the physics' own run-to-run
+/// variation), round after round, and the control steps of a complete episode.
+pub fn evaluate_episodes_on_gpu(
+    gpu: &Gpu,
+    config: &TrainConfig,
+    checkpoint: &Checkpoint,
+    motion: &ReferenceMotion,
+    store: &PlanStore,
+    episodes: u32,
+) -> Result<(Vec<EnvEvaluation>, u32), TrainError> {
+    let trainer = evaluation_trainer(gpu, config, checkpoint, motion, store)?;
+    let mut all = Vec::new();
+    for _ in 0..episodes.max(1) {
+        all.extend(trainer.evaluate()?);
+    }
+    Ok((all, trainer.evaluation_steps()))
+}
+
 /// Evaluates a checkpoint's policy on the GPU: `episodes` rounds of `config.run.eval_envs`
-/// deterministic envs (the same start states each round; rounds differ only by the physics'
-/// own run-to-run variation), summarized together.
+/// deterministic envs ([`evaluate_episodes_on_gpu`]), summarized together.
 pub fn evaluate_on_gpu(
     config: &TrainConfig,
     checkpoint: &Checkpoint,
@@ -258,19 +295,6 @@ pub fn evaluate_on_gpu(
     episodes: u32,
 ) -> Result<EvaluationSummary, TrainError> {
     let gpu = Gpu::open(0)?;
-    // The policy's home is a training rollout; at the evaluation's own size it needs no other
-    // plans than the evaluation's.
-    let mut small = config.clone();
-    small.env.num_envs = config.run.eval_envs;
-    let trainer = Trainer::new(&gpu, store, motion, &small)?;
-    trainer.restore(checkpoint)?;
-    let mut all = Vec::new();
-    for _ in 0..episodes.max(1) {
-        all.extend(trainer.evaluate()?);
-    }
-    Ok(summarize(
-        &all,
-        trainer.evaluation_steps(),
-        config.run.success_rate,
-    )?)
+    let (all, steps) = evaluate_episodes_on_gpu(&gpu, config, checkpoint, motion, store, episodes)?;
+    Ok(summarize(&all, steps, config.run.success_rate)?)
 }

@@ -39,7 +39,10 @@ pub use evaluation::{
     clamped_clip_steps, evaluation_start_times, evaluation_steps, format_evaluation_report,
     summarize, yardstick,
 };
-pub use gpu_loop::{RunStart, TrainSetup, evaluate_on_gpu, train_on_gpu, train_with};
+pub use gpu_loop::{
+    RunStart, TrainSetup, evaluate_episodes_on_gpu, evaluate_on_gpu, evaluation_trainer,
+    train_on_gpu, train_with,
+};
 pub use metrics::{EpisodeEnds, IterationRecord, MetricsLog, ResumedMetrics, UpdateStats};
 pub use preflight::{PolicyShapes, Preflight, check_plans, load_motion, preflight};
 pub use progress::{Progress, ProgressMode};

@@ -237,6 +237,15 @@ impl Preflight {
             config.run.checkpoint_interval,
             config.run.keep_checkpoints
         );
+        let _ = writeln!(
+            out,
+            "replay        {}",
+            if config.run.replay {
+                "replay.html of the final policy at the end (run.replay; --no-replay: none)"
+            } else {
+                "none (run.replay = false)"
+            }
+        );
         out
     }
 }

@@ -7,6 +7,8 @@
 //! checkpoints/     iter_<iteration>.safetensors, the last run.keep_checkpoints of them
 //! summary.json     the final report (written when the run stops)
 //! evaluation.json  every env's episode of the last evaluation (written when the run stops)
+//! replay.html      the final policy's replay page (`run.replay`; written by the command line
+//!                  after the run, src/cli/train.rs, since `train` does not import the viewer)
 //! ```
 //!
 //! A new run refuses a directory that holds files unless told to overwrite it; a resumed run
@@ -40,14 +42,16 @@ pub const CURVE_FILE: &str = "curve.png";
 pub const CHECKPOINTS_DIR: &str = "checkpoints";
 pub const SUMMARY_FILE: &str = "summary.json";
 pub const EVALUATION_FILE: &str = "evaluation.json";
+pub const REPLAY_FILE: &str = "replay.html";
 /// Everything a run writes (what `--overwrite` removes; other files are left alone).
-const RUN_ENTRIES: [&str; 6] = [
+const RUN_ENTRIES: [&str; 7] = [
     CONFIG_FILE,
     METRICS_FILE,
     CURVE_FILE,
     CHECKPOINTS_DIR,
     SUMMARY_FILE,
     EVALUATION_FILE,
+    REPLAY_FILE,
 ];
 
 /// The directory of one run.

@@ -9,7 +9,7 @@
 //! 32-world plans that reads the same policy parameters.
 
 use crate::cuda::{DeviceMemory, Gpu, Graph, Readback};
-use crate::env::{DeviceArray, EpisodeScore, Rollout, RolloutTotals, TOTALS};
+use crate::env::{DeviceArray, Rollout, RolloutTotals, TOTALS};
 use crate::motion::ReferenceMotion;
 use crate::plan::PlanStore;
 use crate::ppo::reduce::{record_clear, record_sum_of_squares};
@@ -167,7 +167,7 @@ impl Trainer {
             .episode_scores()
             .ok_or_else(|| TrainError::Setup("the evaluation rollout keeps no scores".to_owned()))?
             .download()?;
-        Ok(scores.iter().map(env_evaluation).collect())
+        Ok(scores.iter().map(EnvEvaluation::from).collect())
     }
 
     /// Overflow flags of the training worlds' physics since the plans were loaded (waits for
@@ -185,6 +185,12 @@ impl Trainer {
     /// Control steps of one evaluation episode.
     pub fn evaluation_steps(&self) -> u32 {
         self.evaluation.horizon() as u32
+    }
+
+    /// The evaluation rollout (the paper's protocol on `run.eval_envs` envs, sharing the
+    /// policy), for a caller that captures its own graph of it (`replay` records every step).
+    pub fn evaluation_rollout(&self) -> &Rollout {
+        &self.evaluation
     }
 
     /// Adds the policy, the normalization and everything an exact continuation needs to
@@ -260,18 +266,6 @@ impl Trainer {
     /// Floating-point operations of one update (for throughput reports).
     pub fn update_flops(&self) -> f64 {
         self.update.flops().total()
-    }
-}
-
-/// The training report's view of one evaluation episode.
-fn env_evaluation(score: &EpisodeScore) -> EnvEvaluation {
-    EnvEvaluation {
-        completed: score.completed,
-        steps: score.steps,
-        pose_error_sum: score.pose_error_sum,
-        global_position_error_sum: score.mpjpe_sum,
-        ee_position_error_sum: score.ee_position_error_sum,
-        ee_orientation_error_sum: score.ee_rotation_error_sum,
     }
 }
 

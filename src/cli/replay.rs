@@ -1,0 +1,186 @@
+//! `instantmimic replay`: a checkpoint's policy run as `eval` runs it, every control step of a
+//! few envs recorded, written as a self-contained HTML page (and, on request, the recording).
+//! `train` writes its `replay.html` through [`write_replay`] too (docs/replay.md).
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use clap::{Args, ValueEnum};
+
+use crate::cuda::Gpu;
+use crate::motion::library::motions_dir_from_env;
+use crate::plan::PlanStore;
+use crate::recording::Outcome;
+use crate::replay::{DEFAULT_EPISODES, Replay, ReplayInput, chosen_envs, record_replay};
+use crate::train::{Checkpoint, EvalStart, format_evaluation_report, preflight};
+use crate::viewer::save_page;
+
+/// `--start`, spelled as `run.eval_start` is.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+#[value(rename_all = "snake_case")]
+enum StartArg {
+    /// Env i of n starts at i/n of a looping clip (a clamped clip starts every env at 0).
+    Spread,
+    /// Every env starts at the clip's beginning.
+    ClipStart,
+}
+
+#[derive(Args, Debug)]
+pub struct ReplayArgs {
+    /// A checkpoint (`runs/<name>/checkpoints/iter_*.safetensors`).
+    #[arg(long)]
+    checkpoint: PathBuf,
+    /// Episodes to record: evaluation envs spread evenly over the evaluation's `run.eval_envs`.
+    #[arg(long, default_value_t = DEFAULT_EPISODES)]
+    episodes: u32,
+    /// Where the episodes start (default: the checkpoint's `run.eval_start`).
+    #[arg(long, value_enum)]
+    start: Option<StartArg>,
+    /// The HTML page to write (its directory must exist).
+    #[arg(long)]
+    out: PathBuf,
+    /// Also write the recording (safetensors; `export --recording` reads it).
+    #[arg(long)]
+    save_recording: Option<PathBuf>,
+    /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
+    /// (default: $INSTANTMIMIC_MOTIONS).
+    #[arg(long)]
+    motions_dir: Option<PathBuf>,
+    /// A directory laid out like ptx/ instead of the plans built into the binary.
+    #[arg(long)]
+    assets: Option<PathBuf>,
+    /// CUDA device ordinal.
+    #[arg(long, default_value_t = 0)]
+    device: usize,
+}
+
+/// What [`write_replay`] replays and where it writes.
+pub(super) struct ReplayJob<'a> {
+    pub checkpoint: &'a Path,
+    pub episodes: u32,
+    pub start: Option<EvalStart>,
+    pub page: &'a Path,
+    pub recording: Option<&'a Path>,
+    pub motions_dir: Option<&'a Path>,
+    pub store: &'a PlanStore,
+    pub device: usize,
+    /// Print the motion's notices (a user's clip replacing a built-in one); `train` has already.
+    pub motion_notices: bool,
+}
+
+/// Checks everything that needs no GPU (the output paths, the checkpoint and its policy's
+/// shapes, the motion, the plans, the episodes), replays on the GPU, writes the page (and the
+/// recording), and returns the report to print.
+pub(super) fn write_replay(job: &ReplayJob<'_>) -> Result<String> {
+    super::output::check_output_path(job.page)?;
+    if let Some(path) = job.recording {
+        super::output::check_output_path(path)?;
+    }
+    let checkpoint = Checkpoint::load(job.checkpoint)?;
+    let mut config = checkpoint.meta.config(checkpoint.source())?;
+    if let Some(start) = job.start {
+        config.run.eval_start = start;
+    }
+    // Only the evaluation's worlds are simulated: plans for the training count are not needed.
+    config.env.num_envs = config.run.eval_envs;
+    let (checks, motion) = preflight(&config, job.motions_dir, job.store)?;
+    if job.motion_notices {
+        for line in &checks.motion_notices {
+            eprintln!("{line}");
+        }
+    }
+    checks.policy.check(&checkpoint).context(
+        "the checkpoint does not hold the policy its stored configuration describes (replay it with the instantmimic build that trained it)",
+    )?;
+    let envs = chosen_envs(job.episodes, config.run.eval_envs)?;
+    let gpu = Gpu::open(job.device)?;
+    let label = job.checkpoint.display().to_string();
+    let replay = record_replay(
+        &gpu,
+        &ReplayInput {
+            config: &config,
+            checkpoint: &checkpoint,
+            motion: &motion,
+            store: job.store,
+            motion_source: &checks.motion_source,
+            checkpoint_label: &label,
+            episodes: job.episodes,
+        },
+    )?;
+    let m = &checkpoint.meta;
+    let title = format!(
+        "{}: replay of iteration {} (seed {}, {:.1} s active)",
+        config.motion, m.iteration, m.seed, m.active_time_s
+    );
+    let bytes = save_page(job.page, &replay.recording, motion.character(), &title)?;
+    let mut report = episodes_report(&replay, &envs, checks.eval_steps, config.run.success_rate);
+    let _ = writeln!(
+        report,
+        "wrote                {} ({:.2} MB, {} frames)",
+        job.page.display(),
+        bytes as f64 / 1e6,
+        replay.recording.meta.total_frames()
+    );
+    if let Some(path) = job.recording {
+        replay.recording.save(path)?;
+        let _ = writeln!(report, "wrote                {}", path.display());
+    }
+    Ok(report)
+}
+
+/// One line per recorded episode, then the evaluation of every env of the same rollout.
+fn episodes_report(replay: &Replay, envs: &[usize], steps: u32, threshold: f64) -> String {
+    let mut out = String::new();
+    let dt = replay.recording.meta.control_dt;
+    for (e, (info, env)) in replay.recording.episodes().iter().zip(envs).enumerate() {
+        let outcome = match info.outcome {
+            Outcome::Succeeded => "succeeds".to_string(),
+            Outcome::Completed => "completes, past the global MPJPE bound".to_string(),
+            Outcome::Reference => "reference".to_string(),
+            Outcome::Failed => match (info.failed_frame, &info.failure) {
+                (Some(f), Some(why)) => {
+                    format!("fails at frame {f} ({:.2} s): {why}", f as f64 * dt)
+                }
+                (_, Some(why)) => format!("fails: {why}"),
+                _ => "fails".to_string(),
+            },
+        };
+        let _ = writeln!(
+            out,
+            "{:<21}env {env}, from {:.3} s of the clip, {} steps: {outcome}",
+            format!("episode {e}"),
+            info.start_time_s,
+            info.frames.saturating_sub(1)
+        );
+    }
+    let _ = writeln!(
+        out,
+        "evaluation           every env of the same rollout ({} x {steps} steps):",
+        replay.evaluations.len()
+    );
+    out.push_str(&format_evaluation_report(&replay.summary, threshold));
+    out
+}
+
+/// Runs `replay`.
+pub fn run(args: ReplayArgs) -> Result<()> {
+    let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
+    let store = PlanStore::new(args.assets.as_deref());
+    let report = write_replay(&ReplayJob {
+        checkpoint: &args.checkpoint,
+        episodes: args.episodes,
+        start: args.start.map(|s| match s {
+            StartArg::Spread => EvalStart::Spread,
+            StartArg::ClipStart => EvalStart::ClipStart,
+        }),
+        page: &args.out,
+        recording: args.save_recording.as_deref(),
+        motions_dir: motions_dir.as_deref(),
+        store: &store,
+        device: args.device,
+        motion_notices: true,
+    })?;
+    print!("{report}");
+    Ok(())
+}
