@@ -15,7 +15,7 @@ use instantmimic::hpo::state::RunDir;
 use instantmimic::hpo::trial::build_runners;
 use instantmimic::hpo::{HpoConfig, RunnerPool, Search};
 use instantmimic::motion::{Character, MotionClip};
-use instantmimic::plan::{Plan, PlanInfo, load_plan_with_limit, pack};
+use instantmimic::plan::{Plan, load_plan_with_limit, pack};
 use instantmimic::recording::{Recording, synthetic};
 use instantmimic::train::{Checkpoint, CheckpointMeta, TrainConfig};
 
@@ -50,14 +50,7 @@ fn plan_reader_never_panics() {
 
 #[test]
 fn packed_plan_reader_never_panics() {
-    let info = PlanInfo {
-        name: "step".into(),
-        nworld: 2,
-        physics: serde_json::json!({"timestep": 0.005, "iterations": 4})
-            .as_object()
-            .cloned()
-            .unwrap_or_default(),
-    };
+    let info = plan_support::step_info();
     let seeds = vec![
         pack(PLAN_FIXTURE, &info).expect("the fixture packs"),
         pack(&plan_support::every_kind_plan().to_bytes(), &info).expect("a synthetic plan packs"),

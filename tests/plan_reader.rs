@@ -123,14 +123,7 @@ fn fixture_round_trips_byte_for_byte() {
 #[test]
 fn packing_keeps_everything_but_all_zero_initial_data() {
     let raw = parse_fixture();
-    let info = PlanInfo {
-        name: "step".into(),
-        nworld: 2,
-        physics: serde_json::json!({"timestep": 0.005, "iterations": 4})
-            .as_object()
-            .cloned()
-            .unwrap_or_default(),
-    };
+    let info = plan_support::step_info();
     let packed = match pack(FIXTURE, &info) {
         Ok(packed) => packed,
         Err(err) => panic!("pack failed: {err}"),

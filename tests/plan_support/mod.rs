@@ -6,9 +6,9 @@
 use instantmimic::plan::{
     Alloc, ArchSuffix, BinaryKind, Binding, BsrFromTriplets, BsrTranspose, BvhUpdate,
     CompileRecipe, DeviceType, FallbackReason, HashGridUpdate, IfOp, Kernel, KernelLaunch,
-    LaunchParam, MemcpyD2D, MemcpyH2D, Memset, Memtile, Module, Op, Plan, PlanHeader, RadixSort,
-    Reduction, ReductionKind, Region, RegionRef, Relocation, RelocationTarget, RunlengthEncode,
-    ScalarType, Scan, SegmentedSort, WhileOp,
+    LaunchParam, MemcpyD2D, MemcpyH2D, Memset, Memtile, Module, Op, Plan, PlanHeader, PlanInfo,
+    RadixSort, Reduction, ReductionKind, Region, RegionRef, Relocation, RelocationTarget,
+    RunlengthEncode, ScalarType, Scan, SegmentedSort, WhileOp,
 };
 
 pub const MODULE_HASH: &str = "0123456789abcdef0123456789abcdef0123456789abcdef0123456789abcdef";
@@ -69,6 +69,18 @@ pub fn launch(data: RegionRef) -> KernelLaunch {
         ],
         adjoint_params: Vec::new(),
         value_data,
+    }
+}
+
+/// The plan info of a 2-world step plan (what `pack` stores beside the plan).
+pub fn step_info() -> PlanInfo {
+    PlanInfo {
+        name: "step".into(),
+        nworld: 2,
+        physics: serde_json::json!({"timestep": 0.005, "iterations": 4})
+            .as_object()
+            .cloned()
+            .unwrap_or_default(),
     }
 }
 
