@@ -26,7 +26,7 @@ use std::sync::Arc;
 
 use instantmimic::bench::bench_gemm;
 use instantmimic::cuda::{Blas, BlasMatrix, GemmMath, GemmOperand, Gpu};
-use instantmimic::env::{DeviceArray, DeviceArray2, EnvKernels};
+use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels};
 use instantmimic::ppo::reduce::record_clear;
 use instantmimic::ppo::{GaussianPolicy, GemmPath, PolicyGemm, PpoUpdate, mlp_layout};
 use instantmimic::train::{GemmSetting, TrainConfig};

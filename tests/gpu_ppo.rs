@@ -24,8 +24,8 @@ mod ppo_support;
 use std::sync::Arc;
 
 use instantmimic::cuda::Gpu;
-use instantmimic::env::ScheduleParams;
-use instantmimic::env::{DeviceArray, DeviceArray2, EnvKernels, PpoLossParams};
+use instantmimic::kernels::ScheduleParams;
+use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels, PpoLossParams};
 use instantmimic::ppo::adam::{AdamMoments, adam_params, record_schedule};
 use instantmimic::ppo::backward::{
     record_linear_backward_input_elu, record_linear_backward_weight,

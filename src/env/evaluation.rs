@@ -7,7 +7,7 @@
 
 use crate::cuda::Gpu;
 
-use super::{DeviceArray, DeviceArray2, EnvError, Yardstick};
+use crate::kernels::{DeviceArray, DeviceArray2, EnvError, Yardstick};
 
 /// A body farther than this from its reference (m) fails an evaluation episode: the committed
 /// `tracking_distance` before the success yardstick was separated from the training termination

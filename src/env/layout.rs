@@ -7,7 +7,7 @@ use crate::motion::Character;
 use crate::motion::character::JointType;
 use crate::train::{EndEffectorFrame, ObsConfig, TrainConfig};
 
-use super::{DeviceArray, EnvError, ObservationParams, ResetParams, TrackingParams};
+use crate::kernels::{DeviceArray, EnvError, ObservationParams, ResetParams, TrackingParams};
 
 /// Joint kinds as the kernels read them (`kernels_py/env/control.py`).
 pub const BALL: i32 = 0;

@@ -18,6 +18,7 @@ use crate::plan::{PlanStore, Simulation, SimulationError};
 use crate::ppo::{ActStorage, GaussianPolicy, PolicyError};
 use crate::train::{ActionMode, EvalStart, TrainConfig, evaluation_steps};
 
+use super::DeviceReferenceTable;
 use super::evaluation::{EpisodeScores, yardstick};
 use super::layout::{
     DeviceJointLayout, JointLayout, observation_params, observation_size, reset_params,
@@ -27,9 +28,9 @@ use super::normalizer::ObservationNormalizer;
 use super::phases::{Phase, PhaseEvents, PhaseRecorder};
 use super::statistics::RolloutStatistics;
 use super::trajectory::Trajectory;
-use super::{
-    DeviceArray, DeviceArray2, DeviceArray3, DeviceReferenceTable, EnvError, EnvKernels,
-    ObservationParams, ResetParams, TrackingParams, Yardstick,
+use crate::kernels::{
+    DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels, ObservationParams, ResetParams,
+    TrackingParams, Yardstick,
 };
 
 /// Why a rollout cannot be built or run.

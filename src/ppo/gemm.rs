@@ -15,7 +15,7 @@
 use std::sync::Arc;
 
 use crate::cuda::{Blas, CudaError, GemmMath, Gpu, Stream};
-use crate::env::{DeviceArray, DeviceArray2, EnvError, EnvKernels};
+use crate::kernels::{DeviceArray, DeviceArray2, EnvError, EnvKernels};
 use crate::train::GemmSetting;
 
 use super::PpoError;

@@ -13,7 +13,7 @@ use rand_distr::{Distribution, StandardNormal};
 use thiserror::Error;
 
 use crate::cuda::{Gpu, Stream};
-use crate::env::{DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels};
+use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels};
 use crate::train::PolicyConfig;
 
 use super::gemm::PolicyGemm;

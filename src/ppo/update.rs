@@ -26,7 +26,7 @@ use std::sync::Arc;
 use thiserror::Error;
 
 use crate::cuda::{CudaError, Gpu, Stream};
-use crate::env::{
+use crate::kernels::{
     AdamParams, DeviceArray, DeviceArray2, EnvError, EnvKernels, PpoLossParams, ScheduleParams,
 };
 use crate::train::{KlMeasure, TrainConfig};

@@ -18,7 +18,8 @@ mod assemble;
 use thiserror::Error;
 
 use crate::cuda::{CudaError, Gpu};
-use crate::env::{EnvError, RolloutError};
+use crate::env::RolloutError;
+use crate::kernels::EnvError;
 use crate::motion::{ReferenceMotion, TableLayout};
 use crate::plan::PlanStore;
 use crate::recording::{Recording, RecordingError};

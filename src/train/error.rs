@@ -53,7 +53,7 @@ pub enum TrainError {
     #[error(transparent)]
     Cuda(#[from] crate::cuda::CudaError),
     #[error(transparent)]
-    Env(#[from] crate::env::EnvError),
+    Env(#[from] crate::kernels::EnvError),
     #[error(transparent)]
     Rollout(#[from] crate::env::RolloutError),
     #[error(transparent)]

@@ -9,7 +9,8 @@
 //! 32-world plans that reads the same policy parameters.
 
 use crate::cuda::{DeviceMemory, Gpu, Graph, Readback};
-use crate::env::{DeviceArray, Rollout, RolloutTotals, TOTALS};
+use crate::env::{Rollout, RolloutTotals, TOTALS};
+use crate::kernels::DeviceArray;
 use crate::motion::ReferenceMotion;
 use crate::plan::PlanStore;
 use crate::ppo::reduce::{record_clear, record_sum_of_squares};
