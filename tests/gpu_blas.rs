@@ -380,7 +380,15 @@ fn ppo_update_and_rollout_forward_with_cublas_match_warp_tiles() {
             to_f64(&policy.mean().download().unwrap()),
             to_f64(&policy.value().download().unwrap()),
         );
-        let update = PpoUpdate::new(&gpu, kernels.clone(), policy, &config).expect("update");
+        let update = PpoUpdate::new(
+            &gpu,
+            kernels.clone(),
+            policy,
+            &config.ppo,
+            config.env.num_envs as usize,
+            config.seed,
+        )
+        .expect("update");
         let graph = gpu
             .stream()
             .capture(|s| update.record(s, &batch.batch()))

@@ -5,22 +5,33 @@
 //! - [`Rollout`]: the rollout graph (policy, PD control and physics, reward and termination,
 //!   masked reset, observation), captured once and replayed; [`Phase`]s name its parts;
 //!   [`Trajectory`] records every env's state per control step (for `replay`).
+//! - [`RolloutPolicy`]: what the rollout needs of a policy; the caller owns the policy and
+//!   lends it to each capture.
 //! - [`layout`]: what the kernels need from the character and the config.
+//! - [`config`]: the task's configuration sections and [`RolloutConfig`], what a rollout is
+//!   built from.
 
+pub mod config;
 mod evaluation;
 pub mod layout;
 mod normalizer;
 mod phases;
+mod policy;
 mod reference;
 mod rollout;
 mod statistics;
 mod trajectory;
 
+pub use config::{
+    ActionMode, EndEffectorFrame, EnvConfig, EvalStart, EvaluationProtocol, ObsConfig,
+    RewardConfig, RolloutConfig,
+};
 pub use evaluation::{
     COMPLETED, EpisodeScore, EpisodeScores, FAILED, RUNNING, SUCCESS_MAX_BODY_DISTANCE_M,
-    SUCCESS_MAX_ROOT_DROP_M, yardstick,
+    SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps, evaluation_episode_steps, yardstick,
 };
 pub use phases::{Phase, PhaseEvents, PhaseRecorder};
+pub use policy::{ActStorage, RolloutPolicy};
 pub use reference::DeviceReferenceTable;
 pub use rollout::{EpisodeState, PhysicsState, Rollout, RolloutError, RolloutStorage};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};

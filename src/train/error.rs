@@ -58,6 +58,8 @@ pub enum TrainError {
     Rollout(#[from] crate::env::RolloutError),
     #[error(transparent)]
     Ppo(#[from] crate::ppo::PpoError),
+    #[error(transparent)]
+    Policy(#[from] crate::ppo::PolicyError),
 }
 
 impl TrainError {
