@@ -1,7 +1,8 @@
 //! instantmimic: physics-based humanoid skills trained in seconds on one GPU.
 //!
 //! The physics is MuJoCo Warp, captured once at build time as replayable plans (`.wrp`) and
-//! replayed here through CUDA graphs. Layout:
+//! replayed here through CUDA graphs. The modules are layers that import only downward
+//! (docs/architecture.md). Layout:
 //! - [`cuda`]: the driver (context, modules, launches, graphs). The only place with `unsafe` CUDA calls.
 //! - [`plan`]: the `.wrp` plan format: reader, validation, packing, replay into CUDA graphs.
 //! - [`kernels`]: our own kernels (AOT-compiled Warp PTX, typed launchers, device arrays).
