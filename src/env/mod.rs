@@ -6,7 +6,7 @@
 //!   masked reset, observation), captured once and replayed; [`Phase`]s name its parts;
 //!   [`Trajectory`] records every env's state per control step (for `replay`).
 //! - [`RolloutPolicy`]: what the rollout needs of a policy; the caller owns the policy and
-//!   lends it to each capture.
+//!   lends it to each capture. [`RolloutStorage`]: what the rollout records for the learner.
 //! - [`layout`]: what the kernels need from the character and the config.
 //! - [`config`]: the task's configuration sections and [`RolloutConfig`], what a rollout is
 //!   built from.
@@ -20,6 +20,7 @@ mod policy;
 mod reference;
 mod rollout;
 mod statistics;
+mod storage;
 mod trajectory;
 
 pub use config::{
@@ -31,8 +32,9 @@ pub use evaluation::{
     SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps, evaluation_episode_steps, yardstick,
 };
 pub use phases::{Phase, PhaseEvents, PhaseRecorder};
-pub use policy::{ActStorage, RolloutPolicy};
+pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;
-pub use rollout::{EpisodeState, PhysicsState, Rollout, RolloutError, RolloutStorage};
+pub use rollout::{EpisodeState, PhysicsState, Rollout, RolloutError};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
+pub use storage::{ActStorage, RolloutStorage};
 pub use trajectory::{Trajectory, TrajectoryFrames};

@@ -5,9 +5,10 @@
 //! each capture of the rollout (docs/architecture.md).
 
 use crate::cuda::Stream;
-use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
+use crate::kernels::{DeviceArray, DeviceArray2, EnvKernels};
 
 use super::rollout::RolloutError;
+use super::storage::ActStorage;
 
 /// What the rollout graph runs at the start of every control step.
 pub trait RolloutPolicy {
@@ -32,15 +33,4 @@ pub trait RolloutPolicy {
         t: usize,
         deterministic: bool,
     ) -> Result<(), RolloutError>;
-}
-
-/// Rollout storage rows the policy writes.
-pub struct ActStorage<'a> {
-    pub actions: &'a DeviceArray3<f32>,
-    pub means: &'a DeviceArray3<f32>,
-    pub log_probs: &'a DeviceArray2<f32>,
-    pub values: &'a DeviceArray2<f32>,
-    /// The update computes the values (`ppo.values_in_update`): the critic does not run here,
-    /// and what lands in `values` is stale until the update overwrites it.
-    pub values_in_update: bool,
 }

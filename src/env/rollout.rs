@@ -25,8 +25,9 @@ use super::layout::{
 };
 use super::normalizer::ObservationNormalizer;
 use super::phases::{Phase, PhaseEvents, PhaseRecorder};
-use super::policy::{ActStorage, RolloutPolicy};
+use super::policy::RolloutPolicy;
 use super::statistics::RolloutStatistics;
+use super::storage::{ActStorage, RolloutStorage};
 use super::trajectory::Trajectory;
 use crate::kernels::{
     DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels, ObservationParams, ResetParams,
@@ -49,39 +50,6 @@ pub enum RolloutError {
     Motion(String),
     #[error("{0}")]
     Setup(String),
-}
-
-/// Where a rollout leaves its data for the update: `[T, N, ...]` device arrays, `T` = horizon.
-pub struct RolloutStorage {
-    /// Normalized observations, `[T + 1, N, D]`: row t is the input of step t, row T the
-    /// observation after the last step (bootstrap).
-    pub observations: DeviceArray3<f32>,
-    /// Sampled actions `[T, N, A]` and their log-probabilities `[T, N]`.
-    pub actions: DeviceArray3<f32>,
-    /// The policy's means of those actions `[T, N, A]` (the update's analytic KL).
-    pub means: DeviceArray3<f32>,
-    pub log_probs: DeviceArray2<f32>,
-    /// Critic values of the observations `[T, N]`.
-    pub values: DeviceArray2<f32>,
-    /// Rewards and done flags `[T, N]` (flags 0 or 1).
-    pub rewards: DeviceArray2<f32>,
-    pub terminated: DeviceArray2<i32>,
-    pub truncated: DeviceArray2<i32>,
-}
-
-impl RolloutStorage {
-    fn zeros(gpu: &Gpu, t: usize, n: usize, obs: usize, act: usize) -> Result<Self, EnvError> {
-        Ok(RolloutStorage {
-            observations: DeviceArray::zeros(gpu, [t + 1, n, obs])?,
-            actions: DeviceArray::zeros(gpu, [t, n, act])?,
-            means: DeviceArray::zeros(gpu, [t, n, act])?,
-            log_probs: DeviceArray::zeros(gpu, [t, n])?,
-            values: DeviceArray::zeros(gpu, [t, n])?,
-            rewards: DeviceArray::zeros(gpu, [t, n])?,
-            terminated: DeviceArray::zeros(gpu, [t, n])?,
-            truncated: DeviceArray::zeros(gpu, [t, n])?,
-        })
-    }
 }
 
 /// Views of the physics buffers the env kernels read and write (shared with the plans).
