@@ -3,11 +3,11 @@
 //!   deterministic physics variant in `ptx/deterministic/` (read from its directory)
 //!   (`src/assets.rs`);
 //! - generates the typed launchers of our own env kernels from `ptx/env/manifest.json`
-//!   (`$OUT_DIR/env_kernels.rs`, included by `src/env/kernels.rs`), after checking the manifest
+//!   (`$OUT_DIR/env_kernels.rs`, included by `src/kernels/launchers.rs`), after checking the manifest
 //!   against the `.param` declarations of the PTX it describes. See `docs/kernels.md`.
 
 #[allow(dead_code)] // the library uses more of the manifest module than the build does
-#[path = "src/env/manifest.rs"]
+#[path = "src/kernels/manifest.rs"]
 mod manifest;
 
 #[path = "build/env_codegen.rs"]
@@ -101,7 +101,7 @@ fn run() -> Result<(), String> {
     let root = PathBuf::from(manifest_dir).join("ptx");
     println!("cargo:rerun-if-changed=ptx");
     println!("cargo:rerun-if-changed=build");
-    println!("cargo:rerun-if-changed=src/env/manifest.rs");
+    println!("cargo:rerun-if-changed=src/kernels/manifest.rs");
     embed_assets(&root, &out_dir)?;
     generate_env_kernels(&root, &out_dir)
 }

@@ -1,6 +1,6 @@
 //! Generates `$OUT_DIR/env_kernels.rs` from a validated `ptx/env/manifest.json`: one typed
 //! launcher per kernel, the ABI constants they pack with, and a Rust struct per Warp struct.
-//! The output is included by `src/env/kernels.rs`, whose imports it uses (`ArgBuffer`,
+//! The output is included by `src/kernels/launchers.rs`, whose imports it uses (`ArgBuffer`,
 //! `KernelAbi`, `DeviceArray`, ...). Part of `build.rs` (`#[path]`), std only besides the
 //! manifest module.
 

@@ -1,10 +1,12 @@
 //! instantmimic: physics-based humanoid skills trained in seconds on one GPU.
 //!
 //! The physics is MuJoCo Warp, captured once at build time as replayable plans (`.wrp`) and
-//! replayed here through CUDA graphs. Layout:
+//! replayed here through CUDA graphs. The modules are layers that import only downward
+//! (docs/architecture.md). Layout:
 //! - [`cuda`]: the driver (context, modules, launches, graphs). The only place with `unsafe` CUDA calls.
 //! - [`plan`]: the `.wrp` plan format: reader, validation, packing, replay into CUDA graphs.
-//! - [`env`]: our own kernels (AOT-compiled Warp PTX, typed launchers) and the rollout graph.
+//! - [`kernels`]: our own kernels (AOT-compiled Warp PTX, typed launchers, device arrays).
+//! - [`env`]: the tracking task on the GPU and its rollout graph.
 //! - [`ppo`]: the policy networks and the PPO update on the GPU.
 //! - [`motion`]: DeepMimic reference motions and their kinematics.
 //! - [`bench`]: benchmarks of physics and of the rollout, for `instantmimic bench`.
@@ -29,6 +31,7 @@ pub mod env;
 pub mod export;
 pub mod files;
 pub mod hpo;
+pub mod kernels;
 pub mod motion;
 pub mod plan;
 pub mod plot;

@@ -8,7 +8,7 @@ mod skip_support;
 
 use std::collections::BTreeSet;
 
-use instantmimic::env::KERNELS;
+use instantmimic::kernels::KERNELS;
 use kernel_checks::program::Step;
 use kernel_checks::{Check, Fixture, cpu, run_checks};
 

@@ -4,18 +4,18 @@
 
 // The generator as build.rs uses it, with the manifest module where it expects it.
 mod manifest {
-    pub use instantmimic::env::manifest::*;
+    pub use instantmimic::kernels::manifest::*;
 }
 #[path = "../build/env_codegen.rs"]
 mod env_codegen;
 
 use instantmimic::assets;
-use instantmimic::env::abi::{ARRAY_DESCRIPTOR_BYTES, array_descriptor, launch_bounds};
-use instantmimic::env::manifest::{
+use instantmimic::kernels::abi::{ARRAY_DESCRIPTOR_BYTES, array_descriptor, launch_bounds};
+use instantmimic::kernels::manifest::{
     ARRAY_LAYOUT, EnvManifest, ManifestError, SlotType, c_layout, launch_bounds_layout,
     ptx_entry_params,
 };
-use instantmimic::env::{ArgBuffer, KERNELS, LOOKUP_REFERENCE, MANIFEST_ASSET, ParamKind};
+use instantmimic::kernels::{ArgBuffer, KERNELS, LOOKUP_REFERENCE, MANIFEST_ASSET, ParamKind};
 use instantmimic::motion::rotation::SLERP_LINEAR_BELOW;
 use instantmimic::motion::table::{
     HEADER_CYCLE_DISPLACEMENT, HEADER_DURATION, HEADER_LEN, HEADER_NUM_ROWS, HEADER_ROW_DT,

@@ -26,7 +26,7 @@ use std::sync::Arc;
 
 use instantmimic::bench::bench_gemm;
 use instantmimic::cuda::{Blas, BlasMatrix, GemmMath, GemmOperand, Gpu};
-use instantmimic::env::{DeviceArray, DeviceArray2, EnvKernels};
+use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels};
 use instantmimic::ppo::reduce::record_clear;
 use instantmimic::ppo::{GaussianPolicy, GemmPath, PolicyGemm, PpoUpdate, mlp_layout};
 use instantmimic::train::{GemmSetting, TrainConfig};
@@ -380,7 +380,15 @@ fn ppo_update_and_rollout_forward_with_cublas_match_warp_tiles() {
             to_f64(&policy.mean().download().unwrap()),
             to_f64(&policy.value().download().unwrap()),
         );
-        let update = PpoUpdate::new(&gpu, kernels.clone(), policy, &config).expect("update");
+        let update = PpoUpdate::new(
+            &gpu,
+            kernels.clone(),
+            policy,
+            &config.ppo,
+            config.env.num_envs as usize,
+            config.seed,
+        )
+        .expect("update");
         let graph = gpu
             .stream()
             .capture(|s| update.record(s, &batch.batch()))

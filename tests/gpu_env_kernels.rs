@@ -10,7 +10,7 @@ mod skip_support;
 use std::collections::BTreeMap;
 
 use instantmimic::cuda::{Gpu, Stream};
-use instantmimic::env::{
+use instantmimic::kernels::{
     DeviceArray, Element, EnvKernels, ObservationParams, ResetParams, TrackingParams, Yardstick,
 };
 use kernel_checks::program::{Arg, HostData, Outputs, Program, Scalar, Step, StructArg};

@@ -24,8 +24,8 @@ mod ppo_support;
 use std::sync::Arc;
 
 use instantmimic::cuda::Gpu;
-use instantmimic::env::ScheduleParams;
-use instantmimic::env::{DeviceArray, DeviceArray2, EnvKernels, PpoLossParams};
+use instantmimic::kernels::ScheduleParams;
+use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels, PpoLossParams};
 use instantmimic::ppo::adam::{AdamMoments, adam_params, record_schedule};
 use instantmimic::ppo::backward::{
     record_linear_backward_input_elu, record_linear_backward_weight,
@@ -547,7 +547,15 @@ fn small_setup_with(
     let policy = GaussianPolicy::new(&gpu, &config.policy, d, a, n, seed).expect("policy");
     let mut rng = StdRng::seed_from_u64(seed);
     let rollout = RolloutStorage::sampled(&gpu, &kernels, &policy, t, &mut rng);
-    let update = PpoUpdate::new(&gpu, kernels.clone(), &policy, &config).expect("update");
+    let update = PpoUpdate::new(
+        &gpu,
+        kernels.clone(),
+        &policy,
+        &config.ppo,
+        config.env.num_envs as usize,
+        config.seed,
+    )
+    .expect("update");
     (gpu, kernels, policy, update, rollout, config)
 }
 
@@ -838,7 +846,15 @@ fn baseline_update_replay_time() {
     let policy = GaussianPolicy::new(&gpu, &config.policy, 353, 28, n, 7).expect("policy");
     let rollout =
         RolloutStorage::sampled(&gpu, &kernels, &policy, t, &mut StdRng::seed_from_u64(7));
-    let update = PpoUpdate::new(&gpu, kernels, &policy, &config).expect("update");
+    let update = PpoUpdate::new(
+        &gpu,
+        kernels,
+        &policy,
+        &config.ppo,
+        config.env.num_envs as usize,
+        config.seed,
+    )
+    .expect("update");
     let graph = gpu
         .stream()
         .capture(|s| update.record(s, &rollout.batch()))
@@ -882,7 +898,15 @@ fn values_in_update_writes_the_values_the_rollout_would_have() {
         .expect("clear the values");
     let mut on = config.clone();
     on.ppo.values_in_update = true;
-    let update = PpoUpdate::new(&gpu, kernels, &policy, &on).expect("update");
+    let update = PpoUpdate::new(
+        &gpu,
+        kernels,
+        &policy,
+        &on.ppo,
+        on.env.num_envs as usize,
+        on.seed,
+    )
+    .expect("update");
     let graph = gpu
         .stream()
         .capture(|s| update.record(s, &rollout.batch()))

@@ -13,7 +13,8 @@
 #![cfg(feature = "gpu")]
 
 use instantmimic::cuda::Gpu;
-use instantmimic::env::{DeviceArray, DeviceArray2, DeviceReferenceTable, EnvKernels};
+use instantmimic::env::DeviceReferenceTable;
+use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels};
 use instantmimic::motion::built_in::BUILT_IN_CLIPS;
 use instantmimic::motion::library::MotionSource;
 use instantmimic::motion::table::{HEADER_LEN, HUMANOID_LAYOUT};

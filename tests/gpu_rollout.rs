@@ -14,6 +14,7 @@ use instantmimic::env::Rollout;
 use instantmimic::motion::library::resolve_motion;
 use instantmimic::motion::{Character, ReferenceMotion};
 use instantmimic::plan::PlanStore;
+use instantmimic::ppo::GaussianPolicy;
 use instantmimic::train::TrainConfig;
 
 /// The built-in backflip clip.
@@ -32,14 +33,28 @@ fn config(num_envs: u32, horizon: u32) -> TrainConfig {
     config
 }
 
+/// A fresh policy of `config` for `rollout` (the trainer owns it and lends it to the rollout).
+fn policy_for(gpu: &Gpu, rollout: &Rollout, config: &TrainConfig) -> GaussianPolicy {
+    GaussianPolicy::new(
+        gpu,
+        &config.policy,
+        rollout.observation_size(),
+        rollout.action_size(),
+        rollout.num_envs(),
+        config.seed,
+    )
+    .expect("policy")
+}
+
 #[test]
 fn rollout_graph_has_no_host_work_and_replays_advance() {
     let gpu = Gpu::open(0).expect("a GPU");
     let store = PlanStore::new(None);
     let config = config(32, 8);
     let motion = motion();
-    let rollout = Rollout::new(&gpu, &store, &motion, &config).expect("rollout");
-    let (graph, _) = rollout.capture(false).expect("capture");
+    let rollout = Rollout::new(&gpu, &store, &motion, &config.rollout_config()).expect("rollout");
+    let policy = policy_for(&gpu, &rollout, &config);
+    let (graph, _) = rollout.capture(&policy, false).expect("capture");
     let nodes = graph.node_counts().expect("node counts");
     eprintln!("rollout graph nodes: {nodes:?}");
     for kind in [
@@ -206,15 +221,23 @@ fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
     let store = PlanStore::new(None);
     let config = config(32, 8);
     let motion = motion();
-    let training = Rollout::new(&gpu, &store, &motion, &config).expect("training rollout");
-    let evaluation =
-        Rollout::evaluation(&training, &store, &motion, &config).expect("evaluation rollout");
+    let rollout_config = config.rollout_config();
+    let training = Rollout::new(&gpu, &store, &motion, &rollout_config).expect("training rollout");
+    let policy = policy_for(&gpu, &training, &config);
+    let evaluation = Rollout::evaluation(&training, &store, &motion, &rollout_config)
+        .expect("evaluation rollout");
+    // As the trainer lends it: the training parameters with the evaluation's batch.
+    let evaluation_policy = policy
+        .with_batch(&gpu, evaluation.num_envs())
+        .expect("evaluation policy");
     assert_eq!(
-        evaluation.policy.actor_parameters().device_ptr(),
-        training.policy.actor_parameters().device_ptr(),
+        evaluation_policy.actor_parameters().device_ptr(),
+        policy.actor_parameters().device_ptr(),
         "the evaluation must read the training policy's parameters"
     );
-    let (graph, _) = evaluation.capture(false).expect("capture");
+    let (graph, _) = evaluation
+        .capture(&evaluation_policy, false)
+        .expect("capture");
     let nodes = graph.node_counts().expect("node counts");
     assert_eq!(nodes.get("host").copied().unwrap_or(0), 0, "{nodes:?}");
     let horizon = evaluation.horizon() as u32;

@@ -11,7 +11,7 @@ use serde::Serialize;
 
 use super::timing::timed_seconds;
 use crate::cuda::{Blas, GemmMath, Gpu};
-use crate::env::{DeviceArray, EnvError, EnvKernels};
+use crate::kernels::{DeviceArray, EnvError, EnvKernels};
 use crate::ppo::policy::{TILE, TILE_THREADS};
 
 /// One GEMM shape: `[rows, inputs] x [inputs, outputs]`.

@@ -14,6 +14,7 @@ use crate::cuda::{Gpu, Graph, NvtxRange};
 use crate::env::{Phase, Rollout, RolloutError};
 use crate::motion::ReferenceMotion;
 use crate::plan::{PlanStore, Simulation, SimulationError};
+use crate::ppo::GaussianPolicy;
 use crate::train::TrainConfig;
 
 /// Frames per second of `graph` (one rollout of `frames_per_launch` frames), after `warmup`
@@ -135,9 +136,18 @@ pub fn bench_rollout(
     rounds: u32,
 ) -> Result<RolloutBench, RolloutError> {
     let started = Instant::now();
-    let rollout = Rollout::new(gpu, store, motion, config)?;
-    let (graph, _) = rollout.capture(false)?;
-    let (timed_graph, events) = rollout.capture(true)?;
+    let rollout = Rollout::new(gpu, store, motion, &config.rollout_config())?;
+    let policy = GaussianPolicy::new(
+        gpu,
+        &config.policy,
+        rollout.observation_size(),
+        rollout.action_size(),
+        rollout.num_envs(),
+        config.seed,
+    )
+    .map_err(|e| RolloutError::Policy(Box::new(e)))?;
+    let (graph, _) = rollout.capture(&policy, false)?;
+    let (timed_graph, events) = rollout.capture(&policy, true)?;
     let events = events.ok_or_else(|| RolloutError::Setup("no phase events".to_owned()))?;
     let floor = physics_only_graph(
         rollout.simulation(),
@@ -192,7 +202,7 @@ pub fn bench_rollout(
         substeps: rollout.substeps(),
         horizon: rollout.horizon(),
         observation_size: rollout.observation_size(),
-        gemm: rollout.policy.gemm().describe(),
+        gemm: policy.gemm().describe(),
         launches,
         rounds: rounds.max(1),
         frames_per_s,

@@ -14,7 +14,7 @@ use crate::motion::library::{motions_dir_from_env, resolve_motion};
 use crate::plan::{PlanStore, ReplayOrder};
 use crate::train::{GemmSetting, TrainConfig};
 
-/// `bench rollout --gemm`: `policy.gemm` (src/train/config.rs, `GemmSetting`).
+/// `bench rollout --gemm`: `policy.gemm` (src/ppo/config.rs, `GemmSetting`).
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum GemmArg {
     /// cuBLAS f32 when libcublas can be loaded, else Warp tiles.
@@ -92,7 +92,7 @@ struct RolloutArgs {
     #[arg(long)]
     motion: String,
     /// Training configuration (TOML); its `motion` key is replaced by --motion. Default: the
-    /// built-in baseline (src/train/config.rs).
+    /// built-in baseline (src/{env,ppo,train}/config.rs).
     #[arg(long)]
     config: Option<PathBuf>,
     /// Number of envs, overriding `env.num_envs` (a step plan for this count must exist).

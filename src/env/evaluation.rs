@@ -6,8 +6,8 @@
 //! the device and the host reads them once, after the rollout ([`EpisodeScores::download`]).
 
 use crate::cuda::Gpu;
-
-use super::{DeviceArray, DeviceArray2, EnvError, Yardstick};
+use crate::kernels::{DeviceArray, DeviceArray2, EnvError, Yardstick};
+use crate::motion::LoopMode;
 
 /// A body farther than this from its reference (m) fails an evaluation episode: the committed
 /// `tracking_distance` before the success yardstick was separated from the training termination
@@ -101,4 +101,48 @@ pub struct EpisodeScore {
     pub ee_rotation_error_sum: f64,
     /// Sum of rewards.
     pub episode_return: f64,
+}
+
+/// Control steps of an evaluation episode: `fixed` (`run.eval_steps`), or one pass of the clip,
+/// ceil(duration / control dt) (a step shorter than rounding noise is not counted). A clip that
+/// does not loop ends its episodes itself (`reward_termination` truncates when the next
+/// reference time would pass the clip's end): at most [`clamped_clip_steps`] of them.
+pub fn evaluation_episode_steps(
+    fixed: Option<u32>,
+    clip_duration_s: f64,
+    control_dt_s: f64,
+    loop_mode: LoopMode,
+) -> u32 {
+    let steps = fixed.unwrap_or_else(|| {
+        let steps = (clip_duration_s / control_dt_s - 1e-9).ceil();
+        if steps.is_finite() && steps >= 1.0 {
+            steps.min(f64::from(u32::MAX)) as u32
+        } else {
+            1
+        }
+    });
+    match loop_mode {
+        LoopMode::Wrap => steps,
+        LoopMode::Clamp => steps.min(clamped_clip_steps(clip_duration_s, control_dt_s)),
+    }
+}
+
+/// Control steps from the start of a clip that does not loop until the kernel truncates the
+/// episode at its end, in the kernel's own float32 arithmetic: the reference time advances by
+/// dt per step, and the step whose next reference time would pass the duration is the last.
+pub fn clamped_clip_steps(clip_duration_s: f64, control_dt_s: f64) -> u32 {
+    let (duration, dt) = (clip_duration_s as f32, control_dt_s as f32);
+    if !(dt > 0.0 && duration.is_finite()) {
+        return 1;
+    }
+    let mut time = 0.0f32;
+    let mut steps = 1u32;
+    loop {
+        let reference = time + dt;
+        if reference + dt > duration || steps == u32::MAX {
+            return steps;
+        }
+        time = reference;
+        steps += 1;
+    }
 }

@@ -2,12 +2,12 @@
 //! layout, the end effectors, the observation size and the kernels' parameter structs. All of it
 //! is computed at run time from `configs/characters/*.json` and `configs/train/*.toml`.
 
+use super::config::{EndEffectorFrame, ObsConfig, RolloutConfig};
 use crate::cuda::Gpu;
 use crate::motion::Character;
 use crate::motion::character::JointType;
-use crate::train::{EndEffectorFrame, ObsConfig, TrainConfig};
 
-use super::{DeviceArray, EnvError, ObservationParams, ResetParams, TrackingParams};
+use crate::kernels::{DeviceArray, EnvError, ObservationParams, ResetParams, TrackingParams};
 
 /// Joint kinds as the kernels read them (`kernels_py/env/control.py`).
 pub const BALL: i32 = 0;
@@ -294,7 +294,7 @@ pub fn observation_blocks(
 }
 
 /// The reward and termination parameters of `config` at control timestep `dt`.
-pub fn tracking_params(config: &TrainConfig, dt: f64) -> TrackingParams {
+pub fn tracking_params(config: &RolloutConfig, dt: f64) -> TrackingParams {
     let (r, e) = (&config.reward, &config.env);
     TrackingParams {
         pose_weight: r.pose_weight,
@@ -332,14 +332,14 @@ pub fn without_failures(tracking: &TrackingParams) -> TrackingParams {
 }
 
 /// The reset parameters of `config` at control timestep `dt`.
-pub fn reset_params(config: &TrainConfig, dt: f64) -> ResetParams {
+pub fn reset_params(config: &RolloutConfig, dt: f64) -> ResetParams {
     ResetParams {
         // Warp's rand_init takes an int seed. The policy's sampling folds the config's u64 as
         // `seed ^ seed >> 32` with the same per-(iteration, step, env) offsets, so the reset
         // mixes it differently: the two streams must not coincide.
         seed: ((config.seed ^ 0x5851_F42D_4C95_7F2D).wrapping_mul(0xD1B5_4A32_D192_ED03) >> 32)
             as u32 as i32,
-        horizon: config.ppo.horizon as i32,
+        horizon: config.horizon as i32,
         dt: dt as f32,
         noise_std: config.env.motion_noise_std,
         // Training draws every start time from the adaptive phase CDF.
@@ -363,6 +363,7 @@ pub fn observation_params(obs: &ObsConfig, dt: f64) -> ObservationParams {
 #[cfg(test)]
 mod seed_tests {
     use super::*;
+    use crate::env::config::{EvalStart, EvaluationProtocol};
 
     #[test]
     fn observation_blocks_tile_the_observation() {
@@ -392,9 +393,18 @@ mod seed_tests {
     #[test]
     fn the_reset_and_the_policy_draw_from_different_streams() {
         for seed in [0u64, 1, 2, 42, u64::MAX] {
-            let config = TrainConfig {
+            let config = RolloutConfig {
+                env: Default::default(),
+                reward: Default::default(),
+                obs: Default::default(),
+                horizon: 32,
                 seed,
-                ..TrainConfig::with_motion("walk")
+                values_in_update: true,
+                evaluation: EvaluationProtocol {
+                    envs: 32,
+                    steps: None,
+                    start: EvalStart::Spread,
+                },
             };
             let policy_seed = (seed ^ (seed >> 32)) as u32 as i32;
             assert_ne!(

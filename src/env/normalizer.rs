@@ -3,7 +3,7 @@
 
 use crate::cuda::{Gpu, Stream};
 
-use super::{DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels};
+use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels};
 
 /// Running normalization of the observation (kernels_py/env/observe.py): the raw rows, the
 /// normalized ones (the policy's input) and float64 moments.

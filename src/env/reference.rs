@@ -4,9 +4,7 @@
 use crate::cuda::{Gpu, Stream};
 use crate::motion::ReferenceTable;
 
-use super::array::{DeviceArray, DeviceArray2};
-use super::error::EnvError;
-use super::kernels::EnvKernels;
+use crate::kernels::{DeviceArray, DeviceArray2, EnvError, EnvKernels};
 
 /// [`ReferenceTable::data`] on the device, with its quaternion and position offsets. Env
 /// kernels read [`DeviceReferenceTable::table`] with the `@wp.func`s of

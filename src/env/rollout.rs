@@ -15,21 +15,23 @@ use crate::cuda::{CudaError, Gpu, Graph, Stream};
 use crate::motion::LoopMode;
 use crate::motion::{ReferenceMotion, ReferenceTable};
 use crate::plan::{PlanStore, Simulation, SimulationError};
-use crate::ppo::{ActStorage, GaussianPolicy, PolicyError};
-use crate::train::{ActionMode, EvalStart, TrainConfig, evaluation_steps};
 
-use super::evaluation::{EpisodeScores, yardstick};
+use super::DeviceReferenceTable;
+use super::config::{ActionMode, EnvConfig, EvalStart, RolloutConfig};
+use super::evaluation::{EpisodeScores, evaluation_episode_steps, yardstick};
 use super::layout::{
     DeviceJointLayout, JointLayout, observation_params, observation_size, reset_params,
     tracking_params, without_failures,
 };
 use super::normalizer::ObservationNormalizer;
 use super::phases::{Phase, PhaseEvents, PhaseRecorder};
+use super::policy::RolloutPolicy;
 use super::statistics::RolloutStatistics;
+use super::storage::{ActStorage, RolloutStorage};
 use super::trajectory::Trajectory;
-use super::{
-    DeviceArray, DeviceArray2, DeviceArray3, DeviceReferenceTable, EnvError, EnvKernels,
-    ObservationParams, ResetParams, TrackingParams, Yardstick,
+use crate::kernels::{
+    DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels, ObservationParams, ResetParams,
+    TrackingParams, Yardstick,
 };
 
 /// Why a rollout cannot be built or run.
@@ -41,45 +43,13 @@ pub enum RolloutError {
     Simulation(#[from] SimulationError),
     #[error(transparent)]
     Env(#[from] EnvError),
+    /// What the policy's implementation reports (`ppo::PolicyError` for PPO's policy).
     #[error(transparent)]
-    Policy(#[from] PolicyError),
+    Policy(Box<dyn std::error::Error + Send + Sync>),
     #[error("reference motion: {0}")]
     Motion(String),
     #[error("{0}")]
     Setup(String),
-}
-
-/// Where a rollout leaves its data for the update: `[T, N, ...]` device arrays, `T` = horizon.
-pub struct RolloutStorage {
-    /// Normalized observations, `[T + 1, N, D]`: row t is the input of step t, row T the
-    /// observation after the last step (bootstrap).
-    pub observations: DeviceArray3<f32>,
-    /// Sampled actions `[T, N, A]` and their log-probabilities `[T, N]`.
-    pub actions: DeviceArray3<f32>,
-    /// The policy's means of those actions `[T, N, A]` (the update's analytic KL).
-    pub means: DeviceArray3<f32>,
-    pub log_probs: DeviceArray2<f32>,
-    /// Critic values of the observations `[T, N]`.
-    pub values: DeviceArray2<f32>,
-    /// Rewards and done flags `[T, N]` (flags 0 or 1).
-    pub rewards: DeviceArray2<f32>,
-    pub terminated: DeviceArray2<i32>,
-    pub truncated: DeviceArray2<i32>,
-}
-
-impl RolloutStorage {
-    fn zeros(gpu: &Gpu, t: usize, n: usize, obs: usize, act: usize) -> Result<Self, EnvError> {
-        Ok(RolloutStorage {
-            observations: DeviceArray::zeros(gpu, [t + 1, n, obs])?,
-            actions: DeviceArray::zeros(gpu, [t, n, act])?,
-            means: DeviceArray::zeros(gpu, [t, n, act])?,
-            log_probs: DeviceArray::zeros(gpu, [t, n])?,
-            values: DeviceArray::zeros(gpu, [t, n])?,
-            rewards: DeviceArray::zeros(gpu, [t, n])?,
-            terminated: DeviceArray::zeros(gpu, [t, n])?,
-            truncated: DeviceArray::zeros(gpu, [t, n])?,
-        })
-    }
 }
 
 /// Views of the physics buffers the env kernels read and write (shared with the plans).
@@ -149,7 +119,8 @@ pub struct EpisodeState {
     pub errors: DeviceArray2<f32>,
 }
 
-/// Everything one rollout graph needs, built once; [`Rollout::capture`] records the graph.
+/// Everything one rollout graph needs but the policy, built once; [`Rollout::capture`] records
+/// the graph with the policy it is lent.
 pub struct Rollout {
     gpu: Gpu,
     sim: Simulation,
@@ -166,7 +137,6 @@ pub struct Rollout {
     observation: ObservationParams,
     normalizer: ObservationNormalizer,
     phase_statistics: PhaseStatistics,
-    pub policy: GaussianPolicy,
     statistics: RolloutStatistics,
     purpose: Purpose,
     /// `ppo.values_in_update`: the critic runs in the update, not per step here.
@@ -191,31 +161,34 @@ enum Purpose {
 impl Rollout {
     /// Loads the step and kinematics plans for `config.env.num_envs` worlds, uploads the
     /// reference table of `motion` at the control rate, allocates the env state and storage,
-    /// and builds the kernels' parameters from `config` (all run-time values).
+    /// and builds the kernels' parameters from `config` (all run-time values). The policy it
+    /// runs is lent to each capture: one of [`Rollout::observation_size`] inputs,
+    /// [`Rollout::action_size`] actions and a batch of [`Rollout::num_envs`].
     pub fn new(
         gpu: &Gpu,
         store: &PlanStore,
         motion: &ReferenceMotion,
-        config: &TrainConfig,
+        config: &RolloutConfig,
     ) -> Result<Rollout, RolloutError> {
         Rollout::build(gpu, store, motion, config, None)
     }
 
-    /// The evaluation rollout of `training` (the paper's protocol, config `[run]`) on
-    /// `run.eval_envs` worlds (a step plan for that count must exist): the same motion, kernels
-    /// and policy parameters (shared, not copied), the training rollout's normalization
-    /// statistics read but never updated, mean actions, no reset noise, env i of n starting at
-    /// i/n of a looping clip's cycle (`run.eval_start = "spread"`) or every env at the clip's
-    /// start, and a horizon of one episode (`evaluation_steps`: one pass of the clip), so that
-    /// each env plays exactly one episode unless it fails.
+    /// The evaluation rollout of `training` (the paper's protocol, `config.evaluation`) on
+    /// `evaluation.envs` worlds (a step plan for that count must exist): the same motion and
+    /// kernels, the training rollout's normalization statistics read but never updated, mean
+    /// actions, no reset noise, env i of n starting at i/n of a looping clip's cycle
+    /// (`EvalStart::Spread`) or every env at the clip's start, and a horizon of one episode
+    /// ([`evaluation_episode_steps`]: one pass of the clip), so that each env plays exactly one
+    /// episode unless it fails. Lend it the training policy's parameters with a batch of
+    /// `evaluation.envs` (`GaussianPolicy::with_batch`).
     pub fn evaluation(
         training: &Rollout,
         store: &PlanStore,
         motion: &ReferenceMotion,
-        config: &TrainConfig,
+        config: &RolloutConfig,
     ) -> Result<Rollout, RolloutError> {
         let mut config = config.clone();
-        config.env.num_envs = config.run.eval_envs;
+        config.env.num_envs = config.evaluation.envs;
         config.env.motion_noise_std = 0.0;
         Rollout::build(&training.gpu, store, motion, &config, Some(training))
     }
@@ -224,14 +197,14 @@ impl Rollout {
         gpu: &Gpu,
         store: &PlanStore,
         motion: &ReferenceMotion,
-        config: &TrainConfig,
+        config: &RolloutConfig,
         evaluated: Option<&Rollout>,
     ) -> Result<Rollout, RolloutError> {
         let n = config.env.num_envs as usize;
         let substeps = config.env.substeps as usize;
         let sim = Simulation::load(gpu, store, config.env.num_envs, &["step", "kinematics"])?;
         let physics_dt = physics_timestep(&sim)?;
-        let control_dt = config.control_dt(physics_dt);
+        let control_dt = physics_dt * f64::from(config.env.substeps);
         let character = motion.character();
         if character.nq() != NQ || character.nv() != NV || character.actuators().len() != NU {
             return Err(RolloutError::Setup(format!(
@@ -251,15 +224,14 @@ impl Rollout {
         let layout = JointLayout::for_character(character)?;
         let joints = DeviceJointLayout::upload(gpu, &layout)?;
         let obs_size = observation_size(&config.obs, NU, layout.end_effectors.len());
-        let phase_statistics = PhaseStatistics::new(gpu, config)?;
+        let phase_statistics = PhaseStatistics::new(gpu, &config.env)?;
         let mut tracking = tracking_params(config, control_dt);
         let mut reset = reset_params(config, control_dt);
-        let (kernels, normalizer, policy, horizon, purpose) = match evaluated {
+        let (kernels, normalizer, horizon, purpose) = match evaluated {
             None => (
                 Arc::new(EnvKernels::load(gpu)?),
                 ObservationNormalizer::new(gpu, n, obs_size, config.obs.clip)?,
-                GaussianPolicy::new(gpu, &config.policy, obs_size, NU, n, config.seed)?,
-                config.ppo.horizon as usize,
+                config.horizon as usize,
                 Purpose::Training,
             ),
             Some(training) => {
@@ -269,8 +241,8 @@ impl Rollout {
                         training.observation_size()
                     )));
                 }
-                let steps = evaluation_steps(
-                    config,
+                let steps = evaluation_episode_steps(
+                    config.evaluation.steps,
                     host_table.duration(),
                     control_dt,
                     host_table.loop_mode(),
@@ -278,7 +250,7 @@ impl Rollout {
                 tracking = without_failures(&tracking);
                 tracking.max_episode_steps = steps as i32;
                 reset.start_time = 0.0;
-                reset.start_spread = match (config.run.eval_start, host_table.loop_mode()) {
+                reset.start_spread = match (config.evaluation.start, host_table.loop_mode()) {
                     (EvalStart::Spread, LoopMode::Wrap) => host_table.duration() as f32,
                     _ => 0.0,
                 };
@@ -286,7 +258,6 @@ impl Rollout {
                 (
                     Arc::clone(&training.kernels),
                     ObservationNormalizer::frozen(gpu, &training.normalizer, n)?,
-                    training.policy.with_batch(gpu, n)?,
                     steps,
                     Purpose::Evaluation(EpisodeScores::zeros(gpu, n)?, yardstick()),
                 )
@@ -317,10 +288,9 @@ impl Rollout {
             observation: observation_params(&config.obs, control_dt),
             normalizer,
             phase_statistics,
-            policy,
             statistics: RolloutStatistics::new(gpu, n)?,
             purpose,
-            values_in_update: config.ppo.values_in_update,
+            values_in_update: config.values_in_update,
             num_envs: n,
             horizon,
             substeps,
@@ -346,6 +316,11 @@ impl Rollout {
 
     pub fn observation_size(&self) -> usize {
         self.normalizer.size
+    }
+
+    /// Actions per env: one PD target per actuator.
+    pub fn action_size(&self) -> usize {
+        NU
     }
 
     pub fn simulation(&self) -> &Simulation {
@@ -407,9 +382,15 @@ impl Rollout {
         (&p.visits, &p.failures, &p.cdf, &p.iteration)
     }
 
-    /// Captures the rollout into a graph. With `timed`, an event is recorded at every phase
-    /// boundary (for [`PhaseEvents::elapsed_ms`]); the graph is then a little slower.
-    pub fn capture(&self, timed: bool) -> Result<(Graph, Option<PhaseEvents>), RolloutError> {
+    /// Captures the rollout, running `policy`, into a graph. With `timed`, an event is recorded
+    /// at every phase boundary (for [`PhaseEvents::elapsed_ms`]); the graph is then a little
+    /// slower. The graph reads and writes `policy`'s buffers at each launch: keep the policy
+    /// alive as long as the graph.
+    pub fn capture(
+        &self,
+        policy: &dyn RolloutPolicy,
+        timed: bool,
+    ) -> Result<(Graph, Option<PhaseEvents>), RolloutError> {
         let stream = self.gpu.stream();
         let mut events = None;
         let graph = stream.capture(|s| {
@@ -418,7 +399,7 @@ impl Rollout {
             } else {
                 PhaseRecorder::untimed()
             };
-            self.record_rollout(s, &mut phases, None)?;
+            self.record_rollout(s, policy, &mut phases, None)?;
             events = phases.into_events();
             Ok::<(), RolloutError>(())
         })?;
@@ -426,10 +407,10 @@ impl Rollout {
         Ok((graph, events))
     }
 
-    /// Queues the whole rollout on `s` (inside a capture: the training loop records it into one
-    /// graph with the update).
-    pub fn record(&self, s: &Stream) -> Result<(), RolloutError> {
-        self.record_rollout(s, &mut PhaseRecorder::untimed(), None)
+    /// Queues the whole rollout, running `policy`, on `s` (inside a capture: the training loop
+    /// records it into one graph with the update).
+    pub fn record(&self, s: &Stream, policy: &dyn RolloutPolicy) -> Result<(), RolloutError> {
+        self.record_rollout(s, policy, &mut PhaseRecorder::untimed(), None)
     }
 
     /// An empty record of every env's state for each of this rollout's frames: the state it
@@ -446,9 +427,13 @@ impl Rollout {
 
     /// Captures the rollout into a graph that also copies every env's state into
     /// `trajectory` (from [`Rollout::new_trajectory`]) at the start and after every control
-    /// step, before the reset. The graph writes into `trajectory` at each launch: keep it
-    /// alive as long as the graph.
-    pub fn capture_recorded(&self, trajectory: &Trajectory) -> Result<Graph, RolloutError> {
+    /// step, before the reset. The graph writes into `trajectory` and `policy` at each launch:
+    /// keep them alive as long as the graph.
+    pub fn capture_recorded(
+        &self,
+        policy: &dyn RolloutPolicy,
+        trajectory: &Trajectory,
+    ) -> Result<Graph, RolloutError> {
         if trajectory.frames() != self.horizon + 1 {
             return Err(RolloutError::Setup(format!(
                 "a record of {} frames for a rollout of {} steps (make it with Rollout::new_trajectory)",
@@ -457,8 +442,9 @@ impl Rollout {
             )));
         }
         let stream = self.gpu.stream();
-        let graph = stream
-            .capture(|s| self.record_rollout(s, &mut PhaseRecorder::untimed(), Some(trajectory)))?;
+        let graph = stream.capture(|s| {
+            self.record_rollout(s, policy, &mut PhaseRecorder::untimed(), Some(trajectory))
+        })?;
         graph.upload(stream)?;
         Ok(graph)
     }
@@ -484,10 +470,22 @@ impl Rollout {
     fn record_rollout(
         &self,
         s: &Stream,
+        policy: &dyn RolloutPolicy,
         phases: &mut PhaseRecorder,
         trajectory: Option<&Trajectory>,
     ) -> Result<(), RolloutError> {
         let gpu = &self.gpu;
+        let wanted = (self.num_envs, self.observation_size(), NU);
+        let lent = (
+            policy.batch(),
+            policy.observation_size(),
+            policy.action_size(),
+        );
+        if lent != wanted {
+            return Err(RolloutError::Setup(format!(
+                "a policy for (envs, observations, actions) {lent:?} lent to a rollout of {wanted:?}"
+            )));
+        }
         if let Some(trajectory) = trajectory {
             self.record_frame(s, trajectory, 0)?;
         }
@@ -506,7 +504,7 @@ impl Rollout {
         }
         for t in 0..self.horizon {
             let t32 = t as i32;
-            phases.phase(gpu, s, Phase::Policy, |s| self.record_policy(s, t))?;
+            phases.phase(gpu, s, Phase::Policy, |s| self.record_policy(s, policy, t))?;
             phases.phase(gpu, s, Phase::Physics, |s| {
                 for _ in 0..self.substeps {
                     self.record_pd_control(s)?;
@@ -563,7 +561,12 @@ impl Rollout {
         Ok(())
     }
 
-    fn record_policy(&self, s: &Stream, t: usize) -> Result<(), RolloutError> {
+    fn record_policy(
+        &self,
+        s: &Stream,
+        policy: &dyn RolloutPolicy,
+        t: usize,
+    ) -> Result<(), RolloutError> {
         let storage = ActStorage {
             actions: &self.storage.actions,
             means: &self.storage.means,
@@ -572,7 +575,7 @@ impl Rollout {
             // Evaluation needs no values at all.
             values_in_update: self.values_in_update || !self.is_training(),
         };
-        self.policy.record_act(
+        policy.record_act(
             &self.kernels,
             s,
             &self.normalizer.normalized,
@@ -737,16 +740,16 @@ struct PhaseStatistics {
 }
 
 impl PhaseStatistics {
-    fn new(gpu: &Gpu, config: &TrainConfig) -> Result<Self, EnvError> {
-        let bins = config.env.phase_bins as usize;
+    fn new(gpu: &Gpu, config: &EnvConfig) -> Result<Self, EnvError> {
+        let bins = config.phase_bins as usize;
         let uniform: Vec<f32> = (1..=bins).map(|b| b as f32 / bins as f32).collect();
         Ok(PhaseStatistics {
             visits: DeviceArray::zeros(gpu, [bins])?,
             failures: DeviceArray::zeros(gpu, [bins])?,
             cdf: DeviceArray::from_slice(gpu, [bins], &uniform)?,
             iteration: DeviceArray::zeros(gpu, [1])?,
-            decay: config.env.phase_decay,
-            floor: config.env.phase_floor,
+            decay: config.phase_decay,
+            floor: config.phase_floor,
         })
     }
 

@@ -3,7 +3,7 @@
 
 use crate::cuda::{Gpu, Stream};
 
-use super::{DeviceArray, EnvError, EnvKernels};
+use crate::kernels::{DeviceArray, EnvError, EnvKernels};
 
 /// Values in the device totals (statistics.py `ENDED .. STEPS`, then one count per failure
 /// cause).

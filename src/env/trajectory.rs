@@ -10,8 +10,7 @@
 
 use crate::cuda::{Gpu, Stream};
 
-use super::array::{DeviceArray, DeviceArray2, DeviceArray3, DeviceArray4};
-use super::error::EnvError;
+use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, DeviceArray4, EnvError};
 
 /// Frames of every env's state on the device: `[frames, envs, ...]`.
 pub struct Trajectory {

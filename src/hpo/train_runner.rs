@@ -102,7 +102,7 @@ impl TrialRunner for TrainRunner {
         // The scratch directory goes whatever happened; a failure to remove it is harmless.
         let _ = std::fs::remove_dir_all(&root);
         let summary = result.map_err(|e| problem(e.to_string()))?;
-        Ok(summary.trial_outcome())
+        Ok(TrialOutcome::from(&summary))
     }
 
     fn devices(&self) -> usize {

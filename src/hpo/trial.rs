@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::hpo::config::{RunnerKind, RunnerSettings};
 use crate::hpo::error::HpoError;
 use crate::hpo::synthetic::SyntheticObjective;
+use crate::train::RunSummary;
 
 /// What every trial of a search is held to. A runner stops a trial once `budget_s` of active
 /// training time is spent without success.
@@ -54,6 +55,25 @@ impl TrialOutcome {
     }
 }
 
+/// The outcome of a finished training run: its time to success (or the time it spent), at the
+/// iteration it succeeded (or its last), and its last evaluation's scores.
+impl From<&RunSummary> for TrialOutcome {
+    fn from(summary: &RunSummary) -> TrialOutcome {
+        let evaluation = summary.last_evaluation.as_ref();
+        let finite = |x: f64| x.is_finite().then_some(x);
+        TrialOutcome {
+            success: summary.time_to_success_s.is_some(),
+            active_time_s: summary.time_to_success_s.unwrap_or(summary.active_time_s),
+            iterations: summary.success_iteration.unwrap_or(summary.iterations),
+            success_rate: evaluation.map_or(0.0, |e| e.success_rate),
+            ape_m: evaluation.and_then(|e| finite(e.pose_error_m)),
+            mpjpe_m: evaluation.and_then(|e| finite(e.global_mpjpe_m)),
+            ee_error_m: evaluation.and_then(|e| finite(e.ee_position_error_m)),
+            frames_per_s: finite(summary.frames_per_s).filter(|&f| f > 0.0),
+        }
+    }
+}
+
 /// Trains a configuration. One runner owns one device; the experiment stage gives each runner
 /// of its pool a thread and lets them drain the list of (candidate, seed) jobs.
 ///
@@ -95,6 +115,7 @@ pub fn build_runners(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::train::{EvaluationSummary, IterationRecord, UpdateStats};
 
     fn outcome(success: bool, time: f64) -> TrialOutcome {
         TrialOutcome {
@@ -107,6 +128,62 @@ mod tests {
             ee_error_m: None,
             frames_per_s: None,
         }
+    }
+
+    /// Iteration `iteration` of a run (0.25 s each), with an evaluation when `success` is
+    /// given: src/train/summary.rs's test records.
+    fn record(iteration: u64, success: Option<bool>) -> IterationRecord {
+        IterationRecord {
+            iteration,
+            active_time_s: 0.25 * iteration as f64,
+            frames: 131_072 * iteration,
+            frames_per_s: 524_288.0,
+            mean_return: 10.0,
+            mean_episode_length: 20.0,
+            update: UpdateStats::default(),
+            termination: Default::default(),
+            evaluation: success.map(|s| EvaluationSummary {
+                episodes: 32,
+                completed: if s { 30 } else { 3 },
+                succeeded: if s { 30 } else { 3 },
+                success_rate: if s { 30.0 / 32.0 } else { 3.0 / 32.0 },
+                success: s,
+                clip_start_success: s,
+                episode_steps: 53,
+                mean_episode_steps: 50.0,
+                pose_error_m: 0.05,
+                global_mpjpe_m: 0.08,
+                ee_position_error_m: 0.07,
+                ee_orientation_error_rad: 0.3,
+            }),
+            divergence: None,
+        }
+    }
+
+    /// The summaries of src/train/summary.rs's tests, as the search scores them.
+    #[test]
+    fn the_outcome_of_a_run_is_its_first_success_or_its_time_spent() {
+        use crate::train::StopReason;
+        let records: Vec<_> = (1..=15)
+            .map(|i| {
+                let eval = (i % 5 == 0).then_some(i >= 10);
+                record(i, eval)
+            })
+            .collect();
+        let s = RunSummary::from_records("backflip", 1, &records, StopReason::IterationBudget);
+        let outcome = TrialOutcome::from(&s);
+        assert!(outcome.success);
+        assert_eq!((outcome.active_time_s, outcome.iterations), (2.5, 10));
+        assert_eq!(outcome.ape_m, Some(0.05));
+
+        let records: Vec<_> = (1..=10)
+            .map(|i| record(i, (i % 5 == 0).then_some(false)))
+            .collect();
+        let s = RunSummary::from_records("walk", 0, &records, StopReason::TimeBudget);
+        let outcome = TrialOutcome::from(&s);
+        assert!(!outcome.success);
+        assert_eq!(outcome.active_time_s, 2.5);
+        assert_eq!(outcome.success_rate, 3.0 / 32.0);
     }
 
     #[test]

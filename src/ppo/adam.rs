@@ -2,7 +2,7 @@
 //! gradient-norm clipping, and the KL-adaptive learning rate, all read from device memory.
 
 use crate::cuda::{Gpu, Stream};
-use crate::env::{AdamParams, DeviceArray, EnvKernels, ScheduleParams};
+use crate::kernels::{AdamParams, DeviceArray, EnvKernels, ScheduleParams};
 
 use super::PpoError;
 

@@ -3,7 +3,7 @@
 //! launches layer by layer.
 
 use crate::cuda::{Gpu, Stream};
-use crate::env::{DeviceArray, DeviceArray2, EnvKernels};
+use crate::kernels::{DeviceArray, DeviceArray2, EnvKernels};
 
 use super::PpoError;
 use super::policy::{LayerShape, Mlp};

@@ -3,7 +3,8 @@
 //! (`kernels_py/env/minibatch.py`), with the shape checks the launchers cannot do.
 
 use crate::cuda::{Gpu, Stream};
-use crate::env::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels, RolloutStorage};
+use crate::env::RolloutStorage;
+use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
 
 use super::PpoError;
 

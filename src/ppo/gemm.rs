@@ -14,9 +14,9 @@
 
 use std::sync::Arc;
 
+use super::config::GemmSetting;
 use crate::cuda::{Blas, CudaError, GemmMath, Gpu, Stream};
-use crate::env::{DeviceArray, DeviceArray2, EnvError, EnvKernels};
-use crate::train::GemmSetting;
+use crate::kernels::{DeviceArray, DeviceArray2, EnvError, EnvKernels};
 
 use super::PpoError;
 use super::backward::{

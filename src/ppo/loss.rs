@@ -2,7 +2,7 @@
 //! of the update's statistics buffer (`kernels_py/env/ppo_statistics.py`).
 
 use crate::cuda::{Gpu, Stream};
-use crate::env::{DeviceArray, DeviceArray2, EnvKernels, PpoLossParams};
+use crate::kernels::{DeviceArray, DeviceArray2, EnvKernels, PpoLossParams};
 
 use super::PpoError;
 use super::batch::Minibatch;

@@ -11,10 +11,12 @@
 //! - The parts, each with the shape checks its kernels cannot do: [`batch`] (what the rollout
 //!   hands over, GAE, shuffle, gather), [`loss`] (loss gradients, the statistics layout),
 //!   [`backward`] (MLP backward, split weight-gradient reductions), [`reduce`], [`adam`].
+//! - [`config`]: the `[policy]` and `[ppo]` sections of the training configuration.
 
 pub mod adam;
 pub mod backward;
 pub mod batch;
+pub mod config;
 pub mod gemm;
 pub mod loss;
 pub(crate) mod policy;
@@ -22,9 +24,8 @@ pub mod reduce;
 mod update;
 
 pub use batch::PpoBatch;
+pub use config::{GemmSetting, KlMeasure, PolicyConfig, PpoConfig};
 pub use gemm::{GemmPath, PolicyGemm};
 pub use loss::PpoStatistics;
-pub use policy::{
-    ActStorage, GaussianPolicy, LayerShape, PolicyError, initial_parameters, mlp_layout,
-};
+pub use policy::{GaussianPolicy, LayerShape, PolicyError, initial_parameters, mlp_layout};
 pub use update::{PpoError, PpoOptimizerState, PpoUpdate, UpdateFlops};

@@ -13,9 +13,10 @@ use rand_distr::{Distribution, StandardNormal};
 use thiserror::Error;
 
 use crate::cuda::{Gpu, Stream};
-use crate::env::{DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels};
-use crate::train::PolicyConfig;
+use crate::env::{ActStorage, RolloutError, RolloutPolicy};
+use crate::kernels::{DeviceArray, DeviceArray2, EnvError, EnvKernels};
 
+use super::config::PolicyConfig;
 use super::gemm::PolicyGemm;
 
 /// Edge of the output tile of one thread block of `linear_elu` / `linear` (policy.py).
@@ -378,13 +379,43 @@ impl GaussianPolicy {
     }
 }
 
-/// Rollout storage rows the policy writes.
-pub struct ActStorage<'a> {
-    pub actions: &'a DeviceArray3<f32>,
-    pub means: &'a DeviceArray3<f32>,
-    pub log_probs: &'a DeviceArray2<f32>,
-    pub values: &'a DeviceArray2<f32>,
-    /// The update computes the values (`ppo.values_in_update`): the critic does not run here,
-    /// and what lands in `values` is stale until the update overwrites it.
-    pub values_in_update: bool,
+/// The rollout runs the actor (and, unless the update values the batch, the critic) and samples
+/// from the Gaussian: [`GaussianPolicy::record_act`].
+impl RolloutPolicy for GaussianPolicy {
+    fn batch(&self) -> usize {
+        self.batch
+    }
+
+    fn observation_size(&self) -> usize {
+        self.observation_size
+    }
+
+    fn action_size(&self) -> usize {
+        self.action_size
+    }
+
+    fn record_act(
+        &self,
+        kernels: &EnvKernels,
+        stream: &Stream,
+        obs: &DeviceArray2<f32>,
+        actions: &DeviceArray2<f32>,
+        storage: &ActStorage<'_>,
+        iteration: &DeviceArray<i32>,
+        t: usize,
+        deterministic: bool,
+    ) -> Result<(), RolloutError> {
+        GaussianPolicy::record_act(
+            self,
+            kernels,
+            stream,
+            obs,
+            actions,
+            storage,
+            iteration,
+            t,
+            deterministic,
+        )
+        .map_err(|e| RolloutError::Policy(Box::new(e)))
+    }
 }

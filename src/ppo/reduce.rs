@@ -2,7 +2,7 @@
 //! kernels add into their outputs: clear them first (a memset in the graph).
 
 use crate::cuda::Stream;
-use crate::env::{DeviceArray, DeviceArray2, EnvKernels};
+use crate::kernels::{DeviceArray, DeviceArray2, EnvKernels};
 
 use super::PpoError;
 
@@ -80,7 +80,7 @@ pub fn record_sum_and_squares(
 }
 
 /// Queues a memset of the whole of `array` to zero bits (0.0 for floats).
-pub fn record_clear<T: crate::env::Element, const N: usize>(
+pub fn record_clear<T: crate::kernels::Element, const N: usize>(
     stream: &Stream,
     array: &DeviceArray<T, N>,
 ) -> Result<(), PpoError> {

@@ -26,16 +26,16 @@ use std::sync::Arc;
 use thiserror::Error;
 
 use crate::cuda::{CudaError, Gpu, Stream};
-use crate::env::{
+use crate::kernels::{
     AdamParams, DeviceArray, DeviceArray2, EnvError, EnvKernels, PpoLossParams, ScheduleParams,
 };
-use crate::train::{KlMeasure, TrainConfig};
 
 use super::adam::{
     AdamMoments, LEARNING_RATE_MAX, LEARNING_RATE_MIN, adam_params, record_schedule,
 };
 use super::backward::{MlpGradients, input_gradient_scratch_len, record_mlp_backward};
 use super::batch::{Advantages, Minibatch, PpoBatch, ValueNormalization, record_shuffle};
+use super::config::{KlMeasure, PpoConfig};
 use super::loss::{LOSS_TERMS, LossGradients, PpoStatistics};
 use super::policy::{GaussianPolicy, LayerShape, Mlp, PolicyError};
 use super::reduce::{
@@ -171,20 +171,22 @@ pub struct PpoUpdate {
 
 impl PpoUpdate {
     /// An update of `policy` (its parameters are updated in place) for batches of
-    /// `config.ppo.horizon` x `config.env.num_envs` samples with the hyperparameters of
-    /// `config.ppo`; the learning rate starts at `config.ppo.learning_rate`. `kernels` may be
+    /// `config.horizon` x `envs` samples with the hyperparameters of `config`; the learning rate
+    /// starts at `config.learning_rate`; `seed` (the run's) seeds the shuffle. `kernels` may be
     /// shared with the rollout.
     pub fn new(
         gpu: &Gpu,
         kernels: Arc<EnvKernels>,
         policy: &GaussianPolicy,
-        config: &TrainConfig,
+        config: &PpoConfig,
+        envs: usize,
+        seed: u64,
     ) -> Result<PpoUpdate, PpoError> {
-        let q = &config.ppo;
-        let (horizon, envs) = (q.horizon as usize, config.env.num_envs as usize);
+        let q = config;
+        let horizon = q.horizon as usize;
         let (epochs, minibatches) = (q.epochs as usize, q.minibatches as usize);
         let samples = horizon * envs;
-        if samples == 0 || epochs == 0 || minibatches == 0 || samples % minibatches != 0 {
+        if samples == 0 || epochs == 0 || minibatches == 0 || !samples.is_multiple_of(minibatches) {
             return Err(PpoError::Shape(format!(
                 "{horizon} x {envs} samples in {minibatches} minibatches, {epochs} epochs: sizes must be positive and the minibatches must divide the samples"
             )));
@@ -222,7 +224,7 @@ impl PpoUpdate {
             epochs,
             minibatches,
             // The shuffle's own seed (the sampling uses the low and high halves xor-ed).
-            seed: (config.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 32) as u32 as i32,
+            seed: (seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 32) as u32 as i32,
             gamma: q.gamma,
             lambda: q.lambda,
             loss_params: PpoLossParams {

@@ -18,7 +18,8 @@ mod assemble;
 use thiserror::Error;
 
 use crate::cuda::{CudaError, Gpu};
-use crate::env::{EnvError, RolloutError};
+use crate::env::RolloutError;
+use crate::kernels::EnvError;
 use crate::motion::{ReferenceMotion, TableLayout};
 use crate::plan::PlanStore;
 use crate::recording::{Recording, RecordingError};
@@ -100,10 +101,11 @@ pub fn record_replay(gpu: &Gpu, input: &ReplayInput<'_>) -> Result<Replay, Repla
     let config = input.config;
     let envs = chosen_envs(input.episodes, config.run.eval_envs)?;
     let trainer = evaluation_trainer(gpu, config, input.checkpoint, input.motion, input.store)?;
-    let rollout = trainer.evaluation_rollout();
+    let (rollout, policy) = trainer.evaluation_rollout();
     let trajectory = rollout.new_trajectory()?;
-    // The graph writes into `trajectory` at every launch: both live to the end of this call.
-    let graph = rollout.capture_recorded(&trajectory)?;
+    // The graph writes into `trajectory` and the policy's buffers at every launch: all live to
+    // the end of this call.
+    let graph = rollout.capture_recorded(policy, &trajectory)?;
     rollout.reset_all()?;
     graph.launch(gpu.stream())?;
     gpu.synchronize()?;

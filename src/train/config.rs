@@ -2,11 +2,21 @@
 //! (the paper's baseline, Isaac-Humanoid-Direct-v0 PPO). Unknown keys and out-of-range values
 //! are errors that name the key. Every value here is a run-time value: changing it needs no
 //! rebuild (the physics options that need new plans are in `configs/physics/`).
+//!
+//! The sections live with the layer that consumes them (`env::config`: `[env]`, `[reward]`,
+//! `[obs]`; `ppo::config`: `[policy]`, `[ppo]`); `[run]` is training's own. This module composes
+//! them, validates every range (the messages name `section.key`) and hands each layer what it
+//! needs ([`TrainConfig::rollout_config`]).
 
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
+
+use crate::env::{
+    EnvConfig, EvalStart, EvaluationProtocol, ObsConfig, RewardConfig, RolloutConfig,
+};
+use crate::ppo::{PolicyConfig, PpoConfig};
 
 /// A configuration that cannot be used.
 #[derive(Debug, Error)]
@@ -48,271 +58,6 @@ pub struct TrainConfig {
     pub ppo: PpoConfig,
     #[serde(default)]
     pub run: RunConfig,
-}
-
-/// `[env]`: episodes, actions and termination (docs/env.md).
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct EnvConfig {
-    pub num_envs: u32,
-    /// Physics steps per control step (control at 1/(substeps * physics dt)).
-    pub substeps: u32,
-    /// What the actions are offsets from: the reference pose (default) or the zero pose.
-    pub action_mode: ActionMode,
-    /// Global scale of the normalized actions (paper: 1.0, tuned backflip 0.875).
-    pub action_scale: f32,
-    /// Metres the root may fall below the reference root before the episode fails.
-    pub termination_height: f32,
-    /// Largest body distance to the reference (m) before the episode fails.
-    pub tracking_distance: f32,
-    /// The episode fails when the root's absolute height falls below this (m; 0: off). The
-    /// paper's code figure ends episodes at 0.55 m.
-    pub min_root_height: f32,
-    /// The episode fails when the step's reward falls below this (0: off). The paper's code
-    /// figure ends episodes at 0.15.
-    pub min_reward: f32,
-    /// The episode fails when the mean distance of the bodies to their references exceeds this
-    /// (m; 0: off). PHC ends episodes at 0.25 m.
-    pub mean_tracking_distance: f32,
-    /// Control steps after a reset during which failures are ignored.
-    pub grace_steps: u32,
-    /// Reference state initialization noise (rad; velocities get 10x).
-    pub motion_noise_std: f32,
-    /// Episode length limit in control steps (truncation, not failure).
-    pub max_episode_steps: u32,
-    /// Adaptive start-phase sampling: bins over the clip, uniform floor, per-rollout decay.
-    pub phase_bins: u32,
-    pub phase_floor: f32,
-    pub phase_decay: f32,
-}
-
-impl Default for EnvConfig {
-    fn default() -> Self {
-        EnvConfig {
-            num_envs: 4096,
-            substeps: 4,
-            action_mode: ActionMode::Residual,
-            action_scale: 1.0,
-            termination_height: 0.8,
-            tracking_distance: 1.0,
-            min_root_height: 0.0,
-            min_reward: 0.0,
-            mean_tracking_distance: 0.0,
-            grace_steps: 4,
-            motion_noise_std: 0.02,
-            max_episode_steps: 300,
-            phase_bins: 20,
-            phase_floor: 0.1,
-            phase_decay: 0.99,
-        }
-    }
-}
-
-/// What a PD target is relative to (docs/env.md, "Actions and PD control").
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum ActionMode {
-    /// Offsets from the zero pose (ball joints) and the middle of the range (hinges), as
-    /// DeepMimic's targets: a fresh policy commands the zero pose.
-    Absolute,
-    /// Offsets from the reference pose at the end of the control step: a fresh policy commands
-    /// the reference trajectory.
-    Residual,
-}
-
-/// `[reward]`: weights of the multiplicative DeepMimic reward.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct RewardConfig {
-    pub pose_weight: f32,
-    pub velocity_weight: f32,
-    pub com_weight: f32,
-    pub ee_pos_weight: f32,
-    pub ee_rot_weight: f32,
-    /// Where end-effector positions are compared: in the world, or each relative to its own
-    /// root (DeepMimic, MimicKit).
-    pub ee_frame: EndEffectorFrame,
-}
-
-impl Default for RewardConfig {
-    fn default() -> Self {
-        RewardConfig {
-            pose_weight: 10.0,
-            velocity_weight: 0.1,
-            com_weight: 10.0,
-            ee_pos_weight: 40.0,
-            ee_rot_weight: 2.0,
-            ee_frame: EndEffectorFrame::World,
-        }
-    }
-}
-
-/// `reward.ee_frame` (docs/env.md, "Reward").
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum EndEffectorFrame {
-    /// World positions: a character off the reference's path pays in every end effector.
-    World,
-    /// Positions relative to the root (simulated and reference each to its own).
-    Root,
-}
-
-/// `[obs]`: the optional observation blocks and normalization.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct ObsConfig {
-    /// Future reference end-effector frames, and control steps between them.
-    pub future_frames: u32,
-    pub future_spacing: u32,
-    pub prev_action: bool,
-    pub root_target: bool,
-    /// Every body's reference one step ahead relative to the simulated body (PHC's difference
-    /// observation): 135 values.
-    pub reference_bodies: bool,
-    /// Normalized observations are clipped to [-clip, clip].
-    pub clip: f32,
-}
-
-impl Default for ObsConfig {
-    fn default() -> Self {
-        ObsConfig {
-            future_frames: 2,
-            future_spacing: 1,
-            prev_action: true,
-            root_target: false,
-            reference_bodies: false,
-            clip: 5.0,
-        }
-    }
-}
-
-/// `[policy]`: the actor and critic networks.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct PolicyConfig {
-    pub actor_hidden: Vec<u32>,
-    pub critic_hidden: Vec<u32>,
-    pub init_log_std: f32,
-    /// Initial weights are N(0, gain^2 / inputs), biases 0: this gain for the hidden layers
-    /// (He's sqrt(2) for the ELU; torch's default Linear init is about 0.577)...
-    pub init_hidden_gain: f32,
-    /// ...and this for the actor's output layer (small: the first actions stay near the
-    /// reference pose; the critic's output layer uses 1).
-    pub init_output_gain: f32,
-    /// What computes the layers' GEMMs (forward in the rollout and the update, backward).
-    pub gemm: GemmSetting,
-}
-
-impl Default for PolicyConfig {
-    fn default() -> Self {
-        PolicyConfig {
-            actor_hidden: vec![400, 200, 100],
-            critic_hidden: vec![400, 200, 100],
-            init_log_std: -2.0,
-            init_hidden_gain: std::f32::consts::SQRT_2,
-            init_output_gain: 0.01,
-            gemm: GemmSetting::Auto,
-        }
-    }
-}
-
-/// `policy.gemm` (docs/ppo.md, "GEMMs"): cuBLAS comes with the CUDA toolkit, not the driver.
-#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum GemmSetting {
-    /// cuBLAS in f32 when libcublas can be loaded, else Warp's tile kernels.
-    #[default]
-    Auto,
-    /// Warp's tile kernels (plain f32; needs only the driver).
-    Warp,
-    /// cuBLAS, f32 arithmetic; an error at setup when libcublas cannot be loaded.
-    Cublas,
-    /// cuBLAS with TF32 tensor-core products (about 1e-3 relative error); as `cublas`.
-    CublasTf32,
-}
-
-/// `[ppo]`: the update (issue 5).
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct PpoConfig {
-    /// Control steps per environment per rollout.
-    pub horizon: u32,
-    pub epochs: u32,
-    pub minibatches: u32,
-    pub gamma: f32,
-    pub lambda: f32,
-    pub learning_rate: f32,
-    /// Target KL of the adaptive learning rate.
-    pub kl_threshold: f32,
-    pub clip: f32,
-    pub entropy_coef: f32,
-    pub value_coef: f32,
-    /// Clip the value around the rollout's value by `clip` in the value loss (rsl_rl's
-    /// `use_clipped_value_loss`, on in the baseline).
-    pub clip_value_loss: bool,
-    /// The critic predicts values normalized by the returns' running mean and standard
-    /// deviation (rl_games' `normalize_value`); value clipping is then in those units.
-    pub value_normalization: bool,
-    /// Clip the actor's and the critic's gradients to `max_grad_norm` each, instead of their
-    /// joint norm (where the critic's gradient can shrink the actor's step).
-    pub separate_grad_clipping: bool,
-    /// What the adaptive learning rate measures as the KL between the rollout's policy and the
-    /// current one: the sampled estimate (default) or the analytic Gaussian KL (rsl_rl's).
-    pub kl_measure: KlMeasure,
-    /// Adapt the learning rate to the approximate KL after each minibatch (rsl_rl's
-    /// "adaptive" schedule, on in the baseline); off: the rate stays `learning_rate`.
-    pub adaptive_learning_rate: bool,
-    pub max_grad_norm: f32,
-    /// Where the critic's values of the rollout's observations come from: false, a forward
-    /// pass per control step inside the rollout (beside the actor's); true, one batched forward
-    /// over all T + 1 observation rows at the start of the update (the rollout runs the actor
-    /// only; the default). Same values, a different cost split (docs/ppo.md).
-    pub values_in_update: bool,
-}
-
-impl Default for PpoConfig {
-    fn default() -> Self {
-        PpoConfig {
-            horizon: 32,
-            epochs: 5,
-            minibatches: 4,
-            gamma: 0.99,
-            lambda: 0.95,
-            learning_rate: 5e-4,
-            kl_threshold: 0.008,
-            clip: 0.2,
-            entropy_coef: 0.0,
-            value_coef: 2.0,
-            clip_value_loss: true,
-            value_normalization: false,
-            separate_grad_clipping: false,
-            kl_measure: KlMeasure::Sample,
-            adaptive_learning_rate: true,
-            values_in_update: true,
-            max_grad_norm: 1.0,
-        }
-    }
-}
-
-/// `ppo.kl_measure` (docs/ppo.md, "KL").
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum KlMeasure {
-    /// `mean((r - 1) - log r)` over the minibatch's sampled actions.
-    Sample,
-    /// The closed-form KL between the rollout's Gaussians and the current ones.
-    Analytic,
-}
-
-/// Where the evaluation episodes start (docs/train.md, "Evaluation").
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum EvalStart {
-    /// Env i of n starts at i/n of the clip (a looping clip; a clamped clip starts every env
-    /// at 0): n distinct deterministic states that together cover the whole clip.
-    Spread,
-    /// Every env starts at the beginning of the clip.
-    ClipStart,
 }
 
 /// `[run]`: evaluation, stopping, checkpoints (the paper's protocol; docs/train.md).
@@ -784,6 +529,24 @@ impl TrainConfig {
     /// The configuration as TOML (what `config.toml` of a run directory holds).
     pub fn to_toml(&self) -> Result<String, ConfigError> {
         toml::to_string(self).map_err(|e| ConfigError::Serialize(e.to_string()))
+    }
+
+    /// What the rollouts are built from: the task's sections, the horizon, the seed and the
+    /// evaluation protocol of `[run]`.
+    pub fn rollout_config(&self) -> RolloutConfig {
+        RolloutConfig {
+            env: self.env.clone(),
+            reward: self.reward.clone(),
+            obs: self.obs.clone(),
+            horizon: self.ppo.horizon,
+            seed: self.seed,
+            values_in_update: self.ppo.values_in_update,
+            evaluation: EvaluationProtocol {
+                envs: self.run.eval_envs,
+                steps: self.run.eval_steps,
+                start: self.run.eval_start,
+            },
+        }
     }
 
     /// Control steps per second of simulated time for a physics timestep.

@@ -2,6 +2,8 @@
 //! message naming its key.
 
 use super::*;
+use crate::env::{ActionMode, EndEffectorFrame};
+use crate::ppo::{GemmSetting, KlMeasure};
 
 #[test]
 fn defaults_are_the_paper_baseline_and_valid() {

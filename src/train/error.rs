@@ -53,11 +53,13 @@ pub enum TrainError {
     #[error(transparent)]
     Cuda(#[from] crate::cuda::CudaError),
     #[error(transparent)]
-    Env(#[from] crate::env::EnvError),
+    Env(#[from] crate::kernels::EnvError),
     #[error(transparent)]
     Rollout(#[from] crate::env::RolloutError),
     #[error(transparent)]
     Ppo(#[from] crate::ppo::PpoError),
+    #[error(transparent)]
+    Policy(#[from] crate::ppo::PolicyError),
 }
 
 impl TrainError {

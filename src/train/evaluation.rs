@@ -24,10 +24,13 @@ use std::fmt::Write as _;
 
 use serde::{Deserialize, Serialize};
 
-use super::config::{EvalStart, TrainConfig};
+use super::config::TrainConfig;
 use super::metrics::nan_from_null;
-use crate::env::EpisodeScore;
-pub use crate::env::{SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M, yardstick};
+use crate::env::{EpisodeScore, EvalStart};
+pub use crate::env::{
+    SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps,
+    evaluation_episode_steps, yardstick,
+};
 use crate::motion::LoopMode;
 
 /// Largest global MPJPE (m, mean over the episode's steps and the 15 bodies) of a successful
@@ -248,48 +251,20 @@ pub fn summarize(
     })
 }
 
-/// Control steps of an evaluation episode: `run.eval_steps`, or one pass of the clip,
-/// ceil(duration / control dt) (a step shorter than rounding noise is not counted). A clip that
-/// does not loop ends its episodes itself (`reward_termination` truncates when the next
-/// reference time would pass the clip's end): at most [`clamped_clip_steps`] of them.
+/// Control steps of an evaluation episode: `run.eval_steps`, or one pass of the clip
+/// ([`evaluation_episode_steps`], which the evaluation rollout itself uses).
 pub fn evaluation_steps(
     config: &TrainConfig,
     clip_duration_s: f64,
     control_dt_s: f64,
     loop_mode: LoopMode,
 ) -> u32 {
-    let steps = config.run.eval_steps.unwrap_or_else(|| {
-        let steps = (clip_duration_s / control_dt_s - 1e-9).ceil();
-        if steps.is_finite() && steps >= 1.0 {
-            steps.min(f64::from(u32::MAX)) as u32
-        } else {
-            1
-        }
-    });
-    match loop_mode {
-        LoopMode::Wrap => steps,
-        LoopMode::Clamp => steps.min(clamped_clip_steps(clip_duration_s, control_dt_s)),
-    }
-}
-
-/// Control steps from the start of a clip that does not loop until the kernel truncates the
-/// episode at its end, in the kernel's own float32 arithmetic: the reference time advances by
-/// dt per step, and the step whose next reference time would pass the duration is the last.
-pub fn clamped_clip_steps(clip_duration_s: f64, control_dt_s: f64) -> u32 {
-    let (duration, dt) = (clip_duration_s as f32, control_dt_s as f32);
-    if !(dt > 0.0 && duration.is_finite()) {
-        return 1;
-    }
-    let mut time = 0.0f32;
-    let mut steps = 1u32;
-    loop {
-        let reference = time + dt;
-        if reference + dt > duration || steps == u32::MAX {
-            return steps;
-        }
-        time = reference;
-        steps += 1;
-    }
+    evaluation_episode_steps(
+        config.run.eval_steps,
+        clip_duration_s,
+        control_dt_s,
+        loop_mode,
+    )
 }
 
 /// Clip time (s) at which each of `envs` evaluation episodes starts: spread evenly over a

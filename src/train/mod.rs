@@ -26,11 +26,11 @@ pub use checkpoint::{
     CheckpointScan, Tensor, TensorData,
 };
 pub use clock::{ActiveClock, StopReason, StopRule};
-pub use config::{
-    ActionMode, COMMITTED_CONFIGS, ConfigError, EndEffectorFrame, EnvConfig, EvalStart,
-    GemmSetting, KlMeasure, ObsConfig, PolicyConfig, PpoConfig, RewardConfig, RunConfig,
-    TrainConfig,
-};
+pub use config::{COMMITTED_CONFIGS, ConfigError, RunConfig, TrainConfig};
+// The sections `TrainConfig` composes, at their old paths (they live in the layers that
+// consume them).
+pub use crate::env::{ActionMode, EndEffectorFrame, EnvConfig, EvalStart, ObsConfig, RewardConfig};
+pub use crate::ppo::{GemmSetting, KlMeasure, PolicyConfig, PpoConfig};
 pub use divergence::{DivergenceEvent, DivergenceGuard};
 pub use error::TrainError;
 pub use evaluation::{

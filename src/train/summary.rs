@@ -9,7 +9,6 @@ use serde::{Deserialize, Serialize};
 use super::clock::StopReason;
 use super::evaluation::{EvaluationSummary, POSE_ERROR_TARGET_M};
 use super::metrics::IterationRecord;
-use crate::hpo::trial::TrialOutcome;
 
 /// `summary.json` of a run directory, and what `train` prints at the end.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -78,22 +77,6 @@ impl RunSummary {
             time_to_pose_error_s: pose.map(|r| r.active_time_s),
             time_to_clip_start_success_s: clip_start.map(|r| r.active_time_s),
             last_evaluation: records.iter().rev().find_map(|r| r.evaluation.clone()),
-        }
-    }
-
-    /// The outcome the hyperparameter search scores (`hpo::TrialOutcome`).
-    pub fn trial_outcome(&self) -> TrialOutcome {
-        let evaluation = self.last_evaluation.as_ref();
-        let finite = |x: f64| x.is_finite().then_some(x);
-        TrialOutcome {
-            success: self.time_to_success_s.is_some(),
-            active_time_s: self.time_to_success_s.unwrap_or(self.active_time_s),
-            iterations: self.success_iteration.unwrap_or(self.iterations),
-            success_rate: evaluation.map_or(0.0, |e| e.success_rate),
-            ape_m: evaluation.and_then(|e| finite(e.pose_error_m)),
-            mpjpe_m: evaluation.and_then(|e| finite(e.global_mpjpe_m)),
-            ee_error_m: evaluation.and_then(|e| finite(e.ee_position_error_m)),
-            frames_per_s: finite(self.frames_per_s).filter(|&f| f > 0.0),
         }
     }
 
@@ -189,10 +172,7 @@ mod tests {
         assert_eq!(s.success_iteration, Some(10));
         assert_eq!(s.iterations, 15);
         assert_eq!(s.frames_per_s, 131_072.0 * 15.0 / 3.75);
-        let outcome = s.trial_outcome();
-        assert!(outcome.success);
-        assert_eq!((outcome.active_time_s, outcome.iterations), (2.5, 10));
-        assert_eq!(outcome.ape_m, Some(0.05));
+        // What the search makes of this summary: hpo::trial's tests.
         let text = s.report();
         assert!(
             text.contains("time to success 2.500 s (active, at iteration 10)"),
@@ -208,10 +188,6 @@ mod tests {
             .collect();
         let s = RunSummary::from_records("walk", 0, &records, StopReason::TimeBudget);
         assert_eq!(s.time_to_success_s, None);
-        let outcome = s.trial_outcome();
-        assert!(!outcome.success);
-        assert_eq!(outcome.active_time_s, 2.5);
-        assert_eq!(outcome.success_rate, 3.0 / 32.0);
         assert!(s.report().contains("no success"));
         let empty = RunSummary::from_records("walk", 0, &[], StopReason::Interrupted);
         assert_eq!((empty.iterations, empty.frames_per_s), (0, 0.0));

@@ -7,13 +7,20 @@
 //! queues one asynchronous copy of the report, and reads the report when the iteration is done:
 //! nothing inside an iteration waits for the host. Evaluation is a second graph over the
 //! 32-world plans that reads the same policy parameters.
+//!
+//! The trainer owns the policy and lends it to the rollouts (which run it) and to the update
+//! (which changes its parameters in place); the rollouts own the observation normalization and
+//! the start-phase statistics, the update the optimizer's state.
 
 use crate::cuda::{DeviceMemory, Gpu, Graph, Readback};
-use crate::env::{DeviceArray, Rollout, RolloutTotals, TOTALS};
+use crate::env::{Rollout, RolloutTotals, TOTALS};
+use crate::kernels::DeviceArray;
 use crate::motion::ReferenceMotion;
 use crate::plan::PlanStore;
 use crate::ppo::reduce::{record_clear, record_sum_of_squares};
-use crate::ppo::{PolicyGemm, PpoBatch, PpoOptimizerState, PpoStatistics, PpoUpdate};
+use crate::ppo::{
+    GaussianPolicy, PolicyGemm, PpoBatch, PpoOptimizerState, PpoStatistics, PpoUpdate,
+};
 
 use super::checkpoint::tensor_names;
 use super::checkpoint::{Checkpoint, CheckpointError};
@@ -37,6 +44,10 @@ pub struct Trainer {
     gpu: Gpu,
     rollout: Rollout,
     evaluation: Rollout,
+    /// The policy the training rollout samples from and the update trains...
+    policy: GaussianPolicy,
+    /// ...and the same parameters with the evaluation's batch (shared, not copied).
+    evaluation_policy: GaussianPolicy,
     update: PpoUpdate,
     iteration_graph: Graph,
     evaluation_graph: Graph,
@@ -58,18 +69,34 @@ impl Trainer {
         motion: &ReferenceMotion,
         config: &TrainConfig,
     ) -> Result<Trainer, TrainError> {
-        let rollout = Rollout::new(gpu, store, motion, config)?;
-        let evaluation = Rollout::evaluation(&rollout, store, motion, config)?;
-        let update = PpoUpdate::new(gpu, rollout.kernels().clone(), &rollout.policy, config)?;
+        let rollout_config = config.rollout_config();
+        let rollout = Rollout::new(gpu, store, motion, &rollout_config)?;
+        let policy = GaussianPolicy::new(
+            gpu,
+            &config.policy,
+            rollout.observation_size(),
+            rollout.action_size(),
+            rollout.num_envs(),
+            config.seed,
+        )?;
+        let evaluation = Rollout::evaluation(&rollout, store, motion, &rollout_config)?;
+        let evaluation_policy = policy.with_batch(gpu, evaluation.num_envs())?;
+        let update = PpoUpdate::new(
+            gpu,
+            rollout.kernels().clone(),
+            &policy,
+            &config.ppo,
+            rollout.num_envs(),
+            config.seed,
+        )?;
         let report = gpu.alloc_zeroed(REPORT_BYTES)?;
         let parameter_squares = DeviceArray::<f64>::zeros(gpu, [2])?;
         let stream = gpu.stream();
         let iteration_graph = stream.capture(|s| {
-            rollout.record(s)?;
+            rollout.record(s, &policy)?;
             update.record(s, &PpoBatch::from(&rollout.storage))?;
             let kernels = rollout.kernels();
             record_clear(s, &parameter_squares)?;
-            let policy = &rollout.policy;
             record_sum_of_squares(kernels, s, policy.actor_parameters(), &parameter_squares, 0)?;
             record_sum_of_squares(
                 kernels,
@@ -93,13 +120,15 @@ impl Trainer {
             Ok::<(), TrainError>(())
         })?;
         iteration_graph.upload(stream)?;
-        let (evaluation_graph, _) = evaluation.capture(false)?;
+        let (evaluation_graph, _) = evaluation.capture(&evaluation_policy, false)?;
         rollout.reset_all()?;
         Ok(Trainer {
             gpu: gpu.clone(),
             readback: Readback::new(gpu, REPORT_BYTES)?,
             rollout,
             evaluation,
+            policy,
+            evaluation_policy,
             update,
             iteration_graph,
             evaluation_graph,
@@ -179,7 +208,7 @@ impl Trainer {
 
     /// What computes the policy's GEMMs (rollout, update and evaluation share it).
     pub fn gemm(&self) -> &PolicyGemm {
-        self.rollout.policy.gemm()
+        self.policy.gemm()
     }
 
     /// Control steps of one evaluation episode.
@@ -187,10 +216,11 @@ impl Trainer {
         self.evaluation.horizon() as u32
     }
 
-    /// The evaluation rollout (the paper's protocol on `run.eval_envs` envs, sharing the
-    /// policy), for a caller that captures its own graph of it (`replay` records every step).
-    pub fn evaluation_rollout(&self) -> &Rollout {
-        &self.evaluation
+    /// The evaluation rollout (the paper's protocol on `run.eval_envs` envs) and the policy it
+    /// runs (the training parameters, the evaluation's batch), for a caller that captures its
+    /// own graph of it (`replay` records every step).
+    pub fn evaluation_rollout(&self) -> (&Rollout, &GaussianPolicy) {
+        (&self.evaluation, &self.evaluation_policy)
     }
 
     /// Adds the policy, the normalization and everything an exact continuation needs to
@@ -198,7 +228,7 @@ impl Trainer {
     pub fn save_into(&self, checkpoint: &mut Checkpoint) -> Result<(), TrainError> {
         use tensor_names::*;
         self.gpu.synchronize()?;
-        let policy = &self.rollout.policy;
+        let policy = &self.policy;
         put_f32(checkpoint, ACTOR, policy.actor_parameters())?;
         put_f32(checkpoint, CRITIC, policy.critic_parameters())?;
         let [count, mean, m2] = self.rollout.normalizer_moments();
@@ -227,7 +257,7 @@ impl Trainer {
     pub fn restore(&self, checkpoint: &Checkpoint) -> Result<(), TrainError> {
         use tensor_names::*;
         self.gpu.synchronize()?;
-        let policy = &self.rollout.policy;
+        let policy = &self.policy;
         get_f32(checkpoint, ACTOR, policy.actor_parameters())?;
         get_f32(checkpoint, CRITIC, policy.critic_parameters())?;
         let [count, mean, m2] = self.rollout.normalizer_moments();

@@ -7,8 +7,8 @@
 //! f64): `q_ref * qexp(s a)`, `theta_ref + s a`. Half the envs are near their targets and slow
 //! (below the torque limit), half far and fast (clamped).
 
-use instantmimic::env::PD_CONTROL;
 use instantmimic::env::layout::{BALL, JointLayout};
+use instantmimic::kernels::PD_CONTROL;
 use instantmimic::motion::table::HUMANOID_LAYOUT;
 
 use super::compare::{Report, wide};

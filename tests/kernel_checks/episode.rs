@@ -7,7 +7,7 @@
 //! fires), truncated at that step and not before, and `summarize` must accept the result.
 
 use instantmimic::env::layout::{JointLayout, without_failures};
-use instantmimic::env::{EVALUATION_ACCUMULATE, REWARD_TERMINATION, TrackingParams};
+use instantmimic::kernels::{EVALUATION_ACCUMULATE, REWARD_TERMINATION, TrackingParams};
 use instantmimic::motion::{Character, LoopMode, ReferenceTable, SyntheticMotion};
 use instantmimic::train::{
     EnvEvaluation, TrainConfig, clamped_clip_steps, evaluation_steps, summarize, yardstick,

@@ -11,7 +11,7 @@
 //! untouched, bit for bit.
 
 use instantmimic::env::layout::JointLayout;
-use instantmimic::env::{EVALUATION_ACCUMULATE, Yardstick};
+use instantmimic::kernels::{EVALUATION_ACCUMULATE, Yardstick};
 use instantmimic::motion::table::HUMANOID_LAYOUT;
 
 use super::compare::Report;

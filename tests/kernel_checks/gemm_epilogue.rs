@@ -9,7 +9,7 @@
 //! `elu'(z) = 1 if z > 0 else y + 1` (mlp_backward.py's formula). Shapes that are not multiples
 //! of anything, a single element, and the actor's widest layer.
 
-use instantmimic::env::{BIAS_ADD, BIAS_ELU, ELU_INPUT_GRADIENT};
+use instantmimic::kernels::{BIAS_ADD, BIAS_ELU, ELU_INPUT_GRADIENT};
 
 use super::compare::{Report, wide};
 use super::policy::{elu, linear_reference};

@@ -6,7 +6,9 @@
 //! onto existing statistics against the two-pass moments of both data sets together; and
 //! `clip((x - mean) / sqrt(var + 1e-8), -clip, clip)` with and without statistics.
 
-use instantmimic::env::{OBSERVATION_MOMENTS, OBSERVATION_MOMENTS_MERGE, OBSERVATION_NORMALIZE};
+use instantmimic::kernels::{
+    OBSERVATION_MOMENTS, OBSERVATION_MOMENTS_MERGE, OBSERVATION_NORMALIZE,
+};
 
 use super::compare::{Report, wide};
 use super::program::{Arg, Program, Scalar};

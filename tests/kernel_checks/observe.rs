@@ -11,7 +11,7 @@
 //! untouched.
 
 use instantmimic::env::layout::{JointLayout, observation_params, observation_size};
-use instantmimic::env::{OBSERVE, ObservationParams};
+use instantmimic::kernels::{OBSERVE, ObservationParams};
 use instantmimic::motion::table::HUMANOID_LAYOUT;
 use instantmimic::train::ObsConfig;
 use nalgebra::Vector3;

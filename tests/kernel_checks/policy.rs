@@ -7,7 +7,7 @@
 //! reproduced, its log-probability, the value copied, and, without the generator twin, the
 //! log-probability recomputed from the written actions and the recovered noise's statistics.
 
-use instantmimic::env::{GAUSSIAN_SAMPLE, LINEAR, LINEAR_ELU};
+use instantmimic::kernels::{GAUSSIAN_SAMPLE, LINEAR, LINEAR_ELU};
 
 use super::compare::{Report, relative_error, wide};
 use super::program::{Arg, Program, Scalar};

@@ -5,8 +5,8 @@
 
 use std::collections::BTreeMap;
 
-use instantmimic::env::manifest::{EnvManifest, SlotType};
-use instantmimic::env::{
+use instantmimic::kernels::manifest::{EnvManifest, SlotType};
+use instantmimic::kernels::{
     KernelAbi, MANIFEST_ASSET, ObservationParams, ParamKind, ResetParams, ScalarType,
     TrackingParams, Yardstick,
 };
@@ -410,7 +410,7 @@ impl Program {
         manifest: &EnvManifest,
         at: &str,
         kernel: &str,
-        param: &instantmimic::env::ParamAbi,
+        param: &instantmimic::kernels::ParamAbi,
         arg: &Arg,
     ) -> Result<(), String> {
         let at = format!("{at}: {kernel}({})", param.name);

@@ -10,7 +10,7 @@
 //! unit, the root position stays exact and the recovered noise has mean 0 and deviation 1.
 
 use instantmimic::env::layout::{BALL, JointLayout};
-use instantmimic::env::{PHASE_STATISTICS_UPDATE, RESET_MASKED, ResetParams};
+use instantmimic::kernels::{PHASE_STATISTICS_UPDATE, RESET_MASKED, ResetParams};
 use instantmimic::motion::table::{HEADER_DURATION, HEADER_WRAP, HUMANOID_LAYOUT};
 
 use super::compare::{Report, wide};

@@ -8,7 +8,8 @@
 //! kernel over a whole rollout, then the end-of-rollout kernel. Cause bits are given to envs
 //! that did not fail and above bit 4 too: neither may count.
 
-use instantmimic::env::{EPISODE_STATISTICS, FailureCause, ROLLOUT_STATISTICS};
+use instantmimic::env::FailureCause;
+use instantmimic::kernels::{EPISODE_STATISTICS, ROLLOUT_STATISTICS};
 
 use super::Check;
 use super::compare::{Report, wide};

@@ -13,7 +13,7 @@
 //! and several at once, inside and after the grace steps, and to cross thresholds that are off.
 
 use instantmimic::env::layout::{BALL, JointLayout};
-use instantmimic::env::{REWARD_TERMINATION, TrackingParams};
+use instantmimic::kernels::{REWARD_TERMINATION, TrackingParams};
 use instantmimic::motion::table::{
     HEADER_DURATION, HEADER_WRAP, HUMANOID_END_EFFECTORS, HUMANOID_LAYOUT,
 };

@@ -8,8 +8,9 @@
 #![allow(clippy::needless_range_loop)]
 
 use instantmimic::cuda::Gpu;
-use instantmimic::env::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
-use instantmimic::ppo::{ActStorage, GaussianPolicy, LayerShape};
+use instantmimic::env::ActStorage;
+use instantmimic::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
+use instantmimic::ppo::{GaussianPolicy, LayerShape};
 use rand::Rng;
 use rand::rngs::StdRng;
 use rand_distr::StandardNormal;

@@ -325,7 +325,7 @@ pub enum ManifestError {
     Format { found: u32, expected: u32 },
 
     #[error(
-        "Warp's {what} layout in the manifest is {found}, the Rust side writes {expected}: Warp's kernel ABI changed; update src/env/manifest.rs and src/env/abi.rs together"
+        "Warp's {what} layout in the manifest is {found}, the Rust side writes {expected}: Warp's kernel ABI changed; update src/kernels/manifest.rs and src/kernels/abi.rs together"
     )]
     WarpAbi {
         what: String,

@@ -1,0 +1,184 @@
+//! The task's sections of the training configuration (`[env]`, `[reward]`, `[obs]` and the
+//! evaluation's start states), owned here where they are consumed; `train::TrainConfig`
+//! composes them (same TOML keys) and validates their ranges. [`RolloutConfig`] is what a
+//! rollout is built from: these sections plus the few values of other sections it needs,
+//! gathered by `train`.
+
+use serde::{Deserialize, Serialize};
+
+/// `[env]`: episodes, actions and termination (docs/env.md).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct EnvConfig {
+    pub num_envs: u32,
+    /// Physics steps per control step (control at 1/(substeps * physics dt)).
+    pub substeps: u32,
+    /// What the actions are offsets from: the reference pose (default) or the zero pose.
+    pub action_mode: ActionMode,
+    /// Global scale of the normalized actions (paper: 1.0, tuned backflip 0.875).
+    pub action_scale: f32,
+    /// Metres the root may fall below the reference root before the episode fails.
+    pub termination_height: f32,
+    /// Largest body distance to the reference (m) before the episode fails.
+    pub tracking_distance: f32,
+    /// The episode fails when the root's absolute height falls below this (m; 0: off). The
+    /// paper's code figure ends episodes at 0.55 m.
+    pub min_root_height: f32,
+    /// The episode fails when the step's reward falls below this (0: off). The paper's code
+    /// figure ends episodes at 0.15.
+    pub min_reward: f32,
+    /// The episode fails when the mean distance of the bodies to their references exceeds this
+    /// (m; 0: off). PHC ends episodes at 0.25 m.
+    pub mean_tracking_distance: f32,
+    /// Control steps after a reset during which failures are ignored.
+    pub grace_steps: u32,
+    /// Reference state initialization noise (rad; velocities get 10x).
+    pub motion_noise_std: f32,
+    /// Episode length limit in control steps (truncation, not failure).
+    pub max_episode_steps: u32,
+    /// Adaptive start-phase sampling: bins over the clip, uniform floor, per-rollout decay.
+    pub phase_bins: u32,
+    pub phase_floor: f32,
+    pub phase_decay: f32,
+}
+
+impl Default for EnvConfig {
+    fn default() -> Self {
+        EnvConfig {
+            num_envs: 4096,
+            substeps: 4,
+            action_mode: ActionMode::Residual,
+            action_scale: 1.0,
+            termination_height: 0.8,
+            tracking_distance: 1.0,
+            min_root_height: 0.0,
+            min_reward: 0.0,
+            mean_tracking_distance: 0.0,
+            grace_steps: 4,
+            motion_noise_std: 0.02,
+            max_episode_steps: 300,
+            phase_bins: 20,
+            phase_floor: 0.1,
+            phase_decay: 0.99,
+        }
+    }
+}
+
+/// What a PD target is relative to (docs/env.md, "Actions and PD control").
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ActionMode {
+    /// Offsets from the zero pose (ball joints) and the middle of the range (hinges), as
+    /// DeepMimic's targets: a fresh policy commands the zero pose.
+    Absolute,
+    /// Offsets from the reference pose at the end of the control step: a fresh policy commands
+    /// the reference trajectory.
+    Residual,
+}
+
+/// `[reward]`: weights of the multiplicative DeepMimic reward.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct RewardConfig {
+    pub pose_weight: f32,
+    pub velocity_weight: f32,
+    pub com_weight: f32,
+    pub ee_pos_weight: f32,
+    pub ee_rot_weight: f32,
+    /// Where end-effector positions are compared: in the world, or each relative to its own
+    /// root (DeepMimic, MimicKit).
+    pub ee_frame: EndEffectorFrame,
+}
+
+impl Default for RewardConfig {
+    fn default() -> Self {
+        RewardConfig {
+            pose_weight: 10.0,
+            velocity_weight: 0.1,
+            com_weight: 10.0,
+            ee_pos_weight: 40.0,
+            ee_rot_weight: 2.0,
+            ee_frame: EndEffectorFrame::World,
+        }
+    }
+}
+
+/// `reward.ee_frame` (docs/env.md, "Reward").
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum EndEffectorFrame {
+    /// World positions: a character off the reference's path pays in every end effector.
+    World,
+    /// Positions relative to the root (simulated and reference each to its own).
+    Root,
+}
+
+/// `[obs]`: the optional observation blocks and normalization.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ObsConfig {
+    /// Future reference end-effector frames, and control steps between them.
+    pub future_frames: u32,
+    pub future_spacing: u32,
+    pub prev_action: bool,
+    pub root_target: bool,
+    /// Every body's reference one step ahead relative to the simulated body (PHC's difference
+    /// observation): 135 values.
+    pub reference_bodies: bool,
+    /// Normalized observations are clipped to [-clip, clip].
+    pub clip: f32,
+}
+
+impl Default for ObsConfig {
+    fn default() -> Self {
+        ObsConfig {
+            future_frames: 2,
+            future_spacing: 1,
+            prev_action: true,
+            root_target: false,
+            reference_bodies: false,
+            clip: 5.0,
+        }
+    }
+}
+
+/// Where the evaluation episodes start (docs/train.md, "Evaluation").
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum EvalStart {
+    /// Env i of n starts at i/n of the clip (a looping clip; a clamped clip starts every env
+    /// at 0): n distinct deterministic states that together cover the whole clip.
+    Spread,
+    /// Every env starts at the beginning of the clip.
+    ClipStart,
+}
+
+/// Everything a [`Rollout`](super::Rollout) is built from (`train` builds it from its
+/// configuration: `TrainConfig::rollout_config`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RolloutConfig {
+    pub env: EnvConfig,
+    pub reward: RewardConfig,
+    pub obs: ObsConfig,
+    /// Control steps per env of the training rollout (`ppo.horizon`).
+    pub horizon: u32,
+    /// The run's seed: the reset's random stream is derived from it.
+    pub seed: u64,
+    /// Whether the policy's critic values every step inside the rollout (false) or the update
+    /// values the whole batch afterwards (true: `ppo.values_in_update`).
+    pub values_in_update: bool,
+    /// The evaluation rollout's protocol (`[run]`).
+    pub evaluation: EvaluationProtocol,
+}
+
+/// The paper's evaluation as the evaluation rollout runs it (docs/train.md, "Evaluation").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EvaluationProtocol {
+    /// Evaluation environments (`run.eval_envs`; a plan for this many worlds must exist).
+    pub envs: u32,
+    /// Control steps of an episode (`run.eval_steps`); None: one pass of the clip
+    /// ([`evaluation_episode_steps`](super::evaluation_episode_steps)).
+    pub steps: Option<u32>,
+    /// Initial states of the episodes (`run.eval_start`).
+    pub start: EvalStart,
+}
