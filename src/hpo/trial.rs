@@ -115,7 +115,6 @@ pub fn build_runners(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::train::{EvaluationSummary, IterationRecord, UpdateStats};
 
     fn outcome(success: bool, time: f64) -> TrialOutcome {
         TrialOutcome {
@@ -130,35 +129,7 @@ mod tests {
         }
     }
 
-    /// Iteration `iteration` of a run (0.25 s each), with an evaluation when `success` is
-    /// given: src/train/summary.rs's test records.
-    fn record(iteration: u64, success: Option<bool>) -> IterationRecord {
-        IterationRecord {
-            iteration,
-            active_time_s: 0.25 * iteration as f64,
-            frames: 131_072 * iteration,
-            frames_per_s: 524_288.0,
-            mean_return: 10.0,
-            mean_episode_length: 20.0,
-            update: UpdateStats::default(),
-            termination: Default::default(),
-            evaluation: success.map(|s| EvaluationSummary {
-                episodes: 32,
-                completed: if s { 30 } else { 3 },
-                succeeded: if s { 30 } else { 3 },
-                success_rate: if s { 30.0 / 32.0 } else { 3.0 / 32.0 },
-                success: s,
-                clip_start_success: s,
-                episode_steps: 53,
-                mean_episode_steps: 50.0,
-                pose_error_m: 0.05,
-                global_mpjpe_m: 0.08,
-                ee_position_error_m: 0.07,
-                ee_orientation_error_rad: 0.3,
-            }),
-            divergence: None,
-        }
-    }
+    use crate::train::summary::test_records::record;
 
     /// The summaries of src/train/summary.rs's tests, as the search scores them.
     #[test]

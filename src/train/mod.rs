@@ -17,7 +17,7 @@ pub mod preflight;
 mod progress;
 pub mod run_dir;
 mod session;
-mod summary;
+pub(crate) mod summary;
 mod trainer;
 
 pub use crate::files::{is_temporary, write_atomically, write_bytes_atomically};

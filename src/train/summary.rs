@@ -126,12 +126,14 @@ impl RunSummary {
     }
 }
 
+/// Iteration records for tests here and in the search (src/hpo/trial.rs): iteration `i` of a
+/// run (0.25 s each), with an evaluation when `success` is given.
 #[cfg(test)]
-mod tests {
+pub(crate) mod test_records {
     use super::*;
     use crate::train::metrics::UpdateStats;
 
-    fn record(iteration: u64, success: Option<bool>) -> IterationRecord {
+    pub(crate) fn record(iteration: u64, success: Option<bool>) -> IterationRecord {
         IterationRecord {
             iteration,
             active_time_s: 0.25 * iteration as f64,
@@ -158,6 +160,13 @@ mod tests {
             divergence: None,
         }
     }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    use test_records::record;
 
     #[test]
     fn time_to_success_is_the_first_successful_evaluation() {
