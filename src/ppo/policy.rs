@@ -326,12 +326,26 @@ impl GaussianPolicy {
         }
         Ok(())
     }
+}
 
-    /// Queues rollout step `t`: forward of `obs`, then actions sampled into `actions` (`[batch,
-    /// A]`) and stored with their log-probabilities and the values in row t of the storage.
-    /// `deterministic` takes the mean action (evaluation).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_act(
+/// The rollout runs the actor (and, unless the update values the batch, the critic) and samples
+/// from the Gaussian.
+impl RolloutPolicy for GaussianPolicy {
+    fn batch(&self) -> usize {
+        self.batch
+    }
+
+    fn observation_size(&self) -> usize {
+        self.observation_size
+    }
+
+    fn action_size(&self) -> usize {
+        self.action_size
+    }
+
+    /// Forward of `obs`, then actions sampled into `actions` (`[batch, A]`) and stored with
+    /// their log-probabilities and the values in row t of the storage.
+    fn record_act(
         &self,
         kernels: &EnvKernels,
         stream: &Stream,
@@ -341,7 +355,7 @@ impl GaussianPolicy {
         iteration: &DeviceArray<i32>,
         t: usize,
         deterministic: bool,
-    ) -> Result<(), PolicyError> {
+    ) -> Result<(), RolloutError> {
         if storage.values_in_update {
             self.check_observations(obs)?;
             self.actor.record(kernels, stream, obs)?;
@@ -350,13 +364,13 @@ impl GaussianPolicy {
         }
         let [horizon, n, a] = storage.actions.shape();
         if n != self.batch || a != self.action_size || actions.shape() != [n, a] || t >= horizon {
-            return Err(PolicyError::Shape(format!(
+            return Err(RolloutError::from(PolicyError::Shape(format!(
                 "storage {:?} and actions {:?} for step {t}, expected [T > {t}, {}, {}]",
                 storage.actions.shape(),
                 actions.shape(),
                 self.batch,
                 self.action_size
-            )));
+            ))));
         }
         kernels.gaussian_sample(
             stream,
@@ -379,43 +393,10 @@ impl GaussianPolicy {
     }
 }
 
-/// The rollout runs the actor (and, unless the update values the batch, the critic) and samples
-/// from the Gaussian: [`GaussianPolicy::record_act`].
-impl RolloutPolicy for GaussianPolicy {
-    fn batch(&self) -> usize {
-        self.batch
-    }
-
-    fn observation_size(&self) -> usize {
-        self.observation_size
-    }
-
-    fn action_size(&self) -> usize {
-        self.action_size
-    }
-
-    fn record_act(
-        &self,
-        kernels: &EnvKernels,
-        stream: &Stream,
-        obs: &DeviceArray2<f32>,
-        actions: &DeviceArray2<f32>,
-        storage: &ActStorage<'_>,
-        iteration: &DeviceArray<i32>,
-        t: usize,
-        deterministic: bool,
-    ) -> Result<(), RolloutError> {
-        GaussianPolicy::record_act(
-            self,
-            kernels,
-            stream,
-            obs,
-            actions,
-            storage,
-            iteration,
-            t,
-            deterministic,
-        )
-        .map_err(|e| RolloutError::Policy(Box::new(e)))
+/// A policy error inside the rollout (the rollout knows policies only through
+/// [`RolloutPolicy`]).
+impl From<PolicyError> for RolloutError {
+    fn from(e: PolicyError) -> Self {
+        RolloutError::Policy(Box::new(e))
     }
 }

@@ -8,7 +8,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use instantmimic::cuda::Gpu;
-use instantmimic::env::ActStorage;
+use instantmimic::env::{ActStorage, RolloutPolicy};
 use instantmimic::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
 use instantmimic::ppo::{GaussianPolicy, LayerShape};
 use rand::Rng;
