@@ -20,6 +20,8 @@
 //!   from the clip's start: the table's rows) within 1e-4.
 #![cfg(feature = "gpu")]
 
+mod small_run_support;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -78,16 +80,8 @@ fn file_size(path: &Path) -> u64 {
 /// Trains the walk for 4 iterations at 32 envs with its replay page on; returns the run
 /// directory and its final checkpoint.
 fn train_walk(dir: &Path) -> (PathBuf, PathBuf) {
-    let (_, config) = TrainConfig::committed("walk").expect("a committed walk config");
-    let mut config = config.expect("the committed walk config is valid");
-    config.env.num_envs = 32;
-    config.ppo.horizon = 16;
-    config.ppo.minibatches = 2;
-    config.ppo.epochs = 2;
-    config.run.eval_interval = 2;
+    let mut config = small_run_support::small_config("walk");
     config.run.max_iterations = 4;
-    config.run.time_budget_s = 600.0;
-    config.run.stop_on_success = false;
     config.run.replay = true;
     config.validate("test").expect("valid test config");
     let path = dir.join("config.toml");

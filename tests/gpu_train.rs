@@ -9,12 +9,13 @@
 //!   continue without a gap or a duplicate (issue 5's acceptance).
 #![cfg(feature = "gpu")]
 
+mod small_run_support;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use instantmimic::motion::library::MOTIONS_ENV;
-use instantmimic::train::TrainConfig;
 
 /// The binary under test: `INSTANTMIMIC_BIN` where the test runs away from its build tree (the
 /// device machine), else the one cargo built beside this test.
@@ -29,17 +30,9 @@ fn binary() -> Command {
 
 /// The backflip's committed config at the 32-world size, with small iterations.
 fn write_config(dir: &Path, max_iterations: u64, checkpoint_interval: u32) -> PathBuf {
-    let (_, config) = TrainConfig::committed("backflip").expect("a committed backflip config");
-    let mut config = config.expect("the committed backflip config is valid");
-    config.env.num_envs = 32;
-    config.ppo.horizon = 16;
-    config.ppo.minibatches = 2;
-    config.ppo.epochs = 2;
-    config.run.eval_interval = 2;
+    let mut config = small_run_support::small_config("backflip");
     config.run.max_iterations = max_iterations;
-    config.run.time_budget_s = 600.0;
     config.run.checkpoint_interval = checkpoint_interval;
-    config.run.stop_on_success = false;
     config.validate("test").expect("valid test config");
     let path = dir.join("config.toml");
     std::fs::write(&path, config.to_toml().expect("toml")).expect("write config");
