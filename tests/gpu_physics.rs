@@ -1,18 +1,21 @@
 //! The Rust replay of the step plan against MuJoCo Warp itself (GPU; `--features gpu`).
 //!
-//! `kernels_py/physics_reference.py exact --nworld N --out DIR` (on the GPU machine, with
-//! warp-lang) writes seeded initial states and MuJoCo Warp's qpos/qvel after a few step counts.
-//! Point `INSTANTMIMIC_PHYSICS_REFERENCE` at DIR; `INSTANTMIMIC_ASSETS` may point at a directory
-//! laid out like ptx/ (default: the plans built into the binary). Without the reference the
-//! test prints why and passes, since it cannot check anything.
+//! The references are MuJoCo Warp's own states, made on the GPU machine by
+//! `kernels_py/physics_reference.py exact --nworld 32` (`tests/device/physics_reference.sh`) and
+//! committed under `tests/fixtures/physics_reference/`: seeded initial states and MuJoCo Warp's
+//! qpos/qvel after a few step counts, for the default physics (`default_32`, against the plans
+//! built into the binary) and the deterministic one (`deterministic_32`, written with
+//! configs/physics/deterministic.toml, against `ptx/deterministic`). Tests run from the
+//! repository root (cargo's working directory, and session.sh's on the device).
+//! `INSTANTMIMIC_PHYSICS_REFERENCE=DIR` checks one other reference instead, with the plans of
+//! `INSTANTMIMIC_ASSETS` (a directory laid out like ptx/; default: the built-in plans).
 //!
 //! Both replay orders are checked (Warp's chain and our dependency DAG). A free fall (no
 //! contact) must agree bit for bit. With contacts, the default physics differs from itself run
 //! to run (contacts, constraint rows and some solver sums are collected with atomics): the
 //! reference records the largest difference among three MuJoCo Warp runs from the same state,
 //! and after one step the replay must be within 1e-5 or twice that spread. The deterministic
-//! variant (reference written with configs/physics/deterministic.toml, `INSTANTMIMIC_ASSETS=
-//! ptx/deterministic`) must agree bit for bit at every checkpoint, contacts or not.
+//! variant must agree bit for bit at every checkpoint, contacts or not.
 #![cfg(feature = "gpu")]
 
 mod skip_support;
@@ -53,35 +56,53 @@ fn max_abs_diff(a: &[f32], b: &[f32]) -> (f32, usize) {
 
 struct Reference {
     dir: PathBuf,
+    /// The plans to replay (None: the ones built into the binary).
+    assets: Option<PathBuf>,
     summary: serde_json::Value,
     nworld: u32,
 }
 
-fn reference() -> Option<Reference> {
-    let Some(dir) = std::env::var_os("INSTANTMIMIC_PHYSICS_REFERENCE").map(PathBuf::from) else {
-        skip_support::skip("INSTANTMIMIC_PHYSICS_REFERENCE is not set (see the file's header)");
-        return None;
-    };
-    let summary: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.join("reference.json")).expect("reference.json"))
-            .expect("reference.json parses");
-    let nworld = summary["nworld"].as_u64().expect("nworld") as u32;
-    Some(Reference {
-        dir,
-        summary,
-        nworld,
-    })
+impl Reference {
+    fn load(dir: PathBuf, assets: Option<PathBuf>) -> Reference {
+        let file = dir.join("reference.json");
+        let bytes = std::fs::read(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+        let summary: serde_json::Value =
+            serde_json::from_slice(&bytes).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+        let nworld = summary["nworld"].as_u64().expect("nworld") as u32;
+        Reference {
+            dir,
+            assets,
+            summary,
+            nworld,
+        }
+    }
+
+    fn store(&self) -> PlanStore {
+        PlanStore::new(self.assets.as_deref())
+    }
 }
 
-fn store() -> PlanStore {
-    let assets = std::env::var_os("INSTANTMIMIC_ASSETS").map(PathBuf::from);
-    PlanStore::new(assets.as_deref())
+/// `INSTANTMIMIC_PHYSICS_REFERENCE` alone when set, else both committed references.
+fn references() -> Vec<Reference> {
+    if let Some(dir) = std::env::var_os("INSTANTMIMIC_PHYSICS_REFERENCE").map(PathBuf::from) {
+        let assets = std::env::var_os("INSTANTMIMIC_ASSETS").map(PathBuf::from);
+        return vec![Reference::load(dir, assets)];
+    }
+    let fixtures = Path::new("tests/fixtures/physics_reference");
+    vec![
+        Reference::load(fixtures.join("default_32"), None),
+        Reference::load(
+            fixtures.join("deterministic_32"),
+            Some(PathBuf::from("ptx/deterministic")),
+        ),
+    ]
 }
 
 /// A simulation in a reference case's initial state.
 fn load_case(gpu: &Gpu, r: &Reference, case: &serde_json::Value, order: ReplayOrder) -> Simulation {
-    let sim = Simulation::load_with_order(gpu, &store(), r.nworld, &["step", "kinematics"], order)
-        .unwrap_or_else(|e| panic!("loading plans: {e}"));
+    let sim =
+        Simulation::load_with_order(gpu, &r.store(), r.nworld, &["step", "kinematics"], order)
+            .unwrap_or_else(|e| panic!("loading plans: {e}"));
     for field in ["qpos", "qvel", "ctrl"] {
         let file = case["files"][format!("init_{field}")]
             .as_str()
@@ -97,14 +118,22 @@ fn load_case(gpu: &Gpu, r: &Reference, case: &serde_json::Value, order: ReplayOr
 
 #[test]
 fn step_plan_matches_mujoco_warp() {
-    let Some(r) = reference() else { return };
-    let deterministic = r.summary["deterministic"].as_bool().unwrap_or(false);
     let gpu = Gpu::open(0).expect("a GPU");
     let mut failures: Vec<String> = Vec::new();
+    for r in references() {
+        check_reference(&gpu, &r, &mut failures);
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// Replays every case of `r` in both orders; pushes each disagreement onto `failures`.
+fn check_reference(gpu: &Gpu, r: &Reference, failures: &mut Vec<String>) {
+    let deterministic = r.summary["deterministic"].as_bool().unwrap_or(false);
+    let variant = r.dir.display();
     for order in [ReplayOrder::Linear, ReplayOrder::Dag] {
         for case in r.summary["cases"].as_array().expect("cases") {
             let name = case["name"].as_str().expect("case name");
-            let sim = load_case(&gpu, &r, case, order);
+            let sim = load_case(gpu, r, case, order);
             let mut done = 0u64;
             for checkpoint in case["checkpoints"].as_array().expect("checkpoints") {
                 let target = checkpoint["steps"].as_u64().expect("steps");
@@ -127,18 +156,18 @@ fn step_plan_matches_mujoco_warp() {
                         .all(|(a, b)| a.to_bits() == b.to_bits());
                     let spread = checkpoint["warp_vs_warp"][field].as_f64().unwrap_or(0.0) as f32;
                     println!(
-                        "{order:?} {name}: after {target} steps max |d{field}| = {diff:.3e} (world {}); bit-identical: {identical}; MuJoCo Warp against itself: {spread:.3e}",
+                        "{variant} {order:?} {name}: after {target} steps max |d{field}| = {diff:.3e} (world {}); bit-identical: {identical}; MuJoCo Warp against itself: {spread:.3e}",
                         at / (got.len() / r.nworld as usize).max(1)
                     );
                     if (name == "freefall" || deterministic) && !identical {
                         failures.push(format!(
-                            "{order:?} {name}: {field} after {target} steps differs from MuJoCo Warp (max {diff:e})"
+                            "{variant} {order:?} {name}: {field} after {target} steps differs from MuJoCo Warp (max {diff:e})"
                         ));
                     } else if name != "freefall" && target == 1 {
                         let limit = (2.0 * spread).max(1e-5);
                         if diff.is_nan() || diff > limit {
                             failures.push(format!(
-                                "{order:?} {name}: max |d{field}| after 1 step is {diff:e} > {limit:e}"
+                                "{variant} {order:?} {name}: max |d{field}| after 1 step is {diff:e} > {limit:e}"
                             ));
                         }
                     }
@@ -146,17 +175,21 @@ fn step_plan_matches_mujoco_warp() {
             }
         }
     }
-    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
 /// The DAG order treats Model arrays as read-only: check that stepping with contacts leaves
 /// every `m.*` buffer unchanged.
 #[test]
 fn stepping_leaves_model_arrays_unchanged() {
-    let Some(r) = reference() else { return };
     let gpu = Gpu::open(0).expect("a GPU");
+    for r in references() {
+        model_arrays_unchanged(&gpu, &r);
+    }
+}
+
+fn model_arrays_unchanged(gpu: &Gpu, r: &Reference) {
     let case = &r.summary["cases"][0];
-    let sim = load_case(&gpu, &r, case, ReplayOrder::Linear);
+    let sim = load_case(gpu, r, case, ReplayOrder::Linear);
     let names: Vec<String> = sim
         .buffer_names()
         .filter(|n| n.starts_with("m."))
@@ -175,7 +208,8 @@ fn stepping_leaves_model_arrays_unchanged() {
         assert!(&now == old, "{name} changed during 100 steps");
     }
     println!(
-        "{} model arrays unchanged after 100 steps with contacts",
+        "{}: {} model arrays unchanged after 100 steps with contacts",
+        r.dir.display(),
         names.len()
     );
     // The capacities (nconmax, njmax) hold every contact and constraint row of these states;
