@@ -612,6 +612,12 @@ fn replay_checks_its_input_then_needs_the_gpu() {
             "{err}"
         );
     }
+    // Episode length: --steps sets run.eval_steps, checked as the key is.
+    let err = one_line_error(&replay(&["--steps", "0", "--out", page_arg]));
+    assert!(
+        err.contains("replay --steps sets run.eval_steps") && err.contains("run.eval_steps"),
+        "{err}"
+    );
     // Output paths in a missing directory, the page's or the recording's.
     let err = one_line_error(&replay(&["--out", "no/such/dir/replay.html"]));
     assert!(err.contains("does not exist (create it first)"), "{err}");
@@ -660,7 +666,14 @@ fn replay_checks_its_input_then_needs_the_gpu() {
     assert!(err.contains("none.safetensors"), "{err}");
     // Good input reaches the GPU, and writes nothing without one.
     if without_a_gpu() {
-        let err = one_line_error(&replay(&["--start", "clip_start", "--out", page_arg]));
+        let err = one_line_error(&replay(&[
+            "--start",
+            "clip_start",
+            "--steps",
+            "300",
+            "--out",
+            page_arg,
+        ]));
         assert!(err.contains("needs an NVIDIA GPU"), "{err}");
         assert!(!page.exists());
     }

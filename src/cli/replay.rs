@@ -37,6 +37,11 @@ pub struct ReplayArgs {
     /// Where the episodes start (default: the checkpoint's `run.eval_start`).
     #[arg(long, value_enum)]
     start: Option<StartArg>,
+    /// Control steps per episode (`run.eval_steps`; default: the checkpoint's, else one pass of
+    /// the clip). A looping clip's policy can be watched for longer than one pass: 300 steps
+    /// are 10 s at 30 Hz.
+    #[arg(long)]
+    steps: Option<u32>,
     /// The HTML page to write (its directory must exist).
     #[arg(long)]
     out: PathBuf,
@@ -60,6 +65,8 @@ pub(super) struct ReplayJob<'a> {
     pub checkpoint: &'a Path,
     pub episodes: u32,
     pub start: Option<EvalStart>,
+    /// Overrides `run.eval_steps`.
+    pub steps: Option<u32>,
     pub page: &'a Path,
     pub recording: Option<&'a Path>,
     pub motions_dir: Option<&'a Path>,
@@ -81,6 +88,12 @@ pub(super) fn write_replay(job: &ReplayJob<'_>) -> Result<String> {
     let mut config = checkpoint.meta.config(checkpoint.source())?;
     if let Some(start) = job.start {
         config.run.eval_start = start;
+    }
+    if let Some(steps) = job.steps {
+        config.run.eval_steps = Some(steps);
+        config
+            .validate("--steps")
+            .context("replay --steps sets run.eval_steps")?;
     }
     // Only the evaluation's worlds are simulated: plans for the training count are not needed.
     config.env.num_envs = config.run.eval_envs;
@@ -174,6 +187,7 @@ pub fn run(args: ReplayArgs) -> Result<()> {
             StartArg::Spread => EvalStart::Spread,
             StartArg::ClipStart => EvalStart::ClipStart,
         }),
+        steps: args.steps,
         page: &args.out,
         recording: args.save_recording.as_deref(),
         motions_dir: motions_dir.as_deref(),

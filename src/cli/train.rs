@@ -295,6 +295,7 @@ fn replay_final_policy(
         checkpoint: &checkpoint,
         episodes: DEFAULT_EPISODES,
         start: None,
+        steps: None,
         page: &page,
         recording: None,
         motions_dir,
