@@ -7,9 +7,11 @@
 #![cfg(feature = "gpu")]
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 use instantmimic::cuda::{
-    CudaError, DeviceMemory, Function, Gpu, Module, NvtxRange, PtxIsa, Stream,
+    CudaError, DeviceMemory, DeviceRange, Function, Gpu, KernelArgs, Module, NvtxRange, PtxIsa,
+    Stream,
 };
 
 const KERNELS_PTX: &str = include_str!("fixtures/test_kernels.ptx");
@@ -38,43 +40,48 @@ fn setup() -> Kernels {
     }
 }
 
-fn fill_args(out: u64, n: u32, scale: f32) -> Vec<u8> {
+/// The whole of `memory`, as the stream operations and kernel arguments take it.
+fn whole(memory: &Arc<DeviceMemory>) -> DeviceRange {
+    DeviceRange::whole(memory)
+}
+
+/// Bytes `[offset, offset + len)` of `memory`.
+fn range(memory: &Arc<DeviceMemory>, offset: usize, len: usize) -> Result<DeviceRange, CudaError> {
+    DeviceRange::new(memory, offset, len)
+}
+
+fn fill_args(out: &Arc<DeviceMemory>, n: u32, scale: f32) -> KernelArgs {
     // { u64 out; u32 n; f32 scale }: offsets 0, 8, 12.
-    let mut args = Vec::with_capacity(16);
-    args.extend_from_slice(&out.to_ne_bytes());
-    args.extend_from_slice(&n.to_ne_bytes());
-    args.extend_from_slice(&scale.to_ne_bytes());
+    let mut args = KernelArgs::zeroed(16);
+    args.write_address(0, &whole(out)).unwrap();
+    args.write(8, &n.to_ne_bytes()).unwrap();
+    args.write(12, &scale.to_ne_bytes()).unwrap();
     args
 }
 
-fn add_args(ptr: u64, value: u32) -> Vec<u8> {
+fn add_args(counter: &Arc<DeviceMemory>, value: u32) -> KernelArgs {
     // struct { u64 ptr; u32 value; u32 pad }
-    let mut args = Vec::with_capacity(16);
-    args.extend_from_slice(&ptr.to_ne_bytes());
-    args.extend_from_slice(&value.to_ne_bytes());
-    args.extend_from_slice(&0u32.to_ne_bytes());
+    let mut args = KernelArgs::zeroed(16);
+    args.write_address(0, &whole(counter)).unwrap();
+    args.write(8, &value.to_ne_bytes()).unwrap();
     args
 }
 
 impl Kernels {
-    fn add(&self, s: &Stream, counter: &DeviceMemory, value: u32) -> Result<(), CudaError> {
+    fn add(&self, s: &Stream, counter: &Arc<DeviceMemory>, value: u32) -> Result<(), CudaError> {
         s.launch(
             &self.add_u32,
             [1, 1, 1],
             [1, 1, 1],
             0,
-            &add_args(counter.device_ptr(), value),
+            &add_args(counter, value),
         )
     }
 
-    fn decrement(&self, s: &Stream, flag: &DeviceMemory) -> Result<(), CudaError> {
-        s.launch(
-            &self.decrement_i32,
-            [1, 1, 1],
-            [1, 1, 1],
-            0,
-            &flag.device_ptr().to_ne_bytes(),
-        )
+    fn decrement(&self, s: &Stream, flag: &Arc<DeviceMemory>) -> Result<(), CudaError> {
+        let mut args = KernelArgs::zeroed(8);
+        args.write_address(0, &whole(flag))?;
+        s.launch(&self.decrement_i32, [1, 1, 1], [1, 1, 1], 0, &args)
     }
 }
 
@@ -128,17 +135,11 @@ fn loading_the_same_ptx_again_returns_the_loaded_module() {
     assert!(!renamed.is_same_module(&k.module));
     let other = k.gpu.load_ptx("warp", WARP_PTX).unwrap();
     assert!(!other.is_same_module(&k.module));
-    let out = k.gpu.alloc_zeroed(4 * 4).unwrap();
+    let out = k.gpu.alloc_zeroed(4 * 4).map(Arc::new).unwrap();
     let fill = again.function("fill_scaled").unwrap();
     let s = k.gpu.stream();
-    s.launch(
-        &fill,
-        [1, 1, 1],
-        [4, 1, 1],
-        0,
-        &fill_args(out.device_ptr(), 4, 2.0),
-    )
-    .unwrap();
+    s.launch(&fill, [1, 1, 1], [4, 1, 1], 0, &fill_args(&out, 4, 2.0))
+        .unwrap();
     s.synchronize().unwrap();
     println!("a second load of test_kernels returned the first module, which launches");
 }
@@ -175,13 +176,17 @@ fn packed_argument_launch_writes_expected_values() {
     let k = setup();
     let s = k.gpu.stream();
     let n = 1000u32; // not a multiple of the block size: the bounds check in the kernel matters
-    let out = k.gpu.alloc_zeroed((n as usize + 24) * 4).unwrap();
+    let out = k
+        .gpu
+        .alloc_zeroed((n as usize + 24) * 4)
+        .map(Arc::new)
+        .unwrap();
     s.launch(
         &k.fill_scaled,
         [n.div_ceil(128), 1, 1],
         [128, 1, 1],
         0,
-        &fill_args(out.device_ptr(), n, 0.5),
+        &fill_args(&out, n, 0.5),
     )
     .unwrap();
     s.synchronize().unwrap();
@@ -204,7 +209,7 @@ fn packed_argument_launch_writes_expected_values() {
             [0, 1, 1],
             [128, 1, 1],
             0,
-            &fill_args(out.device_ptr(), n, 1.0),
+            &fill_args(&out, n, 1.0),
         )
         .unwrap_err();
     assert!(matches!(err, CudaError::InvalidArgument { .. }), "{err}");
@@ -220,15 +225,9 @@ fn ptx_version_above_the_driver_is_lowered_and_a_trailing_nul_stripped() {
     bytes.push(0);
     let module = gpu.load_ptx("test_kernels_v99", &bytes).unwrap();
     let fill = module.function("fill_scaled").unwrap();
-    let out = gpu.alloc_zeroed(64 * 4).unwrap();
+    let out = gpu.alloc_zeroed(64 * 4).map(Arc::new).unwrap();
     gpu.stream()
-        .launch(
-            &fill,
-            [1, 1, 1],
-            [64, 1, 1],
-            0,
-            &fill_args(out.device_ptr(), 64, 2.0),
-        )
+        .launch(&fill, [1, 1, 1], [64, 1, 1], 0, &fill_args(&out, 64, 2.0))
         .unwrap();
     gpu.stream().synchronize().unwrap();
     let mut last = [0u8; 4];
@@ -244,13 +243,14 @@ fn ptx_version_above_the_driver_is_lowered_and_a_trailing_nul_stripped() {
 /// elements: `launch_bounds_t<1> { u32 shape[1]; size_t size; size_t coord_mult }`, then
 /// `array_t<float> { float* data; float* grad; int shape[4]; int strides[4]; int ndim; int flags }`,
 /// then the float.
-fn warp_fill_args(out: u64, n: u32, scale: f32) -> Vec<u8> {
+fn warp_fill_args(out: &Arc<DeviceMemory>, n: u32, scale: f32) -> KernelArgs {
     let mut args = Vec::with_capacity(84);
     args.extend_from_slice(&n.to_ne_bytes());
     args.extend_from_slice(&[0; 4]);
     args.extend_from_slice(&u64::from(n).to_ne_bytes());
     args.extend_from_slice(&1u64.to_ne_bytes());
-    args.extend_from_slice(&out.to_ne_bytes());
+    // The array's data pointer (byte 24), written below from the range; grad null.
+    args.extend_from_slice(&0u64.to_ne_bytes());
     args.extend_from_slice(&0u64.to_ne_bytes());
     for dim in [n as i32, 0, 0, 0] {
         args.extend_from_slice(&dim.to_ne_bytes());
@@ -261,6 +261,8 @@ fn warp_fill_args(out: u64, n: u32, scale: f32) -> Vec<u8> {
     args.extend_from_slice(&1i32.to_ne_bytes());
     args.extend_from_slice(&0i32.to_ne_bytes());
     args.extend_from_slice(&scale.to_ne_bytes());
+    let mut args = KernelArgs::from_bytes(args);
+    args.write_address(24, &whole(out)).unwrap();
     args
 }
 
@@ -274,7 +276,7 @@ fn warp_ptx_loads_and_runs_with_its_packed_abi() {
         .unwrap();
     assert_eq!(forward.param_layout(), [(0, 24), (24, 56), (80, 4)]);
     let n = 3000u32;
-    let out = gpu.alloc_zeroed(n as usize * 4 + 64).unwrap();
+    let out = gpu.alloc_zeroed(n as usize * 4 + 64).map(Arc::new).unwrap();
     let graph = s
         .capture(|s| {
             s.launch(
@@ -282,7 +284,7 @@ fn warp_ptx_loads_and_runs_with_its_packed_abi() {
                 [n.div_ceil(256), 1, 1],
                 [256, 1, 1],
                 0,
-                &warp_fill_args(out.device_ptr(), n, 0.25),
+                &warp_fill_args(&out, n, 0.25),
             )
         })
         .unwrap();
@@ -350,15 +352,15 @@ fn bad_ptx_gives_errors_that_name_the_module() {
 fn memsets_and_copies_land_where_asked() {
     let k = setup();
     let s = k.gpu.stream();
-    let memory = k.gpu.alloc_zeroed(64).unwrap();
-    let base = memory.device_ptr();
-    s.memset_u8(base + 1, 0xAB, 3).unwrap();
-    s.memset_u16(base + 8, 0xBEEF, 2).unwrap();
-    s.memset_u32(base + 16, 0xDEAD_BEEF, 3).unwrap();
-    s.memcpy_dtod(base + 40, base + 16, 12).unwrap();
-    let mut pinned = k.gpu.alloc_pinned(16).unwrap();
+    let memory = k.gpu.alloc_zeroed(64).map(Arc::new).unwrap();
+    let at = |offset: usize, len: usize| range(&memory, offset, len).unwrap();
+    s.fill_u8(&at(1, 3), 0xAB).unwrap();
+    s.fill_u16(&at(8, 4), 0xBEEF).unwrap();
+    s.fill_u32(&at(16, 12), 0xDEAD_BEEF).unwrap();
+    s.copy(&at(40, 12), &at(16, 12)).unwrap();
+    let pinned = Arc::new(k.gpu.alloc_pinned(16).unwrap());
     pinned.write(4, &[1, 2, 3, 4, 5, 6, 7, 8]).unwrap();
-    s.memcpy_htod(base + 56, &pinned, 4, 8).unwrap();
+    s.copy_from_pinned(&at(56, 8), &pinned, 4).unwrap();
     s.synchronize().unwrap();
 
     let mut expected = vec![0u8; 64];
@@ -380,11 +382,16 @@ fn memsets_and_copies_land_where_asked() {
     assert_eq!(tail, [9; 4]);
 
     let errors = [
-        s.memset_u16(base + 1, 0, 1).unwrap_err(),
-        s.memset_u32(base + 2, 0, 1).unwrap_err(),
+        s.fill_u16(&at(1, 2), 0).unwrap_err(),
+        s.fill_u32(&at(2, 4), 0).unwrap_err(),
+        s.fill_u32(&at(4, 6), 0).unwrap_err(),
+        s.fill_u32_strided(&at(0, 8), 8, 0, 2).unwrap_err(),
+        s.copy(&at(0, 8), &at(4, 8)).unwrap_err(),
+        s.copy(&at(0, 8), &at(16, 4)).unwrap_err(),
+        range(&memory, 60, 8).unwrap_err(),
         memory.copy_to_host(60, &mut [0u8; 8]).unwrap_err(),
         memory.copy_from_host(usize::MAX, &[1]).unwrap_err(),
-        s.memcpy_htod(base, &pinned, 12, 8).unwrap_err(),
+        s.copy_from_pinned(&at(0, 8), &pinned, 12).unwrap_err(),
         pinned.write(15, &[1, 2]).unwrap_err(),
     ];
     for err in &errors {
@@ -397,8 +404,9 @@ fn memsets_and_copies_land_where_asked() {
         );
         println!("rejected: {err}");
     }
-    let empty = k.gpu.alloc_zeroed(0).unwrap();
-    assert_eq!((empty.device_ptr(), empty.len()), (0, 0));
+    let empty = k.gpu.alloc_zeroed(0).map(Arc::new).unwrap();
+    assert_eq!((whole(&empty).len(), empty.len()), (0, 0));
+    s.fill_u8(&whole(&empty), 1).unwrap();
 }
 
 #[test]
@@ -406,7 +414,7 @@ fn event_timing_is_positive() {
     let k = setup();
     let s = k.gpu.stream();
     let n = 1 << 22;
-    let out = k.gpu.alloc_zeroed(n * 4).unwrap();
+    let out = k.gpu.alloc_zeroed(n * 4).map(Arc::new).unwrap();
     let start = k.gpu.new_event().unwrap();
     let end = k.gpu.new_event().unwrap();
     start.record(s).unwrap();
@@ -416,7 +424,7 @@ fn event_timing_is_positive() {
             [(n as u32).div_ceil(256), 1, 1],
             [256, 1, 1],
             0,
-            &fill_args(out.device_ptr(), n as u32, 1.0),
+            &fill_args(&out, n as u32, 1.0),
         )
         .unwrap();
     }
@@ -434,19 +442,22 @@ fn captured_graph_replays_and_keeps_its_module_alive() {
     let k = setup();
     let gpu = k.gpu.clone();
     let s = gpu.stream();
-    let counter = gpu.alloc_zeroed(4).unwrap();
-    let scratch = gpu.alloc_zeroed(64).unwrap();
+    let counter = gpu.alloc_zeroed(4).map(Arc::new).unwrap();
+    let scratch = gpu.alloc_zeroed(64).map(Arc::new).unwrap();
     let graph = s
         .capture(|s| -> Result<(), CudaError> {
             k.add(s, &counter, 1)?;
             k.add(s, &counter, 2)?;
             k.add(s, &counter, 3)?;
-            s.memset_u32(scratch.device_ptr(), 7, 8)?;
-            s.memcpy_dtod(scratch.device_ptr() + 32, scratch.device_ptr(), 32)?;
+            s.fill_u32(&range(&scratch, 0, 32)?, 7)?;
+            s.copy(&range(&scratch, 32, 32)?, &range(&scratch, 0, 32)?)?;
             Ok(())
         })
         .unwrap();
     assert_eq!(read_u32(&counter), 0, "capture must not run the work");
+    // The graph holds one reference to each allocation it addresses.
+    assert_eq!(Arc::strong_count(&counter), 2);
+    assert_eq!(Arc::strong_count(&scratch), 2);
     let counts = graph.node_counts().unwrap();
     assert_eq!(count(&counts, "kernel"), 3, "{counts:?}");
     assert_eq!(count(&counts, "memset"), 1, "{counts:?}");
@@ -462,6 +473,12 @@ fn captured_graph_replays_and_keeps_its_module_alive() {
     s.synchronize().unwrap();
     assert_eq!(read_u32(&counter), 30);
     assert!(u32s(&scratch.to_vec().unwrap()).iter().all(|v| *v == 7));
+    drop(graph);
+    assert_eq!(
+        Arc::strong_count(&scratch),
+        1,
+        "the graph let go of its memory"
+    );
     println!(
         "graph {counts:?} replayed 5 times: counter 30, memset+memcpy filled 64 bytes; module kept alive"
     );
@@ -471,15 +488,18 @@ fn captured_graph_replays_and_keeps_its_module_alive() {
 fn pinned_source_is_read_at_each_replay() {
     let gpu = Gpu::open(0).unwrap();
     let s = gpu.stream();
-    let dst = gpu.alloc_zeroed(8).unwrap();
-    let mut pinned = gpu.alloc_pinned(8).unwrap();
+    let dst = gpu.alloc_zeroed(8).map(Arc::new).unwrap();
+    let pinned = Arc::new(gpu.alloc_pinned(8).unwrap());
     let graph = s
-        .capture(|s| s.memcpy_htod(dst.device_ptr(), &pinned, 0, 8))
+        .capture(|s| s.copy_from_pinned(&whole(&dst), &pinned, 0))
         .unwrap();
+    assert_eq!(
+        Arc::strong_count(&pinned),
+        2,
+        "the graph keeps the pinned source"
+    );
     for round in 1u64..=3 {
-        pinned
-            .as_mut_slice()
-            .copy_from_slice(&(round * 1111).to_ne_bytes());
+        pinned.write(0, &(round * 1111).to_ne_bytes()).unwrap();
         graph.launch(s).unwrap();
         s.synchronize().unwrap();
         let mut got = [0u8; 8];
@@ -493,11 +513,11 @@ fn pinned_source_is_read_at_each_replay() {
 fn capture_while_runs_the_body_exactly_cond_times() {
     let k = setup();
     let s = k.gpu.stream();
-    let counter = k.gpu.alloc_zeroed(4).unwrap();
-    let cond = k.gpu.alloc_zeroed(4).unwrap();
+    let counter = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
+    let cond = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
     let graph = s
         .capture(|s| {
-            s.capture_while(cond.device_ptr(), |s| {
+            s.capture_while(&whole(&cond), |s| {
                 k.add(s, &counter, 1)?;
                 k.decrement(s, &cond)
             })
@@ -523,14 +543,14 @@ fn capture_while_runs_the_body_exactly_cond_times() {
 fn nested_while_loops_multiply() {
     let k = setup();
     let s = k.gpu.stream();
-    let counter = k.gpu.alloc_zeroed(4).unwrap();
-    let outer = k.gpu.alloc_zeroed(4).unwrap();
-    let inner = k.gpu.alloc_zeroed(4).unwrap();
+    let counter = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
+    let outer = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
+    let inner = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
     let graph = s
         .capture(|s| {
-            s.capture_while(outer.device_ptr(), |s| {
-                s.memset_u32(inner.device_ptr(), 4, 1)?;
-                s.capture_while(inner.device_ptr(), |s| {
+            s.capture_while(&whole(&outer), |s| {
+                s.fill_u32(&whole(&inner), 4)?;
+                s.capture_while(&whole(&inner), |s| {
                     k.add(s, &counter, 1)?;
                     k.decrement(s, &inner)
                 })?;
@@ -557,8 +577,8 @@ fn nested_while_loops_multiply() {
 fn capture_if_takes_the_right_branch() {
     let k = setup();
     let s = k.gpu.stream();
-    let counter = k.gpu.alloc_zeroed(4).unwrap();
-    let cond = k.gpu.alloc_zeroed(4).unwrap();
+    let counter = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
+    let cond = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
     let run = |graph: &instantmimic::cuda::Graph, flag: i32| -> u32 {
         counter.copy_from_host(0, &0u32.to_ne_bytes()).unwrap();
         write_i32(&cond, flag);
@@ -571,10 +591,10 @@ fn capture_if_takes_the_right_branch() {
     let both = s
         .capture(|s| {
             s.capture_if(
-                cond.device_ptr(),
+                &whole(&cond),
                 Some(&mut |s: &Stream| {
                     k.add(s, &counter, 1)?;
-                    s.memset_u32(cond.device_ptr(), 0, 1)
+                    s.fill_u32(&whole(&cond), 0)
                 }),
                 Some(&mut |s: &Stream| k.add(s, &counter, 100)),
             )
@@ -593,7 +613,7 @@ fn capture_if_takes_the_right_branch() {
     let then_only = s
         .capture(|s| {
             s.capture_if(
-                cond.device_ptr(),
+                &whole(&cond),
                 Some(&mut |s: &Stream| k.add(s, &counter, 1)),
                 None,
             )
@@ -605,7 +625,7 @@ fn capture_if_takes_the_right_branch() {
     let else_only = s
         .capture(|s| {
             s.capture_if(
-                cond.device_ptr(),
+                &whole(&cond),
                 None,
                 Some(&mut |s: &Stream| k.add(s, &counter, 100)),
             )
@@ -617,7 +637,7 @@ fn capture_if_takes_the_right_branch() {
     println!("IF only: 1 -> 1, 0 -> 0; ELSE only: 0 -> 100, 1 -> 0");
 
     let none = s
-        .capture(|s| s.capture_if::<CudaError>(cond.device_ptr(), None, None))
+        .capture(|s| s.capture_if::<CudaError>(&whole(&cond), None, None))
         .unwrap();
     assert!(none.node_counts().unwrap().is_empty());
 }
@@ -626,15 +646,15 @@ fn capture_if_takes_the_right_branch() {
 fn conditional_calls_outside_a_capture_are_errors() {
     let k = setup();
     let s = k.gpu.stream();
-    let cond = k.gpu.alloc_zeroed(4).unwrap();
+    let cond = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
     // Loads the conditional kernels, so the next errors are about capturing, not loading.
     drop(s.capture(|_| Ok::<(), CudaError>(())).unwrap());
     let err = s
-        .capture_while(cond.device_ptr(), |_| Ok::<(), CudaError>(()))
+        .capture_while(&whole(&cond), |_| Ok::<(), CudaError>(()))
         .unwrap_err();
     assert!(matches!(err, CudaError::NotCapturing { .. }), "{err}");
     let err = s
-        .capture_if::<CudaError>(cond.device_ptr(), Some(&mut |_: &Stream| Ok(())), None)
+        .capture_if::<CudaError>(&whole(&cond), Some(&mut |_: &Stream| Ok(())), None)
         .unwrap_err();
     assert!(matches!(err, CudaError::NotCapturing { .. }), "{err}");
     let err = s
@@ -658,7 +678,7 @@ impl From<CudaError> for TestError {
 
 fn assert_stream_usable(k: &Kernels, s: &Stream) {
     assert!(!s.is_capturing().unwrap());
-    let counter = k.gpu.alloc_zeroed(4).unwrap();
+    let counter = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
     k.add(s, &counter, 5).unwrap();
     s.synchronize().unwrap();
     assert_eq!(read_u32(&counter), 5);
@@ -672,8 +692,8 @@ fn assert_stream_usable(k: &Kernels, s: &Stream) {
 fn failed_captures_leave_the_stream_usable() {
     let k = setup();
     let s = k.gpu.stream();
-    let counter = k.gpu.alloc_zeroed(4).unwrap();
-    let cond = k.gpu.alloc_zeroed(4).unwrap();
+    let counter = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
+    let cond = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
 
     let err = s
         .capture(|s| -> Result<(), TestError> {
@@ -696,7 +716,7 @@ fn failed_captures_leave_the_stream_usable() {
     let err = s
         .capture(|s| -> Result<(), TestError> {
             k.add(s, &counter, 1)?;
-            s.capture_while(cond.device_ptr(), |s| -> Result<(), TestError> {
+            s.capture_while(&whole(&cond), |s| -> Result<(), TestError> {
                 k.add(s, &counter, 1)?;
                 Err(TestError::Planned("body failed"))
             })?;
@@ -711,7 +731,7 @@ fn failed_captures_leave_the_stream_usable() {
     let err = s
         .capture(|s| -> Result<(), TestError> {
             s.capture_if(
-                cond.device_ptr(),
+                &whole(&cond),
                 Some(&mut |_: &Stream| Err(TestError::Planned("branch failed"))),
                 None,
             )
@@ -779,13 +799,19 @@ fn dynamic_shared_memory_above_48_kib_needs_the_attribute() {
     let smem = k.module.function("smem_neighbor").unwrap();
     let threads = 256u32;
     let bytes = 96 * 1024u32;
-    let out = k.gpu.alloc_zeroed(threads as usize * 4).unwrap();
+    let out = k
+        .gpu
+        .alloc_zeroed(threads as usize * 4)
+        .map(Arc::new)
+        .unwrap();
     // (u64 out, u32 bytes): 12 bytes, the exact parameter size.
-    let mut args = out.device_ptr().to_ne_bytes().to_vec();
-    args.extend_from_slice(&bytes.to_ne_bytes());
+    let mut args = KernelArgs::zeroed(12);
+    args.write_address(0, &whole(&out)).unwrap();
+    args.write(8, &bytes.to_ne_bytes()).unwrap();
     assert_eq!(smem.param_layout(), [(0, 8), (8, 4)]);
-    let mut padded = args.clone();
-    padded.extend_from_slice(&[0; 4]);
+    let mut padded = KernelArgs::zeroed(16);
+    padded.write_address(0, &whole(&out)).unwrap();
+    padded.write(8, &bytes.to_ne_bytes()).unwrap();
     let err = s
         .launch(&smem, [1, 1, 1], [threads, 1, 1], 0, &padded)
         .unwrap_err();
@@ -821,16 +847,16 @@ fn dynamic_shared_memory_above_48_kib_needs_the_attribute() {
 #[test]
 fn handles_work_from_another_thread() {
     let k = setup();
-    let counter = k.gpu.alloc_zeroed(4).unwrap();
-    let ptr = counter.device_ptr();
+    let counter = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
+    let ptr = counter.clone();
     let gpu = k.gpu.clone();
     let add = k.add_u32.clone();
     std::thread::spawn(move || {
         let s = gpu.new_stream().unwrap();
-        s.launch(&add, [1, 1, 1], [1, 1, 1], 0, &add_args(ptr, 9))
+        s.launch(&add, [1, 1, 1], [1, 1, 1], 0, &add_args(&ptr, 9))
             .unwrap();
         let graph = s
-            .capture(|s| s.launch(&add, [1, 1, 1], [1, 1, 1], 0, &add_args(ptr, 1)))
+            .capture(|s| s.launch(&add, [1, 1, 1], [1, 1, 1], 0, &add_args(&ptr, 1)))
             .unwrap();
         graph.launch(&s).unwrap();
         s.synchronize().unwrap();
@@ -848,15 +874,15 @@ fn captures_survive_allocations_and_copies_on_other_threads() {
         let capturer = scope.spawn(|| {
             let k = setup();
             let s = k.gpu.stream();
-            let counter = k.gpu.alloc_zeroed(4).unwrap();
-            let cond = k.gpu.alloc_zeroed(4).unwrap();
+            let counter = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
+            let cond = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
             for round in 0..rounds {
                 let graph = s
                     .capture(|s| {
                         for _ in 0..50 {
                             k.add(s, &counter, 1)?;
                         }
-                        s.capture_while(cond.device_ptr(), |s| k.decrement(s, &cond))
+                        s.capture_while(&whole(&cond), |s| k.decrement(s, &cond))
                     })
                     .unwrap_or_else(|e| panic!("capture in round {round}: {e}"));
                 write_i32(&cond, 3);
@@ -869,7 +895,7 @@ fn captures_survive_allocations_and_copies_on_other_threads() {
             let gpu = Gpu::open(0).unwrap();
             let mut moved = 0usize;
             for i in 0..rounds * 10 {
-                let memory = gpu.alloc_zeroed(1 << 16).unwrap();
+                let memory = gpu.alloc_zeroed(1 << 16).map(Arc::new).unwrap();
                 memory.copy_from_host(0, &[i as u8; 256]).unwrap();
                 let mut back = [0u8; 256];
                 memory.copy_to_host(0, &mut back).unwrap();
@@ -893,7 +919,7 @@ fn captures_survive_allocations_and_copies_on_other_threads() {
 fn graph_replay_of_many_kernels_is_fast() {
     let k = setup();
     let s = k.gpu.stream();
-    let counter = k.gpu.alloc_zeroed(4).unwrap();
+    let counter = k.gpu.alloc_zeroed(4).map(Arc::new).unwrap();
     let nodes = 1000;
     let graph = s
         .capture(|s| {
@@ -933,7 +959,7 @@ fn nvtx_ranges_never_panic() {
 #[test]
 fn readback_returns_the_bytes_of_the_last_queued_copy_only_once_it_is_done() {
     let gpu = Gpu::open(0).unwrap();
-    let memory = gpu.alloc_zeroed(4096).unwrap();
+    let memory = gpu.alloc_zeroed(4096).map(Arc::new).unwrap();
     let mut readback = instantmimic::cuda::Readback::new(&gpu, 1024).unwrap();
     assert!(readback.wait().unwrap().is_none(), "nothing queued yet");
     let stream = gpu.stream();
@@ -943,7 +969,7 @@ fn readback_returns_the_bytes_of_the_last_queued_copy_only_once_it_is_done() {
             .collect();
         memory.copy_from_host(512, &bytes).unwrap();
         readback
-            .queue(stream, memory.device_ptr() + 512, bytes.len())
+            .queue(stream, &range(&memory, 512, bytes.len()).unwrap())
             .unwrap();
         assert_eq!(
             readback.wait().unwrap().unwrap(),
@@ -951,10 +977,12 @@ fn readback_returns_the_bytes_of_the_last_queued_copy_only_once_it_is_done() {
             "round {round}"
         );
     }
-    readback.queue(stream, memory.device_ptr(), 16).unwrap();
+    readback
+        .queue(stream, &range(&memory, 0, 16).unwrap())
+        .unwrap();
     assert_eq!(readback.wait().unwrap().unwrap(), &[0u8; 16][..]);
     let too_big = readback
-        .queue(stream, memory.device_ptr(), 1025)
+        .queue(stream, &range(&memory, 0, 1025).unwrap())
         .unwrap_err();
     assert!(too_big.to_string().contains("Readback::queue"), "{too_big}");
 }

@@ -9,7 +9,7 @@ mod skip_support;
 
 use std::collections::BTreeMap;
 
-use instantmimic::cuda::{Gpu, Stream};
+use instantmimic::cuda::{DeviceRange, Gpu, Stream};
 use instantmimic::kernels::{
     DeviceArray, Element, EnvKernels, ObservationParams, ResetParams, TrackingParams, Yardstick,
 };
@@ -43,14 +43,16 @@ impl DeviceBuffer {
         result.unwrap_or_else(|e| panic!("downloading: {e}"))
     }
 
-    /// Device address of element `at`, and the element size.
-    fn address(&self, at: usize) -> u64 {
-        let (ptr, size) = match self {
-            DeviceBuffer::F32(a) => (a.device_ptr(), 4),
-            DeviceBuffer::F64(a) => (a.device_ptr(), 8),
-            DeviceBuffer::I32(a) => (a.device_ptr(), 4),
+    /// Elements `[at, at + count)`, as the stream's copies take them.
+    fn elements(&self, at: usize, count: usize) -> DeviceRange {
+        let (range, size) = match self {
+            DeviceBuffer::F32(a) => (a.range(), 4),
+            DeviceBuffer::F64(a) => (a.range(), 8),
+            DeviceBuffer::I32(a) => (a.range(), 4),
         };
-        ptr + (at * size) as u64
+        range
+            .and_then(|r| Ok(r.sub(at * size, count * size)?))
+            .unwrap_or_else(|e| panic!("elements {at}..+{count}: {e}"))
     }
 }
 
@@ -384,12 +386,10 @@ fn execute(programs: &[Program]) -> Vec<Outputs> {
                         dst_offset,
                         count,
                     } => {
-                        let size = program.buffer(src).data.scalar().size();
                         stream
-                            .memcpy_dtod(
-                                buffers[dst].address(*dst_offset),
-                                buffers[src].address(*src_offset),
-                                count * size,
+                            .copy(
+                                &buffers[dst].elements(*dst_offset, *count),
+                                &buffers[src].elements(*src_offset, *count),
                             )
                             .expect("copy between buffers");
                     }

@@ -231,8 +231,8 @@ fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
         .with_batch(&gpu, evaluation.num_envs())
         .expect("evaluation policy");
     assert_eq!(
-        evaluation_policy.actor_parameters().device_ptr(),
-        policy.actor_parameters().device_ptr(),
+        evaluation_policy.actor_parameters().range().unwrap(),
+        policy.actor_parameters().range().unwrap(),
         "the evaluation must read the training policy's parameters"
     );
     let (graph, _) = evaluation

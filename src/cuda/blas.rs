@@ -47,7 +47,7 @@ pub enum GemmMath {
 /// [`BlasMatrix::new`], which checks that it lies inside the allocation.
 #[derive(Clone, Copy, Debug)]
 pub struct BlasMatrix<'a> {
-    memory: &'a DeviceMemory,
+    memory: &'a Arc<DeviceMemory>,
     offset: usize,
     rows: usize,
     cols: usize,
@@ -57,7 +57,7 @@ impl<'a> BlasMatrix<'a> {
     /// The matrix of `rows x cols` values at value `offset` of `memory`; an error unless it
     /// fits inside the allocation and neither dimension is 0.
     pub fn new(
-        memory: &'a DeviceMemory,
+        memory: &'a Arc<DeviceMemory>,
         offset: usize,
         rows: usize,
         cols: usize,
@@ -161,7 +161,7 @@ unsafe impl Send for Handle {}
 /// the GPU's stream.
 pub struct Blas {
     handle: Mutex<Handle>,
-    workspace: DeviceMemory,
+    workspace: Arc<DeviceMemory>,
     /// The GPU's main stream, for binding the context (and checking streams belong to it).
     stream: Stream,
     version: i32,
@@ -199,7 +199,7 @@ impl Blas {
             }
         }
         let stream = gpu.stream().clone();
-        let workspace = gpu.alloc_zeroed(BLAS_WORKSPACE_BYTES)?;
+        let workspace = Arc::new(gpu.alloc_zeroed(BLAS_WORKSPACE_BYTES)?);
         stream.bind()?;
         let handle = Handle(result::create_handle().map_err(blas_error("cublasCreate"))?);
         let mut version = 0i32;
@@ -327,7 +327,12 @@ impl Blas {
                 sys::cublasGemmAlgo_t::CUBLAS_GEMM_DEFAULT,
             )
         }
-        .map_err(blas_error("cublasGemmEx"))
+        .map_err(blas_error("cublasGemmEx"))?;
+        // Inside a capture, the graph's GEMM kernels address the operands and the workspace.
+        for memory in [a.matrix.memory, b.matrix.memory, c.memory, &self.workspace] {
+            stream.remember_allocation(memory);
+        }
+        Ok(())
     }
 }
 

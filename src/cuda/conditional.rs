@@ -15,7 +15,7 @@ use super::context::DeviceShared;
 use super::error::CheckResult;
 use super::graph::{graph_nodes, node_kind_name, node_type};
 use super::module::{Function, load_module};
-use super::{CudaError, Stream};
+use super::{CudaError, DeviceRange, Stream};
 
 /// The hand-written PTX of the handle-setting kernels.
 pub const GRAPH_CONDITIONAL_PTX: &str = include_str!("graph_conditional.ptx");
@@ -78,15 +78,16 @@ enum SetKernel {
 
 impl Stream {
     /// Captures a WHILE node: `body` is captured into the loop body, which runs as long as the
-    /// `i32` at device address `cond` is non-zero when checked (before the first iteration and
-    /// after each). `body` must change `*cond` for the loop to end. Only inside
-    /// [`Stream::capture`].
-    pub fn capture_while<E, F>(&self, cond: u64, body: F) -> Result<(), E>
+    /// `i32` `cond` (a 4-byte aligned range of 4 bytes) is non-zero when checked (before the
+    /// first iteration and after each). `body` must change `cond` for the loop to end. Only
+    /// inside [`Stream::capture`], whose graph keeps `cond`'s allocation alive.
+    pub fn capture_while<E, F>(&self, cond: &DeviceRange, body: F) -> Result<(), E>
     where
         F: FnOnce(&Stream) -> Result<(), E>,
         E: From<CudaError>,
     {
         const OP: &str = "Stream::capture_while";
+        check_flag(OP, cond)?;
         let state = self.capture_state(OP)?;
         let handle = create_handle(state.graph, self.device_shared().ctx.cu_ctx())?;
         self.launch_set(SetKernel::FromValue, handle, cond)?;
@@ -102,7 +103,8 @@ impl Stream {
         })
     }
 
-    /// Captures an IF (and optional ELSE): `then` runs when the `i32` at `cond` is non-zero,
+    /// Captures an IF (and optional ELSE): `then` runs when the `i32` `cond` (a 4-byte aligned
+    /// range of 4 bytes) is non-zero,
     /// `otherwise` when it is zero, as read once before the node(s). Either may be `None`;
     /// with both `None` nothing is captured. Only inside [`Stream::capture`].
     ///
@@ -110,7 +112,7 @@ impl Stream {
     /// does: its notes say CUDA 12.8/12.9 drivers mis-instantiate two-body IF nodes.
     pub fn capture_if<E>(
         &self,
-        cond: u64,
+        cond: &DeviceRange,
         then: Option<Branch<'_, E>>,
         otherwise: Option<Branch<'_, E>>,
     ) -> Result<(), E>
@@ -118,6 +120,7 @@ impl Stream {
         E: From<CudaError>,
     {
         const OP: &str = "Stream::capture_if";
+        check_flag(OP, cond)?;
         use sys::CUgraphConditionalNodeType::CU_GRAPH_COND_TYPE_IF as IF;
         match (then, otherwise) {
             (None, None) => Ok(()),
@@ -146,7 +149,7 @@ impl Stream {
         &self,
         operation: &'static str,
         set: SetKernel,
-        cond: u64,
+        cond: &DeviceRange,
         branch: Branch<'_, E>,
     ) -> Result<(), E>
     where
@@ -162,6 +165,17 @@ impl Stream {
         )?;
         self.capture_body(operation, state.graph, node, bodies[0], |s| branch(s))
     }
+}
+
+/// A conditional flag is one `i32`: exactly 4 bytes, 4-byte aligned.
+fn check_flag(operation: &'static str, cond: &DeviceRange) -> Result<(), CudaError> {
+    if cond.len() != 4 || !cond.is_aligned(4) {
+        return Err(CudaError::InvalidArgument {
+            operation,
+            reason: format!("the condition {cond:?} is not one 4-byte aligned i32"),
+        });
+    }
+    Ok(())
 }
 
 /// Creates a conditional handle in `graph` (default value 0, not reset per launch: the
@@ -194,7 +208,7 @@ impl Stream {
         &self,
         kernel: SetKernel,
         handle: sys::CUgraphConditionalHandle,
-        cond: u64,
+        cond: &DeviceRange,
     ) -> Result<(), CudaError> {
         let kernels = self.conditional_kernels("setting a conditional handle")?;
         let f = match kernel {
@@ -203,24 +217,30 @@ impl Stream {
         };
         let mut args = [0u8; 16];
         args[..8].copy_from_slice(&handle.to_ne_bytes());
-        args[8..].copy_from_slice(&cond.to_ne_bytes());
+        args[8..].copy_from_slice(&cond.address().to_ne_bytes());
         self.bind()?;
-        self.raw_launch(f.cu_function, [1, 1, 1], [1, 1, 1], 0, &args)
+        // The kernel reads the one i32 of `cond` (checked by check_flag), kept alive by the graph.
+        self.raw_launch(f.cu_function, [1, 1, 1], [1, 1, 1], 0, &args)?;
+        self.remember_memory(cond);
+        Ok(())
     }
 
     fn launch_set_pair(
         &self,
         then_handle: sys::CUgraphConditionalHandle,
         else_handle: sys::CUgraphConditionalHandle,
-        cond: u64,
+        cond: &DeviceRange,
     ) -> Result<(), CudaError> {
         let kernels = self.conditional_kernels("setting conditional handles")?;
         let mut args = [0u8; 24];
         args[..8].copy_from_slice(&then_handle.to_ne_bytes());
         args[8..16].copy_from_slice(&else_handle.to_ne_bytes());
-        args[16..].copy_from_slice(&cond.to_ne_bytes());
+        args[16..].copy_from_slice(&cond.address().to_ne_bytes());
         self.bind()?;
-        self.raw_launch(kernels.pair.cu_function, [1, 1, 1], [1, 1, 1], 0, &args)
+        // As in launch_set.
+        self.raw_launch(kernels.pair.cu_function, [1, 1, 1], [1, 1, 1], 0, &args)?;
+        self.remember_memory(cond);
+        Ok(())
     }
 
     /// The graph this stream captures into and its current dependencies; an error when the

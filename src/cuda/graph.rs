@@ -13,7 +13,7 @@ use super::context::DeviceShared;
 use super::error::CheckResult;
 use super::module::ModuleInner;
 use super::stream::CaptureRecord;
-use super::{CudaError, Stream};
+use super::{CudaError, DeviceMemory, PinnedHostMemory, Stream};
 
 /// One capture mode for every begin and resume: thread-local refuses unsafe calls (a
 /// synchronous copy, say) made by this thread during capture, and needs no other thread.
@@ -43,15 +43,18 @@ impl Drop for OwnedGraph {
     }
 }
 
-/// An instantiated graph, ready to launch any number of times. The memory its nodes address
-/// must outlive it; the modules of its kernels are kept alive by it.
+/// An instantiated graph, ready to launch any number of times. It keeps alive what its nodes
+/// use: the modules of its kernels, the device allocations its launches, memsets, copies and
+/// conditional nodes address, and the pinned host memory its copies read.
 pub struct Graph {
-    // Field order is drop order: the graph goes before the modules and the context it uses
-    // (the exec is destroyed first, in Drop).
+    // Field order is drop order: the graph goes before the modules, the memory and the context
+    // it uses (the exec is destroyed first, in Drop).
     graph: OwnedGraph,
     exec: sys::CUgraphExec,
     conditional_bodies: Vec<(usize, Vec<usize>)>,
     _modules: Vec<Arc<ModuleInner>>,
+    _memory: Vec<Arc<DeviceMemory>>,
+    _pinned: Vec<Arc<PinnedHostMemory>>,
     device: Arc<DeviceShared>,
 }
 
@@ -131,6 +134,8 @@ impl Stream {
             exec,
             conditional_bodies: record.conditional_bodies,
             _modules: record.modules,
+            _memory: record.memory.into_values().collect(),
+            _pinned: record.pinned.into_values().collect(),
             device: self.device_shared().clone(),
         })
     }

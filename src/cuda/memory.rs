@@ -1,8 +1,8 @@
 //! Raw device memory (`cuMemAlloc`) and page-locked host memory (`cuMemHostAlloc`).
 //!
-//! Graphs refer to memory by address. A graph that uses a region must be dropped (or never
-//! launched again) before the region is: the owner of both (the plan replay) keeps them
-//! together.
+//! Graphs refer to memory by address. Safe code addresses an allocation only through a
+//! [`super::DeviceRange`] of it (shared through an `Arc`), and a capture keeps every allocation
+//! it addresses alive in its [`super::Graph`], so a region outlives the graphs that use it.
 //!
 //! Host-side waits here are on the GPU's main stream, never on the whole context:
 //! `cuCtxSynchronize` fails while any stream of the context is capturing, and invalidates that
@@ -54,7 +54,12 @@ impl Gpu {
             ptr,
             len: bytes,
         };
-        memory.stream.memset_u8(ptr, 0, bytes)?;
+        memory.stream.bind()?;
+        // SAFETY: [ptr, ptr + bytes) is the allocation just made, owned by `memory`, which lives
+        // until the synchronization below has waited for the memset; the context is current
+        // and the stream belongs to it.
+        unsafe { sys::cuMemsetD8Async(ptr, 0, bytes, memory.stream.cu_stream()) }
+            .check_with(|| format!("cuMemsetD8Async ({bytes} bytes at {ptr:#x})"))?;
         memory.stream.synchronize()?;
         Ok(memory)
     }
@@ -70,6 +75,7 @@ impl Gpu {
                 ctx,
                 ptr: std::ptr::null_mut(),
                 len: 0,
+                access: std::sync::Mutex::new(()),
             });
         }
         self.shared.bind()?;
@@ -85,6 +91,7 @@ impl Gpu {
             ctx,
             ptr,
             len: bytes,
+            access: std::sync::Mutex::new(()),
         })
     }
 }
@@ -95,7 +102,7 @@ fn refuse_while_capturing(stream: &Stream, operation: &'static str) -> Result<()
     if stream.is_capturing()? {
         return Err(CudaError::InvalidArgument {
             operation,
-            reason: "the GPU's main stream is capturing a graph: allocate before the capture and record copies with Stream::memcpy_* inside it".to_owned(),
+            reason: "the GPU's main stream is capturing a graph: allocate before the capture and record copies with Stream::copy* inside it".to_owned(),
         });
     }
     Ok(())
@@ -119,8 +126,9 @@ fn check_range(
 }
 
 impl DeviceMemory {
-    /// The device address, for kernel arguments and stream operations.
-    pub fn device_ptr(&self) -> u64 {
+    /// The device address, for this layer only: everything outside it addresses memory through
+    /// [`super::DeviceRange`]s.
+    pub(super) fn device_ptr(&self) -> u64 {
         self.ptr
     }
 
@@ -134,7 +142,7 @@ impl DeviceMemory {
 
     /// Copies `src` to `offset`, queued on the GPU's main stream (so after all work queued
     /// there, graph launches included) and waited for. Work on other streams is not waited
-    /// for. Not inside a capture of the main stream; record `Stream::memcpy_htod` instead.
+    /// for. Not inside a capture of the main stream; record `Stream::copy_from_pinned` instead.
     pub fn copy_from_host(&self, offset: usize, src: &[u8]) -> Result<(), CudaError> {
         check_range("DeviceMemory::copy_from_host", offset, src.len(), self.len)?;
         if src.is_empty() {
@@ -202,15 +210,20 @@ impl Drop for DeviceMemory {
     }
 }
 
-/// Page-locked host memory, zeroed at creation and freed on drop.
+/// Page-locked host memory, zeroed at creation and freed on drop. Shared (`Arc`) between its
+/// owner and the graphs whose copies read it, so the host writes it through `&self`
+/// ([`PinnedHostMemory::write`]), one writer at a time.
 pub struct PinnedHostMemory {
     ctx: Arc<CudaContext>,
     ptr: *mut u8,
     len: usize,
+    /// Serializes the host's reads and writes of the bytes.
+    access: std::sync::Mutex<()>,
 }
 
-// SAFETY: the allocation is plain host memory owned by this value; shared access only reads
-// through `&self`, writes need `&mut self`.
+// SAFETY: the allocation is plain host memory owned by this value; the host reads and writes it
+// only under `access` (or, for `as_slice`, as the sole owner inside this layer: the readback,
+// which never writes through `write`).
 unsafe impl Send for PinnedHostMemory {}
 // SAFETY: as above.
 unsafe impl Sync for PinnedHostMemory {}
@@ -231,32 +244,51 @@ impl PinnedHostMemory {
     }
 
     /// The host address (for the driver's copies).
-    pub(crate) fn host_ptr(&self) -> *const u8 {
+    pub(super) fn host_ptr(&self) -> *const u8 {
         self.ptr
     }
 
-    pub fn as_slice(&self) -> &[u8] {
+    /// The bytes, for this layer's readback only: it owns its buffer alone and never calls
+    /// [`PinnedHostMemory::write`] on it, so no write can happen while the slice lives.
+    pub(super) fn as_slice(&self) -> &[u8] {
         if self.len == 0 {
             return &[];
         }
-        // SAFETY: `ptr` points to `len` initialized (zeroed at creation) bytes owned by self.
+        // SAFETY: `ptr` points to `len` initialized (zeroed at creation) bytes owned by self;
+        // the only caller (Readback) never writes them through `write` (see above).
         unsafe { std::slice::from_raw_parts(self.ptr, self.len) }
     }
 
-    /// Writable view. Writing while a queued copy reads this memory changes what that copy
-    /// uploads: synchronize first when that matters.
-    pub fn as_mut_slice(&mut self) -> &mut [u8] {
-        if self.len == 0 {
-            return &mut [];
+    /// Writes `src` at `offset`, bounds-checked. Writing while a queued copy reads this memory
+    /// changes what that copy uploads: synchronize first when that matters.
+    pub fn write(&self, offset: usize, src: &[u8]) -> Result<(), CudaError> {
+        check_range("PinnedHostMemory::write", offset, src.len(), self.len)?;
+        if src.is_empty() {
+            return Ok(());
         }
-        // SAFETY: as in `as_slice`, and `&mut self` makes this the only Rust view.
-        unsafe { std::slice::from_raw_parts_mut(self.ptr, self.len) }
+        let _guard = self
+            .access
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        // SAFETY: [offset, offset + src.len()) lies inside the allocation (checked above); the
+        // host touches these bytes only under `access`, held here, and no Rust reference to them
+        // is handed out (as_slice is the readback's own); `src` is a distinct Rust slice.
+        unsafe { std::ptr::copy_nonoverlapping(src.as_ptr(), self.ptr.add(offset), src.len()) };
+        Ok(())
     }
 
-    /// Writes `src` at `offset`, bounds-checked.
-    pub fn write(&mut self, offset: usize, src: &[u8]) -> Result<(), CudaError> {
-        check_range("PinnedHostMemory::write", offset, src.len(), self.len)?;
-        self.as_mut_slice()[offset..offset + src.len()].copy_from_slice(src);
+    /// Reads `dst.len()` bytes from `offset`, bounds-checked.
+    pub fn read(&self, offset: usize, dst: &mut [u8]) -> Result<(), CudaError> {
+        check_range("PinnedHostMemory::read", offset, dst.len(), self.len)?;
+        if dst.is_empty() {
+            return Ok(());
+        }
+        let _guard = self
+            .access
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        // SAFETY: as in `write`, reading into the distinct slice `dst`.
+        unsafe { std::ptr::copy_nonoverlapping(self.ptr.add(offset), dst.as_mut_ptr(), dst.len()) };
         Ok(())
     }
 }

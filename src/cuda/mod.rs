@@ -6,6 +6,9 @@
 //! - [`ptx`] prepares PTX text for the driver (pure, CPU-tested).
 //! - [`Module`]/[`Function`]: loaded PTX and its kernels.
 //! - [`DeviceMemory`]/[`PinnedHostMemory`]: raw allocations addressed by graphs.
+//! - [`DeviceRange`]: a checked byte range of an allocation, the only way safe code outside
+//!   this folder addresses device memory; [`KernelArgs`]: packed kernel arguments whose device
+//!   addresses come from ranges. No safe function here takes a raw device address.
 //! - [`Stream`]: launches, memsets, copies, and [`Stream::capture`] into a [`Graph`], with
 //!   [`Stream::capture_while`] and [`Stream::capture_if`] for conditional nodes.
 //! - [`Event`] timing and [`NvtxRange`] profiler ranges.
@@ -13,6 +16,7 @@
 //! - [`Blas`]: optional cuBLAS GEMMs (toolkit, not driver) on [`BlasMatrix`] views, capturable:
 //!   the policy's layers when `policy.gemm` picks cuBLAS, and `bench gemm`.
 
+mod args;
 mod blas;
 mod conditional;
 mod context;
@@ -24,9 +28,11 @@ mod memory;
 mod module;
 mod nvtx;
 pub mod ptx;
+mod range;
 mod readback;
 mod stream;
 
+pub use args::KernelArgs;
 pub use blas::{BLAS_WORKSPACE_BYTES, Blas, BlasMatrix, GemmMath, GemmOperand};
 pub use conditional::{
     Branch, GRAPH_CONDITIONAL_ENTRIES, GRAPH_CONDITIONAL_MODULE, GRAPH_CONDITIONAL_PTX,
@@ -41,5 +47,6 @@ pub use memory::{DeviceMemory, PinnedHostMemory};
 pub use module::{Function, Module};
 pub use nvtx::NvtxRange;
 pub use ptx::{PtxIsa, lower_ptx_version, prepare_ptx};
+pub use range::DeviceRange;
 pub use readback::Readback;
 pub use stream::Stream;

@@ -8,7 +8,7 @@
 use cudarc::driver::sys;
 
 use super::error::CheckResult;
-use super::{CudaError, Event, Gpu, PinnedHostMemory, Stream};
+use super::{CudaError, DeviceRange, Event, Gpu, PinnedHostMemory, Stream};
 
 /// A page-locked buffer, the copy into it and the event that marks the copy's end.
 pub struct Readback {
@@ -16,6 +16,8 @@ pub struct Readback {
     done: Event,
     /// Bytes of the last queued copy; None before the first.
     queued: Option<usize>,
+    /// The source of the last queued copy, kept alive until the copy is known to be done.
+    source: Option<DeviceRange>,
 }
 
 impl Readback {
@@ -25,13 +27,16 @@ impl Readback {
             memory: gpu.alloc_pinned(capacity)?,
             done: gpu.new_event()?,
             queued: None,
+            source: None,
         })
     }
 
-    /// Queues on `stream` a copy of `bytes` bytes from device address `src`, after the work
-    /// already queued there. Not for use inside a capture (the copy and the event belong to
-    /// the stream's timeline, not to a graph).
-    pub fn queue(&mut self, stream: &Stream, src: u64, bytes: usize) -> Result<(), CudaError> {
+    /// Queues on `stream` a copy of `src` (all its bytes), after the work already queued
+    /// there. Not for use inside a capture (the copy and the event belong to the stream's
+    /// timeline, not to a graph). The readback keeps `src`'s allocation alive until the copy
+    /// is done.
+    pub fn queue(&mut self, stream: &Stream, src: &DeviceRange) -> Result<(), CudaError> {
+        let bytes = src.len();
         if bytes > self.memory.len() {
             return Err(CudaError::OutOfBounds {
                 operation: "Readback::queue",
@@ -54,22 +59,27 @@ impl Readback {
         }
         if bytes > 0 {
             stream.bind()?;
+            let from = src.address();
             // SAFETY: [0, bytes) lies inside the pinned allocation (checked above), which lives
             // as long as self; no Rust reference to it is handed out until the event after the
-            // copy completes (`wait` takes &mut self and synchronizes first); the source is a
-            // device address, which the driver bounds-checks against its allocations.
+            // copy completes (`wait` takes &mut self and synchronizes first). The source is a
+            // checked range of `bytes` bytes of a live device allocation of this context, kept
+            // alive by `self.source` until the copy is done: the driver reads only those bytes
+            // (a raw address could have named any memory the device can reach, this pinned
+            // buffer included, under unified addressing).
             unsafe {
                 sys::cuMemcpyDtoHAsync_v2(
                     self.memory.host_ptr().cast_mut().cast(),
-                    src,
+                    from,
                     bytes,
                     stream.cu_stream(),
                 )
             }
-            .check_with(|| format!("cuMemcpyDtoHAsync ({bytes} bytes from {src:#x})"))?;
+            .check_with(|| format!("cuMemcpyDtoHAsync ({bytes} bytes from {from:#x})"))?;
         }
         self.done.record(stream)?;
         self.queued = Some(bytes);
+        self.source = Some(src.clone());
         Ok(())
     }
 
@@ -79,6 +89,17 @@ impl Readback {
             return Ok(None);
         };
         self.done.synchronize()?;
+        self.source = None;
         Ok(Some(&self.memory.as_slice()[..bytes]))
+    }
+}
+
+impl Drop for Readback {
+    fn drop(&mut self) {
+        // A queued copy may still be writing the pinned buffer (and reading its source): let it
+        // finish before both are freed. Errors are ignored: the buffer goes either way.
+        if self.queued.is_some() {
+            let _ = self.done.synchronize();
+        }
     }
 }

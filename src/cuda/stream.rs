@@ -1,6 +1,9 @@
 //! Streams and the asynchronous operations a plan records: packed-argument kernel launches,
 //! memsets and copies. Each is valid inside a stream capture, where it becomes a graph node.
+//! They address device memory only through [`DeviceRange`]s (and [`KernelArgs`] built from
+//! them), never through raw addresses, and a capture keeps what they address alive.
 
+use std::collections::HashMap;
 use std::ffi::c_void;
 use std::sync::{Arc, Mutex};
 
@@ -9,7 +12,7 @@ use cudarc::driver::{CudaStream, sys};
 use super::context::DeviceShared;
 use super::error::CheckResult;
 use super::module::ModuleInner;
-use super::{CudaError, Function, PinnedHostMemory};
+use super::{CudaError, DeviceMemory, DeviceRange, Function, KernelArgs, PinnedHostMemory};
 
 /// A non-blocking stream. Cheap to clone (clones share the stream).
 #[derive(Clone)]
@@ -31,6 +34,11 @@ pub(crate) struct CaptureRecord {
     pub(crate) modules: Vec<Arc<ModuleInner>>,
     /// Body graphs of each conditional node created, by node address (for node counting).
     pub(crate) conditional_bodies: Vec<(usize, Vec<usize>)>,
+    /// Device allocations the captured nodes address, by allocation: a graph must not outlive
+    /// the memory it reads and writes.
+    pub(crate) memory: HashMap<usize, Arc<DeviceMemory>>,
+    /// Pinned host memory the captured copies read from.
+    pub(crate) pinned: HashMap<usize, Arc<PinnedHostMemory>>,
 }
 
 impl std::fmt::Debug for Stream {
@@ -65,18 +73,20 @@ impl Stream {
         self.inner.device.bind()
     }
 
-    /// Launches `f` with Warp's packed argument buffer: `packed_args` is the kernel's
-    /// parameters laid out as one C struct (each at its natural alignment), exactly
+    /// Launches `f` with Warp's packed argument buffer: `args` holds the kernel's parameters
+    /// laid out as one C struct (each at its natural alignment), exactly
     /// [`Function::param_bytes`] long, passed through `CU_LAUNCH_PARAM_BUFFER_POINTER`. The
-    /// driver copies the buffer during the call.
+    /// driver copies the buffer during the call. Inside a capture, the graph keeps the module
+    /// and every allocation `args` addresses alive.
     pub fn launch(
         &self,
         f: &Function,
         grid: [u32; 3],
         block: [u32; 3],
         shared_mem_bytes: u32,
-        packed_args: &[u8],
+        args: &KernelArgs,
     ) -> Result<(), CudaError> {
+        let packed_args = args.bytes();
         if grid.contains(&0) || block.contains(&0) {
             return Err(CudaError::InvalidArgument {
                 operation: "Stream::launch",
@@ -116,11 +126,16 @@ impl Stream {
                 other => other,
             })?;
         self.remember_module(&f.module);
+        for range in args.ranges() {
+            self.remember_memory(range);
+        }
         Ok(())
     }
 
     /// The launch itself, for kernels of this layer too (no context binding, no bookkeeping).
-    pub(crate) fn raw_launch(
+    /// `packed_args` may hold device addresses: the caller makes sure they point into live
+    /// allocations (the typed [`Stream::launch`] takes them from [`DeviceRange`]s).
+    pub(super) fn raw_launch(
         &self,
         f: sys::CUfunction,
         grid: [u32; 3],
@@ -182,80 +197,199 @@ impl Stream {
         }
     }
 
-    /// Sets `count` bytes at device address `dst` to `value`.
-    pub fn memset_u8(&self, dst: u64, value: u8, count: usize) -> Result<(), CudaError> {
-        self.bind()?;
-        // SAFETY: a device address cannot reach host memory: the driver refuses addresses outside
-        // its allocations, and which device bytes to write is the caller's (the plan's) choice;
-        // the context is current and the stream belongs to it.
-        unsafe { sys::cuMemsetD8Async(dst, value, count, self.cu_stream()) }
-            .check_with(|| format!("cuMemsetD8Async ({count} bytes at {dst:#x})"))
+    /// Inside a capture, keeps `range`'s allocation alive as long as the graph.
+    pub(super) fn remember_memory(&self, range: &DeviceRange) {
+        self.remember_allocation(range.memory());
     }
 
-    /// Sets `count` 16-bit words at `dst` (2-byte aligned) to `value`.
-    pub fn memset_u16(&self, dst: u64, value: u16, count: usize) -> Result<(), CudaError> {
-        check_aligned("Stream::memset_u16", dst, 2)?;
-        self.bind()?;
-        // SAFETY: as in memset_u8; the address is 2-byte aligned as the call requires.
-        unsafe { sys::cuMemsetD16Async(dst, value, count, self.cu_stream()) }
-            .check_with(|| format!("cuMemsetD16Async ({count} words at {dst:#x})"))
+    /// Inside a capture, keeps `memory` alive as long as the graph.
+    pub(super) fn remember_allocation(&self, memory: &Arc<DeviceMemory>) {
+        let mut capture = self
+            .inner
+            .capture
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        if let Some(record) = capture.as_mut() {
+            record
+                .memory
+                .entry(Arc::as_ptr(memory) as usize)
+                .or_insert_with(|| Arc::clone(memory));
+        }
     }
 
-    /// Sets `count` 32-bit words at `dst` (4-byte aligned) to `value`.
-    pub fn memset_u32(&self, dst: u64, value: u32, count: usize) -> Result<(), CudaError> {
-        check_aligned("Stream::memset_u32", dst, 4)?;
-        self.bind()?;
-        // SAFETY: as in memset_u8; the address is 4-byte aligned as the call requires.
-        unsafe { sys::cuMemsetD32Async(dst, value, count, self.cu_stream()) }
-            .check_with(|| format!("cuMemsetD32Async ({count} words at {dst:#x})"))
+    /// Inside a capture, keeps `host` alive as long as the graph.
+    fn remember_pinned(&self, host: &Arc<PinnedHostMemory>) {
+        let mut capture = self
+            .inner
+            .capture
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        if let Some(record) = capture.as_mut() {
+            record
+                .pinned
+                .entry(Arc::as_ptr(host) as usize)
+                .or_insert_with(|| Arc::clone(host));
+        }
     }
 
-    /// Sets the first 32-bit word of each of `rows` rows, `pitch` bytes apart, starting at `dst`
-    /// (4-byte aligned) to `value`. With one call per word of an element, this fills an array
-    /// of multi-word elements with one value (Warp's `memtile`) using memset nodes only.
-    pub fn memset_u32_strided(
+    /// Sets every byte of `dst` to `value`. Inside a capture it becomes a memset node, and the
+    /// graph keeps `dst`'s allocation alive.
+    pub fn fill_u8(&self, dst: &DeviceRange, value: u8) -> Result<(), CudaError> {
+        if dst.is_empty() {
+            return Ok(());
+        }
+        self.bind()?;
+        let (address, count) = (dst.address(), dst.len());
+        // SAFETY: `dst` is a checked range of a live device allocation of this context (held by
+        // the range, and by the graph inside a capture), so the driver writes only the bytes
+        // [address, address + count) of that allocation; the context is current and the
+        // stream belongs to it.
+        unsafe { sys::cuMemsetD8Async(address, value, count, self.cu_stream()) }
+            .check_with(|| format!("cuMemsetD8Async ({count} bytes at {address:#x})"))?;
+        self.remember_memory(dst);
+        Ok(())
+    }
+
+    /// Sets every 16-bit word of `dst` (2-byte aligned, a whole number of words) to `value`.
+    pub fn fill_u16(&self, dst: &DeviceRange, value: u16) -> Result<(), CudaError> {
+        check_words("Stream::fill_u16", dst, 2)?;
+        if dst.is_empty() {
+            return Ok(());
+        }
+        self.bind()?;
+        let (address, count) = (dst.address(), dst.len() / 2);
+        // SAFETY: as in fill_u8: `count` words of 2 bytes are exactly the range's bytes, and
+        // the address is 2-byte aligned as the call requires (checked above).
+        unsafe { sys::cuMemsetD16Async(address, value, count, self.cu_stream()) }
+            .check_with(|| format!("cuMemsetD16Async ({count} words at {address:#x})"))?;
+        self.remember_memory(dst);
+        Ok(())
+    }
+
+    /// Sets every 32-bit word of `dst` (4-byte aligned, a whole number of words) to `value`.
+    pub fn fill_u32(&self, dst: &DeviceRange, value: u32) -> Result<(), CudaError> {
+        check_words("Stream::fill_u32", dst, 4)?;
+        if dst.is_empty() {
+            return Ok(());
+        }
+        self.bind()?;
+        let (address, count) = (dst.address(), dst.len() / 4);
+        // SAFETY: as in fill_u8: `count` words of 4 bytes are exactly the range's bytes, and
+        // the address is 4-byte aligned as the call requires (checked above).
+        unsafe { sys::cuMemsetD32Async(address, value, count, self.cu_stream()) }
+            .check_with(|| format!("cuMemsetD32Async ({count} words at {address:#x})"))?;
+        self.remember_memory(dst);
+        Ok(())
+    }
+
+    /// Zeroes `dst`: one 32-bit memset when its start is 4-byte aligned and its length a
+    /// multiple of 4, else a byte memset.
+    pub fn fill_zero(&self, dst: &DeviceRange) -> Result<(), CudaError> {
+        if dst.len().is_multiple_of(4) && dst.is_aligned(4) {
+            self.fill_u32(dst, 0)
+        } else {
+            self.fill_u8(dst, 0)
+        }
+    }
+
+    /// Sets the first 32-bit word of each of `rows` rows, `pitch` bytes apart, starting at the
+    /// start of `dst` (4-byte aligned) to `value`; every row's word lies inside `dst`. With one
+    /// call per word of an element, this fills an array of multi-word elements with one value
+    /// (Warp's `memtile`) using memset nodes only.
+    pub fn fill_u32_strided(
         &self,
-        dst: u64,
+        dst: &DeviceRange,
         pitch: usize,
         value: u32,
         rows: usize,
     ) -> Result<(), CudaError> {
-        check_aligned("Stream::memset_u32_strided", dst, 4)?;
+        const OP: &str = "Stream::fill_u32_strided";
+        if !dst.is_aligned(4) {
+            return Err(CudaError::InvalidArgument {
+                operation: OP,
+                reason: format!("{dst:?} does not start 4-byte aligned"),
+            });
+        }
         if !pitch.is_multiple_of(4) || pitch == 0 {
             return Err(CudaError::InvalidArgument {
-                operation: "Stream::memset_u32_strided",
+                operation: OP,
                 reason: format!("pitch {pitch} must be a positive multiple of 4 bytes"),
             });
         }
+        if rows == 0 {
+            return Ok(());
+        }
+        // The last row's word ends at (rows - 1) * pitch + 4.
+        let end = (rows - 1).checked_mul(pitch).and_then(|n| n.checked_add(4));
+        if end.is_none_or(|end| end > dst.len()) {
+            return Err(CudaError::OutOfBounds {
+                operation: OP,
+                offset: 0,
+                bytes: end.unwrap_or(usize::MAX),
+                len: dst.len(),
+            });
+        }
         self.bind()?;
-        // SAFETY: as in memset_u8; the address is 4-byte aligned and the pitch a multiple of 4,
-        // as cuMemsetD2D32Async requires; width 1 word per row.
-        unsafe { sys::cuMemsetD2D32Async(dst, pitch, value, 1, rows, self.cu_stream()) }
-            .check_with(|| format!("cuMemsetD2D32Async ({rows} rows of pitch {pitch} at {dst:#x})"))
+        let address = dst.address();
+        // SAFETY: as in fill_u8: the words written, at address + i * pitch for i < rows, lie
+        // inside the range (its last one ends at (rows - 1) * pitch + 4 <= len, checked above);
+        // the address is 4-byte aligned and the pitch a multiple of 4, as cuMemsetD2D32Async
+        // requires; width 1 word per row.
+        unsafe { sys::cuMemsetD2D32Async(address, pitch, value, 1, rows, self.cu_stream()) }
+            .check_with(|| {
+                format!("cuMemsetD2D32Async ({rows} rows of pitch {pitch} at {address:#x})")
+            })?;
+        self.remember_memory(dst);
+        Ok(())
     }
 
-    /// Copies `bytes` from device address `src` to device address `dst`.
-    pub fn memcpy_dtod(&self, dst: u64, src: u64, bytes: usize) -> Result<(), CudaError> {
+    /// Copies `src` to `dst`, which have the same length and do not overlap. Inside a capture it
+    /// becomes a copy node, and the graph keeps both allocations alive.
+    pub fn copy(&self, dst: &DeviceRange, src: &DeviceRange) -> Result<(), CudaError> {
+        if dst.len() != src.len() {
+            return Err(CudaError::InvalidArgument {
+                operation: "Stream::copy",
+                reason: format!("a copy from {src:?} into {dst:?}: the lengths differ"),
+            });
+        }
+        if dst.overlaps(src) {
+            return Err(CudaError::InvalidArgument {
+                operation: "Stream::copy",
+                reason: format!("a copy from {src:?} into {dst:?}: the ranges overlap"),
+            });
+        }
+        if dst.is_empty() {
+            return Ok(());
+        }
         self.bind()?;
-        // SAFETY: device addresses only, as in memset_u8; the context is current.
-        unsafe { sys::cuMemcpyDtoDAsync_v2(dst, src, bytes, self.cu_stream()) }
-            .check_with(|| format!("cuMemcpyDtoDAsync ({bytes} bytes {src:#x} -> {dst:#x})"))
+        let (to, from, bytes) = (dst.address(), src.address(), dst.len());
+        // SAFETY: both are checked ranges of live device allocations of this context (held by
+        // the ranges, and by the graph inside a capture), of `bytes` bytes each and not
+        // overlapping (checked above), so the driver reads and writes only those bytes; the
+        // context is current.
+        unsafe { sys::cuMemcpyDtoDAsync_v2(to, from, bytes, self.cu_stream()) }
+            .check_with(|| format!("cuMemcpyDtoDAsync ({bytes} bytes {from:#x} -> {to:#x})"))?;
+        self.remember_memory(dst);
+        self.remember_memory(src);
+        Ok(())
     }
 
-    /// Copies `bytes` from pinned host memory at `src_offset` to device address `dst`. The copy
-    /// reads `src` when it runs (each replay, inside a graph): keep `src` alive that long.
-    pub fn memcpy_htod(
+    /// Copies `dst.len()` bytes of pinned host memory from `src_offset` on into `dst`. Inside a
+    /// capture the copy reads `src` when it runs (each replay; the graph keeps `src` alive), so
+    /// writes to `src` between launches change what the next launch uploads. Outside a capture
+    /// the call waits for the stream, so the copy has finished when it returns.
+    pub fn copy_from_pinned(
         &self,
-        dst: u64,
-        src: &PinnedHostMemory,
+        dst: &DeviceRange,
+        src: &Arc<PinnedHostMemory>,
         src_offset: usize,
-        bytes: usize,
     ) -> Result<(), CudaError> {
+        let bytes = dst.len();
         match src_offset.checked_add(bytes) {
             Some(end) if end <= src.len() => {}
             _ => {
                 return Err(CudaError::OutOfBounds {
-                    operation: "Stream::memcpy_htod",
+                    operation: "Stream::copy_from_pinned",
                     offset: src_offset,
                     bytes,
                     len: src.len(),
@@ -265,19 +399,28 @@ impl Stream {
         if bytes == 0 {
             return Ok(());
         }
-        self.bind()?;
-        // SAFETY: [src_offset, + bytes) lies inside the pinned allocation (checked above), which
-        // the caller keeps alive while the copy can run; the destination is a device address, as
-        // in memset_u8; the context is current.
+        let capturing = self.is_capturing()?;
+        let to = dst.address();
+        // SAFETY: [src_offset, + bytes) lies inside the pinned allocation (checked above). Inside
+        // a capture the graph keeps `src` alive for every replay (remembered below); outside one
+        // the stream is synchronized below, before `src` (borrowed for this call) can be freed.
+        // The destination is a checked range of a live device allocation of this context, as in
+        // fill_u8; the context is current (is_capturing bound it).
         unsafe {
             sys::cuMemcpyHtoDAsync_v2(
-                dst,
+                to,
                 src.host_ptr().add(src_offset).cast(),
                 bytes,
                 self.cu_stream(),
             )
         }
-        .check_with(|| format!("cuMemcpyHtoDAsync ({bytes} bytes to {dst:#x})"))
+        .check_with(|| format!("cuMemcpyHtoDAsync ({bytes} bytes to {to:#x})"))?;
+        if !capturing {
+            return self.synchronize();
+        }
+        self.remember_memory(dst);
+        self.remember_pinned(src);
+        Ok(())
     }
 
     /// Waits until all work queued on this stream has finished.
@@ -299,13 +442,19 @@ impl Stream {
     }
 }
 
-fn check_aligned(operation: &'static str, address: u64, alignment: u64) -> Result<(), CudaError> {
-    if address.is_multiple_of(alignment) {
-        Ok(())
-    } else {
-        Err(CudaError::InvalidArgument {
+/// `dst` starts `word`-byte aligned and holds a whole number of words.
+fn check_words(operation: &'static str, dst: &DeviceRange, word: usize) -> Result<(), CudaError> {
+    if !dst.is_aligned(word) {
+        return Err(CudaError::InvalidArgument {
             operation,
-            reason: format!("device address {address:#x} is not {alignment}-byte aligned"),
-        })
+            reason: format!("{dst:?} does not start {word}-byte aligned"),
+        });
     }
+    if !dst.len().is_multiple_of(word) {
+        return Err(CudaError::InvalidArgument {
+            operation,
+            reason: format!("{dst:?} is not a whole number of {word}-byte words"),
+        });
+    }
+    Ok(())
 }

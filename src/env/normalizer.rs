@@ -87,8 +87,7 @@ impl ObservationNormalizer {
                 &self.mean,
                 &self.m2,
             )?;
-            let ptr = self.count.device_ptr();
-            s.memcpy_dtod(ptr, ptr + 8, 8)?;
+            self.count.copy_from(s, &self.count, 1..2, 0)?;
         }
         kernels.observation_normalize(
             s,

@@ -495,12 +495,9 @@ impl Rollout {
             // holds the latest observation (the last one of the previous rollout, or the
             // reset's). Copied here, not at the end of the previous rollout, because the update
             // that follows a rollout still reads its row 0.
-            let bytes = self.normalizer.normalized.len() * std::mem::size_of::<f32>();
-            s.memcpy_dtod(
-                self.storage.observations.device_ptr(),
-                self.normalizer.normalized.device_ptr(),
-                bytes,
-            )?;
+            self.normalizer
+                .normalized
+                .copy_into(s, &self.storage.observations, 0)?;
         }
         for t in 0..self.horizon {
             let t32 = t as i32;

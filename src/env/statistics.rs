@@ -73,7 +73,8 @@ impl RolloutStatistics {
 
     /// Queues the clearing of the totals (the first thing a rollout does).
     pub(super) fn record_clear(&self, s: &Stream) -> Result<(), EnvError> {
-        s.memset_u32(self.totals.device_ptr(), 0, 2 * TOTALS)?;
+        // TOTALS float64 values: 2 * TOTALS 32-bit words of zero bits.
+        s.fill_u32(&self.totals.range()?, 0)?;
         Ok(())
     }
 

@@ -2,10 +2,13 @@
 //! `launch_bounds_t` header, and the packed argument buffer a launch passes to the driver.
 //!
 //! A Warp kernel takes `launch_bounds_t<dim>` and then its parameters, laid out as one C struct
-//! (each at the next multiple of its alignment); `Stream::launch` hands that buffer to
+//! (each at the next multiple of its alignment); `Stream::launch` hands that buffer
+//! ([`KernelArgs`], whose device addresses come only from arrays' [`DeviceRange`](crate::cuda::DeviceRange)s) to
 //! `cuLaunchKernel` as is. The layouts are in [`super::manifest`] ([`ARRAY_LAYOUT`],
 //! [`launch_bounds_layout`]) and checked there against what env_build.py read from Warp. All
 //! bytes are little-endian, the byte order of every CUDA host and device.
+
+use crate::cuda::KernelArgs;
 
 use super::error::EnvError;
 pub use super::manifest::ScalarType;
@@ -199,11 +202,11 @@ impl KernelAbi {
     }
 }
 
-/// The `array_t` descriptor of a contiguous row-major array at device address `data` (no
-/// gradient): shape, byte strides, ndim. Warp stores shape and strides as `int`, so every extent
-/// and stride must fit `i32`.
+/// The `array_t` descriptor of a contiguous row-major array (no gradient): shape, byte strides,
+/// ndim, with the data pointer null. [`ArgBuffer::set_array`] writes the array's address into
+/// it from the array's [`DeviceRange`](crate::cuda::DeviceRange) (no safe code handles raw device addresses). Warp stores
+/// shape and strides as `int`, so every extent and stride must fit `i32`.
 pub fn array_descriptor(
-    data: u64,
     shape: &[usize],
     element_size: usize,
 ) -> Result<[u8; ARRAY_DESCRIPTOR_BYTES], EnvError> {
@@ -216,8 +219,7 @@ pub fn array_descriptor(
     }
     let f = ARRAY_LAYOUT.fields;
     let mut out = [0u8; ARRAY_DESCRIPTOR_BYTES];
-    out[f.data..f.data + 8].copy_from_slice(&data.to_le_bytes());
-    // grad stays null: env kernels have no backward pass.
+    // data stays null here (see above); grad stays null: env kernels have no backward pass.
     let mut stride = element_size;
     for d in (0..shape.len()).rev() {
         let extent = i32::try_from(shape[d])
@@ -274,7 +276,7 @@ pub fn launch_bounds(shape: &[usize]) -> Result<(Vec<u8>, usize), EnvError> {
 #[derive(Debug, Clone)]
 pub struct ArgBuffer {
     abi: &'static KernelAbi,
-    bytes: Vec<u8>,
+    args: KernelArgs,
 }
 
 impl ArgBuffer {
@@ -282,7 +284,7 @@ impl ArgBuffer {
     pub fn new(abi: &'static KernelAbi) -> ArgBuffer {
         ArgBuffer {
             abi,
-            bytes: vec![0; abi.param_bytes()],
+            args: KernelArgs::zeroed(abi.param_bytes()),
         }
     }
 
@@ -292,10 +294,36 @@ impl ArgBuffer {
 
     /// The packed bytes.
     pub fn bytes(&self) -> &[u8] {
-        &self.bytes
+        self.args.bytes()
     }
 
-    fn slot(&mut self, index: usize, expected: &str, fits: bool) -> Result<&mut [u8], EnvError> {
+    /// The packed arguments, as [`crate::cuda::Stream::launch`] takes them.
+    pub fn kernel_args(&self) -> &KernelArgs {
+        &self.args
+    }
+
+    /// Writes `value` into parameter `index` (see [`ArgBuffer::slot_range`]).
+    fn put(
+        &mut self,
+        index: usize,
+        expected: &str,
+        fits: bool,
+        write: impl FnOnce(&mut [u8]),
+    ) -> Result<usize, EnvError> {
+        let (offset, size) = self.slot_range(index, expected, fits)?;
+        let mut value = vec![0u8; size];
+        write(&mut value);
+        self.args.write(offset, &value)?;
+        Ok(offset)
+    }
+
+    /// `(offset, size)` of parameter `index` in the buffer, after checking its type.
+    fn slot_range(
+        &self,
+        index: usize,
+        expected: &str,
+        fits: bool,
+    ) -> Result<(usize, usize), EnvError> {
         let abi = self.abi;
         let param = abi.params.get(index).ok_or_else(|| EnvError::Argument {
             kernel: abi.name,
@@ -309,12 +337,14 @@ impl ArgBuffer {
                 reason: format!("expects {:?}, got {expected}", param.kind),
             });
         }
-        let range = param.offset..param.offset + param.size;
-        self.bytes.get_mut(range).ok_or_else(|| EnvError::Argument {
-            kernel: abi.name,
-            param: param.name.to_owned(),
-            reason: "lies outside the argument buffer".to_owned(),
-        })
+        if param.offset + param.size > self.args.len() {
+            return Err(EnvError::Argument {
+                kernel: abi.name,
+                param: param.name.to_owned(),
+                reason: "lies outside the argument buffer".to_owned(),
+            });
+        }
+        Ok((param.offset, param.size))
     }
 
     /// Sets value parameter `index` (a scalar, vector or matrix).
@@ -327,18 +357,24 @@ impl ArgBuffer {
                 }
                 && p.size == T::SIZE
         });
-        let dst = self.slot(index, &format!("a {:?} {:?}", T::SCALAR, T::SHAPE), fits)?;
-        value.write_le(dst);
+        self.put(
+            index,
+            &format!("a {:?} {:?}", T::SCALAR, T::SHAPE),
+            fits,
+            |dst| value.write_le(dst),
+        )?;
         Ok(())
     }
 
-    /// Sets array parameter `index` from a descriptor of an array of `T` with `ndim` dimensions.
+    /// Sets array parameter `index` from a descriptor of an array of `T` with `ndim` dimensions
+    /// (its data pointer as given: null from [`array_descriptor`]); returns the parameter's
+    /// offset.
     pub fn set_array_descriptor<T: Element>(
         &mut self,
         index: usize,
         ndim: usize,
         descriptor: &[u8; ARRAY_DESCRIPTOR_BYTES],
-    ) -> Result<(), EnvError> {
+    ) -> Result<usize, EnvError> {
         let fits = self.abi.params.get(index).is_some_and(|p| {
             p.kind
                 == ParamKind::Array {
@@ -353,18 +389,22 @@ impl ArgBuffer {
             T::SCALAR,
             T::SHAPE
         );
-        self.slot(index, &expected, fits)?
-            .copy_from_slice(descriptor);
-        Ok(())
+        self.put(index, &expected, fits, |dst| {
+            dst.copy_from_slice(descriptor)
+        })
     }
 
-    /// Sets array parameter `index`.
+    /// Sets array parameter `index`: the array's descriptor, with its data pointer written from
+    /// the array's [`DeviceRange`](crate::cuda::DeviceRange) (which the launch, and a graph capturing it, keeps alive).
     pub fn set_array<T: Element, const N: usize>(
         &mut self,
         index: usize,
         array: &super::DeviceArray<T, N>,
     ) -> Result<(), EnvError> {
-        self.set_array_descriptor::<T>(index, N, &array.descriptor()?)
+        let offset = self.set_array_descriptor::<T>(index, N, &array.descriptor()?)?;
+        self.args
+            .write_address(offset + ARRAY_LAYOUT.fields.data, &array.range()?)?;
+        Ok(())
     }
 
     /// Sets struct parameter `index`.
@@ -373,8 +413,9 @@ impl ArgBuffer {
             self.abi.params.get(index).is_some_and(|p| {
                 p.kind == ParamKind::Struct { name: S::NAME } && p.size == S::SIZE
             });
-        let dst = self.slot(index, &format!("struct {}", S::NAME), fits)?;
-        value.write_le(dst);
+        self.put(index, &format!("struct {}", S::NAME), fits, |dst| {
+            value.write_le(dst)
+        })?;
         Ok(())
     }
 
@@ -391,16 +432,14 @@ impl ArgBuffer {
             });
         }
         let (bytes, size) = launch_bounds(shape)?;
-        match self.bytes.get_mut(..bytes.len()) {
-            Some(dst) => dst.copy_from_slice(&bytes),
-            None => {
-                return Err(EnvError::Argument {
-                    kernel: self.abi.name,
-                    param: "launch_bounds".to_owned(),
-                    reason: "lies outside the argument buffer".to_owned(),
-                });
-            }
+        if bytes.len() > self.args.len() {
+            return Err(EnvError::Argument {
+                kernel: self.abi.name,
+                param: "launch_bounds".to_owned(),
+                reason: "lies outside the argument buffer".to_owned(),
+            });
         }
+        self.args.write(0, &bytes)?;
         Ok(size)
     }
 }

@@ -3,7 +3,7 @@
 use std::marker::PhantomData;
 use std::sync::Arc;
 
-use crate::cuda::{BlasMatrix, DeviceMemory, Gpu, Stream};
+use crate::cuda::{BlasMatrix, DeviceMemory, DeviceRange, Gpu, Stream};
 use crate::plan::Simulation;
 
 use super::abi::{ARRAY_DESCRIPTOR_BYTES, Element, array_descriptor};
@@ -46,8 +46,8 @@ impl<T: Element, const N: usize> std::fmt::Debug for DeviceArray<T, N> {
 
 /// Number of elements of `shape`, checked against what Warp's descriptor can hold.
 fn element_count<T: Element>(shape: &[usize]) -> Result<usize, EnvError> {
-    // Builds the descriptor for address 0: every extent and stride must fit Warp's int.
-    array_descriptor(0, shape, T::SIZE)?;
+    // Builds the descriptor: every extent and stride must fit Warp's int.
+    array_descriptor(shape, T::SIZE)?;
     shape
         .iter()
         .try_fold(1usize, |n, &d| n.checked_mul(d))
@@ -198,23 +198,70 @@ impl<T: Element, const N: usize> DeviceArray<T, N> {
         dst: &DeviceArray<T, M>,
         at: usize,
     ) -> Result<(), EnvError> {
-        let len = self.len();
-        if at.checked_add(len).is_none_or(|end| end > dst.len()) {
-            return Err(EnvError::ArrayShape {
-                shape: dst.shape.to_vec(),
+        dst.copy_from(stream, self, 0..self.len(), at)
+    }
+
+    /// Queues on `stream` a copy of elements `range` of `src` (row-major, any shape) into this
+    /// array from element `at` on; the two may be views of one allocation if the elements do
+    /// not overlap. Inside a capture it becomes a copy node, and the graph keeps both
+    /// allocations alive.
+    pub fn copy_from<const M: usize>(
+        &self,
+        stream: &Stream,
+        src: &DeviceArray<T, M>,
+        range: std::ops::Range<usize>,
+        at: usize,
+    ) -> Result<(), EnvError> {
+        let source = src
+            .elements(range.clone())
+            .map_err(|_| EnvError::ArrayShape {
+                shape: src.shape.to_vec(),
+                reason: format!(
+                    "a copy of elements {range:?} does not fit in {} elements",
+                    src.len()
+                ),
+            })?;
+        let len = range.len();
+        let target = at
+            .checked_add(len)
+            .and_then(|end| self.elements(at..end).ok())
+            .ok_or_else(|| EnvError::ArrayShape {
+                shape: self.shape.to_vec(),
                 reason: format!(
                     "a copy of {len} elements to element {at} does not fit in {} elements",
-                    dst.len()
+                    self.len()
                 ),
+            })?;
+        stream.copy(&target, &source)?;
+        Ok(())
+    }
+
+    /// Queues on `stream` the zeroing of the whole array (all bits 0: 0.0 for floats); inside a
+    /// capture it becomes a memset node.
+    pub fn record_zero(&self, stream: &Stream) -> Result<(), EnvError> {
+        stream.fill_zero(&self.range()?)?;
+        Ok(())
+    }
+
+    /// The bytes of the whole array in its allocation, for stream operations and kernel
+    /// arguments (which keep the allocation alive).
+    pub fn range(&self) -> Result<DeviceRange, EnvError> {
+        self.elements(0..self.len())
+    }
+
+    /// The bytes of elements `range` (row-major), checked against the array.
+    fn elements(&self, range: std::ops::Range<usize>) -> Result<DeviceRange, EnvError> {
+        if range.start > range.end || range.end > self.len() {
+            return Err(EnvError::ArrayShape {
+                shape: self.shape.to_vec(),
+                reason: format!("elements {range:?} do not fit in {} elements", self.len()),
             });
         }
-        let byte_offset = (at * T::SIZE) as u64;
-        stream.memcpy_dtod(
-            dst.device_ptr() + byte_offset,
-            self.device_ptr(),
-            len * T::SIZE,
-        )?;
-        Ok(())
+        Ok(DeviceRange::new(
+            &self.memory,
+            (self.offset + range.start) * T::SIZE,
+            range.len() * T::SIZE,
+        )?)
     }
 
     pub fn shape(&self) -> [usize; N] {
@@ -230,19 +277,15 @@ impl<T: Element, const N: usize> DeviceArray<T, N> {
         self.len() == 0
     }
 
-    /// The device address of element 0.
-    pub fn device_ptr(&self) -> u64 {
-        self.memory.device_ptr() + (self.offset * T::SIZE) as u64
-    }
-
-    /// The underlying allocation, for stream operations (memsets, copies in graphs).
-    pub fn memory(&self) -> &DeviceMemory {
+    /// The underlying allocation (shared), e.g. for a [`BlasMatrix`] of part of it.
+    pub fn memory(&self) -> &Arc<DeviceMemory> {
         &self.memory
     }
 
-    /// Warp's `array_t<T>` descriptor of this array, as a kernel parameter.
+    /// Warp's `array_t<T>` descriptor of this array with a null data pointer:
+    /// [`super::ArgBuffer::set_array`] writes the address from [`DeviceArray::range`].
     pub fn descriptor(&self) -> Result<[u8; ARRAY_DESCRIPTOR_BYTES], EnvError> {
-        array_descriptor(self.device_ptr(), &self.shape, T::SIZE)
+        array_descriptor(&self.shape, T::SIZE)
     }
 }
 

@@ -65,7 +65,7 @@ fn launch(
         [blocks, 1, 1],
         [abi.block_dim, 1, 1],
         abi.smem_bytes,
-        args.bytes(),
+        args.kernel_args(),
     )?;
     Ok(())
 }

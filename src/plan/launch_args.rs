@@ -161,10 +161,24 @@ pub struct PackedLaunchArgs {
     /// Byte offset of each parameter: the launch bounds (always 0), then each argument blob.
     /// Replay compares these with the loaded kernel's parameter layout.
     pub offsets: Vec<usize>,
+    /// Every pointer patched from a `DataPtr` relocation: where in `bytes`, and which byte of
+    /// which region it points to. Replay writes these as addresses of typed ranges.
+    pub pointers: Vec<PointerSlot>,
+}
+
+/// A pointer field of a packed parameter buffer: `bytes[at..at + 8]` points at byte `offset`
+/// of region `region`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PointerSlot {
+    pub at: usize,
+    pub region: u32,
+    pub offset: u64,
 }
 
 /// The parameter buffer for `CU_LAUNCH_PARAM_BUFFER_POINTER`. `resolve(region, offset)` gives
-/// the device address of a byte of a region (or an error). Mesh handles are refused.
+/// the value written for a pointer to a byte of a region (or an error; replay checks the
+/// pointer there and writes 0, then the address through `KernelArgs::write_address`). Mesh
+/// handles are refused.
 pub fn pack_launch_args(
     launch: &KernelLaunch,
     resolve: impl Fn(u32, u64) -> Result<u64>,
@@ -198,6 +212,7 @@ pub fn packed_launch_args(
     put_u64(&mut buf, size_offset, launch.size);
     put_u64(&mut buf, coord_mult_offset, coord_mult);
     let mut offsets = vec![0];
+    let mut pointers = Vec::new();
 
     let params: Vec<_> = if launch.is_forward {
         launch.params.iter().collect()
@@ -228,8 +243,12 @@ pub fn packed_launch_args(
         })?;
         buf.extend_from_slice(blob);
         for (k, reloc) in param.relocations.iter().enumerate() {
+            let at = start + reloc.value_byte_offset as usize;
             let value = match reloc.target {
-                RelocationTarget::DataPtr { region, offset } => resolve(region, offset)?,
+                RelocationTarget::DataPtr { region, offset } => {
+                    pointers.push(PointerSlot { at, region, offset });
+                    resolve(region, offset)?
+                }
                 RelocationTarget::Null => 0,
                 RelocationTarget::Handle { .. } => {
                     return Err(launch_error(
@@ -238,7 +257,6 @@ pub fn packed_launch_args(
                     ));
                 }
             };
-            let at = start + reloc.value_byte_offset as usize;
             if reloc.value_byte_offset as usize + 8 > blob.len() || !put_u64(&mut buf, at, value) {
                 return Err(launch_error(
                     launch,
@@ -250,6 +268,7 @@ pub fn packed_launch_args(
     Ok(PackedLaunchArgs {
         bytes: buf,
         offsets,
+        pointers,
     })
 }
 

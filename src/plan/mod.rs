@@ -32,7 +32,7 @@ pub use format::{
     ArchSuffix, BinaryKind, DeviceType, FallbackReason, OpKind, ReductionKind, ScalarType,
 };
 pub use launch_args::{
-    LaunchDims, PackedLaunchArgs, launch_dims, pack_launch_args, packed_launch_args,
+    LaunchDims, PackedLaunchArgs, PointerSlot, launch_dims, pack_launch_args, packed_launch_args,
 };
 pub use model::{
     Binding, CompileRecipe, HandleLocation, Kernel, Mesh, Module, Plan, PlanHeader, PlanInfo,

@@ -1,8 +1,10 @@
 //! Replaying a plan's operation stream on a CUDA stream.
 //!
 //! [`prepare_ops`] turns the parsed operations into [`PreparedOp`]s once: kernels looked up,
-//! launch geometry computed, argument buffers packed with live device addresses and checked
-//! against the loaded kernel's parameter layout. [`record_ops`] then only queues work, so the
+//! launch geometry computed, argument buffers packed with the addresses of typed ranges of the
+//! plan's regions ([`DeviceRange`], checked against each region) and checked against the loaded
+//! kernel's parameter layout. Every operation addresses memory through such ranges, so a graph
+//! recorded from them keeps the regions alive. [`record_ops`] then only queues work, so the
 //! same plan can be recorded into its own CUDA graph and into larger graphs (a rollout records
 //! the step plan once per physics substep) without repeating any of that.
 //!
@@ -16,8 +18,12 @@
 //! analysis; Warp's launch records carry every pointer as a relocation).
 
 use std::collections::{BTreeSet, HashMap, HashSet};
+use std::sync::Arc;
 
-use crate::cuda::{CaptureNodes, CudaError, Function, PinnedHostMemory, Stream};
+use crate::cuda::{
+    CaptureNodes, CudaError, DeviceMemory, DeviceRange, Function, KernelArgs, PinnedHostMemory,
+    Stream,
+};
 
 use super::error::PlanError;
 use super::launch_args::{launch_dims, packed_launch_args};
@@ -40,49 +46,46 @@ pub struct Prepared {
     regions: Vec<u32>,
 }
 
-/// One operation, ready to be queued.
+/// One operation, ready to be queued. Every range lies inside its region (checked when
+/// prepared).
 pub enum PreparedOp {
     Launch {
         function: Function,
         grid: [u32; 3],
         block: [u32; 3],
         shared_mem: u32,
-        args: Vec<u8>,
+        args: KernelArgs,
     },
     Memset {
-        dst: u64,
+        dst: DeviceRange,
         value: u8,
-        bytes: usize,
     },
     /// Fill `count` elements of `pitch` bytes with `words` (one 32-bit word after another).
     Fill32 {
-        dst: u64,
+        dst: DeviceRange,
         pitch: usize,
         words: Vec<u32>,
         count: usize,
     },
     Fill16 {
-        dst: u64,
+        dst: DeviceRange,
         value: u16,
-        count: usize,
     },
     CopyD2D {
-        dst: u64,
-        src: u64,
-        bytes: usize,
+        dst: DeviceRange,
+        src: DeviceRange,
     },
     /// Copy from the plan's pinned host buffer `buffer` (index into the pinned list).
     CopyH2D {
-        dst: u64,
+        dst: DeviceRange,
         buffer: usize,
-        bytes: usize,
     },
     While {
-        cond: u64,
+        cond: DeviceRange,
         body: Vec<Prepared>,
     },
     If {
-        cond: u64,
+        cond: DeviceRange,
         then: Vec<Prepared>,
         otherwise: Vec<Prepared>,
     },
@@ -93,37 +96,44 @@ pub struct ReplayContext<'a> {
     pub plan: &'a Plan,
     /// SM version of the device (e.g. 90), for the launch geometry.
     pub device_arch: u32,
-    /// Device address of byte 0 and size of each region, by region id.
-    pub regions: &'a HashMap<u32, (u64, u64)>,
+    /// The memory of each region, by region id.
+    pub regions: &'a HashMap<u32, Arc<DeviceMemory>>,
     /// Loads (or returns the cached) kernel `entry` of the module with this binary file name.
     pub function: &'a mut dyn FnMut(&str, &str) -> Result<Function, PlanError>,
     /// Pinned host buffers the H2D copies read from; preparing appends to it.
-    pub pinned: &'a mut Vec<PinnedHostMemory>,
+    pub pinned: &'a mut Vec<Arc<PinnedHostMemory>>,
     pub alloc_pinned: &'a dyn Fn(usize) -> Result<PinnedHostMemory, CudaError>,
     /// Regions no operation writes (bound only to Model arrays): no ordering through them.
     pub read_only: &'a HashSet<u32>,
 }
 
 impl ReplayContext<'_> {
-    fn address(&self, at: &str, r: RegionRef, len: u64) -> Result<u64, PlanError> {
-        let &(base, size) =
-            self.regions
-                .get(&r.region)
-                .ok_or_else(|| PlanError::MissingRegion {
-                    at: at.to_string(),
-                    region: i64::from(r.region),
-                    count: self.regions.len(),
-                })?;
-        match r.offset.checked_add(len) {
-            Some(end) if end <= size => Ok(base + r.offset),
-            _ => Err(PlanError::OutOfBounds {
+    /// Bytes `[r.offset, r.offset + len)` of region `r.region`.
+    fn range(&self, at: &str, r: RegionRef, len: u64) -> Result<DeviceRange, PlanError> {
+        let memory = self
+            .regions
+            .get(&r.region)
+            .ok_or_else(|| PlanError::MissingRegion {
                 at: at.to_string(),
-                what: "the operation".to_string(),
-                start: r.offset,
-                len,
-                container: format!("region {}", r.region),
-                limit: size,
-            }),
+                region: i64::from(r.region),
+                count: self.regions.len(),
+            })?;
+        let size = memory.len() as u64;
+        let out_of_bounds = || PlanError::OutOfBounds {
+            at: at.to_string(),
+            what: "the operation".to_string(),
+            start: r.offset,
+            len,
+            container: format!("region {}", r.region),
+            limit: size,
+        };
+        match r.offset.checked_add(len) {
+            Some(end) if end <= size => {
+                let offset = usize::try_from(r.offset).map_err(|_| out_of_bounds())?;
+                let len = usize::try_from(len).map_err(|_| out_of_bounds())?;
+                DeviceRange::new(memory, offset, len).map_err(|_| out_of_bounds())
+            }
+            _ => Err(out_of_bounds()),
         }
     }
 }
@@ -178,28 +188,25 @@ pub fn prepare_ops(
         let prepared = match op {
             Op::KernelLaunch(launch) => prepare_launch(ctx, launch, &at)?,
             Op::Memset(m) if m.size > 0 => Some(PreparedOp::Memset {
-                dst: ctx.address(&at, m.dst, m.size)?,
+                dst: ctx.range(&at, m.dst, m.size)?,
                 // cudaMemsetAsync semantics: the low byte of the value.
                 value: m.value as u8,
-                bytes: usize_of(&at, m.size)?,
             }),
             Op::Memtile(t) => prepare_fill(ctx, t.dst, t.count, &t.value, &at)?,
             Op::MemcpyD2D(c) if c.size > 0 => Some(PreparedOp::CopyD2D {
-                dst: ctx.address(&at, c.dst, c.size)?,
-                src: ctx.address(&at, c.src, c.size)?,
-                bytes: usize_of(&at, c.size)?,
+                dst: ctx.range(&at, c.dst, c.size)?,
+                src: ctx.range(&at, c.src, c.size)?,
             }),
             Op::MemcpyH2D(c) if !c.data.is_empty() => {
-                let dst = ctx.address(&at, c.dst, c.data.len() as u64)?;
-                let mut host = (ctx.alloc_pinned)(c.data.len())
+                let dst = ctx.range(&at, c.dst, c.data.len() as u64)?;
+                let host = (ctx.alloc_pinned)(c.data.len())
                     .map_err(|e| PlanError::malformed(&at, format!("pinned host buffer: {e}")))?;
                 host.write(0, &c.data)
                     .map_err(|e| PlanError::malformed(&at, e.to_string()))?;
-                ctx.pinned.push(host);
+                ctx.pinned.push(Arc::new(host));
                 Some(PreparedOp::CopyH2D {
                     dst,
                     buffer: ctx.pinned.len() - 1,
-                    bytes: c.data.len(),
                 })
             }
             // Empty memsets and copies do nothing.
@@ -207,13 +214,13 @@ pub fn prepare_ops(
             // Regions of in-graph allocations are allocated when the plan is loaded.
             Op::Alloc(_) => None,
             Op::While(w) => {
-                let cond = ctx.address(&at, w.cond, 4)?;
+                let cond = ctx.range(&at, w.cond, 4)?;
                 let body = prepare_ops(ctx, &w.body, &format!("{at}: body "))?;
                 regions.extend(body.iter().flat_map(|p| p.regions.iter().copied()));
                 Some(PreparedOp::While { cond, body })
             }
             Op::If(c) => {
-                let cond = ctx.address(&at, c.cond, 4)?;
+                let cond = ctx.range(&at, c.cond, 4)?;
                 let then = prepare_ops(ctx, &c.then_ops, &format!("{at}: then "))?;
                 let otherwise = prepare_ops(ctx, &c.else_ops, &format!("{at}: else "))?;
                 regions.extend(
@@ -272,24 +279,43 @@ fn prepare_launch(
     };
     let function = (ctx.function)(&module.binary_filename, entry)?;
     let regions = ctx.regions;
-    let packed = packed_launch_args(launch, |region, offset| {
-        let &(base, size) = regions
+    // The pointer to byte `offset` of `region` (at most its end): the range from there to the
+    // region's end.
+    let pointee = |region: u32, offset: u64| -> Result<DeviceRange, PlanError> {
+        let memory = regions
             .get(&region)
             .ok_or_else(|| PlanError::UnresolvedPointer {
                 region,
                 offset,
                 reason: "the region does not exist".to_string(),
             })?;
-        if offset > size {
-            return Err(PlanError::UnresolvedPointer {
+        let size = memory.len();
+        usize::try_from(offset)
+            .ok()
+            .filter(|&o| o <= size)
+            .and_then(|o| DeviceRange::new(memory, o, size - o).ok())
+            .ok_or_else(|| PlanError::UnresolvedPointer {
                 region,
                 offset,
                 reason: format!("the region has {size} bytes"),
-            });
-        }
-        Ok(base + offset)
-    })?;
-    let args = fit_to_layout(packed.bytes, &packed.offsets, &function, at)?;
+            })
+    };
+    // Pointers are checked here and written below, as addresses of ranges.
+    let packed = packed_launch_args(launch, |region, offset| pointee(region, offset).map(|_| 0))?;
+    let mut args =
+        KernelArgs::from_bytes(fit_to_layout(packed.bytes, &packed.offsets, &function, at)?);
+    for slot in &packed.pointers {
+        let range = pointee(slot.region, slot.offset)?;
+        args.write_address(slot.at, &range).map_err(|e| {
+            PlanError::malformed(
+                at,
+                format!(
+                    "the pointer to region {} at argument byte {}: {e}",
+                    slot.region, slot.at
+                ),
+            )
+        })?;
+    }
     function
         .allow_dynamic_shared_memory(dims.shared_mem)
         .map_err(|e| PlanError::malformed(at, e.to_string()))?;
@@ -353,30 +379,28 @@ fn prepare_fill(
     if bytes == 0 {
         return Ok(None);
     }
-    let addr = ctx.address(at, dst, bytes)?;
+    let dst = ctx.range(at, dst, bytes)?;
     let count = usize_of(at, count)?;
     // One repeated byte is a plain memset whatever the element size.
     if value.iter().all(|&b| b == value[0]) {
         return Ok(Some(PreparedOp::Memset {
-            dst: addr,
+            dst,
             value: value[0],
-            bytes: usize_of(at, bytes)?,
         }));
     }
-    if value.len() == 2 && addr % 2 == 0 {
+    if value.len() == 2 && dst.is_aligned(2) {
         return Ok(Some(PreparedOp::Fill16 {
-            dst: addr,
+            dst,
             value: u16::from_le_bytes([value[0], value[1]]),
-            count,
         }));
     }
-    if value.len().is_multiple_of(4) && addr.is_multiple_of(4) {
+    if value.len().is_multiple_of(4) && dst.is_aligned(4) {
         let words = value
             .chunks_exact(4)
             .map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]))
             .collect();
         return Ok(Some(PreparedOp::Fill32 {
-            dst: addr,
+            dst,
             pitch: value.len(),
             words,
             count,
@@ -397,7 +421,7 @@ fn prepare_fill(
 pub fn record_ops(
     ops: &[Prepared],
     stream: &Stream,
-    pinned: &[PinnedHostMemory],
+    pinned: &[Arc<PinnedHostMemory>],
     order: ReplayOrder,
 ) -> Result<(), CudaError> {
     if order == ReplayOrder::Linear {
@@ -446,7 +470,7 @@ pub fn record_ops(
 fn record_op(
     op: &PreparedOp,
     stream: &Stream,
-    pinned: &[PinnedHostMemory],
+    pinned: &[Arc<PinnedHostMemory>],
     order: ReplayOrder,
 ) -> Result<(), CudaError> {
     match op {
@@ -457,8 +481,8 @@ fn record_op(
             shared_mem,
             args,
         } => stream.launch(function, *grid, *block, *shared_mem, args),
-        PreparedOp::Memset { dst, value, bytes } => stream.memset_u8(*dst, *value, *bytes),
-        PreparedOp::Fill16 { dst, value, count } => stream.memset_u16(*dst, *value, *count),
+        PreparedOp::Memset { dst, value } => stream.fill_u8(dst, *value),
+        PreparedOp::Fill16 { dst, value } => stream.fill_u16(dst, *value),
         PreparedOp::Fill32 {
             dst,
             pitch,
@@ -466,23 +490,25 @@ fn record_op(
             count,
         } => {
             if words.len() == 1 {
-                return stream.memset_u32(*dst, words[0], *count);
+                return stream.fill_u32(dst, words[0]);
             }
             for (w, &word) in words.iter().enumerate() {
-                stream.memset_u32_strided(*dst + 4 * w as u64, *pitch, word, *count)?;
+                // Word w of each element: from byte 4 w of the fill on.
+                let column = dst.sub(4 * w, dst.len() - 4 * w)?;
+                stream.fill_u32_strided(&column, *pitch, word, *count)?;
             }
             Ok(())
         }
-        PreparedOp::CopyD2D { dst, src, bytes } => stream.memcpy_dtod(*dst, *src, *bytes),
-        PreparedOp::CopyH2D { dst, buffer, bytes } => {
+        PreparedOp::CopyD2D { dst, src } => stream.copy(dst, src),
+        PreparedOp::CopyH2D { dst, buffer } => {
             let host = pinned.get(*buffer).ok_or(CudaError::InvalidArgument {
                 operation: "record_ops",
                 reason: format!("pinned buffer {buffer} does not exist"),
             })?;
-            stream.memcpy_htod(*dst, host, 0, *bytes)
+            stream.copy_from_pinned(dst, host, 0)
         }
         PreparedOp::While { cond, body } => {
-            stream.capture_while(*cond, |s| record_ops(body, s, pinned, order))
+            stream.capture_while(cond, |s| record_ops(body, s, pinned, order))
         }
         PreparedOp::If {
             cond,
@@ -492,7 +518,7 @@ fn record_op(
             let mut then_fn = |s: &Stream| record_ops(then, s, pinned, order);
             let mut else_fn = |s: &Stream| record_ops(otherwise, s, pinned, order);
             stream.capture_if::<CudaError>(
-                *cond,
+                cond,
                 (!then.is_empty()).then_some(&mut then_fn as _),
                 (!otherwise.is_empty()).then_some(&mut else_fn as _),
             )

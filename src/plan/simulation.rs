@@ -57,7 +57,7 @@ pub enum SimulationError {
 struct LoadedPlan {
     info: Option<PlanInfo>,
     ops: Vec<Prepared>,
-    pinned: Vec<PinnedHostMemory>,
+    pinned: Vec<Arc<PinnedHostMemory>>,
     graph: Graph,
     /// Every region's memory (shared named ones included), kept alive as long as the graph.
     _regions: Vec<Arc<DeviceMemory>>,
@@ -113,11 +113,6 @@ impl<T: Element> Buffer<'_, T> {
 
     pub fn is_empty(&self) -> bool {
         self.len() == 0
-    }
-
-    /// Device address of element 0, for kernels of our own that read or write the buffer.
-    pub fn device_ptr(&self) -> u64 {
-        self.memory.device_ptr()
     }
 
     /// Copies the whole buffer to the host (waits for the simulation's stream).
@@ -387,10 +382,6 @@ impl Simulation {
             .filter(|(_, names)| names.iter().all(|n| n.starts_with("m.")))
             .map(|(&id, _)| id)
             .collect();
-        let addresses: HashMap<u32, (u64, u64)> = memories
-            .iter()
-            .map(|(&id, m)| (id, (m.device_ptr(), m.len() as u64)))
-            .collect();
         let (major, minor) = self.gpu.info().compute_capability;
         let gpu = self.gpu.clone();
         let mut pinned = Vec::new();
@@ -400,7 +391,7 @@ impl Simulation {
             let mut ctx = ReplayContext {
                 plan: &plan,
                 device_arch: major * 10 + minor,
-                regions: &addresses,
+                regions: &memories,
                 function: &mut loader,
                 pinned: &mut pinned,
                 alloc_pinned: &alloc_pinned,

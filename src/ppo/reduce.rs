@@ -84,14 +84,6 @@ pub fn record_clear<T: crate::kernels::Element, const N: usize>(
     stream: &Stream,
     array: &DeviceArray<T, N>,
 ) -> Result<(), PpoError> {
-    let bytes = array.len() * T::SIZE;
-    if bytes == 0 {
-        return Ok(());
-    }
-    if bytes.is_multiple_of(4) && array.device_ptr().is_multiple_of(4) {
-        stream.memset_u32(array.device_ptr(), 0, bytes / 4)?;
-    } else {
-        stream.memset_u8(array.device_ptr(), 0, bytes)?;
-    }
+    array.record_zero(stream)?;
     Ok(())
 }

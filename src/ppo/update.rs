@@ -314,11 +314,8 @@ impl PpoUpdate {
         record_clear(stream, &self.grad_norm_sq)?;
         record_clear(stream, &self.advantage_moments)?;
         // The rollout that precedes this update sampled with the current log std.
-        stream.memcpy_dtod(
-            self.old_log_std.device_ptr(),
-            self.log_std.device_ptr(),
-            self.action_size * std::mem::size_of::<f32>(),
-        )?;
+        self.old_log_std
+            .copy_from(stream, &self.log_std, 0..self.action_size, 0)?;
 
         let last_values = if self.values_in_update {
             // One forward over all rows; rows 0..T are the rollout's values (what GAE, the
@@ -326,11 +323,7 @@ impl PpoUpdate {
             let all = batch.observations.view(0, [(t + 1) * n, d])?;
             self.bootstrap.record(k, stream, &all)?;
             let values = self.bootstrap.output();
-            stream.memcpy_dtod(
-                batch.values.device_ptr(),
-                values.device_ptr(),
-                t * n * std::mem::size_of::<f32>(),
-            )?;
+            batch.values.copy_from(stream, values, 0..t * n, 0)?;
             values.view(t * n, [n, 1])?
         } else {
             let bootstrap_obs = batch.observations.view(t * n * d, [n, d])?;

@@ -12,7 +12,9 @@
 //! (which changes its parameters in place); the rollouts own the observation normalization and
 //! the start-phase statistics, the update the optimizer's state.
 
-use crate::cuda::{DeviceMemory, Gpu, Graph, Readback};
+use std::sync::Arc;
+
+use crate::cuda::{DeviceRange, Gpu, Graph, Readback};
 use crate::env::{Rollout, RolloutTotals, TOTALS};
 use crate::kernels::DeviceArray;
 use crate::motion::ReferenceMotion;
@@ -51,7 +53,7 @@ pub struct Trainer {
     update: PpoUpdate,
     iteration_graph: Graph,
     evaluation_graph: Graph,
-    report: DeviceMemory,
+    report: DeviceRange,
     /// The actor's and the critic's parameters' sums of squares after the update: written by
     /// the iteration graph (copied into the report), so it lives as long as the graph.
     #[expect(dead_code, reason = "only the captured graph addresses it")]
@@ -89,7 +91,7 @@ impl Trainer {
             rollout.num_envs(),
             config.seed,
         )?;
-        let report = gpu.alloc_zeroed(REPORT_BYTES)?;
+        let report = DeviceRange::whole(&Arc::new(gpu.alloc_zeroed(REPORT_BYTES)?));
         let parameter_squares = DeviceArray::<f64>::zeros(gpu, [2])?;
         let stream = gpu.stream();
         let iteration_graph = stream.capture(|s| {
@@ -106,17 +108,17 @@ impl Trainer {
                 1,
             )?;
             let totals = rollout.statistics().totals();
-            s.memcpy_dtod(report.device_ptr(), totals.device_ptr(), TOTALS_BYTES)?;
-            s.memcpy_dtod(
-                report.device_ptr() + TOTALS_BYTES as u64,
-                update.statistics().device_ptr(),
-                STATISTICS_BYTES,
-            )?;
-            s.memcpy_dtod(
-                report.device_ptr() + (TOTALS_BYTES + STATISTICS_BYTES) as u64,
-                parameter_squares.device_ptr(),
-                PARAMETER_SQUARES_BYTES,
-            )?;
+            // The report is the three, back to back.
+            let parts = [
+                (totals.range()?, TOTALS_BYTES),
+                (update.statistics().range()?, STATISTICS_BYTES),
+                (parameter_squares.range()?, PARAMETER_SQUARES_BYTES),
+            ];
+            let mut at = 0;
+            for (source, bytes) in parts {
+                s.copy(&report.sub(at, bytes)?, &source.sub(0, bytes)?)?;
+                at += bytes;
+            }
             Ok::<(), TrainError>(())
         })?;
         iteration_graph.upload(stream)?;
@@ -142,8 +144,7 @@ impl Trainer {
     pub fn iterate(&mut self) -> Result<IterationStats, TrainError> {
         let stream = self.gpu.stream();
         self.iteration_graph.launch(stream)?;
-        self.readback
-            .queue(stream, self.report.device_ptr(), REPORT_BYTES)?;
+        self.readback.queue(stream, &self.report)?;
         let bytes = self
             .readback
             .wait()?

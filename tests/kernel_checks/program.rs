@@ -205,7 +205,7 @@ pub enum Step {
         args: Vec<Arg>,
     },
     /// `dst[dst_offset..][..count] = src[src_offset..][..count]` (flat elements), what the
-    /// rollout does with `memcpy_dtod` between launches.
+    /// rollout does with `Stream::copy` between launches.
     Copy {
         src: String,
         src_offset: usize,
