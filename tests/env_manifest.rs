@@ -521,7 +521,11 @@ fn element_values_are_written_as_their_little_endian_bytes() {
     fn written<T: Element>(value: &T) -> Vec<u8> {
         let mut out = vec![0xAAu8; T::SIZE + 2];
         write_field(&mut out, 1, value);
-        assert_eq!((out[0], out[T::SIZE + 1]), (0xAA, 0xAA), "only its own bytes");
+        assert_eq!(
+            (out[0], out[T::SIZE + 1]),
+            (0xAA, 0xAA),
+            "only its own bytes"
+        );
         out[1..=T::SIZE].to_vec()
     }
     assert_eq!(written(&-2i32), (-2i32).to_le_bytes());
@@ -535,7 +539,11 @@ fn element_values_are_written_as_their_little_endian_bytes() {
     let expected: Vec<u8> = m.iter().flatten().flat_map(|x| x.to_le_bytes()).collect();
     assert_eq!(written(&m), expected, "row-major");
     assert_eq!(
-        (<[[u16; 3]; 2]>::SCALAR, <[[u16; 3]; 2]>::SHAPE, <[[u16; 3]; 2]>::SIZE),
+        (
+            <[[u16; 3]; 2]>::SCALAR,
+            <[[u16; 3]; 2]>::SHAPE,
+            <[[u16; 3]; 2]>::SIZE
+        ),
         (ScalarType::Uint16, &[2usize, 3][..], 12)
     );
     assert_eq!((<[f32; 3]>::SHAPE, <[f32; 3]>::SIZE), (&[3usize][..], 12));

@@ -11,7 +11,7 @@ use serde::Serialize;
 
 use super::timing::timed_seconds;
 use crate::cuda::{Gpu, Graph, NvtxRange};
-use crate::env::{Rollout, RolloutError, Stage};
+use crate::env::{Rollout, RolloutError, RolloutStage};
 use crate::motion::ReferenceMotion;
 use crate::plan::{PlanStore, Simulation, SimulationError};
 use crate::ppo::GaussianPolicy;
@@ -113,7 +113,7 @@ pub struct RolloutBench {
     pub rounds_physics_only_from_rollout_states_frames_per_s: Vec<f64>,
     /// Milliseconds per rollout in each stage, from the event-timed graph (mean over its
     /// launches), and that graph's own total.
-    pub stage_ms: BTreeMap<Stage, f64>,
+    pub stage_ms: BTreeMap<RolloutStage, f64>,
     pub timed_rollout_ms: f64,
     /// Node kinds of the rollout graph (no `host` node, no copy from or to the host).
     pub graph_nodes: BTreeMap<String, usize>,
@@ -176,7 +176,7 @@ pub fn bench_rollout(
     }
 
     rollout.reset_all()?;
-    let mut stage_ms: BTreeMap<Stage, f64> = BTreeMap::new();
+    let mut stage_ms: BTreeMap<RolloutStage, f64> = BTreeMap::new();
     let mut timed_rollout_ms = 0.0;
     {
         let _range = NvtxRange::push("stage timing");

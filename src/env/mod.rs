@@ -3,7 +3,7 @@
 //!
 //! - [`DeviceReferenceTable`]: a reference table on the GPU and its lookup.
 //! - [`Rollout`]: the rollout graph (policy, PD control and physics, reward and termination,
-//!   masked reset, observation), captured once and replayed; [`Stage`]s name its parts;
+//!   masked reset, observation), captured once and replayed; [`RolloutStage`]s name its parts;
 //!   [`Trajectory`] records every env's state per control step (for `replay`).
 //! - [`RolloutPolicy`]: what the rollout needs of a policy; the caller owns the policy and
 //!   lends it to each capture. [`RolloutStorage`]: what the rollout records for the learner.
@@ -34,7 +34,7 @@ pub use evaluation::{
 pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;
 pub use rollout::{EpisodeState, PhysicsState, Rollout, RolloutError};
-pub use stages::{Stage, StageEvents, StageRecorder};
+pub use stages::{RolloutStage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 pub use storage::{ActStorage, RolloutStorage};
 pub use trajectory::{Trajectory, TrajectoryFrames};

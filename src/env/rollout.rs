@@ -24,8 +24,8 @@ use super::layout::{
     tracking_params, without_failures,
 };
 use super::normalizer::ObservationNormalizer;
-use super::stages::{Stage, StageEvents, StageRecorder};
 use super::policy::RolloutPolicy;
+use super::stages::{RolloutStage, StageEvents, StageRecorder};
 use super::statistics::RolloutStatistics;
 use super::storage::{ActStorage, RolloutStorage};
 use super::trajectory::Trajectory;
@@ -501,15 +501,17 @@ impl Rollout {
         }
         for t in 0..self.horizon {
             let t32 = t as i32;
-            stages.stage(gpu, s, Stage::Policy, |s| self.record_policy(s, policy, t))?;
-            stages.stage(gpu, s, Stage::Physics, |s| {
+            stages.stage(gpu, s, RolloutStage::Policy, |s| {
+                self.record_policy(s, policy, t)
+            })?;
+            stages.stage(gpu, s, RolloutStage::Physics, |s| {
                 for _ in 0..self.substeps {
                     self.record_pd_control(s)?;
                     self.sim.record("step", s)?;
                 }
                 Ok::<(), RolloutError>(())
             })?;
-            stages.stage(gpu, s, Stage::PostPhysics, |s| {
+            stages.stage(gpu, s, RolloutStage::PostPhysics, |s| {
                 self.sim.record("kinematics", s)?;
                 self.record_reward(s, t32)?;
                 match &self.purpose {
@@ -530,15 +532,15 @@ impl Rollout {
                 }
                 Ok::<(), RolloutError>(())
             })?;
-            stages.stage(gpu, s, Stage::Reset, |s| self.record_reset(s, t32))?;
-            stages.stage(gpu, s, Stage::Observation, |s| {
+            stages.stage(gpu, s, RolloutStage::Reset, |s| self.record_reset(s, t32))?;
+            stages.stage(gpu, s, RolloutStage::Observation, |s| {
                 self.record_observation(s, t + 1, self.is_training())
             })?;
         }
         if !self.is_training() {
             return Ok(());
         }
-        stages.stage(gpu, s, Stage::Bookkeeping, |s| {
+        stages.stage(gpu, s, RolloutStage::Bookkeeping, |s| {
             self.phase_statistics.record_update(&self.kernels, s)?;
             self.statistics.record_end(&self.kernels, s, self.horizon)?;
             Ok::<(), RolloutError>(())

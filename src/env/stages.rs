@@ -17,7 +17,7 @@ use crate::cuda::{CudaError, Event, Gpu, NvtxRange, Stream};
 /// One stage of a control step (docs/env.md, "One control step of the rollout graph").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
 #[serde(rename_all = "snake_case")]
-pub enum Stage {
+pub enum RolloutStage {
     /// Actor and critic forward, action sampling, rollout storage of actions and values.
     Policy,
     /// The physics substeps: PD control and the step plan, `substeps` times.
@@ -32,24 +32,24 @@ pub enum Stage {
     Bookkeeping,
 }
 
-impl Stage {
-    pub const ALL: [Stage; 6] = [
-        Stage::Policy,
-        Stage::Physics,
-        Stage::PostPhysics,
-        Stage::Reset,
-        Stage::Observation,
-        Stage::Bookkeeping,
+impl RolloutStage {
+    pub const ALL: [RolloutStage; 6] = [
+        RolloutStage::Policy,
+        RolloutStage::Physics,
+        RolloutStage::PostPhysics,
+        RolloutStage::Reset,
+        RolloutStage::Observation,
+        RolloutStage::Bookkeeping,
     ];
 
     pub fn name(self) -> &'static str {
         match self {
-            Stage::Policy => "policy",
-            Stage::Physics => "physics",
-            Stage::PostPhysics => "post-physics",
-            Stage::Reset => "reset",
-            Stage::Observation => "observation",
-            Stage::Bookkeeping => "bookkeeping",
+            RolloutStage::Policy => "policy",
+            RolloutStage::Physics => "physics",
+            RolloutStage::PostPhysics => "post-physics",
+            RolloutStage::Reset => "reset",
+            RolloutStage::Observation => "observation",
+            RolloutStage::Bookkeeping => "bookkeeping",
         }
     }
 }
@@ -63,7 +63,7 @@ pub struct StageRecorder {
 /// The events of one profiled capture, in recording order.
 pub struct StageEvents {
     start: Event,
-    ends: Vec<(Stage, Event)>,
+    ends: Vec<(RolloutStage, Event)>,
 }
 
 impl StageRecorder {
@@ -90,7 +90,7 @@ impl StageRecorder {
         &mut self,
         gpu: &Gpu,
         stream: &Stream,
-        stage: Stage,
+        stage: RolloutStage,
         body: F,
     ) -> Result<(), E>
     where
@@ -118,7 +118,7 @@ impl StageRecorder {
 impl StageEvents {
     /// Milliseconds per stage in the last replay of the graph that holds these events (waits for
     /// it to finish).
-    pub fn elapsed_ms(&self) -> Result<BTreeMap<Stage, f64>, CudaError> {
+    pub fn elapsed_ms(&self) -> Result<BTreeMap<RolloutStage, f64>, CudaError> {
         let mut totals = BTreeMap::new();
         let Some((_, last)) = self.ends.last() else {
             return Ok(totals);

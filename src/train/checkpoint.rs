@@ -321,7 +321,11 @@ impl Checkpoint {
     }
 
     /// The values of tensor `name`, which must have element type `T` and shape `shape`.
-    pub fn get<T: TensorElement>(&self, name: &str, shape: &[usize]) -> Result<&[T], CheckpointError> {
+    pub fn get<T: TensorElement>(
+        &self,
+        name: &str,
+        shape: &[usize],
+    ) -> Result<&[T], CheckpointError> {
         let tensor = self
             .tensors
             .get(name)
