@@ -8,7 +8,7 @@
 use anyhow::{Context, Result};
 use instantmimic::bench::bench_rollout;
 use instantmimic::cuda::Gpu;
-use instantmimic::env::Phase;
+use instantmimic::env::RolloutStage;
 use instantmimic::motion::Character;
 use instantmimic::motion::library::{motions_dir_from_env, resolve_motion};
 use instantmimic::plan::PlanStore;
@@ -31,8 +31,8 @@ fn main() -> Result<()> {
     ] {
         let r = bench_rollout(&gpu, &store, &motion, config, 20, 3, 3)
             .with_context(|| format!("rollout benchmark of {name}"))?;
-        let total: f64 = r.phase_ms.values().sum();
-        let physics = r.phase_ms.get(&Phase::Physics);
+        let total: f64 = r.stage_ms.values().sum();
+        let physics = r.stage_ms.get(&RolloutStage::Physics);
         println!(
             "{name} (GEMMs: {}): {:.3} M frames/s; floor from the rollout's states {:.3} (ratio {:.3}), \
              from reset states {:.3} (ratio {:.3}); physics share {:.3}",

@@ -23,6 +23,11 @@
 //!   (above `train`, `env` and `recording`; the command line writes its page).
 //! - [`cli`]: the command line.
 
+// Device buffers, kernel arguments and checkpoints are copied to and from host memory as they
+// lie there (`zerocopy`), and all of them are little-endian.
+#[cfg(not(target_endian = "little"))]
+compile_error!("instantmimic needs a little-endian host, as every CUDA host is");
+
 pub mod assets;
 pub mod bench;
 pub mod cli;

@@ -512,3 +512,40 @@ fn the_generator_handles_structs_values_and_two_dimensional_launches() {
     let err = EnvManifest::parse(&v.to_string()).unwrap_err().to_string();
     assert!(err.contains("struct RewardWeights"), "{err}");
 }
+
+#[test]
+fn element_values_are_written_as_their_little_endian_bytes() {
+    use instantmimic::kernels::abi::write_field;
+    use instantmimic::kernels::{Element, ScalarType};
+
+    fn written<T: Element>(value: &T) -> Vec<u8> {
+        let mut out = vec![0xAAu8; T::SIZE + 2];
+        write_field(&mut out, 1, value);
+        assert_eq!(
+            (out[0], out[T::SIZE + 1]),
+            (0xAA, 0xAA),
+            "only its own bytes"
+        );
+        out[1..=T::SIZE].to_vec()
+    }
+    assert_eq!(written(&-2i32), (-2i32).to_le_bytes());
+    assert_eq!(written(&1.5f64), 1.5f64.to_le_bytes());
+    assert_eq!(written(&true), [1]);
+    assert_eq!(written(&half::f16::from_f32(1.0)), 0x3c00u16.to_le_bytes());
+    let v = [1.0f32, -2.0, 3.5];
+    let expected: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+    assert_eq!(written(&v), expected);
+    let m = [[1u16, 2, 3], [4, 5, 6]];
+    let expected: Vec<u8> = m.iter().flatten().flat_map(|x| x.to_le_bytes()).collect();
+    assert_eq!(written(&m), expected, "row-major");
+    assert_eq!(
+        (
+            <[[u16; 3]; 2]>::SCALAR,
+            <[[u16; 3]; 2]>::SHAPE,
+            <[[u16; 3]; 2]>::SIZE
+        ),
+        (ScalarType::Uint16, &[2usize, 3][..], 12)
+    );
+    assert_eq!((<[f32; 3]>::SHAPE, <[f32; 3]>::SIZE), (&[3usize][..], 12));
+    assert_eq!((bool::SCALAR, bool::SIZE), (ScalarType::Bool, 1));
+}

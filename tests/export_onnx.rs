@@ -17,7 +17,7 @@ use instantmimic::export::onnx::proto::{DimensionValue, FLOAT, ModelProto};
 use instantmimic::export::onnx::{IR_VERSION, OPSET, actor_layers, normalizer};
 use instantmimic::motion::Character;
 use instantmimic::ppo::initial_parameters;
-use instantmimic::train::preflight::tensor_names;
+use instantmimic::train::checkpoint::tensor_names;
 use instantmimic::train::{Checkpoint, CheckpointMeta, PolicyShapes, TrainConfig};
 use prost::Message as _;
 use rand::rngs::StdRng;
@@ -342,7 +342,7 @@ fn a_checkpoint_of_another_shape_fails_with_one_line() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(
-        err.contains("mismatch.safetensors") && err.contains("actor.params"),
+        err.contains("mismatch.safetensors") && err.contains(tensor_names::ACTOR),
         "{err}"
     );
     assert!(!dir.path().join("policy.onnx").exists());

@@ -8,7 +8,7 @@ use std::process::{Command, Output};
 
 use instantmimic::motion::library::{CLIP_NAMES, MOTIONS_ENV};
 use instantmimic::motion::{Character, SyntheticMotion};
-use instantmimic::train::preflight::tensor_names;
+use instantmimic::train::checkpoint::tensor_names;
 use instantmimic::train::{
     Checkpoint, IterationStats, PolicyShapes, ProgressMode, RunSession, TrainConfig,
 };

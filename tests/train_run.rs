@@ -5,6 +5,7 @@
 use std::io::Write;
 use std::path::Path;
 
+use instantmimic::train::checkpoint::tensor_names;
 use instantmimic::train::{
     EpisodeEnds, EvaluationSummary, IterationRecord, IterationStats, MetricsLog, ProgressMode,
     RunDir, RunSession, StopReason, TrainConfig, TrainError, UpdateStats, curve,
@@ -75,7 +76,7 @@ fn drive(session: &mut RunSession, stop_after: u64, success_from: u64) -> Option
         if next.checkpoint_due {
             let mut ckpt = session.new_checkpoint().unwrap();
             ckpt.insert(
-                "actor.params",
+                tensor_names::ACTOR,
                 &[2],
                 vec![iteration as f32, -(iteration as f32)],
             )
@@ -122,7 +123,7 @@ fn a_killed_run_resumes_from_its_checkpoint_without_gap_or_duplicate() {
     let checkpoint = checkpoint.unwrap();
     assert_eq!(checkpoint.meta.iteration, 20);
     assert_eq!(
-        checkpoint.get::<f32>("actor.params", &[2]).unwrap(),
+        checkpoint.get::<f32>(tensor_names::ACTOR, &[2]).unwrap(),
         [20.0, -20.0]
     );
     assert_eq!(checkpoint.meta.frames, 20 * 64 * 8);

@@ -11,7 +11,7 @@ use serde::Serialize;
 
 use super::timing::timed_seconds;
 use crate::cuda::{Gpu, Graph, NvtxRange};
-use crate::env::{Phase, Rollout, RolloutError};
+use crate::env::{Rollout, RolloutError, RolloutStage};
 use crate::motion::ReferenceMotion;
 use crate::plan::{PlanStore, Simulation, SimulationError};
 use crate::ppo::GaussianPolicy;
@@ -111,9 +111,9 @@ pub struct RolloutBench {
     pub rounds_frames_per_s: Vec<f64>,
     pub rounds_physics_only_frames_per_s: Vec<f64>,
     pub rounds_physics_only_from_rollout_states_frames_per_s: Vec<f64>,
-    /// Milliseconds per rollout in each phase, from the event-timed graph (mean over its
+    /// Milliseconds per rollout in each stage, from the event-timed graph (mean over its
     /// launches), and that graph's own total.
-    pub phase_ms: BTreeMap<Phase, f64>,
+    pub stage_ms: BTreeMap<RolloutStage, f64>,
     pub timed_rollout_ms: f64,
     /// Node kinds of the rollout graph (no `host` node, no copy from or to the host).
     pub graph_nodes: BTreeMap<String, usize>,
@@ -124,7 +124,7 @@ pub struct RolloutBench {
 /// Builds the rollout of `config` for `motion`, then alternates `rounds` times: `launches`
 /// replays of the rollout graph, `launches` of the physics-only floor, and `launches` of the floor
 /// each right after an untimed rollout, each after putting every env at a reference state and
-/// `warmup` untimed launches. Then `launches` replays of the event-timed graph give the per-phase
+/// `warmup` untimed launches. Then `launches` replays of the event-timed graph give the per-stage
 /// breakdown.
 pub fn bench_rollout(
     gpu: &Gpu,
@@ -148,7 +148,7 @@ pub fn bench_rollout(
     .map_err(|e| RolloutError::Policy(Box::new(e)))?;
     let (graph, _) = rollout.capture(&policy, false)?;
     let (timed_graph, events) = rollout.capture(&policy, true)?;
-    let events = events.ok_or_else(|| RolloutError::Setup("no phase events".to_owned()))?;
+    let events = events.ok_or_else(|| RolloutError::Setup("no stage events".to_owned()))?;
     let floor = physics_only_graph(
         rollout.simulation(),
         rollout.substeps() as u32,
@@ -176,17 +176,17 @@ pub fn bench_rollout(
     }
 
     rollout.reset_all()?;
-    let mut phase_ms: BTreeMap<Phase, f64> = BTreeMap::new();
+    let mut stage_ms: BTreeMap<RolloutStage, f64> = BTreeMap::new();
     let mut timed_rollout_ms = 0.0;
     {
-        let _range = NvtxRange::push("phase timing");
+        let _range = NvtxRange::push("stage timing");
         for _ in 0..warmup {
             timed_graph.launch(gpu.stream())?;
         }
         for _ in 0..launches {
             timed_graph.launch(gpu.stream())?;
-            for (phase, ms) in events.elapsed_ms()? {
-                *phase_ms.entry(phase).or_insert(0.0) += ms / f64::from(launches);
+            for (stage, ms) in events.elapsed_ms()? {
+                *stage_ms.entry(stage).or_insert(0.0) += ms / f64::from(launches);
                 timed_rollout_ms += ms / f64::from(launches);
             }
         }
@@ -213,7 +213,7 @@ pub fn bench_rollout(
         rounds_frames_per_s: full,
         rounds_physics_only_frames_per_s: physics,
         rounds_physics_only_from_rollout_states_frames_per_s: physics_same_state,
-        phase_ms,
+        stage_ms,
         timed_rollout_ms,
         graph_nodes,
         setup_seconds,

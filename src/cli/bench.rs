@@ -59,7 +59,7 @@ enum BenchCommand {
     /// Physics steps per second of the step plan's CUDA graph.
     Physics(PhysicsArgs),
     /// Frames per second of the rollout graph against its physics-only floor, with the time of
-    /// each phase (policy, physics, post-physics, reset, observation).
+    /// each stage (policy, physics, post-physics, reset, observation).
     Rollout(RolloutArgs),
     /// The policy's GEMMs: Warp's tile kernel against cuBLAS (f32 and TF32; cuBLAS comes with
     /// the CUDA toolkit and is found through the library path).
@@ -367,15 +367,15 @@ fn rollout_report(r: &RolloutBench) -> String {
     );
     let _ = writeln!(
         out,
-        "phases (event-timed graph, {:.3} ms per rollout, {:.1} us per control step):",
+        "stages (event-timed graph, {:.3} ms per rollout, {:.1} us per control step):",
         r.timed_rollout_ms,
         r.timed_rollout_ms * 1e3 / r.horizon as f64
     );
-    for (phase, ms) in &r.phase_ms {
+    for (stage, ms) in &r.stage_ms {
         let _ = writeln!(
             out,
             "  {:<13} {:>9.3} ms  {:>5.1}%  {:>8.1} us/step",
-            phase.name(),
+            stage.name(),
             ms,
             100.0 * ms / r.timed_rollout_ms,
             ms * 1e3 / r.horizon as f64

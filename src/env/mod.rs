@@ -3,7 +3,7 @@
 //!
 //! - [`DeviceReferenceTable`]: a reference table on the GPU and its lookup.
 //! - [`Rollout`]: the rollout graph (policy, PD control and physics, reward and termination,
-//!   masked reset, observation), captured once and replayed; [`Phase`]s name its parts;
+//!   masked reset, observation), captured once and replayed; [`RolloutStage`]s name its parts;
 //!   [`Trajectory`] records every env's state per control step (for `replay`).
 //! - [`RolloutPolicy`]: what the rollout needs of a policy; the caller owns the policy and
 //!   lends it to each capture. [`RolloutStorage`]: what the rollout records for the learner.
@@ -15,10 +15,10 @@ pub mod config;
 mod evaluation;
 pub mod layout;
 mod normalizer;
-mod phases;
 mod policy;
 mod reference;
 mod rollout;
+mod stages;
 mod statistics;
 mod storage;
 mod trajectory;
@@ -31,10 +31,10 @@ pub use evaluation::{
     COMPLETED, EpisodeScore, EpisodeScores, FAILED, RUNNING, SUCCESS_MAX_BODY_DISTANCE_M,
     SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps, evaluation_episode_steps, yardstick,
 };
-pub use phases::{Phase, PhaseEvents, PhaseRecorder};
 pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;
 pub use rollout::{EpisodeState, PhysicsState, Rollout, RolloutError};
+pub use stages::{RolloutStage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 pub use storage::{ActStorage, RolloutStorage};
 pub use trajectory::{Trajectory, TrajectoryFrames};

@@ -24,8 +24,8 @@ use super::layout::{
     tracking_params, without_failures,
 };
 use super::normalizer::ObservationNormalizer;
-use super::phases::{Phase, PhaseEvents, PhaseRecorder};
 use super::policy::RolloutPolicy;
+use super::stages::{RolloutStage, StageEvents, StageRecorder};
 use super::statistics::RolloutStatistics;
 use super::storage::{ActStorage, RolloutStorage};
 use super::trajectory::Trajectory;
@@ -383,24 +383,24 @@ impl Rollout {
     }
 
     /// Captures the rollout, running `policy`, into a graph. With `timed`, an event is recorded
-    /// at every phase boundary (for [`PhaseEvents::elapsed_ms`]); the graph is then a little
+    /// at every stage boundary (for [`StageEvents::elapsed_ms`]); the graph is then a little
     /// slower. The graph reads and writes `policy`'s buffers at each launch: keep the policy
     /// alive as long as the graph.
     pub fn capture(
         &self,
         policy: &dyn RolloutPolicy,
         timed: bool,
-    ) -> Result<(Graph, Option<PhaseEvents>), RolloutError> {
+    ) -> Result<(Graph, Option<StageEvents>), RolloutError> {
         let stream = self.gpu.stream();
         let mut events = None;
         let graph = stream.capture(|s| {
-            let mut phases = if timed {
-                PhaseRecorder::timed(&self.gpu, s)?
+            let mut stages = if timed {
+                StageRecorder::timed(&self.gpu, s)?
             } else {
-                PhaseRecorder::untimed()
+                StageRecorder::untimed()
             };
-            self.record_rollout(s, policy, &mut phases, None)?;
-            events = phases.into_events();
+            self.record_rollout(s, policy, &mut stages, None)?;
+            events = stages.into_events();
             Ok::<(), RolloutError>(())
         })?;
         graph.upload(stream)?;
@@ -410,7 +410,7 @@ impl Rollout {
     /// Queues the whole rollout, running `policy`, on `s` (inside a capture: the training loop
     /// records it into one graph with the update).
     pub fn record(&self, s: &Stream, policy: &dyn RolloutPolicy) -> Result<(), RolloutError> {
-        self.record_rollout(s, policy, &mut PhaseRecorder::untimed(), None)
+        self.record_rollout(s, policy, &mut StageRecorder::untimed(), None)
     }
 
     /// An empty record of every env's state for each of this rollout's frames: the state it
@@ -443,7 +443,7 @@ impl Rollout {
         }
         let stream = self.gpu.stream();
         let graph = stream.capture(|s| {
-            self.record_rollout(s, policy, &mut PhaseRecorder::untimed(), Some(trajectory))
+            self.record_rollout(s, policy, &mut StageRecorder::untimed(), Some(trajectory))
         })?;
         graph.upload(stream)?;
         Ok(graph)
@@ -471,7 +471,7 @@ impl Rollout {
         &self,
         s: &Stream,
         policy: &dyn RolloutPolicy,
-        phases: &mut PhaseRecorder,
+        stages: &mut StageRecorder,
         trajectory: Option<&Trajectory>,
     ) -> Result<(), RolloutError> {
         let gpu = &self.gpu;
@@ -501,15 +501,17 @@ impl Rollout {
         }
         for t in 0..self.horizon {
             let t32 = t as i32;
-            phases.phase(gpu, s, Phase::Policy, |s| self.record_policy(s, policy, t))?;
-            phases.phase(gpu, s, Phase::Physics, |s| {
+            stages.stage(gpu, s, RolloutStage::Policy, |s| {
+                self.record_policy(s, policy, t)
+            })?;
+            stages.stage(gpu, s, RolloutStage::Physics, |s| {
                 for _ in 0..self.substeps {
                     self.record_pd_control(s)?;
                     self.sim.record("step", s)?;
                 }
                 Ok::<(), RolloutError>(())
             })?;
-            phases.phase(gpu, s, Phase::PostPhysics, |s| {
+            stages.stage(gpu, s, RolloutStage::PostPhysics, |s| {
                 self.sim.record("kinematics", s)?;
                 self.record_reward(s, t32)?;
                 match &self.purpose {
@@ -530,15 +532,15 @@ impl Rollout {
                 }
                 Ok::<(), RolloutError>(())
             })?;
-            phases.phase(gpu, s, Phase::Reset, |s| self.record_reset(s, t32))?;
-            phases.phase(gpu, s, Phase::Observation, |s| {
+            stages.stage(gpu, s, RolloutStage::Reset, |s| self.record_reset(s, t32))?;
+            stages.stage(gpu, s, RolloutStage::Observation, |s| {
                 self.record_observation(s, t + 1, self.is_training())
             })?;
         }
         if !self.is_training() {
             return Ok(());
         }
-        phases.phase(gpu, s, Phase::Bookkeeping, |s| {
+        stages.stage(gpu, s, RolloutStage::Bookkeeping, |s| {
             self.phase_statistics.record_update(&self.kernels, s)?;
             self.statistics.record_end(&self.kernels, s, self.horizon)?;
             Ok::<(), RolloutError>(())

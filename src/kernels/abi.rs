@@ -8,6 +8,8 @@
 //! [`launch_bounds_layout`]) and checked there against what env_build.py read from Warp. All
 //! bytes are little-endian, the byte order of every CUDA host and device.
 
+use zerocopy::{Immutable, IntoBytes, TryFromBytes};
+
 use crate::cuda::KernelArgs;
 
 use super::error::EnvError;
@@ -26,82 +28,43 @@ mod sealed {
 /// A Warp value type: a scalar, or a fixed-size vector (`[T; N]`: `vec3f` is `[f32; 3]`,
 /// `quatf` is `[f32; 4]` in Warp's x, y, z, w order) or matrix (`[[T; C]; R]`, row-major) of
 /// one. Arrays of these are [`super::DeviceArray`]s; kernel parameters of these are passed by
-/// value.
-pub trait Element: Copy + Send + Sync + 'static + sealed::Sealed {
+/// value. Sealed: only these types, whose bytes are Warp's.
+///
+/// A value's bytes are its memory, through `zerocopy`: [`IntoBytes::as_bytes`] writes it,
+/// [`TryFromBytes::try_read_from_bytes`] reads it back (every bit pattern is a value, except a
+/// `bool`'s, which must be 0 or 1). Little-endian, as on every CUDA host (checked in `lib.rs`).
+pub trait Element:
+    IntoBytes + Immutable + TryFromBytes + Copy + Send + Sync + 'static + sealed::Sealed
+{
     /// The scalar type.
     const SCALAR: ScalarType;
     /// `[]` for a scalar, `[N]` for a vector, `[R, C]` for a matrix.
     const SHAPE: &'static [usize];
     /// Bytes of one value.
-    const SIZE: usize;
-    /// Writes the value into `out`, which is exactly [`Element::SIZE`] bytes long.
-    fn write_le(&self, out: &mut [u8]);
-    /// Reads a value from exactly [`Element::SIZE`] bytes.
-    fn read_le(bytes: &[u8]) -> Self;
+    const SIZE: usize = std::mem::size_of::<Self>();
 }
 
 macro_rules! element {
-    ($t:ty, $scalar:ident, $to:expr, $from:expr) => {
+    ($t:ty, $scalar:ident) => {
         impl sealed::Sealed for $t {}
         impl Element for $t {
             const SCALAR: ScalarType = ScalarType::$scalar;
             const SHAPE: &'static [usize] = &[];
-            const SIZE: usize = std::mem::size_of::<$t>();
-            fn write_le(&self, out: &mut [u8]) {
-                let to: fn($t) -> [u8; std::mem::size_of::<$t>()] = $to;
-                out.copy_from_slice(&to(*self));
-            }
-            fn read_le(bytes: &[u8]) -> Self {
-                let from: fn([u8; std::mem::size_of::<$t>()]) -> $t = $from;
-                let mut raw = [0u8; std::mem::size_of::<$t>()];
-                raw.copy_from_slice(bytes);
-                from(raw)
-            }
         }
         impl<const N: usize> sealed::Sealed for [$t; N] {}
         impl<const N: usize> Element for [$t; N] {
             const SCALAR: ScalarType = ScalarType::$scalar;
             const SHAPE: &'static [usize] = &[N];
-            const SIZE: usize = N * std::mem::size_of::<$t>();
-            fn write_le(&self, out: &mut [u8]) {
-                for (v, dst) in self.iter().zip(out.chunks_exact_mut(<$t>::SIZE)) {
-                    v.write_le(dst);
-                }
-            }
-            fn read_le(bytes: &[u8]) -> Self {
-                let mut out = [<$t>::read_le(&[0u8; std::mem::size_of::<$t>()]); N];
-                for (v, src) in out.iter_mut().zip(bytes.chunks_exact(<$t>::SIZE)) {
-                    *v = <$t>::read_le(src);
-                }
-                out
-            }
         }
         impl<const R: usize, const C: usize> sealed::Sealed for [[$t; C]; R] {}
         impl<const R: usize, const C: usize> Element for [[$t; C]; R] {
             const SCALAR: ScalarType = ScalarType::$scalar;
             const SHAPE: &'static [usize] = &[R, C];
-            const SIZE: usize = R * C * std::mem::size_of::<$t>();
-            fn write_le(&self, out: &mut [u8]) {
-                for (row, dst) in self.iter().zip(out.chunks_exact_mut(<[$t; C]>::SIZE)) {
-                    row.write_le(dst);
-                }
-            }
-            fn read_le(bytes: &[u8]) -> Self {
-                let zero = <$t>::read_le(&[0u8; std::mem::size_of::<$t>()]);
-                let mut out = [[zero; C]; R];
-                for (row, src) in out.iter_mut().zip(bytes.chunks_exact(<[$t; C]>::SIZE)) {
-                    *row = <[$t; C]>::read_le(src);
-                }
-                out
-            }
         }
-    };
-    ($t:ty, $scalar:ident) => {
-        element!($t, $scalar, <$t>::to_le_bytes, <$t>::from_le_bytes);
     };
 }
 
-element!(bool, Bool, |v| [u8::from(v)], |b| b[0] != 0);
+element!(bool, Bool);
 element!(i8, Int8);
 element!(u8, Uint8);
 element!(i16, Int16);
@@ -130,7 +93,7 @@ pub trait WarpStruct {
 /// inside the struct's size (the manifest was validated when the code was generated).
 pub fn write_field<T: Element>(out: &mut [u8], offset: usize, value: &T) {
     if let Some(dst) = out.get_mut(offset..offset + T::SIZE) {
-        value.write_le(dst);
+        dst.copy_from_slice(value.as_bytes());
     }
 }
 
@@ -361,7 +324,7 @@ impl ArgBuffer {
             index,
             &format!("a {:?} {:?}", T::SCALAR, T::SHAPE),
             fits,
-            |dst| value.write_le(dst),
+            |dst| dst.copy_from_slice(value.as_bytes()),
         )?;
         Ok(())
     }

@@ -3,6 +3,8 @@
 use std::marker::PhantomData;
 use std::sync::Arc;
 
+use zerocopy::IntoBytes;
+
 use crate::cuda::{BlasMatrix, DeviceMemory, DeviceRange, Gpu, Stream};
 use crate::plan::Simulation;
 
@@ -173,11 +175,8 @@ impl<T: Element, const N: usize> DeviceArray<T, N> {
                 shape: self.shape.to_vec(),
             });
         }
-        let mut bytes = vec![0u8; self.len() * T::SIZE];
-        for (v, dst) in data.iter().zip(bytes.chunks_exact_mut(T::SIZE)) {
-            v.write_le(dst);
-        }
-        self.memory.copy_from_host(self.offset * T::SIZE, &bytes)?;
+        self.memory
+            .copy_from_host(self.offset * T::SIZE, data.as_bytes())?;
         Ok(())
     }
 
@@ -186,7 +185,16 @@ impl<T: Element, const N: usize> DeviceArray<T, N> {
         let mut bytes = vec![0u8; self.len() * T::SIZE];
         self.memory
             .copy_to_host(self.offset * T::SIZE, &mut bytes)?;
-        Ok(bytes.chunks_exact(T::SIZE).map(T::read_le).collect())
+        bytes
+            .chunks_exact(T::SIZE)
+            .enumerate()
+            .map(|(index, value)| {
+                T::try_read_from_bytes(value).map_err(|_| EnvError::InvalidValue {
+                    scalar: T::SCALAR,
+                    index,
+                })
+            })
+            .collect()
     }
 
     /// Queues on `stream` a copy of this whole array into `dst` from element `at` on (any

@@ -2,6 +2,8 @@
 
 use crate::cuda::CudaError;
 
+use super::manifest::ScalarType;
+
 /// A failure of an env kernel operation. Messages say what is wrong and what to do.
 #[derive(Debug, Clone, thiserror::Error)]
 pub enum EnvError {
@@ -43,6 +45,13 @@ pub enum EnvError {
         expected: usize,
         shape: Vec<usize>,
     },
+
+    /// Device bytes that are no value of the array's type (a `bool` other than 0 or 1).
+    #[error(
+        "element {index} of a device array of {} holds bytes that are not a valid value",
+        scalar.rust_type()
+    )]
+    InvalidValue { scalar: ScalarType, index: usize },
 
     /// A value of the wrong type for a kernel parameter.
     #[error("kernel {kernel}, parameter {param}: {reason}")]

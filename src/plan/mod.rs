@@ -50,7 +50,7 @@ pub use pack::{
 };
 pub use reader::MAX_NESTING_DEPTH;
 pub use replay::ReplayOrder;
-pub use simulation::{Buffer, Element, Simulation, SimulationError};
+pub use simulation::{Buffer, Simulation, SimulationError};
 pub use store::{
     MANIFEST_PATH, MJWARP_PTX_DIR, PlanEntry, PlanManifest, PlanSource, PlanStore, ptx_file_name,
 };

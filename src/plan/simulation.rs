@@ -12,6 +12,7 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
 
 use thiserror::Error;
+use zerocopy::{FromBytes, Immutable, IntoBytes};
 
 use crate::cuda::{
     CudaError, DeviceMemory, Function, Gpu, Graph, Module, PinnedHostMemory, Stream,
@@ -74,41 +75,19 @@ pub struct Simulation {
     order: ReplayOrder,
 }
 
-/// A scalar type a buffer can be read and written as (little-endian, as on every CUDA device).
-pub trait Element: Copy + Default {
-    const SIZE: usize;
-    fn from_le(bytes: &[u8]) -> Self;
-    fn write_le(self, out: &mut Vec<u8>);
-}
-
-macro_rules! element {
-    ($($t:ty),*) => {$(
-        impl Element for $t {
-            const SIZE: usize = std::mem::size_of::<$t>();
-            fn from_le(bytes: &[u8]) -> Self {
-                let mut raw = [0u8; std::mem::size_of::<$t>()];
-                raw.copy_from_slice(&bytes[..Self::SIZE]);
-                <$t>::from_le_bytes(raw)
-            }
-            fn write_le(self, out: &mut Vec<u8>) {
-                out.extend_from_slice(&self.to_le_bytes());
-            }
-        }
-    )*};
-}
-element!(f32, f64, i32, u32, i64, u64, u8, i8, u16, i16);
-
-/// A named device buffer viewed as elements of `T`.
-pub struct Buffer<'a, T: Element> {
+/// A named device buffer viewed as elements of `T`: any type every bit pattern of which is a
+/// value (`zerocopy`'s [`FromBytes`]: `f32`, `i32`, `u8`, arrays of them, ...), in the device's
+/// (little-endian) byte order.
+pub struct Buffer<'a, T: FromBytes + IntoBytes + Immutable + Copy> {
     name: &'a str,
     memory: &'a DeviceMemory,
     _t: std::marker::PhantomData<T>,
 }
 
-impl<T: Element> Buffer<'_, T> {
+impl<T: FromBytes + IntoBytes + Immutable + Copy> Buffer<'_, T> {
     /// Number of elements.
     pub fn len(&self) -> usize {
-        self.memory.len() / T::SIZE
+        self.memory.len() / size_of::<T>()
     }
 
     pub fn is_empty(&self) -> bool {
@@ -117,8 +96,9 @@ impl<T: Element> Buffer<'_, T> {
 
     /// Copies the whole buffer to the host (waits for the simulation's stream).
     pub fn read(&self) -> Result<Vec<T>, SimulationError> {
-        let bytes = self.memory.to_vec()?;
-        Ok(bytes.chunks_exact(T::SIZE).map(T::from_le).collect())
+        let mut values = vec![T::new_zeroed(); self.len()];
+        self.memory.copy_to_host(0, values.as_mut_bytes())?;
+        Ok(values)
     }
 
     /// Writes `values` at element `offset` (waits for the simulation's stream).
@@ -134,11 +114,8 @@ impl<T: Element> Buffer<'_, T> {
                 count: values.len(),
             });
         }
-        let mut bytes = Vec::with_capacity(values.len() * T::SIZE);
-        for v in values {
-            v.write_le(&mut bytes);
-        }
-        self.memory.copy_from_host(offset * T::SIZE, &bytes)?;
+        self.memory
+            .copy_from_host(offset * size_of::<T>(), values.as_bytes())?;
         Ok(())
     }
 
@@ -206,7 +183,7 @@ impl Simulation {
     }
 
     /// The buffer bound to `name` (e.g. `d.qpos`), as elements of `T`.
-    pub fn buffer<'a, T: Element>(
+    pub fn buffer<'a, T: FromBytes + IntoBytes + Immutable + Copy>(
         &'a self,
         name: &'a str,
     ) -> Result<Buffer<'a, T>, SimulationError> {
@@ -216,11 +193,12 @@ impl Simulation {
             .ok_or_else(|| SimulationError::NoBuffer {
                 name: name.to_string(),
             })?;
-        if memory.len() % T::SIZE != 0 {
+        let elem = size_of::<T>();
+        if elem == 0 || memory.len() % elem != 0 {
             return Err(SimulationError::BufferElement {
                 name: name.to_string(),
                 bytes: memory.len(),
-                elem: T::SIZE,
+                elem,
             });
         }
         Ok(Buffer {

@@ -1,5 +1,5 @@
 //! Checkpoints: a safetensors file of named f32/f64/i32 tensors (actor and critic parameters,
-//! Adam moments, normalizer moments, phase statistics, counters: the trainer chooses the
+//! Adam moments, normalizer moments, start-phase statistics, counters: the trainer chooses the
 //! names) with JSON metadata: format version, iteration, active seconds, frames, motion, seed,
 //! the resolved configuration and the crate version, plus a CRC-32 of every tensor (safetensors
 //! itself checks offsets and sizes, not contents). Files are written atomically
@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use safetensors::tensor::{Dtype, TensorView};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
+use zerocopy::{FromBytes, IntoBytes};
 
 use super::config::TrainConfig;
 use crate::files::tagged::{FORMAT_KEY, TaggedFileError, open_tagged};
@@ -184,35 +185,29 @@ impl TensorData {
     /// Little-endian bytes (the safetensors layout).
     fn to_le_bytes(&self) -> Vec<u8> {
         match self {
-            TensorData::F32(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
-            TensorData::F64(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
-            TensorData::I32(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            TensorData::F32(v) => v.as_bytes().to_vec(),
+            TensorData::F64(v) => v.as_bytes().to_vec(),
+            TensorData::I32(v) => v.as_bytes().to_vec(),
         }
     }
 
     fn from_le_bytes(dtype: Dtype, bytes: &[u8]) -> Option<TensorData> {
         Some(match dtype {
-            Dtype::F32 => TensorData::F32(
-                bytes
-                    .chunks_exact(4)
-                    .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                    .collect(),
-            ),
-            Dtype::I32 => TensorData::I32(
-                bytes
-                    .chunks_exact(4)
-                    .map(|c| i32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                    .collect(),
-            ),
-            Dtype::F64 => TensorData::F64(
-                bytes
-                    .chunks_exact(8)
-                    .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
-                    .collect(),
-            ),
+            Dtype::F32 => TensorData::F32(values(bytes)),
+            Dtype::I32 => TensorData::I32(values(bytes)),
+            Dtype::F64 => TensorData::F64(values(bytes)),
             _ => return None,
         })
     }
+}
+
+/// The whole values of `T` that `bytes` holds (safetensors has checked that they fill it).
+fn values<T: FromBytes + IntoBytes + Copy>(bytes: &[u8]) -> Vec<T> {
+    let mut values = vec![T::new_zeroed(); bytes.len() / size_of::<T>()];
+    let filled = values.as_mut_bytes();
+    let len = filled.len();
+    filled.copy_from_slice(&bytes[..len]);
+    values
 }
 
 impl From<Vec<f32>> for TensorData {
@@ -246,41 +241,27 @@ impl Tensor {
     }
 }
 
-/// An element type a checkpoint stores.
-pub trait Element: Sized {
+/// An element type a checkpoint tensor holds: its name in messages and its [`TensorData`]
+/// variant (the safetensors dtype is the variant's, [`TensorData::dtype`]).
+pub trait TensorElement: Sized {
     const NAME: &'static str;
     fn slice(data: &TensorData) -> Option<&[Self]>;
 }
 
-impl Element for f32 {
-    const NAME: &'static str = "f32";
-    fn slice(data: &TensorData) -> Option<&[f32]> {
-        match data {
-            TensorData::F32(v) => Some(v),
-            _ => None,
+macro_rules! tensor_element {
+    ($($t:ty => $variant:ident),*) => {$(
+        impl TensorElement for $t {
+            const NAME: &'static str = stringify!($t);
+            fn slice(data: &TensorData) -> Option<&[$t]> {
+                match data {
+                    TensorData::$variant(v) => Some(v),
+                    _ => None,
+                }
+            }
         }
-    }
+    )*};
 }
-
-impl Element for f64 {
-    const NAME: &'static str = "f64";
-    fn slice(data: &TensorData) -> Option<&[f64]> {
-        match data {
-            TensorData::F64(v) => Some(v),
-            _ => None,
-        }
-    }
-}
-
-impl Element for i32 {
-    const NAME: &'static str = "i32";
-    fn slice(data: &TensorData) -> Option<&[i32]> {
-        match data {
-            TensorData::I32(v) => Some(v),
-            _ => None,
-        }
-    }
-}
+tensor_element!(f32 => F32, f64 => F64, i32 => I32);
 
 /// A checkpoint in memory.
 #[derive(Clone, Debug, PartialEq)]
@@ -340,7 +321,11 @@ impl Checkpoint {
     }
 
     /// The values of tensor `name`, which must have element type `T` and shape `shape`.
-    pub fn get<T: Element>(&self, name: &str, shape: &[usize]) -> Result<&[T], CheckpointError> {
+    pub fn get<T: TensorElement>(
+        &self,
+        name: &str,
+        shape: &[usize],
+    ) -> Result<&[T], CheckpointError> {
         let tensor = self
             .tensors
             .get(name)

@@ -6,6 +6,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
+use super::checkpoint::tensor_names;
 use super::config::TrainConfig;
 use super::error::TrainError;
 use super::evaluation::evaluation_steps;
@@ -17,9 +18,6 @@ use crate::ppo::mlp_layout;
 
 /// The plans a run replays: physics steps, and the kinematics a reset needs.
 pub const RUN_PLANS: [&str; 2] = ["step", "kinematics"];
-
-/// Checkpoint tensor names (`eval` checks the policy's; they live in src/train/checkpoint.rs).
-pub use super::checkpoint::tensor_names;
 
 /// Sizes of the networks of a configuration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -82,8 +82,8 @@ r = json.loads(text[text.index("\n{") + 1 if not text.startswith("{") else 0:])
 print(f"bench {sys.argv[2]}: {r['frames_per_s']/1e6:.3f} M frames/s, physics only "
       f"{r['physics_only_frames_per_s']/1e6:.3f}, ratio {r['ratio']:.3f}; from the rollout's states "
       f"{r['physics_only_from_rollout_states_frames_per_s']/1e6:.3f}, ratio {r['ratio_to_rollout_states']:.3f}; physics share "
-      f"{r['phase_ms']['physics'] / sum(r['phase_ms'].values()):.3f}; "
-      + ", ".join(f"{k} {v:.2f} ms" for k, v in r["phase_ms"].items()) + f"; GEMMs: {r['gemm']}")
+      f"{r['stage_ms']['physics'] / sum(r['stage_ms'].values()):.3f}; "
+      + ", ".join(f"{k} {v:.2f} ms" for k, v in r["stage_ms"].items()) + f"; GEMMs: {r['gemm']}")
 PY
       else
         note "bench $label FAILED: $(tail -2 "$OUT/bench_$tag.err")"

@@ -15,7 +15,7 @@ use prost::Message as _;
 use crate::env::layout::JointLayout;
 use crate::motion::Character;
 use crate::ppo::{LayerShape, mlp_layout};
-use crate::train::preflight::tensor_names;
+use crate::train::checkpoint::tensor_names;
 use crate::train::{Checkpoint, PolicyShapes, TrainConfig, TrainError};
 
 use super::{ExportError, Format};

@@ -1,0 +1,134 @@
+//! The stages of a control step, as NVTX ranges (for nsys) and as CUDA events (per-stage time).
+//!
+//! A rollout is captured once. While it is captured, every stage of every control step is pushed
+//! as an NVTX range, so a capture under `nsys profile --cuda-graph-trace=node` names the kernels
+//! of each stage. For the per-stage breakdown a second graph of the same rollout is captured with
+//! an event recorded at every stage boundary: replayed, the time between consecutive events is
+//! the time of one stage of one step, summed over the horizon. The events join the stage's work
+//! into one point, so that graph runs slightly slower than the unprofiled one; the breakdown is
+//! reported as fractions of its own total, next to the unprofiled frames/s.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use crate::cuda::{CudaError, Event, Gpu, NvtxRange, Stream};
+
+/// One stage of a control step (docs/env.md, "One control step of the rollout graph").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RolloutStage {
+    /// Actor and critic forward, action sampling, rollout storage of actions and values.
+    Policy,
+    /// The physics substeps: PD control and the step plan, `substeps` times.
+    Physics,
+    /// The kinematics plan, reward and termination.
+    PostPhysics,
+    /// The masked reset and the kinematics plan that follows it.
+    Reset,
+    /// Observation, its normalization and storage.
+    Observation,
+    /// Once per rollout: the adaptive start-phase statistics and the rollout statistics.
+    Bookkeeping,
+}
+
+impl RolloutStage {
+    pub const ALL: [RolloutStage; 6] = [
+        RolloutStage::Policy,
+        RolloutStage::Physics,
+        RolloutStage::PostPhysics,
+        RolloutStage::Reset,
+        RolloutStage::Observation,
+        RolloutStage::Bookkeeping,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            RolloutStage::Policy => "policy",
+            RolloutStage::Physics => "physics",
+            RolloutStage::PostPhysics => "post-physics",
+            RolloutStage::Reset => "reset",
+            RolloutStage::Observation => "observation",
+            RolloutStage::Bookkeeping => "bookkeeping",
+        }
+    }
+}
+
+/// Records stages while a rollout is captured: an NVTX range around each, and with timing on,
+/// an event after each (the first event marks the start).
+pub struct StageRecorder {
+    timing: Option<StageEvents>,
+}
+
+/// The events of one profiled capture, in recording order.
+pub struct StageEvents {
+    start: Event,
+    ends: Vec<(RolloutStage, Event)>,
+}
+
+impl StageRecorder {
+    /// Names stages only (no events in the graph).
+    pub fn untimed() -> StageRecorder {
+        StageRecorder { timing: None }
+    }
+
+    /// Also records an event at every stage boundary into the graph being captured on `stream`.
+    pub fn timed(gpu: &Gpu, stream: &Stream) -> Result<StageRecorder, CudaError> {
+        let start = gpu.new_event()?;
+        start.record_in_capture(stream)?;
+        Ok(StageRecorder {
+            timing: Some(StageEvents {
+                start,
+                ends: Vec::new(),
+            }),
+        })
+    }
+
+    /// Runs `body` (which queues the stage's work on `stream`) inside the stage's NVTX range,
+    /// followed by the stage's event when timing.
+    pub fn stage<E, F>(
+        &mut self,
+        gpu: &Gpu,
+        stream: &Stream,
+        stage: RolloutStage,
+        body: F,
+    ) -> Result<(), E>
+    where
+        F: FnOnce(&Stream) -> Result<(), E>,
+        E: From<CudaError>,
+    {
+        {
+            let _range = NvtxRange::push(stage.name());
+            body(stream)?;
+        }
+        if let Some(timing) = &mut self.timing {
+            let event = gpu.new_event()?;
+            event.record_in_capture(stream)?;
+            timing.ends.push((stage, event));
+        }
+        Ok(())
+    }
+
+    /// The events, once the capture is done (None when untimed).
+    pub fn into_events(self) -> Option<StageEvents> {
+        self.timing
+    }
+}
+
+impl StageEvents {
+    /// Milliseconds per stage in the last replay of the graph that holds these events (waits for
+    /// it to finish).
+    pub fn elapsed_ms(&self) -> Result<BTreeMap<RolloutStage, f64>, CudaError> {
+        let mut totals = BTreeMap::new();
+        let Some((_, last)) = self.ends.last() else {
+            return Ok(totals);
+        };
+        last.synchronize()?;
+        let mut previous = &self.start;
+        for (stage, event) in &self.ends {
+            *totals.entry(*stage).or_insert(0.0) += f64::from(previous.elapsed_ms(event)?);
+            previous = event;
+        }
+        Ok(totals)
+    }
+}
