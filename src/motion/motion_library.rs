@@ -98,6 +98,8 @@ pub struct MotionLibraryBuilder {
     control_dt: f64,
     /// The first clip's layout and slot lists; every other clip must have the same.
     shape: Option<(TableLayout, Vec<usize>, Vec<usize>)>,
+    /// The first clip's character, by the name it was loaded under.
+    character: Option<String>,
     clips: Vec<ClipEntry>,
     data: Vec<f32>,
 }
@@ -110,6 +112,7 @@ impl MotionLibraryBuilder {
             origin: origin.to_string(),
             control_dt,
             shape: None,
+            character: None,
             clips: Vec::new(),
             data: Vec::new(),
         }
@@ -147,6 +150,7 @@ impl MotionLibraryBuilder {
                 error,
             }
         })?;
+        self.check_character(name, motion.character().source_name())?;
         self.check_shape(name, &table)?;
         let values = self.data.len() + table.data().len();
         if values > MAX_LIBRARY_VALUES {
@@ -172,6 +176,24 @@ impl MotionLibraryBuilder {
         });
         self.data.extend_from_slice(table.data());
         Ok(self.clips.len() - 1)
+    }
+
+    /// Every clip is for the first clip's character (the same joints with other bone lengths
+    /// would give rows of another body).
+    fn check_character(&mut self, name: &str, character: &str) -> Result<(), MotionLibraryError> {
+        match &self.character {
+            None => {
+                self.character = Some(character.to_string());
+                Ok(())
+            }
+            Some(first) if first == character => Ok(()),
+            Some(first) => Err(MotionLibraryError::CharacterMismatch {
+                name: name.to_string(),
+                problem: format!(
+                    "it was loaded for the character {character}, the library's clips for {first}"
+                ),
+            }),
+        }
     }
 
     /// The first clip fixes the row layout and the slots the lookup slerps and shifts.
