@@ -155,8 +155,6 @@ pub enum MotionError {
 /// them. Every message is one line naming the library's file or the clip, and the key at fault.
 #[derive(Debug, thiserror::Error)]
 pub enum MotionLibraryError {
-    #[error(transparent)]
-    Motion(#[from] MotionError),
     #[error("{path}: cannot read the motion library's file: {error}")]
     Read { path: String, error: std::io::Error },
     #[error("{path}: not a valid motion library file: {message}")]
@@ -187,7 +185,7 @@ pub enum MotionLibraryError {
     Clip {
         origin: String,
         name: String,
-        error: MotionError,
+        error: Box<MotionError>,
     },
     #[error(
         "{origin}: two clips of the motion library are named {name:?} ({first} and {second}); \

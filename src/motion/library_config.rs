@@ -238,7 +238,7 @@ impl LibraryConfig {
         let clip_error = |name: &str, error| MotionLibraryError::Clip {
             origin: origin.to_string(),
             name: name.to_string(),
-            error,
+            error: Box::new(error),
         };
         let entries = if let Some(clips) = &self.clips {
             let mut entries = Vec::with_capacity(clips.len());
@@ -323,7 +323,7 @@ fn manifest_entries(
             MotionLibraryError::Clip {
                 origin: origin.clone(),
                 name: clip.motion.clone(),
-                error,
+                error: Box::new(error),
             }
         })?;
         let name = clip.name.unwrap_or_else(|| default_name(&resolved));
@@ -386,7 +386,7 @@ pub fn load_library(
             .map_err(|error| MotionLibraryError::Clip {
                 origin: origin.to_string(),
                 name: entry.name.clone(),
-                error,
+                error: Box::new(error),
             })?;
         notices.extend(entry.resolved.notices(motion.clip()));
         builder.push(

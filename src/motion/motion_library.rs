@@ -147,7 +147,7 @@ impl MotionLibraryBuilder {
             MotionLibraryError::Clip {
                 origin: self.origin.clone(),
                 name: name.to_string(),
-                error,
+                error: Box::new(error),
             }
         })?;
         self.check_character(name, motion.character().source_name())?;
