@@ -5,7 +5,7 @@ use std::process::{Command, Output};
 
 use instantmimic::motion::SyntheticMotion;
 use instantmimic::motion::built_in::BUILT_IN_CLIPS;
-use instantmimic::motion::library::{MOTIONS_ENV, directory_clips, motions_dir_from_env};
+use instantmimic::motion::find::{MOTIONS_ENV, directory_clips, motions_dir_from_env};
 
 fn run(args: &[&str], motions_dir: Option<&Path>) -> Output {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_instantmimic"));

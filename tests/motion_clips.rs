@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use instantmimic::motion::built_in::BUILT_IN_CLIPS;
-use instantmimic::motion::library::{CLIP_NAMES, MotionSource, resolve_motion};
+use instantmimic::motion::find::{CLIP_NAMES, MotionSource, resolve_motion};
 use instantmimic::motion::{Character, ClipSummary, LoopMode, ReferenceMotion, ReferenceTable};
 
 /// A clip by name with no motions directory: the built-in one.

@@ -6,6 +6,7 @@ mod export;
 mod gpu;
 mod hpo;
 mod motion;
+mod motion_library;
 mod motion_list;
 mod output;
 mod plan;

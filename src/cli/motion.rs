@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::{Args, Subcommand};
 
-use crate::motion::library::{MOTIONS_ENV, ResolvedMotion, motions_dir_from_env, resolve_motion};
+use crate::motion::find::{MOTIONS_ENV, ResolvedMotion, motions_dir_from_env, resolve_motion};
 use crate::motion::summary::JointRange;
 use crate::motion::{Character, ClipSummary, ReferenceMotion};
 use crate::recording::{ClipRecordingSpec, Recording};
@@ -28,10 +28,29 @@ enum MotionCommand {
         motions_dir: Option<PathBuf>,
     },
     /// Print frames, fps, duration, loop mode, per-cycle root displacement, joint ranges and the
-    /// lowest foot point of a clip.
+    /// lowest foot point of a clip; or, with --library, each clip of a motion library and the
+    /// totals.
     Inspect {
-        #[command(flatten)]
-        source: ClipArgs,
+        /// A DeepMimic motion file, or a clip's name (e.g. `walk` for humanoid3d_walk.txt): one
+        /// in the motions directory, else a built-in clip (`motion list` shows them).
+        #[arg(required_unless_present = "library", conflicts_with = "library")]
+        motion: Option<String>,
+        /// A motion library instead of one clip: a file with a `[motion_library]` section
+        /// (e.g. configs/library/shipped.toml) or a directory of DeepMimic `*.txt` files (see
+        /// docs/library.md).
+        #[arg(long)]
+        library: Option<PathBuf>,
+        /// The control rate (Hz) the library's rows are counted at (the committed configs: 30).
+        #[arg(long, default_value_t = 30.0, requires = "library")]
+        control_rate: f64,
+        /// Directory of your own DeepMimic motion files, looked up by name before the built-in
+        /// clips (default: $INSTANTMIMIC_MOTIONS).
+        #[arg(long)]
+        motions_dir: Option<PathBuf>,
+        /// Character description written by kernels_py/export_character.py (default: the
+        /// humanoid).
+        #[arg(long)]
+        character: Option<PathBuf>,
     },
     /// Print the body positions and orientations of one key frame.
     Fk {
@@ -84,10 +103,7 @@ impl ClipArgs {
 
     /// The clip with where it came from.
     fn load_resolved(&self) -> Result<(ResolvedMotion, ReferenceMotion)> {
-        let character = match &self.character {
-            Some(path) => Character::load(path)?,
-            None => Character::humanoid()?,
-        };
+        let character = load_character(self.character.as_deref())?;
         let dir = self.motions_dir.clone().or_else(motions_dir_from_env);
         let resolved = resolve_motion(&self.motion, dir.as_deref())?;
         // The error names the file (and frame and column): no context to add.
@@ -97,6 +113,14 @@ impl ClipArgs {
         }
         Ok((resolved, motion))
     }
+}
+
+/// The character at `path`, or the humanoid.
+fn load_character(path: Option<&std::path::Path>) -> Result<Character> {
+    Ok(match path {
+        Some(path) => Character::load(path)?,
+        None => Character::humanoid()?,
+    })
 }
 
 /// Runs `motion <subcommand>`.
@@ -110,10 +134,34 @@ pub fn run(args: MotionArgs) -> Result<()> {
             let dir = dir.as_ref().map(|(dir, from)| (dir.as_path(), *from));
             print!("{}", super::motion_list::list_report(dir)?);
         }
-        MotionCommand::Inspect { source } => {
-            let motion = source.load()?;
-            print!("{}", inspect_report(&ClipSummary::of(&motion)));
-        }
+        MotionCommand::Inspect {
+            motion,
+            library,
+            control_rate,
+            motions_dir,
+            character,
+        } => match (motion, library) {
+            (_, Some(library)) => {
+                let dir = motions_dir.or_else(motions_dir_from_env);
+                let character = load_character(character.as_deref())?;
+                let report = super::motion_library::inspect_library(
+                    &library,
+                    dir.as_deref(),
+                    &character,
+                    control_rate,
+                )?;
+                print!("{report}");
+            }
+            (Some(motion), None) => {
+                let source = ClipArgs {
+                    motion,
+                    motions_dir,
+                    character,
+                };
+                print!("{}", inspect_report(&ClipSummary::of(&source.load()?)));
+            }
+            (None, None) => bail!("give a motion, or a library with --library"),
+        },
         MotionCommand::Fk { source, frame } => {
             let motion = source.load()?;
             let frames = motion.frames().len();

@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::Result;
 
 use crate::motion::built_in::{BUILT_IN_CLIPS, find_built_in};
-use crate::motion::library::{MotionSource, directory_clips};
+use crate::motion::find::{MotionSource, directory_clips};
 use crate::motion::{Character, MotionClip};
 use crate::train::COMMITTED_CONFIGS;
 
@@ -95,7 +95,7 @@ pub fn list_report(dir: Option<(&Path, &str)>) -> Result<String> {
             let _ = writeln!(
                 out,
                 "motions directory: none (add your own clips with --motions-dir or {})",
-                crate::motion::library::MOTIONS_ENV
+                crate::motion::find::MOTIONS_ENV
             );
         }
         Some((dir, from)) => {

@@ -140,13 +140,85 @@ pub enum MotionError {
         "no motion {name:?}: not a built-in clip ({built_in}) and no such file (looked for: \
          {tried}); pass a path to a DeepMimic motion file, or a clip's name (e.g. `walk` for \
          humanoid3d_walk.txt) in the directory given by --motions-dir or {env}",
-        env = super::library::MOTIONS_ENV
+        env = super::find::MOTIONS_ENV
     )]
     NotFound {
         name: String,
         tried: String,
         built_in: String,
     },
-    #[error("the motions directory {dir}: {problem} (--motions-dir or {env})", env = super::library::MOTIONS_ENV)]
+    #[error("the motions directory {dir}: {problem} (--motions-dir or {env})", env = super::find::MOTIONS_ENV)]
     MotionsDir { dir: String, problem: String },
+}
+
+/// A problem with a motion library: its configuration, one of its clips, or the table built from
+/// them. Every message is one line naming the library's file or the clip, and the key at fault.
+#[derive(Debug, thiserror::Error)]
+pub enum MotionLibraryError {
+    #[error("{path}: cannot read the motion library's file: {error}")]
+    Read { path: String, error: std::io::Error },
+    #[error("{path}: not a valid motion library file: {message}")]
+    Parse { path: String, message: String },
+    #[error("{origin}: `{key}`: {problem}")]
+    Invalid {
+        origin: String,
+        key: String,
+        problem: String,
+    },
+    #[error(
+        "{origin}: the motion library has no clips; list clips in `motion_library.clips`, name a \
+         directory of DeepMimic `*.txt` files in `motion_library.dir`, or a manifest with \
+         `[[clip]]` entries in `motion_library.manifest`"
+    )]
+    Empty { origin: String },
+    #[error(
+        "{origin}: the motion library's directory {dir}: {problem} (`motion_library.dir` takes \
+         a directory of DeepMimic `*.txt` files)"
+    )]
+    Dir {
+        origin: String,
+        dir: String,
+        problem: String,
+    },
+    /// `error` is displayed, not chained as a source: the line already says it.
+    #[error("{origin}: motion library clip {name:?}: {error}")]
+    Clip {
+        origin: String,
+        name: String,
+        error: Box<MotionError>,
+    },
+    #[error(
+        "{origin}: two clips of the motion library are named {name:?} ({first} and {second}); \
+         list each clip once, or give one a distinct `name` in a manifest"
+    )]
+    DuplicateName {
+        origin: String,
+        name: String,
+        first: String,
+        second: String,
+    },
+    #[error(
+        "{origin}: motion library clip {name:?} (`{key}`): the weight {value} must be positive \
+         and finite (it scales the clip's share of resets; leave a clip out to not train on it)"
+    )]
+    Weight {
+        origin: String,
+        name: String,
+        key: String,
+        value: f64,
+    },
+    #[error(
+        "motion library clip {name:?} is for another character: {problem}; every clip of a \
+         library must be loaded for the same character"
+    )]
+    CharacterMismatch { name: String, problem: String },
+    #[error(
+        "the motion library's table would hold {values} values with clip {name:?}; the kernels \
+         address at most {max} (int32): split the library"
+    )]
+    TooLarge {
+        name: String,
+        values: usize,
+        max: usize,
+    },
 }

@@ -11,7 +11,9 @@
 //! - [`summary`]: what `motion inspect` reports.
 //! - [`synthetic`]: generated clips for tests.
 //! - [`built_in`]: the clips built into the binary (`assets/motions/`).
-//! - [`library`]: finding clips by name: the motions directory, then the built-in clips.
+//! - [`find`]: finding clips by name: the motions directory, then the built-in clips.
+//! - [`motion_library`]: a motion library, many clips in one reference table with a clip index;
+//!   [`library_config`]: its TOML configuration (a list of clips, a directory or a manifest).
 //!
 //! `docs/motions.md` and `docs/reference_table.md` describe the conventions.
 
@@ -20,8 +22,10 @@ pub mod character;
 pub mod clip;
 pub mod deepmimic;
 pub mod error;
+pub mod find;
 pub mod kinematics;
-pub mod library;
+pub mod library_config;
+pub mod motion_library;
 pub mod reference;
 pub mod rotation;
 pub mod summary;
@@ -31,10 +35,17 @@ pub mod velocity;
 
 pub use character::Character;
 pub use clip::{ClipTime, LoopMode, MotionClip};
-pub use error::{CharacterError, MotionError};
+pub use error::{CharacterError, MotionError, MotionLibraryError};
 pub use kinematics::{BodyKinematics, forward_kinematics};
+pub use library_config::{LibraryConfig, LibraryEntry};
+pub use motion_library::{ClipEntry, LibraryTotals, MotionLibrary, MotionLibraryBuilder};
 pub use reference::{ReferenceMotion, ReferenceState};
 pub use summary::ClipSummary;
 pub use synthetic::SyntheticMotion;
-pub use table::{ReferenceTable, TableLayout};
+pub use table::{ReferenceTable, TableLayout, TableSegment};
 pub use velocity::{BodyVelocities, body_velocities, differentiate_pos};
+
+/// The old name of [`find`], kept while code outside `motion` and `cli` still imports it (the
+/// training and search layers); new code imports `motion::find`. "Library" now means a motion
+/// library ([`motion_library`]); remove this alias once those imports are renamed.
+pub use find as library;

@@ -217,6 +217,114 @@ impl ReferenceTable {
     }
 
     pub fn num_rows(&self) -> usize {
+        self.segment().num_rows()
+    }
+
+    /// Time between rows (s), as stored.
+    pub fn row_dt(&self) -> f64 {
+        self.segment().row_dt()
+    }
+
+    /// Clip duration (s), as stored.
+    pub fn duration(&self) -> f64 {
+        self.segment().duration()
+    }
+
+    pub fn loop_mode(&self) -> LoopMode {
+        self.segment().loop_mode()
+    }
+
+    /// Per-cycle displacement (m), as stored.
+    pub fn cycle_displacement(&self) -> Vector3<f64> {
+        self.segment().cycle_displacement()
+    }
+
+    /// Row `r`.
+    pub fn row(&self, r: usize) -> Option<&[f32]> {
+        let start = HEADER_LEN.checked_add(r.checked_mul(self.layout.stride)?)?;
+        self.data.get(start..start.checked_add(self.layout.stride)?)
+    }
+
+    /// The time of row `r` within cycle 0 (s), as the lookup computes it.
+    pub fn row_time(&self, r: usize) -> f64 {
+        self.segment().row_time(r)
+    }
+
+    /// Row offsets where a quaternion (w, x, y, z) starts: qpos quaternions, body orientations,
+    /// heading. The lookup slerps these.
+    pub fn quaternion_offsets(&self) -> &[usize] {
+        &self.quaternion_offsets
+    }
+
+    /// Row offsets of the 3-vectors a wrapped cycle k shifts by k displacements: root position
+    /// in qpos, body positions, center of mass.
+    pub fn position_offsets(&self) -> &[usize] {
+        &self.position_offsets
+    }
+
+    /// Where time `t` (s) falls; the GPU computes the same from the header. Non-finite `t` reads
+    /// as 0.
+    pub fn locate(&self, t: f64) -> TableTime {
+        self.segment().locate(t)
+    }
+
+    /// The reference row at time `t` (s): the two rows around it blended (linear, slerp at
+    /// [`Self::quaternion_offsets`]), positions shifted by the cycle's displacement.
+    pub fn lookup(&self, t: f64) -> Vec<f64> {
+        self.segment().lookup(t)
+    }
+
+    /// The whole table as a [`TableSegment`] (a motion library's segments have the same form).
+    pub fn segment(&self) -> TableSegment<'_> {
+        TableSegment {
+            data: &self.data,
+            layout: self.layout,
+            quaternion_offsets: &self.quaternion_offsets,
+            position_offsets: &self.position_offsets,
+        }
+    }
+}
+
+/// One table's header and rows, borrowed: a [`ReferenceTable`]'s whole buffer, or one clip's
+/// segment of a motion library's buffer (`super::motion_library`), which holds a table per clip
+/// one after another. The lookup arithmetic lives here once, for both.
+#[derive(Debug, Clone, Copy)]
+pub struct TableSegment<'a> {
+    data: &'a [f32],
+    layout: TableLayout,
+    quaternion_offsets: &'a [usize],
+    position_offsets: &'a [usize],
+}
+
+impl<'a> TableSegment<'a> {
+    /// A segment over `data` (header, then rows of `layout.stride` values); `None` when `data`
+    /// is shorter than its header says.
+    pub fn new(
+        data: &'a [f32],
+        layout: TableLayout,
+        quaternion_offsets: &'a [usize],
+        position_offsets: &'a [usize],
+    ) -> Option<TableSegment<'a>> {
+        let rows = *data.get(HEADER_NUM_ROWS)? as usize;
+        let len = HEADER_LEN.checked_add(rows.checked_mul(layout.stride)?)?;
+        (rows >= 2 && data.len() >= len).then_some(TableSegment {
+            data: &data[..len],
+            layout,
+            quaternion_offsets,
+            position_offsets,
+        })
+    }
+
+    /// Header and rows, as stored.
+    pub fn data(&self) -> &'a [f32] {
+        self.data
+    }
+
+    pub fn layout(&self) -> TableLayout {
+        self.layout
+    }
+
+    pub fn num_rows(&self) -> usize {
         self.data[HEADER_NUM_ROWS] as usize
     }
 
@@ -245,7 +353,7 @@ impl ReferenceTable {
     }
 
     /// Row `r`.
-    pub fn row(&self, r: usize) -> Option<&[f32]> {
+    pub fn row(&self, r: usize) -> Option<&'a [f32]> {
         let start = HEADER_LEN.checked_add(r.checked_mul(self.layout.stride)?)?;
         self.data.get(start..start.checked_add(self.layout.stride)?)
     }
@@ -257,18 +365,6 @@ impl ReferenceTable {
         } else {
             r as f64 * self.row_dt()
         }
-    }
-
-    /// Row offsets where a quaternion (w, x, y, z) starts: qpos quaternions, body orientations,
-    /// heading. The lookup slerps these.
-    pub fn quaternion_offsets(&self) -> &[usize] {
-        &self.quaternion_offsets
-    }
-
-    /// Row offsets of the 3-vectors a wrapped cycle k shifts by k displacements: root position
-    /// in qpos, body positions, center of mass.
-    pub fn position_offsets(&self) -> &[usize] {
-        &self.position_offsets
     }
 
     /// Where time `t` (s) falls; the GPU computes the same from the header. Non-finite `t` reads
@@ -286,8 +382,8 @@ impl ReferenceTable {
         TableTime { cycle, row, alpha }
     }
 
-    /// The reference row at time `t` (s): the two rows around it blended (linear, slerp at
-    /// [`Self::quaternion_offsets`]), positions shifted by the cycle's displacement.
+    /// The reference row at time `t` (s): the two rows around it blended (linear, slerp at the
+    /// quaternion offsets), positions shifted by the cycle's displacement.
     pub fn lookup(&self, t: f64) -> Vec<f64> {
         let at = self.locate(t);
         let stride = self.layout.stride;
@@ -297,9 +393,9 @@ impl ReferenceTable {
         };
         let a: Vec<f64> = a.iter().map(|&v| f64::from(v)).collect();
         let b: Vec<f64> = b.iter().map(|&v| f64::from(v)).collect();
-        blend(&a, &b, at.alpha, &self.quaternion_offsets, &mut out);
+        blend(&a, &b, at.alpha, self.quaternion_offsets, &mut out);
         let shift = self.cycle_displacement() * at.cycle as f64;
-        for &o in &self.position_offsets {
+        for &o in self.position_offsets {
             for (v, s) in out[o..o + 3].iter_mut().zip(shift.iter()) {
                 *v += s;
             }

@@ -1,4 +1,5 @@
-//! Finding motion clips. A command takes a path to a DeepMimic motion file, or a name: looked up
+//! Finding motion clips (`motion::find`; a motion library, many clips in one table, is
+//! `super::motion_library`). A command takes a path to a DeepMimic motion file, or a name: looked up
 //! first in the user's motions directory (`--motions-dir` or the environment variable
 //! [`MOTIONS_ENV`]), then among the clips built into the binary ([`super::built_in`]). A user's
 //! clip with a built-in clip's name replaces it, and the run says so.
