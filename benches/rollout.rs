@@ -10,7 +10,7 @@ use instantmimic::bench::bench_rollout;
 use instantmimic::cuda::Gpu;
 use instantmimic::env::RolloutStage;
 use instantmimic::motion::Character;
-use instantmimic::motion::library::{motions_dir_from_env, resolve_motion};
+use instantmimic::motion::find::{motions_dir_from_env, resolve_motion};
 use instantmimic::plan::PlanStore;
 use instantmimic::train::TrainConfig;
 

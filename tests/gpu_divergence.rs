@@ -6,7 +6,7 @@
 #![cfg(feature = "gpu")]
 
 use instantmimic::cuda::Gpu;
-use instantmimic::motion::library::resolve_motion;
+use instantmimic::motion::find::resolve_motion;
 use instantmimic::motion::{Character, ReferenceMotion};
 use instantmimic::plan::PlanStore;
 use instantmimic::train::checkpoint::tensor_names;

@@ -16,7 +16,7 @@ use instantmimic::cuda::Gpu;
 use instantmimic::env::DeviceReferenceTable;
 use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels};
 use instantmimic::motion::built_in::BUILT_IN_CLIPS;
-use instantmimic::motion::library::MotionSource;
+use instantmimic::motion::find::MotionSource;
 use instantmimic::motion::table::{HEADER_LEN, HUMANOID_LAYOUT};
 use instantmimic::motion::{Character, LoopMode, ReferenceTable, SyntheticMotion, TableLayout};
 

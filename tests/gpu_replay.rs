@@ -26,7 +26,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use instantmimic::cuda::Gpu;
-use instantmimic::motion::library::MOTIONS_ENV;
+use instantmimic::motion::find::MOTIONS_ENV;
 use instantmimic::motion::{Character, ReferenceMotion};
 use instantmimic::plan::PlanStore;
 use instantmimic::recording::{Outcome, Recording};

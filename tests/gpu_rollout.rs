@@ -11,7 +11,7 @@
 
 use instantmimic::cuda::Gpu;
 use instantmimic::env::Rollout;
-use instantmimic::motion::library::resolve_motion;
+use instantmimic::motion::find::resolve_motion;
 use instantmimic::motion::{Character, ReferenceMotion};
 use instantmimic::plan::PlanStore;
 use instantmimic::ppo::GaussianPolicy;

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use instantmimic::motion::library::MOTIONS_ENV;
+use instantmimic::motion::find::MOTIONS_ENV;
 
 /// The binary under test: `INSTANTMIMIC_BIN` where the test runs away from its build tree (the
 /// device machine), else the one cargo built beside this test.

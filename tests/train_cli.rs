@@ -6,7 +6,7 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-use instantmimic::motion::library::{CLIP_NAMES, MOTIONS_ENV};
+use instantmimic::motion::find::{CLIP_NAMES, MOTIONS_ENV};
 use instantmimic::motion::{Character, SyntheticMotion};
 use instantmimic::train::checkpoint::tensor_names;
 use instantmimic::train::{

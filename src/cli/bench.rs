@@ -10,7 +10,7 @@ use std::fmt::Write as _;
 use crate::bench::{GemmBench, RolloutBench, bench_gemm, bench_physics, bench_rollout};
 use crate::cuda::Gpu;
 use crate::motion::Character;
-use crate::motion::library::{motions_dir_from_env, resolve_motion};
+use crate::motion::find::{motions_dir_from_env, resolve_motion};
 use crate::plan::{PlanStore, ReplayOrder};
 use crate::train::{GemmSetting, TrainConfig};
 

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::Args;
 
-use crate::motion::library::motions_dir_from_env;
+use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
 use crate::train::{
     Checkpoint, evaluate_on_gpu, evaluation_steps, format_evaluation_report, preflight,

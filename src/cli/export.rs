@@ -13,7 +13,7 @@ use crate::export::glb::glb_bytes;
 use crate::export::onnx::export_policy;
 use crate::files::write_bytes_atomically;
 use crate::motion::Character;
-use crate::motion::library::{motions_dir_from_env, resolve_motion};
+use crate::motion::find::{motions_dir_from_env, resolve_motion};
 use crate::plan::PlanStore;
 use crate::recording::{ClipRecordingSpec, Recording};
 use crate::train::{Checkpoint, check_plans};

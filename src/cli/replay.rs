@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
 
 use crate::cuda::Gpu;
-use crate::motion::library::motions_dir_from_env;
+use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
 use crate::recording::Outcome;
 use crate::replay::{DEFAULT_EPISODES, Replay, ReplayInput, chosen_envs, record_replay};

@@ -10,7 +10,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 
 use super::replay::{ReplayJob, write_replay};
-use crate::motion::library::motions_dir_from_env;
+use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
 use crate::replay::DEFAULT_EPISODES;
 use crate::train::run_dir::{CHECKPOINTS_DIR, REPLAY_FILE};

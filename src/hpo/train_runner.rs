@@ -14,7 +14,7 @@ use crate::cuda::Gpu;
 use crate::hpo::error::HpoError;
 use crate::hpo::trial::{BoxedRunner, TrialOutcome, TrialRunner, TrialSpec};
 use crate::motion::ReferenceMotion;
-use crate::motion::library::motions_dir_from_env;
+use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
 use crate::train::{ProgressMode, RunStart, TrainConfig, load_motion, train_with};
 

@@ -44,8 +44,3 @@ pub use summary::ClipSummary;
 pub use synthetic::SyntheticMotion;
 pub use table::{ReferenceTable, TableLayout, TableSegment};
 pub use velocity::{BodyVelocities, body_velocities, differentiate_pos};
-
-/// The old name of [`find`], kept while code outside `motion` and `cli` still imports it (the
-/// training and search layers); new code imports `motion::find`. "Library" now means a motion
-/// library ([`motion_library`]); remove this alias once those imports are renamed.
-pub use find as library;

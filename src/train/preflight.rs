@@ -11,7 +11,7 @@ use super::config::TrainConfig;
 use super::error::TrainError;
 use super::evaluation::evaluation_steps;
 use crate::env::layout::{JointLayout, observation_size};
-use crate::motion::library::{ResolvedMotion, resolve_motion};
+use crate::motion::find::{ResolvedMotion, resolve_motion};
 use crate::motion::{Character, LoopMode, ReferenceMotion, ReferenceTable};
 use crate::plan::PlanStore;
 use crate::ppo::mlp_layout;

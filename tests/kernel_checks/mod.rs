@@ -31,7 +31,7 @@ pub mod statistics;
 pub mod tracking;
 
 use instantmimic::env::layout::JointLayout;
-use instantmimic::motion::library::resolve_motion;
+use instantmimic::motion::find::resolve_motion;
 use instantmimic::motion::{Character, LoopMode, ReferenceMotion, ReferenceTable, SyntheticMotion};
 
 use compare::Report;
