@@ -1,36 +1,14 @@
 //! `instantmimic motion list`, `motion inspect` and `motion fk`, run as a user would.
 
 use std::path::Path;
-use std::process::{Command, Output};
 
 use instantmimic::motion::SyntheticMotion;
 use instantmimic::motion::built_in::BUILT_IN_CLIPS;
 use instantmimic::motion::find::{MOTIONS_ENV, directory_clips, motions_dir_from_env};
 
-fn run(args: &[&str], motions_dir: Option<&Path>) -> Output {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_instantmimic"));
-    cmd.args(args).env_remove(MOTIONS_ENV);
-    if let Some(dir) = motions_dir {
-        cmd.env(MOTIONS_ENV, dir);
-    }
-    cmd.output().expect("the binary runs")
-}
+mod motion_cli_support;
 
-/// The stdout of a command that must succeed (`what` names it if it fails).
-fn succeeded(out: &Output, what: &str) -> String {
-    assert!(
-        out.status.success(),
-        "{what}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-/// The stderr of a command that must fail.
-fn failed(out: &Output, what: &str) -> String {
-    assert!(!out.status.success(), "{what} succeeded");
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
+use motion_cli_support::{failed, run, succeeded};
 
 fn synthetic_dir() -> tempfile::TempDir {
     let dir = tempfile::tempdir().expect("temporary directory");

@@ -2,35 +2,13 @@
 //! totals, a directory, the all-clips library with and without the long clips, bad input.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use instantmimic::motion::SyntheticMotion;
 use instantmimic::motion::find::{MOTIONS_ENV, motions_dir_from_env};
 
-fn run(args: &[&str], motions_dir: Option<&Path>) -> Output {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_instantmimic"));
-    cmd.args(args)
-        .env_remove(MOTIONS_ENV)
-        .current_dir(env!("CARGO_MANIFEST_DIR"));
-    if let Some(dir) = motions_dir {
-        cmd.env(MOTIONS_ENV, dir);
-    }
-    cmd.output().expect("the binary runs")
-}
+mod motion_cli_support;
 
-fn succeeded(out: &Output, what: &str) -> String {
-    assert!(
-        out.status.success(),
-        "{what}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn failed(out: &Output, what: &str) -> String {
-    assert!(!out.status.success(), "{what} succeeded");
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
+use motion_cli_support::{failed, run, succeeded};
 
 fn config(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
