@@ -10,11 +10,12 @@
 
 use crate::cuda::KernelArgs;
 
-use super::error::EnvError;
-pub use super::manifest::ScalarType;
+use super::contract::Violation;
+use super::error::{EnvError, LaunchContractError};
 use super::manifest::{
     ARRAY_LAYOUT, MAX_DIMS, kernel_param_layout, launch_bounds_layout, packed_len,
 };
+pub use super::manifest::{Io, LaunchRule, Op, Relation, ScalarType};
 
 /// Bytes of Warp's `array_t<T>` descriptor.
 pub const ARRAY_DESCRIPTOR_BYTES: usize = ARRAY_LAYOUT.size;
@@ -167,6 +168,8 @@ pub struct ParamAbi {
     pub offset: usize,
     pub size: usize,
     pub align: usize,
+    /// What the kernel does with it (arrays; values and structs are inputs).
+    pub io: Io,
 }
 
 /// A kernel as the generated launchers pack it: `build.rs` writes one per manifest kernel.
@@ -188,6 +191,8 @@ pub struct KernelAbi {
     pub smem_bytes: u32,
     /// Parameters after `launch_bounds_t<dim>`.
     pub params: &'static [ParamAbi],
+    /// The launch contract (`super::contract`): every launch satisfies every rule.
+    pub launch: &'static [LaunchRule<'static>],
 }
 
 impl KernelAbi {
@@ -199,6 +204,55 @@ impl KernelAbi {
     /// Length of the packed argument buffer.
     pub fn param_bytes(&self) -> usize {
         packed_len(&self.param_layout())
+    }
+
+    /// Checks a launch over `dim` against the kernel's launch contract, given the shapes of its
+    /// array parameters (by parameter index; `None` for values, structs and arrays not given).
+    /// The error names the kernel, the dimension, the rule and the arrays it reads.
+    pub fn check_launch(&self, dim: &[usize], shapes: &[Option<&[usize]>]) -> Result<(), EnvError> {
+        for rule in self.launch {
+            let Err(violation) = rule.check(dim, shapes) else {
+                continue;
+            };
+            let name = |param: usize| self.params.get(param).map_or("?", |p| p.name);
+            let arrays: Vec<String> = rule
+                .params()
+                .into_iter()
+                .map(|param| match shapes.get(param).copied().flatten() {
+                    Some(shape) => format!("{} {shape:?}", name(param)),
+                    None => format!("{} (not given)", name(param)),
+                })
+                .collect();
+            let reason = match violation {
+                Violation::Bound { dim: extent, bound } => format!(
+                    "dimension {} is {extent}, the contract's bound is {bound}",
+                    rule.axis
+                ),
+                Violation::Axis { axis, dims } => {
+                    format!("the launch has {dims} dimension(s), the rule constrains axis {axis}")
+                }
+                Violation::Missing { param } => format!("array {} was not given", name(param)),
+                Violation::NoAxis { param, axis } => {
+                    format!("array {} has no axis {axis}", name(param))
+                }
+                Violation::Arithmetic => {
+                    "the bound overflows or divides by zero for these arrays".to_owned()
+                }
+            };
+            return Err(EnvError::LaunchContract(Box::new(LaunchContractError {
+                kernel: self.name,
+                module: self.module,
+                dim: dim.to_vec(),
+                rule: rule.text,
+                arrays: if arrays.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", arrays.join(", "))
+                },
+                reason,
+            })));
+        }
+        Ok(())
     }
 }
 
@@ -236,6 +290,24 @@ pub fn array_descriptor(
     out[f.ndim..f.ndim + 2].copy_from_slice(&ndim.to_le_bytes());
     // flags (ARRAY_FLAG_RETAIN_GRAD) stay 0.
     Ok(out)
+}
+
+/// The shape an `array_t` descriptor describes (its `ndim` extents, as non-negative `int`s).
+fn descriptor_shape(descriptor: &[u8; ARRAY_DESCRIPTOR_BYTES]) -> Vec<usize> {
+    let f = ARRAY_LAYOUT.fields;
+    let ndim = u16::from_le_bytes([descriptor[f.ndim], descriptor[f.ndim + 1]]) as usize;
+    (0..ndim.min(MAX_DIMS))
+        .map(|d| {
+            let at = f.shape + 4 * d;
+            let extent = i32::from_le_bytes([
+                descriptor[at],
+                descriptor[at + 1],
+                descriptor[at + 2],
+                descriptor[at + 3],
+            ]);
+            extent.max(0) as usize
+        })
+        .collect()
 }
 
 /// The `launch_bounds_t<shape.len()>` bytes for a launch over `shape`: extents, their product
@@ -277,6 +349,8 @@ pub fn launch_bounds(shape: &[usize]) -> Result<(Vec<u8>, usize), EnvError> {
 pub struct ArgBuffer {
     abi: &'static KernelAbi,
     args: KernelArgs,
+    /// The shape of each array parameter set so far, by parameter index (for the contract).
+    shapes: Vec<Option<Vec<usize>>>,
 }
 
 impl ArgBuffer {
@@ -285,7 +359,15 @@ impl ArgBuffer {
         ArgBuffer {
             abi,
             args: KernelArgs::zeroed(abi.param_bytes()),
+            shapes: vec![None; abi.params.len()],
         }
+    }
+
+    /// Checks a launch over `dim` against the kernel's launch contract with the arrays set so
+    /// far ([`KernelAbi::check_launch`]).
+    pub fn check_launch(&self, dim: &[usize]) -> Result<(), EnvError> {
+        let shapes: Vec<Option<&[usize]>> = self.shapes.iter().map(Option::as_deref).collect();
+        self.abi.check_launch(dim, &shapes)
     }
 
     pub fn abi(&self) -> &'static KernelAbi {
@@ -389,9 +471,11 @@ impl ArgBuffer {
             T::SCALAR,
             T::SHAPE
         );
-        self.put(index, &expected, fits, |dst| {
+        let offset = self.put(index, &expected, fits, |dst| {
             dst.copy_from_slice(descriptor)
-        })
+        })?;
+        self.shapes[index] = Some(descriptor_shape(descriptor));
+        Ok(offset)
     }
 
     /// Sets array parameter `index`: the array's descriptor, with its data pointer written from
