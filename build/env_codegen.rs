@@ -240,7 +240,7 @@ fn write_launcher(
     }
     let _ = writeln!(
         out,
-        "    ) -> Result<(), EnvError> {{\n        let mut args = ArgBuffer::new(&{});",
+        "    ) -> Result<(), EnvError> {{\n        let mut args = ArgBuffer::new(&{})?;",
         const_name(&kernel.name)
     );
     out.push_str(&packing);

@@ -203,7 +203,7 @@ fn launch_contracts_and_directions_are_validated() {
 #[test]
 fn a_launch_that_breaks_its_contract_names_the_kernel_the_dimension_and_the_arrays() {
     // lookup_reference: `dim == extent(out, 0)`, `dim <= len(times)`.
-    let mut args = ArgBuffer::new(&LOOKUP_REFERENCE);
+    let mut args = ArgBuffer::new(&LOOKUP_REFERENCE).unwrap();
     let times = array_descriptor(&[16], 4).unwrap();
     let out = array_descriptor(&[16, 282], 4).unwrap();
     args.set_array_descriptor::<f32>(3, 1, &times).unwrap();
@@ -317,7 +317,7 @@ fn launch_bounds_are_warps_launch_bounds_t() {
 
 #[test]
 fn the_argument_buffer_puts_each_parameter_at_its_offset_and_checks_its_type() {
-    let mut args = ArgBuffer::new(&LOOKUP_REFERENCE);
+    let mut args = ArgBuffer::new(&LOOKUP_REFERENCE).unwrap();
     assert_eq!(args.bytes().len(), 304);
     let table = array_descriptor(&[8 + 2 * 282], 4).unwrap();
     let out = array_descriptor(&[16, 282], 4).unwrap();

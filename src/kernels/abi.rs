@@ -8,7 +8,7 @@
 //! [`launch_bounds_layout`]) and checked there against what env_build.py read from Warp. All
 //! bytes are little-endian, the byte order of every CUDA host and device.
 
-use crate::cuda::KernelArgs;
+use crate::cuda::{ArgLayout, KernelArgs};
 
 use super::contract::Violation;
 use super::error::{EnvError, LaunchContractError};
@@ -206,6 +206,19 @@ impl KernelAbi {
         packed_len(&self.param_layout())
     }
 
+    /// The packed buffer's layout for [`KernelArgs`]: the parameters (as the driver must
+    /// report them) and the device address slots, the data and grad pointers of every
+    /// `array_t` parameter (struct parameters hold no arrays: the generator refuses them).
+    pub fn arg_layout(&self) -> Result<ArgLayout, EnvError> {
+        let f = ARRAY_LAYOUT.fields;
+        let pointers = self
+            .params
+            .iter()
+            .filter(|p| matches!(p.kind, ParamKind::Array { .. }))
+            .flat_map(|p| [p.offset + f.data, p.offset + f.grad]);
+        Ok(ArgLayout::new(self.param_layout(), pointers)?)
+    }
+
     /// Checks a launch over `dim` against the kernel's launch contract, given the shapes of its
     /// array parameters (by parameter index; `None` for values, structs and arrays not given).
     /// The error names the kernel, the dimension, the rule and the arrays it reads.
@@ -354,13 +367,13 @@ pub struct ArgBuffer {
 }
 
 impl ArgBuffer {
-    /// A zeroed buffer of the kernel's parameter size.
-    pub fn new(abi: &'static KernelAbi) -> ArgBuffer {
-        ArgBuffer {
+    /// A zeroed buffer of the kernel's parameter size, laid out by [`KernelAbi::arg_layout`].
+    pub fn new(abi: &'static KernelAbi) -> Result<ArgBuffer, EnvError> {
+        Ok(ArgBuffer {
             abi,
-            args: KernelArgs::zeroed(abi.param_bytes()),
+            args: KernelArgs::new(abi.arg_layout()?),
             shapes: vec![None; abi.params.len()],
-        }
+        })
     }
 
     /// Checks a launch over `dim` against the kernel's launch contract with the arrays set so
@@ -448,9 +461,9 @@ impl ArgBuffer {
         Ok(())
     }
 
-    /// Sets array parameter `index` from a descriptor of an array of `T` with `ndim` dimensions
-    /// (its data pointer as given: null from [`array_descriptor`]); returns the parameter's
-    /// offset.
+    /// Sets array parameter `index` from a descriptor of an array of `T` with `ndim` dimensions,
+    /// with null data and grad pointers (whatever the descriptor holds there: addresses enter
+    /// only from ranges, [`ArgBuffer::set_array`]); returns the parameter's offset.
     pub fn set_array_descriptor<T: Element>(
         &mut self,
         index: usize,
@@ -471,9 +484,16 @@ impl ArgBuffer {
             T::SCALAR,
             T::SHAPE
         );
-        let offset = self.put(index, &expected, fits, |dst| {
-            dst.copy_from_slice(descriptor)
-        })?;
+        let (offset, _) = self.slot_range(index, &expected, fits)?;
+        // The two pointers are address slots: data and grad null here (set_array writes data
+        // from the array's range), then shape, strides, ndim and flags as plain bytes.
+        let f = ARRAY_LAYOUT.fields;
+        self.args.write_null(offset + f.data)?;
+        self.args.write_null(offset + f.grad)?;
+        self.args.write(
+            offset + f.shape,
+            &descriptor[f.shape..ARRAY_DESCRIPTOR_BYTES],
+        )?;
         self.shapes[index] = Some(descriptor_shape(descriptor));
         Ok(offset)
     }
