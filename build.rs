@@ -10,6 +10,10 @@
 #[path = "src/kernels/manifest.rs"]
 mod manifest;
 
+#[allow(dead_code)] // the launchers evaluate contracts; the build only parses them
+#[path = "src/kernels/contract.rs"]
+mod contract;
+
 #[path = "build/env_codegen.rs"]
 mod env_codegen;
 
@@ -102,6 +106,7 @@ fn run() -> Result<(), String> {
     println!("cargo:rerun-if-changed=ptx");
     println!("cargo:rerun-if-changed=build");
     println!("cargo:rerun-if-changed=src/kernels/manifest.rs");
+    println!("cargo:rerun-if-changed=src/kernels/contract.rs");
     embed_assets(&root, &out_dir)?;
     generate_env_kernels(&root, &out_dir)
 }

@@ -6,7 +6,9 @@
 
 use std::fmt::Write as _;
 
-use crate::manifest::{Dtype, EnvManifest, KernelDef, ModuleDef, Slot, SlotType, rust_ident};
+use crate::manifest::{
+    Dtype, EnvManifest, Io, KernelDef, ModuleDef, Op, Rule, Slot, SlotType, rust_ident,
+};
 
 /// A manifest the generator cannot turn into Rust; the message says where and why.
 #[derive(Debug)]
@@ -119,7 +121,7 @@ fn write_struct(
     Ok(())
 }
 
-fn write_abi(out: &mut String, module: &ModuleDef, kernel: &KernelDef) {
+fn write_abi(out: &mut String, module: &ModuleDef, kernel: &KernelDef, rules: &[Rule]) {
     let _ = writeln!(
         out,
         "/// How the `{}` launcher packs its arguments (`{}`).\npub const {}: KernelAbi = KernelAbi {{\n    module: {},\n    ptx: {},\n    name: {},\n    entry: {},\n    dim: {},\n    block_dim: {},\n    smem_bytes: {},\n    params: &[",
@@ -137,15 +139,56 @@ fn write_abi(out: &mut String, module: &ModuleDef, kernel: &KernelDef) {
     for p in &kernel.params {
         let _ = writeln!(
             out,
-            "        ParamAbi {{ name: {}, kind: {}, offset: {}, size: {}, align: {} }},",
+            "        ParamAbi {{ name: {}, kind: {}, offset: {}, size: {}, align: {}, io: Io::{} }},",
             str_lit(&p.name),
             param_kind(p),
             p.offset,
             p.size,
-            p.align
+            p.align,
+            p.io.unwrap_or(Io::In).variant()
+        );
+    }
+    let _ = writeln!(out, "    ],\n    launch: &[");
+    for rule in rules {
+        let ops: Vec<String> = rule.bound.iter().map(Op::rust).collect();
+        let _ = writeln!(
+            out,
+            "        LaunchRule {{ axis: {}, relation: Relation::{}, bound: &[{}], text: {} }},",
+            rule.axis,
+            rule.relation.variant(),
+            ops.join(", "),
+            str_lit(&rule.text)
         );
     }
     let _ = writeln!(out, "    ],\n}};\n");
+}
+
+/// "reads `a`, `b`; writes `c`; updates `d`" for a kernel's array parameters.
+fn array_directions(kernel: &KernelDef) -> String {
+    let names = |io: Io| -> Vec<String> {
+        kernel
+            .params
+            .iter()
+            .filter(|p| matches!(p.ty, SlotType::Array { .. }) && p.io == Some(io))
+            .map(|p| format!("`{}`", p.name))
+            .collect()
+    };
+    let parts: Vec<String> = [
+        (Io::In, "reads"),
+        (Io::Out, "writes"),
+        (Io::InOut, "updates"),
+    ]
+    .into_iter()
+    .filter_map(|(io, verb)| {
+        let list = names(io);
+        (!list.is_empty()).then(|| format!("{verb} {}", list.join(", ")))
+    })
+    .collect();
+    if parts.is_empty() {
+        "none".to_owned()
+    } else {
+        parts.join("; ")
+    }
 }
 
 fn write_launcher(
@@ -166,12 +209,27 @@ fn write_launcher(
     };
     let _ = writeln!(
         out,
-        "    /// `{}` in `{}`, launched over `dim` threads ({} per block) on `stream`.\n    #[allow(clippy::too_many_arguments)]\n    pub fn {name}(\n        &self,\n        stream: &Stream,\n        dim: {dim_type},",
+        "    /// `{}` in `{}`, launched over `dim` threads ({} per block) on `stream`.",
         kernel.name, module.source, kernel.block_dim
+    );
+    let _ = writeln!(
+        out,
+        "    /// Arrays (`_in` read, `_out` written, `_inout` both): {}.\n    /// Launch contract: {}.",
+        array_directions(kernel),
+        kernel
+            .launch
+            .iter()
+            .map(|r| format!("`{r}`"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let _ = writeln!(
+        out,
+        "    #[allow(clippy::too_many_arguments)]\n    pub fn {name}(\n        &self,\n        stream: &Stream,\n        dim: {dim_type},"
     );
     let mut packing = String::new();
     for (index, p) in kernel.params.iter().enumerate() {
-        let arg = ident(&p.name, &place)?;
+        let arg = ident(&p.launcher_name(), &place)?;
         let _ = writeln!(out, "        {arg}: {},", param_type(p));
         let setter = match p.ty {
             SlotType::Value(_) => format!("set_value({index}, &{arg})"),
@@ -182,7 +240,7 @@ fn write_launcher(
     }
     let _ = writeln!(
         out,
-        "    ) -> Result<(), EnvError> {{\n        let mut args = ArgBuffer::new(&{});",
+        "    ) -> Result<(), EnvError> {{\n        let mut args = ArgBuffer::new(&{})?;",
         const_name(&kernel.name)
     );
     out.push_str(&packing);
@@ -203,7 +261,13 @@ pub fn generate(manifest: &EnvManifest) -> Result<String, CodegenError> {
         write_struct(&mut out, name, &def.fields, def.size)?;
     }
     for (module, kernel) in manifest.kernels() {
-        write_abi(&mut out, module, kernel);
+        let rules = kernel.launch_rules().map_err(|reason| {
+            CodegenError(format!(
+                "{}, kernel {}: {reason}",
+                module.source, kernel.name
+            ))
+        })?;
+        write_abi(&mut out, module, kernel, &rules);
     }
     let consts: Vec<String> = manifest
         .kernels()

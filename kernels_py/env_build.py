@@ -13,8 +13,10 @@ manifest keep their names; the PTX itself is still checked byte for byte by `--c
 forbids `strip_hash` for generic kernels with several overloads; env kernels are not generic.)
 
 `ptx/env/manifest.json` describes every kernel: module, entry, launch dimensionality, block size,
-shared memory, and each parameter in order (kind, dtype, array ndim, byte offset, size and
-alignment), plus the layouts of Warp's `launch_bounds_t<N>` and `array_t<T>`. Sizes come from
+shared memory, its launch contract (the rules of the module's `LAUNCH` dict for it), and
+each parameter in order (kind, dtype, array ndim, byte offset, size and alignment, and `io`:
+whether the kernel reads it, writes it or both, derived from the kernel's source and the
+`@wp.func`s it calls), plus the layouts of Warp's `launch_bounds_t<N>` and `array_t<T>`. Sizes come from
 Warp's own ctypes mirrors of its C++ structs and are checked against the `.param` declarations
 NVRTC wrote into the PTX. `build.rs` turns the manifest into typed Rust launchers. The format is
 documented in docs/kernels.md.
@@ -23,6 +25,7 @@ documented in docs/kernels.md.
 from __future__ import annotations
 
 import argparse
+import ast
 import ctypes
 import importlib
 import inspect
@@ -31,6 +34,7 @@ import pathlib
 import re
 import sys
 import tempfile
+import textwrap
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import physics  # noqa: E402
@@ -41,8 +45,9 @@ PACKAGE = "env"
 PTX_DIR = physics.REPO / "ptx"
 OUT_SUBDIR = "env"
 MANIFEST_NAME = "manifest.json"
-# Bump when the manifest's meaning changes; build.rs refuses other formats.
-MANIFEST_FORMAT = 1
+# Bump when the manifest's meaning changes; build.rs refuses other formats. Format 2 added each
+# kernel's launch contract (`launch`) and each parameter's direction (`io`).
+MANIFEST_FORMAT = 2
 
 # Scalar names as Warp spells them (types.py); bfloat16 has no Rust type here and is refused.
 SCALARS = ("bool", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "float16", "float32", "float64")
@@ -166,7 +171,105 @@ def ptx_entry_params(ptx: str, entry: str) -> list[tuple[int, int]]:
     return params
 
 
-def describe_kernel(kernel, module_name: str, ptx: str, meta: dict, block_dim: int, structs: dict) -> dict:
+# Warp builtins that take arrays, by what they do to their first argument: read it, write it, or
+# read-modify-write it (atomics accumulate into what is there). Any other builtin given an array
+# parameter stops the build until it is added here.
+ARRAY_READS = frozenset({"tile_load"})
+ARRAY_WRITES = frozenset({"tile_store"})
+ARRAY_UPDATES = frozenset(
+    {"atomic_add", "atomic_sub", "atomic_min", "atomic_max", "atomic_exch", "atomic_cas", "atomic_and", "atomic_or",
+     "atomic_xor", "tile_atomic_add"}
+)
+
+
+def _function_ast(func) -> ast.FunctionDef:
+    tree = ast.parse(textwrap.dedent(inspect.getsource(func)))
+    node = tree.body[0]
+    if not isinstance(node, ast.FunctionDef):
+        raise EnvBuildError(f"{func.__qualname__}: cannot read its source as a function")
+    return node
+
+
+def array_accesses(func, arrays: list[str], where: str, depth: int = 0) -> dict[str, set[str]]:
+    """What the Python function `func` (a kernel's or a `@wp.func`'s) does with its parameters
+    named in `arrays`: {"read", "write"} subsets, from its source. Element loads and stores,
+    augmented assignments, the builtins above, and `@wp.func` calls (followed into the callee)
+    are understood; any other use of an array parameter (aliasing, an unknown builtin) is an
+    error, so that `io` is never guessed."""
+    from warp._src import context
+
+    if depth > 32:
+        raise EnvBuildError(f"{where}: @wp.func calls nest too deep to follow")
+    node = _function_ast(func)
+    uses: dict[str, set[str]] = {name: set() for name in arrays}
+    handled: set[int] = set()
+
+    def array_name(expr) -> str | None:
+        return expr.id if isinstance(expr, ast.Name) and expr.id in uses else None
+
+    for sub in ast.walk(node):
+        if isinstance(sub, ast.Attribute) and array_name(sub.value) and sub.attr in ("shape", "ndim", "dtype"):
+            handled.add(id(sub.value))
+        elif isinstance(sub, ast.Subscript) and (name := array_name(sub.value)):
+            handled.add(id(sub.value))
+            uses[name].add("write" if isinstance(sub.ctx, ast.Store) else "read")
+        elif isinstance(sub, ast.AugAssign) and isinstance(sub.target, ast.Subscript):
+            if name := array_name(sub.target.value):
+                uses[name].add("read")
+        elif isinstance(sub, ast.Call):
+            call_args = list(sub.args) + [k.value for k in sub.keywords]
+            passed = [a for a in call_args if array_name(a)]
+            if not passed:
+                continue
+            target = sub.func
+            if isinstance(target, ast.Attribute) and isinstance(target.value, ast.Name) and target.value.id == "wp":
+                builtin = target.attr
+                first = sub.args[0] if sub.args else None
+                if builtin in ARRAY_READS | ARRAY_WRITES | ARRAY_UPDATES and first is not None and array_name(first):
+                    if builtin not in ARRAY_WRITES:
+                        uses[first.id].add("read")
+                    if builtin not in ARRAY_READS:
+                        uses[first.id].add("write")
+                    handled.add(id(first))
+                    if len(passed) == 1:
+                        continue
+                raise EnvBuildError(
+                    f"{where}: wp.{builtin} takes array parameter(s) {[a.id for a in passed]} at line "
+                    f"{sub.lineno} of {func.__qualname__}; add it to ARRAY_READS / ARRAY_WRITES / ARRAY_UPDATES in "
+                    "kernels_py/env_build.py"
+                )
+            callee = func.__globals__.get(target.id) if isinstance(target, ast.Name) else None
+            if not isinstance(callee, context.Function) or getattr(callee, "func", None) is None:
+                raise EnvBuildError(
+                    f"{where}: {ast.unparse(target)} takes array parameter(s) {[a.id for a in passed]} at line "
+                    f"{sub.lineno} of {func.__qualname__}, and is neither a @wp.func nor a builtin env_build.py knows"
+                )
+            callee_params = [a.arg for a in _function_ast(callee.func).args.args]
+            bound = dict(zip(callee_params, sub.args))
+            bound.update({k.arg: k.value for k in sub.keywords})
+            mapping = {param: arg.id for param, arg in bound.items() if array_name(arg)}
+            inner = array_accesses(callee.func, list(mapping), where, depth + 1)
+            for param, caller_name in mapping.items():
+                uses[caller_name] |= inner[param]
+            handled.update(id(a) for a in passed)
+    for sub in ast.walk(node):
+        if isinstance(sub, ast.Name) and sub.id in uses and id(sub) not in handled:
+            raise EnvBuildError(
+                f"{where}: array parameter {sub.id} is used at line {sub.lineno} of {func.__qualname__} in a way "
+                "env_build.py cannot follow (aliased, or passed to something unknown), so its `io` cannot be derived"
+            )
+    return uses
+
+
+def _io(accesses: set[str]) -> str:
+    if accesses == {"read", "write"}:
+        return "inout"
+    return "out" if accesses == {"write"} else "in"
+
+
+def describe_kernel(
+    kernel, module_name: str, ptx: str, meta: dict, block_dim: int, structs: dict, launch_contracts: dict
+) -> dict:
     from warp._src import codegen
 
     where = f"kernels_py/env/{module_name}.py, kernel {kernel.key}"
@@ -192,6 +295,17 @@ def describe_kernel(kernel, module_name: str, ptx: str, meta: dict, block_dim: i
             f"{where}: the PTX declares parameters (size, align) {declared}, the description says {described}: "
             "Warp's ABI changed; update env_build.py and the Rust side together"
         )
+    arrays = [p["name"] for p in params if p["kind"] == "array"]
+    accesses = array_accesses(kernel.func, arrays, where)
+    for param in params:
+        param["io"] = _io(accesses[param["name"]]) if param["kind"] == "array" else "in"
+    launch = launch_contracts.get(kernel.key)
+    if not launch or not all(isinstance(rule, str) and rule.strip() for rule in launch):
+        raise EnvBuildError(
+            f"{where}: no launch contract; add the kernel to the module's LAUNCH dict at the end of the file, "
+            "with rules saying what its launch dimension must equal or not exceed (docs/kernels.md, "
+            '"Launch contracts")'
+        )
     doc = inspect.getdoc(kernel.func) or ""
     return {
         "name": kernel.key,
@@ -201,6 +315,7 @@ def describe_kernel(kernel, module_name: str, ptx: str, meta: dict, block_dim: i
         "smem_bytes": int(meta.get(f"{entry}_smem_bytes", 0)),
         "doc": doc,
         "params": params,
+        "launch": list(launch),
     }
 
 
@@ -208,10 +323,14 @@ def compile_env_module(name: str, workdir: pathlib.Path, structs: dict) -> tuple
     """PTX of kernels_py/env/<name>.py and its manifest entry, or (b"", None) without kernels."""
     import warp as wp
 
-    importlib.import_module(f"{PACKAGE}.{name}")
+    py_module = importlib.import_module(f"{PACKAGE}.{name}")
     module = wp.get_module(f"{PACKAGE}.{name}")
+    launch_contracts = getattr(py_module, "LAUNCH", {})
     if not module.kernels:
         return b"", None
+    unknown = sorted(set(launch_contracts) - set(module.kernels))
+    if unknown:
+        raise EnvBuildError(f"kernels_py/env/{name}.py: LAUNCH names {unknown}, which are not kernels of the module")
     for kernel in module.kernels.values():
         where = f"kernels_py/env/{name}.py, kernel {kernel.key}"
         if kernel.is_generic:
@@ -232,7 +351,7 @@ def compile_env_module(name: str, workdir: pathlib.Path, structs: dict) -> tuple
     meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
     text = ptx.rstrip(b"\0").decode("utf-8")
     block_dim = int(module.options["block_dim"])
-    kernels = [describe_kernel(k, name, text, meta, block_dim, structs) for k in module.kernels.values()]
+    kernels = [describe_kernel(k, name, text, meta, block_dim, structs, launch_contracts) for k in module.kernels.values()]
     entry = {
         "name": name,
         "source": f"kernels_py/env/{name}.py",

@@ -145,7 +145,88 @@ fn the_generated_launchers_match_the_manifest() {
         }
         assert_eq!(abi.param_layout(), k.param_layout());
         assert_eq!(abi.param_bytes(), k.param_bytes());
+        for (p, slot) in abi.params.iter().zip(&k.params) {
+            assert_eq!(Some(p.io), slot.io, "{}.{}", k.name, p.name);
+        }
+        let rules = k.launch_rules().unwrap();
+        assert_eq!(abi.launch.len(), rules.len());
+        for (generated, rule) in abi.launch.iter().zip(&rules) {
+            assert_eq!(*generated, rule.as_launch_rule(), "{}", k.name);
+        }
     }
+}
+
+#[test]
+fn every_kernel_has_a_launch_contract_covering_each_launch_axis() {
+    for (_, k) in manifest().kernels() {
+        let rules = k.launch_rules().unwrap();
+        for axis in 0..k.dim {
+            assert!(
+                rules.iter().any(|r| r.axis == axis),
+                "{}: no rule for axis {axis}",
+                k.name
+            );
+        }
+    }
+}
+
+#[test]
+fn launch_contracts_and_directions_are_validated() {
+    for (rules, expected) in [
+        (json!([]), "no launch rule for axis 0"),
+        (json!(["dim == extent(nothing, 0)"]), "no parameter nothing"),
+        (
+            json!(["dim == extent(table, 1)"]),
+            "axis 1 of parameter table",
+        ),
+        (json!(["dim <= len(table) * "]), "found the end"),
+        (json!(["dim[1] == len(table)"]), "axis 1 of a 1-D launch"),
+        (json!(["threads == len(table)"]), "expected `dim`"),
+        (json!(["dim != len(table)"]), "unexpected '!'"),
+    ] {
+        let err =
+            parse_edited(|v| v["modules"][0]["kernels"][0]["launch"] = rules.clone()).unwrap_err();
+        let err = err.to_string();
+        assert!(err.contains(expected), "{rules}: {err}");
+        assert!(err.contains("pd_control"), "{err}");
+    }
+    let err = parse_edited(|v| {
+        let p = first_param(v, 0).as_object_mut().unwrap();
+        p.remove("io");
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("no `io`"), "{err}");
+    let err = parse_edited(|v| first_param(v, 0)["io"] = json!("sideways")).unwrap_err();
+    assert!(matches!(err, ManifestError::Json(_)), "{err}");
+}
+
+#[test]
+fn a_launch_that_breaks_its_contract_names_the_kernel_the_dimension_and_the_arrays() {
+    // lookup_reference: `dim == extent(out, 0)`, `dim <= len(times)`.
+    let mut args = ArgBuffer::new(&LOOKUP_REFERENCE).unwrap();
+    let times = array_descriptor(&[16], 4).unwrap();
+    let out = array_descriptor(&[16, 282], 4).unwrap();
+    args.set_array_descriptor::<f32>(3, 1, &times).unwrap();
+    let err = args.check_launch(&[16]).unwrap_err().to_string();
+    assert!(err.contains("out (not given)"), "{err}");
+    args.set_array_descriptor::<f32>(4, 2, &out).unwrap();
+    args.check_launch(&[16]).unwrap();
+    let err = args.check_launch(&[17]).unwrap_err().to_string();
+    for expected in [
+        "kernel lookup_reference",
+        "[17]",
+        "`dim == extent(out, 0)`",
+        "out [16, 282]",
+        "is 17, the contract's bound is 16",
+        "LAUNCH at the end of kernels_py/env/reference.py",
+    ] {
+        assert!(err.contains(expected), "missing {expected:?} in {err}");
+    }
+    let short = array_descriptor(&[8], 4).unwrap();
+    args.set_array_descriptor::<f32>(3, 1, &short).unwrap();
+    let err = args.check_launch(&[16]).unwrap_err().to_string();
+    assert!(err.contains("`dim <= len(times)`"), "{err}");
+    assert!(err.contains("times [8]"), "{err}");
 }
 
 #[test]
@@ -236,7 +317,7 @@ fn launch_bounds_are_warps_launch_bounds_t() {
 
 #[test]
 fn the_argument_buffer_puts_each_parameter_at_its_offset_and_checks_its_type() {
-    let mut args = ArgBuffer::new(&LOOKUP_REFERENCE);
+    let mut args = ArgBuffer::new(&LOOKUP_REFERENCE).unwrap();
     assert_eq!(args.bytes().len(), 304);
     let table = array_descriptor(&[8 + 2 * 282], 4).unwrap();
     let out = array_descriptor(&[16, 282], 4).unwrap();
@@ -276,9 +357,9 @@ fn first_param(v: &mut Value, index: usize) -> &mut Value {
 
 #[test]
 fn manifest_validation_says_what_is_wrong() {
-    let err = parse_edited(|v| v["format"] = json!(2)).unwrap_err();
+    let err = parse_edited(|v| v["format"] = json!(1)).unwrap_err();
     assert!(
-        matches!(err, ManifestError::Format { found: 2, .. }),
+        matches!(err, ManifestError::Format { found: 1, .. }),
         "{err}"
     );
 
@@ -415,7 +496,7 @@ fn the_python_lookup_uses_the_tables_constants() {
 fn synthetic_manifest(struct_fields: Value) -> Value {
     let abi: Value = serde_json::from_str::<Value>(manifest_text()).unwrap()["abi"].clone();
     json!({
-        "format": 1,
+        "format": 2,
         "warp_version": "1.19.0",
         "ptx_arch": 80,
         "abi": abi,
@@ -431,12 +512,13 @@ fn synthetic_manifest(struct_fields: Value) -> Value {
                 "block_dim": 128,
                 "smem_bytes": 0,
                 "doc": "Rewards.\n\nOne per env and term.",
+                "launch": ["dim[0] == extent(pos, 0)", "dim[1] <= cdiv(extent(pos, 1) + 1, 2)"],
                 "params": [
-                    {"name": "pos", "kind": "array", "dtype": {"warp": "vec3f", "scalar": "float32", "shape": [3]}, "ndim": 2, "size": 56, "align": 8, "offset": 24},
-                    {"name": "weights", "kind": "struct", "struct": "RewardWeights", "size": 20, "align": 4, "offset": 80},
-                    {"name": "scale", "kind": "scalar", "dtype": {"warp": "float64", "scalar": "float64", "shape": []}, "size": 8, "align": 8, "offset": 104},
-                    {"name": "rotation", "kind": "vector", "dtype": {"warp": "mat33f", "scalar": "float32", "shape": [3, 3]}, "size": 36, "align": 4, "offset": 112},
-                    {"name": "type", "kind": "scalar", "dtype": {"warp": "bool", "scalar": "bool", "shape": []}, "size": 1, "align": 1, "offset": 148}
+                    {"name": "pos", "kind": "array", "dtype": {"warp": "vec3f", "scalar": "float32", "shape": [3]}, "ndim": 2, "size": 56, "align": 8, "offset": 24, "io": "in"},
+                    {"name": "weights", "kind": "struct", "struct": "RewardWeights", "size": 20, "align": 4, "offset": 80, "io": "in"},
+                    {"name": "scale", "kind": "scalar", "dtype": {"warp": "float64", "scalar": "float64", "shape": []}, "size": 8, "align": 8, "offset": 104, "io": "in"},
+                    {"name": "rotation", "kind": "vector", "dtype": {"warp": "mat33f", "scalar": "float32", "shape": [3, 3]}, "size": 36, "align": 4, "offset": 112, "io": "in"},
+                    {"name": "type", "kind": "scalar", "dtype": {"warp": "bool", "scalar": "bool", "shape": []}, "size": 1, "align": 1, "offset": 148, "io": "in"}
                 ]
             }]
         }]
@@ -469,12 +551,12 @@ fn the_generator_handles_structs_values_and_two_dimensional_launches() {
         "    const SIZE: usize = 20;",
         "    pub fn compute_reward(",
         "        dim: [usize; 2],",
-        "        pos: &DeviceArray<[f32; 3], 2>,",
+        "        pos_in: &DeviceArray<[f32; 3], 2>,",
         "        weights: &RewardWeights,",
         "        scale: f64,",
         "        rotation: [[f32; 3]; 3],",
         "        r#type: bool,",
-        "        args.set_array(0, pos)?;",
+        "        args.set_array(0, pos_in)?;",
         "        args.set_struct(1, weights)?;",
         "        args.set_value(2, &scale)?;",
         "        args.set_value(4, &r#type)?;",
@@ -482,6 +564,9 @@ fn the_generator_handles_structs_values_and_two_dimensional_launches() {
         "    /// Rewards.\n    ///\n    /// One per env and term.",
         "kind: ParamKind::Value { scalar: ScalarType::Float32, shape: &[3, 3] }, offset: 112, size: 36, align: 4",
         "compute_reward: bind_kernel(&module_0, &COMPUTE_REWARD)?,",
+        "io: Io::In },",
+        "LaunchRule { axis: 0, relation: Relation::Equal, bound: &[Op::Extent { param: 0, axis: 0 }], text: \"dim[0] == extent(pos, 0)\" },",
+        "LaunchRule { axis: 1, relation: Relation::AtMost, bound: &[Op::Extent { param: 0, axis: 1 }, Op::Const(1), Op::Add, Op::Const(2), Op::CeilDiv], text: \"dim[1] <= cdiv(extent(pos, 1) + 1, 2)\" },",
         "let module_0 = load_module(gpu, \"env/reward.ptx\")?;",
     ] {
         assert!(src.contains(expected), "missing {expected:?} in:\n{src}");

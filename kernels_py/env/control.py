@@ -91,3 +91,18 @@ def pd_control(
         angle = base + s * actions[n, m]
         damping = dof_damping[d] * qvel[n, d]
         ctrl[n, m] = wp.clamp(kp * (angle - qpos[n, a]) - damping, -limit, limit) + damping
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "pd_control": (
+        "dim == extent(ctrl, 0) * extent(joint_kind, 0)",
+        "dim <= extent(actions, 0) * extent(joint_kind, 0)",
+        "dim <= extent(qpos, 0) * extent(joint_kind, 0)",
+        "dim <= extent(qvel, 0) * extent(joint_kind, 0)",
+        "dim <= len(ref_time) * extent(joint_kind, 0)",
+    ),
+}

@@ -109,3 +109,23 @@ def evaluation_accumulate(
         status[n] = FAILED
     elif truncated[t, n] != 0:
         status[n] = COMPLETED
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "evaluation_accumulate": (
+        "dim == len(status)",
+        "dim <= len(steps)",
+        "dim <= extent(sums, 0)",
+        "dim <= extent(qpos, 0)",
+        "dim <= extent(xpos, 0)",
+        "dim <= extent(xquat, 0)",
+        "dim <= len(ref_time)",
+        "dim <= extent(rewards, 1)",
+        "dim <= extent(terminated, 1)",
+        "dim <= extent(truncated, 1)",
+    ),
+}

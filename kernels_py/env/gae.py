@@ -116,3 +116,23 @@ def value_statistics_update(
     value_stats[1] = value_stats[1] + delta * nb / total
     value_stats[2] = value_stats[2] + m2b + delta * delta * na * nb / total
     value_stats[0] = total
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "gae_advantages": (
+        "dim == extent(advantages, 1)",
+        "dim <= extent(returns, 1)",
+        "dim <= extent(rewards, 1)",
+        "dim <= extent(values, 1)",
+        "dim <= extent(last_values, 0)",
+        "dim <= extent(terminated, 1)",
+        "dim <= extent(truncated, 1)",
+    ),
+    "value_statistics_update": (
+        "dim >= 1",
+    ),
+}

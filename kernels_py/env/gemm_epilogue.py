@@ -57,3 +57,21 @@ def elu_input_gradient(g: wp.array2d(dtype=wp.float32), y: wp.array2d(dtype=wp.f
     i = tid // k
     j = tid - i * k
     y[i, j] = elu_backward(g[i, j], y[i, j])
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "bias_elu": (
+        "dim == len(y)",
+    ),
+    "bias_add": (
+        "dim == len(y)",
+    ),
+    "elu_input_gradient": (
+        "dim == len(y)",
+        "dim <= extent(g, 0) * extent(y, 1)",
+    ),
+}

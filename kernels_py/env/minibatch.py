@@ -148,3 +148,24 @@ def gather_minibatch(
         mb_values[i] = value
         mb_returns[i] = ret
         mb_advantages[i] = wp.float32((wp.float64(advantages[t, n]) - stats[0]) / (stats[1] + wp.float64(ADVANTAGE_EPSILON)))
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "shuffle_indices": (
+        "dim == len(permutation)",
+    ),
+    "gather_minibatch": (
+        "dim == len(mb_log_probs) * max(extent(observations, 2), extent(actions, 2))",
+        "dim <= extent(mb_observations, 0) * max(extent(observations, 2), extent(actions, 2))",
+        "dim <= extent(mb_actions, 0) * max(extent(observations, 2), extent(actions, 2))",
+        "dim <= extent(mb_means, 0) * max(extent(observations, 2), extent(actions, 2))",
+        "dim <= len(mb_values) * max(extent(observations, 2), extent(actions, 2))",
+        "dim <= len(mb_advantages) * max(extent(observations, 2), extent(actions, 2))",
+        "dim <= len(mb_returns) * max(extent(observations, 2), extent(actions, 2))",
+        "dim <= len(permutation) * max(extent(observations, 2), extent(actions, 2))",
+    ),
+}

@@ -97,3 +97,19 @@ def linear_backward_input_elu(
         wp.tile_matmul(g, wp.tile_transpose(ws), acc)
     y = wp.tile_load(y_prev, shape=(TILE_M, TILE_N), offset=(i * TILE_M, j * TILE_N), storage="shared")
     wp.tile_store(y_prev, wp.tile_map(elu_backward, acc, y), offset=(i * TILE_M, j * TILE_N))
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "linear_backward_weight": (
+        "dim[0] <= cdiv(extent(dw, 0), 64) * cdiv(extent(dw, 1), 64) * max(cdiv(extent(x, 0), 32), 1)",
+        "dim[1] == 128",
+    ),
+    "linear_backward_input_elu": (
+        "dim[0] == cdiv(extent(y_prev, 0), 64) * cdiv(extent(y_prev, 1), 64)",
+        "dim[1] == 128",
+    ),
+}

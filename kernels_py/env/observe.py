@@ -218,3 +218,36 @@ def observation_normalize(
     x = wp.clamp(x, -clip, clip)
     normalized[n, d] = x
     storage[row, n, d] = x
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "observe": (
+        "dim == extent(obs, 0)",
+        "dim <= extent(qpos, 0)",
+        "dim <= extent(qvel, 0)",
+        "dim <= extent(xpos, 0)",
+        "dim <= extent(xquat, 0)",
+        "dim <= extent(cvel, 0)",
+        "dim <= extent(subtree_com, 0)",
+        "dim <= len(ref_time)",
+        "dim <= extent(actions, 0)",
+    ),
+    "observation_moments": (
+        "dim == cdiv(extent(obs, 0), 64) * extent(obs, 1)",
+    ),
+    "observation_moments_merge": (
+        "dim == len(mean)",
+        "dim <= len(m2)",
+        "dim <= len(batch_sum)",
+        "dim <= len(batch_sum_sq)",
+    ),
+    "observation_normalize": (
+        "dim == len(obs)",
+        "dim <= extent(normalized, 0) * extent(obs, 1)",
+        "dim <= extent(storage, 1) * extent(obs, 1)",
+    ),
+}

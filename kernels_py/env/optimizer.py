@@ -106,3 +106,20 @@ def adam_update(
     step_size = wp.float32(wp.float64(learning_rate[0]) / bias1)
     denom = wp.sqrt(v) / wp.float32(wp.sqrt(bias2)) + hp.epsilon
     params[i] = params[i] - step_size * m / denom
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "ppo_minibatch_schedule": (
+        "dim >= 1",
+    ),
+    "adam_update": (
+        "dim == len(params)",
+        "dim <= len(grads)",
+        "dim <= len(moment1)",
+        "dim <= len(moment2)",
+    ),
+}

@@ -130,3 +130,26 @@ def gaussian_sample(
         log_prob += -0.5 * g * g - log_std[j] - HALF_LOG_TWO_PI
     stored_log_probs[t, n] = log_prob
     stored_values[t, n] = value[n, 0]
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "linear_elu": (
+        "dim == cdiv(extent(y, 0), 64) * cdiv(extent(y, 1), 64) * 128",
+    ),
+    "linear": (
+        "dim == cdiv(extent(y, 0), 64) * cdiv(extent(y, 1), 64) * 128",
+    ),
+    "gaussian_sample": (
+        "dim == extent(actions, 0)",
+        "dim <= extent(mean, 0)",
+        "dim <= extent(value, 0)",
+        "dim <= extent(stored_actions, 1)",
+        "dim <= extent(stored_log_probs, 1)",
+        "dim <= extent(stored_values, 1)",
+        "dim <= extent(stored_means, 1)",
+    ),
+}

@@ -147,3 +147,24 @@ def ppo_loss_gradients(
         z = (actions[i, j] - mean[i, j]) * inv_std
         d_mean[i, j] = g * z * inv_std
         terms[i, LOSS_TERMS + j] = g * (z * z - 1.0)
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "ppo_loss_gradients": (
+        "dim == extent(mean, 0)",
+        "dim <= extent(value, 0)",
+        "dim <= extent(actions, 0)",
+        "dim <= extent(old_means, 0)",
+        "dim <= len(old_log_probs)",
+        "dim <= len(old_values)",
+        "dim <= len(advantages)",
+        "dim <= len(returns)",
+        "dim <= extent(d_mean, 0)",
+        "dim <= extent(d_value, 0)",
+        "dim <= extent(terms, 0)",
+    ),
+}

@@ -74,3 +74,14 @@ def ppo_update_statistics(
     stats[STAT_ADVANTAGE_MEAN] = wp.float32(adv[0])
     stats[STAT_ADVANTAGE_STD] = wp.float32(adv[1])
     stats[STAT_UPDATES] = float(counter)
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "ppo_update_statistics": (
+        "dim >= 1",
+    ),
+}

@@ -84,3 +84,23 @@ def sum_and_squares(
     t = wp.tile_astype(wp.tile_load(x, shape=SUM_CHUNK, offset=block * SUM_CHUNK), wp.float64)
     wp.tile_atomic_add(out, wp.tile_sum(t), offset=0)
     wp.tile_atomic_add(out, wp.tile_sum(wp.tile_map(square64, t)), offset=1)
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "column_sums": (
+        "dim[0] <= cdiv(extent(x, 1), 64) * cdiv(extent(x, 0), 64)",
+        "dim[1] == 128",
+    ),
+    "sum_of_squares": (
+        "dim[0] == cdiv(len(x), 2048)",
+        "dim[1] == 128",
+    ),
+    "sum_and_squares": (
+        "dim[0] == cdiv(len(x), 2048)",
+        "dim[1] == 128",
+    ),
+}

@@ -219,3 +219,15 @@ def lookup_reference(
             p = reference_position(table, at, o)
             for c in range(3):
                 out[i, o + c] = p[c]
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "lookup_reference": (
+        "dim == extent(out, 0)",
+        "dim <= len(times)",
+    ),
+}

@@ -155,3 +155,24 @@ def phase_statistics_update(
         phase_failures[b] = phase_failures[b] * decay
     phase_cdf[bins - 1] = 1.0
     iteration[0] = iteration[0] + 1
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "reset_masked": (
+        "dim == len(done)",
+        "dim <= extent(qpos, 0)",
+        "dim <= extent(qvel, 0)",
+        "dim <= extent(ctrl, 0)",
+        "dim <= extent(qacc_warmstart, 0)",
+        "dim <= len(ref_time)",
+        "dim <= len(episode_step)",
+        "dim <= extent(actions, 0)",
+    ),
+    "phase_statistics_update": (
+        "dim >= 1",
+    ),
+}

@@ -73,3 +73,23 @@ def rollout_statistics(
     wp.atomic_add(totals, REWARD_SUM, wp.float64(reward_sum[n]))
     wp.atomic_add(totals, STEPS, wp.float64(horizon))
     reward_sum[n] = 0.0
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "episode_statistics": (
+        "dim == len(running_return)",
+        "dim <= len(reward_sum)",
+        "dim <= extent(rewards, 1)",
+        "dim <= extent(terminated, 1)",
+        "dim <= extent(truncated, 1)",
+        "dim <= len(episode_step)",
+        "dim <= len(failure)",
+    ),
+    "rollout_statistics": (
+        "dim == len(reward_sum)",
+    ),
+}

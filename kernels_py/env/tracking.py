@@ -226,3 +226,26 @@ def reward_termination(
         wp.atomic_add(phase_failures, b, 1.0)
     ref_time[n] = t_ref
     episode_step[n] = step + 1
+
+# Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
+# dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
+# writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
+# Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
+# above a kernel would change its PTX.
+LAUNCH = {
+    "reward_termination": (
+        "dim == len(done)",
+        "dim <= extent(qpos, 0)",
+        "dim <= extent(qvel, 0)",
+        "dim <= extent(xpos, 0)",
+        "dim <= extent(xquat, 0)",
+        "dim <= extent(subtree_com, 0)",
+        "dim <= len(ref_time)",
+        "dim <= len(episode_step)",
+        "dim <= extent(rewards, 1)",
+        "dim <= extent(terminated, 1)",
+        "dim <= extent(truncated, 1)",
+        "dim <= len(failure)",
+        "dim <= extent(errors, 0)",
+    ),
+}

@@ -78,6 +78,11 @@ impl Stream {
     /// [`Function::param_bytes`] long, passed through `CU_LAUNCH_PARAM_BUFFER_POINTER`. The
     /// driver copies the buffer during the call. Inside a capture, the graph keeps the module
     /// and every allocation `args` addresses alive.
+    ///
+    /// Refused unless every address slot of `args` was written from a range (or null) and its
+    /// layout's parameters are the ones the driver reports for `f` (`cuFuncGetParamInfo`): so
+    /// the bytes the kernel reads as addresses are addresses of live allocations, as far as the
+    /// layout says which bytes those are (`super::args`, what stays trusted).
     pub fn launch(
         &self,
         f: &Function,
@@ -96,6 +101,7 @@ impl Stream {
                 ),
             });
         }
+        args.check_filled()?;
         if packed_args.len() != f.param_bytes() {
             // The driver answers a wrong size with unrelated errors (a buffer 4 bytes too long
             // gave CUDA_ERROR_LAUNCH_OUT_OF_RESOURCES on driver 580), so check it here.
@@ -108,6 +114,18 @@ impl Stream {
                     f.param_bytes(),
                     f.param_layout(),
                     packed_args.len()
+                ),
+            });
+        }
+        if args.layout().params() != f.param_layout() {
+            return Err(CudaError::InvalidArgument {
+                operation: "Stream::launch",
+                reason: format!(
+                    "kernel {} of module {}: the driver reports parameters {:?} (offset, size), the arguments are laid out as {:?}",
+                    f.entry(),
+                    f.module_name(),
+                    f.param_layout(),
+                    args.layout().params()
                 ),
             });
         }
@@ -166,6 +184,14 @@ impl Stream {
         // `extra` follows the documented key/value layout ending with CU_LAUNCH_PARAM_END, and the
         // buffer and size it points to live until the call returns (the driver copies them);
         // kernelParams is null as required when `extra` is used; the context is current.
+        // What the kernel then does with the bytes is the caller's argument: from
+        // `Stream::launch`, the buffer has the driver's parameter layout for `f` and every byte
+        // its `ArgLayout` marks as an address holds the address of a live range (or null), so
+        // the kernel dereferences device memory of this context, kept alive by the graph inside
+        // a capture. That the layout marks every byte the kernel reads as an address is trusted,
+        // not checked: the env manifest and Warp's relocations say so (docs/architecture.md).
+        // Within those addresses, how far a kernel indexes is its launch contract's matter
+        // (checked by the env launchers), not this call's.
         unsafe {
             sys::cuLaunchKernel(
                 f,

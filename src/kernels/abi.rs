@@ -10,13 +10,14 @@
 
 use zerocopy::{Immutable, IntoBytes, TryFromBytes};
 
-use crate::cuda::KernelArgs;
+use crate::cuda::{ArgLayout, KernelArgs};
 
-use super::error::EnvError;
-pub use super::manifest::ScalarType;
+use super::contract::Violation;
+use super::error::{EnvError, LaunchContractError};
 use super::manifest::{
     ARRAY_LAYOUT, MAX_DIMS, kernel_param_layout, launch_bounds_layout, packed_len,
 };
+pub use super::manifest::{Io, LaunchRule, Op, Relation, ScalarType};
 
 /// Bytes of Warp's `array_t<T>` descriptor.
 pub const ARRAY_DESCRIPTOR_BYTES: usize = ARRAY_LAYOUT.size;
@@ -130,6 +131,8 @@ pub struct ParamAbi {
     pub offset: usize,
     pub size: usize,
     pub align: usize,
+    /// What the kernel does with it (arrays; values and structs are inputs).
+    pub io: Io,
 }
 
 /// A kernel as the generated launchers pack it: `build.rs` writes one per manifest kernel.
@@ -151,6 +154,8 @@ pub struct KernelAbi {
     pub smem_bytes: u32,
     /// Parameters after `launch_bounds_t<dim>`.
     pub params: &'static [ParamAbi],
+    /// The launch contract (`super::contract`): every launch satisfies every rule.
+    pub launch: &'static [LaunchRule<'static>],
 }
 
 impl KernelAbi {
@@ -162,6 +167,68 @@ impl KernelAbi {
     /// Length of the packed argument buffer.
     pub fn param_bytes(&self) -> usize {
         packed_len(&self.param_layout())
+    }
+
+    /// The packed buffer's layout for [`KernelArgs`]: the parameters (as the driver must
+    /// report them) and the device address slots, the data and grad pointers of every
+    /// `array_t` parameter (struct parameters hold no arrays: the generator refuses them).
+    pub fn arg_layout(&self) -> Result<ArgLayout, EnvError> {
+        let f = ARRAY_LAYOUT.fields;
+        let pointers = self
+            .params
+            .iter()
+            .filter(|p| matches!(p.kind, ParamKind::Array { .. }))
+            .flat_map(|p| [p.offset + f.data, p.offset + f.grad]);
+        Ok(ArgLayout::new(self.param_layout(), pointers)?)
+    }
+
+    /// Checks a launch over `dim` against the kernel's launch contract, given the shapes of its
+    /// array parameters (by parameter index; `None` for values, structs and arrays not given).
+    /// The error names the kernel, the dimension, the rule and the arrays it reads.
+    pub fn check_launch(&self, dim: &[usize], shapes: &[Option<&[usize]>]) -> Result<(), EnvError> {
+        for rule in self.launch {
+            let Err(violation) = rule.check(dim, shapes) else {
+                continue;
+            };
+            let name = |param: usize| self.params.get(param).map_or("?", |p| p.name);
+            let arrays: Vec<String> = rule
+                .params()
+                .into_iter()
+                .map(|param| match shapes.get(param).copied().flatten() {
+                    Some(shape) => format!("{} {shape:?}", name(param)),
+                    None => format!("{} (not given)", name(param)),
+                })
+                .collect();
+            let reason = match violation {
+                Violation::Bound { dim: extent, bound } => format!(
+                    "dimension {} is {extent}, the contract's bound is {bound}",
+                    rule.axis
+                ),
+                Violation::Axis { axis, dims } => {
+                    format!("the launch has {dims} dimension(s), the rule constrains axis {axis}")
+                }
+                Violation::Missing { param } => format!("array {} was not given", name(param)),
+                Violation::NoAxis { param, axis } => {
+                    format!("array {} has no axis {axis}", name(param))
+                }
+                Violation::Arithmetic => {
+                    "the bound overflows or divides by zero for these arrays".to_owned()
+                }
+            };
+            return Err(EnvError::LaunchContract(Box::new(LaunchContractError {
+                kernel: self.name,
+                module: self.module,
+                dim: dim.to_vec(),
+                rule: rule.text,
+                arrays: if arrays.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", arrays.join(", "))
+                },
+                reason,
+            })));
+        }
+        Ok(())
     }
 }
 
@@ -199,6 +266,24 @@ pub fn array_descriptor(
     out[f.ndim..f.ndim + 2].copy_from_slice(&ndim.to_le_bytes());
     // flags (ARRAY_FLAG_RETAIN_GRAD) stay 0.
     Ok(out)
+}
+
+/// The shape an `array_t` descriptor describes (its `ndim` extents, as non-negative `int`s).
+fn descriptor_shape(descriptor: &[u8; ARRAY_DESCRIPTOR_BYTES]) -> Vec<usize> {
+    let f = ARRAY_LAYOUT.fields;
+    let ndim = u16::from_le_bytes([descriptor[f.ndim], descriptor[f.ndim + 1]]) as usize;
+    (0..ndim.min(MAX_DIMS))
+        .map(|d| {
+            let at = f.shape + 4 * d;
+            let extent = i32::from_le_bytes([
+                descriptor[at],
+                descriptor[at + 1],
+                descriptor[at + 2],
+                descriptor[at + 3],
+            ]);
+            extent.max(0) as usize
+        })
+        .collect()
 }
 
 /// The `launch_bounds_t<shape.len()>` bytes for a launch over `shape`: extents, their product
@@ -240,15 +325,25 @@ pub fn launch_bounds(shape: &[usize]) -> Result<(Vec<u8>, usize), EnvError> {
 pub struct ArgBuffer {
     abi: &'static KernelAbi,
     args: KernelArgs,
+    /// The shape of each array parameter set so far, by parameter index (for the contract).
+    shapes: Vec<Option<Vec<usize>>>,
 }
 
 impl ArgBuffer {
-    /// A zeroed buffer of the kernel's parameter size.
-    pub fn new(abi: &'static KernelAbi) -> ArgBuffer {
-        ArgBuffer {
+    /// A zeroed buffer of the kernel's parameter size, laid out by [`KernelAbi::arg_layout`].
+    pub fn new(abi: &'static KernelAbi) -> Result<ArgBuffer, EnvError> {
+        Ok(ArgBuffer {
             abi,
-            args: KernelArgs::zeroed(abi.param_bytes()),
-        }
+            args: KernelArgs::new(abi.arg_layout()?),
+            shapes: vec![None; abi.params.len()],
+        })
+    }
+
+    /// Checks a launch over `dim` against the kernel's launch contract with the arrays set so
+    /// far ([`KernelAbi::check_launch`]).
+    pub fn check_launch(&self, dim: &[usize]) -> Result<(), EnvError> {
+        let shapes: Vec<Option<&[usize]>> = self.shapes.iter().map(Option::as_deref).collect();
+        self.abi.check_launch(dim, &shapes)
     }
 
     pub fn abi(&self) -> &'static KernelAbi {
@@ -329,9 +424,9 @@ impl ArgBuffer {
         Ok(())
     }
 
-    /// Sets array parameter `index` from a descriptor of an array of `T` with `ndim` dimensions
-    /// (its data pointer as given: null from [`array_descriptor`]); returns the parameter's
-    /// offset.
+    /// Sets array parameter `index` from a descriptor of an array of `T` with `ndim` dimensions,
+    /// with null data and grad pointers (whatever the descriptor holds there: addresses enter
+    /// only from ranges, [`ArgBuffer::set_array`]); returns the parameter's offset.
     pub fn set_array_descriptor<T: Element>(
         &mut self,
         index: usize,
@@ -352,9 +447,18 @@ impl ArgBuffer {
             T::SCALAR,
             T::SHAPE
         );
-        self.put(index, &expected, fits, |dst| {
-            dst.copy_from_slice(descriptor)
-        })
+        let (offset, _) = self.slot_range(index, &expected, fits)?;
+        // The two pointers are address slots: data and grad null here (set_array writes data
+        // from the array's range), then shape, strides, ndim and flags as plain bytes.
+        let f = ARRAY_LAYOUT.fields;
+        self.args.write_null(offset + f.data)?;
+        self.args.write_null(offset + f.grad)?;
+        self.args.write(
+            offset + f.shape,
+            &descriptor[f.shape..ARRAY_DESCRIPTOR_BYTES],
+        )?;
+        self.shapes[index] = Some(descriptor_shape(descriptor));
+        Ok(offset)
     }
 
     /// Sets array parameter `index`: the array's descriptor, with its data pointer written from

@@ -53,6 +53,10 @@ pub enum EnvError {
     )]
     InvalidValue { scalar: ScalarType, index: usize },
 
+    /// A launch that breaks its kernel's launch contract (`src/kernels/contract.rs`).
+    #[error(transparent)]
+    LaunchContract(Box<LaunchContractError>),
+
     /// A value of the wrong type for a kernel parameter.
     #[error("kernel {kernel}, parameter {param}: {reason}")]
     Argument {
@@ -60,4 +64,20 @@ pub enum EnvError {
         param: String,
         reason: String,
     },
+}
+
+/// A launch that breaks its kernel's launch contract: the kernel, the launch dimension, the
+/// rule, why, and the arrays the rule reads.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error(
+    "kernel {kernel} launched over {dim:?} breaks its launch contract `{rule}`: {reason}{arrays}; launch it over what the contract says, with arrays of the shapes it expects (the contract is the kernel's entry in LAUNCH at the end of kernels_py/env/{module}.py)"
+)]
+pub struct LaunchContractError {
+    pub kernel: &'static str,
+    pub module: &'static str,
+    pub dim: Vec<usize>,
+    pub rule: &'static str,
+    pub reason: String,
+    /// ` (name [shape], ...)` of the arrays the rule reads, or empty.
+    pub arrays: String,
 }

@@ -3,7 +3,8 @@
 //!
 //! [`EnvKernels::load`] loads every env module from the PTX embedded in the binary and checks
 //! each kernel's parameter layout (as the driver reports it) against the one the launchers pack.
-//! A launcher packs `launch_bounds_t` and the arguments, and launches a 1-D grid of
+//! A launcher packs `launch_bounds_t` and the arguments, checks the launch dimension against
+//! the kernel's launch contract (`super::contract`, from the manifest), and launches a 1-D grid of
 //! `ceil(threads / block_dim)` blocks (Warp's grid-stride loop covers any remainder). [`KERNELS`]
 //! lists what this binary was built with.
 
@@ -12,8 +13,8 @@ use crate::cuda::{Function, Gpu, Module, Stream};
 
 #[allow(unused_imports)] // which of these the generated code uses depends on the manifest
 use super::abi::{
-    ArgBuffer, KernelAbi, ParamAbi, ParamKind, ScalarType, WarpStruct, write_field,
-    write_struct_field,
+    ArgBuffer, Io, KernelAbi, LaunchRule, Op, ParamAbi, ParamKind, Relation, ScalarType,
+    WarpStruct, write_field, write_struct_field,
 };
 use super::array::DeviceArray;
 use super::error::EnvError;
@@ -47,13 +48,16 @@ fn bind_kernel(module: &Module, abi: &'static KernelAbi) -> Result<Function, Env
     Ok(function)
 }
 
-/// Writes the launch bounds for `shape` and launches; an empty launch does nothing (as in Warp).
+/// Checks the launch against the kernel's contract ([`KernelAbi::check_launch`]), writes the
+/// launch bounds for `shape` and launches; an empty launch does nothing (as in Warp). Inside a
+/// stream capture the check runs at capture time, once for every replay of the graph.
 fn launch(
     stream: &Stream,
     function: &Function,
     mut args: ArgBuffer,
     shape: &[usize],
 ) -> Result<(), EnvError> {
+    args.check_launch(shape)?;
     let threads = args.set_launch_bounds(shape)?;
     if threads == 0 {
         return Ok(());

@@ -13,8 +13,12 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use serde::Deserialize;
 
-/// The manifest format this crate reads (`format` in the file).
-pub const MANIFEST_FORMAT: u32 = 1;
+#[allow(unused_imports)] // build.rs (which includes this file) uses only some of them
+pub use super::contract::{LaunchRule, Op, ParamInfo, Relation, Rule, parse_rule};
+
+/// The manifest format this crate reads (`format` in the file). Format 2 added each kernel's
+/// launch contract (`launch`) and each parameter's direction (`io`).
+pub const MANIFEST_FORMAT: u32 = 2;
 /// Warp's most array dimensions (`ARRAY_MAX_DIMS`, native/array.h) and launch dimensions
 /// (`LAUNCH_MAX_DIMS`, native/builtin.h).
 pub const MAX_DIMS: usize = 4;
@@ -207,7 +211,41 @@ pub enum SlotType {
     Struct(String),
 }
 
-/// A kernel parameter or a struct field: type and place.
+/// What a kernel does with a parameter (MuJoCo Warp's `_in`/`_out` naming, as metadata):
+/// derived by env_build.py from the kernel source (and the `@wp.func`s it calls).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Io {
+    /// Only read (values and structs, passed by value, are always inputs).
+    In,
+    /// Only written (every element the kernel reads it wrote first, or it is not read).
+    Out,
+    /// Read and written: updated in place, or accumulated into (atomics).
+    InOut,
+}
+
+impl Io {
+    /// The suffix the generated launchers give an array parameter's name.
+    pub const fn suffix(self) -> &'static str {
+        match self {
+            Io::In => "_in",
+            Io::Out => "_out",
+            Io::InOut => "_inout",
+        }
+    }
+
+    /// The variant's name, for generated code.
+    pub const fn variant(self) -> &'static str {
+        match self {
+            Io::In => "In",
+            Io::Out => "Out",
+            Io::InOut => "InOut",
+        }
+    }
+}
+
+/// A kernel parameter or a struct field: type and place, and for a kernel parameter what the
+/// kernel does with it.
 #[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
 #[serde(try_from = "RawSlot")]
 pub struct Slot {
@@ -216,6 +254,8 @@ pub struct Slot {
     pub offset: usize,
     pub size: usize,
     pub align: usize,
+    /// Kernel parameters only (struct fields have none).
+    pub io: Option<Io>,
 }
 
 #[derive(Deserialize)]
@@ -230,6 +270,7 @@ struct RawSlot {
     offset: usize,
     size: usize,
     align: usize,
+    io: Option<Io>,
 }
 
 impl TryFrom<RawSlot> for Slot {
@@ -256,6 +297,7 @@ impl TryFrom<RawSlot> for Slot {
             offset: raw.offset,
             size: raw.size,
             align: raw.align,
+            io: raw.io,
         })
     }
 }
@@ -287,6 +329,9 @@ pub struct KernelDef {
     pub doc: String,
     /// Parameters after `launch_bounds_t<dim>`, in order.
     pub params: Vec<Slot>,
+    /// The launch contract: rules the launch dimension must satisfy, at least one per launch
+    /// axis (`src/kernels/contract.rs`).
+    pub launch: Vec<String>,
 }
 
 /// One module file `kernels_py/env/<name>.py` and its PTX.
@@ -508,6 +553,18 @@ impl EnvManifest {
                         ));
                     }
                 }
+                check_io(&place, kernel)?;
+                kernel
+                    .launch_rules()
+                    .map_err(|reason| invalid(&place, reason))?;
+            }
+        }
+        for (name, def) in &self.structs {
+            if let Some(f) = def.fields.iter().find(|f| f.io.is_some()) {
+                return Err(invalid(
+                    format!("struct {name}, {}", f.name),
+                    "struct fields have no `io` (the struct is passed by value)",
+                ));
             }
         }
         Ok(())
@@ -603,7 +660,85 @@ pub fn packed_len(layout: &[(usize, usize)]) -> usize {
     layout.iter().map(|(o, s)| o + s).max().unwrap_or(0)
 }
 
+/// Every parameter has an `io`, values and structs are inputs, and the launcher's parameter
+/// names (arrays suffixed with their direction) are distinct Rust identifiers.
+fn check_io(place: &str, kernel: &KernelDef) -> Result<(), ManifestError> {
+    let mut names = BTreeSet::new();
+    for p in &kernel.params {
+        let at = format!("{place}, parameter {}", p.name);
+        let Some(io) = p.io else {
+            return Err(invalid(
+                at,
+                "no `io` (in, out or inout): regenerate the manifest with kernels_py/env_build.py",
+            ));
+        };
+        if !matches!(p.ty, SlotType::Array { .. }) && io != Io::In {
+            return Err(invalid(
+                at,
+                format!("{io:?}, but values and structs are passed by value (in)"),
+            ));
+        }
+        let name = p.launcher_name();
+        if rust_ident(&name).is_none() || RESERVED_NAMES.contains(&name.as_str()) {
+            return Err(invalid(
+                at,
+                format!("the launcher's name {name} is not usable"),
+            ));
+        }
+        if !names.insert(name.clone()) {
+            return Err(invalid(
+                at,
+                format!("the launcher's name {name} appears twice: rename a parameter"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+impl Slot {
+    /// The name of the parameter in the generated launcher: an array's name with its
+    /// direction's suffix (`qpos_in`, `ctrl_out`, `sums_inout`), a value's or struct's as is.
+    pub fn launcher_name(&self) -> String {
+        match (&self.ty, self.io) {
+            (SlotType::Array { .. }, Some(io)) => format!("{}{}", self.name, io.suffix()),
+            _ => self.name.clone(),
+        }
+    }
+}
+
 impl KernelDef {
+    /// The launch contract, parsed: at least one rule per launch axis, each naming array
+    /// parameters of this kernel by name and existing axes.
+    pub fn launch_rules(&self) -> Result<Vec<Rule>, String> {
+        let params: Vec<ParamInfo<'_>> = self
+            .params
+            .iter()
+            .map(|p| ParamInfo {
+                name: &p.name,
+                ndim: match p.ty {
+                    SlotType::Array { ndim, .. } => Some(ndim),
+                    _ => None,
+                },
+            })
+            .collect();
+        let rules = self
+            .launch
+            .iter()
+            .map(|text| {
+                parse_rule(text, self.dim, &params)
+                    .map_err(|reason| format!("launch rule {text:?}: {reason}"))
+            })
+            .collect::<Result<Vec<Rule>, String>>()?;
+        for axis in 0..self.dim {
+            if !rules.iter().any(|r| r.axis == axis) {
+                return Err(format!(
+                    "no launch rule for axis {axis} of the launch: every kernel declares what its launch dimension must equal or not exceed (`@launch(...)` above the kernel in kernels_py/env/, docs/kernels.md)"
+                ));
+            }
+        }
+        Ok(rules)
+    }
+
     /// `(offset, size)` of every parameter, `launch_bounds_t` first ([`kernel_param_layout`]).
     pub fn param_layout(&self) -> Vec<(usize, usize)> {
         kernel_param_layout(self.dim, self.params.iter().map(|p| (p.offset, p.size)))

@@ -8,16 +8,19 @@
 //! - [`DeviceArray`]: owned typed device arrays, passed as Warp `array_t` descriptors.
 //! - [`abi`]: Warp's kernel ABI (values as bytes, descriptors, packed argument buffers).
 //! - [`manifest`]: `ptx/env/manifest.json`, parsed and validated (shared with `build.rs`).
+//! - [`contract`]: launch contracts, the rules a launch dimension must satisfy (checked by
+//!   every launcher).
 
 pub mod abi;
 mod array;
+pub mod contract;
 mod error;
 mod launchers;
 pub mod manifest;
 
 pub use abi::{ArgBuffer, Element, KernelAbi, ParamAbi, ParamKind, ScalarType, WarpStruct};
 pub use array::{DeviceArray, DeviceArray2, DeviceArray3, DeviceArray4};
-pub use error::EnvError;
+pub use error::{EnvError, LaunchContractError};
 // The launchers, their ABI constants and the Rust structs of Warp structs, all generated.
 pub use launchers::*;
 

@@ -21,8 +21,8 @@ use std::collections::{BTreeSet, HashMap, HashSet};
 use std::sync::Arc;
 
 use crate::cuda::{
-    CaptureNodes, CudaError, DeviceMemory, DeviceRange, Function, KernelArgs, PinnedHostMemory,
-    Stream,
+    ArgLayout, CaptureNodes, CudaError, DeviceMemory, DeviceRange, Function, KernelArgs,
+    PinnedHostMemory, Stream,
 };
 
 use super::error::PlanError;
@@ -302,8 +302,16 @@ fn prepare_launch(
     };
     // Pointers are checked here and written below, as addresses of ranges.
     let packed = packed_launch_args(launch, |region, offset| pointee(region, offset).map(|_| 0))?;
-    let mut args =
-        KernelArgs::from_bytes(fit_to_layout(packed.bytes, &packed.offsets, &function, at)?);
+    // Warp's relocations say which bytes are addresses: those are the layout's address slots,
+    // the driver's parameters its parameters (fit_to_layout checked that they agree).
+    let bytes = fit_to_layout(packed.bytes, &packed.offsets, &function, at)?;
+    let layout = ArgLayout::new(
+        function.param_layout().to_vec(),
+        packed.pointers.iter().map(|slot| slot.at),
+    )
+    .map_err(|e| PlanError::malformed(at, format!("the relocated pointers: {e}")))?;
+    let mut args = KernelArgs::with_bytes(layout, bytes)
+        .map_err(|e| PlanError::malformed(at, e.to_string()))?;
     for slot in &packed.pointers {
         let range = pointee(slot.region, slot.offset)?;
         args.write_address(slot.at, &range).map_err(|e| {

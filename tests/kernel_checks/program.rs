@@ -353,7 +353,7 @@ impl Program {
 
     /// Checks every launch against the kernel's ABI (as the launchers were generated): argument
     /// count, each buffer's element type and dimensionality, scalar types, struct names and
-    /// fields (against the embedded manifest), and every copy's range. Both executions run this
+    /// fields (against the embedded manifest), the launch contract, and every copy's range. Both executions run this
     /// first, so that a case that does not fit the kernel fails with its name.
     pub fn validate(&self) -> Result<(), String> {
         let manifest = embedded_manifest();
@@ -375,6 +375,18 @@ impl Program {
                     for (param, arg) in abi.params.iter().zip(args) {
                         self.check_arg(&manifest, &at, abi.name, param, arg)?;
                     }
+                    // The kernel's launch contract, as the generated launcher checks it.
+                    let shapes: Vec<Option<&[usize]>> = args
+                        .iter()
+                        .map(|arg| match arg {
+                            Arg::Buffer(name) => {
+                                self.find(name, &at).ok().map(|b| b.shape.as_slice())
+                            }
+                            _ => None,
+                        })
+                        .collect();
+                    abi.check_launch(&[*dim], &shapes)
+                        .map_err(|e| format!("{at}: {e}"))?;
                 }
                 Step::Copy {
                     src,
