@@ -14,6 +14,9 @@ mod manifest;
 #[path = "src/kernels/contract.rs"]
 mod contract;
 
+#[path = "src/kernels/ptx_params.rs"]
+mod ptx_params;
+
 #[path = "build/env_codegen.rs"]
 mod env_codegen;
 
@@ -107,6 +110,7 @@ fn run() -> Result<(), String> {
     println!("cargo:rerun-if-changed=build");
     println!("cargo:rerun-if-changed=src/kernels/manifest.rs");
     println!("cargo:rerun-if-changed=src/kernels/contract.rs");
+    println!("cargo:rerun-if-changed=src/kernels/ptx_params.rs");
     embed_assets(&root, &out_dir)?;
     generate_env_kernels(&root, &out_dir)
 }

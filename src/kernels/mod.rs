@@ -17,6 +17,7 @@ pub mod contract;
 mod error;
 mod launchers;
 pub mod manifest;
+mod ptx_params;
 
 pub use abi::{ArgBuffer, Element, KernelAbi, ParamAbi, ParamKind, ScalarType, WarpStruct};
 pub use array::{DeviceArray, DeviceArray2, DeviceArray3, DeviceArray4};
