@@ -129,28 +129,20 @@ mod tests {
         }
     }
 
-    use crate::train::summary::test_records::record;
+    use crate::train::summary::test_records::records;
 
     /// The summaries of src/train/summary.rs's tests, as the search scores them.
     #[test]
     fn the_outcome_of_a_run_is_its_first_success_or_its_time_spent() {
         use crate::train::StopReason;
-        let records: Vec<_> = (1..=15)
-            .map(|i| {
-                let eval = (i % 5 == 0).then_some(i >= 10);
-                record(i, eval)
-            })
-            .collect();
-        let s = RunSummary::from_records("backflip", 1, &records, StopReason::IterationBudget);
+        let s =
+            RunSummary::from_records("backflip", 1, &records(15, 10), StopReason::IterationBudget);
         let outcome = TrialOutcome::from(&s);
         assert!(outcome.success);
         assert_eq!((outcome.active_time_s, outcome.iterations), (2.5, 10));
         assert_eq!(outcome.ape_m, Some(0.05));
 
-        let records: Vec<_> = (1..=10)
-            .map(|i| record(i, (i % 5 == 0).then_some(false)))
-            .collect();
-        let s = RunSummary::from_records("walk", 0, &records, StopReason::TimeBudget);
+        let s = RunSummary::from_records("walk", 0, &records(10, 11), StopReason::TimeBudget);
         let outcome = TrialOutcome::from(&s);
         assert!(!outcome.success);
         assert_eq!(outcome.active_time_s, 2.5);

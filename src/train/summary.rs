@@ -160,23 +160,26 @@ pub(crate) mod test_records {
             divergence: None,
         }
     }
+
+    /// Iterations 1..=n evaluated every 5, succeeding from iteration `first_success` on (never
+    /// when it is past `n`).
+    pub(crate) fn records(n: u64, first_success: u64) -> Vec<IterationRecord> {
+        (1..=n)
+            .map(|i| record(i, (i % 5 == 0).then_some(i >= first_success)))
+            .collect()
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    use test_records::record;
+    use test_records::records;
 
     #[test]
     fn time_to_success_is_the_first_successful_evaluation() {
-        let records: Vec<_> = (1..=15)
-            .map(|i| {
-                let eval = (i % 5 == 0).then_some(i >= 10);
-                record(i, eval)
-            })
-            .collect();
-        let s = RunSummary::from_records("backflip", 1, &records, StopReason::IterationBudget);
+        let s =
+            RunSummary::from_records("backflip", 1, &records(15, 10), StopReason::IterationBudget);
         assert_eq!(s.time_to_success_s, Some(2.5));
         assert_eq!(s.success_iteration, Some(10));
         assert_eq!(s.iterations, 15);
@@ -192,10 +195,7 @@ mod tests {
 
     #[test]
     fn a_run_without_success_reports_its_time_spent() {
-        let records: Vec<_> = (1..=10)
-            .map(|i| record(i, (i % 5 == 0).then_some(false)))
-            .collect();
-        let s = RunSummary::from_records("walk", 0, &records, StopReason::TimeBudget);
+        let s = RunSummary::from_records("walk", 0, &records(10, 11), StopReason::TimeBudget);
         assert_eq!(s.time_to_success_s, None);
         assert!(s.report().contains("no success"));
         let empty = RunSummary::from_records("walk", 0, &[], StopReason::Interrupted);
@@ -204,9 +204,7 @@ mod tests {
 
     #[test]
     fn pose_error_and_clip_start_times_are_their_first_evaluations() {
-        let mut records: Vec<_> = (1..=20)
-            .map(|i| record(i, (i % 5 == 0).then_some(i >= 15)))
-            .collect();
+        let mut records = records(20, 15);
         // The pose error target is met first at iteration 10 (0.05 <= 0.06 in every
         // evaluation of `record`; earlier ones are made worse), the clip start succeeds from
         // iteration 5, spread success from 15.
