@@ -35,15 +35,7 @@ fn config(num_envs: u32, horizon: u32) -> TrainConfig {
 
 /// A fresh policy of `config` for `rollout` (the trainer owns it and lends it to the rollout).
 fn policy_for(gpu: &Gpu, rollout: &Rollout, config: &TrainConfig) -> GaussianPolicy {
-    GaussianPolicy::new(
-        gpu,
-        &config.policy,
-        rollout.observation_size(),
-        rollout.action_size(),
-        rollout.num_envs(),
-        config.seed,
-    )
-    .expect("policy")
+    GaussianPolicy::for_rollout(gpu, &config.policy, rollout, config.seed).expect("policy")
 }
 
 #[test]

@@ -137,15 +137,8 @@ pub fn bench_rollout(
 ) -> Result<RolloutBench, RolloutError> {
     let started = Instant::now();
     let rollout = Rollout::new(gpu, store, motion, &config.rollout_config())?;
-    let policy = GaussianPolicy::new(
-        gpu,
-        &config.policy,
-        rollout.observation_size(),
-        rollout.action_size(),
-        rollout.num_envs(),
-        config.seed,
-    )
-    .map_err(|e| RolloutError::Policy(Box::new(e)))?;
+    let policy = GaussianPolicy::for_rollout(gpu, &config.policy, &rollout, config.seed)
+        .map_err(|e| RolloutError::Policy(Box::new(e)))?;
     let (graph, _) = rollout.capture(&policy, false)?;
     let (timed_graph, events) = rollout.capture(&policy, true)?;
     let events = events.ok_or_else(|| RolloutError::Setup("no stage events".to_owned()))?;

@@ -13,7 +13,7 @@ use rand_distr::{Distribution, StandardNormal};
 use thiserror::Error;
 
 use crate::cuda::{Gpu, Stream};
-use crate::env::{ActStorage, RolloutError, RolloutPolicy};
+use crate::env::{ActStorage, Rollout, RolloutError, RolloutPolicy};
 use crate::kernels::{DeviceArray, DeviceArray2, EnvError, EnvKernels};
 
 use super::config::PolicyConfig;
@@ -217,6 +217,23 @@ impl GaussianPolicy {
             batch,
             seed: (seed ^ (seed >> 32)) as u32 as i32,
         })
+    }
+
+    /// A freshly initialized policy sized for `rollout`: its observations, actions and envs.
+    pub fn for_rollout(
+        gpu: &Gpu,
+        config: &PolicyConfig,
+        rollout: &Rollout,
+        seed: u64,
+    ) -> Result<GaussianPolicy, PolicyError> {
+        GaussianPolicy::new(
+            gpu,
+            config,
+            rollout.observation_size(),
+            rollout.action_size(),
+            rollout.num_envs(),
+            seed,
+        )
     }
 
     /// The same networks (parameters shared, not copied: updates to this policy's parameters

@@ -73,14 +73,7 @@ impl Trainer {
     ) -> Result<Trainer, TrainError> {
         let rollout_config = config.rollout_config();
         let rollout = Rollout::new(gpu, store, motion, &rollout_config)?;
-        let policy = GaussianPolicy::new(
-            gpu,
-            &config.policy,
-            rollout.observation_size(),
-            rollout.action_size(),
-            rollout.num_envs(),
-            config.seed,
-        )?;
+        let policy = GaussianPolicy::for_rollout(gpu, &config.policy, &rollout, config.seed)?;
         let evaluation = Rollout::evaluation(&rollout, store, motion, &rollout_config)?;
         let evaluation_policy = policy.with_batch(gpu, evaluation.num_envs())?;
         let update = PpoUpdate::new(
