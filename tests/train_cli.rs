@@ -618,6 +618,11 @@ fn replay_checks_its_input_then_needs_the_gpu() {
         err.contains("replay --steps sets run.eval_steps") && err.contains("run.eval_steps"),
         "{err}"
     );
+    let err = one_line_error(&replay(&["--steps", "901", "--out", page_arg]));
+    assert!(
+        err.contains("replay --steps 901: at most 900 control steps"),
+        "{err}"
+    );
     // Output paths in a missing directory, the page's or the recording's.
     let err = one_line_error(&replay(&["--out", "no/such/dir/replay.html"]));
     assert!(err.contains("does not exist (create it first)"), "{err}");

@@ -16,6 +16,9 @@ use crate::replay::{DEFAULT_EPISODES, Replay, ReplayInput, chosen_envs, record_r
 use crate::train::{Checkpoint, EvalStart, format_evaluation_report, preflight};
 use crate::viewer::save_page;
 
+/// The longest episode `replay --steps` records.
+const MAX_REPLAY_STEPS: u32 = 900;
+
 /// `--start`, spelled as `run.eval_start` is.
 #[derive(Clone, Copy, Debug, ValueEnum)]
 #[value(rename_all = "snake_case")]
@@ -38,8 +41,8 @@ pub struct ReplayArgs {
     #[arg(long, value_enum)]
     start: Option<StartArg>,
     /// Control steps per episode (`run.eval_steps`; default: the checkpoint's, else one pass of
-    /// the clip). A looping clip's policy can be watched for longer than one pass: 300 steps
-    /// are 10 s at 30 Hz.
+    /// the clip), at most 900. A looping clip's policy can be watched for longer than one pass:
+    /// 300 steps are 10 s at 30 Hz.
     #[arg(long)]
     steps: Option<u32>,
     /// The HTML page to write (its directory must exist).
@@ -90,6 +93,13 @@ pub(super) fn write_replay(job: &ReplayJob<'_>) -> Result<String> {
         config.run.eval_start = start;
     }
     if let Some(steps) = job.steps {
+        // The recorded evaluation is captured as one graph unrolled per step (300 steps took
+        // 66 s to build on the H100's host), and the page grows with every frame.
+        if steps > MAX_REPLAY_STEPS {
+            anyhow::bail!(
+                "replay --steps {steps}: at most {MAX_REPLAY_STEPS} control steps (30 s at 30 Hz); the recorded evaluation is built step by step, so longer ones take minutes and pages past 5 MB"
+            );
+        }
         config.run.eval_steps = Some(steps);
         config
             .validate("--steps")
