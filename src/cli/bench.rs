@@ -69,7 +69,7 @@ enum BenchCommand {
 #[derive(Args, Debug)]
 struct GemmArgs {
     /// Row counts (comma-separated): a rollout step is num_envs rows, an update minibatch
-    /// num_envs x horizon / minibatches (32768 for the baseline, 8192 for the tuned configs).
+    /// num_envs x horizon / minibatches (32768 for the baseline, 4096 for the committed configs).
     #[arg(long, value_delimiter = ',', default_values_t = [4096usize, 8192, 32768])]
     rows: Vec<usize>,
     /// Layer sizes of the policy, observation first (default: the committed configs' actor).

@@ -164,6 +164,7 @@ fn committed_configs_are_the_tuned_baseline_with_their_run_settings() {
     issue16.ppo.value_normalization = true;
     issue16.ppo.separate_grad_clipping = true;
     issue16.reward.ee_pos_weight = 10.0;
+    issue16.ppo.horizon = 4;
     for (name, _) in COMMITTED_CONFIGS {
         let (label, config) = TrainConfig::committed(name).unwrap();
         let config = config.unwrap_or_else(|e| panic!("{label}: {e}"));
