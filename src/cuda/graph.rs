@@ -12,6 +12,7 @@ use cudarc::driver::sys;
 use super::context::DeviceShared;
 use super::error::CheckResult;
 use super::module::ModuleInner;
+use super::nccl::CommunicatorInner;
 use super::stream::CaptureRecord;
 use super::{CudaError, DeviceMemory, PinnedHostMemory, Stream};
 
@@ -51,6 +52,9 @@ pub struct Graph {
     // it uses (the exec is destroyed first, in Drop).
     graph: OwnedGraph,
     exec: sys::CUgraphExec,
+    /// NCCL communicators its collectives use (after the graph: NCCL destroys a communicator
+    /// only once every graph that captured it is gone).
+    _communicators: Vec<Arc<CommunicatorInner>>,
     conditional_bodies: Vec<(usize, Vec<usize>)>,
     _modules: Vec<Arc<ModuleInner>>,
     _memory: Vec<Arc<DeviceMemory>>,
@@ -132,6 +136,7 @@ impl Stream {
         Ok(Graph {
             graph,
             exec,
+            _communicators: record.communicators,
             conditional_bodies: record.conditional_bodies,
             _modules: record.modules,
             _memory: record.memory.into_values().collect(),

@@ -12,6 +12,7 @@ use cudarc::driver::{CudaStream, sys};
 use super::context::DeviceShared;
 use super::error::CheckResult;
 use super::module::ModuleInner;
+use super::nccl::CommunicatorInner;
 use super::{CudaError, DeviceMemory, DeviceRange, Function, KernelArgs, PinnedHostMemory};
 
 /// A non-blocking stream. Cheap to clone (clones share the stream).
@@ -39,6 +40,9 @@ pub(crate) struct CaptureRecord {
     pub(crate) memory: HashMap<usize, Arc<DeviceMemory>>,
     /// Pinned host memory the captured copies read from.
     pub(crate) pinned: HashMap<usize, Arc<PinnedHostMemory>>,
+    /// NCCL communicators the captured collectives use: NCCL's destroy waits for every graph
+    /// that captured a communicator, so the graph must go first.
+    pub(crate) communicators: Vec<Arc<CommunicatorInner>>,
 }
 
 impl std::fmt::Debug for Stream {
@@ -240,6 +244,23 @@ impl Stream {
                 .memory
                 .entry(Arc::as_ptr(memory) as usize)
                 .or_insert_with(|| Arc::clone(memory));
+        }
+    }
+
+    /// Inside a capture, keeps `communicator` alive as long as the graph.
+    pub(super) fn remember_communicator(&self, communicator: &Arc<CommunicatorInner>) {
+        let mut capture = self
+            .inner
+            .capture
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        if let Some(record) = capture.as_mut()
+            && !record
+                .communicators
+                .iter()
+                .any(|c| Arc::ptr_eq(c, communicator))
+        {
+            record.communicators.push(Arc::clone(communicator));
         }
     }
 
