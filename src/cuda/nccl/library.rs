@@ -100,12 +100,7 @@ fn open() -> Result<NcclLibrary, String> {
     let (name, library) = opened.ok_or_else(|| {
         format!(
             "no NCCL library found (tried {})",
-            names
-                .iter()
-                .take(2)
-                .cloned()
-                .collect::<Vec<_>>()
-                .join(", ")
+            names.iter().take(2).cloned().collect::<Vec<_>>().join(", ")
         )
     })?;
     macro_rules! symbol {

@@ -211,9 +211,15 @@ impl Replicas {
             }))
     }
 
+    /// Every rank's [`Trainer::replica_digest`], in rank order (equal while the replicas are
+    /// identical).
+    pub fn digests(&mut self) -> Result<Vec<u32>, TrainError> {
+        self.on_all(|t| t.replica_digest())
+    }
+
     /// Fails unless every replica's [`Trainer::replica_digest`] is the same.
     fn check_digests(&mut self, when: &str) -> Result<(), TrainError> {
-        let digests = self.on_all(|t| t.replica_digest())?;
+        let digests = self.digests()?;
         if digests.windows(2).all(|w| w[0] == w[1]) {
             return Ok(());
         }
