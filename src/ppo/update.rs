@@ -374,7 +374,8 @@ impl PpoUpdate {
         record_sum_and_squares(k, stream, &flat_advantages, &self.advantage_moments)?;
         if let Some(replicas) = &self.replicas {
             // The average of the replicas' sums over this replica's count is the mean over all
-            // of them (the spread's n - 1 becomes n - ranks: a negligible difference).
+            // of them; the unbiased spread divides by N - ranks for N samples in all instead of
+            // N - 1, a negligible difference.
             let moments = [self.advantage_moments.collective()?];
             replicas.all_reduce(stream, &moments, ReduceOp::Average)?;
         }
