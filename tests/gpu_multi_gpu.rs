@@ -6,13 +6,14 @@
 //!   cargo test --release --features gpu --test gpu_multi_gpu -- --nocapture --test-threads 1
 //! ```
 //!
-//! - `one_gpu_*`: a world of one rank through the same NCCL code path trains as the
-//!   single-GPU trainer: the same state bit for bit after setup, and iterations within the
+//! - `one_gpu_*`: a world of one rank through the same NCCL code path (all-reduces in the
+//!   graph, and between graph parts) trains as the single-GPU trainer: the same state bit for bit after setup, and iterations within the
 //!   single-GPU trainer's own run-to-run spread (its physics contacts and its gradient
 //!   reductions add in a run-dependent order, so two single-GPU runs are not bit-identical
 //!   either): at most 4 x that spread plus 1e-4 relative.
 //! - `several_gpus_*` (2 or more GPUs): the replicas stay bit-identical (equal checksums of
-//!   their whole state) for 100 iterations while their rollouts differ; `train --gpus` writes
+//!   their whole state) for 100 iterations while their rollouts differ (and for 20 with the
+//!   all-reduces between graph parts, `run.nccl_in_graph = false`); `train --gpus` writes
 //!   its run, resumes on as many GPUs and refuses another count; a rank waiting for a peer
 //!   that never comes is released by an abort instead of hanging.
 //!
@@ -30,7 +31,8 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use instantmimic::cuda::{
-    CollectiveBuffer, CollectiveElement, Communicator, DeviceRange, Gpu, ReduceOp, nccl_version,
+    CollectiveBuffer, CollectiveElement, CollectivePlacement, Communicator, DeviceRange, Gpu,
+    ReduceOp, nccl_version,
 };
 use instantmimic::motion::find::{MOTIONS_ENV, resolve_motion};
 use instantmimic::motion::{Character, ReferenceMotion};
@@ -92,14 +94,25 @@ fn values(r: &IterationReport) -> [(&'static str, f64); 10] {
 
 #[test]
 fn one_gpu_a_world_of_one_rank_trains_as_the_single_gpu_trainer() {
+    world_of_one_against_the_single_gpu_trainer(CollectivePlacement::InGraph);
+}
+
+/// The fallback (`run.nccl_in_graph = false`): the iteration graph split at every all-reduce.
+#[test]
+fn one_gpu_a_world_of_one_rank_with_all_reduces_between_graph_parts_trains_the_same() {
+    world_of_one_against_the_single_gpu_trainer(CollectivePlacement::BetweenGraphParts);
+}
+
+fn world_of_one_against_the_single_gpu_trainer(placement: CollectivePlacement) {
     if !nccl_or_skip() {
         return;
     }
+    println!("all-reduces: {placement:?}");
     let gpu = Gpu::open(0).expect("a GPU");
     let store = PlanStore::new(None);
     let config = small_run_support::small_config("backflip");
     let motion = motion("backflip");
-    let world = Communicator::create_all(&[0]).expect("a world of one rank");
+    let world = Communicator::create_all(&[0], placement).expect("a world of one rank");
     let mut plain = Trainer::new(&gpu, &store, &motion, &config).expect("trainer");
     let mut again = Trainer::new(&gpu, &store, &motion, &config).expect("second trainer");
     let mut replica = Trainer::replica(&gpu, &store, &motion, &config, &world[0]).expect("replica");
@@ -145,11 +158,22 @@ fn one_gpu_a_world_of_one_rank_trains_as_the_single_gpu_trainer() {
 
 #[test]
 fn several_gpus_replicas_stay_bit_identical_for_100_iterations() {
+    replicas_stay_bit_identical(100, true);
+}
+
+/// The fallback (`run.nccl_in_graph = false`): all-reduces between parts of the graph.
+#[test]
+fn several_gpus_replicas_stay_bit_identical_with_all_reduces_between_graph_parts() {
+    replicas_stay_bit_identical(20, false);
+}
+
+fn replicas_stay_bit_identical(iterations: u32, in_graph: bool) {
     let Some(devices) = several_gpus_or_skip() else {
         return;
     };
     let store = PlanStore::new(None);
-    let config = small_run_support::small_config("backflip");
+    let mut config = small_run_support::small_config("backflip");
+    config.run.nccl_in_graph = in_graph;
     let motion = motion("backflip");
     let mut replicas = Replicas::start(&devices, &config, &motion, &store).expect("replicas");
     for note in replicas.take_notes() {
@@ -157,7 +181,7 @@ fn several_gpus_replicas_stay_bit_identical_for_100_iterations() {
     }
     let mut own_rollouts = 0;
     let mut rounding_only = 0;
-    for iteration in 1..=100 {
+    for iteration in 1..=iterations {
         let reports = replicas.iterate_reports().expect("iterate");
         let digests = replicas.digests().expect("digests");
         assert!(
@@ -178,12 +202,12 @@ fn several_gpus_replicas_stay_bit_identical_for_100_iterations() {
         }
     }
     println!(
-        "{} GPUs, 100 iterations: identical states every iteration; rollouts differed in {own_rollouts}; the reported sums of squares differed by rounding only in {rounding_only}",
+        "{} GPUs, {iterations} iterations (all-reduces in the graph: {in_graph}): identical states every iteration; rollouts differed in {own_rollouts}; the reported sums of squares differed by rounding only in {rounding_only}",
         devices.len()
     );
     assert!(
-        own_rollouts > 50,
-        "every GPU should run its own envs (own seed): rollouts differed in only {own_rollouts} of 100 iterations"
+        own_rollouts > iterations / 2,
+        "every GPU should run its own envs (own seed): rollouts differed in only {own_rollouts} of {iterations} iterations"
     );
 }
 
@@ -293,7 +317,8 @@ fn several_gpus_an_abort_releases_a_rank_whose_peer_never_comes() {
     let Some(devices) = several_gpus_or_skip() else {
         return;
     };
-    let world = Communicator::create_all(&devices[..2]).expect("communicators");
+    let world = Communicator::create_all(&devices[..2], CollectivePlacement::InGraph)
+        .expect("communicators");
     let (tx, rx) = std::sync::mpsc::channel();
     let lonely = world[0].clone();
     let waiter = std::thread::spawn(move || {

@@ -98,6 +98,10 @@ struct TrainGpusArgs {
     /// Untimed iterations before timing.
     #[arg(long, default_value_t = 3)]
     warmup: u32,
+    /// Run NCCL's all-reduces between parts of the iteration graph instead of inside it
+    /// (`run.nccl_in_graph = false`).
+    #[arg(long)]
+    nccl_between_graph_parts: bool,
     /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
     /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
@@ -238,6 +242,9 @@ fn train_gpus(args: TrainGpusArgs) -> Result<()> {
         config.env.num_envs = envs;
     }
     config.run.gpus = args.gpus.iter().map(|&d| d as u32).collect();
+    if args.nccl_between_graph_parts {
+        config.run.nccl_in_graph = false;
+    }
     config.validate(&label)?;
     let store = PlanStore::new(args.assets.as_deref());
     let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
@@ -267,8 +274,17 @@ fn train_gpus_report(r: &TrainGpusBench) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "GPU: {}; {}: {} envs per GPU, horizon {}; {} untimed iterations before each measurement",
-        r.gpu, r.motion, r.envs_per_gpu, r.horizon, r.warmup
+        "GPU: {}; {}: {} envs per GPU, horizon {}; {} untimed iterations before each measurement; all-reduces {}",
+        r.gpu,
+        r.motion,
+        r.envs_per_gpu,
+        r.horizon,
+        r.warmup,
+        if r.nccl_in_graph {
+            "in the iteration graph"
+        } else {
+            "between graph parts"
+        }
     );
     let _ = writeln!(
         out,

@@ -97,6 +97,10 @@ pub struct TrainArgs {
     /// GPU alone. A resumed run must use as many GPUs as it trained on.
     #[arg(long, value_delimiter = ',', num_args = 1.., conflicts_with = "device")]
     gpus: Option<Vec<u32>>,
+    /// With several --gpus: run NCCL's all-reduces between parts of the iteration graph instead
+    /// of inside it (`run.nccl_in_graph = false`; the fallback where NCCL's stream capture fails).
+    #[arg(long)]
+    nccl_between_graph_parts: bool,
 }
 
 impl TrainArgs {
@@ -121,6 +125,10 @@ impl TrainArgs {
         if let Some(gpus) = &self.gpus {
             config.run.gpus = gpus.clone();
             flags.push("--gpus");
+        }
+        if self.nccl_between_graph_parts {
+            config.run.nccl_in_graph = false;
+            flags.push("--nccl-between-graph-parts");
         }
     }
 
@@ -259,10 +267,15 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let nccl = if config.run.data_parallel() {
         let (version, library) = nccl_version()?;
         Some(format!(
-            "GPUs {:?}: {} envs each ({} in all), NCCL {version} ({library})",
+            "GPUs {:?}: {} envs each ({} in all), NCCL {version} ({library}), all-reduces {}",
             config.run.gpus,
             config.env.num_envs,
-            u64::from(config.env.num_envs) * config.run.gpus.len() as u64
+            u64::from(config.env.num_envs) * config.run.gpus.len() as u64,
+            if config.run.nccl_in_graph {
+                "in the iteration graph"
+            } else {
+                "between graph parts"
+            }
         ))
     } else {
         None

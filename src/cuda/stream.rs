@@ -11,6 +11,7 @@ use cudarc::driver::{CudaStream, sys};
 
 use super::context::DeviceShared;
 use super::error::CheckResult;
+use super::graph::Cut;
 use super::module::ModuleInner;
 use super::nccl::CommunicatorInner;
 use super::{CudaError, DeviceMemory, DeviceRange, Function, KernelArgs, PinnedHostMemory};
@@ -43,6 +44,11 @@ pub(crate) struct CaptureRecord {
     /// NCCL communicators the captured collectives use: NCCL's destroy waits for every graph
     /// that captured a communicator, so the graph must go first.
     pub(crate) communicators: Vec<Arc<CommunicatorInner>>,
+    /// The graph the top level of the capture goes into now (`CUgraph` as an address): the
+    /// one `Stream::capture` began, or the last one a cut began.
+    pub(crate) top: usize,
+    /// Where the capture was split around an all-reduce (`Stream::cut_capture`), in order.
+    pub(crate) cuts: Vec<Cut>,
 }
 
 impl std::fmt::Debug for Stream {

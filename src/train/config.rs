@@ -104,6 +104,15 @@ pub struct RunConfig {
     /// (docs/train.md, "Several GPUs"). Empty (the default) or one device: one GPU, no NCCL.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub gpus: Vec<u32>,
+    /// With several `gpus`: record the NCCL all-reduces into the iteration's CUDA graph (true,
+    /// the default), or run them between parts of it (false: the graph is split at each
+    /// all-reduce; the fallback if NCCL's stream capture fails on a machine).
+    #[serde(skip_serializing_if = "is_true")]
+    pub nccl_in_graph: bool,
+}
+
+fn is_true(value: &bool) -> bool {
+    *value
 }
 
 impl Default for RunConfig {
@@ -123,6 +132,7 @@ impl Default for RunConfig {
             max_divergence_restores: 3,
             replay: true,
             gpus: Vec::new(),
+            nccl_in_graph: true,
         }
     }
 }

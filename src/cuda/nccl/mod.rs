@@ -80,6 +80,32 @@ impl ReduceOp {
     }
 }
 
+/// Where a collective queued during a stream capture goes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CollectivePlacement {
+    /// Into the graph, as NCCL's own kernel nodes (NCCL supports stream capture since 2.9): one
+    /// graph launch runs everything.
+    InGraph,
+    /// Between parts of the graph: the capture is split at each all-reduce
+    /// ([`super::Graph`] then launches its parts in order and queues the all-reduces between
+    /// them, eagerly). The fallback where NCCL's capture does not work.
+    BetweenGraphParts,
+}
+
+/// An all-reduce a split capture runs between two graph parts, queued at every launch.
+pub(crate) struct RecordedCollective {
+    communicator: Communicator,
+    buffers: Vec<CollectiveBuffer>,
+    op: ReduceOp,
+}
+
+impl RecordedCollective {
+    /// Queues the all-reduce on `stream` (not capturing: a graph launch).
+    pub(crate) fn queue(&self, stream: &Stream) -> Result<(), CudaError> {
+        self.communicator.all_reduce(stream, &self.buffers, self.op)
+    }
+}
+
 /// A device range reduced in place, as `len / element.size()` values.
 #[derive(Clone, Debug)]
 pub struct CollectiveBuffer {
@@ -133,6 +159,7 @@ pub(crate) struct CommunicatorInner {
     size: usize,
     /// The CUDA device ordinal the communicator was made for.
     ordinal: usize,
+    placement: CollectivePlacement,
 }
 
 impl Drop for CommunicatorInner {
@@ -195,10 +222,14 @@ pub fn nccl_version() -> Result<(String, String), CudaError> {
 
 impl Communicator {
     /// One communicator per device of `ordinals` (rank i on `ordinals[i]`), made together in
-    /// this process (`ncclCommInitAll`). Loads NCCL first: a missing library is a
+    /// this process (`ncclCommInitAll`), whose all-reduces go where `placement` says when they
+    /// are queued during a capture. Loads NCCL first: a missing library is a
     /// [`CudaError::NcclUnavailable`] that says how to get it. Call it before the threads that
     /// use the devices start.
-    pub fn create_all(ordinals: &[usize]) -> Result<Vec<Communicator>, CudaError> {
+    pub fn create_all(
+        ordinals: &[usize],
+        placement: CollectivePlacement,
+    ) -> Result<Vec<Communicator>, CudaError> {
         let invalid = |reason: String| CudaError::InvalidArgument {
             operation: "Communicator::create_all",
             reason,
@@ -254,6 +285,7 @@ impl Communicator {
                     rank,
                     size,
                     ordinal,
+                    placement,
                 }),
             })
             .collect())
@@ -329,10 +361,17 @@ impl Communicator {
         }
     }
 
+    /// Where this communicator's all-reduces go during a capture.
+    pub fn placement(&self) -> CollectivePlacement {
+        self.inner.placement
+    }
+
     /// Queues the all-reduce of every buffer of `buffers` in place (one NCCL group, so one
     /// launch) on `stream`, which must belong to this rank's device, as must the buffers. Every
     /// rank must queue the same buffers (counts and types) in the same order. Valid inside a
-    /// capture: the graph then keeps the buffers and the communicator alive.
+    /// capture: the graph then keeps the buffers and the communicator alive, and holds the
+    /// all-reduce as NCCL's nodes or, with [`CollectivePlacement::BetweenGraphParts`], between
+    /// two of its parts (only at the capture's top level, not in a conditional body).
     pub fn all_reduce(
         &self,
         stream: &Stream,
@@ -362,6 +401,18 @@ impl Communicator {
         let buffers: Vec<&CollectiveBuffer> = buffers.iter().filter(|b| b.count() > 0).collect();
         if buffers.is_empty() {
             return Ok(());
+        }
+        if self.inner.placement == CollectivePlacement::BetweenGraphParts
+            && stream.is_capturing()?
+        {
+            for buffer in &buffers {
+                stream.remember_memory(&buffer.range);
+            }
+            return stream.cut_capture(RecordedCollective {
+                communicator: self.clone(),
+                buffers: buffers.into_iter().cloned().collect(),
+                op,
+            });
         }
         stream.bind()?;
         let library = self.inner.library;
