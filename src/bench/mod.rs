@@ -1,10 +1,13 @@
-//! Benchmarks of the real thing, shared by `instantmimic bench ...` and `benches/`.
+//! Benchmarks of the real thing, shared by `instantmimic bench ...` and `benches/`: physics,
+//! the rollout, the GEMMs, and whole training iterations on 1, 2, ... GPUs.
 
 mod gemm;
 mod physics;
 pub mod rollout;
 mod timing;
+mod train_gpus;
 
 pub use gemm::{GemmBench, GemmCase, bench_gemm};
 pub use physics::{PhysicsBench, bench_physics};
 pub use rollout::{RolloutBench, bench_rollout};
+pub use train_gpus::{GpuCountCase, TrainGpusBench, bench_train_gpus, default_counts};

@@ -7,12 +7,15 @@ use clap::{Args, Subcommand, ValueEnum};
 
 use std::fmt::Write as _;
 
-use crate::bench::{GemmBench, RolloutBench, bench_gemm, bench_physics, bench_rollout};
+use crate::bench::{
+    GemmBench, RolloutBench, TrainGpusBench, bench_gemm, bench_physics, bench_rollout,
+    bench_train_gpus, default_counts,
+};
 use crate::cuda::Gpu;
 use crate::motion::Character;
 use crate::motion::find::{motions_dir_from_env, resolve_motion};
 use crate::plan::{PlanStore, ReplayOrder};
-use crate::train::{GemmSetting, TrainConfig};
+use crate::train::{GemmSetting, TrainConfig, preflight};
 
 /// `bench rollout --gemm`: `policy.gemm` (src/ppo/config.rs, `GemmSetting`).
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -64,6 +67,51 @@ enum BenchCommand {
     /// The policy's GEMMs: Warp's tile kernel against cuBLAS (f32 and TF32; cuBLAS comes with
     /// the CUDA toolkit and is found through the library path).
     Gemm(GemmArgs),
+    /// Frames per second of whole training iterations (rollout and update, all-reduces
+    /// included) on 1, 2, ... GPUs together, as `train --gpus` runs them (NCCL needed for more
+    /// than one).
+    TrainGpus(TrainGpusArgs),
+}
+
+#[derive(Args, Debug)]
+struct TrainGpusArgs {
+    /// A clip name (its committed config, else configs/train/default.toml) or a DeepMimic file.
+    #[arg(long, default_value = "backflip")]
+    motion: String,
+    /// Training configuration (TOML) instead of the motion's committed one; --motion replaces
+    /// its `motion`.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// The devices, comma-separated (rank order): `--gpus 0,1,2,3`.
+    #[arg(long, value_delimiter = ',', num_args = 1.., required = true)]
+    gpus: Vec<usize>,
+    /// GPU counts to measure, each on the first that many of --gpus (default: 1, 2, 4, ... and
+    /// all of them).
+    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    counts: Option<Vec<usize>>,
+    /// Envs per GPU, overriding `env.num_envs` (a step plan for this count must exist).
+    #[arg(long)]
+    envs: Option<u32>,
+    /// Timed iterations per GPU count.
+    #[arg(long, default_value_t = 20)]
+    iterations: u32,
+    /// Untimed iterations before timing.
+    #[arg(long, default_value_t = 3)]
+    warmup: u32,
+    /// Run NCCL's all-reduces between parts of the iteration graph instead of inside it
+    /// (`run.nccl_in_graph = false`).
+    #[arg(long)]
+    nccl_between_graph_parts: bool,
+    /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
+    /// (default: $INSTANTMIMIC_MOTIONS).
+    #[arg(long)]
+    motions_dir: Option<PathBuf>,
+    /// A directory laid out like ptx/ instead of the plans built into the binary.
+    #[arg(long)]
+    assets: Option<PathBuf>,
+    /// Print the result as JSON.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args, Debug)]
@@ -163,7 +211,101 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchCommand::Physics(args) => physics(args),
         BenchCommand::Rollout(args) => rollout(args),
         BenchCommand::Gemm(args) => gemm(args),
+        BenchCommand::TrainGpus(args) => train_gpus(args),
     }
+}
+
+fn train_gpus(args: TrainGpusArgs) -> Result<()> {
+    if args.iterations == 0 {
+        bail!("--iterations must be at least 1");
+    }
+    let counts = args
+        .counts
+        .clone()
+        .unwrap_or_else(|| default_counts(args.gpus.len()));
+    if let Some(bad) = counts.iter().find(|&&n| n == 0 || n > args.gpus.len()) {
+        bail!(
+            "--counts {bad}: each count must be 1 to the {} devices of --gpus",
+            args.gpus.len()
+        );
+    }
+    let (mut config, label) = match &args.config {
+        Some(path) => (TrainConfig::load(path)?, path.display().to_string()),
+        None => {
+            let (label, config) = TrainConfig::committed(&args.motion)
+                .unwrap_or_else(|| TrainConfig::general_default(&args.motion));
+            (config?, label)
+        }
+    };
+    config.motion = args.motion.clone();
+    if let Some(envs) = args.envs {
+        config.env.num_envs = envs;
+    }
+    config.run.gpus = args.gpus.iter().map(|&d| d as u32).collect();
+    if args.nccl_between_graph_parts {
+        config.run.nccl_in_graph = false;
+    }
+    config.validate(&label)?;
+    let store = PlanStore::new(args.assets.as_deref());
+    let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
+    let (checks, motion) = preflight(&config, motions_dir.as_deref(), &store)?;
+    for line in &checks.motion_notices {
+        eprintln!("{line}");
+    }
+    let result = bench_train_gpus(
+        &args.gpus,
+        &counts,
+        &config,
+        &motion,
+        &store,
+        args.warmup,
+        args.iterations,
+    )
+    .context("training-iteration benchmark")?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&result)?);
+    } else {
+        print!("{}", train_gpus_report(&result));
+    }
+    Ok(())
+}
+
+fn train_gpus_report(r: &TrainGpusBench) -> String {
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "GPU: {}; {}: {} envs per GPU, horizon {}; {} untimed iterations before each measurement; all-reduces {}",
+        r.gpu,
+        r.motion,
+        r.envs_per_gpu,
+        r.horizon,
+        r.warmup,
+        if r.nccl_in_graph {
+            "in the iteration graph"
+        } else {
+            "between graph parts"
+        }
+    );
+    let _ = writeln!(
+        out,
+        "| GPUs | devices | setup s | iterations | s | M frames/s | speedup | efficiency |"
+    );
+    let _ = writeln!(out, "|---|---|---|---|---|---|---|---|");
+    for c in &r.cases {
+        let _ = writeln!(
+            out,
+            "| {} | {:?} | {:.1} | {} | {:.3} | {:.3} | {:.2}x | {:.0}% |",
+            c.devices.len(),
+            c.devices,
+            c.setup_seconds,
+            c.iterations,
+            c.seconds,
+            c.frames_per_s / 1e6,
+            c.speedup,
+            100.0 * c.efficiency
+        );
+    }
+    out
 }
 
 fn gemm(args: GemmArgs) -> Result<()> {

@@ -10,13 +10,14 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 
 use super::replay::{ReplayJob, write_replay};
+use crate::cuda::nccl_version;
 use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
 use crate::replay::DEFAULT_EPISODES;
 use crate::train::run_dir::{CHECKPOINTS_DIR, REPLAY_FILE};
 use crate::train::{
-    CheckpointDir, ProgressMode, RunDir, RunStart, TrainConfig, TrainSetup, default_run_dir,
-    preflight, train_on_gpu,
+    CheckpointDir, ProgressMode, RunDir, RunStart, TrainConfig, TrainSetup, check_same_gpu_count,
+    default_run_dir, preflight, train_on_gpu,
 };
 
 /// `--progress`.
@@ -90,6 +91,16 @@ pub struct TrainArgs {
     /// CUDA device ordinal.
     #[arg(long, default_value_t = 0)]
     device: usize,
+    /// CUDA devices to train on together, comma-separated (`--gpus 0,1,2,3`), overriding
+    /// `run.gpus`: one replica per GPU with `env.num_envs` envs each, gradients averaged through
+    /// NCCL (libnccl.so.2 on the library path; see docs/train.md). One device trains on that
+    /// GPU alone. A resumed run must use as many GPUs as it trained on.
+    #[arg(long, value_delimiter = ',', num_args = 1.., conflicts_with = "device")]
+    gpus: Option<Vec<u32>>,
+    /// With several --gpus: run NCCL's all-reduces between parts of the iteration graph instead
+    /// of inside it (`run.nccl_in_graph = false`; the fallback where NCCL's stream capture fails).
+    #[arg(long)]
+    nccl_between_graph_parts: bool,
 }
 
 impl TrainArgs {
@@ -111,6 +122,20 @@ impl TrainArgs {
             config.run.replay = false;
             flags.push("--no-replay");
         }
+        if let Some(gpus) = &self.gpus {
+            config.run.gpus = gpus.clone();
+            flags.push("--gpus");
+        }
+        if self.nccl_between_graph_parts {
+            config.run.nccl_in_graph = false;
+            flags.push("--nccl-between-graph-parts");
+        }
+    }
+
+    /// The device of a single-GPU run, and the one that writes the replay page: the first of
+    /// `run.gpus`, else --device.
+    fn first_device(&self, config: &TrainConfig) -> usize {
+        config.run.gpus.first().map_or(self.device, |&d| d as usize)
     }
 }
 
@@ -194,6 +219,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 label = format!("{label} with {}", flags.join(", "));
             }
             config.validate(&label)?;
+            check_same_gpu_count(&resumed.config, &config)?;
             let line = match &resumed.checkpoint {
                 Some((path, c)) => format!(
                     "{} (resume from iteration {}: {}, {:.2} s active)",
@@ -237,9 +263,29 @@ pub fn run(args: TrainArgs) -> Result<()> {
         // The checkpoint must hold the policy this configuration builds.
         checks.policy.check(checkpoint)?;
     }
+    // Several GPUs need NCCL: say so before a run directory is made.
+    let nccl = if config.run.data_parallel() {
+        let (version, library) = nccl_version()?;
+        Some(format!(
+            "GPUs {:?}: {} envs each ({} in all), NCCL {version} ({library}), all-reduces {}",
+            config.run.gpus,
+            config.env.num_envs,
+            u64::from(config.env.num_envs) * config.run.gpus.len() as u64,
+            if config.run.nccl_in_graph {
+                "in the iteration graph"
+            } else {
+                "between graph parts"
+            }
+        ))
+    } else {
+        None
+    };
     if args.dry_run {
         println!("configuration {label}");
         println!("run directory {directory_line}");
+        if let Some(line) = &nccl {
+            println!("{line}");
+        }
         print!("{}", checks.report(&config));
         println!();
         println!("# resolved configuration (the run's config.toml)");
@@ -253,6 +299,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     };
     let replay = config.run.replay;
     let keep = config.run.keep_checkpoints;
+    let device = args.first_device(&config);
     let setup = TrainSetup {
         config,
         motion,
@@ -266,7 +313,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     print!("{}", summary.report());
     if replay {
         // The run's results are written; a replay that fails leaves them as they are.
-        match replay_final_policy(&root, keep, motions_dir.as_deref(), &store, args.device) {
+        match replay_final_policy(&root, keep, motions_dir.as_deref(), &store, device) {
             Ok(report) => print!("{report}"),
             Err(e) => eprintln!(
                 "warning: {} not written: {e:#}",

@@ -71,6 +71,19 @@ pub enum CudaError {
     )]
     BlasUnavailable { reason: String },
 
+    /// libnccl cannot be used here. It comes with neither the driver nor the toolkit's default
+    /// library path, so only runs on more than one GPU need it.
+    #[error("NCCL is not available ({reason}): {}", super::nccl::NCCL_HELP)]
+    NcclUnavailable { reason: String },
+
+    /// An NCCL call failed; `detail` is NCCL's last error message, when it has one.
+    #[error("{operation}: NCCL returned {status}{}", detail.as_ref().map(|d| format!(" ({d})")).unwrap_or_default())]
+    Nccl {
+        operation: String,
+        status: String,
+        detail: Option<String>,
+    },
+
     /// A cuBLAS call failed.
     #[error("{operation}: cuBLAS returned {status}")]
     Blas {

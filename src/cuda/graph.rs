@@ -12,6 +12,7 @@ use cudarc::driver::sys;
 use super::context::DeviceShared;
 use super::error::CheckResult;
 use super::module::ModuleInner;
+use super::nccl::{CommunicatorInner, RecordedCollective};
 use super::stream::CaptureRecord;
 use super::{CudaError, DeviceMemory, PinnedHostMemory, Stream};
 
@@ -30,6 +31,47 @@ impl OwnedGraph {
         unsafe { sys::cuGraphCreate(&mut graph, 0) }.check("cuGraphCreate")?;
         Ok(OwnedGraph(graph))
     }
+
+    /// Gives up ownership: the caller destroys the graph (by wrapping it in an `OwnedGraph`
+    /// again).
+    fn into_raw(mut self) -> sys::CUgraph {
+        std::mem::replace(&mut self.0, std::ptr::null_mut())
+    }
+}
+
+/// An instantiated graph; destroyed on drop (before the graph it came from, which the `Part`
+/// holding both drops after it).
+struct OwnedExec {
+    exec: sys::CUgraphExec,
+    device: Arc<DeviceShared>,
+}
+
+impl Drop for OwnedExec {
+    fn drop(&mut self) {
+        let bound = self.device.ctx.bind_to_thread();
+        self.device.ctx.record_err(bound);
+        // SAFETY: the exec was made by cuGraphInstantiate and is destroyed only here, before its
+        // graph (field order of `Part::Graph`).
+        let destroyed = unsafe { sys::cuGraphExecDestroy(self.exec) }.result();
+        self.device.ctx.record_err(destroyed);
+    }
+}
+
+/// One part of an instantiated [`Graph`], in launch order.
+enum Part {
+    /// A captured stretch of work, launched as one CUDA graph (field order: the exec is
+    /// destroyed before its graph).
+    Graph { exec: OwnedExec, graph: OwnedGraph },
+    /// An all-reduce queued between two captured stretches, when its communicator places
+    /// collectives there (`CollectivePlacement::BetweenGraphParts`).
+    Collective(RecordedCollective),
+}
+
+/// Where a capture was split (see [`Stream::cut_capture`]): the collective that runs there and
+/// the graph the capture went on into (owned by the capture record until the capture ends).
+pub(crate) struct Cut {
+    collective: RecordedCollective,
+    next: usize,
 }
 
 impl Drop for OwnedGraph {
@@ -46,11 +88,17 @@ impl Drop for OwnedGraph {
 /// An instantiated graph, ready to launch any number of times. It keeps alive what its nodes
 /// use: the modules of its kernels, the device allocations its launches, memsets, copies and
 /// conditional nodes address, and the pinned host memory its copies read.
+///
+/// Usually one CUDA graph; a capture whose NCCL all-reduces run between graph parts
+/// (`CollectivePlacement::BetweenGraphParts`) is several, launched in order with the
+/// all-reduces queued between them.
 pub struct Graph {
-    // Field order is drop order: the graph goes before the modules, the memory and the context
-    // it uses (the exec is destroyed first, in Drop).
-    graph: OwnedGraph,
-    exec: sys::CUgraphExec,
+    // Field order is drop order: the parts (execs, then their graphs) go before the modules,
+    // the memory and the context they use.
+    parts: Vec<Part>,
+    /// NCCL communicators its collectives use (after the graph: NCCL destroys a communicator
+    /// only once every graph that captured it is gone).
+    _communicators: Vec<Arc<CommunicatorInner>>,
     conditional_bodies: Vec<(usize, Vec<usize>)>,
     _modules: Vec<Arc<ModuleInner>>,
     _memory: Vec<Arc<DeviceMemory>>,
@@ -64,18 +112,15 @@ unsafe impl Send for Graph {}
 
 impl std::fmt::Debug for Graph {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "Graph({:p})", self.graph.0)
-    }
-}
-
-impl Drop for Graph {
-    fn drop(&mut self) {
-        let bound = self.device.ctx.bind_to_thread();
-        self.device.ctx.record_err(bound);
-        // SAFETY: the exec was made by cuGraphInstantiate from `graph` and is destroyed only here;
-        // the graph itself is destroyed afterwards by OwnedGraph's Drop.
-        let destroyed = unsafe { sys::cuGraphExecDestroy(self.exec) }.result();
-        self.device.ctx.record_err(destroyed);
+        let graphs: Vec<sys::CUgraph> = self
+            .parts
+            .iter()
+            .filter_map(|part| match part {
+                Part::Graph { graph, .. } => Some(graph.0),
+                Part::Collective(_) => None,
+            })
+            .collect();
+        write!(f, "Graph({graphs:?})")
     }
 }
 
@@ -109,15 +154,26 @@ impl Stream {
             )
         }
         .check("cuStreamBeginCaptureToGraph")?;
-        self.set_capture_record(Some(CaptureRecord::default()));
+        self.set_capture_record(Some(CaptureRecord {
+            top: graph.0 as usize,
+            ..CaptureRecord::default()
+        }));
 
         let result = body(self);
 
         let record = self.set_capture_record(None).unwrap_or_default();
         let ended = self.end_capture("cuStreamEndCapture");
+        // The graphs begun where the capture was cut belong to this call from here on, so that
+        // they are destroyed whatever happens next.
+        let mut graphs = vec![graph];
+        let mut collectives = Vec::with_capacity(record.cuts.len());
+        for cut in record.cuts {
+            graphs.push(OwnedGraph(cut.next as sys::CUgraph));
+            collectives.push(cut.collective);
+        }
         result?;
         let captured = ended?;
-        if captured != graph.0 {
+        if graphs.last().is_none_or(|last| captured != last.0) {
             return Err(CudaError::InvalidArgument {
                 operation: "Stream::capture",
                 reason: "the capture ended in a different graph than it began (a capture_while/capture_if body was left open)"
@@ -125,13 +181,30 @@ impl Stream {
             }
             .into());
         }
-        let mut exec: sys::CUgraphExec = std::ptr::null_mut();
-        // SAFETY: the graph is complete (capture ended) and alive; the out-pointer is a live local.
-        unsafe { sys::cuGraphInstantiateWithFlags(&mut exec, graph.0, 0) }
-            .check("cuGraphInstantiate")?;
+        let split = graphs.len() > 1;
+        let mut collectives = collectives.into_iter();
+        let mut parts = Vec::with_capacity(2 * graphs.len());
+        for graph in graphs {
+            // Between two collectives (or after the last) a part may be empty.
+            if !split || !graph_nodes(graph.0)?.is_empty() {
+                let mut exec: sys::CUgraphExec = std::ptr::null_mut();
+                // SAFETY: the graph is complete (capture ended) and alive; the out-pointer is a
+                // live local.
+                unsafe { sys::cuGraphInstantiateWithFlags(&mut exec, graph.0, 0) }
+                    .check("cuGraphInstantiate")?;
+                let exec = OwnedExec {
+                    exec,
+                    device: self.device_shared().clone(),
+                };
+                parts.push(Part::Graph { exec, graph });
+            }
+            if let Some(collective) = collectives.next() {
+                parts.push(Part::Collective(collective));
+            }
+        }
         Ok(Graph {
-            graph,
-            exec,
+            parts,
+            _communicators: record.communicators,
             conditional_bodies: record.conditional_bodies,
             _modules: record.modules,
             _memory: record.memory.into_values().collect(),
@@ -181,6 +254,60 @@ impl Stream {
         Ok(graph)
     }
 
+    /// Splits the capture in progress at this point: the graph captured so far is finished,
+    /// `collective` will be queued (eagerly, outside any graph) after it at every launch, and
+    /// the capture goes on into a new graph. Only at the top level of a [`Stream::capture`], not
+    /// inside a conditional body. For NCCL all-reduces whose communicator places collectives
+    /// between graph parts (where NCCL's own stream capture cannot be used).
+    pub(crate) fn cut_capture(&self, collective: RecordedCollective) -> Result<(), CudaError> {
+        const OP: &str = "an all-reduce between graph parts";
+        let top = {
+            let slot = self
+                .inner
+                .capture
+                .lock()
+                .unwrap_or_else(|poisoned| poisoned.into_inner());
+            slot.as_ref().map(|record| record.top)
+        };
+        let top = top.ok_or(CudaError::NotCapturing { operation: OP })?;
+        let (graph, _) = self.capture_info(OP)?;
+        if graph as usize != top {
+            return Err(CudaError::InvalidArgument {
+                operation: "Stream::cut_capture",
+                reason: "an all-reduce between graph parts cannot be inside a conditional body"
+                    .to_owned(),
+            });
+        }
+        let finished = self.end_capture("cuStreamEndCapture (before an all-reduce)")?;
+        let next = OwnedGraph::create()?;
+        // If this fails the stream is no longer capturing, and `Stream::capture` reports it
+        // (and destroys the parts so far); `next` is destroyed here.
+        self.begin_capture_to(
+            next.0,
+            &[],
+            "cuStreamBeginCaptureToGraph (after an all-reduce)",
+        )?;
+        debug_assert_eq!(finished as usize, top);
+        let next = next.into_raw() as usize;
+        let mut slot = self
+            .inner
+            .capture
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        match slot.as_mut() {
+            Some(record) => {
+                record.top = next;
+                record.cuts.push(Cut { collective, next });
+                Ok(())
+            }
+            None => {
+                // Not reachable: the record lives as long as the capture. Do not leak the graph.
+                drop(OwnedGraph(next as sys::CUgraph));
+                Err(CudaError::NotCapturing { operation: OP })
+            }
+        }
+    }
+
     /// Begins capturing into `graph` after `dependencies` (nodes of `graph`).
     pub(crate) fn begin_capture_to(
         &self,
@@ -206,18 +333,49 @@ impl Stream {
 }
 
 impl Graph {
-    /// Queues one replay of the graph on `stream`.
+    /// Queues one replay of the graph on `stream` (every part in order, all-reduces between
+    /// parts included).
     pub fn launch(&self, stream: &Stream) -> Result<(), CudaError> {
         stream.bind()?;
-        // SAFETY: the exec is alive (owned by self) and the stream belongs to the current context.
-        unsafe { sys::cuGraphLaunch(self.exec, stream.cu_stream()) }.check("cuGraphLaunch")
+        for part in &self.parts {
+            match part {
+                Part::Graph { exec, .. } => {
+                    // SAFETY: the exec is alive (owned by self) and the stream belongs to the
+                    // current context.
+                    unsafe { sys::cuGraphLaunch(exec.exec, stream.cu_stream()) }
+                        .check("cuGraphLaunch")?
+                }
+                Part::Collective(collective) => {
+                    collective.queue(stream)?;
+                    stream.bind()?;
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Uploads the graph's resources ahead of the first launch, so that launch is not slower.
     pub fn upload(&self, stream: &Stream) -> Result<(), CudaError> {
         stream.bind()?;
-        // SAFETY: as in `launch`.
-        unsafe { sys::cuGraphUpload(self.exec, stream.cu_stream()) }.check("cuGraphUpload")
+        for part in &self.parts {
+            if let Part::Graph { exec, .. } = part {
+                // SAFETY: as in `launch`.
+                unsafe { sys::cuGraphUpload(exec.exec, stream.cu_stream()) }
+                    .check("cuGraphUpload")?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The CUDA graphs the capture was split into (1 unless its all-reduces run between
+    /// parts) and the all-reduces between them.
+    pub fn parts(&self) -> (usize, usize) {
+        let graphs = self
+            .parts
+            .iter()
+            .filter(|p| matches!(p, Part::Graph { .. }))
+            .count();
+        (graphs, self.parts.len() - graphs)
     }
 
     /// How many nodes of each kind the graph holds, counted through child graphs and
@@ -228,7 +386,16 @@ impl Graph {
     pub fn node_counts(&self) -> Result<BTreeMap<String, usize>, CudaError> {
         self.device.bind()?;
         let mut counts = BTreeMap::new();
-        self.count_nodes(self.graph.0, &mut counts, 0)?;
+        for part in &self.parts {
+            match part {
+                Part::Graph { graph, .. } => self.count_nodes(graph.0, &mut counts, 0)?,
+                Part::Collective(_) => {
+                    *counts
+                        .entry("all_reduce_between_parts".to_owned())
+                        .or_insert(0) += 1
+                }
+            }
+        }
         Ok(counts)
     }
 

@@ -140,6 +140,11 @@ impl DeviceMemory {
         self.len == 0
     }
 
+    /// The CUDA device ordinal of the allocation's context.
+    pub(super) fn device_ordinal(&self) -> usize {
+        self.stream.inner.device.info.ordinal
+    }
+
     /// Copies `src` to `offset`, queued on the GPU's main stream (so after all work queued
     /// there, graph launches included) and waited for. Work on other streams is not waited
     /// for. Not inside a capture of the main stream; record `Stream::copy_from_pinned` instead.

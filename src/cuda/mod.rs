@@ -15,6 +15,8 @@
 //! - [`Readback`]: device bytes copied to pinned host memory without stalling the stream.
 //! - [`Blas`]: optional cuBLAS GEMMs (toolkit, not driver) on [`BlasMatrix`] views, capturable:
 //!   the policy's layers when `policy.gemm` picks cuBLAS, and `bench gemm`.
+//! - [`Communicator`]: optional NCCL all-reduces (opened at run time, like cuBLAS) on
+//!   [`CollectiveBuffer`]s, capturable: data-parallel training on several GPUs (`train --gpus`).
 
 mod args;
 mod blas;
@@ -26,6 +28,7 @@ mod frontier;
 mod graph;
 mod memory;
 mod module;
+mod nccl;
 mod nvtx;
 pub mod ptx;
 mod range;
@@ -45,6 +48,10 @@ pub use frontier::CaptureNodes;
 pub use graph::Graph;
 pub use memory::{DeviceMemory, PinnedHostMemory};
 pub use module::{Function, Module};
+pub use nccl::{
+    CollectiveBuffer, CollectiveElement, CollectivePlacement, Communicator, MIN_NCCL_VERSION,
+    NCCL_HELP, ReduceOp, describe_version as describe_nccl_version, nccl_version,
+};
 pub use nvtx::NvtxRange;
 pub use ptx::{PtxIsa, lower_ptx_version, prepare_ptx};
 pub use range::DeviceRange;

@@ -11,7 +11,9 @@ use cudarc::driver::{CudaStream, sys};
 
 use super::context::DeviceShared;
 use super::error::CheckResult;
+use super::graph::Cut;
 use super::module::ModuleInner;
+use super::nccl::CommunicatorInner;
 use super::{CudaError, DeviceMemory, DeviceRange, Function, KernelArgs, PinnedHostMemory};
 
 /// A non-blocking stream. Cheap to clone (clones share the stream).
@@ -39,6 +41,14 @@ pub(crate) struct CaptureRecord {
     pub(crate) memory: HashMap<usize, Arc<DeviceMemory>>,
     /// Pinned host memory the captured copies read from.
     pub(crate) pinned: HashMap<usize, Arc<PinnedHostMemory>>,
+    /// NCCL communicators the captured collectives use: NCCL's destroy waits for every graph
+    /// that captured a communicator, so the graph must go first.
+    pub(crate) communicators: Vec<Arc<CommunicatorInner>>,
+    /// The graph the top level of the capture goes into now (`CUgraph` as an address): the
+    /// one `Stream::capture` began, or the last one a cut began.
+    pub(crate) top: usize,
+    /// Where the capture was split around an all-reduce (`Stream::cut_capture`), in order.
+    pub(crate) cuts: Vec<Cut>,
 }
 
 impl std::fmt::Debug for Stream {
@@ -240,6 +250,23 @@ impl Stream {
                 .memory
                 .entry(Arc::as_ptr(memory) as usize)
                 .or_insert_with(|| Arc::clone(memory));
+        }
+    }
+
+    /// Inside a capture, keeps `communicator` alive as long as the graph.
+    pub(super) fn remember_communicator(&self, communicator: &Arc<CommunicatorInner>) {
+        let mut capture = self
+            .inner
+            .capture
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        if let Some(record) = capture.as_mut()
+            && !record
+                .communicators
+                .iter()
+                .any(|c| Arc::ptr_eq(c, communicator))
+        {
+            record.communicators.push(Arc::clone(communicator));
         }
     }
 

@@ -15,6 +15,7 @@ pub mod config;
 mod evaluation;
 pub mod layout;
 mod normalizer;
+mod phases;
 mod policy;
 mod reference;
 mod rollout;

@@ -1,7 +1,12 @@
 //! The observation's running normalization (kernels_py/env/observe.py): the training rollout
 //! updates it every step; the evaluation reads the training rollout's statistics, frozen.
+//!
+//! On several GPUs (one replica of the rollout per GPU) every step's batch sums are summed over
+//! the replicas (an NCCL all-reduce inside the rollout graph) before the merge, which then
+//! counts every replica's envs: every replica merges the same numbers, so the statistics stay
+//! identical on all GPUs and equal those of one rollout over all their envs.
 
-use crate::cuda::{Gpu, Stream};
+use crate::cuda::{Communicator, Gpu, ReduceOp, Stream};
 
 use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels};
 
@@ -10,6 +15,9 @@ use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKerne
 pub(super) struct ObservationNormalizer {
     pub(super) raw: DeviceArray2<f32>,
     pub(super) normalized: DeviceArray2<f32>,
+    /// The step's batch sums and sums of squares `[2 D]`, one buffer (one all-reduce), viewed
+    /// as the two halves below.
+    batch_moments: DeviceArray<f64>,
     batch_sum: DeviceArray<f64>,
     batch_sum_sq: DeviceArray<f64>,
     /// [running count, merged count] (see `observation_moments_merge`).
@@ -18,6 +26,18 @@ pub(super) struct ObservationNormalizer {
     pub(super) m2: DeviceArray<f64>,
     clip: f32,
     pub(super) size: usize,
+    /// The other GPUs' replicas whose batches every update merges (none: this GPU only).
+    pub(super) replicas: Option<Communicator>,
+}
+
+/// The step's batch sums `[2 D]` and its halves (sums, sums of squares).
+type BatchMoments = (DeviceArray<f64>, DeviceArray<f64>, DeviceArray<f64>);
+
+fn batch_moments(gpu: &Gpu, size: usize) -> Result<BatchMoments, EnvError> {
+    let moments = DeviceArray::zeros(gpu, [2 * size])?;
+    let sum = moments.view(0, [size])?;
+    let sum_sq = moments.view(size, [size])?;
+    Ok((moments, sum, sum_sq))
 }
 
 /// Envs summed by one thread of `observation_moments` (observe.py `MOMENT_CHUNK`).
@@ -25,16 +45,19 @@ const MOMENT_CHUNK: usize = 64;
 
 impl ObservationNormalizer {
     pub(super) fn new(gpu: &Gpu, n: usize, size: usize, clip: f32) -> Result<Self, EnvError> {
+        let (batch_moments, batch_sum, batch_sum_sq) = batch_moments(gpu, size)?;
         Ok(ObservationNormalizer {
             raw: DeviceArray::zeros(gpu, [n, size])?,
             normalized: DeviceArray::zeros(gpu, [n, size])?,
-            batch_sum: DeviceArray::zeros(gpu, [size])?,
-            batch_sum_sq: DeviceArray::zeros(gpu, [size])?,
+            batch_moments,
+            batch_sum,
+            batch_sum_sq,
             count: DeviceArray::zeros(gpu, [2])?,
             mean: DeviceArray::zeros(gpu, [size])?,
             m2: DeviceArray::zeros(gpu, [size])?,
             clip,
             size,
+            replicas: None,
         })
     }
 
@@ -47,16 +70,20 @@ impl ObservationNormalizer {
     ) -> Result<Self, EnvError> {
         let size = source.size;
         let share = |a: &DeviceArray<f64>| a.view(0, [a.len()]);
+        let (batch_moments, batch_sum, batch_sum_sq) = batch_moments(gpu, size)?;
         Ok(ObservationNormalizer {
             raw: DeviceArray::zeros(gpu, [n, size])?,
             normalized: DeviceArray::zeros(gpu, [n, size])?,
-            batch_sum: DeviceArray::zeros(gpu, [size])?,
-            batch_sum_sq: DeviceArray::zeros(gpu, [size])?,
+            batch_moments,
+            batch_sum,
+            batch_sum_sq,
             count: share(&source.count)?,
             mean: share(&source.mean)?,
             m2: share(&source.m2)?,
             clip: source.clip,
             size,
+            // Never updated, so never merged.
+            replicas: None,
         })
     }
 
@@ -77,10 +104,16 @@ impl ObservationNormalizer {
                 &self.batch_sum,
                 &self.batch_sum_sq,
             )?;
+            // Every replica's envs: the sums are summed over the replicas first.
+            let mut rows = n;
+            if let Some(replicas) = &self.replicas {
+                replicas.all_reduce(s, &[self.batch_moments.collective()?], ReduceOp::Sum)?;
+                rows *= replicas.size();
+            }
             kernels.observation_moments_merge(
                 s,
                 d,
-                n as f64,
+                rows as f64,
                 &self.batch_sum,
                 &self.batch_sum_sq,
                 &self.count,

@@ -11,19 +11,20 @@ use std::sync::Arc;
 
 use thiserror::Error;
 
-use crate::cuda::{CudaError, Gpu, Graph, Stream};
+use crate::cuda::{Communicator, CudaError, Gpu, Graph, Stream};
 use crate::motion::LoopMode;
 use crate::motion::{ReferenceMotion, ReferenceTable};
 use crate::plan::{PlanStore, Simulation, SimulationError};
 
 use super::DeviceReferenceTable;
-use super::config::{ActionMode, EnvConfig, EvalStart, RolloutConfig};
+use super::config::{ActionMode, EvalStart, RolloutConfig};
 use super::evaluation::{EpisodeScores, evaluation_episode_steps, yardstick};
 use super::layout::{
     DeviceJointLayout, JointLayout, observation_params, observation_size, reset_params,
     tracking_params, without_failures,
 };
 use super::normalizer::ObservationNormalizer;
+use super::phases::PhaseStatistics;
 use super::policy::RolloutPolicy;
 use super::stages::{RolloutStage, StageEvents, StageRecorder};
 use super::statistics::RolloutStatistics;
@@ -296,6 +297,24 @@ impl Rollout {
             substeps,
             control_dt,
         })
+    }
+
+    /// Makes this training rollout one replica of a data-parallel group over `replicas` (one
+    /// rollout per GPU, each with its own envs and seed): every step's observation statistics
+    /// and every rollout's start-phase counts are merged over the group inside the graph, so
+    /// that they stay identical on every GPU (docs/train.md, "Several GPUs"). Every replica
+    /// must be built from the same configuration (`env.num_envs` each). Call it before the
+    /// first capture and before [`Rollout::reset_all`], which then merge too: every replica's
+    /// thread must call them together.
+    pub fn merging_over(mut self, replicas: &Communicator) -> Result<Rollout, RolloutError> {
+        if !self.is_training() {
+            return Err(RolloutError::Setup(
+                "only a training rollout merges its statistics over GPUs".to_owned(),
+            ));
+        }
+        self.normalizer.replicas = Some(replicas.clone());
+        self.phase_statistics.replicas = Some(replicas.clone());
+        Ok(self)
     }
 
     pub fn num_envs(&self) -> usize {
@@ -723,46 +742,6 @@ impl Rollout {
         )?;
         norm.record(&self.kernels, s, &self.storage.observations, row, update)?;
         Ok(())
-    }
-}
-
-/// Adaptive start-phase sampling (kernels_py/env/reset.py): decayed visit and failure counts
-/// per phase bin, the sampling CDF, and the device iteration counter that moves the random
-/// numbers from one rollout to the next.
-struct PhaseStatistics {
-    visits: DeviceArray<f32>,
-    failures: DeviceArray<f32>,
-    cdf: DeviceArray<f32>,
-    iteration: DeviceArray<i32>,
-    decay: f32,
-    floor: f32,
-}
-
-impl PhaseStatistics {
-    fn new(gpu: &Gpu, config: &EnvConfig) -> Result<Self, EnvError> {
-        let bins = config.phase_bins as usize;
-        let uniform: Vec<f32> = (1..=bins).map(|b| b as f32 / bins as f32).collect();
-        Ok(PhaseStatistics {
-            visits: DeviceArray::zeros(gpu, [bins])?,
-            failures: DeviceArray::zeros(gpu, [bins])?,
-            cdf: DeviceArray::from_slice(gpu, [bins], &uniform)?,
-            iteration: DeviceArray::zeros(gpu, [1])?,
-            decay: config.phase_decay,
-            floor: config.phase_floor,
-        })
-    }
-
-    fn record_update(&self, kernels: &EnvKernels, s: &Stream) -> Result<(), EnvError> {
-        kernels.phase_statistics_update(
-            s,
-            1,
-            self.decay,
-            self.floor,
-            &self.visits,
-            &self.failures,
-            &self.cdf,
-            &self.iteration,
-        )
     }
 }
 

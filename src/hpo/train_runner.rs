@@ -70,6 +70,8 @@ impl TrainRunner {
         config.run.keep_checkpoints = 1;
         // Trials train through `train_with`, which writes no replay page (only `train` does).
         config.run.replay = false;
+        // One trial per GPU: each trial runs on its runner's GPU, never on several.
+        config.run.gpus.clear();
         config
             .validate("the trial's configuration")
             .map_err(|e| problem(e.to_string()))?;
@@ -157,6 +159,17 @@ mod tests {
         assert_eq!(config.run.success_rate, 0.8);
         assert!(config.run.stop_on_success);
         assert_eq!(config.motion, "backflip");
+    }
+
+    #[test]
+    fn a_trial_runs_on_its_runners_gpu_whatever_the_base_says() {
+        let (_, base) = TrainConfig::committed("backflip").expect("committed backflip");
+        let mut base = base.expect("valid");
+        base.run.gpus = vec![0, 1];
+        let table: toml::Table = toml::from_str(&base.to_toml().expect("toml")).expect("table");
+        let config = TrainRunner::trial_config(&table, 3, spec()).expect("trial config");
+        assert!(config.run.gpus.is_empty());
+        assert_eq!(config.run.replicas(), 1);
     }
 
     #[test]

@@ -5,12 +5,14 @@ use std::sync::Arc;
 
 use zerocopy::IntoBytes;
 
-use crate::cuda::{BlasMatrix, DeviceMemory, DeviceRange, Gpu, Stream};
+use crate::cuda::{
+    BlasMatrix, CollectiveBuffer, CollectiveElement, DeviceMemory, DeviceRange, Gpu, Stream,
+};
 use crate::plan::Simulation;
 
 use super::abi::{ARRAY_DESCRIPTOR_BYTES, Element, array_descriptor};
 use super::error::EnvError;
-use super::manifest::MAX_DIMS;
+use super::manifest::{MAX_DIMS, ScalarType};
 
 /// A contiguous row-major device array of `T` with `N` dimensions (1 to 4). Its memory is freed
 /// when the last array or simulation holding it is dropped: [`DeviceArray::from_simulation`]
@@ -283,6 +285,23 @@ impl<T: Element, const N: usize> DeviceArray<T, N> {
 
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+
+    /// The whole array as an NCCL all-reduce buffer (`f32`, `f64` and `i32` scalars and their
+    /// vectors and matrices; other types are an error).
+    pub fn collective(&self) -> Result<CollectiveBuffer, EnvError> {
+        let element = match T::SCALAR {
+            ScalarType::Float32 => CollectiveElement::F32,
+            ScalarType::Float64 => CollectiveElement::F64,
+            ScalarType::Int32 => CollectiveElement::I32,
+            other => {
+                return Err(EnvError::ArrayShape {
+                    shape: self.shape.to_vec(),
+                    reason: format!("{other:?} arrays cannot be all-reduced"),
+                });
+            }
+        };
+        Ok(CollectiveBuffer::new(self.range()?, element)?)
     }
 
     /// The underlying allocation (shared), e.g. for a [`BlasMatrix`] of part of it.

@@ -2,7 +2,7 @@
 //! (`kernels_py/env/gae.py`), the per-epoch device shuffle and the minibatch gather
 //! (`kernels_py/env/minibatch.py`), with the shape checks the launchers cannot do.
 
-use crate::cuda::{Gpu, Stream};
+use crate::cuda::{Communicator, Gpu, ReduceOp, Stream};
 use crate::env::RolloutStorage;
 use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
 
@@ -95,6 +95,9 @@ pub struct ValueNormalization {
     pub stats: DeviceArray<f64>,
     /// The current batch's sum and sum of squares of returns.
     moments: DeviceArray<f64>,
+    /// Replicas on other GPUs whose returns every update merges (summed moments, counted
+    /// returns), so the statistics stay identical on every GPU.
+    pub replicas: Option<Communicator>,
 }
 
 impl ValueNormalization {
@@ -103,6 +106,7 @@ impl ValueNormalization {
             enabled,
             stats: DeviceArray::zeros(gpu, [3])?,
             moments: DeviceArray::zeros(gpu, [2])?,
+            replicas: None,
         })
     }
 
@@ -124,13 +128,17 @@ impl ValueNormalization {
         let flat = returns.view(0, [returns.len()])?;
         super::reduce::record_clear(stream, &self.moments)?;
         super::reduce::record_sum_and_squares(kernels, stream, &flat, &self.moments)?;
-        kernels.value_statistics_update(
-            stream,
-            1,
-            &self.moments,
-            returns.len() as i32,
-            &self.stats,
-        )?;
+        let mut samples = returns.len();
+        if let Some(replicas) = &self.replicas {
+            replicas.all_reduce(stream, &[self.moments.collective()?], ReduceOp::Sum)?;
+            samples *= replicas.size();
+        }
+        let samples = i32::try_from(samples).map_err(|_| {
+            PpoError::Shape(format!(
+                "{samples} returns per update over every GPU: the count is an i32"
+            ))
+        })?;
+        kernels.value_statistics_update(stream, 1, &self.moments, samples, &self.stats)?;
         Ok(())
     }
 }

@@ -215,7 +215,7 @@ impl GaussianPolicy {
             observation_size,
             action_size,
             batch,
-            seed: (seed ^ (seed >> 32)) as u32 as i32,
+            seed: sampling_seed(seed),
         })
     }
 
@@ -234,6 +234,14 @@ impl GaussianPolicy {
             rollout.num_envs(),
             seed,
         )
+    }
+
+    /// This policy with its action sampling keyed by `seed` instead of the one it was
+    /// initialized with: on several GPUs every replica starts from the run's parameters but
+    /// samples its own noise.
+    pub fn with_sampling_seed(mut self, seed: u64) -> GaussianPolicy {
+        self.seed = sampling_seed(seed);
+        self
     }
 
     /// The same networks (parameters shared, not copied: updates to this policy's parameters
@@ -408,6 +416,11 @@ impl RolloutPolicy for GaussianPolicy {
         )?;
         Ok(())
     }
+}
+
+/// The sampling kernel's int seed for a run's u64 seed (the halves xor-ed).
+fn sampling_seed(seed: u64) -> i32 {
+    (seed ^ (seed >> 32)) as u32 as i32
 }
 
 /// A policy error inside the rollout (the rollout knows policies only through

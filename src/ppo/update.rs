@@ -20,12 +20,28 @@
 //!
 //! Every hyperparameter is a kernel argument (recorded with the launch; change it by
 //! recording again) or lives in device memory (the learning rate, Adam's step, the counter).
+//!
+//! On several GPUs ([`PpoUpdate::averaging_over`]: one replica of the update per GPU, each on
+//! its own rollout) four NCCL all-reduces join the recording, so that every value a parameter
+//! update depends on is the same bytes on every GPU and the replicas stay bit-identical:
+//!
+//! - after the advantages' moments: averaged (the advantages are normalized by the mean and
+//!   spread of every GPU's batch, as one GPU with all the envs would);
+//! - with value normalization, the batch's return moments: summed (the running statistics
+//!   count every GPU's returns);
+//! - per minibatch, after the backward passes and before the schedule: the actor's and the
+//!   critic's gradients and the minibatch's loss sums, averaged in one group (the gradient of
+//!   the mean loss over every GPU's minibatch; the KL the learning rate adapts to, the log
+//!   std's gradient and the reported losses of all of them);
+//! - per minibatch, the squared gradient norms: their maximum (the replicas computed them from
+//!   the same gradients, but the block sums add up in a different order; the maximum makes
+//!   the clipping scale the same bytes everywhere).
 
 use std::sync::Arc;
 
 use thiserror::Error;
 
-use crate::cuda::{CudaError, Gpu, Stream};
+use crate::cuda::{Communicator, CudaError, Gpu, ReduceOp, Stream};
 use crate::kernels::{
     AdamParams, DeviceArray, DeviceArray2, EnvError, EnvKernels, PpoLossParams, ScheduleParams,
 };
@@ -167,6 +183,8 @@ pub struct PpoUpdate {
     adam_step: DeviceArray<i32>,
     update_counter: DeviceArray<i32>,
     statistics: DeviceArray<f32>,
+    /// The other GPUs' replicas the update averages over (none: this GPU only).
+    replicas: Option<Communicator>,
 }
 
 impl PpoUpdate {
@@ -296,7 +314,17 @@ impl PpoUpdate {
             update_counter: DeviceArray::zeros(gpu, [1])?,
             statistics: DeviceArray::zeros(gpu, [PpoStatistics::LEN])?,
             kernels,
+            replicas: None,
         })
+    }
+
+    /// Makes this update one replica of a data-parallel group over `replicas` (see the module
+    /// docs): every replica must start from the same parameters and optimizer state, be built
+    /// from the same configuration, and record the same update. Call it before recording.
+    pub fn averaging_over(mut self, replicas: &Communicator) -> PpoUpdate {
+        self.value_normalization.replicas = Some(replicas.clone());
+        self.replicas = Some(replicas.clone());
+        self
     }
 
     /// Queues the whole update of `batch` on `stream` (see the module docs); valid inside
@@ -344,6 +372,13 @@ impl PpoUpdate {
             .record_update(k, stream, &self.advantages.returns)?;
         let flat_advantages = self.advantages.advantages.view(0, [t * n])?;
         record_sum_and_squares(k, stream, &flat_advantages, &self.advantage_moments)?;
+        if let Some(replicas) = &self.replicas {
+            // The average of the replicas' sums over this replica's count is the mean over all
+            // of them; the unbiased spread divides by N - ranks for N samples in all instead of
+            // N - 1, a negligible difference.
+            let moments = [self.advantage_moments.collective()?];
+            replicas.all_reduce(stream, &moments, ReduceOp::Average)?;
+        }
 
         let rows = self.minibatch.rows();
         for epoch in 0..self.epochs {
@@ -426,6 +461,15 @@ impl PpoUpdate {
             blocks,
             self.input_gradient_scratch.as_ref(),
         )?;
+        if let Some(replicas) = &self.replicas {
+            // Before anything reads them: the schedule (KL, log std), the norm and Adam.
+            let averaged = [
+                self.actor_grads.flat.collective()?,
+                self.critic_grads.flat.collective()?,
+                sums.collective()?,
+            ];
+            replicas.all_reduce(stream, &averaged, ReduceOp::Average)?;
+        }
         record_schedule(
             k,
             stream,
@@ -457,6 +501,10 @@ impl PpoUpdate {
             &self.grad_norm_sq,
             critic_slot,
         )?;
+        if let Some(replicas) = &self.replicas {
+            let norms = [self.grad_norm_sq.view(actor_slot, [2])?.collective()?];
+            replicas.all_reduce(stream, &norms, ReduceOp::Max)?;
+        }
         for (params, grads, moments, slot) in [
             (
                 &self.actor_params,

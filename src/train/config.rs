@@ -99,6 +99,20 @@ pub struct RunConfig {
     /// Write `replay.html` into the run directory at the end: the final policy replayed as the
     /// evaluation runs it (`train --no-replay` turns it off).
     pub replay: bool,
+    /// CUDA devices to train on together (`train --gpus 0,1`): one replica of the rollout and
+    /// the update per GPU, each with `env.num_envs` envs, gradients averaged through NCCL
+    /// (docs/train.md, "Several GPUs"). Empty (the default) or one device: one GPU, no NCCL.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub gpus: Vec<u32>,
+    /// With several `gpus`: record the NCCL all-reduces into the iteration's CUDA graph (true,
+    /// the default), or run them between parts of it (false: the graph is split at each
+    /// all-reduce; the fallback if NCCL's stream capture fails on a machine).
+    #[serde(skip_serializing_if = "is_true")]
+    pub nccl_in_graph: bool,
+}
+
+fn is_true(value: &bool) -> bool {
+    *value
 }
 
 impl Default for RunConfig {
@@ -117,7 +131,24 @@ impl Default for RunConfig {
             keep_checkpoints: 3,
             max_divergence_restores: 3,
             replay: true,
+            gpus: Vec::new(),
+            nccl_in_graph: true,
         }
+    }
+}
+
+/// Most GPUs one run may train on (one host).
+pub const MAX_GPUS: usize = 64;
+
+impl RunConfig {
+    /// GPUs the run trains on together (1 for the single-GPU path).
+    pub fn replicas(&self) -> usize {
+        self.gpus.len().max(1)
+    }
+
+    /// Whether the run trains on several GPUs (through NCCL).
+    pub fn data_parallel(&self) -> bool {
+        self.gpus.len() > 1
     }
 }
 
@@ -482,6 +513,33 @@ impl TrainConfig {
             run.max_divergence_restores,
             "must be 0 to 100"
         );
+        let gpus = &run.gpus;
+        check!(
+            gpus.len() <= MAX_GPUS,
+            "run.gpus",
+            format!("{gpus:?}"),
+            "lists at most 64 devices"
+        );
+        for (i, device) in gpus.iter().enumerate() {
+            if let Some(first) = gpus[..i].iter().position(|d| d == device) {
+                return Err(bad(
+                    "run.gpus",
+                    format!("{gpus:?}"),
+                    &format!("lists device {device} twice (positions {first} and {i})"),
+                ));
+            }
+        }
+        // The returns' count of one update over every GPU is an i32 on the device.
+        let all_samples = samples * run.replicas() as u64;
+        if all_samples > i32::MAX as u64 {
+            return Err(bad(
+                "run.gpus",
+                format!("{gpus:?}"),
+                &format!(
+                    "{all_samples} samples per update over every GPU (ppo.horizon x env.num_envs x GPUs) must fit an i32"
+                ),
+            ));
+        }
         Ok(())
     }
 

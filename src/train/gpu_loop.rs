@@ -1,6 +1,8 @@
 //! The training loop: `train` and `eval` prepare and check everything on the CPU, then call
-//! [`train_on_gpu`] / [`evaluate_on_gpu`], which build a [`Trainer`] and drive a
-//! [`RunSession`] (src/train/session.rs documents the call sequence).
+//! [`train_on_gpu`] / [`evaluate_on_gpu`], which build a [`Trainer`] (or, with `run.gpus`
+//! naming several devices, the [`Replicas`] of every GPU) and drive a [`RunSession`]
+//! (src/train/session.rs documents the call sequence). One loop drives either, through
+//! [`LoopTrainer`].
 
 use std::path::PathBuf;
 
@@ -13,12 +15,13 @@ use super::evaluation::{
 };
 use super::preflight::Preflight;
 use super::progress::ProgressMode;
-use super::session::RunSession;
+use super::replicas::Replicas;
+use super::session::{IterationStats, RunSession};
 use super::summary::RunSummary;
 use super::trainer::Trainer;
 use crate::cuda::Gpu;
 use crate::motion::ReferenceMotion;
-use crate::plan::PlanStore;
+use crate::plan::{PhysicsOverflow, PlanStore};
 
 /// Where a run writes: a new directory, or one to continue.
 #[derive(Clone, Debug, PartialEq)]
@@ -41,16 +44,88 @@ pub struct TrainSetup {
     pub preflight: Preflight,
     pub start: RunStart,
     pub progress: ProgressMode,
-    /// CUDA device ordinal.
+    /// CUDA device ordinal (when `config.run.gpus` names none; one device there replaces it).
     pub device: usize,
+}
+
+/// What the training loop drives: one [`Trainer`], or the [`Replicas`] of several GPUs.
+trait LoopTrainer {
+    fn iterate(&mut self) -> Result<IterationStats, TrainError>;
+    fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, TrainError>;
+    fn evaluation_steps(&self) -> u32;
+    fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), TrainError>;
+    fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainError>;
+    fn physics_overflow(&mut self) -> Result<PhysicsOverflow, TrainError>;
+    /// Lines for the run's output since the last call.
+    fn notes(&mut self) -> Vec<String>;
+}
+
+impl LoopTrainer for Trainer {
+    fn iterate(&mut self) -> Result<IterationStats, TrainError> {
+        Trainer::iterate(self)
+    }
+    fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, TrainError> {
+        Trainer::evaluate(self)
+    }
+    fn evaluation_steps(&self) -> u32 {
+        Trainer::evaluation_steps(self)
+    }
+    fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), TrainError> {
+        Trainer::save_into(self, checkpoint)
+    }
+    fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainError> {
+        Trainer::restore(self, checkpoint)
+    }
+    fn physics_overflow(&mut self) -> Result<PhysicsOverflow, TrainError> {
+        Trainer::physics_overflow(self)
+    }
+    fn notes(&mut self) -> Vec<String> {
+        Vec::new()
+    }
+}
+
+impl LoopTrainer for Replicas {
+    fn iterate(&mut self) -> Result<IterationStats, TrainError> {
+        Replicas::iterate(self)
+    }
+    fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, TrainError> {
+        Replicas::evaluate(self)
+    }
+    fn evaluation_steps(&self) -> u32 {
+        Replicas::evaluation_steps(self)
+    }
+    fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), TrainError> {
+        Replicas::save_into(self, checkpoint)
+    }
+    fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainError> {
+        Replicas::restore(self, checkpoint)
+    }
+    fn physics_overflow(&mut self) -> Result<PhysicsOverflow, TrainError> {
+        Replicas::physics_overflow(self)
+    }
+    fn notes(&mut self) -> Vec<String> {
+        self.take_notes()
+    }
 }
 
 /// Trains on the GPU until the session says stop (success, time or iteration budget):
 /// opens the device, builds the [`Trainer`] (not active time), restores the checkpoint of a
 /// resumed run, then iterates: one graph replay per iteration, an evaluation every
 /// `run.eval_interval` iterations, checkpoints at `run.checkpoint_interval` and at the end.
+/// With `run.gpus` naming several devices, trains on all of them ([`train_on_gpus`]).
 pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
-    let gpu = Gpu::open(setup.device)?;
+    let run = &setup.config.run;
+    if run.data_parallel() {
+        return train_on_gpus(
+            &setup.config,
+            &setup.motion,
+            &setup.store,
+            &setup.start,
+            setup.progress,
+        );
+    }
+    let device = run.gpus.first().map_or(setup.device, |&d| d as usize);
+    let gpu = Gpu::open(device)?;
     train_with(
         &gpu,
         &setup.config,
@@ -63,7 +138,7 @@ pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
 
 /// [`train_on_gpu`] on an open GPU (the hyperparameter search trains trial after trial on
 /// one): `config` is the resolved configuration (for a resumed run, its `[run]` section
-/// replaces the run directory's).
+/// replaces the run directory's). `run.gpus` is not read: this is one GPU.
 pub fn train_with(
     gpu: &Gpu,
     config: &TrainConfig,
@@ -72,6 +147,45 @@ pub fn train_with(
     start: &RunStart,
     progress: ProgressMode,
 ) -> Result<RunSummary, TrainError> {
+    let (session, checkpoint) = open_session(config, start, progress)?;
+    let setup = std::time::Instant::now();
+    let mut trainer = Trainer::new(gpu, store, motion, session.config())?;
+    let notes = vec![format!("GEMMs: {}", trainer.gemm().describe())];
+    run_loop(session, &mut trainer, checkpoint, motion, setup, notes)
+}
+
+/// Trains on every device of `config.run.gpus` at once (docs/train.md, "Several GPUs"): one
+/// replica of the rollout and the update per GPU, gradients and statistics all-reduced through
+/// NCCL inside their graphs, evaluation and checkpoints on the first. Otherwise as
+/// [`train_with`]; a resumed run must use as many GPUs as it trained on.
+pub fn train_on_gpus(
+    config: &TrainConfig,
+    motion: &ReferenceMotion,
+    store: &PlanStore,
+    start: &RunStart,
+    progress: ProgressMode,
+) -> Result<RunSummary, TrainError> {
+    let (session, checkpoint) = open_session(config, start, progress)?;
+    let devices: Vec<usize> = session
+        .config()
+        .run
+        .gpus
+        .iter()
+        .map(|&d| d as usize)
+        .collect();
+    let setup = std::time::Instant::now();
+    let mut replicas = Replicas::start(&devices, session.config(), motion, store)?;
+    let mut notes = vec![format!("GEMMs: {} (every GPU)", replicas.gemm())];
+    notes.extend(replicas.take_notes());
+    run_loop(session, &mut replicas, checkpoint, motion, setup, notes)
+}
+
+/// Opens the run directory (new or resumed) and prints the resume's warnings.
+fn open_session(
+    config: &TrainConfig,
+    start: &RunStart,
+    progress: ProgressMode,
+) -> Result<(RunSession, Option<Checkpoint>), TrainError> {
     let (mut session, checkpoint, warnings) = match start {
         RunStart::New { root, overwrite } => (
             RunSession::start_new(root, config, *overwrite, progress)?,
@@ -86,17 +200,28 @@ pub fn train_with(
     for warning in &warnings {
         session.progress().note(&format!("warning: {warning}"));
     }
+    Ok((session, checkpoint))
+}
+
+/// The loop itself, on a built trainer (`setup`: when building it started; `notes`: what to
+/// say about it).
+fn run_loop<T: LoopTrainer>(
+    mut session: RunSession,
+    trainer: &mut T,
+    checkpoint: Option<Checkpoint>,
+    motion: &ReferenceMotion,
+    setup: std::time::Instant,
+    notes: Vec<String>,
+) -> Result<RunSummary, TrainError> {
     let config = session.config().clone();
-    let setup = std::time::Instant::now();
-    let mut trainer = Trainer::new(gpu, store, motion, &config)?;
     // Outside the active time; printed so that a user (or a search) sees what a run costs.
     session.progress().note(&format!(
         "setup {:.2} s (plans, kernels, CUDA graphs; not active time)",
         setup.elapsed().as_secs_f64()
     ));
-    session
-        .progress()
-        .note(&format!("GEMMs: {}", trainer.gemm().describe()));
+    for note in &notes {
+        session.progress().note(note);
+    }
     if let Some(checkpoint) = &checkpoint {
         trainer.restore(checkpoint)?;
         session.progress().note(&format!(
@@ -126,8 +251,11 @@ pub fn train_with(
         let stats = trainer.iterate()?;
         let cause = non_finite_report(&stats);
         let mut step = session.finish_iteration(stats);
+        for note in trainer.notes() {
+            session.progress().note(&note);
+        }
         if let Some(cause) = cause {
-            let event = go_back(&mut guard, &trainer, &mut session, step.iteration, &cause)?;
+            let event = go_back(&mut guard, trainer, &mut session, step.iteration, &cause)?;
             step.diverged(event);
         }
         let evaluation = if step.evaluate {
@@ -151,7 +279,7 @@ pub fn train_with(
                 // optimizer's state): not saved; training goes back instead.
                 Some(cause) => {
                     let iteration = session.iteration();
-                    go_back(&mut guard, &trainer, &mut session, iteration, &cause)?;
+                    go_back(&mut guard, trainer, &mut session, iteration, &cause)?;
                 }
             }
         }
@@ -183,7 +311,7 @@ pub fn train_with(
 /// finite at `iteration`, and says so; errors when no restore is left.
 fn go_back(
     guard: &mut DivergenceGuard,
-    trainer: &Trainer,
+    trainer: &mut impl LoopTrainer,
     session: &mut RunSession,
     iteration: u64,
     cause: &str,

@@ -15,6 +15,8 @@ mod gpu_loop;
 pub mod metrics;
 pub mod preflight;
 mod progress;
+pub mod replicas;
+mod report;
 pub mod run_dir;
 mod session;
 pub(crate) mod summary;
@@ -26,7 +28,7 @@ pub use checkpoint::{
     CheckpointScan, Tensor, TensorData,
 };
 pub use clock::{ActiveClock, StopReason, StopRule};
-pub use config::{COMMITTED_CONFIGS, ConfigError, RunConfig, TrainConfig};
+pub use config::{COMMITTED_CONFIGS, ConfigError, MAX_GPUS, RunConfig, TrainConfig};
 // The sections `TrainConfig` composes, at their old paths (they live in the layers that
 // consume them).
 pub use crate::env::{ActionMode, EndEffectorFrame, EnvConfig, EvalStart, ObsConfig, RewardConfig};
@@ -46,7 +48,9 @@ pub use gpu_loop::{
 pub use metrics::{EpisodeEnds, IterationRecord, MetricsLog, ResumedMetrics, UpdateStats};
 pub use preflight::{PolicyShapes, Preflight, check_plans, load_motion, preflight};
 pub use progress::{Progress, ProgressMode};
+pub use replicas::{Replicas, replica_seed};
+pub use report::{IterationReport, replica_mismatch};
 pub use run_dir::{ResumedRun, RunDir, default_run_dir};
-pub use session::{IterationStats, IterationStep, NextStep, RunSession};
+pub use session::{IterationStats, IterationStep, NextStep, RunSession, check_same_gpu_count};
 pub use summary::RunSummary;
 pub use trainer::Trainer;

@@ -330,7 +330,8 @@ fn check_same_training(
     ];
     let keys: Vec<&str> = differs.iter().filter(|d| d.1).map(|d| d.0).collect();
     if keys.is_empty() {
-        Ok(())
+        // [run] may change, but not the number of GPUs the checkpoint was trained on.
+        super::session::check_same_gpu_count(&stored, config)
     } else {
         Err(TrainError::Setup(format!(
             "{}: trained with a different {} than {}; only [run] may change when resuming",

@@ -91,6 +91,25 @@ pub struct RunSession {
     reached: Milestones,
 }
 
+/// A run resumes on as many GPUs as it trained on (which devices may change): the checkpoint
+/// holds one replica's state, the per-GPU batch and the seeds of the replicas depend on the
+/// count, and so would the meaning of its frames and learning rate.
+pub fn check_same_gpu_count(before: &TrainConfig, resumed: &TrainConfig) -> Result<(), TrainError> {
+    let (trained, now) = (before.run.replicas(), resumed.run.replicas());
+    if trained == now {
+        return Ok(());
+    }
+    let how = if trained == 1 {
+        "on one (no --gpus, or one device)".to_owned()
+    } else {
+        format!("on {trained} (--gpus with {trained} devices; which ones may change)")
+    };
+    Err(TrainError::Setup(format!(
+        "run.gpus: this run trained on {trained} GPU{}; resume it {how}, not on {now}",
+        if trained == 1 { "" } else { "s" }
+    )))
+}
+
 /// Wall seconds between redraws of `curve.png` during a run (and once at its end): drawing
 /// and encoding the picture after every evaluation would cost more than a short run trains.
 const CURVE_REDRAW_S: f64 = 5.0;
@@ -128,6 +147,7 @@ impl RunSession {
         let before = RunDir::inspect_resume(root)?.config;
         let mut config = before.clone();
         adjust(&mut config);
+        check_same_gpu_count(&before, &config)?;
         if config != before {
             // Only [run] may change: the checkpoint was trained with the rest.
             let mut rest = config.clone();
@@ -233,7 +253,10 @@ impl RunSession {
         self.clock.pause();
         let active = self.clock.seconds();
         let iteration = self.iteration + 1;
-        let frames_now = u64::from(self.config.env.num_envs) * u64::from(self.config.ppo.horizon);
+        // Every GPU's envs (each runs env.num_envs).
+        let frames_now = u64::from(self.config.env.num_envs)
+            * u64::from(self.config.ppo.horizon)
+            * self.config.run.replicas() as u64;
         let elapsed = active - self.iteration_start_s;
         let record = IterationRecord {
             iteration,

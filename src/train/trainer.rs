@@ -11,10 +11,15 @@
 //! The trainer owns the policy and lends it to the rollouts (which run it) and to the update
 //! (which changes its parameters in place); the rollouts own the observation normalization and
 //! the start-phase statistics, the update the optimizer's state.
+//!
+//! On several GPUs each runs one [`Trainer::replica`]: the same construction with its GPU's
+//! NCCL communicator, its own envs and seed (`replica_seed`), the run's initial parameters,
+//! and the all-reduces of the rollout and the update inside its iteration graph
+//! (src/train/replicas/ drives them together).
 
 use std::sync::Arc;
 
-use crate::cuda::{DeviceRange, Gpu, Graph, Readback};
+use crate::cuda::{Communicator, DeviceRange, Gpu, Graph, Readback};
 use crate::env::{Rollout, RolloutTotals, TOTALS};
 use crate::kernels::DeviceArray;
 use crate::motion::ReferenceMotion;
@@ -29,7 +34,9 @@ use super::checkpoint::{Checkpoint, CheckpointError};
 use super::config::TrainConfig;
 use super::error::TrainError;
 use super::evaluation::EnvEvaluation;
-use super::metrics::{EpisodeEnds, UpdateStats};
+use super::metrics::UpdateStats;
+use super::replica_seed;
+use super::report::IterationReport;
 use super::session::IterationStats;
 use crate::plan::PhysicsOverflow;
 
@@ -71,12 +78,56 @@ impl Trainer {
         motion: &ReferenceMotion,
         config: &TrainConfig,
     ) -> Result<Trainer, TrainError> {
-        let rollout_config = config.rollout_config();
-        let rollout = Rollout::new(gpu, store, motion, &rollout_config)?;
-        let policy = GaussianPolicy::for_rollout(gpu, &config.policy, &rollout, config.seed)?;
+        Trainer::build(gpu, store, motion, config, None)
+    }
+
+    /// Rank `replicas.rank()` of a data-parallel run over `replicas.size()` GPUs, on `gpu`
+    /// (the communicator's device): `config.env.num_envs` envs of its own, rollout and sampling
+    /// seeded by `replica_seed(config.seed, rank)` (rank 0: the run's seed), the parameters
+    /// initialized from the run's seed like every other rank's, and the all-reduces of the
+    /// rollout and the update recorded into its iteration graph. Every rank's thread must build
+    /// its replica at the same time (the construction ends with collectives), as it must call
+    /// [`Trainer::iterate`] and [`Trainer::restore`]. A world of one rank trains exactly as
+    /// [`Trainer::new`] does, through the same NCCL calls.
+    pub fn replica(
+        gpu: &Gpu,
+        store: &PlanStore,
+        motion: &ReferenceMotion,
+        config: &TrainConfig,
+        replicas: &Communicator,
+    ) -> Result<Trainer, TrainError> {
+        if replicas.device() != gpu.info().ordinal {
+            return Err(TrainError::Setup(format!(
+                "the communicator of device {} for a trainer on device {}",
+                replicas.device(),
+                gpu.info().ordinal
+            )));
+        }
+        Trainer::build(gpu, store, motion, config, Some(replicas))
+    }
+
+    fn build(
+        gpu: &Gpu,
+        store: &PlanStore,
+        motion: &ReferenceMotion,
+        config: &TrainConfig,
+        replicas: Option<&Communicator>,
+    ) -> Result<Trainer, TrainError> {
+        let rank = replicas.map_or(0, Communicator::rank);
+        let own_seed = replica_seed(config.seed, rank);
+        let mut rollout_config = config.rollout_config();
+        rollout_config.seed = own_seed;
+        let mut rollout = Rollout::new(gpu, store, motion, &rollout_config)?;
+        if let Some(replicas) = replicas {
+            rollout = rollout.merging_over(replicas)?;
+        }
+        // The run's seed initializes the parameters (the same on every replica); the
+        // replica's own seed draws its actions.
+        let policy = GaussianPolicy::for_rollout(gpu, &config.policy, &rollout, config.seed)?
+            .with_sampling_seed(own_seed);
         let evaluation = Rollout::evaluation(&rollout, store, motion, &rollout_config)?;
         let evaluation_policy = policy.with_batch(gpu, evaluation.num_envs())?;
-        let update = PpoUpdate::new(
+        let mut update = PpoUpdate::new(
             gpu,
             rollout.kernels().clone(),
             &policy,
@@ -84,6 +135,11 @@ impl Trainer {
             rollout.num_envs(),
             config.seed,
         )?;
+        if let Some(replicas) = replicas {
+            update = update.averaging_over(replicas);
+            // NCCL's first collectives outside the capture, every rank at this point.
+            replicas.warm_up(gpu)?;
+        }
         let report = DeviceRange::whole(&Arc::new(gpu.alloc_zeroed(REPORT_BYTES)?));
         let parameter_squares = DeviceArray::<f64>::zeros(gpu, [2])?;
         let stream = gpu.stream();
@@ -135,6 +191,12 @@ impl Trainer {
     /// Runs one training iteration (rollout and update) and returns its statistics. Waits for
     /// the iteration to finish: the caller's clock measures it.
     pub fn iterate(&mut self) -> Result<IterationStats, TrainError> {
+        Ok(self.iterate_report()?.stats())
+    }
+
+    /// [`Trainer::iterate`], returning this GPU's report as read back (what several GPUs'
+    /// reports are merged from).
+    pub fn iterate_report(&mut self) -> Result<IterationReport, TrainError> {
         let stream = self.gpu.stream();
         self.iteration_graph.launch(stream)?;
         self.readback.queue(stream, &self.report)?;
@@ -159,14 +221,8 @@ impl Trainer {
                 .ok_or_else(|| TrainError::Setup("a short iteration report".to_owned()))
         };
         let parameter_squares = [square(0)?, square(1)?];
-        Ok(IterationStats {
-            mean_return: totals.mean_return,
-            mean_episode_length: totals.mean_episode_length,
-            termination: EpisodeEnds::from_counts(
-                totals.episodes,
-                totals.failures,
-                totals.failures_by_cause,
-            ),
+        Ok(IterationReport {
+            totals,
             parameter_squares,
             update: UpdateStats {
                 policy_loss: f64::from(ppo.surrogate_loss),
@@ -285,6 +341,40 @@ impl Trainer {
         }
         self.rollout.reset_all()?;
         Ok(())
+    }
+
+    /// A checksum (CRC-32 of the bytes) of everything that decides the next update and the
+    /// next rollout's statistics: the parameters, the observation normalization, the optimizer's
+    /// state, the return statistics and the start-phase CDF (waits for the GPU). The replicas
+    /// of a run on several GPUs must have equal digests: an exact check, where the per
+    /// iteration comparison of the sums of squares is a cheap one.
+    pub fn replica_digest(&self) -> Result<u32, TrainError> {
+        use zerocopy::IntoBytes;
+        let mut crc = crc32fast::Hasher::new();
+        let policy = &self.policy;
+        for parameters in [policy.actor_parameters(), policy.critic_parameters()] {
+            crc.update(parameters.download()?.as_bytes());
+        }
+        for moments in self.rollout.normalizer_moments() {
+            crc.update(moments.download()?.as_bytes());
+        }
+        let state = self.update.download_state()?;
+        crc.update(state.learning_rate.as_bytes());
+        crc.update(state.adam_step.as_bytes());
+        crc.update(state.update_counter.as_bytes());
+        for moments in [
+            &state.actor_moment1,
+            &state.actor_moment2,
+            &state.critic_moment1,
+            &state.critic_moment2,
+        ] {
+            crc.update(moments.as_bytes());
+        }
+        crc.update(self.update.value_statistics().download()?.as_bytes());
+        let (_, _, cdf, iteration) = self.rollout.phase_statistics();
+        crc.update(cdf.download()?.as_bytes());
+        crc.update(iteration.download()?.as_bytes());
+        Ok(crc.finalize())
     }
 
     /// Floating-point operations of one update (for throughput reports).

@@ -16,3 +16,20 @@ toolkit_libs() {
   local dir; dir=$(ls -d /usr/local/cuda*/lib64 2>/dev/null | sort -V | tail -1)
   echo "${LD_LIBRARY_PATH:+$LD_LIBRARY_PATH:}$dir"
 }
+
+# NCCL's library directory (training on several GPUs, gpu_multi_gpu), appended to
+# LD_LIBRARY_PATH: $NCCL_LIB_DIR, else PyTorch's bundled copy in /opt/torch/.venv (the GPU
+# machine has NCCL only there), else pip's nvidia-nccl wheel of the system Python. NCCL opens
+# libnccl.so.2 from it. NCCL_NVLS_ENABLE=0 stays as the machine sets it (instantmimic sets it
+# itself when it is unset: no NVLink multicast).
+nccl_libs() {
+  local dir=${NCCL_LIB_DIR:-}
+  [ -n "$dir" ] || dir=$(ls -d /opt/torch/.venv/lib/python3*/site-packages/nvidia/nccl/lib 2>/dev/null | sort -V | tail -1)
+  [ -n "$dir" ] || dir=$(python3 -c 'import nvidia.nccl, pathlib; print(pathlib.Path(list(nvidia.nccl.__path__)[0]) / "lib")' 2>/dev/null)
+  echo "${LD_LIBRARY_PATH:+$LD_LIBRARY_PATH:}$dir"
+}
+
+# Visible GPUs.
+gpu_count() {
+  nvidia-smi -L 2>/dev/null | grep -c '^GPU'
+}

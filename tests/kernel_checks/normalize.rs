@@ -363,12 +363,78 @@ fn no_statistics_case(n: usize, dims: usize, clip: f32, seed: u64) -> Check {
     })
 }
 
+/// Replicas on several GPUs (src/env/normalizer.rs): every step, each replica's moments of
+/// its own batch are summed over the replicas (NCCL's all-reduce; here every replica's
+/// `observation_moments` adds into one pair of sums, which is the same sum) and merged once
+/// with the count of every replica's rows. Against the two-pass statistics of every
+/// replica's rows of every step together: the statistics one GPU with all the envs would hold.
+fn replicas_case(dims: usize, replicas: usize, n: usize, steps: usize, seed: u64) -> Check {
+    let mut rng = Sampler::new(seed);
+    let columns = Columns::new(dims, &mut rng);
+    // Each replica draws from its own shifted columns: the replicas see different data.
+    let batches: Vec<Vec<Vec<f32>>> = (0..steps)
+        .map(|_| {
+            (0..replicas)
+                .map(|r| {
+                    columns
+                        .rows(n, &mut rng)
+                        .into_iter()
+                        .map(|x| x + 0.5 * r as f32)
+                        .collect()
+                })
+                .collect()
+        })
+        .collect();
+    let mut p = Program::new(format!(
+        "{replicas} replicas x {steps} steps of {n} rows: moments summed over the replicas, one merge of {} rows per step ({dims} dims)",
+        n * replicas
+    ));
+    p.f64("batch_sum", &[dims], vec![0.0; dims]);
+    p.f64("batch_sum_sq", &[dims], vec![0.0; dims]);
+    p.f64("count", &[2], vec![0.0; 2]);
+    p.f64("mean", &[dims], vec![0.0; dims]);
+    p.f64("m2", &[dims], vec![0.0; dims]);
+    for (step, rows) in batches.iter().enumerate() {
+        for (replica, batch) in rows.iter().enumerate() {
+            let obs = p.f32(&format!("obs_{step}_{replica}"), &[n, dims], batch.clone());
+            let args = vec![
+                obs,
+                Arg::Buffer("batch_sum".into()),
+                Arg::Buffer("batch_sum_sq".into()),
+            ];
+            p.launch(&OBSERVATION_MOMENTS, n.div_ceil(MOMENT_CHUNK) * dims, args);
+        }
+        let mut args = vec![Arg::Scalar(Scalar::F64((n * replicas) as f64))];
+        args.extend(
+            ["batch_sum", "batch_sum_sq", "count", "mean", "m2"].map(|s| Arg::Buffer(s.into())),
+        );
+        p.launch(&OBSERVATION_MOMENTS_MERGE, dims, args);
+        p.copy("count", 1, "count", 0, 1);
+    }
+    Check::new(p, move |p, out| {
+        let mut r = Report::new(&p.name);
+        let all: Vec<&[f32]> = batches.iter().flatten().map(Vec::as_slice).collect();
+        let (mean, var, count) = two_pass(&all, dims);
+        r.check(
+            out.f64("count") == [count, count],
+            format!("count {:?} = [{count}, {count}]", out.f64("count")),
+        );
+        r.relative("mean (every replica's rows)", out.f64("mean"), &mean);
+        let got_var: Vec<f64> = out.f64("m2").iter().map(|m| m / count).collect();
+        r.relative("variance (every replica's rows)", &got_var, &var);
+        worst_column(&mut r, "variance, worst column", &got_var, &var);
+        r
+    })
+}
+
 pub fn moments_checks(_fx: &Fixture) -> Vec<Check> {
     vec![
         sequence_case(353, &[100, 257, 64, 1, 130], 5.0, 61),
         sequence_case(45, &[64, 64], 3.0, 62),
         merge_case(362, 5000, 200, 63),
         merge_case(7, 1, 65, 64),
+        replicas_case(353, 4, 96, 3, 68),
+        replicas_case(20, 2, 64, 5, 69),
     ]
 }
 
