@@ -88,8 +88,8 @@ fn gpus_reach_run_gpus_and_bad_lists_give_one_line() {
     // One device: that GPU alone (no NCCL), recorded in the configuration.
     let text = succeeded(&dry(&["--gpus", "3"]));
     assert_eq!(resolved_config(&text).run.gpus, vec![3]);
-    let text = succeeded(&dry(&["--gpus", "3", "--nccl-between-graph-parts"]));
-    assert!(!resolved_config(&text).run.nccl_in_graph);
+    let text = succeeded(&dry(&["--gpus", "3", "--nccl-in-graph"]));
+    assert!(resolved_config(&text).run.nccl_in_graph);
     assert!(text.contains("with --envs, --gpus"), "{text}");
     assert!(!text.contains("NCCL"), "{text}");
     // No flag: the key is absent from the run's config.toml.
@@ -163,12 +163,12 @@ fn the_gpus_key_is_validated_and_left_out_when_empty() {
     let none = parse("").expect("no key");
     assert_eq!(none.run.replicas(), 1);
     assert!(!none.to_toml().unwrap().contains("gpus"));
-    // The all-reduces' placement: in the graph unless told (and then written down).
-    assert!(none.run.nccl_in_graph);
+    // The all-reduces' placement: between graph parts unless told (and then written down).
+    assert!(!none.run.nccl_in_graph);
     assert!(!none.to_toml().unwrap().contains("nccl_in_graph"));
-    let split = parse("gpus = [0, 1]\nnccl_in_graph = false").expect("split");
-    assert!(!split.run.nccl_in_graph);
-    assert!(split.to_toml().unwrap().contains("nccl_in_graph = false"));
+    let captured = parse("gpus = [0, 1]\nnccl_in_graph = true").expect("in the graph");
+    assert!(captured.run.nccl_in_graph);
+    assert!(captured.to_toml().unwrap().contains("nccl_in_graph = true"));
     let err = |run: &str| parse(run).unwrap_err().to_string();
     let e = err("gpus = [1, 0, 1]");
     assert!(

@@ -98,10 +98,10 @@ struct TrainGpusArgs {
     /// Untimed iterations before timing.
     #[arg(long, default_value_t = 3)]
     warmup: u32,
-    /// Run NCCL's all-reduces between parts of the iteration graph instead of inside it
-    /// (`run.nccl_in_graph = false`).
+    /// Record NCCL's all-reduces into the iteration graph instead of running them between its
+    /// parts (`run.nccl_in_graph = true`).
     #[arg(long)]
-    nccl_between_graph_parts: bool,
+    nccl_in_graph: bool,
     /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
     /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
@@ -242,8 +242,8 @@ fn train_gpus(args: TrainGpusArgs) -> Result<()> {
         config.env.num_envs = envs;
     }
     config.run.gpus = args.gpus.iter().map(|&d| d as u32).collect();
-    if args.nccl_between_graph_parts {
-        config.run.nccl_in_graph = false;
+    if args.nccl_in_graph {
+        config.run.nccl_in_graph = true;
     }
     config.validate(&label)?;
     let store = PlanStore::new(args.assets.as_deref());

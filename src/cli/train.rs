@@ -97,10 +97,11 @@ pub struct TrainArgs {
     /// GPU alone. A resumed run must use as many GPUs as it trained on.
     #[arg(long, value_delimiter = ',', num_args = 1.., conflicts_with = "device")]
     gpus: Option<Vec<u32>>,
-    /// With several --gpus: run NCCL's all-reduces between parts of the iteration graph instead
-    /// of inside it (`run.nccl_in_graph = false`; the fallback where NCCL's stream capture fails).
+    /// With several --gpus: record NCCL's all-reduces into the iteration graph instead of
+    /// running them between its parts (`run.nccl_in_graph = true`; NCCL 2.28.9 refuses the
+    /// capture on the machines measured, see docs/train.md).
     #[arg(long)]
-    nccl_between_graph_parts: bool,
+    nccl_in_graph: bool,
 }
 
 impl TrainArgs {
@@ -126,9 +127,9 @@ impl TrainArgs {
             config.run.gpus = gpus.clone();
             flags.push("--gpus");
         }
-        if self.nccl_between_graph_parts {
-            config.run.nccl_in_graph = false;
-            flags.push("--nccl-between-graph-parts");
+        if self.nccl_in_graph {
+            config.run.nccl_in_graph = true;
+            flags.push("--nccl-in-graph");
         }
     }
 

@@ -104,15 +104,13 @@ pub struct RunConfig {
     /// (docs/train.md, "Several GPUs"). Empty (the default) or one device: one GPU, no NCCL.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub gpus: Vec<u32>,
-    /// With several `gpus`: record the NCCL all-reduces into the iteration's CUDA graph (true,
-    /// the default), or run them between parts of it (false: the graph is split at each
-    /// all-reduce; the fallback if NCCL's stream capture fails on a machine).
-    #[serde(skip_serializing_if = "is_true")]
+    /// With several `gpus`: run the NCCL all-reduces between parts of the iteration's CUDA
+    /// graph (false, the default: the graph is split at each all-reduce), or record them into
+    /// it (true). On the H100s measured (NCCL 2.28.9, driver 580, 2026-11-26) the capture of
+    /// several ranks' all-reduces fails ("dependency created on uncaptured work in another
+    /// stream"), and the split graph scales at 97% (BENCHMARKS.md, "Several GPUs").
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub nccl_in_graph: bool,
-}
-
-fn is_true(value: &bool) -> bool {
-    *value
 }
 
 impl Default for RunConfig {
@@ -132,7 +130,7 @@ impl Default for RunConfig {
             max_divergence_restores: 3,
             replay: true,
             gpus: Vec::new(),
-            nccl_in_graph: true,
+            nccl_in_graph: false,
         }
     }
 }
