@@ -99,17 +99,7 @@ impl DivergenceGuard {
 
 /// What in an iteration's report is not finite, if anything.
 pub fn non_finite_report(stats: &IterationStats) -> Option<String> {
-    let u = &stats.update;
-    let named = [
-        ("policy loss", u.policy_loss),
-        ("value loss", u.value_loss),
-        ("entropy", u.entropy),
-        ("KL", u.kl),
-        ("learning rate", u.learning_rate),
-        ("gradient norm", u.grad_norm),
-        ("actor parameters", stats.parameter_squares[0]),
-        ("critic parameters", stats.parameter_squares[1]),
-    ];
+    let named = stats.update.named_with_parameters(stats.parameter_squares);
     let bad: Vec<&str> = named
         .iter()
         .filter(|(_, v)| !v.is_finite())
@@ -220,7 +210,7 @@ mod tests {
         stats.parameter_squares[0] = f64::NAN;
         assert_eq!(
             non_finite_report(&stats).unwrap(),
-            "value loss, gradient norm, actor parameters"
+            "value loss, gradient norm, actor parameters' sum of squares"
         );
     }
 }

@@ -39,6 +39,24 @@ pub struct UpdateStats {
     pub grad_norm: f64,
 }
 
+impl UpdateStats {
+    /// The values that decide or reflect a parameter update, named: this update's statistics,
+    /// then the actor's and the critic's parameters' sums of squares after it (what the
+    /// divergence guard checks for finiteness and several GPUs compare bit for bit).
+    pub fn named_with_parameters(&self, parameter_squares: [f64; 2]) -> [(&'static str, f64); 8] {
+        [
+            ("policy loss", self.policy_loss),
+            ("value loss", self.value_loss),
+            ("entropy", self.entropy),
+            ("KL", self.kl),
+            ("learning rate", self.learning_rate),
+            ("gradient norm", self.grad_norm),
+            ("actor parameters' sum of squares", parameter_squares[0]),
+            ("critic parameters' sum of squares", parameter_squares[1]),
+        ]
+    }
+}
+
 /// How this iteration's episodes ended (`metrics.jsonl`'s `termination`): fractions of the
 /// episodes that ended in the rollout; the causes can overlap (one failure can have several).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]

@@ -83,19 +83,7 @@ impl IterationReport {
 /// compared (the divergence guard restores every replica from the same state).
 pub fn replica_mismatch(reports: &[IterationReport]) -> Option<String> {
     let first = reports.first()?;
-    let values = |r: &IterationReport| {
-        let u = &r.update;
-        [
-            ("actor parameters' sum of squares", r.parameter_squares[0]),
-            ("critic parameters' sum of squares", r.parameter_squares[1]),
-            ("policy loss", u.policy_loss),
-            ("value loss", u.value_loss),
-            ("entropy", u.entropy),
-            ("KL", u.kl),
-            ("learning rate", u.learning_rate),
-            ("gradient norm", u.grad_norm),
-        ]
-    };
+    let values = |r: &IterationReport| r.update.named_with_parameters(r.parameter_squares);
     let reference = values(first);
     for (rank, report) in reports.iter().enumerate().skip(1) {
         for ((name, expected), (_, got)) in reference.iter().zip(values(report)) {
