@@ -3,72 +3,14 @@
 //! evaluation and replay themselves fail with one clear line (tests/gpu_train.rs and
 //! tests/gpu_replay.rs run them on a GPU).
 
-use std::path::Path;
-use std::process::{Command, Output};
+mod train_cli_support;
 
-use instantmimic::motion::find::{CLIP_NAMES, MOTIONS_ENV};
-use instantmimic::motion::{Character, SyntheticMotion};
-use instantmimic::train::checkpoint::tensor_names;
-use instantmimic::train::{
-    Checkpoint, IterationStats, PolicyShapes, ProgressMode, RunSession, TrainConfig,
+use instantmimic::motion::SyntheticMotion;
+use instantmimic::motion::find::CLIP_NAMES;
+use instantmimic::train::{Checkpoint, TrainConfig};
+use train_cli_support::{
+    add_policy, make_run, one_line_error, resolved_config, run, stdout, succeeded, workspace,
 };
-
-fn run(args: &[&str], motions_dir: Option<&Path>, cwd: &Path) -> Output {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_instantmimic"));
-    cmd.args(args).env_remove(MOTIONS_ENV).current_dir(cwd);
-    if let Some(dir) = motions_dir {
-        cmd.env(MOTIONS_ENV, dir);
-    }
-    cmd.output().expect("the binary runs")
-}
-
-fn stdout(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-/// The error of a failed command, which must be exactly one line.
-fn one_line_error(out: &Output) -> String {
-    assert!(!out.status.success(), "succeeded: {}", stdout(out));
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(err.trim_end().lines().count(), 1, "not one line:\n{err}");
-    assert!(err.starts_with("error: "), "{err}");
-    err
-}
-
-fn succeeded(out: &Output) -> String {
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    stdout(out)
-}
-
-/// A temporary directory with the synthetic clip as `humanoid3d_synth.txt` (1 s, 30 fps).
-fn workspace() -> tempfile::TempDir {
-    let dir = tempfile::tempdir().expect("temporary directory");
-    std::fs::create_dir(dir.path().join("motions")).unwrap();
-    std::fs::write(
-        dir.path().join("motions/humanoid3d_synth.txt"),
-        SyntheticMotion::default().to_json(),
-    )
-    .unwrap();
-    dir
-}
-
-/// The TOML after the "# resolved configuration" line of a dry run.
-fn resolved_config(text: &str) -> TrainConfig {
-    let start = text
-        .find("# resolved configuration")
-        .expect("the dry run prints the configuration");
-    let toml: String = text[start..]
-        .lines()
-        .skip(1)
-        .take_while(|l| !l.starts_with("dry run:"))
-        .collect::<Vec<_>>()
-        .join("\n");
-    TrainConfig::from_toml(&toml, "dry run output").unwrap()
-}
 
 #[test]
 fn dry_run_checks_everything_and_prints_the_resolved_config() {
@@ -312,61 +254,12 @@ fn bad_inputs_give_one_clear_line() {
     assert!(full.join("notes.txt").exists());
 }
 
-/// A checkpoint holding the policy of `config` (zeros), as the trainer will write it.
-fn add_policy(checkpoint: &mut Checkpoint, config: &TrainConfig) {
-    let shapes = PolicyShapes::new(config, &Character::humanoid().unwrap()).unwrap();
-    let d = shapes.observation_size;
-    checkpoint
-        .insert(
-            tensor_names::ACTOR,
-            &[shapes.actor_params],
-            vec![0.0f32; shapes.actor_params],
-        )
-        .unwrap();
-    checkpoint
-        .insert(
-            tensor_names::CRITIC,
-            &[shapes.critic_params],
-            vec![0.0f32; shapes.critic_params],
-        )
-        .unwrap();
-    checkpoint
-        .insert(tensor_names::OBS_COUNT, &[2], vec![1.0f64, 1.0])
-        .unwrap();
-    checkpoint
-        .insert(tensor_names::OBS_MEAN, &[d], vec![0.0f64; d])
-        .unwrap();
-    checkpoint
-        .insert(tensor_names::OBS_M2, &[d], vec![1.0f64; d])
-        .unwrap();
-}
-
-/// A run of `iterations` iterations on the synthetic clip with checkpoints every 5.
-fn make_run(root: &Path, motions: &Path, iterations: u64) -> TrainConfig {
-    let mut config =
-        TrainConfig::with_motion(motions.join("humanoid3d_synth.txt").to_str().unwrap());
-    config.env.num_envs = 32;
-    config.run.checkpoint_interval = 5;
-    let mut session = RunSession::start_new(root, &config, false, ProgressMode::Quiet).unwrap();
-    while session.iteration() < iterations {
-        session.start_iteration();
-        let step = session.finish_iteration(IterationStats::default());
-        let next = session.record(step, None).unwrap();
-        if next.checkpoint_due {
-            let mut ckpt = session.new_checkpoint().unwrap();
-            add_policy(&mut ckpt, &config);
-            session.save_checkpoint(&ckpt).unwrap();
-        }
-    }
-    config
-}
-
 #[test]
 fn resume_dry_run_inspects_the_run_without_changing_it() {
     let ws = workspace();
     let motions = ws.path().join("motions");
     let root = ws.path().join("runs/synth");
-    make_run(&root, &motions, 12);
+    make_run(&root, &motions, 12, Vec::new());
     let metrics_before = std::fs::read(root.join("metrics.jsonl")).unwrap();
     let config_before = std::fs::read(root.join("config.toml")).unwrap();
     let root_arg = root.to_str().unwrap();
@@ -420,7 +313,7 @@ fn eval_checks_the_checkpoint_then_needs_the_gpu() {
     let ws = workspace();
     let motions = ws.path().join("motions");
     let root = ws.path().join("runs/synth");
-    let config = make_run(&root, &motions, 5);
+    let config = make_run(&root, &motions, 5, Vec::new());
     let path = root.join("checkpoints/iter_00000005.safetensors");
     let path_arg = path.to_str().unwrap();
     let out = run(
@@ -572,7 +465,7 @@ fn no_replay_turns_the_runs_replay_page_off() {
     let (_, default) = TrainConfig::general_default("synth");
     assert!(default.unwrap().run.replay);
     let root = ws.path().join("runs/synth");
-    make_run(&root, &motions, 5);
+    make_run(&root, &motions, 5, Vec::new());
     let out = run(
         &[
             "train",
@@ -592,7 +485,7 @@ fn replay_checks_its_input_then_needs_the_gpu() {
     let ws = workspace();
     let motions = ws.path().join("motions");
     let root = ws.path().join("runs/synth");
-    let config = make_run(&root, &motions, 5);
+    let config = make_run(&root, &motions, 5, Vec::new());
     let path = root.join("checkpoints/iter_00000005.safetensors");
     let path_arg = path.to_str().unwrap();
     let page = ws.path().join("replay.html");
