@@ -27,8 +27,7 @@ mod ppo_support;
 mod skip_support;
 mod small_run_support;
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -37,7 +36,7 @@ use instantmimic::cuda::{
     ReduceOp, nccl_version,
 };
 use instantmimic::kernels::{DeviceArray, EnvKernels};
-use instantmimic::motion::find::{MOTIONS_ENV, resolve_motion};
+use instantmimic::motion::find::resolve_motion;
 use instantmimic::motion::{Character, ReferenceMotion};
 use instantmimic::plan::PlanStore;
 use instantmimic::ppo::{GaussianPolicy, PpoUpdate};
@@ -45,6 +44,7 @@ use instantmimic::train::{IterationReport, Replicas, TrainConfig, Trainer, repli
 use ppo_support::RolloutStorage;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
+use small_run_support::{binary, check_success};
 
 fn motion(name: &str) -> ReferenceMotion {
     let character = Character::humanoid().expect("the humanoid");
@@ -82,21 +82,12 @@ fn several_gpus_or_skip() -> Option<Vec<usize>> {
     Some((0..count.min(4)).collect())
 }
 
-/// The values two trainers' reports are compared on, named.
-fn values(r: &IterationReport) -> [(&'static str, f64); 10] {
-    let u = &r.update;
-    [
-        ("actor sum of squares", r.parameter_squares[0]),
-        ("critic sum of squares", r.parameter_squares[1]),
-        ("policy loss", u.policy_loss),
-        ("value loss", u.value_loss),
-        ("entropy", u.entropy),
-        ("KL", u.kl),
-        ("learning rate", u.learning_rate),
-        ("gradient norm", u.grad_norm),
-        ("mean reward", r.totals.mean_reward),
-        ("episodes", r.totals.episodes),
-    ]
+/// A report's values, named: the update's and the rollout's.
+fn values(r: &IterationReport) -> Vec<(&'static str, f64)> {
+    let mut named = r.update.named_with_parameters(r.parameter_squares).to_vec();
+    named.push(("mean reward", r.totals.mean_reward));
+    named.push(("episodes", r.totals.episodes));
+    named
 }
 
 #[test]
@@ -322,26 +313,6 @@ fn replicas_stay_bit_identical(
     assert!(
         own_rollouts > iterations / 2,
         "every GPU should run its own envs (own seed): rollouts differed in only {own_rollouts} of {iterations} iterations"
-    );
-}
-
-/// The binary under test: `INSTANTMIMIC_BIN` where the test runs away from its build tree (the
-/// device machine), else the one cargo built beside this test.
-fn binary() -> Command {
-    let exe = std::env::var_os("INSTANTMIMIC_BIN")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_instantmimic")));
-    let mut c = Command::new(exe);
-    c.env_remove(MOTIONS_ENV);
-    c
-}
-
-fn check_success(out: &Output, what: &str) {
-    assert!(
-        out.status.success(),
-        "{what} failed:\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
     );
 }
 

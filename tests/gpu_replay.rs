@@ -23,10 +23,9 @@
 mod small_run_support;
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use instantmimic::cuda::Gpu;
-use instantmimic::motion::find::MOTIONS_ENV;
 use instantmimic::motion::{Character, ReferenceMotion};
 use instantmimic::plan::PlanStore;
 use instantmimic::recording::{Outcome, Recording};
@@ -35,6 +34,7 @@ use instantmimic::train::{
     Checkpoint, EnvEvaluation, EvalStart, SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M,
     TrainConfig, evaluate_episodes_on_gpu, evaluation_steps, preflight,
 };
+use small_run_support::binary;
 
 /// The page's size limit (issue 18's acceptance).
 const MAX_PAGE_BYTES: u64 = 5_000_000;
@@ -42,15 +42,6 @@ const MAX_PAGE_BYTES: u64 = 5_000_000;
 /// the kinematics of the table's qpos, the kernels compare with the table's body positions
 /// blended between rows, millimetres apart between two control steps (src/replay/assemble.rs).
 const SLACK_M: f64 = 5e-3;
-
-fn binary() -> Command {
-    let exe = std::env::var_os("INSTANTMIMIC_BIN")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_instantmimic")));
-    let mut c = Command::new(exe);
-    c.env_remove(MOTIONS_ENV);
-    c
-}
 
 /// The deterministic plans (an absolute path, for the binary too).
 fn assets() -> PathBuf {

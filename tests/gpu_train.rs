@@ -12,21 +12,10 @@
 mod small_run_support;
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use instantmimic::motion::find::MOTIONS_ENV;
-
-/// The binary under test: `INSTANTMIMIC_BIN` where the test runs away from its build tree (the
-/// device machine), else the one cargo built beside this test.
-fn binary() -> Command {
-    let exe = std::env::var_os("INSTANTMIMIC_BIN")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_instantmimic")));
-    let mut c = Command::new(exe);
-    c.env_remove(MOTIONS_ENV);
-    c
-}
+use small_run_support::{binary, check_success};
 
 /// The backflip's committed config at the 32-world size, with small iterations.
 fn write_config(dir: &Path, max_iterations: u64, checkpoint_interval: u32) -> PathBuf {
@@ -45,15 +34,6 @@ fn metrics(run: &Path) -> Vec<serde_json::Value> {
         .lines()
         .filter_map(|l| serde_json::from_str(l).ok())
         .collect()
-}
-
-fn check_success(out: &Output, what: &str) {
-    assert!(
-        out.status.success(),
-        "{what} failed:\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
 }
 
 #[test]
