@@ -357,7 +357,7 @@ impl Rollout {
         }
         self.statistics.clear_running()?;
         self.record_reset(stream, 0)?;
-        self.record_observation(stream, 0, self.is_training())?;
+        self.record_observation(stream, &self.storage, 0, self.is_training())?;
         stream.synchronize()?;
         Ok(())
     }
@@ -418,7 +418,7 @@ impl Rollout {
             } else {
                 StageRecorder::untimed()
             };
-            self.record_rollout(s, policy, &mut stages, None)?;
+            self.record_rollout(s, policy, &self.storage, &mut stages, None)?;
             events = stages.into_events();
             Ok::<(), RolloutError>(())
         })?;
@@ -429,7 +429,54 @@ impl Rollout {
     /// Queues the whole rollout, running `policy`, on `s` (inside a capture: the training loop
     /// records it into one graph with the update).
     pub fn record(&self, s: &Stream, policy: &dyn RolloutPolicy) -> Result<(), RolloutError> {
-        self.record_rollout(s, policy, &mut StageRecorder::untimed(), None)
+        self.record_rollout(
+            s,
+            policy,
+            &self.storage,
+            &mut StageRecorder::untimed(),
+            None,
+        )
+    }
+
+    /// [`Rollout::record`] into `storage` instead of [`Rollout::storage`]: the overlapped
+    /// training loop (`ppo.overlap_update`) alternates two storages, so that the update of one
+    /// rollout's batch reads it while the next rollout writes the other. Only a training
+    /// rollout; `storage` comes from [`Rollout::new_storage`].
+    pub fn record_into(
+        &self,
+        s: &Stream,
+        policy: &dyn RolloutPolicy,
+        storage: &RolloutStorage,
+    ) -> Result<(), RolloutError> {
+        if !self.is_training() {
+            return Err(RolloutError::Setup(
+                "only a training rollout records into another storage".to_owned(),
+            ));
+        }
+        let wanted = self.storage.observations.shape();
+        if storage.observations.shape() != wanted
+            || storage.actions.shape() != self.storage.actions.shape()
+        {
+            return Err(RolloutError::Setup(format!(
+                "a storage of observations {:?} and actions {:?} for a rollout of {wanted:?} and {:?} (make it with Rollout::new_storage)",
+                storage.observations.shape(),
+                storage.actions.shape(),
+                self.storage.actions.shape()
+            )));
+        }
+        self.record_rollout(s, policy, storage, &mut StageRecorder::untimed(), None)
+    }
+
+    /// A second storage shaped like [`Rollout::storage`] (zeros), for [`Rollout::record_into`].
+    pub fn new_storage(&self) -> Result<RolloutStorage, RolloutError> {
+        let [rows, n, obs] = self.storage.observations.shape();
+        Ok(RolloutStorage::zeros(
+            &self.gpu,
+            rows - 1,
+            n,
+            obs,
+            self.action_size(),
+        )?)
     }
 
     /// An empty record of every env's state for each of this rollout's frames: the state it
@@ -462,7 +509,13 @@ impl Rollout {
         }
         let stream = self.gpu.stream();
         let graph = stream.capture(|s| {
-            self.record_rollout(s, policy, &mut StageRecorder::untimed(), Some(trajectory))
+            self.record_rollout(
+                s,
+                policy,
+                &self.storage,
+                &mut StageRecorder::untimed(),
+                Some(trajectory),
+            )
         })?;
         graph.upload(stream)?;
         Ok(graph)
@@ -486,10 +539,12 @@ impl Rollout {
         &self.kernels
     }
 
+    /// The rollout into `storage` (this rollout's own, or one from [`Rollout::new_storage`]).
     fn record_rollout(
         &self,
         s: &Stream,
         policy: &dyn RolloutPolicy,
+        storage: &RolloutStorage,
         stages: &mut StageRecorder,
         trajectory: Option<&Trajectory>,
     ) -> Result<(), RolloutError> {
@@ -516,12 +571,12 @@ impl Rollout {
             // that follows a rollout still reads its row 0.
             self.normalizer
                 .normalized
-                .copy_into(s, &self.storage.observations, 0)?;
+                .copy_into(s, &storage.observations, 0)?;
         }
         for t in 0..self.horizon {
             let t32 = t as i32;
             stages.stage(gpu, s, RolloutStage::Policy, |s| {
-                self.record_policy(s, policy, t)
+                self.record_policy(s, policy, storage, t)
             })?;
             stages.stage(gpu, s, RolloutStage::Physics, |s| {
                 for _ in 0..self.substeps {
@@ -532,16 +587,16 @@ impl Rollout {
             })?;
             stages.stage(gpu, s, RolloutStage::PostPhysics, |s| {
                 self.sim.record("kinematics", s)?;
-                self.record_reward(s, t32)?;
+                self.record_reward(s, storage, t32)?;
                 match &self.purpose {
                     Purpose::Evaluation(scores, yardstick) => {
-                        self.record_scores(s, scores, yardstick, t32)?
+                        self.record_scores(s, storage, scores, yardstick, t32)?
                     }
                     Purpose::Training => self.statistics.record_step(
                         &self.kernels,
                         s,
                         t32,
-                        &self.storage,
+                        storage,
                         &self.state.episode_step,
                         &self.state.failure,
                     )?,
@@ -553,7 +608,7 @@ impl Rollout {
             })?;
             stages.stage(gpu, s, RolloutStage::Reset, |s| self.record_reset(s, t32))?;
             stages.stage(gpu, s, RolloutStage::Observation, |s| {
-                self.record_observation(s, t + 1, self.is_training())
+                self.record_observation(s, storage, t + 1, self.is_training())
             })?;
         }
         if !self.is_training() {
@@ -583,13 +638,14 @@ impl Rollout {
         &self,
         s: &Stream,
         policy: &dyn RolloutPolicy,
+        storage: &RolloutStorage,
         t: usize,
     ) -> Result<(), RolloutError> {
         let storage = ActStorage {
-            actions: &self.storage.actions,
-            means: &self.storage.means,
-            log_probs: &self.storage.log_probs,
-            values: &self.storage.values,
+            actions: &storage.actions,
+            means: &storage.means,
+            log_probs: &storage.log_probs,
+            values: &storage.values,
             // Evaluation needs no values at all.
             values_in_update: self.values_in_update || !self.is_training(),
         };
@@ -609,6 +665,7 @@ impl Rollout {
     fn record_scores(
         &self,
         s: &Stream,
+        storage: &RolloutStorage,
         scores: &EpisodeScores,
         yardstick: &Yardstick,
         t: i32,
@@ -624,9 +681,9 @@ impl Rollout {
             &self.joints.end_effectors,
             &self.state.ref_time,
             t,
-            &self.storage.rewards,
-            &self.storage.terminated,
-            &self.storage.truncated,
+            &storage.rewards,
+            &storage.terminated,
+            &storage.truncated,
             yardstick,
             &scores.status,
             &scores.steps,
@@ -662,7 +719,12 @@ impl Rollout {
         Ok(())
     }
 
-    fn record_reward(&self, s: &Stream, t: i32) -> Result<(), RolloutError> {
+    fn record_reward(
+        &self,
+        s: &Stream,
+        storage: &RolloutStorage,
+        t: i32,
+    ) -> Result<(), RolloutError> {
         let (p, st) = (&self.physics, &self.state);
         self.kernels.reward_termination(
             s,
@@ -680,9 +742,9 @@ impl Rollout {
             t,
             &st.ref_time,
             &st.episode_step,
-            &self.storage.rewards,
-            &self.storage.terminated,
-            &self.storage.truncated,
+            &storage.rewards,
+            &storage.terminated,
+            &storage.truncated,
             &st.done,
             &st.failure,
             &st.errors,
@@ -720,8 +782,15 @@ impl Rollout {
         Ok(())
     }
 
-    /// The observation into storage row `row`, normalized (statistics updated when `update`).
-    fn record_observation(&self, s: &Stream, row: usize, update: bool) -> Result<(), RolloutError> {
+    /// The observation into row `row` of `storage`, normalized (statistics updated when
+    /// `update`).
+    fn record_observation(
+        &self,
+        s: &Stream,
+        storage: &RolloutStorage,
+        row: usize,
+        update: bool,
+    ) -> Result<(), RolloutError> {
         let p = &self.physics;
         let norm = &self.normalizer;
         self.kernels.observe(
@@ -740,7 +809,7 @@ impl Rollout {
             &self.observation,
             &norm.raw,
         )?;
-        norm.record(&self.kernels, s, &self.storage.observations, row, update)?;
+        norm.record(&self.kernels, s, &storage.observations, row, update)?;
         Ok(())
     }
 }
