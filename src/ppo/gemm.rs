@@ -34,7 +34,8 @@ pub enum GemmPath {
 }
 
 /// The policy's GEMM path and, for cuBLAS, the handle (shared by the rollout's policy, the
-/// evaluation's and the update: all record onto the GPU's main stream).
+/// evaluation's and the update: all record onto the GPU's main stream, one after the other;
+/// the overlapped loop's rollout policy has a handle of its own, [`PolicyGemm::separate`]).
 #[derive(Clone)]
 pub struct PolicyGemm {
     setting: GemmSetting,
@@ -87,6 +88,20 @@ impl PolicyGemm {
                 }),
             }),
             Err(e) => Err(e),
+        }
+    }
+
+    /// The same path with a cuBLAS handle, and so a workspace, of its own (Warp tiles need
+    /// none): for GEMMs recorded into a branch of a graph that may run at the same time as
+    /// this one's (the overlapped loop's rollout beside the update), which must not share a
+    /// workspace. Not inside a capture.
+    pub fn separate(&self, gpu: &Gpu) -> Result<PolicyGemm, CudaError> {
+        match self.path {
+            GemmPath::WarpTiles => Ok(self.clone()),
+            GemmPath::Cublas(_) => Ok(PolicyGemm {
+                blas: Some(Blas::open(gpu)?),
+                ..self.clone()
+            }),
         }
     }
 

@@ -329,7 +329,48 @@ impl PpoUpdate {
 
     /// Queues the whole update of `batch` on `stream` (see the module docs); valid inside
     /// [`Stream::capture`]. The statistics land in [`PpoUpdate::statistics`] at the end.
+    /// `batch` was sampled by this update's policy, whose parameters have not changed since.
     pub fn record(&self, stream: &Stream, batch: &PpoBatch<'_>) -> Result<(), PpoError> {
+        self.record_update(stream, batch, true)
+    }
+
+    /// Queues a copy of `sampled_with` as the log std the next lagged batch was sampled with
+    /// (the analytic KL's old Gaussians; [`PpoUpdate::record_lagged`]). Record it before the
+    /// sampling policy's parameters change.
+    pub fn record_sampling_log_std(
+        &self,
+        stream: &Stream,
+        sampled_with: &DeviceArray<f32>,
+    ) -> Result<(), PpoError> {
+        if sampled_with.len() != self.action_size {
+            return Err(PpoError::Shape(format!(
+                "a sampling log std of {} values for {} actions",
+                sampled_with.len(),
+                self.action_size
+            )));
+        }
+        self.old_log_std
+            .copy_from(stream, sampled_with, 0..self.action_size, 0)?;
+        Ok(())
+    }
+
+    /// [`PpoUpdate::record`] of a batch that another copy of the policy sampled, with
+    /// parameters older than this update's (the overlapped training loop, docs/train.md):
+    /// the same update, except that the sampling log std is the one
+    /// [`PpoUpdate::record_sampling_log_std`] recorded before, not the policy's current one.
+    /// The ratio and the sampled KL read the log-probabilities stored at sampling time, so
+    /// they measure the new policy against the one that sampled, as PPO asks.
+    pub fn record_lagged(&self, stream: &Stream, batch: &PpoBatch<'_>) -> Result<(), PpoError> {
+        self.record_update(stream, batch, false)
+    }
+
+    /// The update; with `own_log_std`, the policy's current log std is the sampling one.
+    fn record_update(
+        &self,
+        stream: &Stream,
+        batch: &PpoBatch<'_>,
+        own_log_std: bool,
+    ) -> Result<(), PpoError> {
         let (t, n, d, a) = (
             self.horizon,
             self.envs,
@@ -341,9 +382,11 @@ impl PpoUpdate {
         record_clear(stream, &self.loss_sums)?;
         record_clear(stream, &self.grad_norm_sq)?;
         record_clear(stream, &self.advantage_moments)?;
-        // The rollout that precedes this update sampled with the current log std.
-        self.old_log_std
-            .copy_from(stream, &self.log_std, 0..self.action_size, 0)?;
+        if own_log_std {
+            // The rollout that precedes this update sampled with the current log std.
+            self.old_log_std
+                .copy_from(stream, &self.log_std, 0..self.action_size, 0)?;
+        }
 
         let last_values = if self.values_in_update {
             // One forward over all rows; rows 0..T are the rollout's values (what GAE, the
