@@ -86,6 +86,12 @@ pub struct PpoConfig {
     /// over all T + 1 observation rows at the start of the update (the rollout runs the actor
     /// only; the default). Same values, a different cost split (docs/ppo.md).
     pub values_in_update: bool,
+    /// Run the update of each iteration's batch beside the next iteration's rollout (two
+    /// branches of one CUDA graph) instead of after it (docs/train.md, "Overlapping the
+    /// update"): the rollout samples from a copy of the parameters taken before each update,
+    /// one update behind, and the PPO ratio (log-probabilities stored at sampling time)
+    /// corrects for the lag. One GPU only. Off by default; not yet run on a GPU.
+    pub overlap_update: bool,
 }
 
 impl Default for PpoConfig {
@@ -107,6 +113,7 @@ impl Default for PpoConfig {
             kl_measure: KlMeasure::Sample,
             adaptive_learning_rate: true,
             values_in_update: true,
+            overlap_update: false,
             max_grad_norm: 1.0,
         }
     }

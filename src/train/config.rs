@@ -527,6 +527,18 @@ impl TrainConfig {
                 ));
             }
         }
+        // The overlapped loop is built for one GPU's iteration graph; the replicas' all-reduces
+        // run between parts of theirs (docs/train.md, "Overlapping the update").
+        if q.overlap_update && run.data_parallel() {
+            return Err(bad(
+                "ppo.overlap_update",
+                "true".to_owned(),
+                &format!(
+                    "runs on one GPU only, and run.gpus names {} devices {gpus:?}: train on one GPU or leave ppo.overlap_update off",
+                    gpus.len()
+                ),
+            ));
+        }
         // The returns' count of one update over every GPU is an i32 on the device.
         let all_samples = samples * run.replicas() as u64;
         if all_samples > i32::MAX as u64 {

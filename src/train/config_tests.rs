@@ -314,3 +314,63 @@ fn overrides_set_any_key_and_are_validated() {
         );
     }
 }
+
+#[test]
+fn overlap_update_is_off_by_default_and_refused_on_several_gpus() {
+    let c = TrainConfig::with_motion("walk");
+    assert!(!c.ppo.overlap_update);
+    for (name, _) in COMMITTED_CONFIGS {
+        let (_, committed) = TrainConfig::committed(name).unwrap();
+        assert!(!committed.unwrap().ppo.overlap_update, "{name}");
+    }
+    let parse =
+        |text: &str| TrainConfig::from_toml(&format!("motion = \"walk\"\n{text}"), "c.toml");
+    let on = parse("[ppo]\noverlap_update = true").unwrap();
+    assert!(on.ppo.overlap_update);
+    // One device of run.gpus is one GPU: allowed, as is either place of the values.
+    for text in [
+        "[ppo]\noverlap_update = true\n[run]\ngpus = [2]",
+        "[ppo]\noverlap_update = true\nvalues_in_update = false",
+    ] {
+        parse(text).unwrap_or_else(|e| panic!("{text}: {e}"));
+    }
+    let e = parse("[ppo]\noverlap_update = true\n[run]\ngpus = [0, 1]")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("c.toml: ")
+            && e.contains("`ppo.overlap_update` = true")
+            && e.contains("one GPU")
+            && e.contains("run.gpus")
+            && !e.contains('\n'),
+        "{e}"
+    );
+    // --set reaches it, and the refusal names the key there too.
+    let set = |pairs: &[(&str, &str)]| {
+        let pairs: Vec<(String, String)> = pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect();
+        c.with_overrides(&pairs, "walk with --set")
+    };
+    assert!(
+        set(&[("ppo.overlap_update", "true")])
+            .unwrap()
+            .ppo
+            .overlap_update
+    );
+    let e = set(&[("ppo.overlap_update", "true"), ("run.gpus", "[0, 1, 2]")])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("ppo.overlap_update") && e.contains("3 devices"),
+        "{e}"
+    );
+    let e = set(&[("ppo.overlap_update", "yes")])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("overlap_update"), "{e}");
+    // The key round-trips through a run's config.toml.
+    let back = TrainConfig::from_toml(&on.to_toml().unwrap(), "round trip").unwrap();
+    assert_eq!(back, on);
+}
