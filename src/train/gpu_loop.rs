@@ -150,7 +150,13 @@ pub fn train_with(
     let (session, checkpoint) = open_session(config, start, progress)?;
     let setup = std::time::Instant::now();
     let mut trainer = Trainer::new(gpu, store, motion, session.config())?;
-    let notes = vec![format!("GEMMs: {}", trainer.gemm().describe())];
+    let mut notes = vec![format!("GEMMs: {}", trainer.gemm().describe())];
+    if trainer.overlaps_update() {
+        notes.push(
+            "ppo.overlap_update: each update runs beside the next rollout, which samples from the parameters one update behind (docs/train.md, \"Overlapping the update\")"
+                .to_owned(),
+        );
+    }
     run_loop(session, &mut trainer, checkpoint, motion, setup, notes)
 }
 
@@ -389,7 +395,9 @@ pub fn evaluation_trainer(
 ) -> Result<Trainer, TrainError> {
     let mut small = config.clone();
     small.env.num_envs = config.run.eval_envs;
-    let trainer = Trainer::new(gpu, store, motion, &small)?;
+    // It never trains: the overlapped loop's graphs would only cost setup time.
+    small.ppo.overlap_update = false;
+    let mut trainer = Trainer::new(gpu, store, motion, &small)?;
     trainer.restore(checkpoint)?;
     Ok(trainer)
 }

@@ -2,11 +2,13 @@
 //! replayed (docs/train.md, "The training loop").
 //!
 //! One training iteration is one CUDA graph: the rollout (horizon x [policy, physics substeps,
-//! reward, reset, observation]), then the whole PPO update, then two device copies that gather
+//! reward, reset, observation]), then the whole PPO update, then device copies that gather
 //! the rollout's statistics and the update's into one small report. The host launches it,
 //! queues one asynchronous copy of the report, and reads the report when the iteration is done:
 //! nothing inside an iteration waits for the host. Evaluation is a second graph over the
-//! 32-world plans that reads the same policy parameters.
+//! 32-world plans that reads the same policy parameters. With `ppo.overlap_update` the
+//! iteration's graph holds the update of the last rollout's batch and the next rollout as two
+//! branches instead (src/train/pipeline.rs).
 //!
 //! The trainer owns the policy and lends it to the rollouts (which run it) and to the update
 //! (which changes its parameters in place); the rollouts own the observation normalization and
@@ -17,55 +19,60 @@
 //! and the all-reduces of the rollout and the update inside its iteration graph
 //! (src/train/replicas/ drives them together).
 
+use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use crate::cuda::{Communicator, DeviceRange, Gpu, Graph, Readback};
-use crate::env::{Rollout, RolloutTotals, TOTALS};
+use crate::env::Rollout;
 use crate::kernels::DeviceArray;
 use crate::motion::ReferenceMotion;
 use crate::plan::PlanStore;
-use crate::ppo::reduce::{record_clear, record_sum_of_squares};
-use crate::ppo::{
-    GaussianPolicy, PolicyGemm, PpoBatch, PpoOptimizerState, PpoStatistics, PpoUpdate,
-};
+use crate::ppo::{GaussianPolicy, PolicyGemm, PpoBatch, PpoOptimizerState, PpoUpdate};
 
 use super::checkpoint::tensor_names;
 use super::checkpoint::{Checkpoint, CheckpointError};
 use super::config::TrainConfig;
+use super::device_report::{REPORT_BYTES, read_report, record_parameter_squares, record_report};
 use super::error::TrainError;
 use super::evaluation::EnvEvaluation;
-use super::metrics::UpdateStats;
+use super::pipeline::Pipeline;
 use super::replica_seed;
 use super::report::IterationReport;
 use super::session::IterationStats;
 use crate::plan::PhysicsOverflow;
-
-/// Bytes of the rollout's totals (float64) at the start of the report, then the update's
-/// statistics (float32), then the parameters' sums of squares (float64, actor and critic: the
-/// divergence guard's view of the parameters).
-const TOTALS_BYTES: usize = TOTALS * 8;
-const STATISTICS_BYTES: usize = PpoStatistics::LEN * 4;
-const PARAMETER_SQUARES_BYTES: usize = 2 * 8;
-const REPORT_BYTES: usize = TOTALS_BYTES + STATISTICS_BYTES + PARAMETER_SQUARES_BYTES;
 
 /// Everything on the GPU that a run trains and evaluates with.
 pub struct Trainer {
     gpu: Gpu,
     rollout: Rollout,
     evaluation: Rollout,
-    /// The policy the training rollout samples from and the update trains...
+    /// The policy the training rollout samples from and the update trains (with
+    /// `ppo.overlap_update` the rollout samples from a copy one update behind, the pipeline's)...
     policy: GaussianPolicy,
     /// ...and the same parameters with the evaluation's batch (shared, not copied).
     evaluation_policy: GaussianPolicy,
     update: PpoUpdate,
-    iteration_graph: Graph,
+    iterations: Iterations,
     evaluation_graph: Graph,
+}
+
+/// How an iteration runs.
+enum Iterations {
+    /// The rollout, then the update of its batch, in one graph (the default).
+    Sequential(Box<SequentialIteration>),
+    /// The update of the last rollout's batch beside the next rollout (`ppo.overlap_update`).
+    Overlapped(Box<Pipeline>),
+}
+
+/// The default iteration: one graph and its report.
+struct SequentialIteration {
+    graph: Graph,
     report: DeviceRange,
+    readback: Readback,
     /// The actor's and the critic's parameters' sums of squares after the update: written by
     /// the iteration graph (copied into the report), so it lives as long as the graph.
     #[expect(dead_code, reason = "only the captured graph addresses it")]
     parameter_squares: DeviceArray<f64>,
-    readback: Readback,
 }
 
 impl Trainer {
@@ -113,6 +120,12 @@ impl Trainer {
         config: &TrainConfig,
         replicas: Option<&Communicator>,
     ) -> Result<Trainer, TrainError> {
+        if config.ppo.overlap_update && replicas.is_some() {
+            // The configuration's validation refuses it already (with run.gpus).
+            return Err(TrainError::Setup(
+                "ppo.overlap_update runs on one GPU only, not in a replica of several".to_owned(),
+            ));
+        }
         let rank = replicas.map_or(0, Communicator::rank);
         let own_seed = replica_seed(config.seed, rank);
         let mut rollout_config = config.rollout_config();
@@ -140,99 +153,50 @@ impl Trainer {
             // NCCL's first collectives outside the capture, every rank at this point.
             replicas.warm_up(gpu)?;
         }
-        let report = DeviceRange::whole(&Arc::new(gpu.alloc_zeroed(REPORT_BYTES)?));
-        let parameter_squares = DeviceArray::<f64>::zeros(gpu, [2])?;
-        let stream = gpu.stream();
-        let iteration_graph = stream.capture(|s| {
-            rollout.record(s, &policy)?;
-            update.record(s, &PpoBatch::from(&rollout.storage))?;
-            let kernels = rollout.kernels();
-            record_clear(s, &parameter_squares)?;
-            record_sum_of_squares(kernels, s, policy.actor_parameters(), &parameter_squares, 0)?;
-            record_sum_of_squares(
-                kernels,
-                s,
-                policy.critic_parameters(),
-                &parameter_squares,
-                1,
-            )?;
-            let totals = rollout.statistics().totals();
-            // The report is the three, back to back.
-            let parts = [
-                (totals.range()?, TOTALS_BYTES),
-                (update.statistics().range()?, STATISTICS_BYTES),
-                (parameter_squares.range()?, PARAMETER_SQUARES_BYTES),
-            ];
-            let mut at = 0;
-            for (source, bytes) in parts {
-                s.copy(&report.sub(at, bytes)?, &source.sub(0, bytes)?)?;
-                at += bytes;
-            }
-            Ok::<(), TrainError>(())
-        })?;
-        iteration_graph.upload(stream)?;
+        let iterations = if config.ppo.overlap_update {
+            Iterations::Overlapped(Box::new(Pipeline::new(gpu, &rollout, &policy, &update)?))
+        } else {
+            Iterations::Sequential(Box::new(SequentialIteration::capture(
+                gpu, &rollout, &policy, &update,
+            )?))
+        };
         let (evaluation_graph, _) = evaluation.capture(&evaluation_policy, false)?;
         rollout.reset_all()?;
         Ok(Trainer {
             gpu: gpu.clone(),
-            readback: Readback::new(gpu, REPORT_BYTES)?,
             rollout,
             evaluation,
             policy,
             evaluation_policy,
             update,
-            iteration_graph,
+            iterations,
             evaluation_graph,
-            report,
-            parameter_squares,
         })
     }
 
     /// Runs one training iteration (rollout and update) and returns its statistics. Waits for
     /// the iteration to finish: the caller's clock measures it.
     pub fn iterate(&mut self) -> Result<IterationStats, TrainError> {
-        Ok(self.iterate_report()?.stats())
+        let (report, extra_rollouts) = self.run_iteration()?;
+        Ok(IterationStats {
+            extra_rollouts,
+            ..report.stats()
+        })
     }
 
     /// [`Trainer::iterate`], returning this GPU's report as read back (what several GPUs'
     /// reports are merged from).
     pub fn iterate_report(&mut self) -> Result<IterationReport, TrainError> {
+        Ok(self.run_iteration()?.0)
+    }
+
+    /// One iteration: its report and the rollouts it ran beyond its own.
+    fn run_iteration(&mut self) -> Result<(IterationReport, u32), TrainError> {
         let stream = self.gpu.stream();
-        self.iteration_graph.launch(stream)?;
-        self.readback.queue(stream, &self.report)?;
-        let bytes = self
-            .readback
-            .wait()?
-            .ok_or_else(|| TrainError::Setup("the iteration report was not queued".to_owned()))?;
-        let totals = RolloutTotals::from_bytes(&bytes[..TOTALS_BYTES])
-            .ok_or_else(|| TrainError::Setup("malformed rollout totals".to_owned()))?;
-        let squares_at = TOTALS_BYTES + STATISTICS_BYTES;
-        let values: Vec<f32> = bytes[TOTALS_BYTES..squares_at]
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect();
-        let ppo = PpoStatistics::from_values(&values)?;
-        let square = |i: usize| {
-            let at = squares_at + 8 * i;
-            bytes
-                .get(at..at + 8)
-                .and_then(|b| <[u8; 8]>::try_from(b).ok())
-                .map(f64::from_le_bytes)
-                .ok_or_else(|| TrainError::Setup("a short iteration report".to_owned()))
-        };
-        let parameter_squares = [square(0)?, square(1)?];
-        Ok(IterationReport {
-            totals,
-            parameter_squares,
-            update: UpdateStats {
-                policy_loss: f64::from(ppo.surrogate_loss),
-                value_loss: f64::from(ppo.value_loss),
-                entropy: f64::from(ppo.entropy),
-                kl: f64::from(ppo.approx_kl),
-                learning_rate: f64::from(ppo.learning_rate),
-                grad_norm: f64::from(ppo.grad_norm),
-            },
-        })
+        match &mut self.iterations {
+            Iterations::Sequential(sequential) => Ok((sequential.run(stream)?, 0)),
+            Iterations::Overlapped(pipeline) => pipeline.iterate(stream),
+        }
     }
 
     /// Evaluates the current policy by the paper's protocol (one episode per evaluation env,
@@ -304,7 +268,8 @@ impl Trainer {
     /// Restores the policy and the normalization from `checkpoint`, and, when it has them
     /// (a training checkpoint), the optimizer and the start-phase statistics; then puts every
     /// env at a new reference state (episodes in progress are not stored).
-    pub fn restore(&self, checkpoint: &Checkpoint) -> Result<(), TrainError> {
+    /// With `ppo.overlap_update` the pipeline restarts: the next iteration fills it again.
+    pub fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainError> {
         use tensor_names::*;
         self.gpu.synchronize()?;
         let policy = &self.policy;
@@ -340,6 +305,10 @@ impl Trainer {
             }
         }
         self.rollout.reset_all()?;
+        // The batch in flight was sampled from other parameters: the next iteration refills.
+        if let Iterations::Overlapped(pipeline) = &mut self.iterations {
+            pipeline.restart();
+        }
         Ok(())
     }
 
@@ -380,6 +349,96 @@ impl Trainer {
     /// Floating-point operations of one update (for throughput reports).
     pub fn update_flops(&self) -> f64 {
         self.update.flops().total()
+    }
+
+    /// Whether iterations run the update beside the next rollout (`ppo.overlap_update`).
+    pub fn overlaps_update(&self) -> bool {
+        matches!(self.iterations, Iterations::Overlapped(_))
+    }
+
+    /// The policy the update trains (its parameters are what evaluation and checkpoints see).
+    pub fn policy(&self) -> &GaussianPolicy {
+        &self.policy
+    }
+
+    /// With `ppo.overlap_update`, the copy of the policy the training rollout samples from:
+    /// after an iteration, the parameters as they were before that iteration's update (those
+    /// after the update before it). `None` without the overlap.
+    pub fn behaviour_policy(&self) -> Option<&GaussianPolicy> {
+        match &self.iterations {
+            Iterations::Overlapped(pipeline) => Some(pipeline.behaviour()),
+            Iterations::Sequential(_) => None,
+        }
+    }
+
+    /// The training rollout and the policy whose parameters the update trains, for a caller
+    /// that captures graphs of its own from them (`bench full`: the physics floor from the
+    /// rollout's states, the per-stage times). Such graphs write the rollout's state and
+    /// storage when they run: training afterwards continues from whatever they leave.
+    pub fn training_rollout(&self) -> (&Rollout, &GaussianPolicy) {
+        (&self.rollout, &self.policy)
+    }
+
+    /// The update alone, of the batch in the rollout's own storage, captured as a graph of its
+    /// own (`bench full` times it). Launching it trains the parameters.
+    pub fn capture_update(&self) -> Result<Graph, TrainError> {
+        let stream = self.gpu.stream();
+        let graph = stream.capture(|s| {
+            self.update
+                .record(s, &PpoBatch::from(&self.rollout.storage))?;
+            Ok::<(), TrainError>(())
+        })?;
+        graph.upload(stream)?;
+        Ok(graph)
+    }
+
+    /// Node kinds of the graph one iteration launches (the steady graph of the overlapped
+    /// loop), e.g. `{"kernel": .., "memcpy": .., "conditional": ..}`.
+    pub fn iteration_graph_nodes(&self) -> Result<BTreeMap<String, usize>, TrainError> {
+        let graph = match &self.iterations {
+            Iterations::Sequential(sequential) => &sequential.graph,
+            Iterations::Overlapped(pipeline) => pipeline.steady_graph(),
+        };
+        Ok(graph.node_counts()?)
+    }
+}
+
+impl SequentialIteration {
+    /// The rollout, the whole update of its batch, the parameters' sums of squares and the
+    /// report's copies, in one graph.
+    fn capture(
+        gpu: &Gpu,
+        rollout: &Rollout,
+        policy: &GaussianPolicy,
+        update: &PpoUpdate,
+    ) -> Result<SequentialIteration, TrainError> {
+        let report = DeviceRange::whole(&Arc::new(gpu.alloc_zeroed(REPORT_BYTES)?));
+        let parameter_squares = DeviceArray::<f64>::zeros(gpu, [2])?;
+        let stream = gpu.stream();
+        let graph = stream.capture(|s| {
+            rollout.record(s, policy)?;
+            update.record(s, &PpoBatch::from(&rollout.storage))?;
+            record_parameter_squares(rollout.kernels(), s, policy, &parameter_squares)?;
+            record_report(s, &report, rollout, update, &parameter_squares)
+        })?;
+        graph.upload(stream)?;
+        Ok(SequentialIteration {
+            graph,
+            report,
+            readback: Readback::new(gpu, REPORT_BYTES)?,
+            parameter_squares,
+        })
+    }
+
+    /// Launches the graph, queues the report's copy and waits for it.
+    fn run(&mut self, stream: &crate::cuda::Stream) -> Result<IterationReport, TrainError> {
+        self.graph.launch(stream)?;
+        self.readback.queue(stream, &self.report)?;
+        let bytes = self
+            .readback
+            .wait()?
+            .ok_or_else(|| TrainError::Setup("the iteration report was not queued".to_owned()))?;
+        read_report(bytes)
     }
 }
 
