@@ -1,12 +1,15 @@
 //! Benchmarks of the real thing, shared by `instantmimic bench ...` and `benches/`: physics,
-//! the rollout, the GEMMs, and whole training iterations on 1, 2, ... GPUs.
+//! the rollout, the GEMMs, whole training iterations against the physics floor (with and
+//! without the overlapped update), and whole training iterations on 1, 2, ... GPUs.
 
+mod full;
 mod gemm;
 mod physics;
 pub mod rollout;
 mod timing;
 mod train_gpus;
 
+pub use full::{FullBench, LoopCase, bench_full};
 pub use gemm::{GemmBench, GemmCase, bench_gemm};
 pub use physics::{PhysicsBench, bench_physics};
 pub use rollout::{RolloutBench, bench_rollout};

@@ -19,7 +19,7 @@ use crate::train::{GemmSetting, TrainConfig, preflight};
 
 /// `bench rollout --gemm`: `policy.gemm` (src/ppo/config.rs, `GemmSetting`).
 #[derive(Clone, Copy, Debug, ValueEnum)]
-enum GemmArg {
+pub(super) enum GemmArg {
     /// cuBLAS f32 when libcublas can be loaded, else Warp tiles.
     Auto,
     /// Warp's tile kernels.
@@ -71,6 +71,10 @@ enum BenchCommand {
     /// included) on 1, 2, ... GPUs together, as `train --gpus` runs them (NCCL needed for more
     /// than one).
     TrainGpus(TrainGpusArgs),
+    /// Frames per second of whole training iterations on one GPU as `train` runs them, with
+    /// the update after the rollout and beside the next one (`ppo.overlap_update`), against
+    /// the physics-only floor, with the time of each part.
+    Full(super::bench_full::FullArgs),
 }
 
 #[derive(Args, Debug)]
@@ -212,6 +216,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchCommand::Rollout(args) => rollout(args),
         BenchCommand::Gemm(args) => gemm(args),
         BenchCommand::TrainGpus(args) => train_gpus(args),
+        BenchCommand::Full(args) => super::bench_full::run(args),
     }
 }
 

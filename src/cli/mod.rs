@@ -1,6 +1,7 @@
 //! The command line: `instantmimic <command> ...`.
 
 mod bench;
+mod bench_full;
 mod eval;
 mod export;
 mod gpu;

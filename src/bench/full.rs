@@ -1,0 +1,304 @@
+//! Whole training iterations against the physics floor (`bench full`, issue 20): frames per
+//! second of the rollout and the update as `train` runs them (the iteration's graph, the
+//! report's readback, the host waiting for it: what the active clock measures), once with the
+//! update after the rollout (the default) and once beside the next rollout
+//! (`ppo.overlap_update`), each against the physics-only floor replayed from the rollout's
+//! states (`bench rollout`'s floor, the same code), with a breakdown of the sequential
+//! iteration: the rollout's stages, the update, and the rest.
+//!
+//! A frame is one control step of one env; an iteration that ran a rollout more (the
+//! overlapped loop filling its pipeline, only in the warm-up unless it is 0) counts its frames.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::rollout::{median, physics_only_graph, time_floor_from_rollout_states, time_graph};
+use super::timing::timed_seconds;
+use crate::cuda::{Gpu, NvtxRange};
+use crate::env::{RolloutError, RolloutStage};
+use crate::motion::ReferenceMotion;
+use crate::plan::PlanStore;
+use crate::train::{TrainConfig, TrainError, Trainer};
+
+/// One way of running the loop, measured.
+#[derive(Clone, Debug, Serialize)]
+pub struct LoopCase {
+    /// `ppo.overlap_update`.
+    pub overlap_update: bool,
+    /// Building the trainer (plans, kernels, graphs).
+    pub setup_seconds: f64,
+    /// Median over rounds of frames per wall second of the timed iterations, and every
+    /// round's.
+    pub frames_per_s: f64,
+    pub rounds_frames_per_s: Vec<f64>,
+    /// Wall milliseconds per iteration of the median round.
+    pub iteration_ms: f64,
+    /// `frames_per_s` over the floor's (from the rollout's states).
+    pub ratio_to_floor: f64,
+    /// Node kinds of the graph one iteration launches.
+    pub graph_nodes: BTreeMap<String, usize>,
+}
+
+/// The result of [`bench_full`].
+#[derive(Clone, Debug, Serialize)]
+pub struct FullBench {
+    pub gpu: String,
+    pub motion: String,
+    pub num_envs: u32,
+    pub substeps: u32,
+    pub horizon: u32,
+    pub epochs: u32,
+    pub minibatches: u32,
+    /// What computed the policy's GEMMs.
+    pub gemm: String,
+    /// Timed iterations (and floor launches) per round, untimed ones before each, rounds.
+    pub iterations: u32,
+    pub warmup: u32,
+    pub rounds: u32,
+    /// The physics-only floor replayed from the rollout's states: median frames/s, every
+    /// round's, and milliseconds per rollout's worth of it.
+    pub floor_frames_per_s: f64,
+    pub rounds_floor_frames_per_s: Vec<f64>,
+    pub floor_rollout_ms: f64,
+    pub sequential: LoopCase,
+    pub overlapped: LoopCase,
+    /// `overlapped.frames_per_s / sequential.frames_per_s`.
+    pub overlap_speedup: f64,
+    /// The sequential iteration, in milliseconds: the rollout graph alone (median round), the
+    /// share of each of its stages (from the event-timed rollout graph, scaled to
+    /// `rollout_ms`), the update alone (its own graph, event-timed), and the rest of a timed
+    /// iteration (`iteration_ms - rollout_ms - update_ms`: the report's copy and readback,
+    /// launch gaps, the host's wait).
+    pub rollout_ms: f64,
+    pub stage_ms: BTreeMap<RolloutStage, f64>,
+    pub update_ms: f64,
+    pub rest_ms: f64,
+    /// The update's milliseconds per iteration that the overlap took off the sequential
+    /// iteration (`sequential.iteration_ms - overlapped.iteration_ms`), and that over
+    /// `update_ms` (1: all of it hidden).
+    pub hidden_ms: f64,
+    pub hidden_fraction: f64,
+}
+
+/// Builds the trainer of `config` twice, without and with `ppo.overlap_update`, and times
+/// `rounds` x `iterations` whole iterations of each (after `warmup` untimed ones per round);
+/// with the sequential one also the physics-only floor from the rollout's states, the rollout
+/// graph alone, its stages and the update alone. One trainer at a time: the first is dropped
+/// before the second is built.
+pub fn bench_full(
+    gpu: &Gpu,
+    store: &PlanStore,
+    motion: &ReferenceMotion,
+    config: &TrainConfig,
+    iterations: u32,
+    warmup: u32,
+    rounds: u32,
+) -> Result<FullBench, TrainError> {
+    if iterations == 0 {
+        return Err(TrainError::Setup("time at least one iteration".to_owned()));
+    }
+    let rounds = rounds.max(1);
+    let frames = u64::from(config.env.num_envs) * u64::from(config.ppo.horizon);
+    let with_overlap = |on: bool| {
+        let mut c = config.clone();
+        c.ppo.overlap_update = on;
+        c.run.gpus.clear();
+        c.validate("bench full")?;
+        Ok::<TrainConfig, TrainError>(c)
+    };
+
+    let _range = NvtxRange::push("sequential");
+    let started = Instant::now();
+    let mut trainer = Trainer::new(gpu, store, motion, &with_overlap(false)?)?;
+    let setup_seconds = started.elapsed().as_secs_f64();
+    let gemm = trainer.gemm().describe();
+    let timed = time_rounds(&mut trainer, frames, warmup, iterations, rounds)?;
+    let sequential = timed.case(false, setup_seconds, trainer.iteration_graph_nodes()?);
+    let parts = time_parts(gpu, &trainer, frames, warmup, iterations, rounds)?;
+    drop(trainer);
+    drop(_range);
+
+    let _range = NvtxRange::push("overlapped");
+    let started = Instant::now();
+    let mut trainer = Trainer::new(gpu, store, motion, &with_overlap(true)?)?;
+    let setup_seconds = started.elapsed().as_secs_f64();
+    let timed = time_rounds(&mut trainer, frames, warmup, iterations, rounds)?;
+    let overlapped = timed.case(true, setup_seconds, trainer.iteration_graph_nodes()?);
+    drop(trainer);
+
+    let floor = median(&parts.floor);
+    let with_ratio = |mut case: LoopCase| {
+        case.ratio_to_floor = case.frames_per_s / floor;
+        case
+    };
+    let (sequential, overlapped) = (with_ratio(sequential), with_ratio(overlapped));
+    let hidden_ms = sequential.iteration_ms - overlapped.iteration_ms;
+    Ok(FullBench {
+        gpu: gpu.info().name.clone(),
+        motion: motion.clip().name().to_owned(),
+        num_envs: config.env.num_envs,
+        substeps: config.env.substeps,
+        horizon: config.ppo.horizon,
+        epochs: config.ppo.epochs,
+        minibatches: config.ppo.minibatches,
+        gemm,
+        iterations,
+        warmup,
+        rounds,
+        floor_frames_per_s: floor,
+        rounds_floor_frames_per_s: parts.floor,
+        floor_rollout_ms: frames as f64 / floor * 1e3,
+        overlap_speedup: overlapped.frames_per_s / sequential.frames_per_s,
+        rest_ms: sequential.iteration_ms - parts.rollout_ms - parts.update_ms,
+        hidden_fraction: hidden_ms / parts.update_ms,
+        hidden_ms,
+        sequential,
+        overlapped,
+        rollout_ms: parts.rollout_ms,
+        stage_ms: parts.stage_ms,
+        update_ms: parts.update_ms,
+    })
+}
+
+/// Every round's frames/s and wall seconds per iteration.
+struct TimedRounds {
+    frames_per_s: Vec<f64>,
+    iteration_s: Vec<f64>,
+}
+
+impl TimedRounds {
+    fn case(
+        &self,
+        overlap_update: bool,
+        setup_seconds: f64,
+        graph_nodes: BTreeMap<String, usize>,
+    ) -> LoopCase {
+        let frames_per_s = median(&self.frames_per_s);
+        // The iteration time of the round whose frames/s is the median (or the nearest).
+        let at = self
+            .frames_per_s
+            .iter()
+            .enumerate()
+            .min_by(|a, b| {
+                (a.1 - frames_per_s)
+                    .abs()
+                    .total_cmp(&(b.1 - frames_per_s).abs())
+            })
+            .map_or(0, |(i, _)| i);
+        LoopCase {
+            overlap_update,
+            setup_seconds,
+            frames_per_s,
+            rounds_frames_per_s: self.frames_per_s.clone(),
+            iteration_ms: self.iteration_s.get(at).copied().unwrap_or(f64::NAN) * 1e3,
+            ratio_to_floor: f64::NAN,
+            graph_nodes,
+        }
+    }
+}
+
+/// `rounds` times: `warmup` untimed iterations, then `iterations` timed by the wall clock, as
+/// the training loop's active clock times them (each call waits for its report).
+fn time_rounds(
+    trainer: &mut Trainer,
+    frames_per_rollout: u64,
+    warmup: u32,
+    iterations: u32,
+    rounds: u32,
+) -> Result<TimedRounds, TrainError> {
+    let mut timed = TimedRounds {
+        frames_per_s: Vec::new(),
+        iteration_s: Vec::new(),
+    };
+    for round in 0..rounds {
+        let _range = NvtxRange::push(&format!("round {round}"));
+        for _ in 0..warmup {
+            trainer.iterate()?;
+        }
+        let mut rollouts = 0u64;
+        let started = Instant::now();
+        for _ in 0..iterations {
+            rollouts += 1 + u64::from(trainer.iterate()?.extra_rollouts);
+        }
+        let seconds = started.elapsed().as_secs_f64();
+        timed
+            .frames_per_s
+            .push((rollouts * frames_per_rollout) as f64 / seconds);
+        timed.iteration_s.push(seconds / f64::from(iterations));
+    }
+    Ok(timed)
+}
+
+/// What the sequential iteration is made of, timed apart.
+struct Parts {
+    floor: Vec<f64>,
+    rollout_ms: f64,
+    stage_ms: BTreeMap<RolloutStage, f64>,
+    update_ms: f64,
+}
+
+/// With `trainer`'s rollout and policy: the physics-only floor from the rollout's states and
+/// the rollout graph alone (`rounds` each), the event-timed rollout's stages, and the update's
+/// own graph. These graphs change the trainer's state: time them after its iterations.
+fn time_parts(
+    gpu: &Gpu,
+    trainer: &Trainer,
+    frames: u64,
+    warmup: u32,
+    launches: u32,
+    rounds: u32,
+) -> Result<Parts, TrainError> {
+    let (rollout, policy) = trainer.training_rollout();
+    let (graph, _) = rollout.capture(policy, false)?;
+    let floor_graph = physics_only_graph(
+        rollout.simulation(),
+        rollout.substeps() as u32,
+        rollout.horizon() as u32,
+    )
+    .map_err(RolloutError::from)?;
+    floor_graph.upload(gpu.stream())?;
+    let mut floor = Vec::new();
+    let mut rollout_fps = Vec::new();
+    for round in 0..rounds {
+        let _range = NvtxRange::push(&format!("floor round {round}"));
+        floor.push(
+            time_floor_from_rollout_states(gpu, &graph, &floor_graph, frames, warmup, launches)
+                .map_err(RolloutError::from)?,
+        );
+        rollout_fps
+            .push(time_graph(gpu, &graph, frames, warmup, launches).map_err(RolloutError::from)?);
+    }
+    let rollout_ms = frames as f64 / median(&rollout_fps) * 1e3;
+
+    let (timed_graph, events) = rollout.capture(policy, true)?;
+    let events = events.ok_or_else(|| TrainError::Setup("no stage events".to_owned()))?;
+    let mut raw: BTreeMap<RolloutStage, f64> = BTreeMap::new();
+    for _ in 0..warmup {
+        timed_graph.launch(gpu.stream())?;
+    }
+    for _ in 0..launches {
+        timed_graph.launch(gpu.stream())?;
+        for (stage, ms) in events.elapsed_ms()? {
+            *raw.entry(stage).or_insert(0.0) += ms / f64::from(launches);
+        }
+    }
+    // The events slow the timed graph a little: its shares, scaled to the plain rollout's time.
+    let timed_total: f64 = raw.values().sum();
+    let stage_ms = raw
+        .into_iter()
+        .map(|(stage, ms)| (stage, ms / timed_total * rollout_ms))
+        .collect();
+
+    let update = trainer.capture_update()?;
+    let seconds = timed_seconds(gpu, "update", warmup, launches, || {
+        update.launch(gpu.stream()).map_err(TrainError::from)
+    })?;
+    Ok(Parts {
+        floor,
+        rollout_ms,
+        stage_ms,
+        update_ms: seconds / f64::from(launches) * 1e3,
+    })
+}

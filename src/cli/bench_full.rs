@@ -1,0 +1,275 @@
+//! `instantmimic bench full`: whole training iterations, with the update after the rollout and
+//! overlapped with the next one (`ppo.overlap_update`), against the physics-only floor
+//! (`crate::bench::bench_full`).
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+
+use super::bench::GemmArg;
+use crate::bench::{FullBench, LoopCase, bench_full};
+use crate::cuda::Gpu;
+use crate::motion::find::motions_dir_from_env;
+use crate::plan::PlanStore;
+use crate::train::{TrainConfig, preflight};
+
+#[derive(Args, Debug)]
+pub(super) struct FullArgs {
+    /// A clip name (its committed config, else configs/train/default.toml) or a DeepMimic file.
+    #[arg(long, default_value = "backflip")]
+    motion: String,
+    /// Training configuration (TOML) instead of the motion's committed one; --motion replaces
+    /// its `motion`. Its `ppo.overlap_update` and `run.gpus` are not read: both ways are
+    /// measured, on --device.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Number of envs, overriding `env.num_envs` (a step plan for this count must exist).
+    #[arg(long)]
+    envs: Option<u32>,
+    /// Physics substeps per control step, overriding `env.substeps`.
+    #[arg(long)]
+    substeps: Option<u32>,
+    /// Control steps per rollout, overriding `ppo.horizon`.
+    #[arg(long)]
+    horizon: Option<u32>,
+    /// What computes the policy's GEMMs, overriding `policy.gemm`.
+    #[arg(long, value_enum)]
+    gemm: Option<GemmArg>,
+    /// Timed iterations per round (and floor launches per round).
+    #[arg(long, default_value_t = 20)]
+    iterations: u32,
+    /// Untimed iterations before each round.
+    #[arg(long, default_value_t = 3)]
+    warmup: u32,
+    /// Rounds of each measurement (medians are reported).
+    #[arg(long, default_value_t = 3)]
+    rounds: u32,
+    /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
+    /// (default: $INSTANTMIMIC_MOTIONS).
+    #[arg(long)]
+    motions_dir: Option<PathBuf>,
+    /// A directory laid out like ptx/ instead of the plans built into the binary.
+    #[arg(long)]
+    assets: Option<PathBuf>,
+    /// CUDA device ordinal.
+    #[arg(long, default_value_t = 0)]
+    device: usize,
+    /// Print the result as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+pub(super) fn run(args: FullArgs) -> Result<()> {
+    if args.iterations == 0 {
+        bail!("--iterations must be at least 1");
+    }
+    let (mut config, label) = match &args.config {
+        Some(path) => (TrainConfig::load(path)?, path.display().to_string()),
+        None => {
+            let (label, config) = TrainConfig::committed(&args.motion)
+                .unwrap_or_else(|| TrainConfig::general_default(&args.motion));
+            (config?, label)
+        }
+    };
+    config.motion = args.motion.clone();
+    if let Some(envs) = args.envs {
+        config.env.num_envs = envs;
+    }
+    if let Some(substeps) = args.substeps {
+        config.env.substeps = substeps;
+    }
+    if let Some(horizon) = args.horizon {
+        config.ppo.horizon = horizon;
+    }
+    if let Some(gemm) = args.gemm {
+        config.policy.gemm = gemm.into();
+    }
+    // One GPU, --device; both settings of the overlap are measured.
+    config.run.gpus.clear();
+    config.ppo.overlap_update = false;
+    config.validate(&label)?;
+    let store = PlanStore::new(args.assets.as_deref());
+    let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
+    let (checks, motion) = preflight(&config, motions_dir.as_deref(), &store)?;
+    for line in &checks.motion_notices {
+        eprintln!("{line}");
+    }
+    let gpu = Gpu::open(args.device)?;
+    let result = bench_full(
+        &gpu,
+        &store,
+        &motion,
+        &config,
+        args.iterations,
+        args.warmup,
+        args.rounds,
+    )
+    .with_context(|| {
+        format!(
+            "whole-iteration benchmark with {} envs",
+            config.env.num_envs
+        )
+    })?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&result)?);
+    } else {
+        print!("{}", report(&result));
+    }
+    Ok(())
+}
+
+fn report(r: &FullBench) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "GPU: {}", r.gpu);
+    let _ = writeln!(
+        out,
+        "{}: {} envs, {} physics substeps per control step, horizon {}, {} epochs x {} minibatches; GEMMs: {}",
+        r.motion, r.num_envs, r.substeps, r.horizon, r.epochs, r.minibatches, r.gemm
+    );
+    let _ = writeln!(
+        out,
+        "{} rounds of {} timed iterations after {} untimed; whole iterations as `train` runs them (graph, report readback, host wait)",
+        r.rounds, r.iterations, r.warmup
+    );
+    let rounds = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{:.3}", x / 1e6))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let _ = writeln!(
+        out,
+        "physics floor (from the rollout's states): {:.3} M frames/s ({:.2} ms per rollout; rounds: {})",
+        r.floor_frames_per_s / 1e6,
+        r.floor_rollout_ms,
+        rounds(&r.rounds_floor_frames_per_s)
+    );
+    let _ = writeln!(
+        out,
+        "| loop | M frames/s | / floor | ms per iteration | rounds (M frames/s) | setup s |"
+    );
+    let _ = writeln!(out, "|---|---|---|---|---|---|");
+    for (name, case) in [
+        ("update after the rollout", &r.sequential),
+        ("update beside the next rollout", &r.overlapped),
+    ] {
+        let _ = writeln!(out, "{}", row(name, case, &rounds));
+    }
+    let _ = writeln!(
+        out,
+        "overlap: {:.3}x the frames/s; {:.2} ms of the update's {:.2} ms hidden per iteration ({:.0}%)",
+        r.overlap_speedup,
+        r.hidden_ms,
+        r.update_ms,
+        100.0 * r.hidden_fraction
+    );
+    let _ = writeln!(
+        out,
+        "the sequential iteration ({:.2} ms), part by part:",
+        r.sequential.iteration_ms
+    );
+    let share = |ms: f64| 100.0 * ms / r.sequential.iteration_ms;
+    let _ = writeln!(
+        out,
+        "  {:<28} {:>9.3} ms  {:>5.1}%",
+        "rollout",
+        r.rollout_ms,
+        share(r.rollout_ms)
+    );
+    for (stage, ms) in &r.stage_ms {
+        let _ = writeln!(
+            out,
+            "    {:<26} {:>9.3} ms  {:>5.1}%",
+            stage.name(),
+            ms,
+            share(*ms)
+        );
+    }
+    for (name, ms) in [
+        ("update", r.update_ms),
+        ("rest (readback, gaps, host)", r.rest_ms),
+    ] {
+        let _ = writeln!(out, "  {name:<28} {ms:>9.3} ms  {:>5.1}%", share(ms));
+    }
+    out
+}
+
+fn row(name: &str, case: &LoopCase, rounds: &dyn Fn(&[f64]) -> String) -> String {
+    format!(
+        "| {name} | {:.3} | {:.3} | {:.2} | {} | {:.1} |",
+        case.frames_per_s / 1e6,
+        case.ratio_to_floor,
+        case.iteration_ms,
+        rounds(&case.rounds_frames_per_s),
+        case.setup_seconds
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::env::RolloutStage;
+    use std::collections::BTreeMap;
+
+    fn case(overlap_update: bool, frames_per_s: f64, iteration_ms: f64) -> LoopCase {
+        LoopCase {
+            overlap_update,
+            setup_seconds: 2.0,
+            frames_per_s,
+            rounds_frames_per_s: vec![frames_per_s; 3],
+            iteration_ms,
+            ratio_to_floor: frames_per_s / 1.0e6,
+            graph_nodes: BTreeMap::new(),
+        }
+    }
+
+    /// The text report of made-up figures (no GPU): every figure lands in its place.
+    #[test]
+    fn the_report_lists_both_loops_the_floor_and_the_parts() {
+        let stage_ms = BTreeMap::from([(RolloutStage::Physics, 30.0), (RolloutStage::Policy, 1.0)]);
+        let r = FullBench {
+            gpu: "test GPU".to_owned(),
+            motion: "backflip".to_owned(),
+            num_envs: 4096,
+            substeps: 4,
+            horizon: 4,
+            epochs: 3,
+            minibatches: 4,
+            gemm: "Warp tiles (f32)".to_owned(),
+            iterations: 20,
+            warmup: 3,
+            rounds: 3,
+            floor_frames_per_s: 1.0e6,
+            rounds_floor_frames_per_s: vec![1.0e6; 3],
+            floor_rollout_ms: 16.384,
+            sequential: case(false, 0.5e6, 32.768),
+            overlapped: case(true, 0.8e6, 20.48),
+            overlap_speedup: 1.6,
+            rollout_ms: 31.0,
+            stage_ms,
+            update_ms: 15.0,
+            rest_ms: -13.232,
+            hidden_ms: 12.288,
+            hidden_fraction: 0.8192,
+        };
+        let text = report(&r);
+        for needle in [
+            "GPU: test GPU",
+            "4096 envs, 4 physics substeps per control step, horizon 4",
+            "physics floor (from the rollout's states): 1.000 M frames/s",
+            "| update after the rollout | 0.500 | 0.500 | 32.77 |",
+            "| update beside the next rollout | 0.800 | 0.800 | 20.48 |",
+            "overlap: 1.600x the frames/s; 12.29 ms of the update's 15.00 ms hidden per iteration (82%)",
+            "physics",
+            "update",
+        ] {
+            assert!(text.contains(needle), "{needle:?} in:\n{text}");
+        }
+        // The JSON form carries the same fields.
+        let json = serde_json::to_value(&r).expect("json");
+        assert_eq!(json["overlapped"]["overlap_update"], true);
+        assert_eq!(json["stage_ms"]["physics"], 30.0);
+    }
+}
