@@ -220,3 +220,38 @@ fn bench_train_gpus_checks_its_counts_and_devices() {
         assert!(err.contains(expected), "{args:?}: {err}");
     }
 }
+
+/// `ppo.overlap_update` (issue 20) is built for one GPU: with one device of `--gpus` it goes
+/// through, with several it is refused in one line naming the key, before NCCL is looked for.
+#[test]
+fn overlap_update_takes_one_gpu_and_refuses_several_in_one_line() {
+    let ws = workspace();
+    let motions = ws.path().join("motions");
+    let dry = |extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            "--motion",
+            "synth",
+            "--envs",
+            "32",
+            "--dry-run",
+            "--set",
+            "ppo.overlap_update=true",
+        ];
+        args.extend_from_slice(extra);
+        run(&args, Some(&motions), ws.path())
+    };
+    assert!(resolved_config(&succeeded(&dry(&[]))).ppo.overlap_update);
+    assert!(
+        resolved_config(&succeeded(&dry(&["--gpus", "2"])))
+            .ppo
+            .overlap_update
+    );
+    let err = one_line_error(&dry(&["--gpus", "0,1"]));
+    assert!(
+        err.contains("`ppo.overlap_update` = true: runs on one GPU only")
+            && err.contains("run.gpus names 2 devices")
+            && !err.contains("NCCL"),
+        "{err}"
+    );
+}
