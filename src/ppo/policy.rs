@@ -282,9 +282,9 @@ impl GaussianPolicy {
     /// ([`PolicyGemm::separate`]). The overlapped training loop (`ppo.overlap_update`) samples
     /// its rollouts from such a copy, refreshed by [`GaussianPolicy::record_parameters_from`]
     /// before each update, while the update changes this policy's parameters beside it.
-    /// Waits for the GPU (the parameters are read back and uploaded).
+    /// The parameters are read back and uploaded in the order of the GPU's stream (waits for
+    /// it); not inside a capture.
     pub fn separate_copy(&self, gpu: &Gpu) -> Result<GaussianPolicy, PolicyError> {
-        gpu.synchronize().map_err(EnvError::from)?;
         let own = |a: &DeviceArray<f32>| DeviceArray::from_slice(gpu, [a.len()], &a.download()?);
         let actor_params = own(&self.actor.params)?;
         let log_std = actor_params.view(
