@@ -16,6 +16,7 @@ mod evaluation;
 pub mod layout;
 mod normalizer;
 mod phases;
+mod physics_state;
 mod policy;
 mod reference;
 mod rollout;
@@ -32,9 +33,10 @@ pub use evaluation::{
     COMPLETED, EpisodeScore, EpisodeScores, FAILED, RUNNING, SUCCESS_MAX_BODY_DISTANCE_M,
     SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps, evaluation_episode_steps, yardstick,
 };
+pub use physics_state::PhysicsState;
 pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;
-pub use rollout::{EpisodeState, PhysicsState, Rollout, RolloutError};
+pub use rollout::{EpisodeState, Rollout, RolloutError};
 pub use stages::{RolloutStage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 pub use storage::{ActStorage, RolloutStorage};
