@@ -337,7 +337,7 @@ fn a_divergence_restore_restarts_the_pipeline() {
     let good_actor = good
         .get::<f32>(
             tensor_names::ACTOR,
-            &[values(trainer.policy().actor_parameters()).len()],
+            &[trainer.policy().actor_parameters().len()],
         )
         .expect("actor")
         .to_vec();
