@@ -216,8 +216,8 @@ fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
     let rollout_config = config.rollout_config();
     let training = Rollout::new(&gpu, &store, &motion, &rollout_config).expect("training rollout");
     let policy = policy_for(&gpu, &training, &config);
-    let evaluation = Rollout::evaluation(&training, &store, &motion, &rollout_config)
-        .expect("evaluation rollout");
+    let evaluation =
+        Rollout::evaluation(&training, &store, &rollout_config).expect("evaluation rollout");
     // As the trainer lends it: the training parameters with the evaluation's batch.
     let evaluation_policy = policy
         .with_batch(&gpu, evaluation.num_envs())

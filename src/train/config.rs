@@ -601,6 +601,7 @@ impl TrainConfig {
                 envs: self.run.eval_envs,
                 steps: self.run.eval_steps,
                 start: self.run.eval_start,
+                window_s: None,
             },
         }
     }

@@ -20,9 +20,8 @@
 use std::sync::Arc;
 
 use crate::cuda::{Communicator, DeviceRange, Gpu, Graph, Readback};
-use crate::env::{Rollout, RolloutTotals, TOTALS};
+use crate::env::{Rollout, RolloutTotals, TOTALS, TrackedMotion};
 use crate::kernels::DeviceArray;
-use crate::motion::ReferenceMotion;
 use crate::plan::PlanStore;
 use crate::ppo::reduce::{record_clear, record_sum_of_squares};
 use crate::ppo::{
@@ -70,15 +69,15 @@ pub struct Trainer {
 
 impl Trainer {
     /// Loads the plans (training and evaluation world counts), builds the rollout, the update
-    /// and the evaluation for `config`, captures their graphs, and puts every env at a
-    /// reference state.
-    pub fn new(
+    /// and the evaluation for `config` on `motion` (a clip, or a motion library), captures their
+    /// graphs, and puts every env at a reference state.
+    pub fn new<'a>(
         gpu: &Gpu,
         store: &PlanStore,
-        motion: &ReferenceMotion,
+        motion: impl Into<TrackedMotion<'a>>,
         config: &TrainConfig,
     ) -> Result<Trainer, TrainError> {
-        Trainer::build(gpu, store, motion, config, None)
+        Trainer::build(gpu, store, motion.into(), config, None)
     }
 
     /// Rank `replicas.rank()` of a data-parallel run over `replicas.size()` GPUs, on `gpu`
@@ -89,10 +88,10 @@ impl Trainer {
     /// its replica at the same time (the construction ends with collectives), as it must call
     /// [`Trainer::iterate`] and [`Trainer::restore`]. A world of one rank trains exactly as
     /// [`Trainer::new`] does, through the same NCCL calls.
-    pub fn replica(
+    pub fn replica<'a>(
         gpu: &Gpu,
         store: &PlanStore,
-        motion: &ReferenceMotion,
+        motion: impl Into<TrackedMotion<'a>>,
         config: &TrainConfig,
         replicas: &Communicator,
     ) -> Result<Trainer, TrainError> {
@@ -103,13 +102,13 @@ impl Trainer {
                 gpu.info().ordinal
             )));
         }
-        Trainer::build(gpu, store, motion, config, Some(replicas))
+        Trainer::build(gpu, store, motion.into(), config, Some(replicas))
     }
 
     fn build(
         gpu: &Gpu,
         store: &PlanStore,
-        motion: &ReferenceMotion,
+        motion: TrackedMotion<'_>,
         config: &TrainConfig,
         replicas: Option<&Communicator>,
     ) -> Result<Trainer, TrainError> {
@@ -125,7 +124,7 @@ impl Trainer {
         // replica's own seed draws its actions.
         let policy = GaussianPolicy::for_rollout(gpu, &config.policy, &rollout, config.seed)?
             .with_sampling_seed(own_seed);
-        let evaluation = Rollout::evaluation(&rollout, store, motion, &rollout_config)?;
+        let evaluation = Rollout::evaluation(&rollout, store, &rollout_config)?;
         let evaluation_policy = policy.with_batch(gpu, evaluation.num_envs())?;
         let mut update = PpoUpdate::new(
             gpu,
@@ -383,7 +382,13 @@ impl Trainer {
     }
 }
 
-fn put_f32(c: &mut Checkpoint, name: &str, a: &DeviceArray<f32>) -> Result<(), TrainError> {
+/// Stored flat (`[len]`): the start statistics `[clips, bins]` of a single clip are then the
+/// `[bins]` tensors they were before motion libraries.
+fn put_f32<const N: usize>(
+    c: &mut Checkpoint,
+    name: &str,
+    a: &DeviceArray<f32, N>,
+) -> Result<(), TrainError> {
     c.insert(name, &[a.len()], a.download()?)?;
     Ok(())
 }
@@ -398,7 +403,11 @@ fn insert_vec(c: &mut Checkpoint, name: &str, v: Vec<f32>) -> Result<(), Checkpo
     c.insert(name, &[len], v)
 }
 
-fn get_f32(c: &Checkpoint, name: &str, a: &DeviceArray<f32>) -> Result<(), TrainError> {
+fn get_f32<const N: usize>(
+    c: &Checkpoint,
+    name: &str,
+    a: &DeviceArray<f32, N>,
+) -> Result<(), TrainError> {
     a.upload(c.get::<f32>(name, &[a.len()])?)?;
     Ok(())
 }
