@@ -202,14 +202,16 @@ fn launch_contracts_and_directions_are_validated() {
 
 #[test]
 fn a_launch_that_breaks_its_contract_names_the_kernel_the_dimension_and_the_arrays() {
-    // lookup_reference: `dim == extent(out, 0)`, `dim <= len(times)`.
+    // lookup_reference: `dim == extent(out, 0)`, `dim <= len(clips)`, `dim <= len(times)`.
     let mut args = ArgBuffer::new(&LOOKUP_REFERENCE).unwrap();
+    let clips = array_descriptor(&[16], 4).unwrap();
     let times = array_descriptor(&[16], 4).unwrap();
     let out = array_descriptor(&[16, 282], 4).unwrap();
-    args.set_array_descriptor::<f32>(3, 1, &times).unwrap();
+    args.set_array_descriptor::<i32>(4, 1, &clips).unwrap();
+    args.set_array_descriptor::<f32>(5, 1, &times).unwrap();
     let err = args.check_launch(&[16]).unwrap_err().to_string();
     assert!(err.contains("out (not given)"), "{err}");
-    args.set_array_descriptor::<f32>(4, 2, &out).unwrap();
+    args.set_array_descriptor::<f32>(6, 2, &out).unwrap();
     args.check_launch(&[16]).unwrap();
     let err = args.check_launch(&[17]).unwrap_err().to_string();
     for expected in [
@@ -223,10 +225,14 @@ fn a_launch_that_breaks_its_contract_names_the_kernel_the_dimension_and_the_arra
         assert!(err.contains(expected), "missing {expected:?} in {err}");
     }
     let short = array_descriptor(&[8], 4).unwrap();
-    args.set_array_descriptor::<f32>(3, 1, &short).unwrap();
+    args.set_array_descriptor::<f32>(5, 1, &short).unwrap();
     let err = args.check_launch(&[16]).unwrap_err().to_string();
     assert!(err.contains("`dim <= len(times)`"), "{err}");
     assert!(err.contains("times [8]"), "{err}");
+    args.set_array_descriptor::<f32>(5, 1, &times).unwrap();
+    args.set_array_descriptor::<i32>(4, 1, &short).unwrap();
+    let err = args.check_launch(&[16]).unwrap_err().to_string();
+    assert!(err.contains("`dim <= len(clips)`"), "{err}");
 }
 
 #[test]
@@ -249,10 +255,19 @@ fn parameter_offsets_follow_c_layout_and_the_ptx_declarations() {
         assert_eq!(declared, described, "{}: PTX .param declarations", k.name);
         k.check_ptx(&ptx).expect("check_ptx agrees");
     }
-    // The reference lookup: launch_bounds_t<1> (24 bytes), then five array_t (56 bytes each).
+    // The reference lookup: launch_bounds_t<1> (24 bytes), then seven array_t (56 bytes each).
     assert_eq!(
         LOOKUP_REFERENCE.param_layout(),
-        [(0, 24), (24, 56), (80, 56), (136, 56), (192, 56), (248, 56)]
+        [
+            (0, 24),
+            (24, 56),
+            (80, 56),
+            (136, 56),
+            (192, 56),
+            (248, 56),
+            (304, 56),
+            (360, 56)
+        ]
     );
 }
 
@@ -318,17 +333,17 @@ fn launch_bounds_are_warps_launch_bounds_t() {
 #[test]
 fn the_argument_buffer_puts_each_parameter_at_its_offset_and_checks_its_type() {
     let mut args = ArgBuffer::new(&LOOKUP_REFERENCE).unwrap();
-    assert_eq!(args.bytes().len(), 304);
+    assert_eq!(args.bytes().len(), 416);
     let table = array_descriptor(&[8 + 2 * 282], 4).unwrap();
     let out = array_descriptor(&[16, 282], 4).unwrap();
     args.set_array_descriptor::<f32>(0, 1, &table).unwrap();
-    args.set_array_descriptor::<f32>(4, 2, &out).unwrap();
+    args.set_array_descriptor::<f32>(6, 2, &out).unwrap();
     assert_eq!(args.set_launch_bounds(&[16]).unwrap(), 16);
     let bytes = args.bytes();
     assert_eq!(&bytes[24..80], &table);
-    assert_eq!(&bytes[248..304], &out);
+    assert_eq!(&bytes[360..416], &out);
     assert!(
-        bytes[80..248].iter().all(|&b| b == 0),
+        bytes[80..360].iter().all(|&b| b == 0),
         "unset parameters stay zero"
     );
     assert_eq!(u32_at(bytes, 0), 16);
@@ -336,10 +351,10 @@ fn the_argument_buffer_puts_each_parameter_at_its_offset_and_checks_its_type() {
     // Wrong element type, wrong ndim, a value for an array, a parameter that does not exist,
     // a 2-D launch of a 1-D kernel.
     assert!(args.set_array_descriptor::<f32>(1, 1, &table).is_err());
-    assert!(args.set_array_descriptor::<f32>(4, 1, &table).is_err());
+    assert!(args.set_array_descriptor::<f32>(6, 1, &table).is_err());
     assert!(args.set_array_descriptor::<[f32; 3]>(0, 1, &table).is_err());
     assert!(args.set_value(0, &1.0f32).is_err());
-    assert!(args.set_array_descriptor::<f32>(5, 1, &table).is_err());
+    assert!(args.set_array_descriptor::<f32>(7, 1, &table).is_err());
     let err = args.set_launch_bounds(&[4, 4]).unwrap_err();
     assert!(err.to_string().contains("1 dimension"), "{err}");
 }

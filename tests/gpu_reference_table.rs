@@ -1,6 +1,7 @@
 //! The GPU reference-table lookup (`kernels_py/env/reference.py`, launched through the
-//! generated `EnvKernels::lookup_reference`) against its CPU twin `ReferenceTable::lookup`.
-//! Run on a machine with an NVIDIA GPU:
+//! generated `EnvKernels::lookup_reference`) against its CPU twin `ReferenceTable::lookup`, for
+//! single clips (the library of one) and for a motion library with a clip per time
+//! (`MotionLibrary::lookup`). Run on a machine with an NVIDIA GPU:
 //! `cargo test --features gpu --test gpu_reference_table -- --nocapture`
 //!
 //! Every value of ~10 000 looked-up rows per clip must agree with the CPU in f64 within
@@ -18,7 +19,10 @@ use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels};
 use instantmimic::motion::built_in::BUILT_IN_CLIPS;
 use instantmimic::motion::find::MotionSource;
 use instantmimic::motion::table::{HEADER_LEN, HUMANOID_LAYOUT};
-use instantmimic::motion::{Character, LoopMode, ReferenceTable, SyntheticMotion, TableLayout};
+use instantmimic::motion::{
+    Character, LoopMode, MotionLibrary, MotionLibraryBuilder, ReferenceMotion, ReferenceTable,
+    SyntheticMotion, TableLayout, TableSegment,
+};
 
 const CONTROL_DT: f64 = 1.0 / 30.0;
 const LOOKUPS: usize = 10_000;
@@ -46,7 +50,7 @@ impl Samples {
 }
 
 /// Lookup times for `table`: random ones plus row times, the ends, and non-finite times.
-fn lookup_times(table: &ReferenceTable, seed: u64) -> Vec<f32> {
+fn lookup_times(table: TableSegment<'_>, seed: u64) -> Vec<f32> {
     let d = table.duration();
     let mut times: Vec<f32> = vec![0.0, -0.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
     let wrap = table.loop_mode() == LoopMode::Wrap;
@@ -126,8 +130,15 @@ struct Comparison {
     values: usize,
 }
 
-fn compare(table: &ReferenceTable, times: &[f32], gpu: &[f32]) -> Comparison {
-    let stride = table.layout().stride;
+/// The GPU's rows against `cpu(i)`, the CPU's row of lookup i (at `times[i]`).
+fn compare(
+    cpu: impl Fn(usize) -> Vec<f64>,
+    layout: TableLayout,
+    quaternion_offsets: &[usize],
+    times: &[f32],
+    gpu: &[f32],
+) -> Comparison {
+    let stride = layout.stride;
     let mut result = Comparison {
         max_abs: 0.0,
         worst: None,
@@ -135,11 +146,11 @@ fn compare(table: &ReferenceTable, times: &[f32], gpu: &[f32]) -> Comparison {
         values: 0,
     };
     for (i, &t) in times.iter().enumerate() {
-        let cpu = table.lookup(f64::from(t));
+        let cpu = cpu(i);
         let row = &gpu[i * stride..(i + 1) * stride];
         // Quaternions q and -q are the same rotation: take the CPU's sign closest to the GPU's.
         let mut sign = vec![1.0; stride];
-        for &q in table.quaternion_offsets() {
+        for &q in quaternion_offsets {
             let diff = |s: f64| {
                 (0..4)
                     .map(|c| (f64::from(row[q + c]) - s * cpu[q + c]).abs())
@@ -183,23 +194,27 @@ fn humanoid() -> Character {
     Character::humanoid().expect("the embedded humanoid loads")
 }
 
-fn synthetic_table(motion: &SyntheticMotion) -> ReferenceTable {
-    let reference = motion
+fn synthetic_motion(motion: &SyntheticMotion) -> ReferenceMotion {
+    motion
         .reference_motion(&humanoid())
-        .expect("synthetic frames are valid");
-    ReferenceTable::build(&reference, CONTROL_DT).expect("table")
+        .expect("synthetic frames are valid")
 }
 
-/// The tables to check: synthetic ones and every built-in DeepMimic clip.
-fn tables() -> Vec<(String, ReferenceTable)> {
+fn synthetic_table(motion: &SyntheticMotion) -> ReferenceTable {
+    ReferenceTable::build(&synthetic_motion(motion), CONTROL_DT).expect("table")
+}
+
+/// The clips to check: synthetic ones (wrapped and clamped, 30, 60 and 120 fps, turning) and
+/// every built-in DeepMimic clip (15 to 60 fps).
+fn motions() -> Vec<(String, ReferenceMotion)> {
     let mut out = vec![
         (
             "synthetic walk (wrap, 30 fps)".to_owned(),
-            synthetic_table(&SyntheticMotion::default()),
+            synthetic_motion(&SyntheticMotion::default()),
         ),
         (
             "synthetic turning run (wrap, 60 fps)".to_owned(),
-            synthetic_table(&SyntheticMotion {
+            synthetic_motion(&SyntheticMotion {
                 frames: 49,
                 frame_dt: 1.0 / 60.0,
                 forward_speed: 3.0,
@@ -210,11 +225,21 @@ fn tables() -> Vec<(String, ReferenceTable)> {
         ),
         (
             "synthetic clamp (60 fps, 0.75 s)".to_owned(),
-            synthetic_table(&SyntheticMotion {
+            synthetic_motion(&SyntheticMotion {
                 frames: 46,
                 frame_dt: 1.0 / 60.0,
                 loop_mode: LoopMode::Clamp,
                 amplitude: 0.8,
+                ..SyntheticMotion::default()
+            }),
+        ),
+        (
+            "synthetic clamp (120 fps, 2 s)".to_owned(),
+            synthetic_motion(&SyntheticMotion {
+                frames: 241,
+                frame_dt: 1.0 / 120.0,
+                loop_mode: LoopMode::Clamp,
+                turn_rate: -0.5,
                 ..SyntheticMotion::default()
             }),
         ),
@@ -224,10 +249,83 @@ fn tables() -> Vec<(String, ReferenceTable)> {
         let reference = MotionSource::BuiltIn(clip)
             .load(&character)
             .expect("the clip loads");
-        let table = ReferenceTable::build(&reference, CONTROL_DT).expect("table");
-        out.push((format!("{} ({:?})", clip.name, table.loop_mode()), table));
+        let mode = reference.clip().loop_mode();
+        out.push((format!("{} ({mode:?})", clip.name), reference));
     }
     out
+}
+
+/// The tables to check, each clip alone.
+fn tables() -> Vec<(String, ReferenceTable)> {
+    motions()
+        .into_iter()
+        .map(|(name, motion)| {
+            let table = ReferenceTable::build(&motion, CONTROL_DT).expect("table");
+            (name, table)
+        })
+        .collect()
+}
+
+/// Every clip of [`motions`] in one library, in that order.
+fn library() -> MotionLibrary {
+    let mut builder = MotionLibraryBuilder::new("gpu_reference_table", CONTROL_DT);
+    for (i, (name, motion)) in motions().iter().enumerate() {
+        builder
+            .push(name, "test", motion, 1.0 + i as f64)
+            .expect("the clip joins the library");
+    }
+    builder.finish().expect("the library has clips")
+}
+
+/// Prints a comparison's line; returns the failure report, if any.
+fn report(
+    name: &str,
+    rows: usize,
+    times: usize,
+    layout: TableLayout,
+    c: &Comparison,
+) -> Option<String> {
+    let worst = c.worst.as_ref().map_or(String::new(), |w| {
+        format!(
+            "worst at t = {} s, {}: gpu {} cpu {:.9} (error {:.2e}, {:.0}% of tolerance)",
+            w.time,
+            slot_name(&layout, w.slot),
+            w.gpu,
+            w.cpu,
+            w.error,
+            100.0 * w.error / w.tolerance
+        )
+    });
+    println!(
+        "{name}: {rows} rows, {times} times, {} values, max abs error {:.2e}; {worst}",
+        c.values, c.max_abs
+    );
+    if c.failures.is_empty() {
+        return None;
+    }
+    let mut failures = c.failures.clone();
+    failures.sort_by(|a, b| (b.error / b.tolerance).total_cmp(&(a.error / a.tolerance)));
+    let lines: Vec<String> = failures
+        .iter()
+        .take(12)
+        .map(|m| {
+            format!(
+                "  t = {:.9} s ({}): gpu {:.9} cpu {:.9} error {:.3e} > tolerance {:.1e}",
+                m.time,
+                slot_name(&layout, m.slot),
+                m.gpu,
+                m.cpu,
+                m.error,
+                m.tolerance
+            )
+        })
+        .collect();
+    Some(format!(
+        "{name}: {} of {} values disagree beyond 1e-6 * max(1, |cpu|), the worst:\n{}",
+        failures.len(),
+        c.values,
+        lines.join("\n")
+    ))
 }
 
 #[test]
@@ -235,70 +333,143 @@ fn gpu_lookup_agrees_with_the_cpu_lookup_within_1e6() {
     let gpu = Gpu::open(0).expect("opening GPU 0");
     let kernels = EnvKernels::load(&gpu).expect("loading the env kernels");
     let stream = gpu.stream();
-    let mut report = Vec::new();
+    let mut failures = Vec::new();
     for (seed, (name, table)) in tables().into_iter().enumerate() {
         assert_eq!(table.layout(), HUMANOID_LAYOUT);
         let device_table = DeviceReferenceTable::upload(&gpu, &table).expect("upload");
-        let times = lookup_times(&table, 0x5eed + seed as u64);
-        let device_times = DeviceArray::from_slice(&gpu, [times.len()], &times).expect("times");
-        let out: DeviceArray2<f32> =
-            DeviceArray::zeros(&gpu, [times.len(), table.layout().stride]).expect("out");
-        device_table
-            .lookup(&kernels, stream, &device_times, &out)
-            .expect("launch");
-        stream.synchronize().expect("the lookup kernel ran");
-        let rows = out.download().expect("download");
-        let c = compare(&table, &times, &rows);
-        let layout = table.layout();
-        let worst = c.worst.as_ref().map_or(String::new(), |w| {
-            format!(
-                "worst at t = {} s, {}: gpu {} cpu {:.9} (error {:.2e}, {:.0}% of tolerance)",
-                w.time,
-                slot_name(&layout, w.slot),
-                w.gpu,
-                w.cpu,
-                w.error,
-                100.0 * w.error / w.tolerance
-            )
-        });
-        println!(
-            "{name}: {} rows, {} times, {} values, max abs error {:.2e}; {worst}",
+        let times = lookup_times(table.segment(), 0x5eed + seed as u64);
+        let clips = vec![0; times.len()];
+        let rows = gpu_rows(&gpu, &kernels, &device_table, &clips, &times);
+        let c = compare(
+            |i| table.lookup(f64::from(times[i])),
+            table.layout(),
+            table.quaternion_offsets(),
+            &times,
+            &rows,
+        );
+        failures.extend(report(
+            &name,
             table.num_rows(),
             times.len(),
-            c.values,
-            c.max_abs
-        );
-        if !c.failures.is_empty() {
-            let mut failures = c.failures.clone();
-            failures.sort_by(|a, b| (b.error / b.tolerance).total_cmp(&(a.error / a.tolerance)));
-            let lines: Vec<String> = failures
-                .iter()
-                .take(12)
-                .map(|m| {
-                    format!(
-                        "  t = {:.9} s ({}): gpu {:.9} cpu {:.9} error {:.3e} > tolerance {:.1e}",
-                        m.time,
-                        slot_name(&layout, m.slot),
-                        m.gpu,
-                        m.cpu,
-                        m.error,
-                        m.tolerance
-                    )
-                })
-                .collect();
-            report.push(format!(
-                "{name}: {} of {} values disagree beyond 1e-6 * max(1, |cpu|), the worst:\n{}",
-                failures.len(),
-                c.values,
-                lines.join("\n")
-            ));
-        }
+            table.layout(),
+            &c,
+        ));
     }
+    stream.synchronize().expect("the lookups ran");
     assert!(
-        report.is_empty(),
+        failures.is_empty(),
         "GPU lookup vs ReferenceTable::lookup:\n{}",
-        report.join("\n")
+        failures.join("\n")
     );
+}
+
+/// The GPU's rows of `clips[i]` at `times[i]` from `table` (waits for them).
+fn gpu_rows(
+    gpu: &Gpu,
+    kernels: &EnvKernels,
+    table: &DeviceReferenceTable,
+    clips: &[i32],
+    times: &[f32],
+) -> Vec<f32> {
+    let device_clips = DeviceArray::from_slice(gpu, [clips.len()], clips).expect("clips");
+    let device_times = DeviceArray::from_slice(gpu, [times.len()], times).expect("times");
+    let out: DeviceArray2<f32> =
+        DeviceArray::zeros(gpu, [times.len(), table.stride()]).expect("out");
+    table
+        .lookup(kernels, gpu.stream(), &device_clips, &device_times, &out)
+        .expect("launch");
+    gpu.stream().synchronize().expect("the lookup kernel ran");
+    out.download().expect("download")
+}
+
+#[test]
+fn gpu_library_lookup_with_a_clip_per_time_agrees_with_the_cpu_within_1e6() {
+    let gpu = Gpu::open(0).expect("opening GPU 0");
+    let kernels = EnvKernels::load(&gpu).expect("loading the env kernels");
+    let library = library();
+    let device_table = DeviceReferenceTable::from_library(&gpu, &library).expect("upload");
+    assert_eq!(device_table.num_clips(), library.num_clips());
+    // Every clip's times, interleaved by a shuffle so that neighbouring threads read
+    // different clips.
+    let mut lookups: Vec<(i32, f32)> = Vec::new();
+    for c in 0..library.num_clips() {
+        let segment = library.segment(c).expect("a clip");
+        let times = lookup_times(segment, 0xc11b + c as u64);
+        lookups.extend(times.into_iter().take(2000).map(|t| (c as i32, t)));
+    }
+    let mut samples = Samples(0x51ab);
+    for i in (1..lookups.len()).rev() {
+        let j = (samples.next_u64() % (i as u64 + 1)) as usize;
+        lookups.swap(i, j);
+    }
+    let clips: Vec<i32> = lookups.iter().map(|l| l.0).collect();
+    let times: Vec<f32> = lookups.iter().map(|l| l.1).collect();
+    let rows = gpu_rows(&gpu, &kernels, &device_table, &clips, &times);
+    let c = compare(
+        |i| {
+            library
+                .lookup(clips[i] as usize, f64::from(times[i]))
+                .expect("a clip of the library")
+        },
+        library.layout(),
+        library.quaternion_offsets(),
+        &times,
+        &rows,
+    );
+    let name = format!(
+        "a library of {} clips, a clip per time",
+        library.num_clips()
+    );
+    let failure = report(
+        &name,
+        library.totals().rows,
+        times.len(),
+        library.layout(),
+        &c,
+    );
+    assert!(
+        failure.is_none(),
+        "GPU lookup vs MotionLibrary::lookup:\n{}",
+        failure.unwrap_or_default()
+    );
+
+    // An id that is no clip of the library reads as NaN, not as another clip.
+    let bad = gpu_rows(
+        &gpu,
+        &kernels,
+        &device_table,
+        &[-1, library.num_clips() as i32, 1 << 20],
+        &[0.1, 0.1, 0.1],
+    );
+    assert!(
+        bad.iter().all(|v| v.is_nan()),
+        "a bad clip id gives NaN rows"
+    );
+}
+
+#[test]
+fn the_library_of_one_looks_up_exactly_what_the_single_clip_table_does() {
+    let gpu = Gpu::open(0).expect("opening GPU 0");
+    let kernels = EnvKernels::load(&gpu).expect("loading the env kernels");
+    for (seed, (name, motion)) in motions().into_iter().enumerate() {
+        let table = ReferenceTable::build(&motion, CONTROL_DT).expect("table");
+        let single = MotionLibrary::single(&name, &name, &motion, CONTROL_DT).expect("library");
+        let times = lookup_times(table.segment(), 0x0e1 + seed as u64);
+        let clips = vec![0; times.len()];
+        let from_table = DeviceReferenceTable::upload(&gpu, &table).expect("upload");
+        let from_library = DeviceReferenceTable::from_library(&gpu, &single).expect("upload");
+        let a = gpu_rows(&gpu, &kernels, &from_table, &clips, &times);
+        let b = gpu_rows(&gpu, &kernels, &from_library, &clips, &times);
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert!(
+            bits(&a) == bits(&b),
+            "{name}: the library of one's rows differ from the table's"
+        );
+        println!(
+            "{name}: the library of one's {} rows are the table's, bit for bit",
+            times.len()
+        );
+    }
 }
 
 #[test]
@@ -321,10 +492,22 @@ fn a_table_with_fewer_than_two_rows_reads_as_nan_and_empty_launches_do_nothing()
     ]);
     let table = DeviceArray::from_slice(&gpu, [data.len()], &data).unwrap();
     let offsets = DeviceArray::from_slice(&gpu, [1], &[3i32]).unwrap();
+    let clip_offsets = DeviceArray::from_slice(&gpu, [1], &[0i32]).unwrap();
+    let clips = DeviceArray::from_slice(&gpu, [2], &[0i32, 0]).unwrap();
     let times = DeviceArray::from_slice(&gpu, [2], &[0.0f32, 0.01]).unwrap();
     let out: DeviceArray2<f32> = DeviceArray::zeros(&gpu, [2, stride]).unwrap();
     kernels
-        .lookup_reference(stream, 2, &table, &offsets, &offsets, &times, &out)
+        .lookup_reference(
+            stream,
+            2,
+            &table,
+            &clip_offsets,
+            &offsets,
+            &offsets,
+            &clips,
+            &times,
+            &out,
+        )
         .unwrap();
     stream.synchronize().unwrap();
     let rows = out.download().unwrap();
@@ -336,7 +519,17 @@ fn a_table_with_fewer_than_two_rows_reads_as_nan_and_empty_launches_do_nothing()
     // dim 0: nothing is launched, the output keeps its values.
     let before = out.download().unwrap();
     kernels
-        .lookup_reference(stream, 0, &table, &offsets, &offsets, &times, &out)
+        .lookup_reference(
+            stream,
+            0,
+            &table,
+            &clip_offsets,
+            &offsets,
+            &offsets,
+            &clips,
+            &times,
+            &out,
+        )
         .unwrap();
     stream.synchronize().unwrap();
     assert_eq!(
@@ -356,9 +549,16 @@ fn the_table_wrapper_refuses_an_output_of_the_wrong_shape() {
     let table = synthetic_table(&SyntheticMotion::default());
     let device_table = DeviceReferenceTable::upload(&gpu, &table).unwrap();
     let times = DeviceArray::from_slice(&gpu, [3], &[0.0f32, 0.1, 0.2]).unwrap();
+    let clips = DeviceArray::from_slice(&gpu, [3], &[0i32; 3]).unwrap();
     let out: DeviceArray2<f32> = DeviceArray::zeros(&gpu, [3, 100]).unwrap();
     let err = device_table
-        .lookup(&kernels, gpu.stream(), &times, &out)
+        .lookup(&kernels, gpu.stream(), &clips, &times, &out)
         .unwrap_err();
     assert!(err.to_string().contains("[3, 282]"), "{err}");
+    let two = DeviceArray::from_slice(&gpu, [2], &[0i32; 2]).unwrap();
+    let right: DeviceArray2<f32> = DeviceArray::zeros(&gpu, [3, 282]).unwrap();
+    let err = device_table
+        .lookup(&kernels, gpu.stream(), &two, &times, &right)
+        .unwrap_err();
+    assert!(err.to_string().contains("one clip id per time"), "{err}");
 }

@@ -7,22 +7,46 @@
 //! - Replays advance on their own: the device iteration counter moves the random numbers, so two
 //!   replays from the same state store different actions; rewards lie in (0, 1], flags are 0 or
 //!   1, observations are finite and clipped, episode times stay on the clip.
+//! - A motion library (docs/library.md): a clip and its library of one roll out bit for bit
+//!   alike (on the deterministic physics, `ptx/deterministic`); resets draw clips by their
+//!   weights; the evaluation plays clip i mod C from its spread starts and each env completes
+//!   its own clip's episode.
 #![cfg(feature = "gpu")]
 
+mod skip_support;
+
+use std::path::Path;
+
 use instantmimic::cuda::Gpu;
-use instantmimic::env::Rollout;
+use instantmimic::env::{Rollout, TrackedMotion};
 use instantmimic::motion::find::resolve_motion;
-use instantmimic::motion::{Character, ReferenceMotion};
+use instantmimic::motion::{Character, MotionLibrary, MotionLibraryBuilder, ReferenceMotion};
 use instantmimic::plan::PlanStore;
 use instantmimic::ppo::GaussianPolicy;
-use instantmimic::train::TrainConfig;
+use instantmimic::train::{LibraryPlan, TrainConfig};
 
 /// The built-in backflip clip.
 fn motion() -> ReferenceMotion {
+    built_in("backflip")
+}
+
+/// A built-in clip.
+fn built_in(name: &str) -> ReferenceMotion {
     let character = Character::humanoid().expect("the humanoid");
-    resolve_motion("backflip", None)
+    resolve_motion(name, None)
         .and_then(|resolved| resolved.load(&character))
-        .expect("the built-in backflip loads")
+        .unwrap_or_else(|e| panic!("the built-in {name} loads: {e}"))
+}
+
+/// A library of built-in clips with weights, at the control rate of the default config.
+fn library(clips: &[(&str, f64)]) -> MotionLibrary {
+    let mut builder = MotionLibraryBuilder::new("gpu_rollout", 1.0 / 30.0);
+    for (name, weight) in clips {
+        builder
+            .push(name, "built in", &built_in(name), *weight)
+            .expect("the clip joins the library");
+    }
+    builder.finish().expect("clips")
 }
 
 fn config(num_envs: u32, horizon: u32) -> TrainConfig {
@@ -216,8 +240,8 @@ fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
     let rollout_config = config.rollout_config();
     let training = Rollout::new(&gpu, &store, &motion, &rollout_config).expect("training rollout");
     let policy = policy_for(&gpu, &training, &config);
-    let evaluation = Rollout::evaluation(&training, &store, &motion, &rollout_config)
-        .expect("evaluation rollout");
+    let evaluation =
+        Rollout::evaluation(&training, &store, &rollout_config).expect("evaluation rollout");
     // As the trainer lends it: the training parameters with the evaluation's batch.
     let evaluation_policy = policy
         .with_batch(&gpu, evaluation.num_envs())
@@ -289,4 +313,221 @@ fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
             assert!(per_step < 0.5, "{s:?}: mean MPJPE {per_step} m");
         }
     }
+}
+
+/// Every float the rollout stored, as bits: observations, actions, log-probabilities, rewards,
+/// flags and the envs' clocks.
+fn rollout_bits(rollout: &Rollout) -> Vec<u32> {
+    let mut bits = Vec::new();
+    let s = &rollout.storage;
+    for v in [
+        s.observations.download().expect("observations"),
+        s.actions.download().expect("actions"),
+        s.log_probs.download().expect("log_probs"),
+        s.rewards.download().expect("rewards"),
+        rollout.state.ref_time.download().expect("ref_time"),
+    ] {
+        bits.extend(v.iter().map(|x| x.to_bits()));
+    }
+    for v in [
+        s.terminated.download().expect("flags"),
+        s.truncated.download().expect("flags"),
+        rollout.state.episode_step.download().expect("steps"),
+        rollout.state.clip_id.download().expect("clips"),
+    ] {
+        bits.extend(v.iter().map(|x| *x as u32));
+    }
+    bits
+}
+
+/// A clip (`Rollout::new(&motion)`, resampled as the library of one inside) and the library of
+/// one built outside and passed as a library roll out alike, bit for bit, over two replays, on
+/// the deterministic physics (whose replays are exact, issue 2). Today's rollout before
+/// libraries is compared with this one across builds by tests/device/library_of_one.sh.
+#[test]
+fn a_clip_and_its_library_of_one_roll_out_bit_for_bit() {
+    let assets = Path::new("ptx/deterministic");
+    if !assets.join("plans/manifest.json").is_file() {
+        skip_support::skip("no ptx/deterministic here (run from the repository root)");
+        return;
+    }
+    let gpu = Gpu::open(0).expect("a GPU");
+    let store = PlanStore::new(Some(assets));
+    let config = config(32, 8);
+    let motion = motion();
+    let character = Character::humanoid().expect("the humanoid");
+    let single =
+        MotionLibrary::single("backflip", "built in", &motion, 1.0 / 30.0).expect("library");
+    let runs: Vec<Vec<u32>> = [
+        TrackedMotion::Clip(&motion),
+        TrackedMotion::Library {
+            character: &character,
+            library: &single,
+        },
+    ]
+    .into_iter()
+    .map(|tracked| {
+        let rollout =
+            Rollout::new(&gpu, &store, tracked, &config.rollout_config()).expect("rollout");
+        let policy = policy_for(&gpu, &rollout, &config);
+        let (graph, _) = rollout.capture(&policy, false).expect("capture");
+        rollout.reset_all().expect("reset");
+        let mut bits = Vec::new();
+        for _ in 0..2 {
+            graph.launch(gpu.stream()).expect("launch");
+            gpu.synchronize().expect("replay");
+            bits.extend(rollout_bits(&rollout));
+        }
+        bits
+    })
+    .collect();
+    let differ = runs[0].iter().zip(&runs[1]).filter(|(a, b)| a != b).count();
+    assert_eq!(runs[0].len(), runs[1].len());
+    assert_eq!(
+        differ,
+        0,
+        "{differ} of {} values differ between the clip and its library of one",
+        runs[0].len()
+    );
+}
+
+/// With no statistics yet, a reset's clip follows the clips' weights: 4096 resets of a library
+/// weighted 1 : 2 : 5, each clip's count within 5 standard deviations of its share, every start
+/// inside its clip, and after a rollout every clip has visits in its cells.
+#[test]
+fn library_resets_draw_clips_by_their_weights() {
+    let gpu = Gpu::open(0).expect("a GPU");
+    let store = PlanStore::new(None);
+    let config = config(4096, 4);
+    let library = library(&[("walk", 1.0), ("punch", 2.0), ("spinkick", 5.0)]);
+    let character = Character::humanoid().expect("the humanoid");
+    let tracked = TrackedMotion::Library {
+        character: &character,
+        library: &library,
+    };
+    let rollout = Rollout::new(&gpu, &store, tracked, &config.rollout_config()).expect("rollout");
+    rollout.reset_all().expect("reset");
+    let clips = rollout.state.clip_id.download().expect("clips");
+    let times = rollout.state.ref_time.download().expect("times");
+    let n = clips.len() as f64;
+    for (c, share) in library.weight_fractions().iter().enumerate() {
+        let count = clips.iter().filter(|&&k| k == c as i32).count() as f64;
+        let sigma = (n * share * (1.0 - share)).sqrt();
+        eprintln!(
+            "clip {} (weight {share:.3}): {count} of {n} resets, expected {:.0} +- {sigma:.1}",
+            library.clips()[c].name,
+            n * share
+        );
+        assert!(
+            (count - n * share).abs() <= 5.0 * sigma,
+            "clip {c}: {count} resets, expected {} +- 5 x {sigma}",
+            n * share
+        );
+    }
+    for (&c, &t) in clips.iter().zip(&times) {
+        let duration = library.segment(c as usize).expect("a clip").duration() as f32;
+        assert!(
+            t >= 0.0 && t <= duration,
+            "clip {c} starts at {t} of {duration} s"
+        );
+    }
+    let policy = policy_for(&gpu, &rollout, &config);
+    let (graph, _) = rollout.capture(&policy, false).expect("capture");
+    graph.launch(gpu.stream()).expect("launch");
+    gpu.synchronize().expect("replay");
+    let (visits, _, cdf, _) = rollout.phase_statistics();
+    let visits = visits.download().expect("visits");
+    let bins = config.env.phase_bins as usize;
+    for c in 0..library.num_clips() {
+        let clip_visits: f32 = visits[c * bins..(c + 1) * bins].iter().sum();
+        assert!(clip_visits > 0.0, "clip {c} has no visits");
+    }
+    let cdf = cdf.download().expect("cdf");
+    assert_eq!(cdf.len(), library.num_clips() * bins);
+    assert!(cdf.windows(2).all(|w| w[0] <= w[1]) && cdf[cdf.len() - 1] == 1.0);
+}
+
+/// The evaluation of a library on 32 envs: env i plays clip i mod C from start i div C of its
+/// clip's (spread over a looping clip's cycle, at 0 for a clamped one), and each env's episode
+/// ends after its own clip's steps or at a failure; the plan summarizes the scores per clip.
+#[test]
+fn library_evaluation_plays_every_clip_from_its_spread_starts() {
+    let gpu = Gpu::open(0).expect("a GPU");
+    let store = PlanStore::new(None);
+    let mut config = config(32, 8);
+    config.motion = String::new();
+    config.motion_library = Some(instantmimic::motion::LibraryConfig {
+        clips: Some(vec!["walk".into(), "punch".into(), "spinkick".into()]),
+        ..Default::default()
+    });
+    config.validate("test").expect("a library config");
+    let library = library(&[("walk", 1.0), ("punch", 1.0), ("spinkick", 1.0)]);
+    let character = Character::humanoid().expect("the humanoid");
+    let tracked = TrackedMotion::Library {
+        character: &character,
+        library: &library,
+    };
+    let rollout_config = config.rollout_config();
+    let training = Rollout::new(&gpu, &store, tracked, &rollout_config).expect("rollout");
+    let policy = policy_for(&gpu, &training, &config);
+    let evaluation = Rollout::evaluation(&training, &store, &rollout_config).expect("evaluation");
+    let plan = LibraryPlan::new(
+        evaluation.library(),
+        evaluation.clip_evaluations().expect("a plan"),
+        evaluation.num_envs(),
+    )
+    .expect("plan");
+    assert_eq!(evaluation.horizon() as u32, plan.longest_steps());
+    let evaluation_policy = policy
+        .with_batch(&gpu, evaluation.num_envs())
+        .expect("evaluation policy");
+    let (graph, _) = evaluation
+        .capture(&evaluation_policy, false)
+        .expect("capture");
+    evaluation.reset_all().expect("reset");
+    let clips = evaluation.state.clip_id.download().expect("clips");
+    let starts = evaluation.state.ref_time.download().expect("starts");
+    for (i, (&c, &t)) in clips.iter().zip(&starts).enumerate() {
+        let (clip, start) = plan.start_of(i);
+        assert_eq!(c as usize, clip, "env {i}");
+        assert!(
+            (f64::from(t) - start).abs() <= 1e-6,
+            "env {i}: {t} vs {start}"
+        );
+    }
+    graph.launch(gpu.stream()).expect("launch");
+    gpu.synchronize().expect("evaluation");
+    let scores = evaluation
+        .episode_scores()
+        .expect("scores")
+        .download()
+        .expect("download");
+    for (i, s) in scores.iter().enumerate() {
+        let own = plan.clips[i % plan.clips.len()].evaluation.steps;
+        assert!(s.completed != s.failed, "env {i}: {s:?}");
+        if s.completed {
+            assert_eq!(s.steps, own, "env {i}: completed after its clip's steps");
+        } else {
+            assert!(s.steps <= own, "env {i}: {s:?}");
+        }
+    }
+    let episodes: Vec<_> = scores
+        .iter()
+        .map(instantmimic::train::EnvEvaluation::from)
+        .collect();
+    let summary = plan.summarize(&episodes, 0.9).expect("summary");
+    let library_scores = summary.library.expect("per clip");
+    eprintln!(
+        "an untrained policy: {:?}",
+        library_scores
+            .clips
+            .iter()
+            .map(|c| (&c.name, c.episodes, c.success_rate))
+            .collect::<Vec<_>>()
+    );
+    assert_eq!(library_scores.clips.len(), 3);
+    assert_eq!(
+        library_scores.clips.iter().map(|c| c.episodes).sum::<u32>(),
+        32
+    );
 }

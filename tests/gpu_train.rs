@@ -7,6 +7,8 @@
 //!   `eval` reads its checkpoint back.
 //! - A run killed with SIGKILL mid-training resumes from its last checkpoint and its metrics
 //!   continue without a gap or a duplicate (issue 5's acceptance).
+//! - A short run on a motion library evaluates every clip, writes `clips.tsv` and the
+//!   per-clip results in its metrics, and resumes (docs/library.md).
 #![cfg(feature = "gpu")]
 
 mod small_run_support;
@@ -179,4 +181,83 @@ fn a_killed_run_resumes_from_its_checkpoint_without_a_gap_in_its_metrics() {
         .map(|r| r["active_time_s"].as_f64().expect("active time"))
         .collect();
     assert!(times.windows(2).all(|w| w[1] > w[0]), "{times:?}");
+}
+
+#[test]
+fn a_short_library_run_scores_every_clip_and_writes_its_clip_table() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut config = small_run_support::small_config("backflip");
+    config.motion = String::new();
+    config.motion_library = Some(instantmimic::motion::LibraryConfig {
+        clips: Some(vec![
+            "walk".into(),
+            "punch".into(),
+            "spinkick".into(),
+            "getup_faceup".into(),
+        ]),
+        ..Default::default()
+    });
+    config.run.max_iterations = 4;
+    config.run.checkpoint_interval = 2;
+    config.run.replay = false;
+    config.validate("test").expect("a library config");
+    let path = dir.path().join("library.toml");
+    std::fs::write(&path, config.to_toml().expect("toml")).expect("write config");
+    let run = dir.path().join("run");
+    let out = binary()
+        .args(["train", "--progress", "lines", "--config"])
+        .arg(&path)
+        .arg("--out")
+        .arg(&run)
+        .output()
+        .expect("train runs");
+    check_success(&out, "train on a library");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    println!("{stdout}");
+    assert!(stdout.contains("clips at 0.8"), "{stdout}");
+    let records = metrics(&run);
+    assert_eq!(records.len(), 4);
+    let e = &records[1]["evaluation"];
+    let clips = e["library"]["clips"].as_array().expect("per-clip results");
+    assert_eq!(clips.len(), 4, "{e}");
+    assert_eq!(clips[3]["name"], "getup_faceup");
+    assert_eq!(
+        clips
+            .iter()
+            .map(|c| c["episodes"].as_u64().unwrap())
+            .sum::<u64>(),
+        32
+    );
+    let table = std::fs::read_to_string(run.join("clips.tsv")).expect("clips.tsv");
+    assert_eq!(table.lines().count(), 6, "{table}");
+    assert!(
+        table.lines().nth(1).unwrap().starts_with("walk\t"),
+        "{table}"
+    );
+    let rows: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(run.join("evaluation.json")).expect("evaluation.json"),
+    )
+    .expect("JSON");
+    assert_eq!(rows[5]["clip"], "punch", "env 5 plays clip 5 mod 4");
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(run.join("summary.json")).expect("summary.json"),
+    )
+    .expect("JSON");
+    assert!(summary["library"].is_object(), "{summary}");
+    assert!(!run.join("replay.html").exists());
+    // It resumes like a run of one clip.
+    let out = binary()
+        .args([
+            "train",
+            "--max-iterations",
+            "6",
+            "--progress",
+            "lines",
+            "--resume",
+        ])
+        .arg(&run)
+        .output()
+        .expect("train resumes");
+    check_success(&out, "resume a library run");
+    assert_eq!(metrics(&run).len(), 6);
 }

@@ -60,6 +60,7 @@ fn evaluation(iteration: u64, success_from: u64) -> EvaluationSummary {
         global_mpjpe_m: 0.2,
         ee_position_error_m: 0.15,
         ee_orientation_error_rad: 0.4,
+        library: None,
     }
 }
 

@@ -27,7 +27,7 @@ with the implicit `-Kd v'` the net torque is DeepMimic's clamped PD, `clamp(P - 
 
 import warp as wp
 
-from env.reference import reference_locate, reference_quat_wxyz, reference_value
+from env.reference import clip_base, reference_locate, reference_quat_wxyz, reference_value
 from env.rotation import qconj, qexp, qlog, qmul
 
 wp.set_module_options({"enable_backward": False})
@@ -51,6 +51,8 @@ def pd_control(
     joint_scale: wp.array(dtype=wp.float32),
     joint_center: wp.array(dtype=wp.float32),
     table: wp.array(dtype=wp.float32),
+    clip_offsets: wp.array(dtype=wp.int32),
+    clip_id: wp.array(dtype=wp.int32),
     ref_time: wp.array(dtype=wp.float32),
     target_dt: wp.float32,
     residual: wp.int32,
@@ -61,8 +63,9 @@ def pd_control(
     `kd = dof_damping[dof]`, `v = qvel[n, dof]` per motor and P: ball joints
     `kp * qlog(conj(q) qexp(s a))` (a rotation vector in the joint's frame), hinges
     `kp * (center + s a - theta)`, with `s = action_scale * joint_scale[j]`. With `residual`
-    not 0 the zero pose and the centers are replaced by the reference pose at
-    `ref_time[n] + target_dt`: `q_ref qexp(s a)` and `theta_ref + s a`. Launch N * J threads."""
+    not 0 the zero pose and the centers are replaced by the reference pose of the env's clip
+    `clip_id[n]` at `ref_time[n] + target_dt`: `q_ref qexp(s a)` and `theta_ref + s a`. Launch
+    N * J threads."""
     tid = wp.tid()
     nj = joint_kind.shape[0]
     n = tid // nj
@@ -76,7 +79,7 @@ def pd_control(
     if joint_kind[j] == BALL:
         target = qexp(wp.vec3(s * actions[n, m], s * actions[n, m + 1], s * actions[n, m + 2]))
         if residual != 0:
-            at = reference_locate(table, ref_time[n] + target_dt)
+            at = reference_locate(table, clip_base(clip_offsets, clip_id[n]), ref_time[n] + target_dt)
             target = qmul(reference_quat_wxyz(table, at, a), target)
         q = wp.vec4(qpos[n, a], qpos[n, a + 1], qpos[n, a + 2], qpos[n, a + 3])
         e = qlog(qmul(qconj(q), target))
@@ -86,7 +89,7 @@ def pd_control(
     else:
         base = joint_center[j]
         if residual != 0:
-            at = reference_locate(table, ref_time[n] + target_dt)
+            at = reference_locate(table, clip_base(clip_offsets, clip_id[n]), ref_time[n] + target_dt)
             base = reference_value(table, at, a)
         angle = base + s * actions[n, m]
         damping = dof_damping[d] * qvel[n, d]
@@ -103,6 +106,7 @@ LAUNCH = {
         "dim <= extent(actions, 0) * extent(joint_kind, 0)",
         "dim <= extent(qpos, 0) * extent(joint_kind, 0)",
         "dim <= extent(qvel, 0) * extent(joint_kind, 0)",
+        "dim <= len(clip_id) * extent(joint_kind, 0)",
         "dim <= len(ref_time) * extent(joint_kind, 0)",
     ),
 }

@@ -16,7 +16,7 @@ so that a change to the training termination cannot change what counts as succes
 
 import warp as wp
 
-from env.reference import reference_locate, reference_position, reference_quat_wxyz, reference_value
+from env.reference import clip_base, reference_locate, reference_position, reference_quat_wxyz, reference_value
 from env.rotation import qdiff_angle
 
 wp.set_module_options({"enable_backward": False})
@@ -53,29 +53,34 @@ def evaluation_accumulate(
     xpos: wp.array3d(dtype=wp.float32),
     xquat: wp.array3d(dtype=wp.float32),
     table: wp.array(dtype=wp.float32),
+    clip_offsets: wp.array(dtype=wp.int32),
     end_effectors: wp.array(dtype=wp.int32),
+    clip_id: wp.array(dtype=wp.int32),
     ref_time: wp.array(dtype=wp.float32),
     t: wp.int32,
     rewards: wp.array2d(dtype=wp.float32),
     terminated: wp.array2d(dtype=wp.int32),
     truncated: wp.array2d(dtype=wp.int32),
     yardstick: Yardstick,
+    clip_steps: wp.array(dtype=wp.int32),
     status: wp.array(dtype=wp.int32),
     steps: wp.array(dtype=wp.int32),
     sums: wp.array2d(dtype=wp.float32),
 ):
     """One thread per env n whose status is RUNNING: adds, for the state after step t against the
-    reference at `ref_time[n]`, the mean root-relative body position error (average pose error,
-    m), the mean world body position error (global MPJPE, m), the mean end-effector position
-    error (m) and orientation error (rad) over the 5 end effectors, and the step's reward to
-    `sums[n]`, counts the step, then sets the status to FAILED if the step fails the yardstick
+    reference of the env's clip `clip_id[n]` at `ref_time[n]`, the mean root-relative body
+    position error (average pose error, m), the mean world body position error (global MPJPE,
+    m), the mean end-effector position error (m) and orientation error (rad) over the 5 end
+    effectors, and the step's reward to `sums[n]`, counts the step, then sets the status to FAILED if the step fails the yardstick
     (a body farther than `max_body_distance` from its reference, or the root more than
     `max_root_drop` below the reference root) or `terminated[t, n]`, else COMPLETED if
-    `truncated[t, n]`."""
+    `truncated[t, n]` or the env has scored its clip's `clip_steps[clip_id[n]]` steps (a
+    library's clips have episodes of their own lengths in one evaluation rollout)."""
     n = wp.tid()
     if status[n] != RUNNING:
         return
-    at = reference_locate(table, ref_time[n])
+    clip = clip_id[n]
+    at = reference_locate(table, clip_base(clip_offsets, clip), ref_time[n])
     root = wp.vec3(xpos[n, 1, 0], xpos[n, 1, 1], xpos[n, 1, 2])
     root_ref = reference_position(table, at, REF_BODY_POS)
     pose = float(0.0)
@@ -103,11 +108,15 @@ def evaluation_accumulate(
     sums[n, SUM_EE_POS] = sums[n, SUM_EE_POS] + ee_pos / wp.float32(effectors)
     sums[n, SUM_EE_ROT] = sums[n, SUM_EE_ROT] + ee_rot / wp.float32(effectors)
     sums[n, SUM_REWARD] = sums[n, SUM_REWARD] + rewards[t, n]
-    steps[n] = steps[n] + 1
+    scored = steps[n] + 1
+    steps[n] = scored
     dropped = reference_value(table, at, 2) - qpos[n, 2] > yardstick.max_root_drop
+    window_done = False
+    if clip >= 0 and clip < clip_steps.shape[0]:
+        window_done = scored >= clip_steps[clip]
     if terminated[t, n] != 0 or far > yardstick.max_body_distance or dropped:
         status[n] = FAILED
-    elif truncated[t, n] != 0:
+    elif truncated[t, n] != 0 or window_done:
         status[n] = COMPLETED
 
 # Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
@@ -123,6 +132,7 @@ LAUNCH = {
         "dim <= extent(qpos, 0)",
         "dim <= extent(xpos, 0)",
         "dim <= extent(xquat, 0)",
+        "dim <= len(clip_id)",
         "dim <= len(ref_time)",
         "dim <= extent(rewards, 1)",
         "dim <= extent(terminated, 1)",

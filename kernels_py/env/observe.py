@@ -16,7 +16,7 @@ rollout storage row `row`.
 
 import warp as wp
 
-from env.reference import reference_locate, reference_position, reference_quat_wxyz
+from env.reference import clip_base, reference_locate, reference_position, reference_quat_wxyz
 from env.rotation import heading_inverse, qconj, qmul, qrotate, tan_norm
 
 wp.set_module_options({"enable_backward": False})
@@ -78,7 +78,9 @@ def observe(
     cvel: wp.array3d(dtype=wp.float32),
     subtree_com: wp.array3d(dtype=wp.float32),
     table: wp.array(dtype=wp.float32),
+    clip_offsets: wp.array(dtype=wp.int32),
     end_effectors: wp.array(dtype=wp.int32),
+    clip_id: wp.array(dtype=wp.int32),
     ref_time: wp.array(dtype=wp.float32),
     actions: wp.array2d(dtype=wp.float32),
     params: ObservationParams,
@@ -87,7 +89,7 @@ def observe(
     """One thread per env: the raw observation row (docs/env.md table), in order: root height;
     root orientation (6D); root linear and angular velocity; positions of bodies 1..14 relative to
     the root; orientations (6D), linear and angular velocities of the 15 bodies; for each future
-    frame k = 1..K at `ref_time + k * spacing * dt`, each end effector's reference position
+    frame k = 1..K of the env's clip `clip_id[n]` at `ref_time + k * spacing * dt`, each end effector's reference position
     relative to the root and orientation (6D); the last action (if `prev_action`); the reference
     root at `ref_time + dt` relative to the root, position and orientation (if `root_target`);
     for each of the 15 bodies, the reference at `ref_time + dt` against the simulated body: the
@@ -99,6 +101,7 @@ def observe(
     root_p = body_vec3(xpos, n, 1, 0)
     h = heading_inverse(root_q)
     com = body_vec3(subtree_com, n, 1, 0)
+    base = clip_base(clip_offsets, clip_id[n])
 
     k = 0
     obs[n, k] = qpos[n, 2]
@@ -117,7 +120,7 @@ def observe(
     for b in range(NUM_BODIES):
         k = put3(obs, n, k, qrotate(h, body_vec3(cvel, n, b + 1, 0)))
     for f in range(1, params.future_frames + 1):
-        at = reference_locate(table, ref_time[n] + wp.float32(f * params.future_spacing) * params.dt)
+        at = reference_locate(table, base, ref_time[n] + wp.float32(f * params.future_spacing) * params.dt)
         for e in range(end_effectors.shape[0]):
             b = end_effectors[e]
             k = put3(obs, n, k, qrotate(h, reference_position(table, at, REF_BODY_POS + 3 * b) - root_p))
@@ -127,11 +130,11 @@ def observe(
             obs[n, k] = actions[n, m]
             k += 1
     if params.root_target != 0:
-        at = reference_locate(table, ref_time[n] + params.dt)
+        at = reference_locate(table, base, ref_time[n] + params.dt)
         k = put3(obs, n, k, qrotate(h, reference_position(table, at, 0) - root_p))
         k = put6(obs, n, k, qmul(h, reference_quat_wxyz(table, at, 3)))
     if params.reference_bodies != 0:
-        at = reference_locate(table, ref_time[n] + params.dt)
+        at = reference_locate(table, base, ref_time[n] + params.dt)
         for b in range(NUM_BODIES):
             p_ref = reference_position(table, at, REF_BODY_POS + 3 * b)
             k = put3(obs, n, k, qrotate(h, p_ref - body_vec3(xpos, n, b + 1, 0)))
@@ -233,6 +236,7 @@ LAUNCH = {
         "dim <= extent(xquat, 0)",
         "dim <= extent(cvel, 0)",
         "dim <= extent(subtree_com, 0)",
+        "dim <= len(clip_id)",
         "dim <= len(ref_time)",
         "dim <= extent(actions, 0)",
     ),

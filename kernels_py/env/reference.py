@@ -1,9 +1,13 @@
-"""The reference-table lookup: the reference state of the clip at any time, on the GPU.
+"""The reference-table lookup: the reference state of a clip of the motion library at any time,
+on the GPU.
 
-The table is `ReferenceTable::data()` uploaded as is (`docs/reference_table.md`): a header of
-`HEADER_LEN` values, then one row of `stride` values per control step of one cycle, the last row
-at the clip's end D. The arithmetic is `ReferenceTable::locate` and `ReferenceTable::lookup`
-(`src/motion/table.rs`), the CPU twin the GPU test compares against:
+The table is `MotionLibrary::data()` uploaded as is (`docs/library.md`): each clip's reference
+table one after another, a header of `HEADER_LEN` values then one row of `stride` values per
+control step of one cycle, the last row at the clip's end D (`docs/reference_table.md`).
+`clip_offsets[c]` is where clip c's header starts (`MotionLibrary::header_offsets`); a single
+clip is the library of one, `clip_offsets = [0]`, so one code path serves both. The arithmetic is
+`ReferenceTable::locate` and `ReferenceTable::lookup` on the clip's segment (`src/motion/table.rs:
+TableSegment`, `MotionLibrary::lookup`), the CPU twin the GPU test compares against:
 
 - `reference_locate` splits a time into cycle, row and blend weight, in `float64`: in `float32`
   a time several cycles into a clip loses the row's sub-microsecond position (t - k D cancels),
@@ -16,9 +20,10 @@ at the clip's end D. The arithmetic is `ReferenceTable::locate` and `ReferenceTa
   `float64` costs a few operations per value, nothing next to the row reads, even on GPUs with
   slow `float64`.
 
-Other env kernels (reward, observation, reset) call `reference_locate` once per env and then the
+Other env kernels (reward, observation, reset) read the env's clip id once, turn it into the
+clip's header offset (`clip_base`), call `reference_locate` once per time they need and then the
 value functions for the slots they need, inside their own kernel; `lookup_reference` writes whole
-rows (resets, and the GPU test).
+rows (the GPU test, and `Rollout::reference_rows`).
 """
 
 import warp as wp
@@ -55,20 +60,45 @@ class ReferenceTime:
     alpha: wp.float64
     # Loop cycle k (0 for a clamped clip): positions are shifted by k times the displacement.
     cycle: wp.float64
+    # Index of the clip's header in the table (its per-cycle displacement is read there).
+    base: wp.int32
 
 
 @wp.func
-def reference_locate(table: wp.array(dtype=wp.float32), t: wp.float32) -> ReferenceTime:
-    """Cycle, rows and blend weight of time `t` (s); a non-finite `t` reads as 0."""
+def clip_base(clip_offsets: wp.array(dtype=wp.int32), clip: wp.int32) -> wp.int32:
+    """Index of clip `clip`'s header in the table, or -1 for an id that is no clip of the
+    library (the lookup then reads as NaN instead of reading another clip or past the array)."""
+    if clip < 0 or clip >= clip_offsets.shape[0]:
+        return -1
+    return clip_offsets[clip]
+
+
+@wp.func
+def clip_header(table: wp.array(dtype=wp.float32), base: wp.int32, slot: wp.int32) -> wp.float32:
+    """Header value `slot` of the clip whose header starts at `base` (NaN for no clip)."""
+    if base < 0 or base + HEADER_LEN > table.shape[0]:
+        return wp.nan
+    return table[base + slot]
+
+
+@wp.func
+def reference_locate(table: wp.array(dtype=wp.float32), base: wp.int32, t: wp.float32) -> ReferenceTime:
+    """Cycle, rows and blend weight of time `t` (s) in the clip whose header starts at `base`
+    (`clip_base`); a non-finite `t` reads as 0."""
     at = ReferenceTime()
-    stride = wp.int32(table[HEADER_ROW_STRIDE])
-    num_rows = wp.int32(table[HEADER_NUM_ROWS])
+    at.base = base
+    if base < 0 or base + HEADER_LEN > table.shape[0]:
+        at.row_start = -1
+        at.next_start = -1
+        return at
+    stride = wp.int32(table[base + HEADER_ROW_STRIDE])
+    num_rows = wp.int32(table[base + HEADER_NUM_ROWS])
     # Never read past the array, whatever the header says.
     if stride > 0:
-        num_rows = wp.min(num_rows, (table.shape[0] - HEADER_LEN) // stride)
+        num_rows = wp.min(num_rows, (table.shape[0] - base - HEADER_LEN) // stride)
     at.stride = stride
-    dt = wp.float64(table[HEADER_ROW_DT])
-    duration = wp.float64(table[HEADER_DURATION])
+    dt = wp.float64(table[base + HEADER_ROW_DT])
+    duration = wp.float64(table[base + HEADER_DURATION])
     if stride <= 0 or num_rows < 2 or not (dt > wp.float64(0.0) and duration > wp.float64(0.0)):
         at.row_start = -1
         at.next_start = -1
@@ -81,7 +111,7 @@ def reference_locate(table: wp.array(dtype=wp.float32), t: wp.float32) -> Refere
     # Cycle and time within the cycle (motion::clip::cycle_and_phase).
     cycle = wp.float64(0.0)
     tau = wp.float64(0.0)
-    if table[HEADER_WRAP] != 0.0:
+    if table[base + HEADER_WRAP] != 0.0:
         cycle = wp.floor(time / duration)
         tau = time - cycle * duration
         if tau >= duration:  # rounding guard
@@ -102,7 +132,7 @@ def reference_locate(table: wp.array(dtype=wp.float32), t: wp.float32) -> Refere
     if t1 > t0:
         alpha = wp.clamp((tau - t0) / (t1 - t0), wp.float64(0.0), wp.float64(1.0))
 
-    at.row_start = HEADER_LEN + row * stride
+    at.row_start = base + HEADER_LEN + row * stride
     at.next_start = at.row_start + stride
     at.alpha = alpha
     at.cycle = cycle
@@ -143,7 +173,7 @@ def reference_position(table: wp.array(dtype=wp.float32), at: ReferenceTime, slo
         return wp.vec3(wp.nan, wp.nan, wp.nan)
     p = wp.vec3()
     for c in range(3):
-        shift = at.cycle * wp.float64(table[HEADER_CYCLE_DISPLACEMENT + c])
+        shift = at.cycle * wp.float64(table[at.base + HEADER_CYCLE_DISPLACEMENT + c])
         p[c] = wp.float32(blend_f64(table, at, slot + c) + shift)
     return p
 
@@ -190,18 +220,21 @@ def reference_quat(table: wp.array(dtype=wp.float32), at: ReferenceTime, slot: w
 @wp.kernel
 def lookup_reference(
     table: wp.array(dtype=wp.float32),
+    clip_offsets: wp.array(dtype=wp.int32),
     quaternion_offsets: wp.array(dtype=wp.int32),
     position_offsets: wp.array(dtype=wp.int32),
+    clips: wp.array(dtype=wp.int32),
     times: wp.array(dtype=wp.float32),
     out: wp.array2d(dtype=wp.float32),
 ):
-    """Writes the reference row at `times[i]` to `out[i, :]` for every env i: every value blended
-    linearly, the quaternions at `quaternion_offsets` slerped, the 3-vectors at `position_offsets`
-    shifted by the cycle's displacement (`ReferenceTable::lookup`). `out` has one column per row
-    value (the header's stride); extra columns are left alone, offsets that do not fit are
-    skipped. An unusable table (fewer than two rows, no positive row time or duration) gives NaN."""
+    """Writes the reference row of clip `clips[i]` at its time `times[i]` to `out[i, :]` for every
+    i: every value blended linearly, the quaternions at `quaternion_offsets` slerped, the 3-vectors
+    at `position_offsets` shifted by the cycle's displacement (`MotionLibrary::lookup`). `out` has
+    one column per row value (the header's stride); extra columns are left alone, offsets that do
+    not fit are skipped. An unusable clip (an id that is no clip of `clip_offsets`, fewer than two
+    rows, no positive row time or duration) gives NaN."""
     i = wp.tid()
-    at = reference_locate(table, times[i])
+    at = reference_locate(table, clip_base(clip_offsets, clips[i]), times[i])
     n = out.shape[1]
     if at.row_start >= 0:
         n = wp.min(n, at.stride)
@@ -228,6 +261,7 @@ def lookup_reference(
 LAUNCH = {
     "lookup_reference": (
         "dim == extent(out, 0)",
+        "dim <= len(clips)",
         "dim <= len(times)",
     ),
 }

@@ -1,8 +1,11 @@
 """Masked reset with reference state initialization, and the adaptive start-phase statistics
-(docs/env.md, "Masked reset with reference state initialization").
+(docs/env.md, "Masked reset with reference state initialization"; docs/library.md, "The reset
+sampler").
 
 `reset_masked` runs for every env every control step; only envs with `done[n] != 0` change, so
-no host read decides who is reset. Random numbers come from Warp's counter-based RNG with an
+no host read decides who is reset. A reset picks a clip of the motion library and a start time in
+it together: one cell of the (clip, phase bin) grid, drawn from one CDF over every cell (the
+library of one: today's phase bins of the one clip). Random numbers come from Warp's counter-based RNG with an
 offset built from a device iteration counter (advanced once per rollout by
 `phase_statistics_update`), the step index and the env, so each replay of a captured rollout
 draws new numbers with no host involvement.
@@ -13,6 +16,8 @@ import warp as wp
 from env.reference import (
     HEADER_DURATION,
     HEADER_WRAP,
+    clip_base,
+    clip_header,
     reference_locate,
     reference_position,
     reference_quat_wxyz,
@@ -38,26 +43,41 @@ class ResetParams:
     dt: wp.float32
     # Reference state initialization noise (rad; velocities get 10x).
     noise_std: wp.float32
-    # Start time (s) of every reset episode; negative: drawn from the adaptive phase CDF
-    # (training). Evaluation: env n of N starts at `start_time + start_spread * n / N` (spread
-    # over a looping clip's cycle, or all at the start with a spread of 0).
+    # Start time (s) of every reset episode; negative: a clip and a start drawn from the adaptive
+    # CDF (training). Evaluation: env n of N plays clip n mod C (C clips) and starts at
+    # `start_time + start_spread[clip] * k / K`, its k = n div C of the clip's K = ceil(N / C)
+    # starts (spread over a looping clip's cycle or a long clip's windows, or all at the start
+    # with a spread of 0).
     start_time: wp.float32
-    start_spread: wp.float32
 
 
 @wp.func
-def sample_start_time(
-    u: wp.float32, v: wp.float32, table: wp.array(dtype=wp.float32), phase_cdf: wp.array(dtype=wp.float32), dt: wp.float32
+def sample_cell(u: wp.float32, phase_cdf: wp.array2d(dtype=wp.float32)) -> wp.int32:
+    """The first cell (clip c, bin b is cell c * bins + b) whose CDF value exceeds u, by binary
+    search: the CDF is a running sum, non-decreasing, and a library's hundreds of cells are too
+    many for a scan per reset. The last cell is not read: it is where u lands when no earlier
+    cell exceeds it (the linear scan this replaces did the same)."""
+    bins = phase_cdf.shape[1]
+    lo = int(0)
+    hi = phase_cdf.shape[0] * bins - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        row = mid // bins
+        if u < phase_cdf[row, mid - row * bins]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@wp.func
+def start_in_bin(
+    b: wp.int32, v: wp.float32, bins: wp.int32, table: wp.array(dtype=wp.float32), base: wp.int32, dt: wp.float32
 ) -> wp.float32:
-    """The bin where the CDF first exceeds u, then the time at fraction v of it (clamped clips:
-    bins span [0, duration - dt], so that at least one control step remains)."""
-    bins = phase_cdf.shape[0]
-    b = bins - 1
-    for i in range(bins):
-        if u < phase_cdf[i] and b == bins - 1:
-            b = i
-    span = table[HEADER_DURATION]
-    if table[HEADER_WRAP] == 0.0:
+    """The time at fraction v of bin b of the clip whose header is at `base` (clamped clips: bins
+    span [0, duration - dt], so that at least one control step remains)."""
+    span = clip_header(table, base, HEADER_DURATION)
+    if clip_header(table, base, HEADER_WRAP) == 0.0:
         span = wp.max(span - dt, 0.0)
     return (wp.float32(b) + v) / wp.float32(bins) * span
 
@@ -66,10 +86,12 @@ def sample_start_time(
 def reset_masked(
     done: wp.array(dtype=wp.int32),
     table: wp.array(dtype=wp.float32),
+    clip_offsets: wp.array(dtype=wp.int32),
     root_quat: wp.int32,
     joint_kind: wp.array(dtype=wp.int32),
     joint_qpos: wp.array(dtype=wp.int32),
-    phase_cdf: wp.array(dtype=wp.float32),
+    phase_cdf: wp.array2d(dtype=wp.float32),
+    start_spread: wp.array(dtype=wp.float32),
     iteration: wp.array(dtype=wp.int32),
     t: wp.int32,
     params: ResetParams,
@@ -77,16 +99,19 @@ def reset_masked(
     qvel: wp.array2d(dtype=wp.float32),
     ctrl: wp.array2d(dtype=wp.float32),
     qacc_warmstart: wp.array2d(dtype=wp.float32),
+    clip_id: wp.array(dtype=wp.int32),
     ref_time: wp.array(dtype=wp.float32),
     episode_step: wp.array(dtype=wp.int32),
     actions: wp.array2d(dtype=wp.float32),
 ):
-    """For every env n with done[n] != 0: a start time t0 from the adaptive phase CDF (or, when
-    `params.start_time` is not negative, `start_time + start_spread * n / N`), qpos = the
-    reference qpos at t0 with noise (root orientation and ball joints `q * qexp(sigma g)`, hinges
-    `theta + sigma g`, root position exact), qvel = reference qvel + 10 sigma g, ctrl, warm start
-    and last action zeroed, ref_time = t0, episode_step = 0. Random stream: seed, offset
-    `(iteration[0] * horizon + t) * N + n`."""
+    """For every env n with done[n] != 0: a clip c and a start time t0 in it, from the cell
+    (clip, phase bin) where the adaptive CDF `phase_cdf` `[clips, bins]` first exceeds a uniform
+    draw, then uniform within the bin (or, when `params.start_time` is not negative, clip n mod C
+    from `start_time + start_spread[c] * k / K`, k = n div C, K = ceil(N / C)); qpos = the
+    clip's reference qpos at t0 with noise (root orientation and ball joints
+    `q * qexp(sigma g)`, hinges `theta + sigma g`, root position exact), qvel = reference qvel +
+    10 sigma g, ctrl, warm start and last action zeroed, clip_id = c, ref_time = t0,
+    episode_step = 0. Random stream: seed, offset `(iteration[0] * horizon + t) * N + n`."""
     n = wp.tid()
     if done[n] == 0:
         return
@@ -95,10 +120,19 @@ def reset_masked(
     state = wp.rand_init(params.seed, offset)
     u = wp.randf(state)
     v = wp.randf(state)
-    t0 = params.start_time + params.start_spread * wp.float32(n) / wp.float32(num_envs)
+    clips = wp.max(clip_offsets.shape[0], 1)
+    clip = n % clips
+    starts = (num_envs + clips - 1) // clips
+    spread = float(0.0)
+    if clip < start_spread.shape[0]:
+        spread = start_spread[clip]
+    t0 = params.start_time + spread * wp.float32(n // clips) / wp.float32(starts)
     if params.start_time < 0.0:
-        t0 = sample_start_time(u, v, table, phase_cdf, params.dt)
-    at = reference_locate(table, t0)
+        cell = sample_cell(u, phase_cdf)
+        bins = phase_cdf.shape[1]
+        clip = cell // bins
+        t0 = start_in_bin(cell - clip * bins, v, bins, table, clip_base(clip_offsets, clip), params.dt)
+    at = reference_locate(table, clip_base(clip_offsets, clip), t0)
     sigma = params.noise_std
 
     for i in range(qpos.shape[1]):
@@ -125,6 +159,7 @@ def reset_masked(
         ctrl[n, m] = 0.0
     for m in range(actions.shape[1]):
         actions[n, m] = 0.0
+    clip_id[n] = clip
     ref_time[n] = t0
     episode_step[n] = 0
 
@@ -133,27 +168,36 @@ def reset_masked(
 def phase_statistics_update(
     decay: wp.float32,
     floor: wp.float32,
-    phase_visits: wp.array(dtype=wp.float32),
-    phase_failures: wp.array(dtype=wp.float32),
-    phase_cdf: wp.array(dtype=wp.float32),
+    clip_weight: wp.array(dtype=wp.float32),
+    phase_visits: wp.array2d(dtype=wp.float32),
+    phase_failures: wp.array2d(dtype=wp.float32),
+    phase_cdf: wp.array2d(dtype=wp.float32),
     iteration: wp.array(dtype=wp.int32),
 ):
-    """Once per rollout, one thread: sampling weight per bin `failures / max(visits, 1) + floor`
-    into the CDF (from this rollout's counts and the decayed earlier ones), then both counts
-    decayed and the iteration counter advanced (new random numbers for the next rollout)."""
+    """Once per rollout, one thread: sampling weight per (clip c, bin b) cell
+    `clip_weight[c] * (failures / max(visits, 1) + floor)` into the CDF over every cell, clip
+    after clip (from this rollout's counts and the decayed earlier ones), then both counts
+    decayed and the iteration counter advanced (new random numbers for the next rollout). With
+    every failure rate 0 a clip's share of resets is its weight (fractions summing to 1); the
+    floor keeps every cell's share above `weight * floor / (bins * (1 + floor))`. One thread
+    in order, as the one clip's bins always were: a library of one (weight 1) gets today's CDF
+    bit for bit, and the few hundred cells of a library cost microseconds once per rollout."""
     if wp.tid() != 0:
         return
-    bins = phase_cdf.shape[0]
+    clips = phase_cdf.shape[0]
+    bins = phase_cdf.shape[1]
     total = float(0.0)
-    for b in range(bins):
-        total += phase_failures[b] / wp.max(phase_visits[b], 1.0) + floor
+    for c in range(clips):
+        for b in range(bins):
+            total += clip_weight[c] * (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor)
     acc = float(0.0)
-    for b in range(bins):
-        acc += (phase_failures[b] / wp.max(phase_visits[b], 1.0) + floor) / total
-        phase_cdf[b] = acc
-        phase_visits[b] = phase_visits[b] * decay
-        phase_failures[b] = phase_failures[b] * decay
-    phase_cdf[bins - 1] = 1.0
+    for c in range(clips):
+        for b in range(bins):
+            acc += clip_weight[c] * (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor) / total
+            phase_cdf[c, b] = acc
+            phase_visits[c, b] = phase_visits[c, b] * decay
+            phase_failures[c, b] = phase_failures[c, b] * decay
+    phase_cdf[clips - 1, bins - 1] = 1.0
     iteration[0] = iteration[0] + 1
 
 # Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
@@ -168,6 +212,7 @@ LAUNCH = {
         "dim <= extent(qvel, 0)",
         "dim <= extent(ctrl, 0)",
         "dim <= extent(qacc_warmstart, 0)",
+        "dim <= len(clip_id)",
         "dim <= len(ref_time)",
         "dim <= len(episode_step)",
         "dim <= extent(actions, 0)",

@@ -4,8 +4,8 @@
 After the physics substeps and the kinematics plan, each env compares its state with the
 reference at `ref_time + dt`, writes the reward and the done flags into rollout storage at row
 `t`, the five tracking errors (metrics; means per joint, dof or end effector), the reset mask
-`done`, then advances its episode clock. It also counts visits and failures per phase bin for the
-adaptive start-phase sampling (`reset.py`), with atomics.
+`done`, then advances its episode clock. It also counts visits and failures per (clip, phase bin)
+cell for the adaptive start-phase sampling (`reset.py`), with atomics.
 """
 
 import warp as wp
@@ -13,6 +13,8 @@ import warp as wp
 from env.reference import (
     HEADER_DURATION,
     HEADER_WRAP,
+    clip_base,
+    clip_header,
     reference_locate,
     reference_position,
     reference_quat_wxyz,
@@ -66,11 +68,12 @@ class TrackingParams:
 
 
 @wp.func
-def phase_bin(table: wp.array(dtype=wp.float32), t: wp.float32, bins: wp.int32) -> wp.int32:
-    """The bin of time t's position in the clip's cycle (clamped clips: in the clip)."""
-    d = table[HEADER_DURATION]
+def phase_bin(table: wp.array(dtype=wp.float32), base: wp.int32, t: wp.float32, bins: wp.int32) -> wp.int32:
+    """The bin of time t's position in the cycle of the clip whose header is at `base` (clamped
+    clips: in the clip)."""
+    d = clip_header(table, base, HEADER_DURATION)
     x = t / d
-    if table[HEADER_WRAP] != 0.0:
+    if clip_header(table, base, HEADER_WRAP) != 0.0:
         x = x - wp.floor(x)
     b = wp.int32(wp.floor(x * wp.float32(bins)))
     return wp.clamp(b, 0, bins - 1)
@@ -84,11 +87,13 @@ def reward_termination(
     xquat: wp.array3d(dtype=wp.float32),
     subtree_com: wp.array3d(dtype=wp.float32),
     table: wp.array(dtype=wp.float32),
+    clip_offsets: wp.array(dtype=wp.int32),
     joint_kind: wp.array(dtype=wp.int32),
     joint_qpos: wp.array(dtype=wp.int32),
     end_effectors: wp.array(dtype=wp.int32),
     params: TrackingParams,
     t: wp.int32,
+    clip_id: wp.array(dtype=wp.int32),
     ref_time: wp.array(dtype=wp.float32),
     episode_step: wp.array(dtype=wp.int32),
     rewards: wp.array2d(dtype=wp.float32),
@@ -97,11 +102,12 @@ def reward_termination(
     done: wp.array(dtype=wp.int32),
     failure: wp.array(dtype=wp.int32),
     errors: wp.array2d(dtype=wp.float32),
-    phase_visits: wp.array(dtype=wp.float32),
-    phase_failures: wp.array(dtype=wp.float32),
+    phase_visits: wp.array2d(dtype=wp.float32),
+    phase_failures: wp.array2d(dtype=wp.float32),
 ):
     """One thread per env n: `r = exp(-(w . e))` over the pose, velocity, COM, end-effector
-    position and orientation errors against the reference at `ref_time[n] + dt`; failure (not
+    position and orientation errors against the reference of the env's clip `clip_id[n]` at
+    `ref_time[n] + dt`; failure (not
     within `grace_steps` of a reset) when the root is more than `termination_height` below the
     reference root (FELL), a body is farther than `tracking_distance` from its reference (LOST),
     and, each only when its threshold is positive, the root is below `min_root_height` (LOW_ROOT),
@@ -110,7 +116,8 @@ def reward_termination(
     clamped clip. Writes `rewards/terminated/truncated[t, n]`, `done[n]`, `failure[n]` (the
     bits of every cause that held, 0 when the step did not fail), `errors[n, 0..5]` (the five
     error terms, as used in the reward), advances `ref_time[n]` by dt and `episode_step[n]` by 1,
-    and counts the visit (and failure) in the phase bin of `ref_time[n]`.
+    and counts the visit (and failure) in the cell `[clip_id[n], phase bin of ref_time[n]]` of
+    `phase_visits` (`phase_failures`), `[clips, bins]`.
 
     The error terms are means, not sums: over the joints (pose), the non-root dofs (velocity) and
     the end effectors (position, orientation); the COM error is one point's. With the paper's
@@ -120,8 +127,10 @@ def reward_termination(
     reference (0.1 rad per joint, 1 rad/s per dof, 5 cm per end effector and of COM, 0.1 rad per
     end effector's rotation: an exponent of ~0.35)."""
     n = wp.tid()
+    clip = clip_id[n]
+    base = clip_base(clip_offsets, clip)
     t_ref = ref_time[n] + params.dt
-    at = reference_locate(table, t_ref)
+    at = reference_locate(table, base, t_ref)
 
     e_pose = float(0.0)
     for j in range(joint_kind.shape[0]):
@@ -206,7 +215,7 @@ def reward_termination(
     ended = 0
     if step + 1 >= params.max_episode_steps:
         ended = 1
-    if table[HEADER_WRAP] == 0.0 and t_ref + params.dt > table[HEADER_DURATION]:
+    if clip_header(table, base, HEADER_WRAP) == 0.0 and t_ref + params.dt > clip_header(table, base, HEADER_DURATION):
         ended = 1
 
     rewards[t, n] = reward
@@ -220,10 +229,11 @@ def reward_termination(
     errors[n, 3] = e_eep
     errors[n, 4] = e_eer
 
-    b = phase_bin(table, ref_time[n], phase_visits.shape[0])
-    wp.atomic_add(phase_visits, b, 1.0)
-    if failed != 0:
-        wp.atomic_add(phase_failures, b, 1.0)
+    if base >= 0 and clip < phase_visits.shape[0]:
+        b = phase_bin(table, base, ref_time[n], phase_visits.shape[1])
+        wp.atomic_add(phase_visits, clip, b, 1.0)
+        if failed != 0:
+            wp.atomic_add(phase_failures, clip, b, 1.0)
     ref_time[n] = t_ref
     episode_step[n] = step + 1
 
@@ -240,6 +250,7 @@ LAUNCH = {
         "dim <= extent(xpos, 0)",
         "dim <= extent(xquat, 0)",
         "dim <= extent(subtree_com, 0)",
+        "dim <= len(clip_id)",
         "dim <= len(ref_time)",
         "dim <= len(episode_step)",
         "dim <= extent(rewards, 1)",

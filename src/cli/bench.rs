@@ -15,6 +15,7 @@ use crate::cuda::Gpu;
 use crate::motion::Character;
 use crate::motion::find::{motions_dir_from_env, resolve_motion};
 use crate::plan::{PlanStore, ReplayOrder};
+use crate::train::library::single_clip_only;
 use crate::train::{GemmSetting, TrainConfig, preflight};
 
 /// `bench rollout --gemm`: `policy.gemm` (src/ppo/config.rs, `GemmSetting`).
@@ -242,6 +243,7 @@ fn train_gpus(args: TrainGpusArgs) -> Result<()> {
             (config?, label)
         }
     };
+    single_clip_only(&config, "bench train-gpus")?;
     config.motion = args.motion.clone();
     if let Some(envs) = args.envs {
         config.env.num_envs = envs;
@@ -414,6 +416,8 @@ fn rollout(args: RolloutArgs) -> Result<()> {
         Some(path) => TrainConfig::load(path)?,
         None => TrainConfig::with_motion(&args.motion),
     };
+    // The benchmark times one clip (--motion).
+    single_clip_only(&config, "bench rollout")?;
     config.motion = args.motion.clone();
     if let Some(envs) = args.envs {
         config.env.num_envs = envs;

@@ -17,7 +17,7 @@ use crate::replay::DEFAULT_EPISODES;
 use crate::train::run_dir::{CHECKPOINTS_DIR, REPLAY_FILE};
 use crate::train::{
     CheckpointDir, ProgressMode, RunDir, RunStart, TrainConfig, TrainSetup, check_same_gpu_count,
-    default_run_dir, preflight, train_on_gpu,
+    default_run_dir, preflight_training, train_on_gpu,
 };
 
 /// `--progress`.
@@ -37,7 +37,8 @@ pub struct TrainArgs {
     /// configs/train/<name>.toml (built in); other motions use configs/train/default.toml (built in).
     #[arg(long)]
     motion: Option<String>,
-    /// Training configuration (TOML); --motion, if given, replaces its `motion`.
+    /// Training configuration (TOML); --motion, if given, replaces its `motion` (or its
+    /// `[motion_library]`).
     #[arg(long)]
     config: Option<PathBuf>,
     /// Random seed, overriding `seed`.
@@ -159,6 +160,7 @@ fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
             flags.push("--motion");
         }
         config.motion = motion.clone();
+        config.motion_library = None;
     }
     if let Some(seed) = args.seed {
         config.seed = seed;
@@ -256,7 +258,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             (config, label, start, line, None)
         }
     };
-    let (checks, motion) = preflight(&config, motions_dir.as_deref(), &store)?;
+    let (checks, motion) = preflight_training(&config, motions_dir.as_deref(), &store)?;
     for line in &checks.motion_notices {
         eprintln!("{line}");
     }
@@ -298,7 +300,14 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let root = match &start {
         RunStart::New { root, .. } | RunStart::Resume { root } => root.clone(),
     };
-    let replay = config.run.replay;
+    // A replay plays one clip: a library's run writes none (docs/library.md).
+    let replay = config.run.replay && config.motion_library.is_none();
+    if config.run.replay && config.motion_library.is_some() {
+        eprintln!(
+            "note: no {} for a motion library (replay plays one clip; run.replay is ignored)",
+            REPLAY_FILE
+        );
+    }
     let keep = config.run.keep_checkpoints;
     let device = args.first_device(&config);
     let setup = TrainSetup {

@@ -181,4 +181,9 @@ pub struct EvaluationProtocol {
     pub steps: Option<u32>,
     /// Initial states of the episodes (`run.eval_start`).
     pub start: EvalStart,
+    /// Clips longer than this (s) are evaluated over windows of this length from spread starts
+    /// ([`clip_evaluation`](super::clip_evaluation)): a motion library's
+    /// [`LIBRARY_EVALUATION_WINDOW_S`](super::LIBRARY_EVALUATION_WINDOW_S). None: every clip
+    /// whole (a single clip, as it always was).
+    pub window_s: Option<f64>,
 }

@@ -5,6 +5,7 @@
 //! [`crate::env::Rollout::evaluation`] builds that rollout; its graph accumulates per-env sums on
 //! the device and the host reads them once, after the rollout ([`EpisodeScores::download`]).
 
+use super::config::{EvalStart, EvaluationProtocol};
 use crate::cuda::Gpu;
 use crate::kernels::{DeviceArray, DeviceArray2, EnvError, Yardstick};
 use crate::motion::LoopMode;
@@ -40,14 +41,22 @@ pub struct EpisodeScores {
     /// `[N, 5]`: average pose error, global MPJPE, end-effector position and orientation
     /// errors (per-step means, summed over steps), reward.
     pub(super) sums: DeviceArray2<f32>,
+    /// Control steps of each clip's episode (`[clips]`): an env completes when it has scored
+    /// its clip's (or when the episode is truncated).
+    pub(super) clip_steps: DeviceArray<i32>,
 }
 
 impl EpisodeScores {
-    pub(super) fn zeros(gpu: &Gpu, n: usize) -> Result<EpisodeScores, EnvError> {
+    pub(super) fn zeros(
+        gpu: &Gpu,
+        n: usize,
+        clip_steps: &[i32],
+    ) -> Result<EpisodeScores, EnvError> {
         Ok(EpisodeScores {
             status: DeviceArray::zeros(gpu, [n])?,
             steps: DeviceArray::zeros(gpu, [n])?,
             sums: DeviceArray::zeros(gpu, [n, SUMS])?,
+            clip_steps: DeviceArray::from_slice(gpu, [clip_steps.len()], clip_steps)?,
         })
     }
 
@@ -144,5 +153,154 @@ pub fn clamped_clip_steps(clip_duration_s: f64, control_dt_s: f64) -> u32 {
         }
         time = reference;
         steps += 1;
+    }
+}
+
+/// A motion library's clips longer than this (s) are evaluated over windows of this length
+/// from spread starts, not whole (docs/library.md, "Library evaluation"): longer than every
+/// built-in clip (so a window never asks less of a long clip than a short clip's pass), several
+/// gait cycles and turns of a long walk, the goal task's episode, and short enough that a few
+/// windows cover a 66 s clip while a 17.7 s clip still has distinct ones. Whole-clip evaluation
+/// of a 66 s clip would let one stumble fail a minute of tracking. The same for every method.
+pub const LIBRARY_EVALUATION_WINDOW_S: f64 = 10.0;
+
+/// How the evaluation plays one clip: the control steps of its episodes and the spread of
+/// their start times.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClipEvaluation {
+    /// Control steps of one of the clip's episodes.
+    pub steps: u32,
+    /// Start `k` of the clip's `K` evaluation envs is at `start_spread * k / K` s
+    /// ([`evaluation_start_time`]): the clip's cycle for a looping clip, the span of its window
+    /// starts for a long clamped clip, 0 otherwise (every env from the start).
+    pub start_spread: f32,
+    /// Evaluated over windows of [`EvaluationProtocol::window_s`], not whole.
+    pub windowed: bool,
+}
+
+/// How the evaluation plays a clip of `duration_s` at control step `dt_s` under `protocol`:
+/// one pass of the clip ([`evaluation_episode_steps`]; env starts spread over a looping clip's
+/// cycle with `EvalStart::Spread`), or, for a clip longer than `protocol.window_s`, a window of
+/// that length (or `protocol.steps`) from starts spread over the clip (a clamped clip's starts
+/// end two steps before the last window would reach its end, so that no window is cut short by
+/// the clip's end).
+pub fn clip_evaluation(
+    protocol: &EvaluationProtocol,
+    duration_s: f64,
+    dt_s: f64,
+    loop_mode: LoopMode,
+) -> ClipEvaluation {
+    let spread = protocol.start == EvalStart::Spread;
+    match protocol.window_s {
+        Some(window) if duration_s > window => {
+            let mut steps = protocol
+                .steps
+                .unwrap_or_else(|| evaluation_episode_steps(None, window, dt_s, LoopMode::Wrap));
+            let start_spread = match loop_mode {
+                LoopMode::Wrap if spread => duration_s,
+                LoopMode::Wrap => 0.0,
+                LoopMode::Clamp => {
+                    steps = steps.min(clamped_clip_steps(duration_s, dt_s));
+                    let last = duration_s - (f64::from(steps) + 2.0) * dt_s;
+                    if spread { last.max(0.0) } else { 0.0 }
+                }
+            };
+            ClipEvaluation {
+                steps,
+                start_spread: start_spread as f32,
+                windowed: true,
+            }
+        }
+        _ => ClipEvaluation {
+            steps: evaluation_episode_steps(protocol.steps, duration_s, dt_s, loop_mode),
+            start_spread: match loop_mode {
+                LoopMode::Wrap if spread => duration_s as f32,
+                _ => 0.0,
+            },
+            windowed: false,
+        },
+    }
+}
+
+/// Which clip evaluation env `env` of `envs` plays, and which of that clip's starts: env i of
+/// E over C clips plays clip i mod C, start i div C of the clip's ceil(E / C) (the reset kernel's
+/// rule; kernels_py/env/reset.py).
+pub fn evaluation_env(env: usize, envs: usize, clips: usize) -> (usize, usize, usize) {
+    let clips = clips.max(1);
+    (env % clips, env / clips, envs.div_ceil(clips))
+}
+
+/// The start time (s) of start `k` of `starts` of a clip whose starts spread over `spread` s,
+/// in the reset kernel's float32 arithmetic.
+pub fn evaluation_start_time(spread: f32, k: usize, starts: usize) -> f32 {
+    0.0f32 + spread * k as f32 / starts as f32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn protocol(window_s: Option<f64>, steps: Option<u32>) -> EvaluationProtocol {
+        EvaluationProtocol {
+            envs: 32,
+            steps,
+            start: EvalStart::Spread,
+            window_s,
+        }
+    }
+
+    #[test]
+    fn a_clip_shorter_than_the_window_is_evaluated_as_a_single_clip_is() {
+        let dt = 1.0 / 30.0;
+        for (duration, mode) in [(1.75, LoopMode::Wrap), (2.1333, LoopMode::Clamp)] {
+            for window in [None, Some(LIBRARY_EVALUATION_WINDOW_S)] {
+                let c = clip_evaluation(&protocol(window, None), duration, dt, mode);
+                assert_eq!(c.steps, evaluation_episode_steps(None, duration, dt, mode));
+                assert!(!c.windowed);
+                let spread = if mode == LoopMode::Wrap {
+                    duration as f32
+                } else {
+                    0.0
+                };
+                assert_eq!(c.start_spread, spread);
+            }
+        }
+        // Without windows (a single clip) a long clip is played whole, as before.
+        let c = clip_evaluation(&protocol(None, None), 66.0, dt, LoopMode::Clamp);
+        assert_eq!(c.steps, clamped_clip_steps(66.0, dt));
+        assert!(!c.windowed);
+    }
+
+    #[test]
+    fn long_clips_get_windows_that_end_inside_the_clip() {
+        let dt = 1.0 / 30.0;
+        let p = protocol(Some(LIBRARY_EVALUATION_WINDOW_S), None);
+        for duration in [17.7, 40.0, 66.0] {
+            let c = clip_evaluation(&p, duration, dt, LoopMode::Clamp);
+            assert!(c.windowed);
+            assert_eq!(c.steps, 300);
+            // The last start of any number of starts leaves the window and a step inside the
+            // clip: the kernel's clip-end truncation never cuts a window short.
+            let last = f64::from(c.start_spread);
+            assert!(
+                last + (f64::from(c.steps) + 1.0) * dt <= duration,
+                "{duration}"
+            );
+            assert!(last > 0.0);
+        }
+        let c = clip_evaluation(&p, 20.0, dt, LoopMode::Wrap);
+        assert_eq!((c.steps, c.start_spread, c.windowed), (300, 20.0, true));
+        let c = clip_evaluation(&protocol(Some(10.0), Some(90)), 20.0, dt, LoopMode::Clamp);
+        assert_eq!(c.steps, 90);
+    }
+
+    #[test]
+    fn evaluation_envs_go_round_the_clips() {
+        assert_eq!(evaluation_env(0, 32, 1), (0, 0, 32));
+        assert_eq!(evaluation_env(31, 32, 1), (0, 31, 32));
+        assert_eq!(evaluation_env(14, 32, 13), (1, 1, 3));
+        assert_eq!(evaluation_env(31, 32, 13), (5, 2, 3));
+        // The single clip's starts are the kernel's spread * n / N.
+        assert_eq!(evaluation_start_time(2.0, 3, 4), 2.0 * 3.0 / 4.0);
     }
 }

@@ -342,9 +342,8 @@ pub fn reset_params(config: &RolloutConfig, dt: f64) -> ResetParams {
         horizon: config.horizon as i32,
         dt: dt as f32,
         noise_std: config.env.motion_noise_std,
-        // Training draws every start time from the adaptive phase CDF.
+        // Training draws every clip and start time from the adaptive CDF.
         start_time: -1.0,
-        start_spread: 0.0,
     }
 }
 
@@ -404,6 +403,7 @@ mod seed_tests {
                     envs: 32,
                     steps: None,
                     start: EvalStart::Spread,
+                    window_s: None,
                 },
             };
             let policy_seed = (seed ^ (seed >> 32)) as u32 as i32;

@@ -1,7 +1,8 @@
 //! The tracking task on the GPU: physics, reference, reward and termination, reset,
 //! observation, run by the kernels of [`crate::kernels`] (docs/env.md, docs/architecture.md).
 //!
-//! - [`DeviceReferenceTable`]: a reference table on the GPU and its lookup.
+//! - [`DeviceReferenceTable`]: a motion library's reference table on the GPU (a single clip is
+//!   the library of one) and its lookup; [`TrackedMotion`]: what a rollout tracks.
 //! - [`Rollout`]: the rollout graph (policy, PD control and physics, reward and termination,
 //!   masked reset, observation), captured once and replayed; [`RolloutStage`]s name its parts;
 //!   [`Trajectory`] records every env's state per control step (for `replay`).
@@ -23,6 +24,7 @@ mod rollout;
 mod stages;
 mod statistics;
 mod storage;
+mod tracked;
 mod trajectory;
 
 pub use config::{
@@ -30,8 +32,9 @@ pub use config::{
     RewardConfig, RolloutConfig,
 };
 pub use evaluation::{
-    COMPLETED, EpisodeScore, EpisodeScores, FAILED, RUNNING, SUCCESS_MAX_BODY_DISTANCE_M,
-    SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps, evaluation_episode_steps, yardstick,
+    COMPLETED, ClipEvaluation, EpisodeScore, EpisodeScores, FAILED, LIBRARY_EVALUATION_WINDOW_S,
+    RUNNING, SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps,
+    clip_evaluation, evaluation_env, evaluation_episode_steps, evaluation_start_time, yardstick,
 };
 pub use physics_state::PhysicsState;
 pub use policy::RolloutPolicy;
@@ -40,4 +43,5 @@ pub use rollout::{EpisodeState, Rollout, RolloutError};
 pub use stages::{RolloutStage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 pub use storage::{ActStorage, RolloutStorage};
+pub use tracked::TrackedMotion;
 pub use trajectory::{Trajectory, TrajectoryFrames};

@@ -225,6 +225,47 @@ impl LibraryConfig {
         Ok(())
     }
 
+    /// This configuration with the paths written relative to `base` (the directory of the file
+    /// it was read from) made relative to the working directory instead, by the rules
+    /// [`LibraryConfig::entries`] applies: `dir` and `manifest` always, a `clips` entry when it
+    /// names a file beside `base`. A training configuration is then the same library wherever
+    /// it is copied (a run directory's `config.toml`).
+    pub fn rebased(&self, base: Option<&Path>) -> LibraryConfig {
+        let Some(base) = base else {
+            return self.clone();
+        };
+        let clips = self.clips.as_ref().map(|clips| {
+            clips
+                .iter()
+                .map(|motion| {
+                    let beside = relative_to(Some(base), Path::new(motion));
+                    if Path::new(motion).is_relative() && beside.is_file() {
+                        beside.display().to_string()
+                    } else {
+                        motion.clone()
+                    }
+                })
+                .collect()
+        });
+        LibraryConfig {
+            clips,
+            dir: self.dir.as_ref().map(|d| relative_to(Some(base), d)),
+            manifest: self.manifest.as_ref().map(|m| relative_to(Some(base), m)),
+        }
+    }
+
+    /// A short description for labels and run names: the clips' count, the directory or the
+    /// manifest.
+    pub fn describe(&self) -> String {
+        match (&self.clips, &self.dir, &self.manifest) {
+            (Some(clips), _, _) if clips.len() == 1 => "motion library (1 clip)".to_string(),
+            (Some(clips), _, _) => format!("motion library ({} clips)", clips.len()),
+            (None, Some(dir), _) => format!("motion library {}", dir.display()),
+            (None, None, Some(manifest)) => format!("motion library {}", manifest.display()),
+            (None, None, None) => "motion library (no clips)".to_string(),
+        }
+    }
+
     /// Finds every clip of the library, checking names and weights; reads no clip yet. `base`:
     /// the directory relative paths start from (the library file's; `None`: the working
     /// directory). `motions_dir`: where names are looked up before the built-in clips.

@@ -155,7 +155,8 @@ pub fn record_replay(gpu: &Gpu, input: &ReplayInput<'_>) -> Result<Replay, Repla
         .iter()
         .flat_map(|e| e.times.iter().copied())
         .collect();
-    let rows = rollout.reference_rows(&times)?;
+    // A replay plays one clip: the library of one, whose clip id is 0.
+    let rows = rollout.reference_rows(&vec![0; times.len()], &times)?;
     let mut offset = 0;
     for episode in &mut episodes {
         let len = episode.times.len() * layout.stride;

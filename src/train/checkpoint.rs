@@ -123,7 +123,7 @@ impl CheckpointMeta {
             iteration,
             active_time_s,
             frames,
-            motion: config.motion.clone(),
+            motion: config.motion_label(),
             seed: config.seed,
             config_toml: config
                 .to_toml()

@@ -201,6 +201,7 @@ mod tests {
             global_mpjpe_m: 0.1,
             ee_position_error_m: 0.1,
             ee_orientation_error_rad: 0.1,
+            library: None,
         }
     }
 

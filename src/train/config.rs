@@ -7,6 +7,9 @@
 //! `[obs]`; `ppo::config`: `[policy]`, `[ppo]`); `[run]` is training's own. This module composes
 //! them, validates every range (the messages name `section.key`) and hands each layer what it
 //! needs ([`TrainConfig::rollout_config`]).
+//!
+//! A run trains on one clip (`motion`) or on a motion library (`[motion_library]`,
+//! `motion::library_config`, docs/library.md): exactly one of the two.
 
 use std::path::Path;
 
@@ -14,8 +17,10 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::env::{
-    EnvConfig, EvalStart, EvaluationProtocol, ObsConfig, RewardConfig, RolloutConfig,
+    EnvConfig, EvalStart, EvaluationProtocol, LIBRARY_EVALUATION_WINDOW_S, ObsConfig, RewardConfig,
+    RolloutConfig,
 };
+use crate::motion::{LibraryConfig, MotionLibraryError};
 use crate::ppo::{PolicyConfig, PpoConfig};
 
 /// A configuration that cannot be used.
@@ -36,14 +41,27 @@ pub enum ConfigError {
     },
     #[error("cannot write the configuration as TOML: {0}")]
     Serialize(String),
+    /// A `[motion_library]` section that cannot be used (the message names the key).
+    #[error("{path}: {error}")]
+    Library {
+        path: String,
+        error: MotionLibraryError,
+    },
 }
 
 /// The whole training configuration.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct TrainConfig {
-    /// A motion name (`backflip`, resolved in the motions directory) or a path.
+    /// A motion name (`backflip`, resolved in the motions directory) or a path; empty when
+    /// `motion_library` gives the clips.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
     pub motion: String,
+    /// `[motion_library]`: one policy trained on many clips (docs/library.md), instead of
+    /// `motion`. Paths in it are relative to the working directory once loaded
+    /// ([`TrainConfig::load`] rebases those written relative to the file).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion_library: Option<LibraryConfig>,
     #[serde(default)]
     pub seed: u64,
     #[serde(default)]
@@ -197,6 +215,7 @@ impl TrainConfig {
     pub fn with_motion(motion: &str) -> TrainConfig {
         TrainConfig {
             motion: motion.to_owned(),
+            motion_library: None,
             seed: 0,
             env: EnvConfig::default(),
             reward: RewardConfig::default(),
@@ -207,14 +226,27 @@ impl TrainConfig {
         }
     }
 
-    /// Reads and validates a TOML file.
+    /// Reads and validates a TOML file. The paths of a `[motion_library]` section are taken
+    /// relative to the file's directory, as a library file's are (`LibraryConfig::rebased`).
     pub fn load(path: &Path) -> Result<TrainConfig, ConfigError> {
         let name = path.display().to_string();
         let text = std::fs::read_to_string(path).map_err(|error| ConfigError::Read {
             path: name.clone(),
             error,
         })?;
-        TrainConfig::from_toml(&text, &name)
+        let mut config = TrainConfig::from_toml(&text, &name)?;
+        config.motion_library = config
+            .motion_library
+            .map(|library| library.rebased(path.parent()));
+        Ok(config)
+    }
+
+    /// What the run trains on, for labels: the motion, or the library's description.
+    pub fn motion_label(&self) -> String {
+        match &self.motion_library {
+            Some(library) => library.describe(),
+            None => self.motion.clone(),
+        }
     }
 
     /// Parses and validates TOML text; `name` labels errors.
@@ -246,12 +278,34 @@ impl TrainConfig {
         }
         let (e, r, o, p, q) = (&self.env, &self.reward, &self.obs, &self.policy, &self.ppo);
         let run = &self.run;
-        check!(
-            !self.motion.trim().is_empty(),
-            "motion",
-            "\"\"",
-            "name a motion or a file"
-        );
+        match &self.motion_library {
+            None => check!(
+                !self.motion.trim().is_empty(),
+                "motion",
+                "\"\"",
+                "name a motion or a file (or give a [motion_library] section)"
+            ),
+            Some(library) => {
+                check!(
+                    self.motion.trim().is_empty(),
+                    "motion_library",
+                    library.describe(),
+                    "`motion` and `[motion_library]` are alternatives; keep one"
+                );
+                library
+                    .validate("motion_library")
+                    .map_err(|error| ConfigError::Library {
+                        path: name.to_string(),
+                        error,
+                    })?;
+                check!(
+                    !run.data_parallel(),
+                    "run.gpus",
+                    format!("{:?}", run.gpus),
+                    "a motion library trains on one GPU for now (several GPUs train one clip)"
+                );
+            }
+        }
         check!(
             (1..=1 << 20).contains(&e.num_envs),
             "env.num_envs",
@@ -613,6 +667,11 @@ impl TrainConfig {
                 envs: self.run.eval_envs,
                 steps: self.run.eval_steps,
                 start: self.run.eval_start,
+                // A library's long clips are evaluated over windows (docs/library.md).
+                window_s: self
+                    .motion_library
+                    .as_ref()
+                    .map(|_| LIBRARY_EVALUATION_WINDOW_S),
             },
         }
     }

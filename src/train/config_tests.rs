@@ -374,3 +374,100 @@ fn overlap_update_is_off_by_default_and_refused_on_several_gpus() {
     let back = TrainConfig::from_toml(&on.to_toml().unwrap(), "round trip").unwrap();
     assert_eq!(back, on);
 }
+
+#[test]
+fn a_motion_library_replaces_the_motion_and_round_trips() {
+    let text = "[motion_library]\nclips = [\"walk\", \"run\"]\n[env]\nnum_envs = 32\n";
+    let c = TrainConfig::from_toml(text, "lib").unwrap();
+    assert!(c.motion.is_empty());
+    assert_eq!(c.motion_label(), "motion library (2 clips)");
+    let back = TrainConfig::from_toml(&c.to_toml().unwrap(), "round trip").unwrap();
+    assert_eq!(back, c);
+    // A library's evaluation takes 10-s windows of long clips; a single clip's does not.
+    assert_eq!(
+        c.rollout_config().evaluation.window_s,
+        Some(crate::env::LIBRARY_EVALUATION_WINDOW_S)
+    );
+    let single = TrainConfig::with_motion("walk");
+    assert_eq!(single.rollout_config().evaluation.window_s, None);
+    // A single clip's configuration is written as before: no library key.
+    let text = single.to_toml().unwrap();
+    assert!(!text.contains("motion_library"), "{text}");
+    assert!(text.starts_with("motion = \"walk\""), "{text}");
+
+    let e = TrainConfig::from_toml(
+        "motion = \"walk\"\n[motion_library]\nclips = [\"run\"]\n",
+        "t",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("`motion_library`") && e.contains("alternatives"),
+        "{e}"
+    );
+    let e = TrainConfig::from_toml("seed = 1\n", "t")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("`motion` = \"\""), "{e}");
+    let e = TrainConfig::from_toml("[motion_library]\nclips = []\n", "t")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("t: motion_library: the motion library has no clips"),
+        "{e}"
+    );
+    let e = TrainConfig::from_toml("[motion_library]\nclip = [\"walk\"]\n", "t")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("unknown field `clip`"), "{e}");
+    let e = TrainConfig::from_toml(
+        "[motion_library]\nclips = [\"walk\"]\n[run]\ngpus = [0, 1]\n",
+        "t",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("`run.gpus`") && e.contains("one GPU"), "{e}");
+}
+
+#[test]
+fn a_library_configs_paths_are_taken_relative_to_its_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let sub = dir.path().join("configs");
+    std::fs::create_dir(&sub).unwrap();
+    std::fs::write(sub.join("mine.txt"), "{}").unwrap();
+    let path = sub.join("lib.toml");
+    std::fs::write(
+        &path,
+        "[motion_library]\nclips = [\"walk\", \"mine.txt\"]\n",
+    )
+    .unwrap();
+    let c = TrainConfig::load(&path).unwrap();
+    let clips = c.motion_library.unwrap().clips.unwrap();
+    assert_eq!(clips[0], "walk", "a name stays a name");
+    assert_eq!(clips[1], sub.join("mine.txt").display().to_string());
+    std::fs::write(&path, "[motion_library]\ndir = \"clips\"\n").unwrap();
+    let c = TrainConfig::load(&path).unwrap();
+    assert_eq!(c.motion_library.unwrap().dir, Some(sub.join("clips")));
+}
+
+#[test]
+fn the_library_configs_train_the_general_defaults_sections_on_a_library() {
+    let (_, default) = TrainConfig::general_default("any");
+    let d = default.unwrap();
+    for (name, clips) in [("library_shipped", 13), ("library_all", 22)] {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("configs/train/{name}.toml"));
+        let c = TrainConfig::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            (&c.env, &c.reward, &c.obs, &c.policy, &c.ppo),
+            (&d.env, &d.reward, &d.obs, &d.policy, &d.ppo),
+            "{name}"
+        );
+        let library = c.motion_library.as_ref().unwrap();
+        assert_eq!(library.clips.as_ref().map(Vec::len), Some(clips), "{name}");
+        assert_eq!(
+            (c.run.eval_envs, c.run.success_rate, c.run.time_budget_s),
+            (4096, 0.95, 900.0)
+        );
+        assert!(!c.run.replay);
+    }
+}

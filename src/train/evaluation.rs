@@ -25,6 +25,7 @@ use std::fmt::Write as _;
 use serde::{Deserialize, Serialize};
 
 use super::config::TrainConfig;
+use super::library_evaluation::LibraryEvaluation;
 use super::metrics::nan_from_null;
 use crate::env::{EpisodeScore, EvalStart};
 pub use crate::env::{
@@ -115,6 +116,12 @@ pub struct EvaluationSummary {
     pub ee_position_error_m: f64,
     #[serde(deserialize_with = "nan_from_null")]
     pub ee_orientation_error_rad: f64,
+    /// A motion library's per-clip results (`train::library_evaluation`); absent for a single
+    /// clip. With a library, `success` needs every clip at its threshold too, `episode_steps`
+    /// is the longest clip's, and `clip_start_success` says whether every clip's episode from
+    /// its beginning succeeded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub library: Option<LibraryEvaluation>,
 }
 
 /// One env's episode of an evaluation, as `evaluation.json` of a run directory lists them: where
@@ -122,6 +129,9 @@ pub struct EvaluationSummary {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EnvEpisodeRow {
     pub env: u32,
+    /// The clip of a motion library the env played (absent for a single clip).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clip: Option<String>,
     /// Clip time (s) the episode started at.
     pub start_s: f64,
     pub completed: bool,
@@ -149,6 +159,7 @@ pub fn episode_rows(episodes: &[EnvEvaluation], start_times: &[f64]) -> Vec<EnvE
             };
             EnvEpisodeRow {
                 env: i as u32,
+                clip: None,
                 start_s: start_times.get(i).copied().unwrap_or(f64::NAN),
                 completed: e.completed,
                 succeeded: e.succeeded(),
@@ -177,6 +188,16 @@ pub enum EvaluationError {
     },
     #[error("env {env}: error sum {value} is negative or not finite")]
     ErrorSum { env: usize, value: f64 },
+    /// A motion library's clip whose episodes do not describe an evaluation (`env` counts the
+    /// clip's episodes).
+    #[error("motion library clip {clip:?}: {error}")]
+    Clip {
+        clip: String,
+        error: Box<EvaluationError>,
+    },
+    /// Episodes that do not fit the library's evaluation plan.
+    #[error("{0}")]
+    Plan(String),
 }
 
 /// The summary of `episodes` (any number of evaluation rounds of any number of envs) of
@@ -248,6 +269,7 @@ pub fn summarize(
         global_mpjpe_m: per_step(sums[1]),
         ee_position_error_m: per_step(sums[2]),
         ee_orientation_error_rad: per_step(sums[3]),
+        library: None,
     })
 }
 

@@ -2,7 +2,8 @@
 //! [`train_on_gpu`] / [`evaluate_on_gpu`], which build a [`Trainer`] (or, with `run.gpus`
 //! naming several devices, the [`Replicas`] of every GPU) and drive a [`RunSession`]
 //! (src/train/session.rs documents the call sequence). One loop drives either, through
-//! [`LoopTrainer`].
+//! [`LoopTrainer`]. A motion library trains on one GPU, through the same loop; its evaluation
+//! is scored per clip ([`Scorer`]).
 
 use std::path::PathBuf;
 
@@ -11,8 +12,11 @@ use super::config::TrainConfig;
 use super::divergence::{DivergenceEvent, DivergenceGuard, non_finite_report};
 use super::error::TrainError;
 use super::evaluation::{
-    EnvEvaluation, EvaluationSummary, episode_rows, evaluation_start_times, summarize,
+    EnvEpisodeRow, EnvEvaluation, EvaluationError, EvaluationSummary, episode_rows,
+    evaluation_start_times, summarize,
 };
+use super::library::TrainMotion;
+use super::library_evaluation::LibraryPlan;
 use super::preflight::Preflight;
 use super::progress::ProgressMode;
 use super::replicas::Replicas;
@@ -20,6 +24,7 @@ use super::session::{IterationStats, RunSession};
 use super::summary::RunSummary;
 use super::trainer::Trainer;
 use crate::cuda::Gpu;
+use crate::env::TrackedMotion;
 use crate::motion::ReferenceMotion;
 use crate::plan::{PhysicsOverflow, PlanStore};
 
@@ -37,7 +42,8 @@ pub enum RunStart {
 pub struct TrainSetup {
     /// The resolved, validated configuration.
     pub config: TrainConfig,
-    pub motion: ReferenceMotion,
+    /// One clip, or a motion library.
+    pub motion: TrainMotion,
     pub store: PlanStore,
     /// What `--dry-run` checked (plans, physics and control timesteps, evaluation length,
     /// policy sizes).
@@ -116,9 +122,15 @@ impl LoopTrainer for Replicas {
 pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
     let run = &setup.config.run;
     if run.data_parallel() {
+        let motion = setup.motion.clip().ok_or_else(|| {
+            TrainError::Setup(
+                "run.gpus: a motion library trains on one GPU for now (several GPUs train one clip)"
+                    .to_owned(),
+            )
+        })?;
         return train_on_gpus(
             &setup.config,
-            &setup.motion,
+            motion,
             &setup.store,
             &setup.start,
             setup.progress,
@@ -129,7 +141,7 @@ pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
     train_with(
         &gpu,
         &setup.config,
-        &setup.motion,
+        setup.motion.tracked(),
         &setup.store,
         &setup.start,
         setup.progress,
@@ -139,17 +151,19 @@ pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
 /// [`train_on_gpu`] on an open GPU (the hyperparameter search trains trial after trial on
 /// one): `config` is the resolved configuration (for a resumed run, its `[run]` section
 /// replaces the run directory's). `run.gpus` is not read: this is one GPU.
-pub fn train_with(
+pub fn train_with<'a>(
     gpu: &Gpu,
     config: &TrainConfig,
-    motion: &ReferenceMotion,
+    motion: impl Into<TrackedMotion<'a>>,
     store: &PlanStore,
     start: &RunStart,
     progress: ProgressMode,
 ) -> Result<RunSummary, TrainError> {
+    let motion = motion.into();
     let (session, checkpoint) = open_session(config, start, progress)?;
     let setup = std::time::Instant::now();
     let mut trainer = Trainer::new(gpu, store, motion, session.config())?;
+    let scorer = Scorer::new(&trainer, motion, session.config())?;
     let mut notes = vec![format!("GEMMs: {}", trainer.gemm().describe())];
     if trainer.overlaps_update() {
         notes.push(
@@ -157,7 +171,80 @@ pub fn train_with(
                 .to_owned(),
         );
     }
-    run_loop(session, &mut trainer, checkpoint, motion, setup, notes)
+    if let Scorer::Library(plan) = &scorer {
+        notes.push(format!(
+            "motion library: {} clips, evaluated on {} envs (clip i mod {}), episodes of up to {} steps",
+            plan.clips.len(),
+            plan.envs,
+            plan.clips.len(),
+            plan.longest_steps()
+        ));
+    }
+    run_loop(session, &mut trainer, checkpoint, &scorer, setup, notes)
+}
+
+/// How an evaluation's episodes are scored: one clip (the paper's protocol), or a motion
+/// library's clips each by their own episodes (`train::library_evaluation`).
+enum Scorer {
+    /// Where each env's episode started (s).
+    Clip {
+        start_times: Vec<f64>,
+    },
+    Library(LibraryPlan),
+}
+
+impl Scorer {
+    fn new(
+        trainer: &Trainer,
+        motion: TrackedMotion<'_>,
+        config: &TrainConfig,
+    ) -> Result<Scorer, TrainError> {
+        Ok(match motion {
+            TrackedMotion::Clip(motion) => Scorer::for_clip(motion, config),
+            TrackedMotion::Library { .. } => {
+                let (rollout, _) = trainer.evaluation_rollout();
+                let evaluations = rollout.clip_evaluations().ok_or_else(|| {
+                    TrainError::Setup("the evaluation rollout has no clip plan".to_owned())
+                })?;
+                Scorer::Library(LibraryPlan::new(
+                    rollout.library(),
+                    evaluations,
+                    rollout.num_envs(),
+                )?)
+            }
+        })
+    }
+
+    fn for_clip(motion: &ReferenceMotion, config: &TrainConfig) -> Scorer {
+        let clip = motion.clip();
+        Scorer::Clip {
+            start_times: evaluation_start_times(
+                config.run.eval_start,
+                config.run.eval_envs,
+                clip.duration(),
+                clip.loop_mode(),
+            ),
+        }
+    }
+
+    fn summarize(
+        &self,
+        episodes: &[EnvEvaluation],
+        episode_steps: u32,
+        threshold: f64,
+    ) -> Result<EvaluationSummary, EvaluationError> {
+        match self {
+            Scorer::Clip { .. } => summarize(episodes, episode_steps, threshold),
+            Scorer::Library(plan) => plan.summarize(episodes, threshold),
+        }
+    }
+
+    fn rows(&self, episodes: &[EnvEvaluation]) -> Vec<EnvEpisodeRow> {
+        match self {
+            Scorer::Clip { start_times } => episode_rows(episodes, start_times),
+            Scorer::Library(plan) => plan.episode_rows(episodes),
+        }
+    }
 }
 
 /// Trains on every device of `config.run.gpus` at once (docs/train.md, "Several GPUs"): one
@@ -183,7 +270,8 @@ pub fn train_on_gpus(
     let mut replicas = Replicas::start(&devices, session.config(), motion, store)?;
     let mut notes = vec![format!("GEMMs: {} (every GPU)", replicas.gemm())];
     notes.extend(replicas.take_notes());
-    run_loop(session, &mut replicas, checkpoint, motion, setup, notes)
+    let scorer = Scorer::for_clip(motion, session.config());
+    run_loop(session, &mut replicas, checkpoint, &scorer, setup, notes)
 }
 
 /// Opens the run directory (new or resumed) and prints the resume's warnings.
@@ -215,7 +303,7 @@ fn run_loop<T: LoopTrainer>(
     mut session: RunSession,
     trainer: &mut T,
     checkpoint: Option<Checkpoint>,
-    motion: &ReferenceMotion,
+    scorer: &Scorer,
     setup: std::time::Instant,
     notes: Vec<String>,
 ) -> Result<RunSummary, TrainError> {
@@ -236,13 +324,6 @@ fn run_loop<T: LoopTrainer>(
         ));
     }
     let threshold = config.run.success_rate;
-    let clip = motion.clip();
-    let start_times = evaluation_start_times(
-        config.run.eval_start,
-        config.run.eval_envs,
-        clip.duration(),
-        clip.loop_mode(),
-    );
     // The state to go back to if training diverges: where this run starts (a resumed run's
     // checkpoint, or the initial one), then every checkpoint it saves.
     let mut guard = {
@@ -268,7 +349,7 @@ fn run_loop<T: LoopTrainer>(
             let started = std::time::Instant::now();
             let episodes = trainer.evaluate()?;
             wall.evaluation(started);
-            let summary = summarize(&episodes, trainer.evaluation_steps(), threshold)?;
+            let summary = scorer.summarize(&episodes, trainer.evaluation_steps(), threshold)?;
             last_episodes = episodes;
             Some(summary)
         } else {
@@ -295,7 +376,7 @@ fn run_loop<T: LoopTrainer>(
             session.progress().note(&line);
             session
                 .run_dir()
-                .write_last_evaluation(&episode_rows(&last_episodes, &start_times))?;
+                .write_last_evaluation(&scorer.rows(&last_episodes))?;
             // Iteration limits no longer print from the kernels (kernels_py/physics.py); the
             // flags they set are summed here, once, outside the timed loop.
             match trainer.physics_overflow() {

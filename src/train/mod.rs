@@ -2,7 +2,9 @@
 //! directories, checkpoints, the metrics log, the learning curve, the evaluation protocol's
 //! arithmetic, the active clock and stop rule, progress display, and the checks of
 //! `train --dry-run` (docs/train.md); and the GPU side, [`Trainer`] (rollout, PPO update and
-//! evaluation as CUDA graphs), which `train_on_gpu` drives through a [`RunSession`].
+//! evaluation as CUDA graphs), which `train_on_gpu` drives through a [`RunSession`]. A run
+//! trains on one clip or on a motion library ([`TrainMotion`]; its per-clip evaluation is
+//! [`library_evaluation`]).
 
 pub mod checkpoint;
 mod clock;
@@ -13,6 +15,8 @@ pub mod divergence;
 mod error;
 pub mod evaluation;
 mod gpu_loop;
+pub mod library;
+pub mod library_evaluation;
 pub mod metrics;
 mod pipeline;
 pub mod preflight;
@@ -47,6 +51,8 @@ pub use gpu_loop::{
     RunStart, TrainSetup, evaluate_episodes_on_gpu, evaluate_on_gpu, evaluation_trainer,
     train_on_gpu, train_with,
 };
+pub use library::{TrainMotion, preflight_training};
+pub use library_evaluation::{CLIP_SUCCESS_RATE, ClipScore, LibraryEvaluation, LibraryPlan};
 pub use metrics::{EpisodeEnds, IterationRecord, MetricsLog, ResumedMetrics, UpdateStats};
 pub use preflight::{PolicyShapes, Preflight, check_plans, load_motion, preflight};
 pub use progress::{Progress, ProgressMode};

@@ -72,28 +72,39 @@ pub struct PlanCheck {
 /// What the checks found.
 #[derive(Clone, Debug)]
 pub struct Preflight {
-    /// The clip's path, or `assets/motions/<file> (built in)`.
+    /// The clip's path, or `assets/motions/<file> (built in)`; a library's description.
     pub motion_source: String,
-    /// Lines for stderr about the clip (`ResolvedMotion::notices`).
+    /// Lines for stderr about the clip (`ResolvedMotion::notices`; a library's clips').
     pub motion_notices: Vec<String>,
+    /// Key frames and duration of the clip (a library: summed over its clips).
     pub clip_frames: usize,
     pub clip_duration_s: f64,
+    /// The clip's loop mode (a library's clips have their own: see `library`).
     pub loop_mode: LoopMode,
     pub physics_dt: f64,
     pub control_dt: f64,
     /// Rows of the reference table at the control rate.
     pub table_frames: usize,
+    /// Control steps of an evaluation episode (a library: the longest clip's).
     pub eval_steps: u32,
     pub plans: Vec<PlanCheck>,
     pub policy: PolicyShapes,
+    /// A motion library's lines for the report, one per clip (None: one clip).
+    pub library: Option<Vec<String>>,
 }
 
 /// Loads the motion named by `config.motion` (a file, a name in `motions_dir`, or a built-in
-/// clip's name).
+/// clip's name); a configuration of a motion library is refused in one line (its clips load
+/// with `library::preflight_training`).
 pub fn load_motion(
     config: &TrainConfig,
     motions_dir: Option<&Path>,
 ) -> Result<(ResolvedMotion, ReferenceMotion), TrainError> {
+    if config.motion_library.is_some() {
+        return Err(TrainError::Setup(
+            "motion_library: this takes a configuration of one clip (`motion`) for now; a motion library trains with `train` (docs/library.md)".to_owned(),
+        ));
+    }
     let character = Character::humanoid().map_err(crate::motion::MotionError::from)?;
     let resolved = resolve_motion(&config.motion, motions_dir)?;
     let motion = resolved.load(&character)?;
@@ -140,25 +151,15 @@ pub fn check_plans(store: &PlanStore, nworld: u32) -> Result<Vec<PlanCheck>, Tra
     Ok(checks)
 }
 
-/// Runs every check a run can make without a GPU; returns what it found and the motion.
+/// Runs every check a run can make without a GPU; returns what it found and the motion (one
+/// clip; `library::preflight_training` takes a library too).
 pub fn preflight(
     config: &TrainConfig,
     motions_dir: Option<&Path>,
     store: &PlanStore,
 ) -> Result<(Preflight, ReferenceMotion), TrainError> {
     let (resolved, motion) = load_motion(config, motions_dir)?;
-    let mut plans = check_plans(store, config.env.num_envs)?;
-    if config.run.eval_envs != config.env.num_envs {
-        plans.extend(check_plans(store, config.run.eval_envs)?);
-    }
-    let physics_dt = plans.first().map_or(0.0, |p| p.physics_dt);
-    if let Some(other) = plans.iter().find(|p| p.physics_dt != physics_dt) {
-        return Err(TrainError::Setup(format!(
-            "the plans disagree on the physics timestep: {physics_dt} s and {} s (`{}` for {} worlds); capture them together",
-            other.physics_dt, other.name, other.nworld
-        )));
-    }
-    let control_dt = config.control_dt(physics_dt);
+    let (plans, physics_dt, control_dt) = physics_checks(config, store)?;
     let table = ReferenceTable::build(&motion, control_dt)?;
     let clip = motion.clip();
     let checks = Preflight {
@@ -173,22 +174,58 @@ pub fn preflight(
         eval_steps: evaluation_steps(config, clip.duration(), control_dt, clip.loop_mode()),
         plans,
         policy: PolicyShapes::new(config, motion.character())?,
+        library: None,
     };
     Ok((checks, motion))
+}
+
+/// The plans of the training and evaluation world counts, and the physics and control
+/// timesteps they fix (s).
+pub fn physics_checks(
+    config: &TrainConfig,
+    store: &PlanStore,
+) -> Result<(Vec<PlanCheck>, f64, f64), TrainError> {
+    let mut plans = check_plans(store, config.env.num_envs)?;
+    if config.run.eval_envs != config.env.num_envs {
+        plans.extend(check_plans(store, config.run.eval_envs)?);
+    }
+    let physics_dt = plans.first().map_or(0.0, |p| p.physics_dt);
+    if let Some(other) = plans.iter().find(|p| p.physics_dt != physics_dt) {
+        return Err(TrainError::Setup(format!(
+            "the plans disagree on the physics timestep: {physics_dt} s and {} s (`{}` for {} worlds); capture them together",
+            other.physics_dt, other.name, other.nworld
+        )));
+    }
+    let control_dt = config.control_dt(physics_dt);
+    Ok((plans, physics_dt, control_dt))
 }
 
 impl Preflight {
     /// The lines `train --dry-run` prints.
     pub fn report(&self, config: &TrainConfig) -> String {
         let mut out = String::new();
-        let _ = writeln!(
-            out,
-            "motion        {} ({} frames, {:.4} s, loop {})",
-            self.motion_source,
-            self.clip_frames,
-            self.clip_duration_s,
-            self.loop_mode.deepmimic_name()
-        );
+        match &self.library {
+            None => {
+                let _ = writeln!(
+                    out,
+                    "motion        {} ({} frames, {:.4} s, loop {})",
+                    self.motion_source,
+                    self.clip_frames,
+                    self.clip_duration_s,
+                    self.loop_mode.deepmimic_name()
+                );
+            }
+            Some(lines) => {
+                let _ = writeln!(
+                    out,
+                    "motion        {}: {} frames, {:.3} s in all",
+                    self.motion_source, self.clip_frames, self.clip_duration_s
+                );
+                for line in lines {
+                    let _ = writeln!(out, "{line}");
+                }
+            }
+        }
         let _ = writeln!(
             out,
             "control       {:.6} s ({} physics steps of {:.6} s); reference table {} rows",
@@ -220,12 +257,21 @@ impl Preflight {
         );
         let _ = writeln!(
             out,
-            "evaluation    every {} iterations: {} envs x {} steps ({:.3} s), success at {}",
+            "evaluation    every {} iterations: {} envs x {}{} steps ({:.3} s), success at {}{}",
             config.run.eval_interval,
             config.run.eval_envs,
+            if self.library.is_some() { "up to " } else { "" },
             self.eval_steps,
             f64::from(self.eval_steps) * self.control_dt,
-            config.run.success_rate
+            config.run.success_rate,
+            if self.library.is_some() {
+                format!(
+                    " of the episodes and every clip at {}",
+                    super::library_evaluation::CLIP_SUCCESS_RATE
+                )
+            } else {
+                String::new()
+            }
         );
         let _ = writeln!(
             out,

@@ -146,6 +146,14 @@ pub fn evaluation_line(record: &IterationRecord) -> String {
             if e.success { " reached" } else { "" },
             e.pose_error_m
         ));
+        if let Some(library) = &e.library {
+            line.push_str(&format!(
+                "  clips at {} {}/{}",
+                super::library_evaluation::CLIP_SUCCESS_RATE,
+                library.clips_at_threshold,
+                library.clips.len()
+            ));
+        }
     }
     line
 }
@@ -197,6 +205,7 @@ mod tests {
                 global_mpjpe_m: 0.1,
                 ee_position_error_m: 0.1,
                 ee_orientation_error_rad: 0.1,
+                library: None,
             }),
             divergence: None,
         }

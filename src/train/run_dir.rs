@@ -42,15 +42,18 @@ pub const CURVE_FILE: &str = "curve.png";
 pub const CHECKPOINTS_DIR: &str = "checkpoints";
 pub const SUMMARY_FILE: &str = "summary.json";
 pub const EVALUATION_FILE: &str = "evaluation.json";
+/// A motion library's per-clip evaluation table.
+pub const CLIPS_FILE: &str = "clips.tsv";
 pub const REPLAY_FILE: &str = "replay.html";
 /// Everything a run writes (what `--overwrite` removes; other files are left alone).
-const RUN_ENTRIES: [&str; 7] = [
+const RUN_ENTRIES: [&str; 8] = [
     CONFIG_FILE,
     METRICS_FILE,
     CURVE_FILE,
     CHECKPOINTS_DIR,
     SUMMARY_FILE,
     EVALUATION_FILE,
+    CLIPS_FILE,
     REPLAY_FILE,
 ];
 
@@ -86,12 +89,17 @@ impl ResumedRun {
 }
 
 /// The default run directory of a configuration: `runs/<motion>-seed<seed>`, the motion's
-/// file stem without DeepMimic's `humanoid3d_` prefix.
+/// file stem without DeepMimic's `humanoid3d_` prefix (`runs/library-seed<seed>` for a motion
+/// library).
 pub fn default_run_dir(config: &TrainConfig) -> PathBuf {
-    let stem = Path::new(&config.motion)
-        .file_stem()
-        .and_then(|s| s.to_str())
-        .unwrap_or("run");
+    let stem = if config.motion_library.is_some() {
+        "library"
+    } else {
+        Path::new(&config.motion)
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("run")
+    };
     let stem = stem.strip_prefix("humanoid3d_").unwrap_or(stem);
     PathBuf::from("runs").join(format!("{stem}-seed{}", config.seed))
 }
@@ -202,7 +210,7 @@ impl RunDir {
         config: &TrainConfig,
         records: &[IterationRecord],
     ) -> Result<(), TrainError> {
-        let title = format!("{} (seed {})", config.motion, config.seed);
+        let title = format!("{} (seed {})", config.motion_label(), config.seed);
         write_learning_curve(
             &self.curve_path(),
             records,
@@ -220,6 +228,12 @@ impl RunDir {
     /// Writes `evaluation.json`: every env's episode of the last evaluation.
     pub fn write_last_evaluation(&self, rows: &[EnvEpisodeRow]) -> Result<(), TrainError> {
         write_json(&self.root.join(EVALUATION_FILE), rows)
+    }
+
+    /// Replaces `clips.tsv` (a motion library's per-clip table, `library_evaluation::clips_table`).
+    pub fn write_clips_table(&self, text: &str) -> Result<(), TrainError> {
+        let path = self.root.join(CLIPS_FILE);
+        write_bytes_atomically(&path, text.as_bytes()).map_err(|e| TrainError::io(&path, e))
     }
 
     /// Reopens a run to continue it: its configuration, the newest good checkpoint (newer
@@ -321,6 +335,10 @@ fn check_same_training(
     let stored = checkpoint.meta.config(&path.display().to_string())?;
     let differs = [
         ("motion", stored.motion != config.motion),
+        (
+            "[motion_library]",
+            stored.motion_library != config.motion_library,
+        ),
         ("seed", stored.seed != config.seed),
         ("[env]", stored.env != config.env),
         ("[reward]", stored.reward != config.reward),

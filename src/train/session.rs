@@ -27,6 +27,7 @@ use super::config::TrainConfig;
 use super::divergence::DivergenceEvent;
 use super::error::TrainError;
 use super::evaluation::EvaluationSummary;
+use super::library_evaluation::clips_table;
 use super::metrics::{EpisodeEnds, IterationRecord, MetricsLog, UpdateStats};
 use super::progress::{Progress, ProgressMode};
 use super::run_dir::{ResumedRun, RunDir};
@@ -317,6 +318,10 @@ impl RunSession {
             self.dir.write_curve(&self.config, &self.records)?;
             self.curve_drawn = Some(std::time::Instant::now());
         }
+        if evaluated && let Some(table) = clips_table(&self.records) {
+            // A motion library's per-clip table, after every evaluation (atomically).
+            self.dir.write_clips_table(&table)?;
+        }
         let interval = u64::from(self.config.run.checkpoint_interval);
         let checkpoint_due =
             stop.is_some() || (interval > 0 && self.iteration.is_multiple_of(interval));
@@ -348,8 +353,12 @@ impl RunSession {
     pub fn finish(mut self, reason: StopReason) -> Result<RunSummary, TrainError> {
         self.clock.pause();
         self.dir.write_curve(&self.config, &self.records)?;
-        let summary =
-            RunSummary::from_records(&self.config.motion, self.config.seed, &self.records, reason);
+        let summary = RunSummary::from_records(
+            &self.config.motion_label(),
+            self.config.seed,
+            &self.records,
+            reason,
+        );
         self.dir.write_summary(&summary)?;
         self.progress.finish();
         Ok(summary)

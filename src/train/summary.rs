@@ -36,6 +36,19 @@ pub struct RunSummary {
     #[serde(default)]
     pub time_to_clip_start_success_s: Option<f64>,
     pub last_evaluation: Option<EvaluationSummary>,
+    /// A motion library's times to its two criteria (absent for one clip).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub library: Option<LibraryTimes>,
+}
+
+/// When a motion library's run first met each of its success criteria (active seconds; null:
+/// not reached). `time_to_success_s` is when both held in one evaluation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LibraryTimes {
+    /// At least `run.success_rate` of the evaluation's episodes succeeded.
+    pub time_to_episode_rate_s: Option<f64>,
+    /// Every clip's episodes succeeded at `CLIP_SUCCESS_RATE` or more.
+    pub time_to_every_clip_s: Option<f64>,
 }
 
 impl RunSummary {
@@ -57,6 +70,19 @@ impl RunSummary {
         };
         let pose = first(&EvaluationSummary::meets_pose_error_target);
         let clip_start = first(&|e| e.clip_start_success);
+        let library = records
+            .iter()
+            .any(|r| r.evaluation.as_ref().is_some_and(|e| e.library.is_some()))
+            .then(|| LibraryTimes {
+                time_to_episode_rate_s: first(&|e| {
+                    e.library.as_ref().is_some_and(|l| l.episodes_pass)
+                })
+                .map(|r| r.active_time_s),
+                time_to_every_clip_s: first(&|e| {
+                    e.library.as_ref().is_some_and(|l| l.all_clips_pass)
+                })
+                .map(|r| r.active_time_s),
+            });
         let active_time_s = last.map_or(0.0, |r| r.active_time_s);
         let frames = last.map_or(0, |r| r.frames);
         RunSummary {
@@ -77,6 +103,7 @@ impl RunSummary {
             time_to_pose_error_s: pose.map(|r| r.active_time_s),
             time_to_clip_start_success_s: clip_start.map(|r| r.active_time_s),
             last_evaluation: records.iter().rev().find_map(|r| r.evaluation.clone()),
+            library,
         }
     }
 
@@ -109,6 +136,28 @@ impl RunSummary {
             at(self.time_to_pose_error_s),
             at(self.time_to_clip_start_success_s)
         );
+        if let Some(times) = &self.library {
+            let _ = writeln!(
+                out,
+                "motion library: time to the episodes' success rate {}; to every clip at {} {}",
+                at(times.time_to_episode_rate_s),
+                super::library_evaluation::CLIP_SUCCESS_RATE,
+                at(times.time_to_every_clip_s)
+            );
+        }
+        if let Some(library) = self
+            .last_evaluation
+            .as_ref()
+            .and_then(|e| e.library.as_ref())
+        {
+            let _ = writeln!(
+                out,
+                "last evaluation: {} of {} clips at {} (clips.tsv)",
+                library.clips_at_threshold,
+                library.clips.len(),
+                super::library_evaluation::CLIP_SUCCESS_RATE
+            );
+        }
         if let Some(e) = &self.last_evaluation {
             let _ = writeln!(
                 out,
@@ -156,6 +205,7 @@ pub(crate) mod test_records {
                 global_mpjpe_m: 0.08,
                 ee_position_error_m: 0.07,
                 ee_orientation_error_rad: 0.3,
+                library: None,
             }),
             divergence: None,
         }

@@ -23,9 +23,8 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use crate::cuda::{Communicator, DeviceRange, Gpu, Graph, Readback};
-use crate::env::Rollout;
+use crate::env::{Rollout, TrackedMotion};
 use crate::kernels::DeviceArray;
-use crate::motion::ReferenceMotion;
 use crate::plan::PlanStore;
 use crate::ppo::{GaussianPolicy, PolicyGemm, PpoBatch, PpoOptimizerState, PpoUpdate};
 
@@ -77,15 +76,15 @@ struct SequentialIteration {
 
 impl Trainer {
     /// Loads the plans (training and evaluation world counts), builds the rollout, the update
-    /// and the evaluation for `config`, captures their graphs, and puts every env at a
-    /// reference state.
-    pub fn new(
+    /// and the evaluation for `config` on `motion` (a clip, or a motion library), captures their
+    /// graphs, and puts every env at a reference state.
+    pub fn new<'a>(
         gpu: &Gpu,
         store: &PlanStore,
-        motion: &ReferenceMotion,
+        motion: impl Into<TrackedMotion<'a>>,
         config: &TrainConfig,
     ) -> Result<Trainer, TrainError> {
-        Trainer::build(gpu, store, motion, config, None)
+        Trainer::build(gpu, store, motion.into(), config, None)
     }
 
     /// Rank `replicas.rank()` of a data-parallel run over `replicas.size()` GPUs, on `gpu`
@@ -96,10 +95,10 @@ impl Trainer {
     /// its replica at the same time (the construction ends with collectives), as it must call
     /// [`Trainer::iterate`] and [`Trainer::restore`]. A world of one rank trains exactly as
     /// [`Trainer::new`] does, through the same NCCL calls.
-    pub fn replica(
+    pub fn replica<'a>(
         gpu: &Gpu,
         store: &PlanStore,
-        motion: &ReferenceMotion,
+        motion: impl Into<TrackedMotion<'a>>,
         config: &TrainConfig,
         replicas: &Communicator,
     ) -> Result<Trainer, TrainError> {
@@ -110,13 +109,13 @@ impl Trainer {
                 gpu.info().ordinal
             )));
         }
-        Trainer::build(gpu, store, motion, config, Some(replicas))
+        Trainer::build(gpu, store, motion.into(), config, Some(replicas))
     }
 
     fn build(
         gpu: &Gpu,
         store: &PlanStore,
-        motion: &ReferenceMotion,
+        motion: TrackedMotion<'_>,
         config: &TrainConfig,
         replicas: Option<&Communicator>,
     ) -> Result<Trainer, TrainError> {
@@ -138,7 +137,7 @@ impl Trainer {
         // replica's own seed draws its actions.
         let policy = GaussianPolicy::for_rollout(gpu, &config.policy, &rollout, config.seed)?
             .with_sampling_seed(own_seed);
-        let evaluation = Rollout::evaluation(&rollout, store, motion, &rollout_config)?;
+        let evaluation = Rollout::evaluation(&rollout, store, &rollout_config)?;
         let evaluation_policy = policy.with_batch(gpu, evaluation.num_envs())?;
         let mut update = PpoUpdate::new(
             gpu,
@@ -442,7 +441,13 @@ impl SequentialIteration {
     }
 }
 
-fn put_f32(c: &mut Checkpoint, name: &str, a: &DeviceArray<f32>) -> Result<(), TrainError> {
+/// Stored flat (`[len]`): the start statistics `[clips, bins]` of a single clip are then the
+/// `[bins]` tensors they were before motion libraries.
+fn put_f32<const N: usize>(
+    c: &mut Checkpoint,
+    name: &str,
+    a: &DeviceArray<f32, N>,
+) -> Result<(), TrainError> {
     c.insert(name, &[a.len()], a.download()?)?;
     Ok(())
 }
@@ -457,7 +462,11 @@ fn insert_vec(c: &mut Checkpoint, name: &str, v: Vec<f32>) -> Result<(), Checkpo
     c.insert(name, &[len], v)
 }
 
-fn get_f32(c: &Checkpoint, name: &str, a: &DeviceArray<f32>) -> Result<(), TrainError> {
+fn get_f32<const N: usize>(
+    c: &Checkpoint,
+    name: &str,
+    a: &DeviceArray<f32, N>,
+) -> Result<(), TrainError> {
     a.upload(c.get::<f32>(name, &[a.len()])?)?;
     Ok(())
 }

@@ -3,9 +3,10 @@
 //! Reference: per motor, `ctrl = clamp(P - kd v, +-limit) + kd v` with the dof's damping kd and
 //! velocity v, and P for ball joint j `kp * qlog(conj(q) * qexp(s a))`, for a hinge
 //! `kp * (center + s a - theta)`, with `s = action_scale * scale_j`; residual targets replace the
-//! zero pose and the centers with the reference pose at `ref_time + dt` (`ReferenceTable::lookup`,
-//! f64): `q_ref * qexp(s a)`, `theta_ref + s a`. Half the envs are near their targets and slow
-//! (below the torque limit), half far and fast (clamped).
+//! zero pose and the centers with the reference pose of the env's clip at `ref_time + dt`
+//! (`MotionLibrary::lookup`, f64; a single clip is the library of one): `q_ref * qexp(s a)`,
+//! `theta_ref + s a`. Half the envs are near their targets and slow (below the torque limit),
+//! half far and fast (clamped).
 
 use instantmimic::env::layout::{BALL, JointLayout};
 use instantmimic::kernels::PD_CONTROL;
@@ -165,22 +166,24 @@ fn inputs(
     (actions, qpos, qvel)
 }
 
-/// `residual`: the clip whose reference pose the targets are offsets from.
+/// `residual`: the clips whose reference poses the targets are offsets from.
 fn case(fx: &Fixture, n: usize, action_scale: f32, residual: Option<&Clip>, seed: u64) -> Check {
     let layout = fx.layout.clone();
     let mut rng = Sampler::new(seed);
+    let clip_id = residual.map_or_else(|| vec![0; n], |clip| clip.clip_ids(n, &mut rng));
     // Times over several cycles of a looping clip (and past a clamped clip's end, where the
     // lookup holds the last row).
     let ref_time: Vec<f32> = (0..n)
-        .map(|_| match residual {
-            Some(clip) => rng.uniform(0.0, 3.0 * clip.table.duration()) as f32,
+        .map(|e| match residual {
+            Some(clip) => rng.uniform(0.0, 3.0 * clip.duration(clip_id[e] as usize)) as f32,
             None => 0.0,
         })
         .collect();
     let rows: Option<Vec<Vec<f64>>> = residual.map(|clip| {
         ref_time
             .iter()
-            .map(|&t| clip.table.lookup(f64::from(t + DT)))
+            .zip(&clip_id)
+            .map(|(&t, &c)| clip.lookup(c as usize, f64::from(t + DT)))
             .collect()
     });
     let (actions, qpos, qvel) = inputs(&layout, rows.as_deref(), n, action_scale, &mut rng);
@@ -202,7 +205,8 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, residual: Option<&Clip>, seed
     let mut p = Program::new(format!(
         "pd_control: {n} envs x {j} joints, action_scale {action_scale}, {mode}"
     ));
-    let table = residual.map_or_else(|| fx.main.data(), Clip::data);
+    let tracked = residual.unwrap_or(&fx.main);
+    let (table, offsets) = (tracked.data(), tracked.offsets());
     let args = vec![
         p.f32("actions", &[n, NU], actions),
         p.f32("qpos", &[n, NQ], qpos),
@@ -216,6 +220,8 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, residual: Option<&Clip>, seed
         p.f32("joint_scale", &[j], layout.scale.clone()),
         p.f32("joint_center", &[j], layout.center.clone()),
         p.f32("table", &[table.len()], table),
+        p.i32("clip_offsets", &[offsets.len()], offsets),
+        p.i32("clip_id", &[n], clip_id),
         p.f32("ref_time", &[n], ref_time),
         Arg::Scalar(Scalar::F32(DT)),
         Arg::Scalar(Scalar::I32(i32::from(residual.is_some()))),
@@ -275,5 +281,6 @@ pub fn checks(fx: &Fixture) -> Vec<Check> {
         case(fx, 37, 0.5, None, 12),
         case(fx, 64, 0.875, Some(&fx.main), 13),
         case(fx, 37, 1.0, Some(&fx.clamped), 14),
+        case(fx, 80, 0.875, Some(&fx.library), 15),
     ]
 }

@@ -5,10 +5,16 @@
 //! physics state copied in at each step's reference time. Every env must complete after exactly
 //! `evaluation_steps` steps (`clamped_clip_steps`: where the kernel's own clip-end truncation
 //! fires), truncated at that step and not before, and `summarize` must accept the result.
+//!
+//! And a motion library's evaluation in one rollout: clips of different lengths (clamped ones
+//! ending themselves, a looping one ending when it has scored its pass), env e playing clip
+//! e mod C, the horizon the longest clip's; every env must complete after exactly its own
+//! clip's steps (`clip_evaluation`, as the rollout plans them).
 
 use instantmimic::env::layout::{JointLayout, without_failures};
+use instantmimic::env::{EvalStart, EvaluationProtocol, clip_evaluation};
 use instantmimic::kernels::{EVALUATION_ACCUMULATE, REWARD_TERMINATION, TrackingParams};
-use instantmimic::motion::{Character, LoopMode, ReferenceTable, SyntheticMotion};
+use instantmimic::motion::{Character, LoopMode, MotionLibraryBuilder, SyntheticMotion};
 use instantmimic::train::{
     EnvEvaluation, TrainConfig, clamped_clip_steps, evaluation_steps, summarize, yardstick,
 };
@@ -21,7 +27,8 @@ use super::tracking::default_params;
 use super::{Check, Clip, Fixture, POISON_I32};
 
 const COMPLETED: i32 = 1;
-/// Envs per case (all start at the clip's beginning, as a clamped clip's evaluation does).
+/// Envs per single-clip case (all start at the clip's beginning, as a clamped clip's
+/// evaluation does).
 const ENVS: usize = 3;
 /// Steps run past the expected end: the episode must not go on.
 const EXTRA_STEPS: usize = 3;
@@ -45,89 +52,113 @@ fn state_block<'a>(physics: &'a PhysicsBatch, name: &str) -> &'a [f32] {
     }
 }
 
-/// A case: a synthetic clamped clip of `frames` frames at `fps`, evaluated at control step `dt`.
-fn case(character: &Character, layout: &JointLayout, frames: usize, fps: f64, dt: f64) -> Check {
-    let motion = SyntheticMotion {
+fn synthetic(
+    character: &Character,
+    frames: usize,
+    fps: f64,
+    loop_mode: LoopMode,
+) -> instantmimic::motion::ReferenceMotion {
+    SyntheticMotion {
         frames,
         frame_dt: 1.0 / fps,
-        loop_mode: LoopMode::Clamp,
+        loop_mode,
         amplitude: 0.6,
         ..SyntheticMotion::default()
     }
     .reference_motion(character)
-    .expect("synthetic frames are valid");
-    let table = ReferenceTable::build(&motion, dt).expect("the reference table builds");
-    let clip = Clip {
-        name: format!("clamped synthetic, {frames} frames at {fps} fps"),
-        table,
-    };
-    let duration = clip.table.duration();
-    let config = TrainConfig::with_motion("synthetic");
-    let steps = evaluation_steps(&config, duration, dt, LoopMode::Clamp) as usize;
-    let rows = steps + EXTRA_STEPS;
+    .expect("synthetic frames are valid")
+}
+
+/// The episode program: `envs` envs from t = 0, env e on clip `clip_id[e]`, for `rows` steps
+/// of `dt` with `max_steps` the episode limit and `clip_steps` each clip's episode length.
+#[allow(clippy::too_many_arguments)]
+fn program(
+    name: String,
+    clip: &Clip,
+    clip_id: &[i32],
+    layout: &JointLayout,
+    dt: f64,
+    max_steps: usize,
+    clip_steps: &[i32],
+    rows: usize,
+    seed: u64,
+) -> Program {
+    let envs = clip_id.len();
     let params = TrackingParams {
         dt: dt as f32,
-        max_episode_steps: steps as i32,
+        max_episode_steps: max_steps as i32,
         ..without_failures(&default_params())
     };
-
     // Step k compares with the reference at (k + 1) dt (f32 clock, as the kernel's): the state
-    // is put there, a little off so that the errors are not zero; past the clip's end it stays
-    // at the end.
-    let mut rng = Sampler::new(frames as u64 * 1000 + fps as u64);
+    // is put there, a little off so that the errors are not zero; past a clamped clip's end it
+    // stays at the end.
+    let mut rng = Sampler::new(seed);
     let mut states: Vec<PhysicsBatch> = Vec::with_capacity(rows);
     let mut clock = 0.0f32;
     for _ in 0..rows {
         clock += dt as f32;
-        let t = f64::from(clock).min(duration);
-        let mut physics = PhysicsBatch::new(ENVS);
-        for e in 0..ENVS {
-            physics.set_near_reference(e, &clip, t, 0.3, &mut rng);
+        let mut physics = PhysicsBatch::new(envs);
+        for (e, &c) in clip_id.iter().enumerate() {
+            let c = c as usize;
+            let t = if clip.wraps(c) {
+                f64::from(clock)
+            } else {
+                f64::from(clock).min(clip.duration(c))
+            };
+            physics.set_near_reference(e, (clip, c), t, 0.3, &mut rng);
         }
         states.push(physics);
     }
 
-    let mut p = Program::new(format!(
-        "an evaluation episode: {}, dt {dt:.6} s, {steps} steps",
-        clip.name
-    ));
+    let mut p = Program::new(name);
     for (name, width) in STATE_BUFFERS {
         let all: Vec<f32> = states
             .iter()
             .flat_map(|s| state_block(s, name).to_vec())
             .collect();
-        p.f32(&format!("{name}_by_step"), &[rows, ENVS * width], all);
+        p.f32(&format!("{name}_by_step"), &[rows, envs * width], all);
     }
     let shape = |width: usize| match width {
-        w if w == NQ || w == NV => vec![ENVS, w],
-        w => vec![ENVS, NBODY, w / NBODY],
+        w if w == NQ || w == NV => vec![envs, w],
+        w => vec![envs, NBODY, w / NBODY],
     };
     for (name, width) in STATE_BUFFERS {
-        p.f32(name, &shape(width), vec![f32::NAN; ENVS * width]);
+        p.f32(name, &shape(width), vec![f32::NAN; envs * width]);
     }
     let j = layout.num_joints();
     let ee = layout.end_effectors.clone();
-    p.f32("table", &[clip.table.data().len()], clip.data());
+    p.f32("table", &[clip.data().len()], clip.data());
+    p.i32("clip_offsets", &[clip.clips()], clip.offsets());
     p.i32("joint_kind", &[j], layout.kind.clone());
     p.i32("joint_qpos", &[j], layout.qpos.clone());
     p.i32("end_effectors", &[ee.len()], ee);
-    p.f32("ref_time", &[ENVS], vec![0.0; ENVS]);
-    p.i32("episode_step", &[ENVS], vec![0; ENVS]);
-    p.f32("rewards", &[rows, ENVS], vec![f32::NAN; rows * ENVS]);
-    p.i32("terminated", &[rows, ENVS], vec![POISON_I32; rows * ENVS]);
-    p.i32("truncated", &[rows, ENVS], vec![POISON_I32; rows * ENVS]);
-    p.i32("done", &[ENVS], vec![POISON_I32; ENVS]);
-    p.i32("failure", &[ENVS], vec![POISON_I32; ENVS]);
-    p.f32("errors", &[ENVS, 5], vec![f32::NAN; ENVS * 5]);
-    p.f32("phase_visits", &[4], vec![0.0; 4]);
-    p.f32("phase_failures", &[4], vec![0.0; 4]);
-    p.i32("status", &[ENVS], vec![0; ENVS]);
-    p.i32("steps", &[ENVS], vec![0; ENVS]);
-    p.f32("sums", &[ENVS, 5], vec![0.0; ENVS * 5]);
+    p.i32("clip_id", &[envs], clip_id.to_vec());
+    p.f32("ref_time", &[envs], vec![0.0; envs]);
+    p.i32("episode_step", &[envs], vec![0; envs]);
+    p.f32("rewards", &[rows, envs], vec![f32::NAN; rows * envs]);
+    p.i32("terminated", &[rows, envs], vec![POISON_I32; rows * envs]);
+    p.i32("truncated", &[rows, envs], vec![POISON_I32; rows * envs]);
+    p.i32("done", &[envs], vec![POISON_I32; envs]);
+    p.i32("failure", &[envs], vec![POISON_I32; envs]);
+    p.f32("errors", &[envs, 5], vec![f32::NAN; envs * 5]);
+    p.f32(
+        "phase_visits",
+        &[clip.clips(), 4],
+        vec![0.0; clip.clips() * 4],
+    );
+    p.f32(
+        "phase_failures",
+        &[clip.clips(), 4],
+        vec![0.0; clip.clips() * 4],
+    );
+    p.i32("clip_steps", &[clip_steps.len()], clip_steps.to_vec());
+    p.i32("status", &[envs], vec![0; envs]);
+    p.i32("steps", &[envs], vec![0; envs]);
+    p.f32("sums", &[envs, 5], vec![0.0; envs * 5]);
     let buffer = |name: &str| Arg::Buffer(name.to_owned());
     for k in 0..rows {
         for (name, width) in STATE_BUFFERS {
-            let count = ENVS * width;
+            let count = envs * width;
             p.copy(&format!("{name}_by_step"), k * count, name, 0, count);
         }
         let step = Arg::Scalar(Scalar::I32(k as i32));
@@ -138,6 +169,7 @@ fn case(character: &Character, layout: &JointLayout, frames: usize, fps: f64, dt
             "xquat",
             "subtree_com",
             "table",
+            "clip_offsets",
             "joint_kind",
             "joint_qpos",
             "end_effectors",
@@ -147,6 +179,7 @@ fn case(character: &Character, layout: &JointLayout, frames: usize, fps: f64, dt
         .chain([Arg::Struct(StructArg::Tracking(params)), step.clone()])
         .chain(
             [
+                "clip_id",
                 "ref_time",
                 "episode_step",
                 "rewards",
@@ -161,13 +194,15 @@ fn case(character: &Character, layout: &JointLayout, frames: usize, fps: f64, dt
             .map(buffer),
         )
         .collect();
-        p.launch(&REWARD_TERMINATION, ENVS, tracking_args);
+        p.launch(&REWARD_TERMINATION, envs, tracking_args);
         let scoring_args = [
             "qpos",
             "xpos",
             "xquat",
             "table",
+            "clip_offsets",
             "end_effectors",
+            "clip_id",
             "ref_time",
         ]
         .map(buffer)
@@ -175,10 +210,54 @@ fn case(character: &Character, layout: &JointLayout, frames: usize, fps: f64, dt
         .chain([step])
         .chain(["rewards", "terminated", "truncated"].map(buffer))
         .chain([Arg::Struct(StructArg::Yardstick(yardstick()))])
-        .chain(["status", "steps", "sums"].map(buffer))
+        .chain(["clip_steps", "status", "steps", "sums"].map(buffer))
         .collect();
-        p.launch(&EVALUATION_ACCUMULATE, ENVS, scoring_args);
+        p.launch(&EVALUATION_ACCUMULATE, envs, scoring_args);
     }
+    p
+}
+
+/// Env `e`'s episode as the training report reads it.
+fn episode(out: &super::program::Outputs, e: usize) -> EnvEvaluation {
+    let sums = out.f32("sums");
+    EnvEvaluation {
+        completed: out.i32("status")[e] == COMPLETED,
+        steps: out.i32("steps")[e].max(0) as u32,
+        pose_error_sum: f64::from(sums[e * 5]),
+        global_position_error_sum: f64::from(sums[e * 5 + 1]),
+        ee_position_error_sum: f64::from(sums[e * 5 + 2]),
+        ee_orientation_error_sum: f64::from(sums[e * 5 + 3]),
+    }
+}
+
+/// A case: a synthetic clamped clip of `frames` frames at `fps`, evaluated at control step `dt`
+/// (the library of one).
+fn case(character: &Character, layout: &JointLayout, frames: usize, fps: f64, dt: f64) -> Check {
+    let motion = synthetic(character, frames, fps, LoopMode::Clamp);
+    let clip = Clip::single(
+        &format!("clamped synthetic, {frames} frames at {fps} fps"),
+        &motion,
+        dt,
+    );
+    let duration = clip.duration(0);
+    let config = TrainConfig::with_motion("synthetic");
+    let steps = evaluation_steps(&config, duration, dt, LoopMode::Clamp) as usize;
+    let rows = steps + EXTRA_STEPS;
+    let p = program(
+        format!(
+            "an evaluation episode: {}, dt {dt:.6} s, {steps} steps",
+            clip.name
+        ),
+        &clip,
+        &[0; ENVS],
+        layout,
+        dt,
+        steps,
+        // What the rollout passes: the episode's steps, where the truncation falls too.
+        &[steps as i32],
+        rows,
+        frames as u64 * 1000 + fps as u64,
+    );
 
     Check::new(p, move |p, out| {
         let mut r = Report::new(&p.name);
@@ -207,17 +286,7 @@ fn case(character: &Character, layout: &JointLayout, frames: usize, fps: f64, dt
             &out.i32("terminated")[..steps * ENVS],
             &vec![0; steps * ENVS],
         );
-        let sums = out.f32("sums");
-        let episodes: Vec<EnvEvaluation> = (0..ENVS)
-            .map(|e| EnvEvaluation {
-                completed: out.i32("status")[e] == COMPLETED,
-                steps: out.i32("steps")[e].max(0) as u32,
-                pose_error_sum: f64::from(sums[e * 5]),
-                global_position_error_sum: f64::from(sums[e * 5 + 1]),
-                ee_position_error_sum: f64::from(sums[e * 5 + 2]),
-                ee_orientation_error_sum: f64::from(sums[e * 5 + 3]),
-            })
-            .collect();
+        let episodes: Vec<EnvEvaluation> = (0..ENVS).map(|e| episode(out, e)).collect();
         match summarize(&episodes, steps as u32, 0.9) {
             Ok(s) => r.check(
                 s.completed == ENVS as u32 && s.success,
@@ -232,13 +301,92 @@ fn case(character: &Character, layout: &JointLayout, frames: usize, fps: f64, dt
     })
 }
 
-/// Clamped clips at the frame rates DeepMimic's clips use, at 30 and 60 Hz control.
+/// A library's evaluation in one rollout at control step `dt`: three clamped clips of
+/// different lengths and rates and a looping one, two envs per clip (env e on clip e mod 4).
+fn library_case(character: &Character, layout: &JointLayout, dt: f64) -> Check {
+    let clips = [
+        (17, 16.0, LoopMode::Clamp),
+        (65, 30.0, LoopMode::Clamp),
+        (31, 24.0, LoopMode::Wrap),
+        (91, 60.0, LoopMode::Clamp),
+    ];
+    let mut builder = MotionLibraryBuilder::new("episode library", dt);
+    for (i, &(frames, fps, mode)) in clips.iter().enumerate() {
+        let motion = synthetic(character, frames, fps, mode);
+        builder
+            .push(&format!("clip {i}"), "synthetic", &motion, 1.0)
+            .expect("the clip joins the library");
+    }
+    let clip = Clip {
+        name: "a library of 3 clamped clips and a looping one".to_owned(),
+        library: builder.finish().expect("the library has clips"),
+    };
+    let protocol = EvaluationProtocol {
+        envs: 8,
+        steps: None,
+        start: EvalStart::Spread,
+        window_s: None,
+    };
+    let plan: Vec<i32> = (0..clip.clips())
+        .map(|c| {
+            let segment = clip.segment(c);
+            clip_evaluation(&protocol, segment.duration(), dt, segment.loop_mode()).steps as i32
+        })
+        .collect();
+    let horizon = plan.iter().copied().max().unwrap_or(1) as usize;
+    let clip_id: Vec<i32> = (0..8).map(|e| (e % clips.len()) as i32).collect();
+    let envs = clip_id.len();
+    let p = program(
+        format!(
+            "an evaluation episode: {}, dt {dt:.6} s, clip steps {plan:?}",
+            clip.name
+        ),
+        &clip,
+        &clip_id,
+        layout,
+        dt,
+        horizon,
+        &plan,
+        horizon + EXTRA_STEPS,
+        (1.0 / dt) as u64,
+    );
+    Check::new(p, move |p, out| {
+        let mut r = Report::new(&p.name);
+        r.exact("status", out.i32("status"), &vec![COMPLETED; envs]);
+        let own: Vec<i32> = clip_id.iter().map(|&c| plan[c as usize]).collect();
+        r.exact("scored steps: each env its clip's", out.i32("steps"), &own);
+        r.check(
+            own.iter().collect::<std::collections::BTreeSet<_>>().len() == clips.len(),
+            format!("the clips' episodes differ in length: {plan:?}"),
+        );
+        for (c, &steps) in plan.iter().enumerate() {
+            let episodes: Vec<EnvEvaluation> = (0..envs)
+                .filter(|&e| clip_id[e] as usize == c)
+                .map(|e| episode(out, e))
+                .collect();
+            match summarize(&episodes, steps as u32, 0.9) {
+                Ok(s) => r.check(
+                    s.completed == episodes.len() as u32,
+                    format!("clip {c}: {} of {} complete", s.completed, episodes.len()),
+                ),
+                Err(e) => r.check(false, format!("clip {c}: summarize refuses: {e}")),
+            }
+        }
+        r
+    })
+}
+
+/// Clamped clips at the frame rates DeepMimic's clips use, at 30 and 60 Hz control; a library
+/// of clips of different lengths at both rates.
 pub fn checks(fx: &Fixture) -> Vec<Check> {
     let mut checks = Vec::new();
     for (frames, fps) in [(17, 16.0), (49, 24.0), (65, 30.0), (61, 60.0), (121, 120.0)] {
         for dt in [1.0 / 30.0, 1.0 / 60.0] {
             checks.push(case(&fx.character, &fx.layout, frames, fps, dt));
         }
+    }
+    for dt in [1.0 / 30.0, 1.0 / 60.0] {
+        checks.push(library_case(&fx.character, &fx.layout, dt));
     }
     checks
 }

@@ -1,13 +1,15 @@
 //! `evaluation_accumulate` (kernels_py/env/evaluate.py; docs/env.md, "Evaluation").
 //!
-//! Reference: for each env still RUNNING, the state against the reference at `ref_time`: mean
+//! Reference: for each env still RUNNING, the state against the reference of its clip at
+//! `ref_time` (`MotionLibrary::lookup`; a single clip is the library of one): mean
 //! over the 15 bodies of the root-relative position error (average pose error) and of the world
 //! position error (global MPJPE), means over the end effectors of the position error and the
 //! orientation angle, added to the sums with the step's reward; the step count advanced; the
 //! status set to FAILED when the step fails the yardstick (a body farther than
 //! `max_body_distance` from its reference, or the root more than `max_root_drop` below the
-//! reference root) or `terminated[t]`, else COMPLETED on `truncated[t]`. Running envs are built
-//! to fail each way alone and with a truncation. Envs already COMPLETED or FAILED are
+//! reference root) or `terminated[t]`, else COMPLETED on `truncated[t]` or when the env has
+//! scored its clip's `clip_steps` (a library's episodes of different lengths). Running envs are
+//! built to fail each way alone and with a truncation. Envs already COMPLETED or FAILED are
 //! untouched, bit for bit.
 
 use instantmimic::env::layout::JointLayout;
@@ -26,17 +28,17 @@ const RUNNING: i32 = 0;
 const COMPLETED: i32 = 1;
 const FAILED: i32 = 2;
 
-/// The f64 per-step means [pose, mpjpe, ee position, ee rotation] of env `e` at time `t`, and
-/// the largest body distance.
+/// The f64 per-step means [pose, mpjpe, ee position, ee rotation] of env `e` at time `t` of
+/// clip `clip.1` of `clip.0`, and the largest body distance.
 fn step_errors(
-    clip: &Clip,
+    clip: (&Clip, usize),
     layout: &JointLayout,
     physics: &PhysicsBatch,
     e: usize,
     t: f64,
 ) -> ([f64; 4], f64) {
     let l = HUMANOID_LAYOUT;
-    let row = clip.table.lookup(t);
+    let row = clip.0.lookup(clip.1, t);
     let body = |b: usize| (e * NBODY + b + 1) * 3;
     let root = vec3(&physics.xpos, body(0));
     let root_ref = vec3_64(&row, l.body_pos);
@@ -78,14 +80,14 @@ enum Kind {
 /// What the yardstick says of env `e` at time `t`: (body too far, root dropped, the smaller
 /// distance of the two quantities to their thresholds).
 fn yardstick_failures(
-    clip: &Clip,
+    clip: (&Clip, usize),
     physics: &PhysicsBatch,
     yardstick: &Yardstick,
     far: f64,
     e: usize,
     t: f64,
 ) -> (bool, bool, f64) {
-    let ref_z = clip.table.lookup(t)[HUMANOID_LAYOUT.qpos + 2];
+    let ref_z = clip.0.lookup(clip.1, t)[HUMANOID_LAYOUT.qpos + 2];
     let drop = ref_z - f64::from(physics.qpos[e * NQ + 2]);
     let (max_far, max_drop) = (
         f64::from(yardstick.max_body_distance),
@@ -95,7 +97,8 @@ fn yardstick_failures(
     (far > max_far, drop > max_drop, margin)
 }
 
-/// Why a running env's status changes: (a body too far, root dropped, terminated, truncated).
+/// Why a running env's status changes: (a body too far, root dropped, terminated, truncated or
+/// its clip's steps scored).
 type Reasons = (bool, bool, bool, bool);
 
 /// An offset from a threshold: 2 to 20 mm past it (two thirds of the time) or short of it.
@@ -117,13 +120,16 @@ fn case(
     yardstick: Yardstick,
     seed: u64,
 ) -> Check {
-    let clip = fx.clips()[clip_index];
-    let (clip_name, table) = (clip.name.clone(), clip.table.clone());
+    let clip = fx.clips()[clip_index].clone();
+    let clip_name = clip.name.clone();
     let layout = fx.layout.clone();
     let mut rng = Sampler::new(seed);
-    let duration = table.duration();
+    let clip_id = clip.clip_ids(n, &mut rng);
     let mut physics = PhysicsBatch::new(n);
-    let ref_time: Vec<f32> = (0..n).map(|_| rng.uniform(0.0, duration) as f32).collect();
+    let ref_time: Vec<f32> = clip_id
+        .iter()
+        .map(|&c| rng.uniform(0.0, clip.duration(c as usize)) as f32)
+        .collect();
     // A third of the envs already scored; the rest running with earlier sums.
     let status: Vec<i32> = (0..n)
         .map(|e| match e % 6 {
@@ -138,8 +144,9 @@ fn case(
         .collect();
     for (e, &time) in ref_time.iter().enumerate() {
         let time = f64::from(time);
+        let c = clip_id[e] as usize;
         let scale = rng.uniform(0.2, 4.0);
-        physics.set_near_reference(e, clip, time, scale, &mut rng);
+        physics.set_near_reference(e, (&clip, c), time, scale, &mut rng);
         match kinds[e] {
             Kind::Near => {}
             // Within 2 cm of the threshold, on either side: closer than the reference moves
@@ -149,7 +156,7 @@ fn case(
                 let dir = rng.normal3(1.0);
                 let len = dir.iter().map(|x| x * x).sum::<f64>().sqrt();
                 let distance = f64::from(yardstick.max_body_distance) + near_threshold(&mut rng);
-                let p_ref = table.lookup(time);
+                let p_ref = clip.lookup(c, time);
                 let at = (e * NBODY + b + 1) * 3;
                 for (c, x) in dir.iter().enumerate() {
                     let p = p_ref[HUMANOID_LAYOUT.body_pos + 3 * b + c] + distance * x / len;
@@ -157,7 +164,7 @@ fn case(
                 }
             }
             Kind::Dropped => {
-                let ref_z = table.lookup(time)[HUMANOID_LAYOUT.qpos + 2];
+                let ref_z = clip.lookup(c, time)[HUMANOID_LAYOUT.qpos + 2];
                 let drop = f64::from(yardstick.max_root_drop) + near_threshold(&mut rng);
                 physics.qpos[e * NQ + 2] = (ref_z - drop) as f32;
             }
@@ -175,6 +182,14 @@ fn case(
     let sums: Vec<f32> = (0..n * SUMS)
         .map(|_| rng.uniform(0.0, 3.0) as f32)
         .collect();
+    // A single clip's episodes end by truncation only (the rollout passes its episode's steps,
+    // where the truncation also falls); a library's clips each end after their own steps,
+    // around the envs' step counts so that some complete by them.
+    let clip_steps: Vec<i32> = if clip.clips() == 1 {
+        vec![i32::MAX]
+    } else {
+        (0..clip.clips()).map(|_| rng.index(5, 50) as i32).collect()
+    };
 
     let ee = layout.end_effectors.clone();
     let mut p = Program::new(format!(
@@ -185,14 +200,17 @@ fn case(
         p.f32("qpos", &[n, NQ], physics.qpos.clone()),
         p.f32("xpos", &[n, NBODY, 3], physics.xpos.clone()),
         p.f32("xquat", &[n, NBODY, 4], physics.xquat.clone()),
-        p.f32("table", &[table.data().len()], table.data().to_vec()),
+        p.f32("table", &[clip.data().len()], clip.data()),
+        p.i32("clip_offsets", &[clip.clips()], clip.offsets()),
         p.i32("end_effectors", &[ee.len()], ee),
+        p.i32("clip_id", &[n], clip_id.clone()),
         p.f32("ref_time", &[n], ref_time.clone()),
         Arg::Scalar(Scalar::I32(t as i32)),
         p.f32("rewards", &[horizon, n], rewards.clone()),
         p.i32("terminated", &[horizon, n], terminated.clone()),
         p.i32("truncated", &[horizon, n], truncated.clone()),
         Arg::Struct(StructArg::Yardstick(yardstick)),
+        p.i32("clip_steps", &[clip_steps.len()], clip_steps.clone()),
         p.i32("status", &[n], status.clone()),
         p.i32("steps", &[n], steps.clone()),
         p.f32("sums", &[n, SUMS], sums.clone()),
@@ -200,10 +218,6 @@ fn case(
     p.launch(&EVALUATION_ACCUMULATE, n, args);
 
     Check::new(p, move |p, out| {
-        let clip = Clip {
-            name: clip_name.clone(),
-            table: table.clone(),
-        };
         let mut r = Report::new(&p.name);
         let running: Vec<usize> = (0..n).filter(|&e| status[e] == RUNNING).collect();
         let scored: Vec<usize> = (0..n).filter(|&e| status[e] != RUNNING).collect();
@@ -215,9 +229,10 @@ fn case(
         let mut margin = f64::INFINITY;
         for &e in &running {
             let time = f64::from(ref_time[e]);
-            let (errors, far) = step_errors(&clip, &layout, &physics, e, time);
+            let tracked = (&clip, clip_id[e] as usize);
+            let (errors, far) = step_errors(tracked, &layout, &physics, e, time);
             let (too_far, dropped, m) =
-                yardstick_failures(&clip, &physics, &yardstick, far, e, time);
+                yardstick_failures(tracked, &physics, &yardstick, far, e, time);
             margin = margin.min(m);
             let i = t * n + e;
             for c in 0..SUMS {
@@ -230,7 +245,8 @@ fn case(
                 got_sums.push(f64::from(out.f32("sums")[e * SUMS + c]));
             }
             expected_steps.push(steps[e] + 1);
-            let (term, trunc) = (terminated[i] != 0, truncated[i] != 0);
+            let window_done = steps[e] + 1 >= clip_steps[clip_id[e] as usize];
+            let (term, trunc) = (terminated[i] != 0, truncated[i] != 0 || window_done);
             expected_status.push(if term || too_far || dropped {
                 FAILED
             } else if trunc {
@@ -275,6 +291,19 @@ fn case(
                 "every yardstick decision clear of its threshold: smallest margin {margin:.2e}"
             ),
         );
+        if clip_steps.len() > 1 {
+            let by_steps = running
+                .iter()
+                .filter(|&&e| {
+                    let i = t * n + e;
+                    truncated[i] == 0 && steps[e] + 1 >= clip_steps[clip_id[e] as usize]
+                })
+                .count();
+            r.check(
+                by_steps > 0,
+                format!("{by_steps} running envs reach their clip's steps untruncated"),
+            );
+        }
         let count = |f: &dyn Fn(&Reasons) -> bool| reasons.iter().filter(|x| f(x)).count();
         let short = running
             .iter()
@@ -320,5 +349,7 @@ pub fn checks(fx: &Fixture) -> Vec<Check> {
         case(fx, 1, 61, 53, 52, instantmimic::train::yardstick(), 52),
         case(fx, 0, 96, 4, 0, stricter, 53),
         case(fx, 1, 96, 2, 1, stricter, 54),
+        // A library: every env its clip, clips' episodes of their own lengths.
+        case(fx, 2, 120, 8, 5, instantmimic::train::yardstick(), 55),
     ]
 }

@@ -4,7 +4,8 @@
 //! simulated root (`H` = minus the yaw of the root's forward axis), positions relative to the root
 //! body's origin, rotations as the first two columns of the rotation matrix, body velocities at
 //! the body origins (`cvel` is COM-based), future reference end effectors and the root target
-//! from `ReferenceTable::lookup`; with `reference_bodies`, each body's reference at
+//! of the env's clip from `MotionLibrary::lookup` (a single clip: the library of one); with
+//! `reference_bodies`, each body's reference at
 //! `ref_time + dt` against the simulated body (position difference in the heading frame, the
 //! rotation `conj(q) q_ref` in the body's frame, 6D). Each block is compared on its own; the row
 //! is as wide as `layout::observation_size` says, and padding columns after it must stay
@@ -50,9 +51,10 @@ fn rotated(h: &Quat, v: Vector3<f64>) -> Vec<f64> {
     vec![r.x, r.y, r.z]
 }
 
-/// The f64 observation of env `e`, as blocks in the kernel's order.
+/// The f64 observation of env `e`, which tracks clip `clip.1` of `clip.0`, as blocks in the
+/// kernel's order.
 pub fn reference_blocks(
-    clip: &Clip,
+    clip: (&Clip, usize),
     layout: &JointLayout,
     params: &ObservationParams,
     physics: &PhysicsBatch,
@@ -122,7 +124,7 @@ pub fn reference_blocks(
     for f in 1..=params.future_frames {
         // The kernel's f32 time (ref_time is an f32 quantity).
         let t = ref_time + (f * params.future_spacing) as f32 * params.dt;
-        let row = clip.table.lookup(f64::from(t));
+        let row = clip.0.lookup(clip.1, f64::from(t));
         let mut positions = Vec::new();
         let mut rotations = Vec::new();
         for &b in &layout.end_effectors {
@@ -164,7 +166,7 @@ pub fn reference_blocks(
         );
     }
     if params.root_target != 0 {
-        let row = clip.table.lookup(f64::from(ref_time + params.dt));
+        let row = clip.0.lookup(clip.1, f64::from(ref_time + params.dt));
         add(
             &mut blocks,
             "root target position".into(),
@@ -177,7 +179,7 @@ pub fn reference_blocks(
         );
     }
     if params.reference_bodies != 0 {
-        let row = clip.table.lookup(f64::from(ref_time + params.dt));
+        let row = clip.0.lookup(clip.1, f64::from(ref_time + params.dt));
         let values: Vec<f64> = (0..BODIES)
             .flat_map(|b| {
                 let p = vec3(&physics.xpos, body(b) * 3);
@@ -205,26 +207,34 @@ pub fn reference_blocks(
 }
 
 fn case(fx: &Fixture, clip_index: usize, n: usize, obs: ObsConfig, seed: u64) -> Check {
-    let clip = fx.clips()[clip_index];
-    let (clip_name, table) = (clip.name.clone(), clip.table.clone());
+    let clip = fx.clips()[clip_index].clone();
+    let clip_name = clip.name.clone();
     let layout = fx.layout.clone();
     let params = observation_params(&obs, CONTROL_DT);
     let width = observation_size(&obs, NU, layout.end_effectors.len());
     let stride = width + PADDING;
     let mut rng = Sampler::new(seed);
-    let d = clip.table.duration();
+    let clip_id = clip.clip_ids(n, &mut rng);
     let mut physics = PhysicsBatch::new(n);
     let mut ref_time = vec![0.0f32; n];
     for (e, time) in ref_time.iter_mut().enumerate() {
+        let c = clip_id[e] as usize;
+        let d = clip.duration(c);
         loop {
-            let t = if clip.wraps() {
+            let t = if clip.wraps(c) {
                 rng.uniform(0.0, 5.0 * d)
             } else {
                 // Future frames reach past the end of a clamped clip for some envs.
                 rng.uniform(0.0, d)
             };
             *time = t as f32;
-            physics.set_near_reference(e, clip, f64::from(*time), rng.uniform(0.3, 2.0), &mut rng);
+            physics.set_near_reference(
+                e,
+                (&clip, c),
+                f64::from(*time),
+                rng.uniform(0.3, 2.0),
+                &mut rng,
+            );
             // Half the envs turned about +z: other headings than the clip's.
             if e % 2 == 1 {
                 let at = e * NQ + 3;
@@ -257,8 +267,10 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, obs: ObsConfig, seed: u64) ->
         p.f32("xquat", &[n, NBODY, 4], physics.xquat.clone()),
         p.f32("cvel", &[n, NBODY, 6], physics.cvel.clone()),
         p.f32("subtree_com", &[n, NBODY, 3], physics.subtree_com.clone()),
-        p.f32("table", &[table.data().len()], table.data().to_vec()),
+        p.f32("table", &[clip.data().len()], clip.data()),
+        p.i32("clip_offsets", &[clip.clips()], clip.offsets()),
         p.i32("end_effectors", &[ee.len()], ee),
+        p.i32("clip_id", &[n], clip_id.clone()),
         p.f32("ref_time", &[n], ref_time.clone()),
         p.f32("actions", &[n, NU], actions.clone()),
         Arg::Struct(StructArg::Observation(params)),
@@ -267,14 +279,21 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, obs: ObsConfig, seed: u64) ->
     p.launch(&OBSERVE, n, args);
 
     Check::new(p, move |p, out| {
-        let clip = Clip {
-            name: clip_name.clone(),
-            table: table.clone(),
-        };
         let mut r = Report::new(&p.name);
         let got = out.f32("obs");
         let per_env: Vec<Vec<Block>> = (0..n)
-            .map(|e| reference_blocks(&clip, &layout, &params, &physics, &actions, ref_time[e], e))
+            .map(|e| {
+                let tracked = (&clip, clip_id[e] as usize);
+                reference_blocks(
+                    tracked,
+                    &layout,
+                    &params,
+                    &physics,
+                    &actions,
+                    ref_time[e],
+                    e,
+                )
+            })
             .collect();
         let sizes: Vec<usize> = per_env[0].iter().map(|b| b.values.len()).collect();
         let total: usize = sizes.iter().sum();
@@ -331,5 +350,7 @@ pub fn checks(fx: &Fixture) -> Vec<Check> {
         case(fx, 0, 64, obs(2, 1, true, true, true), 56),
         case(fx, 1, 48, obs(1, 1, true, false, true), 57),
         case(fx, 0, 48, obs(0, 1, false, false, true), 58),
+        // A library: every env its clip.
+        case(fx, 2, 96, obs(3, 2, true, true, true), 59),
     ]
 }

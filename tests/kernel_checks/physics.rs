@@ -53,18 +53,18 @@ impl PhysicsBatch {
         }
     }
 
-    /// Env `e` at the reference state of time `t`, perturbed with noise of `scale` (1: joint
-    /// angles off by ~0.05 rad, velocities by ~0.5, positions by ~3 cm).
+    /// Env `e` at the reference state of clip `c` of `clip` at time `t`, perturbed with noise
+    /// of `scale` (1: joint angles off by ~0.05 rad, velocities by ~0.5, positions by ~3 cm).
     pub fn set_near_reference(
         &mut self,
         e: usize,
-        clip: &Clip,
+        clip: (&Clip, usize),
         t: f64,
         scale: f64,
         rng: &mut Sampler,
     ) {
         let l = HUMANOID_LAYOUT;
-        let row = clip.table.lookup(t);
+        let row = clip.0.lookup(clip.1, t);
         let angle = 0.05 * scale;
         let position = 0.03 * scale;
         let velocity = 0.5 * scale;

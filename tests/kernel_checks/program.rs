@@ -168,7 +168,6 @@ impl StructArg {
                 ("dt", F32(p.dt)),
                 ("noise_std", F32(p.noise_std)),
                 ("start_time", F32(p.start_time)),
-                ("start_spread", F32(p.start_spread)),
             ],
             StructArg::Observation(p) => vec![
                 ("future_frames", I32(p.future_frames)),

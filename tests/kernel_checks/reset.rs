@@ -1,13 +1,17 @@
 //! `reset_masked` and `phase_statistics_update` (kernels_py/env/reset.py; docs/env.md, "Masked
 //! reset with reference state initialization").
 //!
-//! Reference of the reset: with Warp's generator reproduced ([`super::rng`]), the start time
-//! (phase bin from the CDF, then uniform within it; clamped clips within [0, D - dt]), the
-//! reference state there (`ReferenceTable::lookup`, f64) with the kernel's noise draws, zeroed
-//! control, warm start and last action, reset clocks; envs with `done = 0` bit for bit as they
-//! were. Independently of the generator twin: a one-bin CDF puts every start in that bin, noise
-//! 0 gives the reference state at the written start time, and with noise the quaternions stay
-//! unit, the root position stays exact and the recovered noise has mean 0 and deviation 1.
+//! Reference of the reset: with Warp's generator reproduced ([`super::rng`]), the clip and start
+//! time (the (clip, phase bin) cell where the CDF over every cell first exceeds a uniform draw,
+//! found by a linear scan here and a binary search in the kernel, then uniform within the bin;
+//! clamped clips within [0, D - dt]; evaluation: clip n mod C from its spread starts), the clip's
+//! reference state there (`MotionLibrary::lookup`, f64; a single clip is the library of one)
+//! with the kernel's noise draws, zeroed control, warm start and last action, reset clocks and
+//! clip ids; envs with `done = 0` bit for bit as they were. Independently of the generator twin:
+//! a one-cell CDF puts every start in that cell, noise 0 gives the reference state at the
+//! written start time, and with noise the quaternions stay unit, the root position stays exact
+//! and the recovered noise has mean 0 and deviation 1. `phase_statistics_update`: the CDF over
+//! cells weighted by each clip's weight, against f64.
 
 use instantmimic::env::layout::{BALL, JointLayout};
 use instantmimic::kernels::{PHASE_STATISTICS_UPDATE, RESET_MASKED, ResetParams};
@@ -25,46 +29,65 @@ const VELOCITY_NOISE_FACTOR: f64 = 10.0;
 /// The root quaternion's qpos address.
 const ROOT_QUAT: usize = 3;
 
-/// The start time the kernel draws from uniforms u, v (f32 arithmetic, as the kernel: the bin
-/// is an integer decision and the time an f32 value).
-pub fn start_time(table: &[f32], cdf: &[f32], dt: f32, u: f32, v: f32) -> (usize, f32) {
-    let bins = cdf.len();
-    let bin = cdf.iter().position(|&c| u < c).unwrap_or(bins - 1);
-    let mut span = table[HEADER_DURATION];
-    if table[HEADER_WRAP] == 0.0 {
+/// The clip, phase bin and start time the kernel draws from uniforms u, v with the CDF `cdf`
+/// over every (clip, bin) cell, clip after clip (f32 arithmetic, as the kernel: the cell is an
+/// integer decision and the time an f32 value).
+pub fn start_time(
+    clip: &Clip,
+    cdf: &[f32],
+    bins: usize,
+    dt: f32,
+    u: f32,
+    v: f32,
+) -> (usize, usize, f32) {
+    let cells = cdf.len();
+    let cell = cdf.iter().position(|&c| u < c).unwrap_or(cells - 1);
+    let (c, bin) = (cell / bins, cell % bins);
+    let header = clip.header(c);
+    let mut span = header[HEADER_DURATION];
+    if header[HEADER_WRAP] == 0.0 {
         span = (span - dt).max(0.0);
     }
-    (bin, (bin as f32 + v) / bins as f32 * span)
+    (c, bin, (bin as f32 + v) / bins as f32 * span)
 }
 
-/// The reset state of one env: qpos, qvel, start time, bin.
+/// The reset state of one env: qpos, qvel, clip, start time, bin (of the clip).
 pub struct ResetState {
     pub qpos: Vec<f64>,
     pub qvel: Vec<f64>,
+    pub clip: usize,
     pub t0: f32,
     pub bin: usize,
 }
 
-/// The f64 reference of a reset env drawing from `rng`.
+/// The f64 reference of a reset env drawing from `rng`; `spread`: each clip's spread of the
+/// evaluation's start times.
+#[allow(clippy::too_many_arguments)]
 pub fn reference_reset(
     clip: &Clip,
     layout: &JointLayout,
     cdf: &[f32],
+    bins: usize,
     params: &ResetParams,
+    spread: &[f32],
     env: (usize, usize),
     rng: &mut WarpRandom,
 ) -> ResetState {
     let l = HUMANOID_LAYOUT;
     let u = rng.randf();
     let v = rng.randf();
-    let (bin, mut t0) = start_time(clip.table.data(), cdf, params.dt, u, v);
+    let (mut c, bin, mut t0) = start_time(clip, cdf, bins, params.dt, u, v);
     if params.start_time >= 0.0 {
-        // Evaluation: fixed start times spread over the envs (the draws above still happen, in
-        // the same order), in the kernel's f32 arithmetic.
+        // Evaluation: env e plays clip e mod C from start e div C of the clip's ceil(N / C),
+        // spread over the clip (the draws above still happen, in the same order), in the
+        // kernel's f32 arithmetic.
         let (e, n) = env;
-        t0 = params.start_time + params.start_spread * e as f32 / n as f32;
+        let clips = clip.clips();
+        c = e % clips;
+        let (k, starts) = (e / clips, n.div_ceil(clips));
+        t0 = params.start_time + spread[c] * k as f32 / starts as f32;
     }
-    let row = clip.table.lookup(f64::from(t0));
+    let row = clip.lookup(c, f64::from(t0));
     let sigma = f64::from(params.noise_std);
     let mut qpos = row[l.qpos..l.qpos + NQ].to_vec();
     let rotate = |qpos: &mut Vec<f64>, a: usize, rng: &mut WarpRandom| {
@@ -87,6 +110,7 @@ pub fn reference_reset(
     ResetState {
         qpos,
         qvel,
+        clip: c,
         t0,
         bin,
     }
@@ -103,6 +127,16 @@ fn quaternion_addresses(layout: &JointLayout) -> Vec<usize> {
     a
 }
 
+/// How the evaluation's start times spread over each clip.
+#[derive(Clone, Copy, Debug)]
+enum Spread {
+    /// Every clip's starts over this many seconds.
+    All(f32),
+    /// A looping clip's starts over its cycle, a clamped clip's all at its start (the
+    /// evaluation's `spread` protocol).
+    Cycles,
+}
+
 /// What a reset case sets up.
 #[derive(Clone, Copy)]
 struct ResetCase {
@@ -111,15 +145,16 @@ struct ResetCase {
     /// Fraction of envs with done = 1.
     done_fraction: f64,
     noise_std: f32,
-    /// Some(b): a CDF with all its mass in bin b.
+    /// Some(b): a CDF with all its mass in cell b (clip b div bins, bin b mod bins).
     one_bin: Option<usize>,
     bins: usize,
     iteration: i32,
     t: i32,
     seed: u64,
-    /// Some((t, spread)): env e of n starts at t + spread e / n (evaluation), else from the CDF
+    /// Some((t, spread)): env e of n plays clip e mod C from t + spread[clip] k / K, k = e div C,
+    /// K = ceil(n / C) (evaluation; a single clip: t + spread e / n), else from the CDF
     /// (training).
-    fixed_start: Option<(f32, f32)>,
+    fixed_start: Option<(f32, Spread)>,
 }
 
 fn rows_of(v: &[f32], width: usize, envs: &[usize]) -> Vec<f32> {
@@ -129,8 +164,10 @@ fn rows_of(v: &[f32], width: usize, envs: &[usize]) -> Vec<f32> {
 }
 
 fn case(fx: &Fixture, c: ResetCase) -> Check {
-    let clip = fx.clips()[c.clip_index];
-    let (clip_name, table) = (clip.name.clone(), clip.table.clone());
+    let clip = fx.clips()[c.clip_index].clone();
+    let clip_name = clip.name.clone();
+    let clips = clip.clips();
+    let cells = clips * c.bins;
     let layout = fx.layout.clone();
     let n = c.n;
     let mut rng = Sampler::new(c.seed);
@@ -138,11 +175,9 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         .map(|_| i32::from(rng.chance(c.done_fraction)))
         .collect();
     let cdf: Vec<f32> = match c.one_bin {
-        Some(b) => (0..c.bins)
-            .map(|i| if i >= b { 1.0 } else { 0.0 })
-            .collect(),
+        Some(b) => (0..cells).map(|i| if i >= b { 1.0 } else { 0.0 }).collect(),
         None => {
-            let w: Vec<f64> = (0..c.bins).map(|_| rng.uniform(0.0, 1.0) + 0.1).collect();
+            let w: Vec<f64> = (0..cells).map(|_| rng.uniform(0.0, 1.0) + 0.1).collect();
             let total: f64 = w.iter().sum();
             let mut acc = 0.0;
             let mut cdf: Vec<f32> = w
@@ -152,17 +187,23 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
                     acc as f32
                 })
                 .collect();
-            cdf[c.bins - 1] = 1.0;
+            cdf[cells - 1] = 1.0;
             cdf
         }
     };
+    let spread: Vec<f32> = (0..clips)
+        .map(|k| match c.fixed_start {
+            Some((_, Spread::All(s))) => s,
+            Some((_, Spread::Cycles)) if clip.wraps(k) => clip.duration(k) as f32,
+            _ => 0.0,
+        })
+        .collect();
     let params = ResetParams {
         seed: rng.index(0, 1 << 30) as i32,
         horizon: 32,
         dt: super::CONTROL_DT as f32,
         noise_std: c.noise_std,
         start_time: c.fixed_start.map_or(-1.0, |(t, _)| t),
-        start_spread: c.fixed_start.map_or(0.0, |(_, s)| s),
     };
     // Envs that stay: arbitrary values that must survive bit for bit. Envs reset: poison.
     let fill = |width: usize, rng: &mut Sampler| -> Vec<f32> {
@@ -196,6 +237,17 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
             }
         })
         .collect();
+    // Kept envs' clips must survive too (no draw: the single-clip cases' inputs stay as they
+    // were before clip ids existed).
+    let clip_id: Vec<i32> = (0..n)
+        .map(|e| {
+            if done[e] != 0 {
+                POISON_I32
+            } else {
+                (e % clips) as i32
+            }
+        })
+        .collect();
 
     let j = layout.num_joints();
     let mut p = Program::new(format!(
@@ -203,18 +255,27 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         100.0 * c.done_fraction,
         c.noise_std,
         match (c.fixed_start, c.one_bin) {
-            (Some((t, spread)), _) => format!("fixed start time {t} s + {spread} s x env / envs"),
-            (None, Some(b)) => format!("all mass in bin {b} of {}", c.bins),
-            (None, None) => format!("random CDF over {} bins", c.bins),
+            (Some((t, Spread::All(spread))), _) => {
+                format!("fixed start time {t} s + {spread} s x env / envs")
+            }
+            (Some((t, Spread::Cycles)), _) => {
+                format!("fixed start time {t} s + each clip's cycle x start / starts")
+            }
+            (None, Some(b)) if clips == 1 => format!("all mass in bin {b} of {}", c.bins),
+            (None, Some(b)) => format!("all mass in cell {b} of {clips} x {}", c.bins),
+            (None, None) if clips == 1 => format!("random CDF over {} bins", c.bins),
+            (None, None) => format!("random CDF over {clips} x {} cells", c.bins),
         }
     ));
     let args = vec![
         p.i32("done", &[n], done.clone()),
-        p.f32("table", &[table.data().len()], table.data().to_vec()),
+        p.f32("table", &[clip.data().len()], clip.data()),
+        p.i32("clip_offsets", &[clips], clip.offsets()),
         Arg::Scalar(Scalar::I32(ROOT_QUAT as i32)),
         p.i32("joint_kind", &[j], layout.kind.clone()),
         p.i32("joint_qpos", &[j], layout.qpos.clone()),
-        p.f32("phase_cdf", &[c.bins], cdf.clone()),
+        p.f32("phase_cdf", &[clips, c.bins], cdf.clone()),
+        p.f32("start_spread", &[clips], spread.clone()),
         p.i32("iteration", &[1], vec![c.iteration]),
         Arg::Scalar(Scalar::I32(c.t)),
         Arg::Struct(StructArg::Reset(params)),
@@ -222,6 +283,7 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         p.f32("qvel", &[n, NV], qvel),
         p.f32("ctrl", &[n, NU], ctrl),
         p.f32("qacc_warmstart", &[n, NV], warm),
+        p.i32("clip_id", &[n], clip_id),
         p.f32("ref_time", &[n], ref_time),
         p.i32("episode_step", &[n], steps),
         p.f32("actions", &[n, NU], actions),
@@ -229,10 +291,6 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
     p.launch(&RESET_MASKED, n, args);
 
     Check::new(p, move |p, out| {
-        let clip = Clip {
-            name: clip_name.clone(),
-            table: table.clone(),
-        };
         let mut r = Report::new(&p.name);
         let reset: Vec<usize> = (0..n).filter(|&e| done[e] != 0).collect();
         let kept: Vec<usize> = (0..n).filter(|&e| done[e] == 0).collect();
@@ -271,6 +329,17 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
                 .collect::<Vec<_>>(),
             &vec![0; reset.len()],
         );
+        r.exact(
+            "clip_id of envs not done",
+            &kept
+                .iter()
+                .map(|&e| out.i32("clip_id")[e])
+                .collect::<Vec<_>>(),
+            &kept
+                .iter()
+                .map(|&e| p.input_i32("clip_id")[e])
+                .collect::<Vec<_>>(),
+        );
 
         // The exact reference, for both evaluation orders of randn's two draws.
         let expected = |order: RandnOrder| -> Vec<ResetState> {
@@ -283,7 +352,9 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
                         &clip,
                         &layout,
                         &cdf,
+                        c.bins,
                         &params,
+                        &spread,
                         (e, n),
                         &mut WarpRandom::new(params.seed, offset, order),
                     )
@@ -321,40 +392,69 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         );
         r.relative("qpos of reset envs", &got_qpos, &qpos_ref);
         r.relative("qvel of reset envs", &got_qvel, &qvel_ref);
+        let got_clip: Vec<i32> = reset.iter().map(|&e| out.i32("clip_id")[e]).collect();
+        let clip_ref: Vec<i32> = states.iter().map(|s| s.clip as i32).collect();
+        r.exact("clip_id of reset envs", &got_clip, &clip_ref);
 
         // Checks that do not rely on the generator twin.
-        let data = clip.table.data();
-        let (d, dt) = (data[HEADER_DURATION], params.dt);
-        let span = if clip.wraps() { d } else { (d - dt).max(0.0) };
-        let width = span / c.bins as f32;
-        if let Some((start, spread)) = c.fixed_start {
+        let dt = params.dt;
+        let span = |k: usize| {
+            let d = clip.header(k)[HEADER_DURATION];
+            if clip.wraps(k) { d } else { (d - dt).max(0.0) }
+        };
+        if let Some((start, _)) = c.fixed_start {
             let exact = reset
                 .iter()
                 .zip(&got_t0)
-                .all(|(&e, &t)| t == start + spread * e as f32 / n as f32);
+                .zip(&got_clip)
+                .all(|((&e, &t), &k)| {
+                    let (k_expected, starts) = (e % clips, n.div_ceil(clips));
+                    let t_expected =
+                        start + spread[k_expected] * (e / clips) as f32 / starts as f32;
+                    k as usize == k_expected && t == t_expected
+                });
             r.check(
                 exact,
-                format!("every start time is {start} s + {spread} s x env / envs"),
+                format!(
+                    "every env e plays clip e mod {clips} from {start} s + its clip's spread {spread:?} s x (e div {clips}) / ceil({n} / {clips})"
+                ),
             );
-        } else if let Some(b) = c.one_bin {
-            let inside = got_t0.iter().all(|&t| {
-                t >= b as f32 * width * (1.0 - 1e-6) && t <= (b + 1) as f32 * width * (1.0 + 1e-6)
+        } else if let Some(cell) = c.one_bin {
+            let (k, b) = (cell / c.bins, cell % c.bins);
+            let width = span(k) / c.bins as f32;
+            let inside = got_t0.iter().zip(&got_clip).all(|(&t, &got)| {
+                got as usize == k
+                    && t >= b as f32 * width * (1.0 - 1e-6)
+                    && t <= (b + 1) as f32 * width * (1.0 + 1e-6)
             });
             r.check(
                 inside,
                 format!(
-                    "every start time in bin {b}: [{}, {}] s",
+                    "every start in clip {k}, bin {b}: [{}, {}] s",
                     b as f32 * width,
                     (b + 1) as f32 * width
                 ),
             );
         }
-        let bins_hit: std::collections::BTreeSet<usize> = states.iter().map(|s| s.bin).collect();
-        r.note(format!("start bins drawn: {bins_hit:?}"));
+        if c.fixed_start.is_none() {
+            let bins_hit: std::collections::BTreeSet<(usize, usize)> =
+                states.iter().map(|s| (s.clip, s.bin)).collect();
+            r.note(format!("start (clip, bin) cells drawn: {bins_hit:?}"));
+        }
         r.check(
-            got_t0.iter().all(|&t| t >= 0.0 && t <= span),
-            format!("start times within [0, {span}] s"),
+            got_t0
+                .iter()
+                .zip(&got_clip)
+                .all(|(&t, &k)| t >= 0.0 && t <= span(k as usize)),
+            "start times within [0, the clip's span] s".to_owned(),
         );
+        if clips > 1 && c.fixed_start.is_none() && c.one_bin.is_none() {
+            let drawn: std::collections::BTreeSet<i32> = got_clip.iter().copied().collect();
+            r.check(
+                drawn.len() == clips,
+                format!("every clip of the library drawn: {drawn:?}"),
+            );
+        }
         let norms_off = reset
             .iter()
             .flat_map(|&e| {
@@ -378,7 +478,7 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         let mut recovered_velocity: Vec<f64> = Vec::new();
         let sigma = f64::from(params.noise_std);
         for (i, &e) in reset.iter().enumerate() {
-            let row = clip.table.lookup(f64::from(got_t0[i]));
+            let row = clip.lookup(got_clip[i] as usize, f64::from(got_t0[i]));
             let q = &out.f32("qpos")[e * NQ..(e + 1) * NQ];
             let v = &out.f32("qvel")[e * NV..(e + 1) * NV];
             for c in 0..3 {
@@ -428,17 +528,24 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
     })
 }
 
-/// The f64 reference of `phase_statistics_update`: CDF, decayed counts.
+/// The f64 reference of `phase_statistics_update`: the CDF over every (clip, bin) cell (clip
+/// after clip, each cell weighted by its clip's weight), decayed counts.
 pub fn reference_statistics(
     decay: f32,
     floor: f32,
+    weights: &[f32],
     visits: &[f32],
     failures: &[f32],
 ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let bins = visits.len() / weights.len();
     let rate: Vec<f64> = visits
         .iter()
         .zip(failures)
-        .map(|(&v, &f)| f64::from(f) / f64::from(v).max(1.0) + f64::from(floor))
+        .enumerate()
+        .map(|(cell, (&v, &f))| {
+            f64::from(weights[cell / bins])
+                * (f64::from(f) / f64::from(v).max(1.0) + f64::from(floor))
+        })
         .collect();
     let total: f64 = rate.iter().sum();
     let mut acc = 0.0;
@@ -456,10 +563,14 @@ pub fn reference_statistics(
     (cdf, decayed(visits), decayed(failures))
 }
 
-fn statistics_case(bins: usize, threads: usize, seed: u64) -> Check {
+/// `weights`: the clips' weight fractions (`[1.0]`: a single clip).
+fn statistics_case(weights: &[f32], bins: usize, threads: usize, seed: u64) -> Check {
     let mut rng = Sampler::new(seed);
     let (decay, floor) = (0.99f32, 0.1f32);
-    let visits: Vec<f32> = (0..bins)
+    let clips = weights.len();
+    let cells = clips * bins;
+    let weights = weights.to_vec();
+    let visits: Vec<f32> = (0..cells)
         .map(|b| match b % 5 {
             0 => 0.0,
             1 => rng.uniform(0.0, 1.0) as f32,
@@ -471,26 +582,44 @@ fn statistics_case(bins: usize, threads: usize, seed: u64) -> Check {
         .map(|&v| (f64::from(v) * rng.uniform(0.0, 1.0)) as f32)
         .collect();
     let iteration = rng.index(0, 1000) as i32;
-    let mut p = Program::new(format!(
-        "phase_statistics_update: {bins} bins, launched over {threads} threads"
-    ));
+    let mut p = Program::new(if clips == 1 {
+        format!("phase_statistics_update: {bins} bins, launched over {threads} threads")
+    } else {
+        format!(
+            "phase_statistics_update: {clips} clips of weights {weights:?} x {bins} bins, launched over {threads} threads"
+        )
+    });
     let args = vec![
         Arg::Scalar(Scalar::F32(decay)),
         Arg::Scalar(Scalar::F32(floor)),
-        p.f32("phase_visits", &[bins], visits.clone()),
-        p.f32("phase_failures", &[bins], failures.clone()),
-        p.f32("phase_cdf", &[bins], nan_f32(bins)),
+        p.f32("clip_weight", &[clips], weights.clone()),
+        p.f32("phase_visits", &[clips, bins], visits.clone()),
+        p.f32("phase_failures", &[clips, bins], failures.clone()),
+        p.f32("phase_cdf", &[clips, bins], nan_f32(cells)),
         p.i32("iteration", &[1], vec![iteration]),
     ];
     p.launch(&PHASE_STATISTICS_UPDATE, threads, args);
     Check::new(p, move |p, out| {
         let mut r = Report::new(&p.name);
-        let (cdf, v, f) = reference_statistics(decay, floor, &visits, &failures);
+        let (cdf, v, f) = reference_statistics(decay, floor, &weights, &visits, &failures);
         r.relative("phase_cdf", &wide(out.f32("phase_cdf")), &cdf);
         r.check(
-            out.f32("phase_cdf")[bins - 1] == 1.0,
+            out.f32("phase_cdf")[cells - 1] == 1.0,
             "the CDF ends at exactly 1",
         );
+        if clips > 1 {
+            // With every failure rate equal, each clip's share is its weight: the shares of
+            // this case differ from the weights only by the rates drawn.
+            let shares: Vec<f64> = (0..clips)
+                .map(|c| {
+                    let before = if c == 0 { 0.0 } else { cdf[c * bins - 1] };
+                    cdf[(c + 1) * bins - 1] - before
+                })
+                .collect();
+            r.note(format!(
+                "clips' shares of resets {shares:.3?} for weights {weights:?}"
+            ));
+        }
         r.relative("phase_visits (decayed)", &wide(out.f32("phase_visits")), &v);
         r.relative(
             "phase_failures (decayed)",
@@ -575,7 +704,7 @@ pub fn reset_checks(fx: &Fixture) -> Vec<Check> {
                 iteration: 0,
                 t: 0,
                 seed: 38,
-                fixed_start: Some((0.0, fx.main.table.duration() as f32)),
+                fixed_start: Some((0.0, Spread::All(fx.main.duration(0) as f32))),
                 ..base
             },
         ),
@@ -586,7 +715,7 @@ pub fn reset_checks(fx: &Fixture) -> Vec<Check> {
                 iteration: 0,
                 t: 0,
                 seed: 36,
-                fixed_start: Some((0.0, 0.0)),
+                fixed_start: Some((0.0, Spread::All(0.0))),
                 ..base
             },
         ),
@@ -597,7 +726,44 @@ pub fn reset_checks(fx: &Fixture) -> Vec<Check> {
                 noise_std: 0.0,
                 one_bin: Some(3),
                 seed: 37,
-                fixed_start: Some((0.37, 0.0)),
+                fixed_start: Some((0.37, Spread::All(0.0))),
+                ..base
+            },
+        ),
+        // A library: clips and starts from one CDF over (clip, bin) cells.
+        case(
+            fx,
+            ResetCase {
+                clip_index: 2,
+                n: 512,
+                seed: 39,
+                ..base
+            },
+        ),
+        case(
+            fx,
+            ResetCase {
+                clip_index: 2,
+                noise_std: 0.0,
+                bins: 7,
+                // Clip 3 (clamped, 120 fps), bin 5.
+                one_bin: Some(3 * 7 + 5),
+                seed: 40,
+                ..base
+            },
+        ),
+        // The library's evaluation: env e plays clip e mod 5 from its spread starts.
+        case(
+            fx,
+            ResetCase {
+                clip_index: 2,
+                n: 37,
+                done_fraction: 1.0,
+                noise_std: 0.0,
+                iteration: 0,
+                t: 0,
+                seed: 41,
+                fixed_start: Some((0.0, Spread::Cycles)),
                 ..base
             },
         ),
@@ -606,8 +772,11 @@ pub fn reset_checks(fx: &Fixture) -> Vec<Check> {
 
 pub fn statistics_checks(_fx: &Fixture) -> Vec<Check> {
     vec![
-        statistics_case(20, 1, 41),
-        statistics_case(7, 64, 42),
-        statistics_case(1, 3, 43),
+        statistics_case(&[1.0], 20, 1, 41),
+        statistics_case(&[1.0], 7, 64, 42),
+        statistics_case(&[1.0], 1, 3, 43),
+        // A library: 22 clips x 20 bins (the all-clips library's 440 cells), and 3 clips.
+        statistics_case(&[1.0 / 22.0; 22], 20, 1, 44),
+        statistics_case(&[0.5, 0.3, 0.2], 7, 32, 45),
     ]
 }

@@ -1,6 +1,7 @@
 //! `reward_termination` (kernels_py/env/tracking.py; docs/env.md, "Reward", "Termination").
 //!
-//! Reference: the reference state at `t = ref_time + dt` (`ReferenceTable::lookup`, f64), the
+//! Reference: the reference state of the env's clip at `t = ref_time + dt`
+//! (`MotionLibrary::lookup`, f64; a single clip is the library of one), the
 //! five tracking errors (means over the joints, the non-root dofs and the end effectors; the
 //! COM's one point; end-effector positions in the world or, with `ee_relative`, each relative to
 //! its own root), `r = exp(-w . e)`, the failure causes (FELL: root fallen more than
@@ -9,7 +10,7 @@
 //! root below `min_root_height`; LOW_REWARD: reward below `min_reward`; DRIFT: mean body
 //! distance above `mean_tracking_distance`) as the bitmask `failure`, from `grace_steps` on,
 //! truncation at `max_episode_steps` or when a clamped clip's next reference time would pass
-//! its end, the phase bin counts, the advanced clocks. Envs are built to hit every cause alone
+//! its end, the (clip, phase bin) counts, the advanced clocks. Envs are built to hit every cause alone
 //! and several at once, inside and after the grace steps, and to cross thresholds that are off.
 
 use instantmimic::env::layout::{BALL, JointLayout};
@@ -89,16 +90,18 @@ pub struct EnvOutcome {
     pub clip_end: bool,
     pub ref_time: f32,
     pub episode_step: i32,
+    /// The (clip, phase bin) cell counted, `clip * bins + bin`.
     pub bin: usize,
     /// The smallest distance of a failure quantity to its threshold (of the causes that are on;
     /// the reward's relative to its threshold): f32 rounding must not decide a case.
     pub margin: f64,
 }
 
-/// The f64 reference of env `e`.
+/// The f64 reference of env `e`, which tracks clip `c` of `clip`.
 #[allow(clippy::too_many_arguments)]
 pub fn reference_env(
     clip: &Clip,
+    c: usize,
     layout: &JointLayout,
     params: &TrackingParams,
     physics: &PhysicsBatch,
@@ -108,9 +111,9 @@ pub fn reference_env(
     bins: usize,
 ) -> EnvOutcome {
     let l = HUMANOID_LAYOUT;
-    let data = clip.table.data();
+    let data = clip.header(c);
     let t_ref = ref_time + params.dt;
-    let row = clip.table.lookup(f64::from(t_ref));
+    let row = clip.lookup(c, f64::from(t_ref));
     let qpos = &physics.qpos[e * NQ..(e + 1) * NQ];
     let qvel = &physics.qvel[e * NV..(e + 1) * NV];
     let body = |b: usize| (e * NBODY + b + 1) * 3;
@@ -236,7 +239,7 @@ pub fn reference_env(
         clip_end,
         ref_time: t_ref,
         episode_step: episode_step + 1,
-        bin: phase_bin(data, ref_time, bins),
+        bin: c * bins + phase_bin(data, ref_time, bins),
         margin,
     }
 }
@@ -353,11 +356,11 @@ fn case(
     bins: usize,
     seed: u64,
 ) -> Check {
-    let clip_name = fx.clips()[clip_index].name.clone();
     let clip = fx.clips()[clip_index];
+    let clip_name = clip.name.clone();
     let layout = fx.layout.clone();
     let mut rng = Sampler::new(seed);
-    let d = clip.table.duration();
+    let clip_id = clip.clip_ids(n, &mut rng);
     let dt = f64::from(params.dt);
     let mut physics = PhysicsBatch::new(n);
     let mut ref_time = vec![0.0f32; n];
@@ -366,7 +369,9 @@ fn case(
         let kind = KINDS[e % KINDS.len()];
         // Every other env of each kind is inside the grace steps.
         let in_grace = (e / KINDS.len()) % 2 == 1;
-        let t = match (kind, clip.wraps()) {
+        let c = clip_id[e] as usize;
+        let d = clip.duration(c);
+        let t = match (kind, clip.wraps(c)) {
             // Wrapped clips: several cycles out (positions shift by the cycle displacement).
             (Kind::NearClipEnd, true) => rng.uniform(3.0 * d, 6.0 * d),
             // Clamped: half the envs whose next reference passes the end, half just before.
@@ -396,11 +401,13 @@ fn case(
         } else {
             rng.uniform(0.3, 2.0)
         };
-        physics.set_near_reference(e, clip, t_ref, scale, &mut rng);
-        let row = clip.table.lookup(t_ref);
+        physics.set_near_reference(e, (clip, c), t_ref, scale, &mut rng);
+        let row = clip.lookup(c, t_ref);
         make_kind(kind, &mut physics, e, &row, &params, &mut rng);
     }
-    let visits: Vec<f32> = (0..bins).map(|_| rng.uniform(0.0, 60.0) as f32).collect();
+    let clips = clip.clips();
+    let cells = clips * bins;
+    let visits: Vec<f32> = (0..cells).map(|_| rng.uniform(0.0, 60.0) as f32).collect();
     let failures: Vec<f32> = visits
         .iter()
         .map(|&v| v * rng.uniform(0.0, 0.5) as f32)
@@ -433,12 +440,14 @@ fn case(
         p.f32("xpos", &[n, NBODY, 3], physics.xpos.clone()),
         p.f32("xquat", &[n, NBODY, 4], physics.xquat.clone()),
         p.f32("subtree_com", &[n, NBODY, 3], physics.subtree_com.clone()),
-        p.f32("table", &[clip.table.data().len()], clip.data()),
+        p.f32("table", &[clip.data().len()], clip.data()),
+        p.i32("clip_offsets", &[clips], clip.offsets()),
         p.i32("joint_kind", &[j], layout.kind.clone()),
         p.i32("joint_qpos", &[j], layout.qpos.clone()),
         p.i32("end_effectors", &[ee.len()], ee),
         Arg::Struct(StructArg::Tracking(params)),
         Arg::Scalar(Scalar::I32(ROW as i32)),
+        p.i32("clip_id", &[n], clip_id.clone()),
         p.f32("ref_time", &[n], ref_time.clone()),
         p.i32("episode_step", &[n], episode_step.clone()),
         p.f32("rewards", &[STORAGE_ROWS, n], nan_f32(STORAGE_ROWS * n)),
@@ -455,23 +464,22 @@ fn case(
         p.i32("done", &[n], vec![POISON_I32; n]),
         p.i32("failure", &[n], vec![POISON_I32; n]),
         p.f32("errors", &[n, 5], nan_f32(n * 5)),
-        p.f32("phase_visits", &[bins], visits.clone()),
-        p.f32("phase_failures", &[bins], failures.clone()),
+        p.f32("phase_visits", &[clips, bins], visits.clone()),
+        p.f32("phase_failures", &[clips, bins], failures.clone()),
     ];
     p.launch(&REWARD_TERMINATION, n, args);
 
-    let clip_table = clip.table.clone();
-    let wraps = clip.wraps();
+    let clip = clip.clone();
+    // Whether any env tracks a clamped clip (the clip end must be covered) or a wrapped one.
+    let clamped_envs = clip_id.iter().any(|&c| !clip.wraps(c as usize));
+    let wrapped: Vec<bool> = clip_id.iter().map(|&c| clip.wraps(c as usize)).collect();
     Check::new(p, move |p, out| {
-        let clip = Clip {
-            name: clip_name.clone(),
-            table: clip_table.clone(),
-        };
         let mut r = Report::new(&p.name);
         let outcomes: Vec<EnvOutcome> = (0..n)
             .map(|e| {
                 reference_env(
                     &clip,
+                    clip_id[e] as usize,
                     &layout,
                     &params,
                     &physics,
@@ -560,16 +568,24 @@ fn case(
             format!("every failure decision clear of its threshold: smallest margin {margin:.2e}"),
         );
         let coverage = coverage(&outcomes, &episode_step, &params);
-        let needed = |name: &str| !(wraps && name == "clip end");
+        let needed = |name: &str| clamped_envs || name != "clip end";
         r.check(
             coverage.iter().all(|(name, c)| !needed(name) || *c > 0),
             format!("coverage: {coverage:?}"),
         );
-        if wraps {
-            let clip_end = coverage.iter().find(|(name, _)| *name == "clip end");
+        if wrapped.iter().any(|&w| w) {
+            let ended = outcomes
+                .iter()
+                .zip(&wrapped)
+                .filter(|(o, w)| **w && o.clip_end)
+                .count();
+            r.check(ended == 0, "a wrapped clip never ends".to_owned());
+        }
+        if clip.clips() > 1 {
+            let tracked: std::collections::BTreeSet<i32> = clip_id.iter().copied().collect();
             r.check(
-                clip_end.is_some_and(|(_, c)| *c == 0),
-                "a wrapped clip never ends".to_owned(),
+                tracked.len() == clip.clips(),
+                format!("every clip of the library tracked by some env: {tracked:?}"),
             );
         }
         let rewards_ok = outcomes.iter().filter(|o| o.reward > 0.01).count();
@@ -737,5 +753,18 @@ pub fn checks(fx: &Fixture) -> Vec<Check> {
             23,
         ),
         case(fx, 1, 80, tuned, 7, 24),
+        // A library: every env its clip (wrapped and clamped, different rates and lengths).
+        case(fx, 2, 160, causes, 20, 27),
+        case(
+            fx,
+            2,
+            120,
+            TrackingParams {
+                ee_relative: 1,
+                ..tuned
+            },
+            7,
+            28,
+        ),
     ]
 }

@@ -111,7 +111,7 @@ fn run(
             let trainer = Trainer::replica(
                 &gpu,
                 &start.store,
-                &start.motion,
+                start.motion.as_ref(),
                 &start.config,
                 &communicator,
             )?;

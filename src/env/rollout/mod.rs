@@ -6,19 +6,23 @@
 //! plan again, then the observation. Every kernel reads and writes device memory only: the reset
 //! always runs and a per-env mask chooses who is reset, random numbers are offset by a device
 //! counter that the graph itself advances, so replays need nothing from the host.
+//!
+//! A rollout tracks a motion library ([`TrackedMotion`]): each env carries a clip id beside its
+//! time, and a single clip is the library of one, so both run the same kernels.
+
+mod launches;
 
 use std::sync::Arc;
 
 use thiserror::Error;
 
 use crate::cuda::{Communicator, CudaError, Gpu, Graph, Stream};
-use crate::motion::LoopMode;
-use crate::motion::{ReferenceMotion, ReferenceTable};
+use crate::motion::MotionLibrary;
 use crate::plan::{PlanStore, Simulation, SimulationError};
 
 use super::DeviceReferenceTable;
-use super::config::{ActionMode, EvalStart, RolloutConfig};
-use super::evaluation::{EpisodeScores, evaluation_episode_steps, yardstick};
+use super::config::{ActionMode, RolloutConfig};
+use super::evaluation::{ClipEvaluation, EpisodeScores, clip_evaluation, yardstick};
 use super::layout::{
     DeviceJointLayout, JointLayout, observation_params, observation_size, reset_params,
     tracking_params, without_failures,
@@ -30,6 +34,7 @@ use super::policy::RolloutPolicy;
 use super::stages::{RolloutStage, StageEvents, StageRecorder};
 use super::statistics::RolloutStatistics;
 use super::storage::{ActStorage, RolloutStorage};
+use super::tracked::TrackedMotion;
 use super::trajectory::Trajectory;
 use crate::kernels::{
     DeviceArray, DeviceArray2, EnvError, EnvKernels, ObservationParams, ResetParams,
@@ -56,7 +61,9 @@ pub enum RolloutError {
 
 /// Per-env episode state.
 pub struct EpisodeState {
-    /// Seconds into the clip of the env's current state.
+    /// The clip of the motion library each env tracks (0 for a single clip).
+    pub clip_id: DeviceArray<i32>,
+    /// Seconds into the env's clip of its current state.
     pub ref_time: DeviceArray<f32>,
     /// Control steps since the env's last reset.
     pub episode_step: DeviceArray<i32>,
@@ -77,7 +84,12 @@ pub struct Rollout {
     gpu: Gpu,
     sim: Simulation,
     kernels: Arc<EnvKernels>,
-    table: DeviceReferenceTable,
+    /// The clips on the host (the library of one for a single clip) and on the device; the
+    /// evaluation rollout shares both with its training rollout.
+    library: Arc<MotionLibrary>,
+    table: Arc<DeviceReferenceTable>,
+    /// The character's joints as the kernels read them, on the host and the device.
+    layout: JointLayout,
     physics: PhysicsState,
     pub state: EpisodeState,
     pub storage: RolloutStorage,
@@ -86,6 +98,9 @@ pub struct Rollout {
     action_scale: f32,
     tracking: TrackingParams,
     reset: ResetParams,
+    /// Per clip, the spread of the evaluation's start times (`reset_masked`; zeros for
+    /// training, whose starts come from the adaptive CDF).
+    start_spread: DeviceArray<f32>,
     observation: ObservationParams,
     normalizer: ObservationNormalizer,
     phase_statistics: PhaseStatistics,
@@ -105,117 +120,156 @@ enum Purpose {
     /// drawn from the adaptive statistics (updated once per rollout).
     Training,
     /// The paper's evaluation: mean actions, the training rollout's normalization frozen, every
-    /// env starting at the clip's start, each env's first episode scored against the fixed
-    /// success yardstick (the training's failures are off).
-    Evaluation(EpisodeScores, Yardstick),
+    /// env starting at a fixed state of its clip, each env's first episode scored against the
+    /// fixed success yardstick (the training's failures are off); how each clip is played.
+    Evaluation(EpisodeScores, Yardstick, Vec<ClipEvaluation>),
+}
+
+/// What a rollout is built from: a motion for a training rollout, or the training rollout an
+/// evaluation rollout evaluates (its clips, layout, kernels and normalization).
+enum Source<'a> {
+    Training(TrackedMotion<'a>),
+    Evaluation(&'a Rollout),
 }
 
 impl Rollout {
     /// Loads the step and kinematics plans for `config.env.num_envs` worlds, uploads the
-    /// reference table of `motion` at the control rate, allocates the env state and storage,
+    /// reference table of `motion` (a clip, resampled at the control rate as the library of
+    /// one, or a motion library) with its clip index, allocates the env state and storage,
     /// and builds the kernels' parameters from `config` (all run-time values). The policy it
     /// runs is lent to each capture: one of [`Rollout::observation_size`] inputs,
     /// [`Rollout::action_size`] actions and a batch of [`Rollout::num_envs`].
-    pub fn new(
+    pub fn new<'a>(
         gpu: &Gpu,
         store: &PlanStore,
-        motion: &ReferenceMotion,
+        motion: impl Into<TrackedMotion<'a>>,
         config: &RolloutConfig,
     ) -> Result<Rollout, RolloutError> {
-        Rollout::build(gpu, store, motion, config, None)
+        Rollout::build(gpu, store, config, Source::Training(motion.into()))
     }
 
     /// The evaluation rollout of `training` (the paper's protocol, `config.evaluation`) on
-    /// `evaluation.envs` worlds (a step plan for that count must exist): the same motion and
+    /// `evaluation.envs` worlds (a step plan for that count must exist): the same clips and
     /// kernels, the training rollout's normalization statistics read but never updated, mean
-    /// actions, no reset noise, env i of n starting at i/n of a looping clip's cycle
-    /// (`EvalStart::Spread`) or every env at the clip's start, and a horizon of one episode
-    /// ([`evaluation_episode_steps`]: one pass of the clip), so that each env plays exactly one
-    /// episode unless it fails. Lend it the training policy's parameters with a batch of
-    /// `evaluation.envs` (`GaussianPolicy::with_batch`).
+    /// actions, no reset noise, env i of n playing clip i mod C of the C clips from start
+    /// i div C of the clip's ([`clip_evaluation`]: spread over a looping clip's cycle with
+    /// `EvalStart::Spread`, over a long clip's windows, or every env at the clip's start),
+    /// each for one episode of its clip (one pass, or one window), so that each env plays
+    /// exactly one scored episode unless it fails; the horizon is the longest clip's episode.
+    /// Lend it the training policy's parameters with a batch of `evaluation.envs`
+    /// (`GaussianPolicy::with_batch`).
     pub fn evaluation(
         training: &Rollout,
         store: &PlanStore,
-        motion: &ReferenceMotion,
         config: &RolloutConfig,
     ) -> Result<Rollout, RolloutError> {
         let mut config = config.clone();
         config.env.num_envs = config.evaluation.envs;
         config.env.motion_noise_std = 0.0;
-        Rollout::build(&training.gpu, store, motion, &config, Some(training))
+        Rollout::build(&training.gpu, store, &config, Source::Evaluation(training))
     }
 
     fn build(
         gpu: &Gpu,
         store: &PlanStore,
-        motion: &ReferenceMotion,
         config: &RolloutConfig,
-        evaluated: Option<&Rollout>,
+        source: Source<'_>,
     ) -> Result<Rollout, RolloutError> {
         let n = config.env.num_envs as usize;
         let substeps = config.env.substeps as usize;
         let sim = Simulation::load(gpu, store, config.env.num_envs, &["step", "kinematics"])?;
         let physics_dt = physics_timestep(&sim)?;
         let control_dt = physics_dt * f64::from(config.env.substeps);
-        let character = motion.character();
-        if character.nq() != NQ || character.nv() != NV || character.actuators().len() != NU {
-            return Err(RolloutError::Setup(format!(
-                "the rollout is built for the humanoid (nq {NQ}, nv {NV}, nu {NU}); {} has nq {}, nv {}, nu {}",
-                character.source_name(),
-                character.nq(),
-                character.nv(),
-                character.actuators().len()
-            )));
-        }
-        let host_table = ReferenceTable::build(motion, control_dt)
-            .map_err(|e| RolloutError::Motion(e.to_string()))?;
-        let table = DeviceReferenceTable::upload(gpu, &host_table)?;
+        let (library, table, layout) = match source {
+            Source::Training(motion) => {
+                let character = motion.character();
+                if character.nq() != NQ || character.nv() != NV || character.actuators().len() != NU
+                {
+                    return Err(RolloutError::Setup(format!(
+                        "the rollout is built for the humanoid (nq {NQ}, nv {NV}, nu {NU}); {} has nq {}, nv {}, nu {}",
+                        character.source_name(),
+                        character.nq(),
+                        character.nv(),
+                        character.actuators().len()
+                    )));
+                }
+                let library = motion.library(control_dt)?;
+                let table = DeviceReferenceTable::from_library(gpu, &library)?;
+                let layout = JointLayout::for_character(character)?;
+                (Arc::new(library), Arc::new(table), layout)
+            }
+            Source::Evaluation(training) => (
+                Arc::clone(&training.library),
+                Arc::clone(&training.table),
+                training.layout.clone(),
+            ),
+        };
+        let clips = library.num_clips();
         let physics = PhysicsState::view(&sim)?;
         physics.widen_control_range()?;
 
-        let layout = JointLayout::for_character(character)?;
         let joints = DeviceJointLayout::upload(gpu, &layout)?;
         let obs_size = observation_size(&config.obs, NU, layout.end_effectors.len());
-        let phase_statistics = PhaseStatistics::new(gpu, &config.env)?;
+        let weights: Vec<f32> = library
+            .weight_fractions()
+            .iter()
+            .map(|&w| w as f32)
+            .collect();
+        let phase_statistics = PhaseStatistics::new(gpu, &config.env, &weights)?;
         let mut tracking = tracking_params(config, control_dt);
         let mut reset = reset_params(config, control_dt);
-        let (kernels, normalizer, horizon, purpose) = match evaluated {
-            None => (
+        let mut start_spread = vec![0.0f32; clips];
+        let (kernels, normalizer, horizon, purpose) = match source {
+            Source::Training(_) => (
                 Arc::new(EnvKernels::load(gpu)?),
                 ObservationNormalizer::new(gpu, n, obs_size, config.obs.clip)?,
                 config.horizon as usize,
                 Purpose::Training,
             ),
-            Some(training) => {
+            Source::Evaluation(training) => {
                 if training.observation_size() != obs_size {
                     return Err(RolloutError::Setup(format!(
                         "the evaluation's observation size {obs_size} differs from the training rollout's {}",
                         training.observation_size()
                     )));
                 }
-                let steps = evaluation_episode_steps(
-                    config.evaluation.steps,
-                    host_table.duration(),
-                    control_dt,
-                    host_table.loop_mode(),
-                ) as usize;
+                // Each clip's duration as its header holds it (f32), as the kernels see it.
+                let plan = (0..clips)
+                    .map(|c| {
+                        let segment = library.segment(c).ok_or_else(|| {
+                            RolloutError::Setup(format!("the library has no clip {c}"))
+                        })?;
+                        Ok(clip_evaluation(
+                            &config.evaluation,
+                            segment.duration(),
+                            control_dt,
+                            segment.loop_mode(),
+                        ))
+                    })
+                    .collect::<Result<Vec<ClipEvaluation>, RolloutError>>()?;
+                // One episode of every clip: the longest clip's (a library's shorter episodes
+                // complete when they have scored their clip's steps).
+                let steps = plan.iter().map(|c| c.steps).max().unwrap_or(1) as usize;
                 tracking = without_failures(&tracking);
                 tracking.max_episode_steps = steps as i32;
                 reset.start_time = 0.0;
-                reset.start_spread = match (config.evaluation.start, host_table.loop_mode()) {
-                    (EvalStart::Spread, LoopMode::Wrap) => host_table.duration() as f32,
-                    _ => 0.0,
-                };
+                start_spread = plan.iter().map(|c| c.start_spread).collect();
                 reset.horizon = steps as i32;
+                let clip_steps: Vec<i32> = plan.iter().map(|c| c.steps as i32).collect();
                 (
                     Arc::clone(&training.kernels),
                     ObservationNormalizer::frozen(gpu, &training.normalizer, n)?,
                     steps,
-                    Purpose::Evaluation(EpisodeScores::zeros(gpu, n)?, yardstick()),
+                    Purpose::Evaluation(
+                        EpisodeScores::zeros(gpu, n, &clip_steps)?,
+                        yardstick(),
+                        plan,
+                    ),
                 )
             }
         };
         let state = EpisodeState {
+            clip_id: DeviceArray::zeros(gpu, [n])?,
             ref_time: DeviceArray::zeros(gpu, [n])?,
             episode_step: DeviceArray::zeros(gpu, [n])?,
             done: DeviceArray::from_slice(gpu, [n], &vec![1; n])?,
@@ -228,7 +282,9 @@ impl Rollout {
             gpu: gpu.clone(),
             sim,
             kernels,
+            library,
             table,
+            layout,
             physics,
             state,
             storage,
@@ -237,6 +293,7 @@ impl Rollout {
             action_scale: config.env.action_scale,
             tracking,
             reset,
+            start_spread: DeviceArray::from_slice(gpu, [clips], &start_spread)?,
             observation: observation_params(&config.obs, control_dt),
             normalizer,
             phase_statistics,
@@ -303,7 +360,7 @@ impl Rollout {
         let stream = self.gpu.stream();
         let n = self.num_envs;
         self.state.done.upload(&vec![1; n])?;
-        if let Purpose::Evaluation(scores, _) = &self.purpose {
+        if let Purpose::Evaluation(scores, ..) = &self.purpose {
             scores.clear()?;
         }
         self.statistics.clear_running()?;
@@ -326,9 +383,23 @@ impl Rollout {
     /// The scores of the evaluation rollout's episodes (None for a training rollout).
     pub fn episode_scores(&self) -> Option<&EpisodeScores> {
         match &self.purpose {
-            Purpose::Evaluation(scores, _) => Some(scores),
+            Purpose::Evaluation(scores, ..) => Some(scores),
             Purpose::Training => None,
         }
+    }
+
+    /// How the evaluation rollout plays each clip of its library (episode steps, start spread;
+    /// None for a training rollout).
+    pub fn clip_evaluations(&self) -> Option<&[ClipEvaluation]> {
+        match &self.purpose {
+            Purpose::Evaluation(_, _, plan) => Some(plan),
+            Purpose::Training => None,
+        }
+    }
+
+    /// The clips this rollout tracks (the library of one for a single clip).
+    pub fn library(&self) -> &MotionLibrary {
+        &self.library
     }
 
     /// The policy's observation normalization: running count, mean and M2 (float64 device
@@ -338,14 +409,14 @@ impl Rollout {
         [&n.count, &n.mean, &n.m2]
     }
 
-    /// The adaptive start-phase statistics (visits, failures, CDF) and the device iteration
-    /// counter, for checkpoints.
+    /// The adaptive start statistics (visits, failures, CDF, each `[clips, phase bins]`) and
+    /// the device iteration counter, for checkpoints.
     pub fn phase_statistics(
         &self,
     ) -> (
-        &DeviceArray<f32>,
-        &DeviceArray<f32>,
-        &DeviceArray<f32>,
+        &DeviceArray2<f32>,
+        &DeviceArray2<f32>,
+        &DeviceArray2<f32>,
         &DeviceArray<i32>,
     ) {
         let p = &self.phase_statistics;
@@ -472,16 +543,22 @@ impl Rollout {
         Ok(graph)
     }
 
-    /// The reference table's rows at `times` (s), `[times.len(), stride]` row-major, as the
-    /// env kernels see them (`lookup_reference`); waits for the GPU.
-    pub fn reference_rows(&self, times: &[f32]) -> Result<Vec<f32>, RolloutError> {
+    /// The reference rows of clips `clips` at their times `times` (s), `[times.len(), stride]`
+    /// row-major, as the env kernels see them (`lookup_reference`); waits for the GPU.
+    pub fn reference_rows(&self, clips: &[i32], times: &[f32]) -> Result<Vec<f32>, RolloutError> {
         if times.is_empty() {
             return Ok(Vec::new());
         }
+        let device_clips = DeviceArray::from_slice(&self.gpu, [clips.len()], clips)?;
         let device_times = DeviceArray::from_slice(&self.gpu, [times.len()], times)?;
         let rows = DeviceArray::zeros(&self.gpu, [times.len(), self.table.stride()])?;
-        self.table
-            .lookup(&self.kernels, self.gpu.stream(), &device_times, &rows)?;
+        self.table.lookup(
+            &self.kernels,
+            self.gpu.stream(),
+            &device_clips,
+            &device_times,
+            &rows,
+        )?;
         Ok(rows.download()?)
     }
 
@@ -540,7 +617,7 @@ impl Rollout {
                 self.sim.record("kinematics", s)?;
                 self.record_reward(s, storage, t32)?;
                 match &self.purpose {
-                    Purpose::Evaluation(scores, yardstick) => {
+                    Purpose::Evaluation(scores, yardstick, _) => {
                         self.record_scores(s, storage, scores, yardstick, t32)?
                     }
                     Purpose::Training => self.statistics.record_step(
@@ -610,157 +687,6 @@ impl Rollout {
             t,
             !self.is_training(),
         )?;
-        Ok(())
-    }
-
-    fn record_scores(
-        &self,
-        s: &Stream,
-        storage: &RolloutStorage,
-        scores: &EpisodeScores,
-        yardstick: &Yardstick,
-        t: i32,
-    ) -> Result<(), RolloutError> {
-        let p = &self.physics;
-        self.kernels.evaluation_accumulate(
-            s,
-            self.num_envs,
-            &p.qpos,
-            &p.xpos,
-            &p.xquat,
-            self.table.table(),
-            &self.joints.end_effectors,
-            &self.state.ref_time,
-            t,
-            &storage.rewards,
-            &storage.terminated,
-            &storage.truncated,
-            yardstick,
-            &scores.status,
-            &scores.steps,
-            &scores.sums,
-        )?;
-        Ok(())
-    }
-
-    fn record_pd_control(&self, s: &Stream) -> Result<(), RolloutError> {
-        let j = &self.joints;
-        self.kernels.pd_control(
-            s,
-            self.num_envs * j.num_joints,
-            &self.state.actions,
-            &self.physics.qpos,
-            &self.physics.qvel,
-            &self.physics.dof_damping,
-            &j.kind,
-            &j.qpos,
-            &j.dof,
-            &j.kp,
-            &j.limit,
-            &j.scale,
-            &j.center,
-            self.table.table(),
-            &self.state.ref_time,
-            // The targets are the pose at the end of this control step (the reward's time).
-            self.tracking.dt,
-            i32::from(self.action_mode == ActionMode::Residual),
-            self.action_scale,
-            &self.physics.ctrl,
-        )?;
-        Ok(())
-    }
-
-    fn record_reward(
-        &self,
-        s: &Stream,
-        storage: &RolloutStorage,
-        t: i32,
-    ) -> Result<(), RolloutError> {
-        let (p, st) = (&self.physics, &self.state);
-        self.kernels.reward_termination(
-            s,
-            self.num_envs,
-            &p.qpos,
-            &p.qvel,
-            &p.xpos,
-            &p.xquat,
-            &p.subtree_com,
-            self.table.table(),
-            &self.joints.kind,
-            &self.joints.qpos,
-            &self.joints.end_effectors,
-            &self.tracking,
-            t,
-            &st.ref_time,
-            &st.episode_step,
-            &storage.rewards,
-            &storage.terminated,
-            &storage.truncated,
-            &st.done,
-            &st.failure,
-            &st.errors,
-            &self.phase_statistics.visits,
-            &self.phase_statistics.failures,
-        )?;
-        Ok(())
-    }
-
-    /// The masked reset of step `t`, then the kinematics plan (for every env: the ones not
-    /// reset are unchanged by it).
-    fn record_reset(&self, s: &Stream, t: i32) -> Result<(), RolloutError> {
-        let (p, st) = (&self.physics, &self.state);
-        self.kernels.reset_masked(
-            s,
-            self.num_envs,
-            &st.done,
-            self.table.table(),
-            self.joints.root_quat,
-            &self.joints.kind,
-            &self.joints.qpos,
-            &self.phase_statistics.cdf,
-            &self.phase_statistics.iteration,
-            t,
-            &self.reset,
-            &p.qpos,
-            &p.qvel,
-            &p.ctrl,
-            &p.qacc_warmstart,
-            &st.ref_time,
-            &st.episode_step,
-            &st.actions,
-        )?;
-        self.sim.record("kinematics", s)?;
-        Ok(())
-    }
-
-    /// The observation into row `row` of `storage`, normalized (statistics updated when
-    /// `update`).
-    fn record_observation(
-        &self,
-        s: &Stream,
-        storage: &RolloutStorage,
-        row: usize,
-        update: bool,
-    ) -> Result<(), RolloutError> {
-        let p = &self.physics;
-        let norm = &self.normalizer;
-        self.kernels.observe(
-            s,
-            self.num_envs,
-            &p.qpos,
-            &p.qvel,
-            &p.xpos,
-            &p.xquat,
-            &p.cvel,
-            &p.subtree_com,
-            self.table.table(),
-            &self.joints.end_effectors,
-            &self.state.ref_time,
-            &self.state.actions,
-            &self.observation,
-            &norm.raw,
-        )?;
-        norm.record(&self.kernels, s, &storage.observations, row, update)?;
         Ok(())
     }
 }

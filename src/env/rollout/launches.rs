@@ -1,0 +1,176 @@
+//! The env kernels' launches of one control step (docs/env.md, "One control step of the rollout
+//! graph"): each passes the reference table with its clip index and every env's clip id, so a
+//! single clip (the library of one) and a motion library run the same launches.
+
+use crate::cuda::Stream;
+use crate::kernels::Yardstick;
+
+use super::super::evaluation::EpisodeScores;
+use super::super::storage::RolloutStorage;
+use super::{Rollout, RolloutError};
+use crate::env::config::ActionMode;
+
+impl Rollout {
+    pub(super) fn record_scores(
+        &self,
+        s: &Stream,
+        storage: &RolloutStorage,
+        scores: &EpisodeScores,
+        yardstick: &Yardstick,
+        t: i32,
+    ) -> Result<(), RolloutError> {
+        let p = &self.physics;
+        self.kernels.evaluation_accumulate(
+            s,
+            self.num_envs,
+            &p.qpos,
+            &p.xpos,
+            &p.xquat,
+            self.table.table(),
+            self.table.clip_offsets(),
+            &self.joints.end_effectors,
+            &self.state.clip_id,
+            &self.state.ref_time,
+            t,
+            &storage.rewards,
+            &storage.terminated,
+            &storage.truncated,
+            yardstick,
+            &scores.clip_steps,
+            &scores.status,
+            &scores.steps,
+            &scores.sums,
+        )?;
+        Ok(())
+    }
+
+    pub(super) fn record_pd_control(&self, s: &Stream) -> Result<(), RolloutError> {
+        let j = &self.joints;
+        self.kernels.pd_control(
+            s,
+            self.num_envs * j.num_joints,
+            &self.state.actions,
+            &self.physics.qpos,
+            &self.physics.qvel,
+            &self.physics.dof_damping,
+            &j.kind,
+            &j.qpos,
+            &j.dof,
+            &j.kp,
+            &j.limit,
+            &j.scale,
+            &j.center,
+            self.table.table(),
+            self.table.clip_offsets(),
+            &self.state.clip_id,
+            &self.state.ref_time,
+            // The targets are the pose at the end of this control step (the reward's time).
+            self.tracking.dt,
+            i32::from(self.action_mode == ActionMode::Residual),
+            self.action_scale,
+            &self.physics.ctrl,
+        )?;
+        Ok(())
+    }
+
+    pub(super) fn record_reward(
+        &self,
+        s: &Stream,
+        storage: &RolloutStorage,
+        t: i32,
+    ) -> Result<(), RolloutError> {
+        let (p, st) = (&self.physics, &self.state);
+        self.kernels.reward_termination(
+            s,
+            self.num_envs,
+            &p.qpos,
+            &p.qvel,
+            &p.xpos,
+            &p.xquat,
+            &p.subtree_com,
+            self.table.table(),
+            self.table.clip_offsets(),
+            &self.joints.kind,
+            &self.joints.qpos,
+            &self.joints.end_effectors,
+            &self.tracking,
+            t,
+            &st.clip_id,
+            &st.ref_time,
+            &st.episode_step,
+            &storage.rewards,
+            &storage.terminated,
+            &storage.truncated,
+            &st.done,
+            &st.failure,
+            &st.errors,
+            &self.phase_statistics.visits,
+            &self.phase_statistics.failures,
+        )?;
+        Ok(())
+    }
+
+    /// The masked reset of step `t`, then the kinematics plan (for every env: the ones not
+    /// reset are unchanged by it).
+    pub(super) fn record_reset(&self, s: &Stream, t: i32) -> Result<(), RolloutError> {
+        let (p, st) = (&self.physics, &self.state);
+        self.kernels.reset_masked(
+            s,
+            self.num_envs,
+            &st.done,
+            self.table.table(),
+            self.table.clip_offsets(),
+            self.joints.root_quat,
+            &self.joints.kind,
+            &self.joints.qpos,
+            &self.phase_statistics.cdf,
+            &self.start_spread,
+            &self.phase_statistics.iteration,
+            t,
+            &self.reset,
+            &p.qpos,
+            &p.qvel,
+            &p.ctrl,
+            &p.qacc_warmstart,
+            &st.clip_id,
+            &st.ref_time,
+            &st.episode_step,
+            &st.actions,
+        )?;
+        self.sim.record("kinematics", s)?;
+        Ok(())
+    }
+
+    /// The observation into `storage`'s row `row`, normalized (statistics updated when
+    /// `update`).
+    pub(super) fn record_observation(
+        &self,
+        s: &Stream,
+        storage: &RolloutStorage,
+        row: usize,
+        update: bool,
+    ) -> Result<(), RolloutError> {
+        let p = &self.physics;
+        let norm = &self.normalizer;
+        self.kernels.observe(
+            s,
+            self.num_envs,
+            &p.qpos,
+            &p.qvel,
+            &p.xpos,
+            &p.xquat,
+            &p.cvel,
+            &p.subtree_com,
+            self.table.table(),
+            self.table.clip_offsets(),
+            &self.joints.end_effectors,
+            &self.state.clip_id,
+            &self.state.ref_time,
+            &self.state.actions,
+            &self.observation,
+            &norm.raw,
+        )?;
+        norm.record(&self.kernels, s, &storage.observations, row, update)?;
+        Ok(())
+    }
+}

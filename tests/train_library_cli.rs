@@ -1,0 +1,226 @@
+//! `instantmimic train` on a motion library, without a GPU: the dry run of the committed
+//! library configurations, a library's paths relative to its configuration file, and bad input
+//! failing with one line that names the clip or the key (docs/library.md).
+
+mod train_cli_support;
+
+use std::path::Path;
+
+use instantmimic::motion::SyntheticMotion;
+use instantmimic::motion::find::motions_dir_from_env;
+use train_cli_support::{one_line_error, resolved_config, run, succeeded, workspace};
+
+fn repo() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn the_shipped_library_config_passes_the_dry_run_with_every_clip_listed() {
+    let out = run(
+        &[
+            "train",
+            "--config",
+            "configs/train/library_shipped.toml",
+            "--dry-run",
+        ],
+        None,
+        repo(),
+    );
+    let text = succeeded(&out);
+    assert!(
+        text.contains("motion        motion library (13 clips): 1385 frames, 28.058 s in all"),
+        "{text}"
+    );
+    for clip in ["backflip", "getup_faceup", "walk"] {
+        assert!(
+            text.contains(&format!("clip          {clip} (")),
+            "{clip}: {text}"
+        );
+    }
+    assert!(
+        text.contains("getup_faceup (227 frames at 60.0 fps, 3.767 s, loop none, 114 rows, weight 1; evaluated over one pass, 112 steps)"),
+        "{text}"
+    );
+    assert!(
+        text.contains("4096 envs x up to 121 steps (4.033 s), success at 0.95 of the episodes and every clip at 0.8"),
+        "{text}"
+    );
+    assert!(text.contains("run directory runs/library-seed0"), "{text}");
+    let config = resolved_config(&text);
+    let library = config.motion_library.as_ref().expect("a library");
+    assert_eq!(library.clips.as_ref().map(Vec::len), Some(13));
+    assert!(config.motion.is_empty());
+}
+
+/// The long clips are not committed: checked when INSTANTMIMIC_MOTIONS names a directory with
+/// `long/` (tests/run.sh sets it where ../shared/data/motions exists).
+#[test]
+fn the_all_clips_config_evaluates_the_long_clips_over_windows() {
+    let Some(dir) = motions_dir_from_env().filter(|d| d.join("long").is_dir()) else {
+        eprintln!("skipped: INSTANTMIMIC_MOTIONS names no directory with DeepMimic's long/");
+        return;
+    };
+    let args = [
+        "train",
+        "--config",
+        "configs/train/library_all.toml",
+        "--dry-run",
+    ];
+    let text = succeeded(&run(&args, Some(&dir), repo()));
+    assert!(text.contains("motion library (22 clips)"), "{text}");
+    assert!(
+        text.contains("stealthy_walk1 (1595 frames at 24.0 fps, 66.417 s, loop none, 1994 rows, weight 1; evaluated over windows of 300 steps)"),
+        "{text}"
+    );
+    assert!(text.contains("4096 envs x up to 300 steps"), "{text}");
+    // Without the motions directory the first long clip is named.
+    let err = one_line_error(&run(&args, None, repo()));
+    assert!(
+        err.contains("motion library clip \"long/humanoid3d_long_walk1.txt\": no motion"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_library_configs_paths_are_relative_to_the_file() {
+    let ws = workspace();
+    let configs = ws.path().join("configs");
+    std::fs::create_dir(&configs).unwrap();
+    std::fs::write(
+        configs.join("clips.toml"),
+        "[[clip]]\nmotion = \"../motions/humanoid3d_synth.txt\"\nweight = 2.0\n[[clip]]\nmotion = \"walk\"\n",
+    )
+    .unwrap();
+    std::fs::write(
+        configs.join("lib.toml"),
+        "[motion_library]\nmanifest = \"clips.toml\"\n[env]\nnum_envs = 32\n[ppo]\nhorizon = 4\n",
+    )
+    .unwrap();
+    // Run from the workspace's parent: the manifest is found beside the configuration.
+    let parent = ws.path().parent().unwrap();
+    let config = configs.join("lib.toml");
+    let out = run(
+        &["train", "--config", config.to_str().unwrap(), "--dry-run"],
+        None,
+        parent,
+    );
+    let text = succeeded(&out);
+    assert!(text.contains("clip          synth (31 frames"), "{text}");
+    assert!(
+        text.contains("weight 2; evaluated over one pass, 30 steps"),
+        "{text}"
+    );
+    assert!(text.contains("clip          walk (39 frames"), "{text}");
+    // The run's config.toml names the manifest so that it is found from the same directory.
+    let resolved = resolved_config(&text);
+    let manifest = resolved
+        .motion_library
+        .and_then(|l| l.manifest)
+        .expect("a manifest");
+    assert_eq!(manifest, configs.join("clips.toml"));
+}
+
+#[test]
+fn bad_libraries_fail_with_one_line_naming_the_clip_or_the_key() {
+    let ws = workspace();
+    let path = |name: &str| ws.path().join(name);
+    let write = |name: &str, text: &str| std::fs::write(path(name), text).unwrap();
+    write("empty.toml", "[motion_library]\nclips = []\n");
+    write(
+        "both.toml",
+        "motion = \"walk\"\n[motion_library]\nclips = [\"run\"]\n",
+    );
+    write("neither.toml", "seed = 3\n");
+    std::fs::create_dir(path("dir")).unwrap();
+    std::fs::write(
+        path("dir/humanoid3d_good.txt"),
+        SyntheticMotion::default().to_json(),
+    )
+    .unwrap();
+    std::fs::write(path("dir/humanoid3d_broken.txt"), "{ not json").unwrap();
+    write("dir.toml", "[motion_library]\ndir = \"dir\"\n");
+    // Another character's clip: DeepMimic frames of 8 columns, not the humanoid's 44.
+    std::fs::write(
+        path("motions/humanoid3d_other.txt"),
+        "{\"Loop\": \"wrap\", \"Frames\": [[0.1, 0, 0, 0, 1, 0, 0, 0], [0.1, 0, 0, 0, 1, 0, 0, 0]]}",
+    )
+    .unwrap();
+    write(
+        "other.toml",
+        "[motion_library]\nclips = [\"walk\", \"other\"]\n",
+    );
+    write(
+        "weight.toml",
+        "[motion_library]\nmanifest = \"weights.toml\"\n",
+    );
+    write(
+        "weights.toml",
+        "[[clip]]\nmotion = \"walk\"\nweight = -1.0\n",
+    );
+    let motions = path("motions");
+    let arg = |name: &str| path(name).display().to_string();
+    for (name, extra, expected) in [
+        ("empty.toml", None, "the motion library has no clips"),
+        (
+            "both.toml",
+            None,
+            "`motion_library` = motion library (1 clip): `motion` and `[motion_library]` are alternatives",
+        ),
+        (
+            "neither.toml",
+            None,
+            "`motion` = \"\": name a motion or a file",
+        ),
+        ("dir.toml", None, "motion library clip \"broken\": "),
+        ("other.toml", None, "motion library clip \"other\": "),
+        (
+            "weight.toml",
+            None,
+            "motion library clip \"walk\" (`clip[0].weight`): the weight -1 must be positive",
+        ),
+        (
+            "other.toml",
+            Some("--gpus=0,1"),
+            "`run.gpus` = [0, 1]: a motion library trains on one GPU",
+        ),
+    ] {
+        let config = arg(name);
+        let mut args = vec!["train", "--config", config.as_str(), "--dry-run"];
+        args.extend(extra);
+        let err = one_line_error(&run(&args, Some(&motions), ws.path()));
+        assert!(err.contains(expected), "{name} {extra:?}: {err}");
+    }
+    let err = one_line_error(&run(
+        &["train", "--config", &arg("other.toml"), "--dry-run"],
+        Some(&motions),
+        ws.path(),
+    ));
+    assert!(err.contains("columns"), "another character's clip: {err}");
+}
+
+#[test]
+fn a_command_of_one_clip_refuses_a_library_in_one_line() {
+    let ws = workspace();
+    std::fs::write(
+        ws.path().join("lib.toml"),
+        "[motion_library]\nclips = [\"walk\", \"run\"]\n",
+    )
+    .unwrap();
+    let out = run(
+        &[
+            "bench",
+            "rollout",
+            "--motion",
+            "walk",
+            "--config",
+            ws.path().join("lib.toml").to_str().unwrap(),
+        ],
+        None,
+        ws.path(),
+    );
+    let err = one_line_error(&out);
+    assert!(
+        err.contains("motion_library: this takes a configuration of one clip"),
+        "{err}"
+    );
+}
