@@ -206,21 +206,19 @@ fn a_command_of_one_clip_refuses_a_library_in_one_line() {
         "[motion_library]\nclips = [\"walk\", \"run\"]\n",
     )
     .unwrap();
-    let out = run(
-        &[
-            "bench",
-            "rollout",
-            "--motion",
-            "walk",
-            "--config",
-            ws.path().join("lib.toml").to_str().unwrap(),
-        ],
-        None,
-        ws.path(),
-    );
-    let err = one_line_error(&out);
-    assert!(
-        err.contains("motion_library: this takes a configuration of one clip"),
-        "{err}"
-    );
+    let config = ws.path().join("lib.toml").display().to_string();
+    for command in [
+        vec!["bench", "rollout"],
+        vec!["bench", "full"],
+        vec!["bench", "train-gpus", "--gpus", "0,1"],
+    ] {
+        let mut args = command.clone();
+        args.extend(["--motion", "walk", "--config", config.as_str()]);
+        let err = one_line_error(&run(&args, None, ws.path()));
+        assert!(
+            err.contains("motion_library: this takes a configuration of one clip")
+                && err.contains(&command[..2].join(" ")),
+            "{command:?}: {err}"
+        );
+    }
 }

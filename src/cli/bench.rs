@@ -1,6 +1,6 @@
 //! `instantmimic bench ...`: throughput benchmarks on the GPU.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand, ValueEnum};
@@ -17,6 +17,64 @@ use crate::motion::find::{motions_dir_from_env, resolve_motion};
 use crate::plan::{PlanStore, ReplayOrder};
 use crate::train::library::single_clip_only;
 use crate::train::{GemmSetting, TrainConfig, preflight};
+
+/// The shape of a benchmarked training loop, each overriding its config key (`bench rollout`,
+/// `bench full`).
+#[derive(Args, Debug)]
+pub(super) struct LoopShapeArgs {
+    /// Number of envs, overriding `env.num_envs` (a step plan for this count must exist).
+    #[arg(long)]
+    envs: Option<u32>,
+    /// Physics substeps per control step, overriding `env.substeps`.
+    #[arg(long)]
+    substeps: Option<u32>,
+    /// Control steps per rollout, overriding `ppo.horizon`.
+    #[arg(long)]
+    horizon: Option<u32>,
+    /// What computes the policy's GEMMs, overriding `policy.gemm` (cuBLAS comes with the CUDA
+    /// toolkit and is found through the library path).
+    #[arg(long, value_enum)]
+    gemm: Option<GemmArg>,
+}
+
+impl LoopShapeArgs {
+    /// Writes the given overrides into `config`.
+    pub(super) fn apply(&self, config: &mut TrainConfig) {
+        if let Some(envs) = self.envs {
+            config.env.num_envs = envs;
+        }
+        if let Some(substeps) = self.substeps {
+            config.env.substeps = substeps;
+        }
+        if let Some(horizon) = self.horizon {
+            config.ppo.horizon = horizon;
+        }
+        if let Some(gemm) = self.gemm {
+            config.policy.gemm = gemm.into();
+        }
+    }
+}
+
+/// The configuration a benchmark of `motion` runs with, and its label: the file `config`, else
+/// the motion's committed config, else the general default (as `train --motion` takes them);
+/// `motion` replaces its `motion` key. A motion library is refused, naming `command`.
+pub(super) fn benchmark_config(
+    config: Option<&Path>,
+    motion: &str,
+    command: &str,
+) -> Result<(TrainConfig, String)> {
+    let (mut config, label) = match config {
+        Some(path) => (TrainConfig::load(path)?, path.display().to_string()),
+        None => {
+            let (label, config) = TrainConfig::committed(motion)
+                .unwrap_or_else(|| TrainConfig::general_default(motion));
+            (config?, label)
+        }
+    };
+    single_clip_only(&config, command)?;
+    config.motion = motion.to_owned();
+    Ok((config, label))
+}
 
 /// `bench rollout --gemm`: `policy.gemm` (src/ppo/config.rs, `GemmSetting`).
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -148,19 +206,8 @@ struct RolloutArgs {
     /// built-in baseline (src/{env,ppo,train}/config.rs).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Number of envs, overriding `env.num_envs` (a step plan for this count must exist).
-    #[arg(long)]
-    envs: Option<u32>,
-    /// Physics substeps per control step, overriding `env.substeps`.
-    #[arg(long)]
-    substeps: Option<u32>,
-    /// Control steps per rollout, overriding `ppo.horizon`.
-    #[arg(long)]
-    horizon: Option<u32>,
-    /// What computes the policy's GEMMs, overriding `policy.gemm` (cuBLAS comes with the CUDA
-    /// toolkit and is found through the library path).
-    #[arg(long, value_enum)]
-    gemm: Option<GemmArg>,
+    #[command(flatten)]
+    shape: LoopShapeArgs,
     /// Timed rollouts per measurement.
     #[arg(long, default_value_t = 20)]
     launches: u32,
@@ -235,16 +282,8 @@ fn train_gpus(args: TrainGpusArgs) -> Result<()> {
             args.gpus.len()
         );
     }
-    let (mut config, label) = match &args.config {
-        Some(path) => (TrainConfig::load(path)?, path.display().to_string()),
-        None => {
-            let (label, config) = TrainConfig::committed(&args.motion)
-                .unwrap_or_else(|| TrainConfig::general_default(&args.motion));
-            (config?, label)
-        }
-    };
-    single_clip_only(&config, "bench train-gpus")?;
-    config.motion = args.motion.clone();
+    let (mut config, label) =
+        benchmark_config(args.config.as_deref(), &args.motion, "bench train-gpus")?;
     if let Some(envs) = args.envs {
         config.env.num_envs = envs;
     }
@@ -419,18 +458,7 @@ fn rollout(args: RolloutArgs) -> Result<()> {
     // The benchmark times one clip (--motion).
     single_clip_only(&config, "bench rollout")?;
     config.motion = args.motion.clone();
-    if let Some(envs) = args.envs {
-        config.env.num_envs = envs;
-    }
-    if let Some(substeps) = args.substeps {
-        config.env.substeps = substeps;
-    }
-    if let Some(horizon) = args.horizon {
-        config.ppo.horizon = horizon;
-    }
-    if let Some(gemm) = args.gemm {
-        config.policy.gemm = gemm.into();
-    }
+    args.shape.apply(&mut config);
     let name = args.config.as_ref().map_or_else(
         || "the command line".to_owned(),
         |p| p.display().to_string(),

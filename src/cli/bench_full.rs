@@ -8,12 +8,12 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 
-use super::bench::GemmArg;
+use super::bench::{LoopShapeArgs, benchmark_config};
 use crate::bench::{FullBench, LoopCase, bench_full};
 use crate::cuda::Gpu;
 use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
-use crate::train::{TrainConfig, preflight};
+use crate::train::preflight;
 
 #[derive(Args, Debug)]
 pub(super) struct FullArgs {
@@ -25,18 +25,8 @@ pub(super) struct FullArgs {
     /// measured, on --device.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Number of envs, overriding `env.num_envs` (a step plan for this count must exist).
-    #[arg(long)]
-    envs: Option<u32>,
-    /// Physics substeps per control step, overriding `env.substeps`.
-    #[arg(long)]
-    substeps: Option<u32>,
-    /// Control steps per rollout, overriding `ppo.horizon`.
-    #[arg(long)]
-    horizon: Option<u32>,
-    /// What computes the policy's GEMMs, overriding `policy.gemm`.
-    #[arg(long, value_enum)]
-    gemm: Option<GemmArg>,
+    #[command(flatten)]
+    shape: LoopShapeArgs,
     /// Timed iterations per round (and floor launches per round).
     #[arg(long, default_value_t = 20)]
     iterations: u32,
@@ -65,27 +55,8 @@ pub(super) fn run(args: FullArgs) -> Result<()> {
     if args.iterations == 0 {
         bail!("--iterations must be at least 1");
     }
-    let (mut config, label) = match &args.config {
-        Some(path) => (TrainConfig::load(path)?, path.display().to_string()),
-        None => {
-            let (label, config) = TrainConfig::committed(&args.motion)
-                .unwrap_or_else(|| TrainConfig::general_default(&args.motion));
-            (config?, label)
-        }
-    };
-    config.motion = args.motion.clone();
-    if let Some(envs) = args.envs {
-        config.env.num_envs = envs;
-    }
-    if let Some(substeps) = args.substeps {
-        config.env.substeps = substeps;
-    }
-    if let Some(horizon) = args.horizon {
-        config.ppo.horizon = horizon;
-    }
-    if let Some(gemm) = args.gemm {
-        config.policy.gemm = gemm.into();
-    }
+    let (mut config, label) = benchmark_config(args.config.as_deref(), &args.motion, "bench full")?;
+    args.shape.apply(&mut config);
     // One GPU, --device; both settings of the overlap are measured.
     config.run.gpus.clear();
     config.ppo.overlap_update = false;
