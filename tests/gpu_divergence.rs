@@ -5,27 +5,14 @@
 //! `cargo test --release --features gpu --test gpu_divergence -- --nocapture`
 #![cfg(feature = "gpu")]
 
+mod small_run_support;
+
 use instantmimic::cuda::Gpu;
-use instantmimic::motion::find::resolve_motion;
-use instantmimic::motion::{Character, ReferenceMotion};
 use instantmimic::plan::PlanStore;
 use instantmimic::train::checkpoint::tensor_names;
 use instantmimic::train::divergence::{RESTORE_LEARNING_RATE_FACTOR, non_finite_report};
-use instantmimic::train::{Checkpoint, CheckpointMeta, DivergenceGuard, TrainConfig, Trainer};
-
-fn motion() -> ReferenceMotion {
-    let character = Character::humanoid().expect("the humanoid");
-    resolve_motion("walk", None)
-        .and_then(|resolved| resolved.load(&character))
-        .expect("the built-in walk loads")
-}
-
-fn snapshot(trainer: &Trainer, config: &TrainConfig, iteration: u64) -> Checkpoint {
-    let meta = CheckpointMeta::new(config, iteration, 0.0, 0).expect("meta");
-    let mut checkpoint = Checkpoint::new(meta);
-    trainer.save_into(&mut checkpoint).expect("save");
-    checkpoint
-}
+use instantmimic::train::{DivergenceGuard, TrainConfig, Trainer};
+use small_run_support::{built_in_motion, snapshot};
 
 #[test]
 fn an_injected_nan_is_reported_and_training_recovers() {
@@ -36,7 +23,7 @@ fn an_injected_nan_is_reported_and_training_recovers() {
     // The committed 32-world plans keep the test small.
     config.env.num_envs = 32;
     config.validate("test").expect("valid config");
-    let motion = motion();
+    let motion = built_in_motion("walk");
     let mut trainer = Trainer::new(&gpu, &store, &motion, &config).expect("trainer");
 
     for _ in 0..3 {

@@ -27,7 +27,6 @@ mod ppo_support;
 mod skip_support;
 mod small_run_support;
 
-use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -36,22 +35,13 @@ use instantmimic::cuda::{
     ReduceOp, nccl_version,
 };
 use instantmimic::kernels::{DeviceArray, EnvKernels};
-use instantmimic::motion::find::resolve_motion;
-use instantmimic::motion::{Character, ReferenceMotion};
 use instantmimic::plan::PlanStore;
 use instantmimic::ppo::{GaussianPolicy, PpoUpdate};
 use instantmimic::train::{IterationReport, Replicas, TrainConfig, Trainer, replica_mismatch};
 use ppo_support::RolloutStorage;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
-use small_run_support::{binary, check_success};
-
-fn motion(name: &str) -> ReferenceMotion {
-    let character = Character::humanoid().expect("the humanoid");
-    resolve_motion(name, None)
-        .and_then(|resolved| resolved.load(&character))
-        .expect("a built-in clip")
-}
+use small_run_support::{binary, built_in_motion, check_success, metrics};
 
 /// Whether NCCL can be opened (else the test skips, or fails with INSTANTMIMIC_NO_SKIP=1).
 fn nccl_or_skip() -> bool {
@@ -216,7 +206,7 @@ fn one_gpu_a_world_of_one_rank_starts_as_the_single_gpu_trainer() {
     let gpu = Gpu::open(0).expect("a GPU");
     let store = PlanStore::new(None);
     let config = small_run_support::small_config("backflip");
-    let motion = motion("backflip");
+    let motion = built_in_motion("backflip");
     let world = Communicator::create_all(&[0], CollectivePlacement::BetweenGraphParts)
         .expect("a world of one rank");
     let plain = Trainer::new(&gpu, &store, &motion, &config).expect("trainer");
@@ -244,7 +234,7 @@ fn several_gpus_replicas_stay_bit_identical_for_100_iterations() {
         !config.run.nccl_in_graph,
         "the default: between graph parts"
     );
-    let motion = motion("backflip");
+    let motion = built_in_motion("backflip");
     let replicas = Replicas::start(&devices, &config, &motion, &PlanStore::new(None));
     replicas_stay_bit_identical(replicas.expect("replicas"), &devices, 100, false);
 }
@@ -261,7 +251,7 @@ fn several_gpus_with_the_all_reduces_in_the_graph_stay_identical_or_fail_cleanly
     };
     let mut config = small_run_support::small_config("backflip");
     config.run.nccl_in_graph = true;
-    let motion = motion("backflip");
+    let motion = built_in_motion("backflip");
     match Replicas::start(&devices, &config, &motion, &PlanStore::new(None)) {
         Ok(replicas) => replicas_stay_bit_identical(replicas, &devices, 20, true),
         Err(e) => {
@@ -314,14 +304,6 @@ fn replicas_stay_bit_identical(
         own_rollouts > iterations / 2,
         "every GPU should run its own envs (own seed): rollouts differed in only {own_rollouts} of {iterations} iterations"
     );
-}
-
-fn metrics(run: &Path) -> Vec<serde_json::Value> {
-    std::fs::read_to_string(run.join("metrics.jsonl"))
-        .unwrap_or_default()
-        .lines()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect()
 }
 
 #[test]

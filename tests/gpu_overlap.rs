@@ -25,39 +25,21 @@
 mod ppo_support;
 mod small_run_support;
 
-use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use instantmimic::cuda::Gpu;
 use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels};
-use instantmimic::motion::find::resolve_motion;
-use instantmimic::motion::{Character, ReferenceMotion};
 use instantmimic::plan::PlanStore;
 use instantmimic::ppo::{GaussianPolicy, KlMeasure, PpoStatistics, PpoUpdate};
 use instantmimic::train::checkpoint::tensor_names;
 use instantmimic::train::divergence::non_finite_report;
-use instantmimic::train::{
-    Checkpoint, CheckpointMeta, DivergenceGuard, IterationStats, TrainConfig, Trainer,
-};
+use instantmimic::train::{DivergenceGuard, IterationStats, TrainConfig, Trainer};
 use ppo_support::RolloutStorage;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
-use small_run_support::{binary, check_success};
-
-/// The deterministic plans (an absolute path, for the binary too).
-fn assets() -> PathBuf {
-    let dir = std::env::var_os("INSTANTMIMIC_ASSETS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("ptx/deterministic"));
-    std::path::absolute(&dir).expect("an absolute assets path")
-}
-
-fn motion(name: &str) -> ReferenceMotion {
-    let character = Character::humanoid().expect("the humanoid");
-    resolve_motion(name, None)
-        .and_then(|resolved| resolved.load(&character))
-        .expect("a built-in clip")
-}
+use small_run_support::{
+    binary, built_in_motion, check_success, deterministic_assets, metrics, snapshot,
+};
 
 fn values(a: &DeviceArray<f32>) -> Vec<f32> {
     a.download().expect("download")
@@ -235,8 +217,8 @@ fn finite(stats: &IterationStats, what: &str) {
 #[test]
 fn off_is_the_sequential_loop_and_the_overlapped_loop_starts_with_its_update() {
     let gpu = Gpu::open(0).expect("a GPU");
-    let store = PlanStore::new(Some(assets().as_path()));
-    let motion = motion("backflip");
+    let store = PlanStore::new(Some(deterministic_assets().as_path()));
+    let motion = built_in_motion("backflip");
     let mut first = Trainer::new(&gpu, &store, &motion, &small(false)).expect("trainer");
     let mut second = Trainer::new(&gpu, &store, &motion, &small(false)).expect("trainer");
     let mut overlapped = Trainer::new(&gpu, &store, &motion, &small(true)).expect("trainer");
@@ -289,9 +271,10 @@ fn off_is_the_sequential_loop_and_the_overlapped_loop_starts_with_its_update() {
 #[test]
 fn the_rollout_samples_from_the_parameters_one_update_behind() {
     let gpu = Gpu::open(0).expect("a GPU");
-    let store = PlanStore::new(Some(assets().as_path()));
+    let store = PlanStore::new(Some(deterministic_assets().as_path()));
     let config = small(true);
-    let mut trainer = Trainer::new(&gpu, &store, &motion("backflip"), &config).expect("trainer");
+    let mut trainer =
+        Trainer::new(&gpu, &store, &built_in_motion("backflip"), &config).expect("trainer");
     let mut before = parameters(trainer.policy());
     for iteration in 1..=6 {
         let stats = trainer.iterate().expect("iterate");
@@ -317,19 +300,13 @@ fn the_rollout_samples_from_the_parameters_one_update_behind() {
     }
 }
 
-fn snapshot(trainer: &Trainer, config: &TrainConfig, iteration: u64) -> Checkpoint {
-    let meta = CheckpointMeta::new(config, iteration, 0.0, 0).expect("meta");
-    let mut checkpoint = Checkpoint::new(meta);
-    trainer.save_into(&mut checkpoint).expect("save");
-    checkpoint
-}
-
 #[test]
 fn a_divergence_restore_restarts_the_pipeline() {
     let gpu = Gpu::open(0).expect("a GPU");
-    let store = PlanStore::new(Some(assets().as_path()));
+    let store = PlanStore::new(Some(deterministic_assets().as_path()));
     let config = small(true);
-    let mut trainer = Trainer::new(&gpu, &store, &motion("backflip"), &config).expect("trainer");
+    let mut trainer =
+        Trainer::new(&gpu, &store, &built_in_motion("backflip"), &config).expect("trainer");
     for _ in 0..3 {
         finite(&trainer.iterate().expect("iterate"), "before");
     }
@@ -385,14 +362,6 @@ fn a_divergence_restore_restarts_the_pipeline() {
         finite(&stats, "after");
         assert_eq!(stats.extra_rollouts, 0);
     }
-}
-
-fn metrics(run: &Path) -> Vec<serde_json::Value> {
-    std::fs::read_to_string(run.join("metrics.jsonl"))
-        .unwrap_or_default()
-        .lines()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect()
 }
 
 #[test]

@@ -34,7 +34,7 @@ use instantmimic::train::{
     Checkpoint, EnvEvaluation, EvalStart, SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M,
     TrainConfig, evaluate_episodes_on_gpu, evaluation_steps, preflight,
 };
-use small_run_support::binary;
+use small_run_support::{binary, deterministic_assets};
 
 /// The page's size limit (issue 18's acceptance).
 const MAX_PAGE_BYTES: u64 = 5_000_000;
@@ -42,14 +42,6 @@ const MAX_PAGE_BYTES: u64 = 5_000_000;
 /// the kinematics of the table's qpos, the kernels compare with the table's body positions
 /// blended between rows, millimetres apart between two control steps (src/replay/assemble.rs).
 const SLACK_M: f64 = 5e-3;
-
-/// The deterministic plans (an absolute path, for the binary too).
-fn assets() -> PathBuf {
-    let dir = std::env::var_os("INSTANTMIMIC_ASSETS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("ptx/deterministic"));
-    std::path::absolute(&dir).expect("an absolute assets path")
-}
 
 fn check_success(out: &Output, what: &str) -> String {
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
@@ -84,7 +76,7 @@ fn train_walk(dir: &Path) -> (PathBuf, PathBuf) {
         .arg("--out")
         .arg(&run)
         .arg("--assets")
-        .arg(assets())
+        .arg(deterministic_assets())
         .output()
         .expect("train runs");
     let text = check_success(&out, "train");
@@ -301,7 +293,7 @@ fn replays_record_what_the_evaluation_scores_and_pages_stay_small() {
         .arg("--save-recording")
         .arg(&recording_path)
         .arg("--assets")
-        .arg(assets())
+        .arg(deterministic_assets())
         .output()
         .expect("replay runs");
     check_success(&out, "replay");
@@ -314,7 +306,7 @@ fn replays_record_what_the_evaluation_scores_and_pages_stay_small() {
     let from_file = Recording::load(&recording_path, &character).expect("the recording reads");
 
     let gpu = Gpu::open(0).expect("a GPU");
-    let store = PlanStore::new(Some(&assets()));
+    let store = PlanStore::new(Some(&deterministic_assets()));
     let (replay, config, motion, evaluations) =
         replay_in_process(&gpu, &checkpoint, &store, EvalStart::Spread, 4);
     let recording = &replay.recording;

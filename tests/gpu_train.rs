@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use small_run_support::{binary, check_success};
+use small_run_support::{binary, check_success, metrics};
 
 /// The backflip's committed config at the 32-world size, with small iterations.
 fn write_config(dir: &Path, max_iterations: u64, checkpoint_interval: u32) -> PathBuf {
@@ -28,14 +28,6 @@ fn write_config(dir: &Path, max_iterations: u64, checkpoint_interval: u32) -> Pa
     let path = dir.join("config.toml");
     std::fs::write(&path, config.to_toml().expect("toml")).expect("write config");
     path
-}
-
-fn metrics(run: &Path) -> Vec<serde_json::Value> {
-    std::fs::read_to_string(run.join("metrics.jsonl"))
-        .unwrap_or_default()
-        .lines()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect()
 }
 
 #[test]

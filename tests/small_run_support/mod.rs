@@ -1,14 +1,50 @@
 //! What the GPU tests that train share: the committed config of a clip shrunk for them (32
 //! envs, the committed 32-world plans; short iterations, evaluation every 2, no stop at
-//! success), and the binary under test for those that run it.
+//! success), the built-in clips and the deterministic plans they train on, a run's metrics and
+//! a trainer's state as a checkpoint, and the binary under test for those that run it.
 
 #![allow(dead_code)] // each test binary uses a subset
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use instantmimic::motion::find::MOTIONS_ENV;
-use instantmimic::train::TrainConfig;
+use instantmimic::motion::find::{MOTIONS_ENV, resolve_motion};
+use instantmimic::motion::{Character, ReferenceMotion};
+use instantmimic::train::{Checkpoint, CheckpointMeta, TrainConfig, Trainer};
+
+/// A built-in clip, loaded for the humanoid.
+pub fn built_in_motion(name: &str) -> ReferenceMotion {
+    let character = Character::humanoid().expect("the humanoid");
+    resolve_motion(name, None)
+        .and_then(|resolved| resolved.load(&character))
+        .expect("a built-in clip")
+}
+
+/// The deterministic plans (an absolute path, for the binary too): `INSTANTMIMIC_ASSETS`, else
+/// `ptx/deterministic`.
+pub fn deterministic_assets() -> PathBuf {
+    let dir = std::env::var_os("INSTANTMIMIC_ASSETS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("ptx/deterministic"));
+    std::path::absolute(&dir).expect("an absolute assets path")
+}
+
+/// The records of a run's `metrics.jsonl` (none when it is missing).
+pub fn metrics(run: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(run.join("metrics.jsonl"))
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect()
+}
+
+/// `trainer`'s state as a checkpoint of `config` at `iteration`.
+pub fn snapshot(trainer: &Trainer, config: &TrainConfig, iteration: u64) -> Checkpoint {
+    let meta = CheckpointMeta::new(config, iteration, 0.0, 0).expect("meta");
+    let mut checkpoint = Checkpoint::new(meta);
+    trainer.save_into(&mut checkpoint).expect("save");
+    checkpoint
+}
 
 /// The binary under test: `INSTANTMIMIC_BIN` where the test runs away from its build tree (the
 /// device machine), else the one cargo built beside this test; the user's motions directory
