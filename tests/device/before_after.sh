@@ -10,9 +10,7 @@
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 . tests/device/common.sh
-[ -f "${BEFORE:-}/instantmimic.xz" ] || { echo "BEFORE=DIR must hold instantmimic.xz (the older build)" >&2; exit 2; }
-mkdir -p /tmp/instantmimic-before && xz -dc "$BEFORE/instantmimic.xz" > /tmp/instantmimic-before/instantmimic \
-  && chmod +x /tmp/instantmimic-before/instantmimic
+unpack_before
 # cuBLAS for the policy's GEMMs (`policy.gemm = "auto"`), as the committed configs measure.
 LD_LIBRARY_PATH=$(toolkit_libs)
 export LD_LIBRARY_PATH
@@ -20,7 +18,6 @@ deadline=$(( $(date +%s) + ${SESSION_S:-540} ))
 mkdir -p "$OUT/runs"
 rows="$OUT/before_after.tsv"
 printf 'what\tbuild\tvalue\tframes_M\n' > "$rows"
-binary() { if [ "$1" = before ]; then echo /tmp/instantmimic-before/instantmimic; else echo "$BIN/instantmimic"; fi; }
 time_left() { [ $(( deadline - $(date +%s) )) -gt "$1" ]; }
 
 for round in 1 2; do

@@ -33,3 +33,13 @@ nccl_libs() {
 gpu_count() {
   nvidia-smi -L 2>/dev/null | grep -c '^GPU'
 }
+
+# The older build of a before/after comparison: unpacks $BEFORE/instantmimic.xz once and
+# defines `binary before|after` (the older build, or the staged one). Exits when BEFORE is not
+# such a directory.
+unpack_before() {
+  [ -f "${BEFORE:-}/instantmimic.xz" ] || { echo "BEFORE=DIR must hold instantmimic.xz (the older build)" >&2; exit 2; }
+  mkdir -p /tmp/instantmimic-before && xz -dc "$BEFORE/instantmimic.xz" > /tmp/instantmimic-before/instantmimic \
+    && chmod +x /tmp/instantmimic-before/instantmimic
+}
+binary() { if [ "$1" = before ]; then echo /tmp/instantmimic-before/instantmimic; else echo "$BIN/instantmimic"; fi; }

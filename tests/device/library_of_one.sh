@@ -12,15 +12,12 @@
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 . tests/device/common.sh
-[ -f "${BEFORE:-}/instantmimic.xz" ] || { echo "BEFORE=DIR must hold instantmimic.xz (the older build)" >&2; exit 2; }
-mkdir -p /tmp/instantmimic-before && xz -dc "$BEFORE/instantmimic.xz" > /tmp/instantmimic-before/instantmimic \
-  && chmod +x /tmp/instantmimic-before/instantmimic
+unpack_before
 LD_LIBRARY_PATH=$(toolkit_libs)
 export LD_LIBRARY_PATH
 ASSETS=ptx/deterministic
 dir="$OUT/library_of_one"
 mkdir -p "$dir"
-binary() { if [ "$1" = before ]; then echo /tmp/instantmimic-before/instantmimic; else echo "$BIN/instantmimic"; fi; }
 
 "$(binary after)" train --motion walk --seed 0 --max-iterations 10 --eval-interval 5 --no-replay \
   --assets "$ASSETS" --out "$dir/run" --overwrite --progress lines > "$dir/train.log" 2>&1 \
