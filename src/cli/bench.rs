@@ -76,6 +76,20 @@ pub(super) fn benchmark_config(
     Ok((config, label))
 }
 
+/// Prints a benchmark's result: as JSON with `--json`, else as `report` writes it.
+pub(super) fn print_result<T: serde::Serialize>(
+    result: &T,
+    json: bool,
+    report: impl FnOnce(&T) -> String,
+) -> Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(result)?);
+    } else {
+        print!("{}", report(result));
+    }
+    Ok(())
+}
+
 /// `bench rollout --gemm`: `policy.gemm` (src/ppo/config.rs, `GemmSetting`).
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub(super) enum GemmArg {
@@ -308,12 +322,7 @@ fn train_gpus(args: TrainGpusArgs) -> Result<()> {
         args.iterations,
     )
     .context("training-iteration benchmark")?;
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&result)?);
-    } else {
-        print!("{}", train_gpus_report(&result));
-    }
-    Ok(())
+    print_result(&result, args.json, train_gpus_report)
 }
 
 fn train_gpus_report(r: &TrainGpusBench) -> String {
@@ -364,12 +373,7 @@ fn gemm(args: GemmArgs) -> Result<()> {
     let shapes: Vec<(usize, usize)> = args.layers.windows(2).map(|w| (w[0], w[1])).collect();
     let gpu = Gpu::open(args.device)?;
     let result = bench_gemm(&gpu, &shapes, &args.rows, args.reps).context("GEMM benchmark")?;
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&result)?);
-    } else {
-        print!("{}", gemm_report(&result));
-    }
-    Ok(())
+    print_result(&result, args.json, gemm_report)
 }
 
 fn gemm_report(r: &GemmBench) -> String {
@@ -484,12 +488,7 @@ fn rollout(args: RolloutArgs) -> Result<()> {
         args.rounds,
     )
     .with_context(|| format!("rollout benchmark with {} envs", config.env.num_envs))?;
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&result)?);
-        return Ok(());
-    }
-    print!("{}", rollout_report(&result));
-    Ok(())
+    print_result(&result, args.json, rollout_report)
 }
 
 fn rollout_report(r: &RolloutBench) -> String {

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 
-use super::bench::{LoopShapeArgs, benchmark_config};
+use super::bench::{LoopShapeArgs, benchmark_config, print_result};
 use crate::bench::{FullBench, LoopCase, bench_full};
 use crate::cuda::Gpu;
 use crate::motion::find::motions_dir_from_env;
@@ -83,12 +83,7 @@ pub(super) fn run(args: FullArgs) -> Result<()> {
             config.env.num_envs
         )
     })?;
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&result)?);
-    } else {
-        print!("{}", report(&result));
-    }
-    Ok(())
+    print_result(&result, args.json, report)
 }
 
 fn report(r: &FullBench) -> String {
