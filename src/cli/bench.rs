@@ -12,8 +12,8 @@ use crate::bench::{
     bench_train_gpus, default_counts,
 };
 use crate::cuda::Gpu;
-use crate::motion::Character;
 use crate::motion::find::{motions_dir_from_env, resolve_motion};
+use crate::motion::{Character, ReferenceMotion};
 use crate::plan::{PlanStore, ReplayOrder};
 use crate::train::library::single_clip_only;
 use crate::train::{GemmSetting, TrainConfig, preflight};
@@ -88,6 +88,25 @@ pub(super) fn print_result<T: serde::Serialize>(
         print!("{}", report(result));
     }
     Ok(())
+}
+
+/// The plans (`--assets`, else the built-in ones) and the motion a benchmark of `config` runs,
+/// checked as `train --dry-run` checks them (the motion's notices on stderr); `motions_dir`
+/// else `$INSTANTMIMIC_MOTIONS`.
+pub(super) fn benchmark_inputs(
+    config: &TrainConfig,
+    motions_dir: Option<&Path>,
+    assets: Option<&Path>,
+) -> Result<(PlanStore, ReferenceMotion)> {
+    let store = PlanStore::new(assets);
+    let motions_dir = motions_dir
+        .map(Path::to_path_buf)
+        .or_else(motions_dir_from_env);
+    let (checks, motion) = preflight(config, motions_dir.as_deref(), &store)?;
+    for line in &checks.motion_notices {
+        eprintln!("{line}");
+    }
+    Ok((store, motion))
 }
 
 /// `bench rollout --gemm`: `policy.gemm` (src/ppo/config.rs, `GemmSetting`).
@@ -306,12 +325,8 @@ fn train_gpus(args: TrainGpusArgs) -> Result<()> {
         config.run.nccl_in_graph = true;
     }
     config.validate(&label)?;
-    let store = PlanStore::new(args.assets.as_deref());
-    let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
-    let (checks, motion) = preflight(&config, motions_dir.as_deref(), &store)?;
-    for line in &checks.motion_notices {
-        eprintln!("{line}");
-    }
+    let (store, motion) =
+        benchmark_inputs(&config, args.motions_dir.as_deref(), args.assets.as_deref())?;
     let result = bench_train_gpus(
         &args.gpus,
         &counts,

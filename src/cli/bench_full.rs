@@ -8,12 +8,9 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 
-use super::bench::{LoopShapeArgs, benchmark_config, print_result};
+use super::bench::{LoopShapeArgs, benchmark_config, benchmark_inputs, print_result};
 use crate::bench::{FullBench, LoopCase, bench_full};
 use crate::cuda::Gpu;
-use crate::motion::find::motions_dir_from_env;
-use crate::plan::PlanStore;
-use crate::train::preflight;
 
 #[derive(Args, Debug)]
 pub(super) struct FullArgs {
@@ -61,12 +58,8 @@ pub(super) fn run(args: FullArgs) -> Result<()> {
     config.run.gpus.clear();
     config.ppo.overlap_update = false;
     config.validate(&label)?;
-    let store = PlanStore::new(args.assets.as_deref());
-    let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
-    let (checks, motion) = preflight(&config, motions_dir.as_deref(), &store)?;
-    for line in &checks.motion_notices {
-        eprintln!("{line}");
-    }
+    let (store, motion) =
+        benchmark_inputs(&config, args.motions_dir.as_deref(), args.assets.as_deref())?;
     let gpu = Gpu::open(args.device)?;
     let result = bench_full(
         &gpu,
