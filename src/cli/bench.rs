@@ -18,6 +18,25 @@ use crate::plan::{PlanStore, ReplayOrder};
 use crate::train::library::single_clip_only;
 use crate::train::{GemmSetting, TrainConfig, preflight};
 
+/// Where a GPU benchmark of one clip finds its motion and plans, where it runs, and how it
+/// prints (`bench rollout`, `bench full`).
+#[derive(Args, Debug)]
+pub(super) struct BenchRunArgs {
+    /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
+    /// (default: $INSTANTMIMIC_MOTIONS).
+    #[arg(long)]
+    pub(super) motions_dir: Option<PathBuf>,
+    /// A directory laid out like ptx/ instead of the plans built into the binary.
+    #[arg(long)]
+    pub(super) assets: Option<PathBuf>,
+    /// CUDA device ordinal.
+    #[arg(long, default_value_t = 0)]
+    pub(super) device: usize,
+    /// Print the result as JSON.
+    #[arg(long)]
+    pub(super) json: bool,
+}
+
 /// The shape of a benchmarked training loop, each overriding its config key (`bench rollout`,
 /// `bench full`).
 #[derive(Args, Debug)]
@@ -250,19 +269,8 @@ struct RolloutArgs {
     /// Measurements of the rollout and of the physics-only floor, alternating.
     #[arg(long, default_value_t = 3)]
     rounds: u32,
-    /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
-    /// (default: $INSTANTMIMIC_MOTIONS).
-    #[arg(long)]
-    motions_dir: Option<PathBuf>,
-    /// A directory laid out like ptx/ instead of the plans built into the binary.
-    #[arg(long)]
-    assets: Option<PathBuf>,
-    /// CUDA device ordinal.
-    #[arg(long, default_value_t = 0)]
-    device: usize,
-    /// Print the result as JSON.
-    #[arg(long)]
-    json: bool,
+    #[command(flatten)]
+    run: BenchRunArgs,
 }
 
 #[derive(Args, Debug)]
@@ -485,14 +493,14 @@ fn rollout(args: RolloutArgs) -> Result<()> {
     config.validate(&name)?;
 
     let character = Character::humanoid()?;
-    let dir = args.motions_dir.clone().or_else(motions_dir_from_env);
+    let dir = args.run.motions_dir.clone().or_else(motions_dir_from_env);
     let resolved = resolve_motion(&config.motion, dir.as_deref())?;
     let motion = resolved.load(&character)?;
     for line in resolved.notices(motion.clip()) {
         eprintln!("{line}");
     }
-    let gpu = Gpu::open(args.device)?;
-    let store = PlanStore::new(args.assets.as_deref());
+    let gpu = Gpu::open(args.run.device)?;
+    let store = PlanStore::new(args.run.assets.as_deref());
     let result = bench_rollout(
         &gpu,
         &store,
@@ -503,7 +511,7 @@ fn rollout(args: RolloutArgs) -> Result<()> {
         args.rounds,
     )
     .with_context(|| format!("rollout benchmark with {} envs", config.env.num_envs))?;
-    print_result(&result, args.json, rollout_report)
+    print_result(&result, args.run.json, rollout_report)
 }
 
 fn rollout_report(r: &RolloutBench) -> String {

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 
-use super::bench::{LoopShapeArgs, benchmark_config, benchmark_inputs, print_result};
+use super::bench::{BenchRunArgs, LoopShapeArgs, benchmark_config, benchmark_inputs, print_result};
 use crate::bench::{FullBench, LoopCase, bench_full};
 use crate::cuda::Gpu;
 
@@ -33,19 +33,8 @@ pub(super) struct FullArgs {
     /// Rounds of each measurement (medians are reported).
     #[arg(long, default_value_t = 3)]
     rounds: u32,
-    /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
-    /// (default: $INSTANTMIMIC_MOTIONS).
-    #[arg(long)]
-    motions_dir: Option<PathBuf>,
-    /// A directory laid out like ptx/ instead of the plans built into the binary.
-    #[arg(long)]
-    assets: Option<PathBuf>,
-    /// CUDA device ordinal.
-    #[arg(long, default_value_t = 0)]
-    device: usize,
-    /// Print the result as JSON.
-    #[arg(long)]
-    json: bool,
+    #[command(flatten)]
+    run: BenchRunArgs,
 }
 
 pub(super) fn run(args: FullArgs) -> Result<()> {
@@ -58,9 +47,12 @@ pub(super) fn run(args: FullArgs) -> Result<()> {
     config.run.gpus.clear();
     config.ppo.overlap_update = false;
     config.validate(&label)?;
-    let (store, motion) =
-        benchmark_inputs(&config, args.motions_dir.as_deref(), args.assets.as_deref())?;
-    let gpu = Gpu::open(args.device)?;
+    let (store, motion) = benchmark_inputs(
+        &config,
+        args.run.motions_dir.as_deref(),
+        args.run.assets.as_deref(),
+    )?;
+    let gpu = Gpu::open(args.run.device)?;
     let result = bench_full(
         &gpu,
         &store,
@@ -76,7 +68,7 @@ pub(super) fn run(args: FullArgs) -> Result<()> {
             config.env.num_envs
         )
     })?;
-    print_result(&result, args.json, report)
+    print_result(&result, args.run.json, report)
 }
 
 fn report(r: &FullBench) -> String {
