@@ -218,11 +218,7 @@ impl Stream {
     }
 
     fn set_capture_record(&self, record: Option<CaptureRecord>) -> Option<CaptureRecord> {
-        let mut slot = self
-            .inner
-            .capture
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        let mut slot = self.capture_record();
         std::mem::replace(&mut *slot, record)
     }
 
@@ -232,11 +228,7 @@ impl Stream {
         node: sys::CUgraphNode,
         bodies: &[sys::CUgraph],
     ) {
-        let mut slot = self
-            .inner
-            .capture
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        let mut slot = self.capture_record();
         if let Some(record) = slot.as_mut() {
             record
                 .conditional_bodies
@@ -262,11 +254,7 @@ impl Stream {
     pub(crate) fn cut_capture(&self, collective: RecordedCollective) -> Result<(), CudaError> {
         const OP: &str = "an all-reduce between graph parts";
         let top = {
-            let slot = self
-                .inner
-                .capture
-                .lock()
-                .unwrap_or_else(|poisoned| poisoned.into_inner());
+            let slot = self.capture_record();
             slot.as_ref().map(|record| record.top)
         };
         let top = top.ok_or(CudaError::NotCapturing { operation: OP })?;
@@ -289,11 +277,7 @@ impl Stream {
         )?;
         debug_assert_eq!(finished as usize, top);
         let next = next.into_raw() as usize;
-        let mut slot = self
-            .inner
-            .capture
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        let mut slot = self.capture_record();
         match slot.as_mut() {
             Some(record) => {
                 record.top = next;

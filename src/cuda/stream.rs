@@ -5,7 +5,7 @@
 
 use std::collections::HashMap;
 use std::ffi::c_void;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, MutexGuard};
 
 use cudarc::driver::{CudaStream, sys};
 
@@ -220,12 +220,18 @@ impl Stream {
         .check("cuLaunchKernel")
     }
 
-    fn remember_module(&self, module: &Arc<ModuleInner>) {
-        let mut capture = self
-            .inner
+    /// The record of the capture in progress on this stream (`None` outside a capture),
+    /// locked; a lock poisoned by a panic elsewhere is taken as it is (each holder makes one
+    /// insertion or replacement, so a record is never half-written).
+    pub(super) fn capture_record(&self) -> MutexGuard<'_, Option<CaptureRecord>> {
+        self.inner
             .capture
             .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner());
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    fn remember_module(&self, module: &Arc<ModuleInner>) {
+        let mut capture = self.capture_record();
         if let Some(record) = capture.as_mut()
             && !record.modules.iter().any(|m| Arc::ptr_eq(m, module))
         {
@@ -240,11 +246,7 @@ impl Stream {
 
     /// Inside a capture, keeps `memory` alive as long as the graph.
     pub(super) fn remember_allocation(&self, memory: &Arc<DeviceMemory>) {
-        let mut capture = self
-            .inner
-            .capture
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        let mut capture = self.capture_record();
         if let Some(record) = capture.as_mut() {
             record
                 .memory
@@ -255,11 +257,7 @@ impl Stream {
 
     /// Inside a capture, keeps `communicator` alive as long as the graph.
     pub(super) fn remember_communicator(&self, communicator: &Arc<CommunicatorInner>) {
-        let mut capture = self
-            .inner
-            .capture
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        let mut capture = self.capture_record();
         if let Some(record) = capture.as_mut()
             && !record
                 .communicators
@@ -272,11 +270,7 @@ impl Stream {
 
     /// Inside a capture, keeps `host` alive as long as the graph.
     fn remember_pinned(&self, host: &Arc<PinnedHostMemory>) {
-        let mut capture = self
-            .inner
-            .capture
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        let mut capture = self.capture_record();
         if let Some(record) = capture.as_mut() {
             record
                 .pinned
