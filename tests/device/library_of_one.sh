@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A single clip through the motion library's code path (issue 19) against the build before it,
-# bit for bit, in one device call: one short training run of walk (the newer build), then its
+# bit for bit, in one device call: one short training run of walk (the older build: a newer checkpoint stores config keys the older build does not know), then its
 # checkpoint's evaluation replayed by both builds on the deterministic physics
 # (ptx/deterministic, whose replays are exact), twice each. The recordings (every env's qpos and
 # body poses every control step, and the reference rows the kernels looked up) and `eval --json`
@@ -19,7 +19,7 @@ ASSETS=ptx/deterministic
 dir="$OUT/library_of_one"
 mkdir -p "$dir"
 
-"$(binary after)" train --motion walk --seed 0 --max-iterations 10 --eval-interval 5 --no-replay \
+"$(binary before)" train --motion walk --seed 0 --max-iterations 10 --eval-interval 5 --no-replay \
   --assets "$ASSETS" --out "$dir/run" --overwrite --progress lines > "$dir/train.log" 2>&1 \
   || { echo "training failed: $(tail -3 "$dir/train.log")"; exit 1; }
 checkpoint=$(ls "$dir"/run/checkpoints/*.safetensors | tail -1)
@@ -27,7 +27,7 @@ for build in before after; do
   for round in 1 2; do
     tag="${build}_$round"
     "$(binary "$build")" replay --checkpoint "$checkpoint" --assets "$ASSETS" --episodes 8 \
-      --page "$dir/$tag.html" --recording "$dir/$tag.safetensors" > "$dir/$tag.replay.log" 2>&1 \
+      --out "$dir/$tag.html" --save-recording "$dir/$tag.safetensors" > "$dir/$tag.replay.log" 2>&1 \
       || echo "replay $tag failed: $(tail -2 "$dir/$tag.replay.log")"
     "$(binary "$build")" eval --checkpoint "$checkpoint" --assets "$ASSETS" --episodes 2 --json \
       > "$dir/$tag.eval.json" 2> "$dir/$tag.eval.log" || echo "eval $tag failed: $(tail -2 "$dir/$tag.eval.log")"
