@@ -21,7 +21,7 @@ use std::sync::Arc;
 
 use crate::cuda::{Gpu, Stream};
 use crate::env::RolloutStorage;
-use crate::kernels::{AdamParams, DeviceArray, DeviceArray2, EnvKernels};
+use crate::kernels::{AdamParams, DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
 use crate::ppo::adam::{AdamMoments, adam_params};
 use crate::ppo::backward::{MlpGradients, input_gradient_scratch_len};
 use crate::ppo::batch::record_shuffle;
@@ -76,6 +76,23 @@ impl Trained {
             grads: MlpGradients::new(gpu, shapes, params.len())?,
             moments: AdamMoments::zeros(gpu, params.len())?,
         })
+    }
+}
+
+/// The rows a distillation update learns from: normalized observations `[T + 1, N, D]` (rows
+/// 0..T are read) and the teacher's actions `[T, N, A]`. A rollout run by [`LatentStudent`]
+/// leaves them in its storage's `observations` and `means`.
+pub struct DistillationBatch<'a> {
+    pub observations: &'a DeviceArray3<f32>,
+    pub teacher: &'a DeviceArray3<f32>,
+}
+
+impl<'a> From<&'a RolloutStorage> for DistillationBatch<'a> {
+    fn from(s: &'a RolloutStorage) -> Self {
+        DistillationBatch {
+            observations: &s.observations,
+            teacher: &s.means,
+        }
     }
 }
 
@@ -196,17 +213,15 @@ impl DistillationUpdate {
         })
     }
 
-    /// Queues the whole update of the rollout's rows: `storage.observations` rows 0..T and
-    /// the teacher's actions in `storage.means` (what [`LatentStudent`] stores). Valid inside
-    /// a capture.
-    pub fn record(&self, stream: &Stream, storage: &RolloutStorage) -> Result<(), LatentError> {
+    /// Queues the whole update of `batch`'s rows. Valid inside a capture.
+    pub fn record(&self, stream: &Stream, batch: &DistillationBatch<'_>) -> Result<(), LatentError> {
         let (t, n) = (self.horizon, self.envs);
         let (d, a) = (self.shapes.observation_size, self.shapes.action_size);
-        if storage.observations.shape() != [t + 1, n, d] || storage.means.shape() != [t, n, a] {
+        if batch.observations.shape() != [t + 1, n, d] || batch.teacher.shape() != [t, n, a] {
             return Err(LatentError::Shape(format!(
                 "a rollout of observations {:?} and teacher actions {:?} for an update of [{}, {n}, {d}] and [{t}, {n}, {a}]",
-                storage.observations.shape(),
-                storage.means.shape(),
+                batch.observations.shape(),
+                batch.teacher.shape(),
                 t + 1
             )));
         }
@@ -229,8 +244,8 @@ impl DistillationUpdate {
                     rows * d.max(a),
                     &self.permutation,
                     (mb * rows) as i32,
-                    &storage.observations,
-                    &storage.means,
+                    batch.observations,
+                    batch.teacher,
                     &self.observations,
                     &self.teacher,
                 )?;

@@ -25,7 +25,7 @@ use crate::kernels::DeviceArray;
 use crate::latent::frozen::FrozenParts;
 use crate::latent::teacher::{StudentSizes, TeacherValues};
 use crate::latent::{
-    DistillationStatistics, DistillationUpdate, FrozenDecoder, LatentConfig, LatentShapes,
+    DistillationBatch, DistillationStatistics, DistillationUpdate, FrozenDecoder, LatentConfig, LatentShapes,
     LatentStudent, TeacherCheckpoint, proprio_columns,
 };
 use crate::plan::{PhysicsOverflow, PlanStore};
@@ -124,7 +124,7 @@ impl LatentTrainer {
         let stream = gpu.stream();
         let graph = stream.capture(|s| {
             rollout.record(s, &student)?;
-            update.record(s, &rollout.storage)?;
+            update.record(s, &DistillationBatch::from(&rollout.storage))?;
             record_clear(s, &parameter_squares)?;
             let (e, d, p) = student.parameters();
             let k = rollout.kernels();
