@@ -132,7 +132,8 @@ mod tests {
     #[test]
     fn defaults_are_valid_and_each_bad_value_names_its_key() {
         assert_eq!(LatentConfig::default().validate(), Ok(()));
-        let cases: [(&str, fn(&mut LatentConfig)); 8] = [
+        type Spoil = fn(&mut LatentConfig);
+        let cases: [(&str, Spoil); 8] = [
             ("latent.latent_size", |c| c.latent_size = 0),
             ("latent.kl_weight", |c| c.kl_weight = f32::NAN),
             ("latent.encoder_hidden", |c| c.encoder_hidden.clear()),

@@ -54,6 +54,15 @@ pub struct DistillationStatistics {
     pub learning_rate: f64,
 }
 
+/// The optimizer's device state as a host copy (checkpoints and resume).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DistillationOptimizerState {
+    /// Adam's first and second moments of the encoder, the decoder and the prior.
+    pub moments: Vec<[Vec<f32>; 2]>,
+    pub adam_step: i32,
+    pub update_counter: i32,
+}
+
 /// One network's update state: its parameters (the student's), a minibatch-sized copy of the
 /// network, gradients and Adam's moments.
 struct Trained {
@@ -214,7 +223,11 @@ impl DistillationUpdate {
     }
 
     /// Queues the whole update of `batch`'s rows. Valid inside a capture.
-    pub fn record(&self, stream: &Stream, batch: &DistillationBatch<'_>) -> Result<(), LatentError> {
+    pub fn record(
+        &self,
+        stream: &Stream,
+        batch: &DistillationBatch<'_>,
+    ) -> Result<(), LatentError> {
         let (t, n) = (self.horizon, self.envs);
         let (d, a) = (self.shapes.observation_size, self.shapes.action_size);
         if batch.observations.shape() != [t + 1, n, d] || batch.teacher.shape() != [t, n, a] {
@@ -410,9 +423,8 @@ impl DistillationUpdate {
         (self.observations.shape()[0], self.epochs * self.minibatches)
     }
 
-    /// Adam's state for checkpoints: per network (encoder, decoder, prior) its two moments,
-    /// then `[adam_step, update_counter]` (waits for the GPU).
-    pub fn download_state(&self) -> Result<(Vec<[Vec<f32>; 2]>, [i32; 2]), LatentError> {
+    /// Adam's state, for checkpoints (waits for the GPU).
+    pub fn download_state(&self) -> Result<DistillationOptimizerState, LatentError> {
         self.gpu.synchronize()?;
         let mut moments = Vec::new();
         for trained in [&self.encoder, &self.decoder, &self.prior] {
@@ -421,35 +433,29 @@ impl DistillationUpdate {
                 trained.moments.moment2.download()?,
             ]);
         }
-        Ok((
+        Ok(DistillationOptimizerState {
             moments,
-            [
-                self.adam_step.download()?[0],
-                self.update_counter.download()?[0],
-            ],
-        ))
+            adam_step: self.adam_step.download()?[0],
+            update_counter: self.update_counter.download()?[0],
+        })
     }
 
     /// Restores a state from [`DistillationUpdate::download_state`] (resume).
-    pub fn upload_state(
-        &self,
-        moments: &[[Vec<f32>; 2]],
-        counters: [i32; 2],
-    ) -> Result<(), LatentError> {
+    pub fn upload_state(&self, state: &DistillationOptimizerState) -> Result<(), LatentError> {
         self.gpu.synchronize()?;
         let trained = [&self.encoder, &self.decoder, &self.prior];
-        if moments.len() != trained.len() {
+        if state.moments.len() != trained.len() {
             return Err(LatentError::Shape(format!(
                 "Adam moments of {} networks for 3",
-                moments.len()
+                state.moments.len()
             )));
         }
-        for (t, [m1, m2]) in trained.iter().zip(moments) {
+        for (t, [m1, m2]) in trained.iter().zip(&state.moments) {
             t.moments.moment1.upload(m1)?;
             t.moments.moment2.upload(m2)?;
         }
-        self.adam_step.upload(&[counters[0]])?;
-        self.update_counter.upload(&[counters[1]])?;
+        self.adam_step.upload(&[state.adam_step])?;
+        self.update_counter.upload(&[state.update_counter])?;
         Ok(())
     }
 

@@ -32,7 +32,9 @@ use crate::kernels::EnvError;
 use crate::ppo::{PolicyError, PpoError};
 
 pub use config::LatentConfig;
-pub use distill::{DistillationBatch, DistillationStatistics, DistillationUpdate};
+pub use distill::{
+    DistillationBatch, DistillationOptimizerState, DistillationStatistics, DistillationUpdate,
+};
 pub use frozen::FrozenDecoder;
 pub use networks::{LatentShapes, proprio_columns};
 pub use student::LatentStudent;

@@ -25,8 +25,8 @@ use crate::kernels::DeviceArray;
 use crate::latent::frozen::FrozenParts;
 use crate::latent::teacher::{StudentSizes, TeacherValues};
 use crate::latent::{
-    DistillationBatch, DistillationStatistics, DistillationUpdate, FrozenDecoder, LatentConfig, LatentShapes,
-    LatentStudent, TeacherCheckpoint, proprio_columns,
+    DistillationBatch, DistillationOptimizerState, DistillationStatistics, DistillationUpdate,
+    FrozenDecoder, LatentConfig, LatentShapes, LatentStudent, TeacherCheckpoint, proprio_columns,
 };
 use crate::plan::{PhysicsOverflow, PlanStore};
 use crate::ppo::PolicyGemm;
@@ -183,7 +183,7 @@ impl LatentTrainer {
     /// A line about the last update every `run.eval_interval` iterations.
     pub fn notes(&mut self) -> Vec<String> {
         match self.last.take() {
-            Some(s) if self.iterations % self.note_interval == 0 => vec![format!(
+            Some(s) if self.iterations.is_multiple_of(self.note_interval) => vec![format!(
                 "iteration {}: distillation loss {:.4e} (first epoch {:.4e}): reconstruction {:.4e}, KL {:.4e} x {}",
                 self.iterations, s.loss, s.first_epoch_loss, s.reconstruction, s.kl, self.kl_weight
             )],
@@ -252,12 +252,12 @@ impl LatentTrainer {
         for (name, moments) in [(OBS_COUNT, count), (OBS_MEAN, mean), (OBS_M2, m2)] {
             checkpoint.insert(name, &[moments.len()], moments.download()?)?;
         }
-        let (moments, counters) = self.update.download_state()?;
-        for ([m_name, v_name], [m, v]) in names::ADAM.iter().zip(moments) {
+        let state = self.update.download_state()?;
+        for ([m_name, v_name], [m, v]) in names::ADAM.iter().zip(state.moments) {
             checkpoint.insert(m_name, &[m.len()], m)?;
             checkpoint.insert(v_name, &[v.len()], v)?;
         }
-        checkpoint.insert(ADAM_STEP, &[2], counters.to_vec())?;
+        checkpoint.insert(ADAM_STEP, &[2], vec![state.adam_step, state.update_counter])?;
         checkpoint.insert(LEARNING_RATE, &[1], self.update.learning_rate().download()?)?;
         let (visits, failures, cdf, iteration) = self.rollout.phase_statistics();
         for (name, a) in [
@@ -304,7 +304,11 @@ impl LatentTrainer {
                 ]);
             }
             let step = checkpoint.get::<i32>(ADAM_STEP, &[2])?;
-            self.update.upload_state(&moments, [step[0], step[1]])?;
+            self.update.upload_state(&DistillationOptimizerState {
+                moments,
+                adam_step: step[0],
+                update_counter: step[1],
+            })?;
             let (visits, failures, cdf, iteration) = self.rollout.phase_statistics();
             for (name, a) in [
                 (PHASE_VISITS, visits),
