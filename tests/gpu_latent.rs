@@ -88,20 +88,13 @@ fn the_updates_gradients_match_finite_differences_of_the_float64_loss() {
         let mut rng = StdRng::seed_from_u64(7);
         // Output gain 0.5: log sigmas away from 0, so the sample's gradient matters.
         let (e0, d0, p0) = shapes.initial_parameters(1.0, 0.5, 11);
-        let student = LatentStudent::new(
-            &gpu,
-            &shapes,
-            (&e0, &d0, &p0),
-            None,
-            gemm.clone(),
-            n,
-            3,
-        )
-        .expect("student");
+        let student = LatentStudent::new(&gpu, &shapes, (&e0, &d0, &p0), None, gemm.clone(), n, 3)
+            .expect("student");
         let update = DistillationUpdate::new(&gpu, kernels.clone(), &student, &config, t, n, 5)
             .expect("update");
-        let obs = DeviceArray::from_slice(&gpu, [t + 1, n, d], &normal(&mut rng, (t + 1) * n * d, 1.0))
-            .expect("observations");
+        let obs =
+            DeviceArray::from_slice(&gpu, [t + 1, n, d], &normal(&mut rng, (t + 1) * n * d, 1.0))
+                .expect("observations");
         let teacher = DeviceArray::from_slice(&gpu, [t, n, a], &normal(&mut rng, t * n * a, 0.5))
             .expect("teacher");
         let batch = DistillationBatch {
@@ -122,8 +115,15 @@ fn the_updates_gradients_match_finite_differences_of_the_float64_loss() {
             distillation_loss_f64(&shapes, (e, dp, p), &mb_obs, &mb_teacher, &noise, kl_weight).0
         };
         let host_loss = loss(&e0, &d0, &p0);
-        println!("{gemm:?}: loss GPU {:.6e}, host {host_loss:.6e}", stats.loss);
-        assert!((stats.loss - host_loss).abs() <= 1e-4 * host_loss.abs(), "{} vs {host_loss}", stats.loss);
+        println!(
+            "{gemm:?}: loss GPU {:.6e}, host {host_loss:.6e}",
+            stats.loss
+        );
+        assert!(
+            (stats.loss - host_loss).abs() <= 1e-4 * host_loss.abs(),
+            "{} vs {host_loss}",
+            stats.loss
+        );
 
         let (ge, gd, gp) = update.gradients();
         let grads = [
@@ -149,7 +149,9 @@ fn the_updates_gradients_match_finite_differences_of_the_float64_loss() {
             }
             let analytic: Vec<f64> = picks.iter().map(|&i| f64::from(grad[i])).collect();
             let err = relative_error(&analytic, &numeric);
-            println!("{gemm:?}: network {net} gradient vs finite differences: relative error {err:.2e}");
+            println!(
+                "{gemm:?}: network {net} gradient vs finite differences: relative error {err:.2e}"
+            );
             assert!(err <= 2e-3, "network {net}: relative error {err:.3e}");
         }
     }
@@ -272,7 +274,9 @@ fn a_short_distillation_run_evaluates_checkpoints_and_its_decoder_loads() {
     let records = metrics(&latent_run);
     assert_eq!(records.len(), 4);
     for r in &records {
-        let loss = r["policy_loss"].as_f64().expect("a finite distillation loss");
+        let loss = r["policy_loss"]
+            .as_f64()
+            .expect("a finite distillation loss");
         assert!(loss.is_finite() && loss >= 0.0, "{r}");
     }
     let clips = records[1]["evaluation"]["library"]["clips"]

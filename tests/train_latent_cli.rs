@@ -111,7 +111,12 @@ fn a_teacher_of_another_shape_fails_with_one_line_naming_the_file() {
 #[test]
 fn no_teacher_or_no_latent_section_fails_with_one_line() {
     let out = run(
-        &["train", "--config", "configs/latent/library.toml", "--dry-run"],
+        &[
+            "train",
+            "--config",
+            "configs/latent/library.toml",
+            "--dry-run",
+        ],
         None,
         repo(),
     );

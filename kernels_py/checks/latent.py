@@ -10,6 +10,11 @@ references.
 - `latent_z_gradient`: the product with z's rows of the first layer's weights.
 - `latent_gather`: rows of a permutation of a [T, N] batch.
 - `latent_advance_counter`.
+- One whole minibatch step composed as src/latent/distill.rs records it on the Warp-tile path
+  (split, encoder and prior forward, sample, decoder forward, reconstruction gradient, the
+  decoder's backward pass, z's gradient from its first activation, the KL gradients, the
+  encoder's and the prior's backward passes): every parameter gradient of the three networks
+  against central finite differences of the float64 loss (sampled entries).
 
     python kernels_py/checks/latent.py
 """
@@ -19,6 +24,8 @@ import sys
 from check_support import Verdict, array, f32, np, wp, zeros
 
 from env import latent as lat
+from env import policy
+from ppo_backward import elu, launch_forward, launch_input_grad, launch_weight_grad
 
 LO, HI = -5.0, 2.0
 
@@ -150,6 +157,114 @@ def check_counter(v: Verdict):
     v.check("counter advanced once by a launch of 3 threads", c.numpy()[0] == 42, f"{c.numpy()[0]}")
 
 
+def make_mlp(rng, sizes, out_gain):
+    layers = []
+    for i in range(len(sizes) - 1):
+        gain = out_gain if i == len(sizes) - 2 else 1.0
+        w = f32(rng.standard_normal((sizes[i], sizes[i + 1])) * gain / np.sqrt(sizes[i]))
+        b = f32(rng.standard_normal(sizes[i + 1]) * 0.1)
+        layers.append((w, b))
+    return layers
+
+
+def mlp64(layers, x):
+    for i, (w, b) in enumerate(layers):
+        x = x @ w + b
+        if i < len(layers) - 1:
+            x = elu(x)
+    return x
+
+
+def step_loss(nets, obs, cols, teacher, eps, kl_weight):
+    enc, dec, pri = nets
+    latent = eps.shape[1]
+    e = mlp64(enc, obs)
+    proprio = obs[:, cols]
+    p = mlp64(pri, proprio)
+    z = e[:, :latent] + np.exp(np.clip(e[:, latent:], LO, HI)) * eps
+    a = mlp64(dec, np.concatenate([proprio, z], axis=1))
+    loss, _, _ = loss_reference(a, teacher, e, p, eps, None, kl_weight)
+    return loss
+
+
+class Net:
+    """A network's parameters and activations on Warp's CPU device, and its gradients."""
+
+    def __init__(self, layers, rows):
+        self.w = [array(w) for w, _ in layers]
+        self.b = [array(b) for _, b in layers]
+        self.y = [zeros((rows, w.shape[1])) for w, _ in layers]
+        self.dw = [zeros(w.shape) for w, _ in layers]
+        self.db = [zeros(b.shape) for _, b in layers]
+
+    def forward(self, x):
+        last = len(self.w) - 1
+        for i in range(len(self.w)):
+            launch_forward(policy.linear if i == last else policy.linear_elu, x if i == 0 else self.y[i - 1], self.w[i], self.b[i], self.y[i])
+
+    def backward(self, x, d_out):
+        # As src/ppo/backward.rs records it: the weight gradient, then the input gradient over
+        # the layer below's activation.
+        for i in range(len(self.w) - 1, -1, -1):
+            dz = d_out if i == len(self.w) - 1 else self.y[i]
+            below = x if i == 0 else self.y[i - 1]
+            launch_weight_grad(below, dz, self.dw[i], self.db[i], splits=2)
+            if i > 0:
+                launch_input_grad(dz, self.w[i], self.y[i - 1])
+
+
+def check_minibatch_step(v: Verdict, rng):
+    m, d, a, latent, kl_weight = 70, 11, 4, 3, 0.3
+    cols = np.array([0, 1, 2, 6, 7], dtype=np.int32)
+    p = len(cols)
+    enc_l = make_mlp(rng, [d, 16, 2 * latent], 0.5)
+    dec_l = make_mlp(rng, [p + latent, 16, 8, a], 0.5)
+    pri_l = make_mlp(rng, [p, 12, 2 * latent], 0.5)
+    obs = f32(rng.standard_normal((m, d)))
+    teacher = f32(rng.standard_normal((m, a)) * 0.5)
+    enc, dec, pri = Net(enc_l, m), Net(dec_l, m), Net(pri_l, m)
+    obs_d = array(obs)
+    proprio, dec_in, noise = zeros((m, p)), zeros((m, p + latent)), zeros((m, latent))
+    wp.launch(lat.latent_split_observation, dim=m * p, inputs=[obs_d, array(cols), proprio, dec_in], device="cpu")
+    enc.forward(obs_d)
+    pri.forward(proprio)
+    wp.launch(lat.latent_sample, dim=m, inputs=[enc.y[-1], array(np.array([2])), 1, 4, 9, 0, dec_in, noise], device="cpu")
+    dec.forward(dec_in)
+    d_dec, terms = zeros((m, a)), zeros((m, 2))
+    wp.launch(lat.latent_reconstruction_gradient, dim=m, inputs=[dec.y[-1], array(teacher), d_dec, terms], device="cpu")
+    dec.backward(dec_in, d_dec)
+    d_z = zeros((m, latent))
+    wp.launch(lat.latent_z_gradient, dim=m * latent, inputs=[dec.y[0], dec.w[0], p, d_z], device="cpu")
+    d_enc, d_pri = zeros((m, 2 * latent)), zeros((m, 2 * latent))
+    wp.launch(lat.latent_kl_gradients, dim=m, inputs=[enc.y[-1], pri.y[-1], noise, d_z, kl_weight, d_enc, d_pri, terms], device="cpu")
+    enc.backward(obs_d, d_enc)
+    pri.backward(proprio, d_pri)
+
+    eps = noise.numpy().astype(np.float64)
+    w64 = float(np.float32(kl_weight))
+    nets = [enc_l, dec_l, pri_l]
+    loss = step_loss(nets, obs, cols, teacher, eps, w64)
+    terms_np = terms.numpy().astype(np.float64)
+    v.error("minibatch step: loss from the terms", terms_np[:, 0].mean() + w64 * terms_np[:, 1].mean(), loss)
+    h = 1e-5
+    for name, net, layers, k in [("encoder", enc, enc_l, 0), ("decoder", dec, dec_l, 1), ("prior", pri, pri_l, 2)]:
+        analytic, numeric = [], []
+        for li, (w, b) in enumerate(layers):
+            for which, values, grad in [("w", w, net.dw[li]), ("b", b, net.db[li])]:
+                flat = values.reshape(-1)
+                g = grad.numpy().reshape(-1)
+                for idx in rng.choice(flat.size, size=min(12, flat.size), replace=False):
+                    saved = flat[idx]
+                    flat[idx] = saved + h
+                    plus = step_loss(nets, obs, cols, teacher, eps, w64)
+                    flat[idx] = saved - h
+                    minus = step_loss(nets, obs, cols, teacher, eps, w64)
+                    flat[idx] = saved
+                    numeric.append((plus - minus) / (2 * h))
+                    analytic.append(g[idx])
+        v.error(f"minibatch step: {name} gradients vs finite differences of the float64 loss", np.array(analytic), np.array(numeric))
+
+
 def main() -> int:
     rng = np.random.default_rng(19)
     v = Verdict("latent")
@@ -158,6 +273,7 @@ def main() -> int:
     check_loss_gradients(v, rng)
     check_gather(v, rng)
     check_counter(v)
+    check_minibatch_step(v, rng)
     return v.finish()
 
 
