@@ -8,6 +8,7 @@
 //! - [`kernels`]: our own kernels (AOT-compiled Warp PTX, typed launchers, device arrays).
 //! - [`env`]: the tracking task on the GPU and its rollout graph.
 //! - [`ppo`]: the policy networks and the PPO update on the GPU.
+//! - [`latent`]: the latent controller (encoder, decoder, prior) distilled from a tracker.
 //! - [`motion`]: DeepMimic reference motions and their kinematics.
 //! - [`bench`]: benchmarks of physics and of the rollout, for `instantmimic bench`.
 //! - [`train`]: training runs: the GPU loop (`Trainer`), configuration, run directories,
@@ -37,6 +38,7 @@ pub mod export;
 pub mod files;
 pub mod hpo;
 pub mod kernels;
+pub mod latent;
 pub mod motion;
 pub mod plan;
 pub mod plot;

@@ -50,9 +50,11 @@ fn all_checks(fixture: &Fixture) -> Vec<Check> {
 
 /// The PPO update's modules: their kernels are checked against float64 numpy on Warp's CPU
 /// device by tests/ppo_kernels_cpu.rs (kernels_py/checks/ppo_*.py) and on the GPU by
-/// tests/gpu_ppo.rs.
-const PPO_MODULES: [&str; 7] = [
+/// tests/gpu_ppo.rs; the latent controller's likewise by tests/latent_kernels_cpu.rs
+/// (kernels_py/checks/latent.py) and tests/gpu_latent.rs.
+const PPO_MODULES: [&str; 8] = [
     "gae",
+    "latent",
     "minibatch",
     "mlp_backward",
     "optimizer",

@@ -24,7 +24,7 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 31] = [
+const EXPECTED_KERNELS: [(&str, &str); 38] = [
     ("control", "pd_control"),
     ("evaluate", "evaluation_accumulate"),
     ("gae", "gae_advantages"),
@@ -32,6 +32,13 @@ const EXPECTED_KERNELS: [(&str, &str); 31] = [
     ("gemm_epilogue", "bias_elu"),
     ("gemm_epilogue", "bias_add"),
     ("gemm_epilogue", "elu_input_gradient"),
+    ("latent", "latent_split_observation"),
+    ("latent", "latent_sample"),
+    ("latent", "latent_reconstruction_gradient"),
+    ("latent", "latent_z_gradient"),
+    ("latent", "latent_kl_gradients"),
+    ("latent", "latent_gather"),
+    ("latent", "latent_advance_counter"),
     ("minibatch", "shuffle_indices"),
     ("minibatch", "gather_minibatch"),
     ("mlp_backward", "linear_backward_weight"),

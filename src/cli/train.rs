@@ -14,6 +14,7 @@ use crate::cuda::nccl_version;
 use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
 use crate::replay::DEFAULT_EPISODES;
+use crate::train::latent_trainer::{latent_shapes, load_teacher};
 use crate::train::run_dir::{CHECKPOINTS_DIR, REPLAY_FILE};
 use crate::train::{
     CheckpointDir, ProgressMode, RunDir, RunStart, TrainConfig, TrainSetup, check_same_gpu_count,
@@ -103,6 +104,10 @@ pub struct TrainArgs {
     /// capture on the machines measured, see docs/train.md).
     #[arg(long)]
     nccl_in_graph: bool,
+    /// The library tracker's checkpoint a latent controller is distilled from (overrides
+    /// `latent.teacher`; the configuration needs a `[latent]` section, docs/latent.md).
+    #[arg(long, conflicts_with = "resume")]
+    teacher: Option<PathBuf>,
 }
 
 impl TrainArgs {
@@ -173,6 +178,15 @@ fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
     if let Some(horizon) = args.horizon {
         config.ppo.horizon = horizon;
         flags.push("--horizon");
+    }
+    if let Some(teacher) = &args.teacher {
+        let Some(latent) = config.latent.as_mut() else {
+            bail!(
+                "--teacher: {label} has no [latent] section (train a latent controller with --config configs/latent/library.toml)"
+            );
+        };
+        latent.teacher = teacher.display().to_string();
+        flags.push("--teacher");
     }
     args.apply_run_overrides(&mut config, &mut flags);
     if !args.set.is_empty() {
@@ -263,9 +277,44 @@ pub fn run(args: TrainArgs) -> Result<()> {
         eprintln!("{line}");
     }
     if let Some(checkpoint) = &resume_checkpoint {
-        // The checkpoint must hold the policy this configuration builds.
-        checks.policy.check(checkpoint)?;
+        // The checkpoint must hold the policy this configuration builds (a latent
+        // controller's networks are checked when they are restored).
+        if config.latent.is_none() {
+            checks.policy.check(checkpoint)?;
+        }
     }
+    // A latent controller's teacher must fit the run: checked before the GPU, and by
+    // --dry-run.
+    let teacher_line = match &config.latent {
+        Some(_) => {
+            let teacher = load_teacher(&config, &checks.policy)?;
+            let shapes = latent_shapes(&config, &checks.policy)?;
+            let (e, d, p) = shapes.parameter_counts();
+            let hidden = |layers: &[crate::ppo::LayerShape]| -> Vec<usize> {
+                layers.iter().skip(1).map(|l| l.inputs).collect()
+            };
+            Some(format!(
+                "teacher {}: actor {} -> {:?} -> {} (its observation statistics, frozen)\n\
+                 latent controller: z of {}; encoder {} -> {:?} -> {} ({e} parameters), decoder {} + {} -> {:?} -> {} ({d}), prior {} -> {:?} -> {} ({p})",
+                teacher.source,
+                checks.policy.observation_size,
+                hidden(&teacher.actor_layers),
+                checks.policy.action_size,
+                shapes.latent_size,
+                shapes.observation_size,
+                hidden(&shapes.encoder),
+                2 * shapes.latent_size,
+                shapes.proprio_size(),
+                shapes.latent_size,
+                hidden(&shapes.decoder),
+                shapes.action_size,
+                shapes.proprio_size(),
+                hidden(&shapes.prior),
+                2 * shapes.latent_size,
+            ))
+        }
+        None => None,
+    };
     // Several GPUs need NCCL: say so before a run directory is made.
     let nccl = if config.run.data_parallel() {
         let (version, library) = nccl_version()?;
@@ -287,6 +336,9 @@ pub fn run(args: TrainArgs) -> Result<()> {
         println!("configuration {label}");
         println!("run directory {directory_line}");
         if let Some(line) = &nccl {
+            println!("{line}");
+        }
+        if let Some(line) = &teacher_line {
             println!("{line}");
         }
         print!("{}", checks.report(&config));

@@ -28,6 +28,9 @@ pub(super) struct ObservationNormalizer {
     pub(super) size: usize,
     /// The other GPUs' replicas whose batches every update merges (none: this GPU only).
     pub(super) replicas: Option<Communicator>,
+    /// Statistics given from outside (a teacher's, [`ObservationNormalizer::freeze_at`]) and
+    /// never updated, even by a training rollout.
+    frozen: bool,
 }
 
 /// The step's batch sums `[2 D]` and its halves (sums, sums of squares).
@@ -58,6 +61,7 @@ impl ObservationNormalizer {
             clip,
             size,
             replicas: None,
+            frozen: false,
         })
     }
 
@@ -84,7 +88,24 @@ impl ObservationNormalizer {
             size,
             // Never updated, so never merged.
             replicas: None,
+            frozen: true,
         })
+    }
+
+    /// Sets the statistics to `count [2]`, `mean [D]`, `m2 [D]` (a checkpoint's) and freezes
+    /// them: the latent controller's student sees the observations normalized exactly as its
+    /// teacher was trained to (docs/latent.md). Synchronous upload; not inside a capture.
+    pub(super) fn freeze_at(
+        &mut self,
+        count: &[f64],
+        mean: &[f64],
+        m2: &[f64],
+    ) -> Result<(), EnvError> {
+        self.count.upload(count)?;
+        self.mean.upload(mean)?;
+        self.m2.upload(m2)?;
+        self.frozen = true;
+        Ok(())
     }
 
     pub(super) fn record(
@@ -96,7 +117,7 @@ impl ObservationNormalizer {
         update: bool,
     ) -> Result<(), EnvError> {
         let [n, d] = self.raw.shape();
-        if update {
+        if update && !self.frozen {
             kernels.observation_moments(
                 s,
                 n.div_ceil(MOMENT_CHUNK) * d,

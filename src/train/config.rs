@@ -20,6 +20,7 @@ use crate::env::{
     EnvConfig, EvalStart, EvaluationProtocol, LIBRARY_EVALUATION_WINDOW_S, ObsConfig, RewardConfig,
     RolloutConfig,
 };
+use crate::latent::LatentConfig;
 use crate::motion::{LibraryConfig, MotionLibraryError};
 use crate::ppo::{PolicyConfig, PpoConfig};
 
@@ -76,6 +77,10 @@ pub struct TrainConfig {
     pub ppo: PpoConfig,
     #[serde(default)]
     pub run: RunConfig,
+    /// `[latent]`: train the latent controller by distillation from a library tracker
+    /// instead of PPO (docs/latent.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub latent: Option<LatentConfig>,
 }
 
 /// `[run]`: evaluation, stopping, checkpoints (the paper's protocol; docs/train.md).
@@ -223,6 +228,7 @@ impl TrainConfig {
             policy: PolicyConfig::default(),
             ppo: PpoConfig::default(),
             run: RunConfig::default(),
+            latent: None,
         }
     }
 
@@ -603,6 +609,23 @@ impl TrainConfig {
                     "{all_samples} samples per update over every GPU (ppo.horizon x env.num_envs x GPUs) must fit an i32"
                 ),
             ));
+        }
+        if let Some(latent) = &self.latent {
+            latent
+                .validate()
+                .map_err(|p| bad(p.key, p.value, p.reason))?;
+            check!(
+                samples.is_multiple_of(u64::from(latent.minibatches)),
+                "latent.minibatches",
+                latent.minibatches,
+                "must divide ppo.horizon x env.num_envs (the rows of one rollout)"
+            );
+            check!(
+                !run.data_parallel() && !q.overlap_update,
+                "latent",
+                "[latent]",
+                "the latent controller trains on one GPU, rollout then update (leave run.gpus and ppo.overlap_update off)"
+            );
         }
         Ok(())
     }

@@ -72,6 +72,8 @@ pub enum TrainError {
     Ppo(#[from] crate::ppo::PpoError),
     #[error(transparent)]
     Policy(#[from] crate::ppo::PolicyError),
+    #[error(transparent)]
+    Latent(#[from] crate::latent::LatentError),
 }
 
 impl TrainError {

@@ -15,6 +15,7 @@ use super::evaluation::{
     EnvEpisodeRow, EnvEvaluation, EvaluationError, EvaluationSummary, episode_rows,
     evaluation_start_times, summarize,
 };
+use super::latent_trainer::{LatentTrainer, load_teacher};
 use super::library::TrainMotion;
 use super::library_evaluation::LibraryPlan;
 use super::preflight::Preflight;
@@ -24,7 +25,7 @@ use super::session::{IterationStats, RunSession};
 use super::summary::RunSummary;
 use super::trainer::Trainer;
 use crate::cuda::Gpu;
-use crate::env::TrackedMotion;
+use crate::env::{Rollout, TrackedMotion};
 use crate::motion::ReferenceMotion;
 use crate::plan::{PhysicsOverflow, PlanStore};
 
@@ -114,12 +115,39 @@ impl LoopTrainer for Replicas {
     }
 }
 
+impl LoopTrainer for LatentTrainer {
+    fn iterate(&mut self) -> Result<IterationStats, TrainError> {
+        LatentTrainer::iterate(self)
+    }
+    fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, TrainError> {
+        LatentTrainer::evaluate(self)
+    }
+    fn evaluation_steps(&self) -> u32 {
+        LatentTrainer::evaluation_steps(self)
+    }
+    fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), TrainError> {
+        LatentTrainer::save_into(self, checkpoint)
+    }
+    fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainError> {
+        LatentTrainer::restore(self, checkpoint)
+    }
+    fn physics_overflow(&mut self) -> Result<PhysicsOverflow, TrainError> {
+        LatentTrainer::physics_overflow(self)
+    }
+    fn notes(&mut self) -> Vec<String> {
+        LatentTrainer::notes(self)
+    }
+}
+
 /// Trains on the GPU until the session says stop (success, time or iteration budget):
 /// opens the device, builds the [`Trainer`] (not active time), restores the checkpoint of a
 /// resumed run, then iterates: one graph replay per iteration, an evaluation every
 /// `run.eval_interval` iterations, checkpoints at `run.checkpoint_interval` and at the end.
 /// With `run.gpus` naming several devices, trains on all of them ([`train_on_gpus`]).
 pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
+    if setup.config.latent.is_some() {
+        return train_latent_on_gpu(setup);
+    }
     let run = &setup.config.run;
     if run.data_parallel() {
         let motion = setup.motion.clip().ok_or_else(|| {
@@ -163,7 +191,7 @@ pub fn train_with<'a>(
     let (session, checkpoint) = open_session(config, start, progress)?;
     let setup = std::time::Instant::now();
     let mut trainer = Trainer::new(gpu, store, motion, session.config())?;
-    let scorer = Scorer::new(&trainer, motion, session.config())?;
+    let scorer = Scorer::new(trainer.evaluation_rollout().0, motion, session.config())?;
     let mut notes = vec![format!("GEMMs: {}", trainer.gemm().describe())];
     if trainer.overlaps_update() {
         notes.push(
@@ -183,6 +211,33 @@ pub fn train_with<'a>(
     run_loop(session, &mut trainer, checkpoint, &scorer, setup, notes)
 }
 
+/// A run with a `[latent]` section (docs/latent.md): the latent controller distilled from the
+/// teacher `latent.teacher` names, on one GPU, through the same loop (run directory,
+/// metrics, curve, checkpoints, resume, library evaluation with the student deterministic).
+fn train_latent_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
+    let teacher = load_teacher(&setup.config, &setup.preflight.policy)?;
+    let device = setup
+        .config
+        .run
+        .gpus
+        .first()
+        .map_or(setup.device, |&d| d as usize);
+    let gpu = Gpu::open(device)?;
+    let motion = setup.motion.tracked();
+    let (session, checkpoint) = open_session(&setup.config, &setup.start, setup.progress)?;
+    let started = std::time::Instant::now();
+    let mut trainer = LatentTrainer::new(&gpu, &setup.store, motion, session.config(), &teacher)?;
+    let scorer = Scorer::new(trainer.evaluation_rollout(), motion, session.config())?;
+    let notes = vec![
+        format!("GEMMs: {}", trainer.gemm().describe()),
+        format!(
+            "latent controller distilled from {} (its observation statistics frozen; the student acts, the teacher labels)",
+            teacher.source
+        ),
+    ];
+    run_loop(session, &mut trainer, checkpoint, &scorer, started, notes)
+}
+
 /// How an evaluation's episodes are scored: one clip (the paper's protocol), or a motion
 /// library's clips each by their own episodes (`train::library_evaluation`).
 enum Scorer {
@@ -194,15 +249,15 @@ enum Scorer {
 }
 
 impl Scorer {
+    /// The scorer of `rollout`'s episodes (the evaluation rollout of a run on `motion`).
     fn new(
-        trainer: &Trainer,
+        rollout: &Rollout,
         motion: TrackedMotion<'_>,
         config: &TrainConfig,
     ) -> Result<Scorer, TrainError> {
         Ok(match motion {
             TrackedMotion::Clip(motion) => Scorer::for_clip(motion, config),
             TrackedMotion::Library { .. } => {
-                let (rollout, _) = trainer.evaluation_rollout();
                 let evaluations = rollout.clip_evaluations().ok_or_else(|| {
                     TrainError::Setup("the evaluation rollout has no clip plan".to_owned())
                 })?;

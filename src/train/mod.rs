@@ -15,6 +15,7 @@ pub mod divergence;
 mod error;
 pub mod evaluation;
 mod gpu_loop;
+pub mod latent_trainer;
 pub mod library;
 pub mod library_evaluation;
 pub mod metrics;

@@ -325,6 +325,28 @@ impl Rollout {
         Ok(self)
     }
 
+    /// Gives this training rollout the observation statistics `count [2]`, `mean [D]`, `m2
+    /// [D]` (a tracker checkpoint's `obs_norm.*`) and never updates them: the latent
+    /// controller's distillation (docs/latent.md). Call it before [`Rollout::reset_all`].
+    pub fn freeze_normalization(
+        &mut self,
+        count: &[f64],
+        mean: &[f64],
+        m2: &[f64],
+    ) -> Result<(), RolloutError> {
+        let d = self.observation_size();
+        if count.len() != 2 || mean.len() != d || m2.len() != d {
+            return Err(RolloutError::Setup(format!(
+                "observation statistics of {} counts, {} means and {} M2 for {d} observations",
+                count.len(),
+                mean.len(),
+                m2.len()
+            )));
+        }
+        self.normalizer.freeze_at(count, mean, m2)?;
+        Ok(())
+    }
+
     pub fn num_envs(&self) -> usize {
         self.num_envs
     }

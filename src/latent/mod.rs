@@ -1,0 +1,68 @@
+//! The latent controller (issue 19, item 4; docs/latent.md): an encoder that sees the tracker's
+//! whole observation and outputs a Gaussian over a latent `z`, a decoder (the low-level policy)
+//! that sees the character's state and `z` and outputs actions, and a learned prior over `z`
+//! given the character's state, trained by online distillation from a library tracker
+//! (PULSE's approach: the student acts, the frozen teacher labels every step, DAgger).
+//!
+//! - [`config`]: the `[latent]` section.
+//! - [`networks`]: the three layouts, which observation columns are the character's state, a
+//!   float64 host reference of the loss.
+//! - [`teacher`]: the tracker checkpoint the student learns from (actor and observation
+//!   statistics), with its shape checked.
+//! - [`LatentStudent`]: the networks on the GPU; as a [`crate::env::RolloutPolicy`] it acts
+//!   with the decoder and stores the teacher's label of each step.
+//! - [`DistillationUpdate`]: epochs x minibatches of Adam on the distillation loss, recorded
+//!   onto a stream (one CUDA graph with the rollout).
+//! - [`FrozenDecoder`]: the decoder and the prior of a trained latent controller with the
+//!   observation statistics, shape-checked: what a goal task drives with its latent actions.
+//!   The train layer reads and writes the checkpoint files (`train::latent_trainer`).
+
+pub mod config;
+mod distill;
+pub mod frozen;
+pub mod networks;
+mod student;
+pub mod teacher;
+
+use thiserror::Error;
+
+use crate::cuda::CudaError;
+use crate::env::RolloutError;
+use crate::kernels::EnvError;
+use crate::ppo::{PolicyError, PpoError};
+
+pub use config::LatentConfig;
+pub use distill::{
+    DistillationBatch, DistillationOptimizerState, DistillationStatistics, DistillationUpdate,
+};
+pub use frozen::FrozenDecoder;
+pub use networks::{LatentShapes, proprio_columns};
+pub use student::LatentStudent;
+pub use teacher::TeacherCheckpoint;
+
+/// Why the latent controller cannot be built, loaded or run.
+#[derive(Debug, Error)]
+pub enum LatentError {
+    #[error(transparent)]
+    Env(#[from] EnvError),
+    #[error(transparent)]
+    Cuda(#[from] CudaError),
+    #[error(transparent)]
+    Policy(#[from] PolicyError),
+    #[error(transparent)]
+    Ppo(#[from] PpoError),
+    #[error("latent controller: {0}")]
+    Shape(String),
+    /// A checkpoint (teacher or latent) that does not fit this run; the message names the
+    /// file and what differs.
+    #[error("{path}: {reason}")]
+    Incompatible { path: String, reason: String },
+}
+
+/// A latent-controller error inside the rollout (it knows policies only through
+/// `RolloutPolicy`).
+impl From<LatentError> for RolloutError {
+    fn from(e: LatentError) -> Self {
+        RolloutError::Policy(Box::new(e))
+    }
+}
