@@ -24,7 +24,7 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 31] = [
+const EXPECTED_KERNELS: [(&str, &str); 34] = [
     ("control", "pd_control"),
     ("evaluate", "evaluation_accumulate"),
     ("gae", "gae_advantages"),
@@ -32,6 +32,9 @@ const EXPECTED_KERNELS: [(&str, &str); 31] = [
     ("gemm_epilogue", "bias_elu"),
     ("gemm_epilogue", "bias_add"),
     ("gemm_epilogue", "elu_input_gradient"),
+    ("goal", "goal_reward_termination"),
+    ("goal", "goal_reset"),
+    ("goal", "goal_observe"),
     ("minibatch", "shuffle_indices"),
     ("minibatch", "gather_minibatch"),
     ("mlp_backward", "linear_backward_weight"),

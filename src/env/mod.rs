@@ -14,6 +14,7 @@
 
 pub mod config;
 mod evaluation;
+mod goal_counters;
 pub mod layout;
 mod normalizer;
 mod phases;
@@ -36,6 +37,7 @@ pub use evaluation::{
     RUNNING, SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps,
     clip_evaluation, evaluation_env, evaluation_episode_steps, evaluation_start_time, yardstick,
 };
+pub use goal_counters::{GoalCounter, GoalTally};
 pub use physics_state::PhysicsState;
 pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;
