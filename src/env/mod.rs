@@ -25,12 +25,13 @@ mod rollout;
 mod stages;
 mod statistics;
 mod storage;
+mod task;
 mod tracked;
 mod trajectory;
 
 pub use config::{
-    ActionMode, EndEffectorFrame, EnvConfig, EvalStart, EvaluationProtocol, ObsConfig,
-    RewardConfig, RolloutConfig,
+    ActionMode, EndEffectorFrame, EnvConfig, EvalStart, EvaluationProtocol, GoalConfig, ObsConfig,
+    RewardConfig, RolloutConfig, TaskConfig,
 };
 pub use evaluation::{
     COMPLETED, ClipEvaluation, EpisodeScore, EpisodeScores, FAILED, LIBRARY_EVALUATION_WINDOW_S,
@@ -45,5 +46,6 @@ pub use rollout::{EpisodeState, Rollout, RolloutError};
 pub use stages::{RolloutStage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 pub use storage::{ActStorage, RolloutStorage};
+pub use task::{GOAL_OBSERVATION, goal_episode_steps, goal_observation_size};
 pub use tracked::TrackedMotion;
 pub use trajectory::{Trajectory, TrajectoryFrames};

@@ -17,8 +17,8 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::env::{
-    EnvConfig, EvalStart, EvaluationProtocol, LIBRARY_EVALUATION_WINDOW_S, ObsConfig, RewardConfig,
-    RolloutConfig,
+    EnvConfig, EvalStart, EvaluationProtocol, GoalConfig, LIBRARY_EVALUATION_WINDOW_S, ObsConfig,
+    RewardConfig, RolloutConfig, TaskConfig,
 };
 use crate::motion::{LibraryConfig, MotionLibraryError};
 use crate::ppo::{PolicyConfig, PpoConfig};
@@ -76,6 +76,10 @@ pub struct TrainConfig {
     pub ppo: PpoConfig,
     #[serde(default)]
     pub run: RunConfig,
+    /// `[goal]`: train the goal-reaching task (docs/goal.md) instead of tracking; the motion
+    /// (or library) gives the reset's start states.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal: Option<GoalConfig>,
 }
 
 /// `[run]`: evaluation, stopping, checkpoints (the paper's protocol; docs/train.md).
@@ -223,6 +227,7 @@ impl TrainConfig {
             policy: PolicyConfig::default(),
             ppo: PpoConfig::default(),
             run: RunConfig::default(),
+            goal: None,
         }
     }
 
@@ -276,6 +281,7 @@ impl TrainConfig {
                 }
             };
         }
+        super::goal::validate_goal(self, name)?;
         let (e, r, o, p, q) = (&self.env, &self.reward, &self.obs, &self.policy, &self.ppo);
         let run = &self.run;
         match &self.motion_library {
@@ -657,6 +663,10 @@ impl TrainConfig {
     /// evaluation protocol of `[run]`.
     pub fn rollout_config(&self) -> RolloutConfig {
         RolloutConfig {
+            task: match &self.goal {
+                Some(goal) => TaskConfig::Goal(goal.clone()),
+                None => TaskConfig::Tracking,
+            },
             env: self.env.clone(),
             reward: self.reward.clone(),
             obs: self.obs.clone(),

@@ -208,6 +208,7 @@ mod tests {
                 library: None,
             }),
             divergence: None,
+            goal: None,
         }
     }
 
