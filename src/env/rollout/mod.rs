@@ -459,6 +459,15 @@ impl Rollout {
         matches!(self.task, Task::Goal(_))
     }
 
+    /// The goal task's per-env goals `[N, 2]` (world x, y) and root distances to them `[N]`
+    /// after the last step (None for tracking).
+    pub fn goals(&self) -> Option<(&DeviceArray2<f32>, &DeviceArray<f32>)> {
+        match &self.task {
+            Task::Goal(goal) => Some((&goal.goal, &goal.distance)),
+            Task::Tracking(_) => None,
+        }
+    }
+
     /// The goal task's episode totals (None for tracking; waits for the GPU): for a training
     /// rollout every episode ended since [`Rollout::reset_all`] (take differences between
     /// reads for one rollout's), for the evaluation rollout each env's first episode.
