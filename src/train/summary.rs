@@ -176,6 +176,13 @@ impl RunSummary {
                 e.ee_orientation_error_rad
             );
         }
+        if let Some(g) = &self.goal_evaluation {
+            let _ = writeln!(
+                out,
+                "last goal evaluation: {:.2} goals per episode, fall rate {:.3} ({} episodes)",
+                g.goals_per_episode, g.fall_rate, g.episodes
+            );
+        }
         out
     }
 }
