@@ -81,6 +81,15 @@ pub fn goal_evaluation_line(config: &TrainConfig, control_dt: f64) -> Option<Str
     ))
 }
 
+/// The progress line of an iteration with a goal evaluation (None otherwise).
+pub fn goal_progress_line(record: &IterationRecord) -> Option<String> {
+    let e = record.goal.as_ref()?.evaluation.as_ref()?;
+    Some(format!(
+        "iteration {} ({:.2} s active): {:.2} goals per episode, fall rate {:.3} ({} episodes)",
+        record.iteration, record.active_time_s, e.goals_per_episode, e.fall_rate, e.episodes
+    ))
+}
+
 /// The last goal evaluation of a run's records (`summary.json`).
 pub fn last_goal_evaluation(records: &[IterationRecord]) -> Option<GoalRates> {
     records
@@ -239,6 +248,48 @@ mod tests {
         assert_eq!(key_of(&c), Some("ppo.overlap_update"));
         // No [goal] section: tracking, nothing of the goal task is checked.
         assert_eq!(key_of(&TrainConfig::with_motion("walk")), None);
+    }
+
+    #[test]
+    fn the_last_goal_evaluation_reaches_the_summary_and_the_progress_line() {
+        use crate::train::StopReason;
+        use crate::train::summary::RunSummary;
+        use crate::train::summary::test_records::record;
+        let rates = |goals: u64, falls: u64| {
+            GoalRates::from(&GoalTally {
+                episodes: 32,
+                goals,
+                falls,
+            })
+        };
+        let mut records: Vec<IterationRecord> = (1..=4).map(|i| record(i, None)).collect();
+        for (i, r) in records.iter_mut().enumerate() {
+            r.goal = Some(GoalRecord {
+                rollout: rates(10, 4),
+                evaluation: (i % 2 == 1).then(|| rates(64 * (i as u64 + 1), 8)),
+            });
+        }
+        assert_eq!(goal_progress_line(&records[0]), None);
+        let line = goal_progress_line(&records[3]).expect("an evaluation iteration");
+        assert!(
+            line.contains("8.00 goals per episode, fall rate 0.250 (32 episodes)"),
+            "{line}"
+        );
+        let summary = RunSummary::from_records("walk", 0, &records, StopReason::IterationBudget);
+        let last = summary
+            .goal_evaluation
+            .as_ref()
+            .expect("the last goal evaluation");
+        assert_eq!(last.goals_per_episode, 8.0);
+        assert!(
+            summary
+                .report()
+                .contains("last goal evaluation: 8.00 goals per episode")
+        );
+        // Tracking runs have none.
+        let tracking: Vec<IterationRecord> = (1..=2).map(|i| record(i, Some(false))).collect();
+        let summary = RunSummary::from_records("walk", 0, &tracking, StopReason::IterationBudget);
+        assert!(summary.goal_evaluation.is_none());
     }
 
     #[test]
