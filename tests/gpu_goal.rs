@@ -17,8 +17,6 @@
 
 mod small_run_support;
 
-use std::path::Path;
-
 use instantmimic::cuda::Gpu;
 use instantmimic::env::{GOAL_OBSERVATION, Rollout, TrackedMotion};
 use instantmimic::motion::find::resolve_motion;
@@ -31,8 +29,12 @@ use small_run_support::{binary, check_success, metrics};
 
 /// `configs/goal/reach.toml` at the 32-world size with short iterations.
 fn goal_config() -> TrainConfig {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/goal/reach.toml");
-    let mut config = TrainConfig::load(&path).expect("configs/goal/reach.toml loads");
+    // Embedded: the test binary runs on the GPU machine, away from this checkout.
+    let mut config = TrainConfig::from_toml(
+        include_str!("../configs/goal/reach.toml"),
+        "configs/goal/reach.toml",
+    )
+    .expect("configs/goal/reach.toml parses");
     config.env.num_envs = 32;
     config.ppo.horizon = 32;
     config.ppo.minibatches = 2;
