@@ -25,8 +25,8 @@ fn run_on_cpu(kernel: &str, checks: impl FnOnce(&Fixture) -> Vec<Check>) {
 /// All check families, as the two executions run them.
 fn all_checks(fixture: &Fixture) -> Vec<Check> {
     use kernel_checks::{
-        control, episode, evaluate, gemm_epilogue, normalize, observe, policy, reset, statistics,
-        tracking,
+        control, episode, evaluate, gemm_epilogue, goal, normalize, observe, policy, reset,
+        statistics, tracking,
     };
     [
         control::checks(fixture),
@@ -42,6 +42,7 @@ fn all_checks(fixture: &Fixture) -> Vec<Check> {
         evaluate::checks(fixture),
         episode::checks(fixture),
         statistics::checks(fixture),
+        goal::checks(fixture),
     ]
     .into_iter()
     .flatten()
@@ -168,4 +169,22 @@ fn evaluation_accumulate_matches_the_f64_reference() {
 #[test]
 fn rollout_statistics_match_the_f64_reference() {
     run_on_cpu("episode_statistics", kernel_checks::statistics::checks);
+}
+
+#[test]
+fn goal_reward_termination_matches_the_f64_reference() {
+    run_on_cpu(
+        "goal_reward_termination",
+        kernel_checks::goal::reward_checks,
+    );
+}
+
+#[test]
+fn goal_reset_matches_the_f64_reference() {
+    run_on_cpu("goal_reset", kernel_checks::goal::reset_checks);
+}
+
+#[test]
+fn goal_observe_matches_the_f64_reference() {
+    run_on_cpu("goal_observe", kernel_checks::goal::observe_checks);
 }

@@ -24,7 +24,7 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 38] = [
+const EXPECTED_KERNELS: [(&str, &str); 41] = [
     ("control", "pd_control"),
     ("evaluate", "evaluation_accumulate"),
     ("gae", "gae_advantages"),
@@ -32,6 +32,9 @@ const EXPECTED_KERNELS: [(&str, &str); 38] = [
     ("gemm_epilogue", "bias_elu"),
     ("gemm_epilogue", "bias_add"),
     ("gemm_epilogue", "elu_input_gradient"),
+    ("goal", "goal_reward_termination"),
+    ("goal", "goal_reset"),
+    ("goal", "goal_observe"),
     ("latent", "latent_split_observation"),
     ("latent", "latent_sample"),
     ("latent", "latent_reconstruction_gradient"),

@@ -11,7 +11,8 @@ use std::collections::BTreeMap;
 
 use instantmimic::cuda::{DeviceRange, Gpu, Stream};
 use instantmimic::kernels::{
-    DeviceArray, Element, EnvKernels, ObservationParams, ResetParams, TrackingParams, Yardstick,
+    DeviceArray, Element, EnvKernels, GoalParams, ObservationParams, ResetParams, TrackingParams,
+    Yardstick,
 };
 use kernel_checks::program::{Arg, HostData, Outputs, Program, Scalar, Step, StructArg};
 use kernel_checks::{Check, Fixture, run_checks};
@@ -158,6 +159,13 @@ impl Args<'_> {
     fn observation(&self, i: usize) -> ObservationParams {
         match &self.args[i] {
             Arg::Struct(StructArg::Observation(p)) => *p,
+            other => panic!("argument {i} is {other:?}"),
+        }
+    }
+
+    fn goal(&self, i: usize) -> GoalParams {
+        match &self.args[i] {
+            Arg::Struct(StructArg::Goal(p)) => *p,
             other => panic!("argument {i} is {other:?}"),
         }
     }
@@ -361,6 +369,39 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
         "rollout_statistics" => {
             kernels.rollout_statistics(s, dim, a.i32(0), &a.array(1), &a.array(2))
         }
+        "goal_reward_termination" => kernels.goal_reward_termination(
+            s,
+            dim,
+            &a.array(0),
+            &a.goal(1),
+            a.i32(2),
+            &a.array(3),
+            &a.array(4),
+            &a.array(5),
+            &a.array(6),
+            &a.array(7),
+            &a.array(8),
+            &a.array(9),
+            &a.array(10),
+            &a.array(11),
+            &a.array(12),
+        ),
+        "goal_reset" => kernels.goal_reset(
+            s,
+            dim,
+            &a.array(0),
+            &a.goal(1),
+            a.i32(2),
+            &a.array(3),
+            &a.array(4),
+            &a.array(5),
+            &a.array(6),
+            &a.array(7),
+            &a.array(8),
+        ),
+        "goal_observe" => {
+            kernels.goal_observe(s, dim, &a.array(0), &a.array(1), a.i32(2), &a.array(3))
+        }
         other => panic!("no GPU dispatch for kernel {other}"),
     };
     result.unwrap_or_else(|e| panic!("launching {kernel}: {e}"));
@@ -504,4 +545,22 @@ fn gpu_evaluation_accumulate_matches_the_f64_reference() {
 #[test]
 fn gpu_rollout_statistics_match_the_f64_reference() {
     run_on_gpu("episode_statistics", kernel_checks::statistics::checks);
+}
+
+#[test]
+fn gpu_goal_reward_termination_matches_the_f64_reference() {
+    run_on_gpu(
+        "goal_reward_termination",
+        kernel_checks::goal::reward_checks,
+    );
+}
+
+#[test]
+fn gpu_goal_reset_matches_the_f64_reference() {
+    run_on_gpu("goal_reset", kernel_checks::goal::reset_checks);
+}
+
+#[test]
+fn gpu_goal_observe_matches_the_f64_reference() {
+    run_on_gpu("goal_observe", kernel_checks::goal::observe_checks);
 }

@@ -365,6 +365,7 @@ fn the_learning_curve_is_a_png_with_both_series() {
             termination: Default::default(),
             evaluation: (i % 5 == 0).then(|| evaluation(i, 30)),
             divergence: None,
+            goal: None,
         })
         .collect();
     let png_bytes = curve::learning_curve_png(&records, "walk (seed 0)", 300.0, 0.9).unwrap();

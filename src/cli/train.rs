@@ -353,10 +353,16 @@ pub fn run(args: TrainArgs) -> Result<()> {
         RunStart::New { root, .. } | RunStart::Resume { root } => root.clone(),
     };
     // A replay plays one clip: a library's run writes none (docs/library.md).
-    let replay = config.run.replay && config.motion_library.is_none();
+    // The goal task's episodes are not tracking episodes: it writes none either (docs/goal.md).
+    let replay = config.run.replay && config.motion_library.is_none() && config.goal.is_none();
     if config.run.replay && config.motion_library.is_some() {
         eprintln!(
             "note: no {} for a motion library (replay plays one clip; run.replay is ignored)",
+            REPLAY_FILE
+        );
+    } else if config.run.replay && config.goal.is_some() {
+        eprintln!(
+            "note: no {} for the goal task (replay plays tracking episodes; run.replay is ignored)",
             REPLAY_FILE
         );
     }

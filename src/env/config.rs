@@ -142,6 +142,51 @@ impl Default for ObsConfig {
     }
 }
 
+/// `[goal]`: the goal-reaching task (docs/goal.md). A training configuration with this section
+/// trains the goal task instead of tracking.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct GoalConfig {
+    /// Episode length (s); an episode ends earlier only by a fall.
+    pub episode_s: f32,
+    /// Goals are drawn this far from the root (m), in a uniform direction.
+    pub min_distance: f32,
+    pub max_distance: f32,
+    /// A goal is reached when the root is this close horizontally (m); the next appears at once.
+    pub reach_radius: f32,
+    /// Reward per metre of horizontal distance to the goal gained in a control step.
+    pub progress_weight: f32,
+    /// Reward per goal reached.
+    pub bonus_weight: f32,
+    /// A fall: the root below this height (m) ends the episode as a failure.
+    pub fall_height: f32,
+}
+
+impl Default for GoalConfig {
+    fn default() -> Self {
+        GoalConfig {
+            episode_s: 10.0,
+            min_distance: 1.0,
+            max_distance: 3.0,
+            reach_radius: 0.5,
+            progress_weight: 20.0,
+            bonus_weight: 10.0,
+            fall_height: 0.5,
+        }
+    }
+}
+
+/// The task a rollout trains (docs/env.md, "Tasks"): its reward and termination, the part of
+/// the reset and of the observation that is its own.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TaskConfig {
+    /// Track the motion (a clip or a library): `[reward]`, `[env]`'s failures, `[obs]`'s
+    /// reference blocks.
+    Tracking,
+    /// Reach goals on the ground (`[goal]`), starting from states of the motion library.
+    Goal(GoalConfig),
+}
+
 /// Where the evaluation episodes start (docs/train.md, "Evaluation").
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
@@ -157,6 +202,7 @@ pub enum EvalStart {
 /// configuration: `TrainConfig::rollout_config`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct RolloutConfig {
+    pub task: TaskConfig,
     pub env: EnvConfig,
     pub reward: RewardConfig,
     pub obs: ObsConfig,

@@ -393,6 +393,7 @@ mod seed_tests {
     fn the_reset_and_the_policy_draw_from_different_streams() {
         for seed in [0u64, 1, 2, 42, u64::MAX] {
             let config = RolloutConfig {
+                task: crate::env::config::TaskConfig::Tracking,
                 env: Default::default(),
                 reward: Default::default(),
                 obs: Default::default(),

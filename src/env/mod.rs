@@ -14,6 +14,7 @@
 
 pub mod config;
 mod evaluation;
+mod goal_counters;
 pub mod layout;
 mod normalizer;
 mod phases;
@@ -24,18 +25,20 @@ mod rollout;
 mod stages;
 mod statistics;
 mod storage;
+mod task;
 mod tracked;
 mod trajectory;
 
 pub use config::{
-    ActionMode, EndEffectorFrame, EnvConfig, EvalStart, EvaluationProtocol, ObsConfig,
-    RewardConfig, RolloutConfig,
+    ActionMode, EndEffectorFrame, EnvConfig, EvalStart, EvaluationProtocol, GoalConfig, ObsConfig,
+    RewardConfig, RolloutConfig, TaskConfig,
 };
 pub use evaluation::{
     COMPLETED, ClipEvaluation, EpisodeScore, EpisodeScores, FAILED, LIBRARY_EVALUATION_WINDOW_S,
     RUNNING, SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps,
     clip_evaluation, evaluation_env, evaluation_episode_steps, evaluation_start_time, yardstick,
 };
+pub use goal_counters::{GoalCounter, GoalTally};
 pub use physics_state::PhysicsState;
 pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;
@@ -43,5 +46,6 @@ pub use rollout::{EpisodeState, Rollout, RolloutError};
 pub use stages::{RolloutStage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 pub use storage::{ActStorage, RolloutStorage};
+pub use task::{GOAL_OBSERVATION, goal_episode_steps, goal_observation_size};
 pub use tracked::TrackedMotion;
 pub use trajectory::{Trajectory, TrajectoryFrames};

@@ -17,8 +17,8 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::env::{
-    EnvConfig, EvalStart, EvaluationProtocol, LIBRARY_EVALUATION_WINDOW_S, ObsConfig, RewardConfig,
-    RolloutConfig,
+    EnvConfig, EvalStart, EvaluationProtocol, GoalConfig, LIBRARY_EVALUATION_WINDOW_S, ObsConfig,
+    RewardConfig, RolloutConfig, TaskConfig,
 };
 use crate::latent::LatentConfig;
 use crate::motion::{LibraryConfig, MotionLibraryError};
@@ -81,6 +81,10 @@ pub struct TrainConfig {
     /// instead of PPO (docs/latent.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub latent: Option<LatentConfig>,
+    /// `[goal]`: train the goal-reaching task (docs/goal.md) instead of tracking; the motion
+    /// (or library) gives the reset's start states.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal: Option<GoalConfig>,
 }
 
 /// `[run]`: evaluation, stopping, checkpoints (the paper's protocol; docs/train.md).
@@ -229,6 +233,7 @@ impl TrainConfig {
             ppo: PpoConfig::default(),
             run: RunConfig::default(),
             latent: None,
+            goal: None,
         }
     }
 
@@ -282,6 +287,7 @@ impl TrainConfig {
                 }
             };
         }
+        super::goal::validate_goal(self, name)?;
         let (e, r, o, p, q) = (&self.env, &self.reward, &self.obs, &self.policy, &self.ppo);
         let run = &self.run;
         match &self.motion_library {
@@ -680,6 +686,10 @@ impl TrainConfig {
     /// evaluation protocol of `[run]`.
     pub fn rollout_config(&self) -> RolloutConfig {
         RolloutConfig {
+            task: match &self.goal {
+                Some(goal) => TaskConfig::Goal(goal.clone()),
+                None => TaskConfig::Tracking,
+            },
             env: self.env.clone(),
             reward: self.reward.clone(),
             obs: self.obs.clone(),

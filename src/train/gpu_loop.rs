@@ -16,6 +16,7 @@ use super::evaluation::{
     evaluation_start_times, summarize,
 };
 use super::latent_trainer::{LatentTrainer, load_teacher};
+use super::goal::GoalRecord;
 use super::library::TrainMotion;
 use super::library_evaluation::LibraryPlan;
 use super::preflight::Preflight;
@@ -60,6 +61,9 @@ trait LoopTrainer {
     fn iterate(&mut self) -> Result<IterationStats, TrainError>;
     fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, TrainError>;
     fn evaluation_steps(&self) -> u32;
+    /// The goal task's record of the iteration just run, evaluated when `evaluate` (None
+    /// when tracking).
+    fn goal_record(&mut self, evaluate: bool) -> Result<Option<GoalRecord>, TrainError>;
     fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), TrainError>;
     fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainError>;
     fn physics_overflow(&mut self) -> Result<PhysicsOverflow, TrainError>;
@@ -76,6 +80,9 @@ impl LoopTrainer for Trainer {
     }
     fn evaluation_steps(&self) -> u32 {
         Trainer::evaluation_steps(self)
+    }
+    fn goal_record(&mut self, evaluate: bool) -> Result<Option<GoalRecord>, TrainError> {
+        Trainer::goal_record(self, evaluate)
     }
     fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), TrainError> {
         Trainer::save_into(self, checkpoint)
@@ -100,6 +107,10 @@ impl LoopTrainer for Replicas {
     }
     fn evaluation_steps(&self) -> u32 {
         Replicas::evaluation_steps(self)
+    }
+    fn goal_record(&mut self, _evaluate: bool) -> Result<Option<GoalRecord>, TrainError> {
+        // The configuration refuses the goal task on several GPUs (run.gpus).
+        Ok(None)
     }
     fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), TrainError> {
         Replicas::save_into(self, checkpoint)
@@ -256,6 +267,11 @@ impl Scorer {
         config: &TrainConfig,
     ) -> Result<Scorer, TrainError> {
         Ok(match motion {
+            // The goal task's evaluation is its goal counters (Trainer::goal_record); no
+            // tracking episodes are scored.
+            _ if config.goal.is_some() => Scorer::Clip {
+                start_times: Vec::new(),
+            },
             TrackedMotion::Clip(motion) => Scorer::for_clip(motion, config),
             TrackedMotion::Library { .. } => {
                 let evaluations = rollout.clip_evaluations().ok_or_else(|| {
@@ -400,7 +416,16 @@ fn run_loop<T: LoopTrainer>(
             let event = go_back(&mut guard, trainer, &mut session, step.iteration, &cause)?;
             step.diverged(event);
         }
-        let evaluation = if step.evaluate {
+        let started = std::time::Instant::now();
+        let goal = trainer.goal_record(step.evaluate)?;
+        let goal_task = goal.is_some();
+        if let Some(goal) = goal {
+            if step.evaluate {
+                wall.evaluation(started);
+            }
+            step.set_goal(goal);
+        }
+        let evaluation = if step.evaluate && !goal_task {
             let started = std::time::Instant::now();
             let episodes = trainer.evaluate()?;
             wall.evaluation(started);

@@ -148,6 +148,9 @@ pub struct IterationRecord {
     /// state (src/train/divergence.rs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub divergence: Option<DivergenceEvent>,
+    /// The goal task's goals per episode and falls (absent when tracking).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal: Option<super::goal::GoalRecord>,
 }
 
 /// `null` read as NaN: serde_json writes non-finite floats as `null`.

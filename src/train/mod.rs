@@ -14,6 +14,7 @@ mod device_report;
 pub mod divergence;
 mod error;
 pub mod evaluation;
+pub mod goal;
 mod gpu_loop;
 pub mod latent_trainer;
 pub mod library;
@@ -48,6 +49,7 @@ pub use evaluation::{
     clamped_clip_steps, evaluation_start_times, evaluation_steps, format_evaluation_report,
     summarize, yardstick,
 };
+pub use goal::{GoalRates, GoalRecord};
 pub use gpu_loop::{
     RunStart, TrainSetup, evaluate_episodes_on_gpu, evaluate_on_gpu, evaluation_trainer,
     train_on_gpu, train_with,

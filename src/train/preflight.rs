@@ -10,6 +10,7 @@ use super::checkpoint::tensor_names;
 use super::config::TrainConfig;
 use super::error::TrainError;
 use super::evaluation::evaluation_steps;
+use crate::env::goal_observation_size;
 use crate::env::layout::{JointLayout, observation_size};
 use crate::motion::find::{ResolvedMotion, resolve_motion};
 use crate::motion::{Character, LoopMode, ReferenceMotion, ReferenceTable};
@@ -34,7 +35,11 @@ impl PolicyShapes {
         let layout =
             JointLayout::for_character(character).map_err(|e| TrainError::Setup(e.to_string()))?;
         let actions = layout.num_motors;
-        let observation = observation_size(&config.obs, actions, layout.end_effectors.len());
+        let effectors = layout.end_effectors.len();
+        let observation = match &config.goal {
+            None => observation_size(&config.obs, actions, effectors),
+            Some(_) => goal_observation_size(&config.obs, actions, effectors),
+        };
         let end = |layers: Vec<crate::ppo::LayerShape>| layers.last().map_or(0, |l| l.end());
         Ok(PolicyShapes {
             observation_size: observation,
@@ -255,24 +260,29 @@ impl Preflight {
             "iteration     {} envs x {} steps = {frames} frames; {} epochs x {} minibatches",
             config.env.num_envs, config.ppo.horizon, config.ppo.epochs, config.ppo.minibatches
         );
-        let _ = writeln!(
-            out,
-            "evaluation    every {} iterations: {} envs x {}{} steps ({:.3} s), success at {}{}",
-            config.run.eval_interval,
-            config.run.eval_envs,
-            if self.library.is_some() { "up to " } else { "" },
-            self.eval_steps,
-            f64::from(self.eval_steps) * self.control_dt,
-            config.run.success_rate,
-            if self.library.is_some() {
-                format!(
-                    " of the episodes and every clip at {}",
-                    super::library_evaluation::CLIP_SUCCESS_RATE
-                )
-            } else {
-                String::new()
-            }
-        );
+        let _ = writeln!(out, "{}", super::goal::task_line(config, self.control_dt));
+        if let Some(line) = super::goal::goal_evaluation_line(config, self.control_dt) {
+            let _ = writeln!(out, "{line}");
+        } else {
+            let _ = writeln!(
+                out,
+                "evaluation    every {} iterations: {} envs x {}{} steps ({:.3} s), success at {}{}",
+                config.run.eval_interval,
+                config.run.eval_envs,
+                if self.library.is_some() { "up to " } else { "" },
+                self.eval_steps,
+                f64::from(self.eval_steps) * self.control_dt,
+                config.run.success_rate,
+                if self.library.is_some() {
+                    format!(
+                        " of the episodes and every clip at {}",
+                        super::library_evaluation::CLIP_SUCCESS_RATE
+                    )
+                } else {
+                    String::new()
+                }
+            );
+        }
         let _ = writeln!(
             out,
             "budgets       {} s active, {} iterations; checkpoint every {} iterations, keep {}",

@@ -82,17 +82,25 @@ impl Progress {
         if let Some(e) = &record.evaluation {
             self.last_success_rate = Some(e.success_rate);
         }
+        // The goal task's evaluation (docs/goal.md) has a line of its own.
+        let goal_line = super::goal::goal_progress_line(record);
         if let Some(bar) = &self.bar {
             bar.set_position(record.iteration);
             bar.set_message(bar_message(record, self.last_success_rate));
             if record.evaluation.is_some() {
                 bar.println(evaluation_line(record));
             }
-        } else if let Some(out) = &mut self.lines
-            && record.evaluation.is_some()
-        {
+            if let Some(line) = &goal_line {
+                bar.println(line);
+            }
+        } else if let Some(out) = &mut self.lines {
             // Progress output is best effort: a closed pipe must not stop training.
-            let _ = writeln!(out, "{}", evaluation_line(record));
+            if record.evaluation.is_some() {
+                let _ = writeln!(out, "{}", evaluation_line(record));
+            }
+            if let Some(line) = &goal_line {
+                let _ = writeln!(out, "{line}");
+            }
             let _ = out.flush();
         }
     }
@@ -208,6 +216,7 @@ mod tests {
                 library: None,
             }),
             divergence: None,
+            goal: None,
         }
     }
 

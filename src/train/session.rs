@@ -66,6 +66,12 @@ impl IterationStep {
         self.evaluate = false;
         self.record.divergence = Some(event);
     }
+
+    /// The goal task's record of this iteration (its rollout's episodes, and its evaluation
+    /// when one ran).
+    pub fn set_goal(&mut self, goal: super::goal::GoalRecord) {
+        self.record.goal = Some(goal);
+    }
 }
 
 /// What the loop does after recording an iteration.
@@ -279,6 +285,7 @@ impl RunSession {
             termination: stats.termination,
             evaluation: None,
             divergence: None,
+            goal: None,
         };
         IterationStep {
             iteration,

@@ -39,6 +39,10 @@ pub struct RunSummary {
     /// A motion library's times to its two criteria (absent for one clip).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub library: Option<LibraryTimes>,
+    /// The goal task's last evaluation: goals per episode and the fall rate (absent when
+    /// tracking).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal_evaluation: Option<super::goal::GoalRates>,
 }
 
 /// When a motion library's run first met each of its success criteria (active seconds; null:
@@ -104,6 +108,7 @@ impl RunSummary {
             time_to_clip_start_success_s: clip_start.map(|r| r.active_time_s),
             last_evaluation: records.iter().rev().find_map(|r| r.evaluation.clone()),
             library,
+            goal_evaluation: super::goal::last_goal_evaluation(records),
         }
     }
 
@@ -171,6 +176,13 @@ impl RunSummary {
                 e.ee_orientation_error_rad
             );
         }
+        if let Some(g) = &self.goal_evaluation {
+            let _ = writeln!(
+                out,
+                "last goal evaluation: {:.2} goals per episode, fall rate {:.3} ({} episodes)",
+                g.goals_per_episode, g.fall_rate, g.episodes
+            );
+        }
         out
     }
 }
@@ -208,6 +220,7 @@ pub(crate) mod test_records {
                 library: None,
             }),
             divergence: None,
+            goal: None,
         }
     }
 

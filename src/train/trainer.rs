@@ -23,7 +23,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use crate::cuda::{Communicator, DeviceRange, Gpu, Graph, Readback};
-use crate::env::{Rollout, TrackedMotion};
+use crate::env::{GoalTally, Rollout, TrackedMotion};
 use crate::kernels::DeviceArray;
 use crate::plan::PlanStore;
 use crate::ppo::{GaussianPolicy, PolicyGemm, PpoBatch, PpoOptimizerState, PpoUpdate};
@@ -34,6 +34,7 @@ use super::config::TrainConfig;
 use super::device_report::{REPORT_BYTES, read_report, record_parameter_squares, record_report};
 use super::error::TrainError;
 use super::evaluation::EnvEvaluation;
+use super::goal::{GoalRates, GoalRecord};
 use super::pipeline::Pipeline;
 use super::replica_seed;
 use super::report::IterationReport;
@@ -53,6 +54,9 @@ pub struct Trainer {
     update: PpoUpdate,
     iterations: Iterations,
     evaluation_graph: Graph,
+    /// The goal task's counter totals at the last [`Trainer::goal_record`] (zeros when
+    /// tracking, and after every reset of the rollout).
+    goal_seen: GoalTally,
 }
 
 /// How an iteration runs.
@@ -170,6 +174,7 @@ impl Trainer {
             update,
             iterations,
             evaluation_graph,
+            goal_seen: GoalTally::default(),
         })
     }
 
@@ -207,9 +212,38 @@ impl Trainer {
         let scores = self
             .evaluation
             .episode_scores()
-            .ok_or_else(|| TrainError::Setup("the evaluation rollout keeps no scores".to_owned()))?
+            .ok_or_else(|| {
+                TrainError::Setup(
+                    "the evaluation rollout keeps no tracking scores (the goal task's evaluation is Trainer::goal_record)"
+                        .to_owned(),
+                )
+            })?
             .download()?;
         Ok(scores.iter().map(EnvEvaluation::from).collect())
+    }
+
+    /// The goal task's record of the iteration just run (None when tracking; waits for the
+    /// GPU): the training rollout's episodes that ended since the last call, and with
+    /// `evaluate`, the evaluation rollout's (every env's first episode: mean actions, no reset
+    /// noise, every env starting at its clip's start).
+    pub fn goal_record(&mut self, evaluate: bool) -> Result<Option<GoalRecord>, TrainError> {
+        let Some(total) = self.rollout.goal_tally()? else {
+            return Ok(None);
+        };
+        let rollout = GoalRates::from(&total.since(&self.goal_seen));
+        self.goal_seen = total;
+        let evaluation = if evaluate {
+            self.evaluation.reset_all()?;
+            self.evaluation_graph.launch(self.gpu.stream())?;
+            self.gpu.synchronize()?;
+            self.evaluation.goal_tally()?.map(|t| GoalRates::from(&t))
+        } else {
+            None
+        };
+        Ok(Some(GoalRecord {
+            rollout,
+            evaluation,
+        }))
     }
 
     /// Overflow flags of the training worlds' physics since the plans were loaded (waits for
@@ -304,6 +338,7 @@ impl Trainer {
             }
         }
         self.rollout.reset_all()?;
+        self.goal_seen = GoalTally::default();
         // The batch in flight was sampled from other parameters: the next iteration refills.
         if let Iterations::Overlapped(pipeline) = &mut self.iterations {
             pipeline.restart();

@@ -19,6 +19,7 @@ pub mod cpu;
 pub mod episode;
 pub mod evaluate;
 pub mod gemm_epilogue;
+pub mod goal;
 pub mod normalize;
 pub mod observe;
 pub mod physics;

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 
 use instantmimic::kernels::manifest::{EnvManifest, SlotType};
 use instantmimic::kernels::{
-    KernelAbi, MANIFEST_ASSET, ObservationParams, ParamKind, ResetParams, ScalarType,
+    GoalParams, KernelAbi, MANIFEST_ASSET, ObservationParams, ParamKind, ResetParams, ScalarType,
     TrackingParams, Yardstick,
 };
 
@@ -130,6 +130,7 @@ pub enum StructArg {
     Reset(ResetParams),
     Observation(ObservationParams),
     Yardstick(Yardstick),
+    Goal(GoalParams),
 }
 
 impl StructArg {
@@ -139,6 +140,7 @@ impl StructArg {
             StructArg::Reset(_) => "ResetParams",
             StructArg::Observation(_) => "ObservationParams",
             StructArg::Yardstick(_) => "Yardstick",
+            StructArg::Goal(_) => "GoalParams",
         }
     }
 
@@ -180,6 +182,17 @@ impl StructArg {
             StructArg::Yardstick(p) => vec![
                 ("max_body_distance", F32(p.max_body_distance)),
                 ("max_root_drop", F32(p.max_root_drop)),
+            ],
+            StructArg::Goal(p) => vec![
+                ("seed", I32(p.seed)),
+                ("horizon", I32(p.horizon)),
+                ("min_distance", F32(p.min_distance)),
+                ("max_distance", F32(p.max_distance)),
+                ("reach_radius", F32(p.reach_radius)),
+                ("progress_weight", F32(p.progress_weight)),
+                ("bonus_weight", F32(p.bonus_weight)),
+                ("fall_height", F32(p.fall_height)),
+                ("max_episode_steps", I32(p.max_episode_steps)),
             ],
         }
     }

@@ -7,6 +7,7 @@ use crate::kernels::Yardstick;
 
 use super::super::evaluation::EpisodeScores;
 use super::super::storage::RolloutStorage;
+use super::super::task::Task;
 use super::{Rollout, RolloutError};
 use crate::env::config::ActionMode;
 
@@ -65,7 +66,7 @@ impl Rollout {
             &self.state.clip_id,
             &self.state.ref_time,
             // The targets are the pose at the end of this control step (the reward's time).
-            self.tracking.dt,
+            self.control_dt as f32,
             i32::from(self.action_mode == ActionMode::Residual),
             self.action_scale,
             &self.physics.ctrl,
@@ -80,6 +81,29 @@ impl Rollout {
         t: i32,
     ) -> Result<(), RolloutError> {
         let (p, st) = (&self.physics, &self.state);
+        let tracking = match &self.task {
+            Task::Tracking(tracking) => tracking,
+            Task::Goal(goal) => {
+                self.kernels.goal_reward_termination(
+                    s,
+                    self.num_envs,
+                    &p.qpos,
+                    &goal.params,
+                    t,
+                    &self.phase_statistics.iteration,
+                    &st.episode_step,
+                    &goal.goal,
+                    &goal.distance,
+                    &storage.rewards,
+                    &storage.terminated,
+                    &storage.truncated,
+                    &st.done,
+                    &st.failure,
+                    &goal.counters,
+                )?;
+                return Ok(());
+            }
+        };
         self.kernels.reward_termination(
             s,
             self.num_envs,
@@ -93,7 +117,7 @@ impl Rollout {
             &self.joints.kind,
             &self.joints.qpos,
             &self.joints.end_effectors,
-            &self.tracking,
+            tracking,
             t,
             &st.clip_id,
             &st.ref_time,
@@ -137,6 +161,22 @@ impl Rollout {
             &st.episode_step,
             &st.actions,
         )?;
+        // The goal task starts at rest with a new goal around the new root.
+        if let Task::Goal(goal) = &self.task {
+            self.kernels.goal_reset(
+                s,
+                self.num_envs,
+                &st.done,
+                &goal.params,
+                t,
+                &self.phase_statistics.iteration,
+                &p.qpos,
+                &p.qvel,
+                &goal.goal,
+                &goal.distance,
+                &goal.counters,
+            )?;
+        }
         self.sim.record("kinematics", s)?;
         Ok(())
     }
@@ -170,6 +210,16 @@ impl Rollout {
             &self.observation,
             &norm.raw,
         )?;
+        if let Task::Goal(goal) = &self.task {
+            self.kernels.goal_observe(
+                s,
+                self.num_envs,
+                &p.qpos,
+                &goal.goal,
+                goal.column as i32,
+                &norm.raw,
+            )?;
+        }
         norm.record(&self.kernels, s, &storage.observations, row, update)?;
         Ok(())
     }

@@ -21,8 +21,9 @@ use crate::motion::MotionLibrary;
 use crate::plan::{PlanStore, Simulation, SimulationError};
 
 use super::DeviceReferenceTable;
-use super::config::{ActionMode, RolloutConfig};
+use super::config::{ActionMode, RolloutConfig, TaskConfig};
 use super::evaluation::{ClipEvaluation, EpisodeScores, clip_evaluation, yardstick};
+use super::goal_counters::GoalTally;
 use super::layout::{
     DeviceJointLayout, JointLayout, observation_params, observation_size, reset_params,
     tracking_params, without_failures,
@@ -34,11 +35,11 @@ use super::policy::RolloutPolicy;
 use super::stages::{RolloutStage, StageEvents, StageRecorder};
 use super::statistics::RolloutStatistics;
 use super::storage::{ActStorage, RolloutStorage};
+use super::task::{GoalTask, Task, goal_observation_config, goal_observation_size, goal_params};
 use super::tracked::TrackedMotion;
 use super::trajectory::Trajectory;
 use crate::kernels::{
-    DeviceArray, DeviceArray2, EnvError, EnvKernels, ObservationParams, ResetParams,
-    TrackingParams, Yardstick,
+    DeviceArray, DeviceArray2, EnvError, EnvKernels, ObservationParams, ResetParams, Yardstick,
 };
 
 /// Why a rollout cannot be built or run.
@@ -96,7 +97,9 @@ pub struct Rollout {
     joints: DeviceJointLayout,
     action_mode: ActionMode,
     action_scale: f32,
-    tracking: TrackingParams,
+    /// The task's own stages: tracking's reward and termination, or the goal task's kernels
+    /// and per-env goals.
+    task: Task,
     reset: ResetParams,
     /// Per clip, the spread of the evaluation's start times (`reset_masked`; zeros for
     /// training, whose starts come from the adaptive CDF).
@@ -123,6 +126,10 @@ enum Purpose {
     /// env starting at a fixed state of its clip, each env's first episode scored against the
     /// fixed success yardstick (the training's failures are off); how each clip is played.
     Evaluation(EpisodeScores, Yardstick, Vec<ClipEvaluation>),
+    /// The goal task's evaluation: mean actions, the training normalization frozen, no reset
+    /// noise, every env's first episode (its goals and whether it fell) kept in the goal
+    /// counters.
+    GoalEvaluation,
 }
 
 /// What a rollout is built from: a motion for a training rollout, or the training rollout an
@@ -209,7 +216,19 @@ impl Rollout {
         physics.widen_control_range()?;
 
         let joints = DeviceJointLayout::upload(gpu, &layout)?;
-        let obs_size = observation_size(&config.obs, NU, layout.end_effectors.len());
+        let effectors = layout.end_effectors.len();
+        // The goal task observes the character's own state (the same `observe` launch with no
+        // reference blocks), then its goal.
+        let (obs_size, observation) = match &config.task {
+            TaskConfig::Tracking => (
+                observation_size(&config.obs, NU, effectors),
+                observation_params(&config.obs, control_dt),
+            ),
+            TaskConfig::Goal(_) => (
+                goal_observation_size(&config.obs, NU, effectors),
+                observation_params(&goal_observation_config(&config.obs), control_dt),
+            ),
+        };
         let weights: Vec<f32> = library
             .weight_fractions()
             .iter()
@@ -217,6 +236,10 @@ impl Rollout {
             .collect();
         let phase_statistics = PhaseStatistics::new(gpu, &config.env, &weights)?;
         let mut tracking = tracking_params(config, control_dt);
+        let goal = match &config.task {
+            TaskConfig::Goal(goal) => Some(goal_params(goal, config, control_dt)),
+            TaskConfig::Tracking => None,
+        };
         let mut reset = reset_params(config, control_dt);
         let mut start_spread = vec![0.0f32; clips];
         let (kernels, normalizer, horizon, purpose) = match source {
@@ -226,6 +249,24 @@ impl Rollout {
                 config.horizon as usize,
                 Purpose::Training,
             ),
+            Source::Evaluation(training) if goal.is_some() => {
+                if training.observation_size() != obs_size {
+                    return Err(RolloutError::Setup(format!(
+                        "the evaluation's observation size {obs_size} differs from the training rollout's {}",
+                        training.observation_size()
+                    )));
+                }
+                // One goal episode per env from a fixed state: clip n mod C at its start.
+                let steps = goal.map_or(1, |g| g.max_episode_steps.max(1)) as usize;
+                reset.start_time = 0.0;
+                reset.horizon = steps as i32;
+                (
+                    Arc::clone(&training.kernels),
+                    ObservationNormalizer::frozen(gpu, &training.normalizer, n)?,
+                    steps,
+                    Purpose::GoalEvaluation,
+                )
+            }
             Source::Evaluation(training) => {
                 if training.observation_size() != obs_size {
                     return Err(RolloutError::Setup(format!(
@@ -278,6 +319,18 @@ impl Rollout {
             errors: DeviceArray::zeros(gpu, [n, 5])?,
         };
         let storage = RolloutStorage::zeros(gpu, horizon, n, obs_size, NU)?;
+        let task = match goal {
+            Some(mut params) => {
+                params.horizon = reset.horizon;
+                Task::Goal(GoalTask::new(
+                    gpu,
+                    params,
+                    n,
+                    obs_size - super::task::GOAL_OBSERVATION,
+                )?)
+            }
+            None => Task::Tracking(tracking),
+        };
         Ok(Rollout {
             gpu: gpu.clone(),
             sim,
@@ -291,10 +344,10 @@ impl Rollout {
             joints,
             action_mode: config.env.action_mode,
             action_scale: config.env.action_scale,
-            tracking,
+            task,
             reset,
             start_spread: DeviceArray::from_slice(gpu, [clips], &start_spread)?,
-            observation: observation_params(&config.obs, control_dt),
+            observation,
             normalizer,
             phase_statistics,
             statistics: RolloutStatistics::new(gpu, n)?,
@@ -386,6 +439,9 @@ impl Rollout {
             scores.clear()?;
         }
         self.statistics.clear_running()?;
+        if let Task::Goal(goal) = &self.task {
+            goal.clear_counters()?;
+        }
         self.record_reset(stream, 0)?;
         self.record_observation(stream, &self.storage, 0, self.is_training())?;
         stream.synchronize()?;
@@ -402,20 +458,47 @@ impl Rollout {
         matches!(self.purpose, Purpose::Training)
     }
 
-    /// The scores of the evaluation rollout's episodes (None for a training rollout).
+    /// The scores of the tracking evaluation rollout's episodes (None for a training rollout
+    /// or the goal task's evaluation).
     pub fn episode_scores(&self) -> Option<&EpisodeScores> {
         match &self.purpose {
             Purpose::Evaluation(scores, ..) => Some(scores),
-            Purpose::Training => None,
+            Purpose::Training | Purpose::GoalEvaluation => None,
         }
     }
 
     /// How the evaluation rollout plays each clip of its library (episode steps, start spread;
-    /// None for a training rollout).
+    /// None for a training rollout or the goal task's evaluation).
     pub fn clip_evaluations(&self) -> Option<&[ClipEvaluation]> {
         match &self.purpose {
             Purpose::Evaluation(_, _, plan) => Some(plan),
-            Purpose::Training => None,
+            Purpose::Training | Purpose::GoalEvaluation => None,
+        }
+    }
+
+    /// Whether this rollout runs the goal task.
+    pub fn is_goal_task(&self) -> bool {
+        matches!(self.task, Task::Goal(_))
+    }
+
+    /// The goal task's per-env goals `[N, 2]` (world x, y) and root distances to them `[N]`
+    /// after the last step (None for tracking).
+    pub fn goals(&self) -> Option<(&DeviceArray2<f32>, &DeviceArray<f32>)> {
+        match &self.task {
+            Task::Goal(goal) => Some((&goal.goal, &goal.distance)),
+            Task::Tracking(_) => None,
+        }
+    }
+
+    /// The goal task's episode totals (None for tracking; waits for the GPU): for a training
+    /// rollout every episode ended since [`Rollout::reset_all`] (take differences between
+    /// reads for one rollout's), for the evaluation rollout each env's first episode.
+    pub fn goal_tally(&self) -> Result<Option<GoalTally>, RolloutError> {
+        match &self.task {
+            Task::Goal(goal) => Ok(Some(
+                goal.tally(matches!(self.purpose, Purpose::GoalEvaluation))?,
+            )),
+            Task::Tracking(_) => Ok(None),
         }
     }
 
@@ -642,6 +725,9 @@ impl Rollout {
                     Purpose::Evaluation(scores, yardstick, _) => {
                         self.record_scores(s, storage, scores, yardstick, t32)?
                     }
+                    // The goal evaluation's scores are the goal counters, which the task's
+                    // reward kernel keeps.
+                    Purpose::GoalEvaluation => {}
                     Purpose::Training => self.statistics.record_step(
                         &self.kernels,
                         s,

@@ -137,6 +137,13 @@ pub fn export_policy(
         .meta
         .config(checkpoint.source())
         .map_err(TrainError::from)?;
+    if config.goal.is_some() {
+        // The contract describes tracking's observation blocks, not the goal task's.
+        return Err(ExportError::Unsupported(format!(
+            "{}: a goal-task policy; its ONNX export is not built yet (docs/goal.md)",
+            checkpoint.source()
+        )));
+    }
     let shapes = PolicyShapes::new(&config, character)?;
     shapes.check(checkpoint)?;
     let layout = JointLayout::for_character(character)
