@@ -632,6 +632,12 @@ impl TrainConfig {
                 "[latent]",
                 "the latent controller trains on one GPU, rollout then update (leave run.gpus and ppo.overlap_update off)"
             );
+            check!(
+                self.goal.is_none(),
+                "latent",
+                "[latent]",
+                "the latent controller is distilled on the tracking task; [goal] trains a task policy (give one of the two sections)"
+            );
         }
         Ok(())
     }

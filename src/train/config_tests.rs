@@ -471,3 +471,18 @@ fn the_library_configs_train_the_general_defaults_sections_on_a_library() {
         assert!(!c.run.replay);
     }
 }
+
+#[test]
+fn latent_and_goal_are_alternatives() {
+    let goal = std::fs::read_to_string("configs/goal/reach.toml").unwrap();
+    let latent = std::fs::read_to_string("configs/latent/library.toml").unwrap();
+    let latent_section = &latent[latent.find("\n[latent]").unwrap()..];
+    let latent_section = match latent_section[1..].find("\n[") {
+        Some(end) => &latent_section[..end + 1],
+        None => latent_section,
+    };
+    let e = TrainConfig::from_toml(&format!("{goal}\n{latent_section}"), "both.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("[latent]") && e.contains("[goal]"), "{e}");
+}

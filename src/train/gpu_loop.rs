@@ -15,8 +15,8 @@ use super::evaluation::{
     EnvEpisodeRow, EnvEvaluation, EvaluationError, EvaluationSummary, episode_rows,
     evaluation_start_times, summarize,
 };
-use super::latent_trainer::{LatentTrainer, load_teacher};
 use super::goal::GoalRecord;
+use super::latent_trainer::{LatentTrainer, load_teacher};
 use super::library::TrainMotion;
 use super::library_evaluation::LibraryPlan;
 use super::preflight::Preflight;
@@ -135,6 +135,10 @@ impl LoopTrainer for LatentTrainer {
     }
     fn evaluation_steps(&self) -> u32 {
         LatentTrainer::evaluation_steps(self)
+    }
+    fn goal_record(&mut self, _evaluate: bool) -> Result<Option<GoalRecord>, TrainError> {
+        // The configuration refuses [latent] with [goal]: the latent controller tracks.
+        Ok(None)
     }
     fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), TrainError> {
         LatentTrainer::save_into(self, checkpoint)
