@@ -42,6 +42,7 @@ const EXPECTED_KERNELS: [(&str, &str); 41] = [
     ("latent", "latent_kl_gradients"),
     ("latent", "latent_gather"),
     ("latent", "latent_advance_counter"),
+    ("latent", "latent_prior_residual"),
     ("minibatch", "shuffle_indices"),
     ("minibatch", "gather_minibatch"),
     ("mlp_backward", "linear_backward_weight"),

@@ -119,6 +119,8 @@ pub fn validate_goal(config: &TrainConfig, path: &str) -> Result<(), ConfigError
         progress_weight,
         bonus_weight,
         fall_height,
+        ref decoder,
+        latent_action_scale,
     } = *g;
     if !(episode_s > 0.0 && episode_s <= 600.0) {
         return bad(
@@ -161,6 +163,20 @@ pub fn validate_goal(config: &TrainConfig, path: &str) -> Result<(), ConfigError
             "goal.fall_height",
             fall_height.to_string(),
             "must be in [0, 2) m (0: never falls)",
+        );
+    }
+    if !decoder.is_empty() && decoder.trim().is_empty() {
+        return bad(
+            "goal.decoder",
+            format!("{decoder:?}"),
+            "name a latent controller's checkpoint, or leave the key out (PD-target actions)",
+        );
+    }
+    if !(latent_action_scale > 0.0 && latent_action_scale <= 100.0) {
+        return bad(
+            "goal.latent_action_scale",
+            latent_action_scale.to_string(),
+            "must be in (0, 100]",
         );
     }
     if config.env.action_mode != ActionMode::Absolute {

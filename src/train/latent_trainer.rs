@@ -401,10 +401,14 @@ fn end_effectors(shapes: &PolicyShapes, obs: &crate::env::ObsConfig) -> usize {
 /// controller's, or whose parts do not fit one another, fails with one line naming the file;
 /// check it against the task with [`FrozenDecoder::check_fits`].
 pub fn load_frozen_decoder(path: &Path) -> Result<FrozenDecoder, TrainError> {
-    use latent_tensor_names as names;
     let checkpoint = Checkpoint::load(path)?;
-    let source = path.display().to_string();
-    let config = checkpoint.meta.config(&source)?;
+    frozen_decoder_of(&checkpoint, &path.display().to_string())
+}
+
+/// [`load_frozen_decoder`] of a checkpoint already read from `source`.
+pub fn frozen_decoder_of(checkpoint: &Checkpoint, source: &str) -> Result<FrozenDecoder, TrainError> {
+    use latent_tensor_names as names;
+    let config = checkpoint.meta.config(source)?;
     let latent = config.latent.as_ref().ok_or_else(|| {
         TrainError::Setup(format!(
             "{source}: not a latent controller's checkpoint (its configuration has no [latent] section)"
@@ -433,7 +437,7 @@ pub fn load_frozen_decoder(path: &Path) -> Result<FrozenDecoder, TrainError> {
             parts.latent_size, latent.latent_size
         )));
     }
-    Ok(FrozenDecoder::new(&source, parts)?)
+    Ok(FrozenDecoder::new(source, parts)?)
 }
 
 /// The latent controller's networks for `config` and the run's sizes (`shapes`, from
