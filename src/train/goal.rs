@@ -63,7 +63,14 @@ pub fn task_line(config: &TrainConfig, control_dt: f64) -> String {
                 "              reward {} x progress (m per step) + {} per goal",
                 g.progress_weight, g.bonus_weight
             ),
-            "              action: PD targets (env.action_mode absolute); the latent action (a z decoded by a frozen decoder) is not wired yet".to_owned(),
+            if g.decoder.is_empty() {
+                "              action: PD targets (env.action_mode absolute)".to_owned()
+            } else {
+                format!(
+                    "              action: a residual on the prior's mean of {}, decoded by its frozen decoder into PD targets (docs/goal.md)",
+                    g.decoder
+                )
+            },
         ]
         .join("\n"),
     }

@@ -230,28 +230,13 @@ impl LatentTrainer {
         use tensor_names::*;
         self.gpu.synchronize()?;
         let (e, d, p) = self.student.parameters();
-        for (name, params) in [(names::ENCODER, e), (names::DECODER, d), (names::PRIOR, p)] {
-            checkpoint.insert(name, &[params.len()], params.download()?)?;
-        }
-        let shapes = self.student.shapes();
-        checkpoint.insert(
-            names::PROPRIO_COLUMNS,
-            &[shapes.proprio_columns.len()],
-            shapes.proprio_columns.clone(),
-        )?;
-        checkpoint.insert(
-            names::SIZES,
-            &[3],
-            vec![
-                shapes.observation_size as i32,
-                shapes.latent_size as i32,
-                shapes.action_size as i32,
-            ],
-        )?;
         let [count, mean, m2] = self.rollout.normalizer_moments();
-        for (name, moments) in [(OBS_COUNT, count), (OBS_MEAN, mean), (OBS_M2, m2)] {
-            checkpoint.insert(name, &[moments.len()], moments.download()?)?;
-        }
+        insert_latent_networks(
+            checkpoint,
+            self.student.shapes(),
+            [e.download()?, d.download()?, p.download()?],
+            [count.download()?, mean.download()?, m2.download()?],
+        )?;
         let state = self.update.download_state()?;
         for ([m_name, v_name], [m, v]) in names::ADAM.iter().zip(state.moments) {
             checkpoint.insert(m_name, &[m.len()], m)?;
@@ -327,6 +312,45 @@ impl LatentTrainer {
         self.rollout.reset_all()?;
         Ok(())
     }
+}
+
+/// Adds a latent controller's networks of `shapes` (encoder, decoder, prior parameters), its
+/// character-state columns and sizes, and the observation statistics `[count, mean, m2]` to
+/// `checkpoint`: what [`load_frozen_decoder`] reads (and [`LatentTrainer::save_into`] writes
+/// with the optimizer's state).
+pub fn insert_latent_networks(
+    checkpoint: &mut Checkpoint,
+    shapes: &LatentShapes,
+    [encoder, decoder, prior]: [Vec<f32>; 3],
+    [count, mean, m2]: [Vec<f64>; 3],
+) -> Result<(), TrainError> {
+    use latent_tensor_names as names;
+    use tensor_names::*;
+    for (name, params) in [
+        (names::ENCODER, encoder),
+        (names::DECODER, decoder),
+        (names::PRIOR, prior),
+    ] {
+        checkpoint.insert(name, &[params.len()], params)?;
+    }
+    checkpoint.insert(
+        names::PROPRIO_COLUMNS,
+        &[shapes.proprio_columns.len()],
+        shapes.proprio_columns.clone(),
+    )?;
+    checkpoint.insert(
+        names::SIZES,
+        &[3],
+        vec![
+            shapes.observation_size as i32,
+            shapes.latent_size as i32,
+            shapes.action_size as i32,
+        ],
+    )?;
+    for (name, moments) in [(OBS_COUNT, count), (OBS_MEAN, mean), (OBS_M2, m2)] {
+        checkpoint.insert(name, &[moments.len()], moments)?;
+    }
+    Ok(())
 }
 
 fn latent_section(config: &TrainConfig) -> Result<&LatentConfig, TrainError> {
