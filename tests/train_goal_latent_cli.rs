@@ -23,8 +23,8 @@ const CONFIG: &str = "configs/goal/reach_latent.toml";
 /// The committed latent controller's configuration, trained with absolute PD targets at the
 /// goal config's action scale (what a decoder for the goal task needs).
 fn latent_config() -> TrainConfig {
-    let mut config =
-        TrainConfig::load(&repo().join("configs/latent/library.toml")).expect("valid latent config");
+    let mut config = TrainConfig::load(&repo().join("configs/latent/library.toml"))
+        .expect("valid latent config");
     config.env.action_mode = ActionMode::Absolute;
     config
 }
@@ -65,7 +65,14 @@ fn last_error_line(out: &std::process::Output) -> String {
 
 fn dry_run(decoder: &Path, set: &[&str]) -> std::process::Output {
     let decoder = decoder.display().to_string();
-    let mut args = vec!["train", "--config", CONFIG, "--decoder", &decoder, "--dry-run"];
+    let mut args = vec![
+        "train",
+        "--config",
+        CONFIG,
+        "--decoder",
+        &decoder,
+        "--dry-run",
+    ];
     for s in set {
         args.extend(["--set", s]);
     }
@@ -98,7 +105,10 @@ fn the_dry_run_loads_the_decoder_and_prints_the_three_networks() {
     // Without a decoder the same configuration trains PD targets.
     let out = run(&["train", "--config", CONFIG, "--dry-run"], None, repo());
     let text = succeeded(&out);
-    assert!(text.contains("policy        observation 266, action 28"), "{text}");
+    assert!(
+        text.contains("policy        observation 266, action 28"),
+        "{text}"
+    );
     assert!(text.contains("action: PD targets"), "{text}");
 }
 
@@ -125,24 +135,58 @@ fn a_decoder_that_does_not_fit_fails_with_one_line_naming_the_file() {
         .expect("saved");
     let missing = dir.path().join("missing.safetensors");
     for (decoder, set, words) in [
-        (&residual, &[][..], &["residual.safetensors: ", "env.action_mode"][..]),
+        (
+            &residual,
+            &[][..],
+            &["residual.safetensors: ", "env.action_mode"][..],
+        ),
         (&mixed, &[], &["mixed.safetensors: ", "latent size"]),
-        (&tracker, &[], &["tracker.safetensors: ", "not a latent controller's checkpoint"]),
+        (
+            &tracker,
+            &[],
+            &[
+                "tracker.safetensors: ",
+                "not a latent controller's checkpoint",
+            ],
+        ),
         (&missing, &[], &["missing.safetensors"]),
-        (&good, &["env.action_scale=1.0"], &["good.safetensors: ", "env.action_scale = 0.875"]),
-        (&good, &["env.substeps=2"], &["good.safetensors: ", "env.substeps = 2"]),
-        (&good, &["obs.clip=10.0"], &["good.safetensors: ", "obs.clip = 5"]),
-        (&good, &["obs.prev_action=false"], &["good.safetensors: ", "prev_action"]),
+        (
+            &good,
+            &["env.action_scale=1.0"],
+            &["good.safetensors: ", "env.action_scale = 0.875"],
+        ),
+        (
+            &good,
+            &["env.substeps=2"],
+            &["good.safetensors: ", "env.substeps = 2"],
+        ),
+        (
+            &good,
+            &["obs.clip=10.0"],
+            &["good.safetensors: ", "obs.clip = 5"],
+        ),
+        (
+            &good,
+            &["obs.prev_action=false"],
+            &["good.safetensors: ", "prev_action"],
+        ),
     ] {
         let err = last_error_line(&dry_run(decoder, set));
         for word in words {
-            assert!(err.contains(word), "{} {set:?}: {err} lacks {word:?}", decoder.display());
+            assert!(
+                err.contains(word),
+                "{} {set:?}: {err} lacks {word:?}",
+                decoder.display()
+            );
         }
     }
     // The goal observation may hold more than the decoder reads: a decoder trained without the
     // previous action drives a goal task that observes it.
     let text = succeeded(&dry_run(&no_action, &[]));
-    assert!(text.contains("235 goal-observation columns feed the prior and decoder (235 of 334"), "{text}");
+    assert!(
+        text.contains("235 goal-observation columns feed the prior and decoder (235 of 334"),
+        "{text}"
+    );
 }
 
 #[test]
@@ -151,9 +195,19 @@ fn decoder_on_a_configuration_without_goal_fails_with_one_line() {
     let decoder = write_latent(dir.path(), "latent.safetensors", &latent_config(), None);
     let decoder = decoder.display().to_string();
     let err = one_line_error(&run(
-        &["train", "--motion", "walk", "--decoder", &decoder, "--dry-run"],
+        &[
+            "train",
+            "--motion",
+            "walk",
+            "--decoder",
+            &decoder,
+            "--dry-run",
+        ],
         None,
         repo(),
     ));
-    assert!(err.contains("--decoder") && err.contains("no [goal] section"), "{err}");
+    assert!(
+        err.contains("--decoder") && err.contains("no [goal] section"),
+        "{err}"
+    );
 }

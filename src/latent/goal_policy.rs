@@ -353,7 +353,7 @@ mod tests {
         }
     }
 
-    /// A frozen decoder of random-free parameters trained on `obs`, with statistics that
+    /// A frozen decoder of zero parameters trained on `obs`, with statistics that
     /// number each column (mean = column, m2 = 2 x column).
     fn frozen_on(obs: &ObsConfig) -> FrozenDecoder {
         let columns = proprio_columns(obs, MOTORS, EFFECTORS);

@@ -430,7 +430,10 @@ pub fn load_frozen_decoder(path: &Path) -> Result<FrozenDecoder, TrainError> {
 }
 
 /// [`load_frozen_decoder`] of a checkpoint already read from `source`.
-pub fn frozen_decoder_of(checkpoint: &Checkpoint, source: &str) -> Result<FrozenDecoder, TrainError> {
+pub fn frozen_decoder_of(
+    checkpoint: &Checkpoint,
+    source: &str,
+) -> Result<FrozenDecoder, TrainError> {
     use latent_tensor_names as names;
     let config = checkpoint.meta.config(source)?;
     let latent = config.latent.as_ref().ok_or_else(|| {
