@@ -24,7 +24,7 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 41] = [
+const EXPECTED_KERNELS: [(&str, &str); 42] = [
     ("control", "pd_control"),
     ("evaluate", "evaluation_accumulate"),
     ("gae", "gae_advantages"),
