@@ -1,7 +1,8 @@
 //! `instantmimic train --config configs/goal/reach_latent.toml --decoder <checkpoint>` without a
 //! GPU (docs/goal.md, "The latent action space"): the dry run loads the decoder and prints the
 //! three networks and the latent size; a decoder of another shape or task, or `--decoder` on a
-//! configuration without `[goal]`, fails with one line naming the file or the flag. The latent
+//! configuration without `[goal]`, fails with one line naming the file or the flag; `eval`
+//! refuses a goal checkpoint in one line. The latent
 //! checkpoints are written by the latent module's own writer
 //! (`train::latent_trainer::insert_latent_networks`).
 
@@ -208,6 +209,24 @@ fn decoder_on_a_configuration_without_goal_fails_with_one_line() {
     ));
     assert!(
         err.contains("--decoder") && err.contains("no [goal] section"),
+        "{err}"
+    );
+}
+
+#[test]
+fn eval_refuses_a_goal_checkpoint_with_one_line() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let decoder = write_latent(dir.path(), "latent.safetensors", &latent_config(), None);
+    let mut config = TrainConfig::load(&repo().join(CONFIG)).expect("valid");
+    config.goal.as_mut().expect("[goal]").decoder = decoder.display().to_string();
+    let path = dir.path().join("iter_8.safetensors");
+    Checkpoint::new(CheckpointMeta::new(&config, 8, 2.0, 100).expect("meta"))
+        .save(&path)
+        .expect("saved");
+    let checkpoint = path.display().to_string();
+    let err = one_line_error(&run(&["eval", "--checkpoint", &checkpoint], None, repo()));
+    assert!(
+        err.contains("iter_8.safetensors: a goal task's checkpoint"),
         "{err}"
     );
 }
