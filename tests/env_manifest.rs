@@ -24,7 +24,7 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 41] = [
+const EXPECTED_KERNELS: [(&str, &str); 42] = [
     ("control", "pd_control"),
     ("evaluate", "evaluation_accumulate"),
     ("gae", "gae_advantages"),
@@ -42,6 +42,7 @@ const EXPECTED_KERNELS: [(&str, &str); 41] = [
     ("latent", "latent_kl_gradients"),
     ("latent", "latent_gather"),
     ("latent", "latent_advance_counter"),
+    ("latent", "latent_prior_residual"),
     ("minibatch", "shuffle_indices"),
     ("minibatch", "gather_minibatch"),
     ("mlp_backward", "linear_backward_weight"),

@@ -22,7 +22,7 @@ fn the_goal_config_passes_the_dry_run_and_prints_the_task() {
         "task          goal reaching: goals 1-3 m from the root, reached within 0.5 m (the next at once)",
         "episodes of 10 s (300 steps), ending early when the root falls below 0.5 m",
         "reward 20 x progress (m per step) + 10 per goal",
-        "the latent action (a z decoded by a frozen decoder) is not wired yet",
+        "action: PD targets (env.action_mode absolute)",
         "evaluation    every 10 iterations: 32 envs x one episode of 300 steps",
         // 235 values of the character's state, 28 of the previous action, 3 of the goal.
         "policy        observation 266, action 28",

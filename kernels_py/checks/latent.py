@@ -10,6 +10,9 @@ references.
 - `latent_z_gradient`: the product with z's rows of the first layer's weights.
 - `latent_gather`: rows of a permutation of a [T, N] batch.
 - `latent_advance_counter`.
+- `latent_prior_residual`: z = mu_p + scale * residual into the decoder input's last columns;
+  and the goal task's whole decoding step composed as src/latent/goal_policy.rs records it
+  (split, prior forward, residual, decoder forward) against a float64 forward pass.
 - One whole minibatch step composed as src/latent/distill.rs records it on the Warp-tile path
   (split, encoder and prior forward, sample, decoder forward, reconstruction gradient, the
   decoder's backward pass, z's gradient from its first activation, the KL gradients, the
@@ -265,6 +268,40 @@ def check_minibatch_step(v: Verdict, rng):
         v.error(f"minibatch step: {name} gradients vs finite differences of the float64 loss", np.array(analytic), np.array(numeric))
 
 
+def check_prior_residual(v: Verdict, rng):
+    m, p, latent, scale = 29, 5, 4, 0.7
+    prior = f32(rng.standard_normal((m, 2 * latent)))
+    residual = f32(rng.standard_normal((m, latent)))
+    dec_in = array(f32(np.full((m, p + latent), 3.0)))
+    wp.launch(lat.latent_prior_residual, dim=m * latent, inputs=[array(prior), array(residual), scale, dec_in], device="cpu")
+    out = dec_in.numpy()
+    ref = prior[:, :latent].astype(np.float64) + float(np.float32(scale)) * residual.astype(np.float64)
+    v.error("prior residual: z = mu_p + scale * residual", out[:, p:], ref)
+    v.check("prior residual: proprio columns untouched", np.all(out[:, :p] == 3.0))
+
+
+def check_goal_decoding(v: Verdict, rng):
+    """The latent goal policy's step after the head's sample: the goal observation's proprio
+    columns into the prior and the decoder, z on the prior's mean, the decoder's action."""
+    m, d, a, latent, scale = 45, 13, 6, 3, 0.5
+    cols = np.arange(10, dtype=np.int32)
+    p = len(cols)
+    dec_l = make_mlp(rng, [p + latent, 16, 8, a], 0.5)
+    pri_l = make_mlp(rng, [p, 12, 2 * latent], 0.5)
+    obs = f32(rng.standard_normal((m, d)))
+    residual = f32(rng.standard_normal((m, latent)) * 0.3)
+    dec, pri = Net(dec_l, m), Net(pri_l, m)
+    proprio, dec_in = zeros((m, p)), zeros((m, p + latent))
+    wp.launch(lat.latent_split_observation, dim=m * p, inputs=[array(obs), array(cols), proprio, dec_in], device="cpu")
+    pri.forward(proprio)
+    wp.launch(lat.latent_prior_residual, dim=m * latent, inputs=[pri.y[-1], array(residual), scale, dec_in], device="cpu")
+    dec.forward(dec_in)
+    proprio64 = obs[:, cols].astype(np.float64)
+    z = mlp64(pri_l, proprio64)[:, :latent] + scale * residual.astype(np.float64)
+    action = mlp64(dec_l, np.concatenate([proprio64, z], axis=1))
+    v.error("goal decoding: the decoder's action on [proprio | mu_p + scale * residual]", dec.y[-1].numpy(), action)
+
+
 def main() -> int:
     rng = np.random.default_rng(19)
     v = Verdict("latent")
@@ -274,6 +311,8 @@ def main() -> int:
     check_gather(v, rng)
     check_counter(v)
     check_minibatch_step(v, rng)
+    check_prior_residual(v, rng)
+    check_goal_decoding(v, rng)
     return v.finish()
 
 

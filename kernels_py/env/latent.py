@@ -1,6 +1,6 @@
-"""The latent controller's kernels (docs/latent.md): the encoder's reparameterized sample, the
-distillation loss's gradients (reconstruction and KL), the gradient of the decoder's latent
-input, the minibatch gather of the distillation batch, and a counter.
+"""The latent controller's kernels (docs/latent.md): the encoder's sample, the distillation
+loss's gradients (reconstruction and KL), the gradient of the decoder's latent input, the
+minibatch gather, a counter; last, a task's latent action on the prior's mean (docs/goal.md).
 
 The encoder and the prior each output `[M, 2L]`: the mean in columns `0..L`, the log standard
 deviation in `L..2L`, clamped to `[LOG_SIGMA_MIN, LOG_SIGMA_MAX]` wherever it is read (the
@@ -207,6 +207,25 @@ def latent_advance_counter(counter: wp.array(dtype=wp.int32)):
 # writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
 # Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
 # above a kernel would change its PTX.
+@wp.kernel
+def latent_prior_residual(
+    prior: wp.array2d(dtype=wp.float32),
+    residual: wp.array2d(dtype=wp.float32),
+    scale: wp.float32,
+    decoder_input: wp.array2d(dtype=wp.float32),
+):
+    """One thread per (row m, latent component l): a downstream task's latent action,
+    `z = mu_p + scale * residual` (a residual on the prior's mean, as PULSE; `residual [M, L]`
+    is the task policy's action, `prior [M, 2L]` the prior's output), into the last L columns of
+    `decoder_input [M, P + L]` (docs/goal.md, "The latent action space")."""
+    i = wp.tid()
+    latent = residual.shape[1]
+    m = i // latent
+    l = i - m * latent
+    p = decoder_input.shape[1] - latent
+    decoder_input[m, p + l] = prior[m, l] + scale * residual[m, l]
+
+
 LAUNCH = {
     "latent_split_observation": (
         "dim == extent(proprio, 0) * extent(proprio, 1)",
@@ -244,5 +263,10 @@ LAUNCH = {
     ),
     "latent_advance_counter": (
         "dim >= 1",
+    ),
+    "latent_prior_residual": (
+        "dim == extent(residual, 0) * extent(residual, 1)",
+        "dim <= extent(prior, 0) * extent(residual, 1)",
+        "dim <= extent(decoder_input, 0) * extent(residual, 1)",
     ),
 }

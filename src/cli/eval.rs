@@ -59,6 +59,13 @@ pub fn run(args: EvalArgs) -> Result<()> {
     }
     let checkpoint = Checkpoint::load(&args.checkpoint)?;
     let config = checkpoint.meta.config(checkpoint.source())?;
+    if config.goal.is_some() {
+        // A latent goal checkpoint's decoder would be checked by its digest (Trainer::restore).
+        bail!(
+            "{}: a goal task's checkpoint; eval scores tracking episodes (a goal run evaluates itself while training: metrics.jsonl's goal.evaluation, docs/goal.md)",
+            checkpoint.source()
+        );
+    }
     let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
     let store = PlanStore::new(args.assets.as_deref());
     let (checks, motion) = preflight(&config, motions_dir.as_deref(), &store)?;

@@ -14,6 +14,7 @@ use crate::cuda::nccl_version;
 use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
 use crate::replay::DEFAULT_EPISODES;
+use crate::train::goal_latent::load_goal_decoder;
 use crate::train::latent_trainer::{latent_shapes, load_teacher};
 use crate::train::run_dir::{CHECKPOINTS_DIR, REPLAY_FILE};
 use crate::train::{
@@ -108,6 +109,11 @@ pub struct TrainArgs {
     /// `latent.teacher`; the configuration needs a `[latent]` section, docs/latent.md).
     #[arg(long, conflicts_with = "resume")]
     teacher: Option<PathBuf>,
+    /// A latent controller's checkpoint whose frozen decoder the goal policy drives: its action
+    /// is then a residual on the prior's mean (overrides `goal.decoder`; the configuration
+    /// needs a `[goal]` section, docs/goal.md).
+    #[arg(long, conflicts_with = "resume")]
+    decoder: Option<PathBuf>,
 }
 
 impl TrainArgs {
@@ -187,6 +193,15 @@ fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
         };
         latent.teacher = teacher.display().to_string();
         flags.push("--teacher");
+    }
+    if let Some(decoder) = &args.decoder {
+        let Some(goal) = config.goal.as_mut() else {
+            bail!(
+                "--decoder: {label} has no [goal] section (the decoder drives the goal task: --config configs/goal/reach_latent.toml)"
+            );
+        };
+        goal.decoder = decoder.display().to_string();
+        flags.push("--decoder");
     }
     args.apply_run_overrides(&mut config, &mut flags);
     if !args.set.is_empty() {
@@ -272,9 +287,17 @@ pub fn run(args: TrainArgs) -> Result<()> {
             (config, label, start, line, None)
         }
     };
-    let (checks, motion) = preflight_training(&config, motions_dir.as_deref(), &store)?;
+    let (mut checks, motion) = preflight_training(&config, motions_dir.as_deref(), &store)?;
     for line in &checks.motion_notices {
         eprintln!("{line}");
+    }
+    // A latent goal run's decoder must fit the run; its head acts in the latent space.
+    let decoder = load_goal_decoder(&config, motion.tracked().character())?;
+    if let Some(d) = &decoder {
+        checks.policy = d.head_shapes(&config);
+        if let Some(checkpoint) = &resume_checkpoint {
+            d.check_checkpoint(checkpoint)?;
+        }
     }
     if let Some(checkpoint) = &resume_checkpoint {
         // The checkpoint must hold the policy this configuration builds (a latent
@@ -340,6 +363,9 @@ pub fn run(args: TrainArgs) -> Result<()> {
         }
         if let Some(line) = &teacher_line {
             println!("{line}");
+        }
+        if let Some(d) = &decoder {
+            println!("{}", d.describe(&config));
         }
         print!("{}", checks.report(&config));
         println!();

@@ -160,6 +160,14 @@ pub struct GoalConfig {
     pub bonus_weight: f32,
     /// A fall: the root below this height (m) ends the episode as a failure.
     pub fall_height: f32,
+    /// A latent controller's checkpoint (docs/goal.md, "The latent action space"): the policy's
+    /// action is then a residual on its prior's mean, decoded by its frozen decoder into the PD
+    /// targets. Empty: the action is the PD target. `train --decoder` overrides it; relative
+    /// paths are taken from the working directory (as `latent.teacher`).
+    #[serde(skip_serializing_if = "String::is_empty")]
+    pub decoder: String,
+    /// With a decoder: `z = mu_prior + latent_action_scale * action`.
+    pub latent_action_scale: f32,
 }
 
 impl Default for GoalConfig {
@@ -172,6 +180,8 @@ impl Default for GoalConfig {
             progress_weight: 20.0,
             bonus_weight: 10.0,
             fall_height: 0.5,
+            decoder: String::new(),
+            latent_action_scale: 1.0,
         }
     }
 }

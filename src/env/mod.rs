@@ -46,6 +46,8 @@ pub use rollout::{EpisodeState, Rollout, RolloutError};
 pub use stages::{RolloutStage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 pub use storage::{ActStorage, RolloutStorage};
-pub use task::{GOAL_OBSERVATION, goal_episode_steps, goal_observation_size};
+pub use task::{
+    GOAL_OBSERVATION, goal_episode_steps, goal_observation_config, goal_observation_size,
+};
 pub use tracked::TrackedMotion;
 pub use trajectory::{Trajectory, TrajectoryFrames};

@@ -16,10 +16,14 @@
 //! - [`FrozenDecoder`]: the decoder and the prior of a trained latent controller with the
 //!   observation statistics, shape-checked: what a goal task drives with its latent actions.
 //!   The train layer reads and writes the checkpoint files (`train::latent_trainer`).
+//! - [`goal_policy`]: the goal task in the latent action space: how the goal observation
+//!   feeds the frozen decoder ([`GoalDecoding`]), the decoder and prior on the GPU
+//!   ([`LatentDecoder`]), and the head plus decoder as one rollout policy ([`LatentGoalPolicy`]).
 
 pub mod config;
 mod distill;
 pub mod frozen;
+pub mod goal_policy;
 pub mod networks;
 mod student;
 pub mod teacher;
@@ -36,6 +40,7 @@ pub use distill::{
     DistillationBatch, DistillationOptimizerState, DistillationStatistics, DistillationUpdate,
 };
 pub use frozen::FrozenDecoder;
+pub use goal_policy::{GoalDecoding, LatentDecoder, LatentGoalPolicy};
 pub use networks::{LatentShapes, proprio_columns};
 pub use student::LatentStudent;
 pub use teacher::TeacherCheckpoint;

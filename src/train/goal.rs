@@ -63,7 +63,14 @@ pub fn task_line(config: &TrainConfig, control_dt: f64) -> String {
                 "              reward {} x progress (m per step) + {} per goal",
                 g.progress_weight, g.bonus_weight
             ),
-            "              action: PD targets (env.action_mode absolute); the latent action (a z decoded by a frozen decoder) is not wired yet".to_owned(),
+            if g.decoder.is_empty() {
+                "              action: PD targets (env.action_mode absolute)".to_owned()
+            } else {
+                format!(
+                    "              action: a residual on the prior's mean of {}, decoded by its frozen decoder into PD targets (docs/goal.md)",
+                    g.decoder
+                )
+            },
         ]
         .join("\n"),
     }
@@ -119,6 +126,8 @@ pub fn validate_goal(config: &TrainConfig, path: &str) -> Result<(), ConfigError
         progress_weight,
         bonus_weight,
         fall_height,
+        ref decoder,
+        latent_action_scale,
     } = *g;
     if !(episode_s > 0.0 && episode_s <= 600.0) {
         return bad(
@@ -161,6 +170,20 @@ pub fn validate_goal(config: &TrainConfig, path: &str) -> Result<(), ConfigError
             "goal.fall_height",
             fall_height.to_string(),
             "must be in [0, 2) m (0: never falls)",
+        );
+    }
+    if !decoder.is_empty() && decoder.trim().is_empty() {
+        return bad(
+            "goal.decoder",
+            format!("{decoder:?}"),
+            "name a latent controller's checkpoint, or leave the key out (PD-target actions)",
+        );
+    }
+    if !(latent_action_scale > 0.0 && latent_action_scale <= 100.0) {
+        return bad(
+            "goal.latent_action_scale",
+            latent_action_scale.to_string(),
+            "must be in (0, 100]",
         );
     }
     if config.env.action_mode != ActionMode::Absolute {

@@ -214,6 +214,12 @@ pub fn train_with<'a>(
                 .to_owned(),
         );
     }
+    if let Some(goal) = config.goal.as_ref().filter(|g| !g.decoder.is_empty()) {
+        notes.push(format!(
+            "goal policy in the latent action space of {} (decoder, prior and observation statistics frozen; docs/goal.md)",
+            goal.decoder
+        ));
+    }
     if let Scorer::Library(plan) = &scorer {
         notes.push(format!(
             "motion library: {} clips, evaluated on {} envs (clip i mod {}), episodes of up to {} steps",

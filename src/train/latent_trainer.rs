@@ -230,28 +230,13 @@ impl LatentTrainer {
         use tensor_names::*;
         self.gpu.synchronize()?;
         let (e, d, p) = self.student.parameters();
-        for (name, params) in [(names::ENCODER, e), (names::DECODER, d), (names::PRIOR, p)] {
-            checkpoint.insert(name, &[params.len()], params.download()?)?;
-        }
-        let shapes = self.student.shapes();
-        checkpoint.insert(
-            names::PROPRIO_COLUMNS,
-            &[shapes.proprio_columns.len()],
-            shapes.proprio_columns.clone(),
-        )?;
-        checkpoint.insert(
-            names::SIZES,
-            &[3],
-            vec![
-                shapes.observation_size as i32,
-                shapes.latent_size as i32,
-                shapes.action_size as i32,
-            ],
-        )?;
         let [count, mean, m2] = self.rollout.normalizer_moments();
-        for (name, moments) in [(OBS_COUNT, count), (OBS_MEAN, mean), (OBS_M2, m2)] {
-            checkpoint.insert(name, &[moments.len()], moments.download()?)?;
-        }
+        insert_latent_networks(
+            checkpoint,
+            self.student.shapes(),
+            [e.download()?, d.download()?, p.download()?],
+            [count.download()?, mean.download()?, m2.download()?],
+        )?;
         let state = self.update.download_state()?;
         for ([m_name, v_name], [m, v]) in names::ADAM.iter().zip(state.moments) {
             checkpoint.insert(m_name, &[m.len()], m)?;
@@ -329,6 +314,45 @@ impl LatentTrainer {
     }
 }
 
+/// Adds a latent controller's networks of `shapes` (encoder, decoder, prior parameters), its
+/// character-state columns and sizes, and the observation statistics `[count, mean, m2]` to
+/// `checkpoint`: what [`load_frozen_decoder`] reads (and [`LatentTrainer::save_into`] writes
+/// with the optimizer's state).
+pub fn insert_latent_networks(
+    checkpoint: &mut Checkpoint,
+    shapes: &LatentShapes,
+    [encoder, decoder, prior]: [Vec<f32>; 3],
+    [count, mean, m2]: [Vec<f64>; 3],
+) -> Result<(), TrainError> {
+    use latent_tensor_names as names;
+    use tensor_names::*;
+    for (name, params) in [
+        (names::ENCODER, encoder),
+        (names::DECODER, decoder),
+        (names::PRIOR, prior),
+    ] {
+        checkpoint.insert(name, &[params.len()], params)?;
+    }
+    checkpoint.insert(
+        names::PROPRIO_COLUMNS,
+        &[shapes.proprio_columns.len()],
+        shapes.proprio_columns.clone(),
+    )?;
+    checkpoint.insert(
+        names::SIZES,
+        &[3],
+        vec![
+            shapes.observation_size as i32,
+            shapes.latent_size as i32,
+            shapes.action_size as i32,
+        ],
+    )?;
+    for (name, moments) in [(OBS_COUNT, count), (OBS_MEAN, mean), (OBS_M2, m2)] {
+        checkpoint.insert(name, &[moments.len()], moments)?;
+    }
+    Ok(())
+}
+
 fn latent_section(config: &TrainConfig) -> Result<&LatentConfig, TrainError> {
     config
         .latent
@@ -401,10 +425,17 @@ fn end_effectors(shapes: &PolicyShapes, obs: &crate::env::ObsConfig) -> usize {
 /// controller's, or whose parts do not fit one another, fails with one line naming the file;
 /// check it against the task with [`FrozenDecoder::check_fits`].
 pub fn load_frozen_decoder(path: &Path) -> Result<FrozenDecoder, TrainError> {
-    use latent_tensor_names as names;
     let checkpoint = Checkpoint::load(path)?;
-    let source = path.display().to_string();
-    let config = checkpoint.meta.config(&source)?;
+    frozen_decoder_of(&checkpoint, &path.display().to_string())
+}
+
+/// [`load_frozen_decoder`] of a checkpoint already read from `source`.
+pub fn frozen_decoder_of(
+    checkpoint: &Checkpoint,
+    source: &str,
+) -> Result<FrozenDecoder, TrainError> {
+    use latent_tensor_names as names;
+    let config = checkpoint.meta.config(source)?;
     let latent = config.latent.as_ref().ok_or_else(|| {
         TrainError::Setup(format!(
             "{source}: not a latent controller's checkpoint (its configuration has no [latent] section)"
@@ -433,7 +464,7 @@ pub fn load_frozen_decoder(path: &Path) -> Result<FrozenDecoder, TrainError> {
             parts.latent_size, latent.latent_size
         )));
     }
-    Ok(FrozenDecoder::new(&source, parts)?)
+    Ok(FrozenDecoder::new(source, parts)?)
 }
 
 /// The latent controller's networks for `config` and the run's sizes (`shapes`, from

@@ -23,8 +23,9 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use crate::cuda::{Communicator, DeviceRange, Gpu, Graph, Readback};
-use crate::env::{GoalTally, Rollout, TrackedMotion};
+use crate::env::{GoalTally, Rollout, RolloutPolicy, TrackedMotion};
 use crate::kernels::DeviceArray;
+use crate::latent::LatentDecoder;
 use crate::plan::PlanStore;
 use crate::ppo::{GaussianPolicy, PolicyGemm, PpoBatch, PpoOptimizerState, PpoUpdate};
 
@@ -35,6 +36,7 @@ use super::device_report::{REPORT_BYTES, read_report, record_parameter_squares, 
 use super::error::TrainError;
 use super::evaluation::EnvEvaluation;
 use super::goal::{GoalRates, GoalRecord};
+use super::goal_latent::{DECODER_DIGEST, GoalDecoder, decoder_digest, load_goal_decoder};
 use super::pipeline::Pipeline;
 use super::replica_seed;
 use super::report::IterationReport;
@@ -57,6 +59,17 @@ pub struct Trainer {
     /// The goal task's counter totals at the last [`Trainer::goal_record`] (zeros when
     /// tracking, and after every reset of the rollout).
     goal_seen: GoalTally,
+    /// A goal run in a latent controller's action space (`goal.decoder`): the frozen decoder
+    /// the policy above (the head) drives; the graphs address its buffers.
+    decoder: Option<DecoderNetworks>,
+}
+
+/// The frozen decoder and prior of a latent goal run on the GPU: the training rollout's batch
+/// and the evaluation's (parameters shared).
+struct DecoderNetworks {
+    loaded: GoalDecoder,
+    training: LatentDecoder,
+    evaluation: LatentDecoder,
 }
 
 /// How an iteration runs.
@@ -133,16 +146,66 @@ impl Trainer {
         let own_seed = replica_seed(config.seed, rank);
         let mut rollout_config = config.rollout_config();
         rollout_config.seed = own_seed;
+        let goal_decoder = load_goal_decoder(config, motion.character())?;
+        if goal_decoder.is_some() && (replicas.is_some() || config.ppo.overlap_update) {
+            // The configuration's validation refuses both for the goal task already.
+            return Err(TrainError::Setup(
+                "goal.decoder: a latent goal run trains on one GPU, rollout then update".to_owned(),
+            ));
+        }
         let mut rollout = Rollout::new(gpu, store, motion, &rollout_config)?;
         if let Some(replicas) = replicas {
             rollout = rollout.merging_over(replicas)?;
         }
+        // A latent goal run: the observation is normalized by the decoder's frozen statistics
+        // (docs/goal.md), and the storage keeps the head's latent residuals.
+        let mut action_size = rollout.action_size();
+        if let Some(d) = &goal_decoder {
+            let g = &d.decoding;
+            rollout.freeze_normalization(&g.obs_count, &g.obs_mean, &g.obs_m2)?;
+            action_size = d.frozen.latent_size;
+            rollout = rollout.storing_actions_of(action_size)?;
+        }
         // The run's seed initializes the parameters (the same on every replica); the
         // replica's own seed draws its actions.
-        let policy = GaussianPolicy::for_rollout(gpu, &config.policy, &rollout, config.seed)?
-            .with_sampling_seed(own_seed);
-        let evaluation = Rollout::evaluation(&rollout, store, &rollout_config)?;
+        let policy = GaussianPolicy::new(
+            gpu,
+            &config.policy,
+            rollout.observation_size(),
+            action_size,
+            rollout.num_envs(),
+            config.seed,
+        )?
+        .with_sampling_seed(own_seed);
+        let mut evaluation = Rollout::evaluation(&rollout, store, &rollout_config)?;
+        if goal_decoder.is_some() {
+            evaluation = evaluation.storing_actions_of(action_size)?;
+        }
         let evaluation_policy = policy.with_batch(gpu, evaluation.num_envs())?;
+        let decoder = match goal_decoder {
+            Some(loaded) => {
+                let training = LatentDecoder::new(
+                    gpu,
+                    &loaded.frozen,
+                    &loaded.decoding,
+                    loaded.scale,
+                    policy.gemm().clone(),
+                    rollout.num_envs(),
+                )?;
+                let evaluation = training.with_batch(
+                    gpu,
+                    &loaded.frozen,
+                    &loaded.decoding,
+                    evaluation.num_envs(),
+                )?;
+                Some(DecoderNetworks {
+                    loaded,
+                    training,
+                    evaluation,
+                })
+            }
+            None => None,
+        };
         let mut update = PpoUpdate::new(
             gpu,
             rollout.kernels().clone(),
@@ -159,11 +222,19 @@ impl Trainer {
         let iterations = if config.ppo.overlap_update {
             Iterations::Overlapped(Box::new(Pipeline::new(gpu, &rollout, &policy, &update)?))
         } else {
-            Iterations::Sequential(Box::new(SequentialIteration::capture(
-                gpu, &rollout, &policy, &update,
-            )?))
+            let sequential = match &decoder {
+                Some(d) => {
+                    let acting = d.training.driven_by(&policy)?;
+                    SequentialIteration::capture(gpu, &rollout, &acting, &policy, &update)?
+                }
+                None => SequentialIteration::capture(gpu, &rollout, &policy, &policy, &update)?,
+            };
+            Iterations::Sequential(Box::new(sequential))
         };
-        let (evaluation_graph, _) = evaluation.capture(&evaluation_policy, false)?;
+        let (evaluation_graph, _) = match &decoder {
+            Some(d) => evaluation.capture(&d.evaluation.driven_by(&evaluation_policy)?, false)?,
+            None => evaluation.capture(&evaluation_policy, false)?,
+        };
         rollout.reset_all()?;
         Ok(Trainer {
             gpu: gpu.clone(),
@@ -175,6 +246,7 @@ impl Trainer {
             iterations,
             evaluation_graph,
             goal_seen: GoalTally::default(),
+            decoder,
         })
     }
 
@@ -295,6 +367,19 @@ impl Trainer {
         put_f32(checkpoint, PHASE_CDF, cdf)?;
         checkpoint.insert(RNG_ITERATION, &[1], iteration.download()?)?;
         put_f64(checkpoint, VALUE_STATISTICS, self.update.value_statistics())?;
+        if let Some(d) = &self.decoder {
+            // Of the parameters on the GPU, which nothing may have changed.
+            let (decoder, prior) = d.training.parameters();
+            let f = &d.loaded.frozen;
+            let digest = decoder_digest(
+                &decoder.download()?,
+                &prior.download()?,
+                f.proprio_columns.len(),
+                f.latent_size,
+                f.action_size,
+            );
+            checkpoint.insert(DECODER_DIGEST, &[digest.len()], digest.to_vec())?;
+        }
         Ok(())
     }
 
@@ -305,6 +390,16 @@ impl Trainer {
     pub fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainError> {
         use tensor_names::*;
         self.gpu.synchronize()?;
+        match &self.decoder {
+            Some(d) => d.loaded.check_checkpoint(checkpoint)?,
+            None if checkpoint.tensor(DECODER_DIGEST).is_some() => {
+                return Err(TrainError::Setup(format!(
+                    "{}: a latent goal run's checkpoint (its policy drives a decoder); this configuration has no goal.decoder",
+                    checkpoint.source()
+                )));
+            }
+            None => {}
+        }
         let policy = &self.policy;
         get_f32(checkpoint, ACTOR, policy.actor_parameters())?;
         get_f32(checkpoint, CRITIC, policy.critic_parameters())?;
@@ -395,6 +490,11 @@ impl Trainer {
         &self.policy
     }
 
+    /// A latent goal run's frozen decoder and prior parameters on the GPU (None otherwise).
+    pub fn goal_decoder_parameters(&self) -> Option<(&DeviceArray<f32>, &DeviceArray<f32>)> {
+        self.decoder.as_ref().map(|d| d.training.parameters())
+    }
+
     /// With `ppo.overlap_update`, the copy of the policy the training rollout samples from:
     /// after an iteration, the parameters as they were before that iteration's update (those
     /// after the update before it). `None` without the overlap.
@@ -438,11 +538,13 @@ impl Trainer {
 }
 
 impl SequentialIteration {
-    /// The rollout, the whole update of its batch, the parameters' sums of squares and the
-    /// report's copies, in one graph.
+    /// The rollout (run by `acting`: `policy` itself, or a decoder driven by it), the whole
+    /// update of its batch, the parameters' sums of squares and the report's copies, in one
+    /// graph.
     fn capture(
         gpu: &Gpu,
         rollout: &Rollout,
+        acting: &dyn RolloutPolicy,
         policy: &GaussianPolicy,
         update: &PpoUpdate,
     ) -> Result<SequentialIteration, TrainError> {
@@ -450,7 +552,7 @@ impl SequentialIteration {
         let parameter_squares = DeviceArray::<f64>::zeros(gpu, [2])?;
         let stream = gpu.stream();
         let graph = stream.capture(|s| {
-            rollout.record(s, policy)?;
+            rollout.record(s, acting)?;
             update.record(s, &PpoBatch::from(&rollout.storage))?;
             record_parameter_squares(rollout.kernels(), s, policy, &parameter_squares)?;
             record_report(s, &report, rollout, update, &parameter_squares)

@@ -400,6 +400,15 @@ impl Rollout {
         Ok(())
     }
 
+    /// Stores `size` action columns per step instead of [`Rollout::action_size`]: a policy that
+    /// learns in another action space than the PD targets (the latent goal policy stores its
+    /// latent residual; docs/goal.md). Call it before the first capture.
+    pub fn storing_actions_of(mut self, size: usize) -> Result<Rollout, RolloutError> {
+        let [rows, n, obs] = self.storage.observations.shape();
+        self.storage = RolloutStorage::zeros(&self.gpu, rows - 1, n, obs, size)?;
+        Ok(self)
+    }
+
     pub fn num_envs(&self) -> usize {
         self.num_envs
     }
@@ -602,7 +611,7 @@ impl Rollout {
             rows - 1,
             n,
             obs,
-            self.action_size(),
+            self.storage.actions.shape()[2],
         )?)
     }
 
