@@ -16,8 +16,8 @@ mod stopped;
 mod train;
 
 use anyhow::Result;
-
 use clap::{Parser, Subcommand};
+
 pub use stopped::Stopped;
 
 #[derive(Parser, Debug)]
