@@ -1,5 +1,6 @@
 //! `instantmimic`: the command-line entry point. Everything lives in the library; this file
-//! only turns an error into one clear line and a non-zero exit status.
+//! only turns an error into one clear line and a non-zero exit status (a clean stop on SIGINT
+//! or SIGTERM into the shell's status for the signal, 130 or 143).
 
 use std::process::ExitCode;
 
@@ -7,11 +8,15 @@ fn main() -> ExitCode {
     quiet_on_closed_stdout();
     match instantmimic::cli::run() {
         Ok(()) => ExitCode::SUCCESS,
-        Err(err) => {
-            // `{:#}` prints the whole context chain on one line: "loading plan x: region 3: ...".
-            eprintln!("error: {err:#}");
-            ExitCode::FAILURE
-        }
+        Err(err) => match err.downcast_ref::<instantmimic::cli::Stopped>() {
+            // A clean stop on SIGINT/SIGTERM: the command said so already.
+            Some(stopped) => ExitCode::from(stopped.exit_code()),
+            None => {
+                // `{:#}` prints the whole context chain on one line: "loading plan x: ...".
+                eprintln!("error: {err:#}");
+                ExitCode::FAILURE
+            }
+        },
     }
 }
 

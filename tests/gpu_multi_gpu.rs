@@ -16,7 +16,8 @@
 //!   graph parts); with `run.nccl_in_graph = true` they stay identical or the setup fails with
 //!   NCCL's error (NCCL 2.28.9 refuses that capture); `train --gpus` writes its run, resumes on
 //!   as many GPUs and refuses another count; a rank waiting for a peer that never comes is
-//!   released by an abort instead of hanging.
+//!   released by an abort instead of hanging; `train --gpus` sent SIGTERM stops every GPU after
+//!   the same iteration (the checkpoint's replica checksums agree), exits with 143 and resumes.
 //!
 //! Without NCCL, or with fewer than 2 GPUs for the `several_gpus_*` tests, a test skips with a
 //! note, and fails with `INSTANTMIMIC_NO_SKIP=1` (tests/skip_support; tests/device/session.sh
@@ -377,6 +378,78 @@ fn several_gpus_train_writes_its_run_and_resumes_on_as_many_gpus() {
         .filter_map(|r| r["iteration"].as_u64())
         .collect();
     assert_eq!(iterations, (1..=8).collect::<Vec<_>>());
+}
+
+#[test]
+fn several_gpus_sigterm_stops_every_gpu_after_the_same_iteration_and_resumes() {
+    let Some(devices) = several_gpus_or_skip() else {
+        return;
+    };
+    let gpus = format!("{},{}", devices[0], devices[1]);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut config = small_run_support::small_config("backflip");
+    config.run.max_iterations = 200;
+    // No periodic checkpoint before the stop: the one found after it is the stop's.
+    config.run.checkpoint_interval = 100;
+    let config_path = dir.path().join("config.toml");
+    std::fs::write(&config_path, config.to_toml().expect("toml")).expect("write config");
+    let run = dir.path().join("run");
+    let child = binary()
+        .args(["train", "--progress", "lines", "--gpus", &gpus, "--config"])
+        .arg(&config_path)
+        .arg("--out")
+        .arg(&run)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("train starts");
+    let started = std::time::Instant::now();
+    while metrics(&run).len() < 4 {
+        assert!(started.elapsed() < Duration::from_secs(300), "no progress");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let sent = std::process::Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(sent.success(), "kill -TERM");
+    let out = child.wait_with_output().expect("train ends");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    println!("{stdout}");
+    // The stop's checkpoint compares every replica's checksum: a rank that ran another
+    // iteration would fail the run (status 1) instead.
+    assert_eq!(
+        out.status.code(),
+        Some(143),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let iterations = metrics(&run).len() as u64;
+    assert!(stdout.contains(&format!(
+        "SIGTERM received: stopped after iteration {iterations}"
+    )));
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(run.join("summary.json")).expect("summary.json"),
+    )
+    .expect("summary.json");
+    assert_eq!(summary["stop_reason"], "interrupted", "{summary}");
+    assert!(
+        run.join(format!("checkpoints/iter_{iterations:08}.safetensors"))
+            .is_file()
+    );
+    let more = iterations + 2;
+    let out = binary()
+        .args(["train", "--progress", "lines", "--no-replay", "--resume"])
+        .arg(&run)
+        .args(["--gpus", &gpus, "--max-iterations", &more.to_string()])
+        .output()
+        .expect("train runs");
+    check_success(&out, "train --resume --gpus after SIGTERM");
+    let resumed: Vec<u64> = metrics(&run)
+        .iter()
+        .filter_map(|r| r["iteration"].as_u64())
+        .collect();
+    assert_eq!(resumed, (1..=more).collect::<Vec<_>>());
 }
 
 #[test]

@@ -9,12 +9,15 @@
 //!   continue without a gap or a duplicate (issue 5's acceptance).
 //! - A short run on a motion library evaluates every clip, writes `clips.tsv` and the
 //!   per-clip results in its metrics, and resumes (docs/library.md).
+//! - A run sent SIGINT mid-training stops after its current iteration with a checkpoint of it
+//!   and `summary.json` (stop reason `interrupted`), exits with 130, and `--resume` continues
+//!   from that iteration (docs/train.md, "Stopping a run").
 #![cfg(feature = "gpu")]
 
 mod small_run_support;
 
 use std::path::{Path, PathBuf};
-use std::process::Stdio;
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use small_run_support::{binary, check_success, metrics};
@@ -252,4 +255,93 @@ fn a_short_library_run_scores_every_clip_and_writes_its_clip_table() {
         .expect("train resumes");
     check_success(&out, "resume a library run");
     assert_eq!(metrics(&run).len(), 6);
+}
+
+#[test]
+fn a_run_sent_sigint_checkpoints_its_last_iteration_exits_130_and_resumes() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    // No periodic checkpoint before the stop: the one found after it is the stop's.
+    let config = write_config(dir.path(), 200, 100);
+    let run = dir.path().join("run");
+    let child = binary()
+        .args([
+            "train",
+            "--motion",
+            "backflip",
+            "--progress",
+            "lines",
+            "--config",
+        ])
+        .arg(&config)
+        .arg("--out")
+        .arg(&run)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("train starts");
+    let started = Instant::now();
+    while metrics(&run).len() < 6 {
+        assert!(started.elapsed() < Duration::from_secs(300), "no progress");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(sent.success(), "kill -INT");
+    let out = child.wait_with_output().expect("train ends");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    println!("{stdout}");
+    assert_eq!(
+        out.status.code(),
+        Some(130),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let iterations = metrics(&run).len() as u64;
+    assert!(iterations < 200, "stopped mid-run");
+    assert!(
+        stdout.contains(&format!(
+            "SIGINT received: stopped after iteration {iterations}"
+        )),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains(&format!("instantmimic train --resume {}", run.display())),
+        "{stdout}"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).expect("summary"))
+            .expect("summary.json");
+    assert_eq!(summary["stop_reason"], "interrupted", "{summary}");
+    assert_eq!(summary["iterations"].as_u64(), Some(iterations));
+    assert!(run.join("curve.png").is_file());
+    assert!(!run.join("replay.html").exists(), "no replay after a stop");
+    let resumed = instantmimic::train::RunDir::inspect_resume(&run).expect("resumable");
+    let (_, checkpoint) = resumed.checkpoint.expect("the stop's checkpoint");
+    assert_eq!(checkpoint.meta.iteration, iterations);
+
+    let more = iterations + 4;
+    let out = binary()
+        .args(["train", "--progress", "lines", "--no-replay", "--resume"])
+        .arg(&run)
+        .args(["--max-iterations", &more.to_string()])
+        .output()
+        .expect("resume runs");
+    check_success(&out, "resume");
+    // `--progress lines` notes on stdout.
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains(&format!("resumed at iteration {iterations}")),
+        "{text}"
+    );
+    let records: Vec<u64> = metrics(&run)
+        .iter()
+        .map(|r| r["iteration"].as_u64().expect("iteration"))
+        .collect();
+    assert_eq!(records, (1..=more).collect::<Vec<u64>>());
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).expect("summary"))
+            .expect("summary.json");
+    assert_eq!(summary["stop_reason"], "iteration_budget", "{summary}");
 }

@@ -1,11 +1,15 @@
 //! `instantmimic hpo`: the agent's hyperparameter search (plan → propose → experiment).
+//! SIGINT or SIGTERM stops it between trials (a training trial after its current iteration),
+//! its state at the last complete cycle; it says how to resume and exits with 130 or 143.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::Args;
 
-use crate::hpo::{HpoRequest, SearchOverrides, run};
+use super::stopped::Stopped;
+use crate::hpo::{HpoError, HpoRequest, SearchOverrides, run};
+use crate::train::StopFlag;
 
 #[derive(Args, Debug)]
 pub struct HpoArgs {
@@ -40,6 +44,8 @@ pub struct HpoArgs {
 
 /// Runs `hpo`: progress on stderr, the summary table on stdout.
 pub fn run_hpo(args: HpoArgs) -> Result<()> {
+    let stop = StopFlag::on_signals().context("cannot handle SIGINT and SIGTERM")?;
+    let resume_dir = args.resume.clone().or_else(|| args.out.clone());
     let request = HpoRequest {
         config: args.config,
         resume: args.resume,
@@ -51,12 +57,40 @@ pub fn run_hpo(args: HpoArgs) -> Result<()> {
             budget_s: args.budget,
         },
         stop_after_s: args.stop_after,
+        stop,
     };
     let mut progress = std::io::stderr();
-    let summary = run(&request, &mut progress).context("hyperparameter search")?;
+    let summary = match run(&request, &mut progress) {
+        Ok(summary) => summary,
+        Err(HpoError::Interrupted { signal }) => {
+            // Before the baseline was measured: nothing to summarize.
+            let resume = match &resume_dir {
+                Some(dir) => format!("continue with: instantmimic hpo --resume {}", dir.display()),
+                None => {
+                    "continue with: instantmimic hpo --resume <its run directory (runs/hpo/...)>"
+                        .to_owned()
+                }
+            };
+            println!(
+                "{} received before the baseline was measured; {resume}",
+                signal.name()
+            );
+            return Err(Stopped { signal }.into());
+        }
+        Err(e) => return Err(e).context("hyperparameter search"),
+    };
     print!("{}", summary.table);
     println!("\nRun directory: {}", summary.dir.display());
     println!("Trajectory: {}", summary.plot.display());
+    if let Some(signal) = summary.interrupted {
+        println!(
+            "{} received: stopped after cycle {} (the cycle that was running is not recorded); continue with: instantmimic hpo --resume {}",
+            signal.name(),
+            summary.cycles_done,
+            summary.dir.display()
+        );
+        return Err(Stopped { signal }.into());
+    }
     if !summary.complete {
         println!(
             "Stopped by --stop-after after cycle {}; continue with: instantmimic hpo --resume {}",

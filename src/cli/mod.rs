@@ -12,10 +12,13 @@ mod motion_list;
 mod output;
 mod plan;
 mod replay;
+mod stopped;
 mod train;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
+
+pub use stopped::Stopped;
 
 #[derive(Parser, Debug)]
 #[command(

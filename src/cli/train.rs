@@ -3,6 +3,10 @@
 //! over to the GPU loop. `--dry-run` stops after the checks and prints the resolved config.
 //! After the run, `replay.html` of the final policy (`run.replay`, `--no-replay`): written here,
 //! above `train`, which does not import the viewer.
+//!
+//! SIGINT (Ctrl-C) or SIGTERM stops the run after its current iteration with a checkpoint and
+//! `summary.json` (stop reason `interrupted`); `train` then says how to resume and exits with
+//! 130 or 143 (docs/train.md, "Stopping a run").
 
 use std::path::{Path, PathBuf};
 
@@ -10,6 +14,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 
 use super::replay::{ReplayJob, write_replay};
+use super::stopped::Stopped;
 use crate::cuda::nccl_version;
 use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
@@ -18,8 +23,9 @@ use crate::train::goal_latent::load_goal_decoder;
 use crate::train::latent_trainer::{latent_shapes, load_teacher};
 use crate::train::run_dir::{CHECKPOINTS_DIR, REPLAY_FILE};
 use crate::train::{
-    CheckpointDir, ProgressMode, RunDir, RunStart, TrainConfig, TrainSetup, check_same_gpu_count,
-    default_run_dir, preflight_training, train_on_gpu,
+    CheckpointDir, ProgressMode, RunDir, RunStart, RunSummary, StopFlag, StopReason, StopSignal,
+    TrainConfig, TrainSetup, check_same_gpu_count, default_run_dir, preflight_training,
+    train_on_gpu,
 };
 
 /// `--progress`.
@@ -394,6 +400,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     }
     let keep = config.run.keep_checkpoints;
     let device = args.first_device(&config);
+    let stop = StopFlag::on_signals().context("cannot handle SIGINT and SIGTERM")?;
     let setup = TrainSetup {
         config,
         motion,
@@ -402,9 +409,21 @@ pub fn run(args: TrainArgs) -> Result<()> {
         start,
         progress,
         device: args.device,
+        stop: stop.clone(),
     };
     let summary = train_on_gpu(setup)?;
     print!("{}", summary.report());
+    if let Some(signal) = stop.requested() {
+        println!("{}", stopped_line(signal, &summary, &root));
+        if summary.stop_reason == StopReason::Interrupted {
+            return Err(Stopped { signal }.into());
+        }
+        // The run ended by its own rule at the iteration the signal came in: it is complete
+        // (exit 0), but the replay is not what was asked for.
+        return Ok(());
+    }
+    // Nothing reads the stop request from here: a signal ends the process at once.
+    stop.stop_at_once_from_now();
     if replay {
         // The run's results are written; a replay that fails leaves them as they are.
         match replay_final_policy(&root, keep, motions_dir.as_deref(), &store, device) {
@@ -416,6 +435,24 @@ pub fn run(args: TrainArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The line `train` prints when a signal stopped it: what was written and how to continue.
+fn stopped_line(signal: StopSignal, summary: &RunSummary, root: &Path) -> String {
+    let dir = root.display();
+    if summary.stop_reason == StopReason::Interrupted {
+        format!(
+            "{} received: stopped after iteration {} with a checkpoint, metrics, curve and summary.json in {dir}; continue with `instantmimic train --resume {dir}`",
+            signal.name(),
+            summary.iterations
+        )
+    } else {
+        format!(
+            "{} received as the run ended ({}): no {REPLAY_FILE} written",
+            signal.name(),
+            summary.stop_reason.describe()
+        )
+    }
 }
 
 /// Writes `replay.html` into the run directory from its newest checkpoint (the final policy:
@@ -447,4 +484,40 @@ fn replay_final_policy(
     Ok(format!(
         "replay               the final policy (iteration {iteration}) as the evaluation runs it (--no-replay: none)\n{report}"
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn summary(stop_reason: StopReason) -> RunSummary {
+        RunSummary::from_records("walk", 0, &[], stop_reason)
+    }
+
+    #[test]
+    fn a_stopped_run_says_how_to_resume() {
+        let line = stopped_line(
+            StopSignal::Interrupt,
+            &summary(StopReason::Interrupted),
+            Path::new("runs/walk-seed0"),
+        );
+        assert!(
+            line.starts_with("SIGINT received: stopped after iteration 0"),
+            "{line}"
+        );
+        assert!(
+            line.ends_with("continue with `instantmimic train --resume runs/walk-seed0`"),
+            "{line}"
+        );
+        let ended = stopped_line(
+            StopSignal::Terminate,
+            &summary(StopReason::IterationBudget),
+            Path::new("runs/walk-seed0"),
+        );
+        assert!(
+            ended.contains("as the run ended (iteration budget spent)"),
+            "{ended}"
+        );
+        assert!(!ended.contains("--resume"), "{ended}");
+    }
 }

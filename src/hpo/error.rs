@@ -36,6 +36,10 @@ pub enum HpoError {
     Agent(#[from] crate::hpo::backend::BackendError),
     #[error("cannot draw the trajectory plot: {problem}")]
     Plot { problem: String },
+    /// SIGINT or SIGTERM stopped the search between trials (a training trial after its
+    /// current iteration); the cycle that was running is not recorded.
+    #[error("stopped by {}", .signal.name())]
+    Interrupted { signal: crate::train::StopSignal },
 }
 
 impl HpoError {

@@ -11,6 +11,7 @@ use crate::hpo::objective::score;
 use crate::hpo::record::{CandidateResult, SeedTrial};
 use crate::hpo::space::{Assignment, ParamValue, apply};
 use crate::hpo::trial::{BoxedRunner, TrialOutcome};
+use crate::train::{StopFlag, StopSignal};
 
 /// One configuration to train with one seed.
 pub struct Job {
@@ -22,30 +23,52 @@ pub struct Job {
 /// The runners of a search.
 pub struct RunnerPool {
     runners: Vec<BoxedRunner>,
+    /// Once requested, no trial starts (and the runners stop theirs: `TrialRunner::stop_on`).
+    stop: StopFlag,
 }
 
 impl RunnerPool {
     /// A pool needs at least one runner.
     pub fn new(runners: Vec<BoxedRunner>) -> Option<Self> {
-        (!runners.is_empty()).then_some(RunnerPool { runners })
+        (!runners.is_empty()).then_some(RunnerPool {
+            runners,
+            stop: StopFlag::new(),
+        })
     }
 
     pub fn workers(&self) -> usize {
         self.runners.len()
     }
 
+    /// Stops the experiments when `stop` is requested: the running trials end as their
+    /// runners can, no other starts, and [`RunnerPool::run`] returns `HpoError::Interrupted`.
+    pub fn stop_on(&mut self, stop: StopFlag) {
+        for runner in &mut self.runners {
+            runner.stop_on(&stop);
+        }
+        self.stop = stop;
+    }
+
+    /// The signal that asked the search to stop, if one did.
+    pub fn stop_requested(&self) -> Option<StopSignal> {
+        self.stop.requested()
+    }
+
     /// Runs every job and returns the outcomes in job order. The first failure (in job
-    /// order) is returned; once a job fails, workers take no new jobs.
+    /// order) is returned; once a job fails, workers take no new jobs. Once a stop is
+    /// requested ([`RunnerPool::stop_on`]) no job starts, and unless every job had finished,
+    /// the result is `HpoError::Interrupted`.
     pub fn run(&mut self, jobs: &[Job]) -> Result<Vec<TrialOutcome>, HpoError> {
         let next = AtomicUsize::new(0);
         let stop = AtomicBool::new(false);
         let (sender, receiver) = mpsc::channel();
+        let requested = &self.stop;
         std::thread::scope(|scope| {
             for runner in self.runners.iter_mut() {
                 let sender = sender.clone();
                 let (next, stop) = (&next, &stop);
                 scope.spawn(move || {
-                    while !stop.load(Ordering::Relaxed) {
+                    while !stop.load(Ordering::Relaxed) && !requested.is_requested() {
                         let index = next.fetch_add(1, Ordering::Relaxed);
                         let Some(job) = jobs.get(index) else { break };
                         let result = runner.run(&job.config, job.seed);
@@ -66,6 +89,11 @@ impl RunnerPool {
             if let Some(slot) = slots.get_mut(index) {
                 *slot = Some(result);
             }
+        }
+        if let Some(signal) = self.stop.requested()
+            && slots.iter().any(|slot| !matches!(slot, Some(Ok(_))))
+        {
+            return Err(HpoError::Interrupted { signal });
         }
         let mut outcomes = Vec::with_capacity(jobs.len());
         let mut first_error = None;

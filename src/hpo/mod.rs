@@ -56,6 +56,9 @@ pub struct HpoRequest {
     pub overrides: SearchOverrides,
     /// Wall-clock seconds after which no new cycle starts ([`Search::run_until`]).
     pub stop_after_s: Option<f64>,
+    /// Stops the search between trials (a training trial after its current iteration);
+    /// `hpo` connects it to SIGINT and SIGTERM.
+    pub stop: crate::train::StopFlag,
 }
 
 /// What a finished search reports.
@@ -67,9 +70,12 @@ pub struct HpoSummary {
     pub plot: PathBuf,
     pub best: Kept,
     /// Cycles done, and whether the requested last cycle was reached (false when the time
-    /// limit stopped the search first).
+    /// limit or a signal stopped the search first).
     pub cycles_done: u32,
     pub complete: bool,
+    /// The signal that stopped the search, if one did (the state on disk is its last
+    /// complete cycle).
+    pub interrupted: Option<crate::train::StopSignal>,
 }
 
 /// Runs or resumes a search with the runner and agent its configuration names, then writes
@@ -117,6 +123,7 @@ pub fn run(request: &HpoRequest, progress: &mut dyn Write) -> Result<HpoSummary,
     let mut backend = backend::build_backend(&config.agent)?;
     let mut pool = RunnerPool::new(trial::build_runners(&config.runner, config.objective)?)
         .ok_or_else(|| HpoError::config(&config.name, "[runner] gave no trial runner"))?;
+    pool.stop_on(request.stop.clone());
     let last_cycle = request.cycles.unwrap_or(config.search.cycles);
     let _ = writeln!(
         progress,
@@ -128,9 +135,25 @@ pub fn run(request: &HpoRequest, progress: &mut dyn Write) -> Result<HpoSummary,
     let deadline = request
         .stop_after_s
         .map(|s| started + Duration::from_secs_f64(s));
-    let complete = search.run_until(backend.as_mut(), &mut pool, last_cycle, deadline, progress)?;
+    let ran = search.run_until(backend.as_mut(), &mut pool, last_cycle, deadline, progress);
+    let (complete, interrupted) = match (ran, request.stop.requested()) {
+        (Ok(complete), _) => (complete, None),
+        // Whatever failed after a stop was asked for (an agent's program that got the
+        // terminal's Ctrl-C too) is the stop's doing.
+        (Err(error), Some(signal)) => {
+            if !matches!(error, HpoError::Interrupted { .. }) {
+                let _ = writeln!(progress, "after {}: {error}", signal.name());
+            }
+            if search.state().is_none() {
+                return Err(HpoError::Interrupted { signal });
+            }
+            (false, Some(signal))
+        }
+        (Err(error), None) => return Err(error),
+    };
     let mut summary = finish(&search)?;
     summary.complete = complete;
+    summary.interrupted = interrupted;
     Ok(summary)
 }
 
@@ -161,6 +184,7 @@ pub fn finish(search: &Search) -> Result<HpoSummary, HpoError> {
         best: state.best.clone(),
         cycles_done: search.cycles_done(),
         complete: true,
+        interrupted: None,
     })
 }
 

@@ -6,7 +6,9 @@
 //! Replies that fail validation are recorded and fed back; a plan that keeps failing leaves
 //! the previous strategy in place, a proposal that keeps failing skips the cycle. Only errors
 //! no retry can fix (a refused key, a trial that cannot run, a full disk) stop the search; the
-//! state then stays at the last complete cycle and `--resume` continues from it.
+//! state then stays at the last complete cycle and `--resume` continues from it. So does a
+//! stop on SIGINT or SIGTERM ([`RunnerPool::stop_on`]): no trial starts after it, the cycle
+//! that was running is dropped, and the search ends with `HpoError::Interrupted`.
 
 use std::io::Write;
 use std::path::Path;
@@ -147,7 +149,8 @@ impl Search {
     /// the slowest trial seen so far times the trials of a full cycle (the first cycle of a
     /// call always starts). Returns whether `last_cycle` was reached; when not, the state on
     /// disk is the last complete cycle and `--resume` continues from there, so a search split
-    /// over time-limited sessions loses no half-run cycle.
+    /// over time-limited sessions loses no half-run cycle. A stop requested through the pool
+    /// ends the search with `HpoError::Interrupted`, the state on disk as it was.
     pub fn run_until(
         &mut self,
         backend: &mut dyn Backend,
@@ -170,6 +173,9 @@ impl Search {
             note(&mut slowest_trial, started, rounds);
         }
         while self.cycles_done() < last_cycle {
+            if let Some(signal) = pool.stop_requested() {
+                return Err(HpoError::Interrupted { signal });
+            }
             let rounds = (self.config.search.max_candidates * self.config.search.seeds.len())
                 .div_ceil(workers);
             if let (Some(deadline), Some(trial)) = (deadline, slowest_trial)

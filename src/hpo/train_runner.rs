@@ -16,7 +16,9 @@ use crate::hpo::trial::{BoxedRunner, TrialOutcome, TrialRunner, TrialSpec};
 use crate::motion::ReferenceMotion;
 use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
-use crate::train::{ProgressMode, RunStart, TrainConfig, load_motion, train_with};
+use crate::train::{
+    ProgressMode, RunStart, StopFlag, StopReason, TrainConfig, load_motion, train_with,
+};
 
 /// Distinguishes the scratch directories of the trials of one process.
 static TRIAL_COUNTER: AtomicU64 = AtomicU64::new(0);
@@ -28,6 +30,8 @@ pub struct TrainRunner {
     store: PlanStore,
     /// Motions by name, loaded once.
     motions: HashMap<String, ReferenceMotion>,
+    /// Stops a trial after its current iteration (the search's SIGINT/SIGTERM).
+    stop: StopFlag,
 }
 
 impl TrainRunner {
@@ -42,6 +46,7 @@ impl TrainRunner {
             spec,
             store: PlanStore::new(None).keeping_decoded(),
             motions: HashMap::new(),
+            stop: StopFlag::new(),
         })
     }
 
@@ -100,15 +105,26 @@ impl TrialRunner for TrainRunner {
                 overwrite: true,
             },
             ProgressMode::Quiet,
+            &self.stop,
         );
         // The scratch directory goes whatever happened; a failure to remove it is harmless.
         let _ = std::fs::remove_dir_all(&root);
         let summary = result.map_err(|e| problem(e.to_string()))?;
+        // An interrupted trial measured nothing: it is not an outcome.
+        if summary.stop_reason == StopReason::Interrupted
+            && let Some(signal) = self.stop.requested()
+        {
+            return Err(HpoError::Interrupted { signal });
+        }
         Ok(TrialOutcome::from(&summary))
     }
 
     fn devices(&self) -> usize {
         Gpu::device_count().unwrap_or(1).max(1)
+    }
+
+    fn stop_on(&mut self, stop: &StopFlag) {
+        self.stop = stop.clone();
     }
 }
 

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::hpo::config::{RunnerKind, RunnerSettings};
 use crate::hpo::error::HpoError;
 use crate::hpo::synthetic::SyntheticObjective;
-use crate::train::RunSummary;
+use crate::train::{RunSummary, StopFlag};
 
 /// What every trial of a search is held to. A runner stops a trial once `budget_s` of active
 /// training time is spent without success.
@@ -88,6 +88,11 @@ pub trait TrialRunner {
     fn devices(&self) -> usize {
         1
     }
+
+    /// Stop a trial that is running when `stop` is requested, as soon as it can, with
+    /// `HpoError::Interrupted` (a training trial stops after its current iteration). A runner
+    /// whose trials are short need not: the pool starts no trial once a stop is requested.
+    fn stop_on(&mut self, _stop: &StopFlag) {}
 }
 
 /// A runner that can move to a worker thread.

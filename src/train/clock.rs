@@ -85,7 +85,8 @@ pub enum StopReason {
     TimeBudget,
     /// `run.max_iterations` iterations are done.
     IterationBudget,
-    /// The user interrupted the run.
+    /// SIGINT or SIGTERM stopped the run after its current iteration (src/train/stop.rs);
+    /// `train --resume` continues it.
     Interrupted,
 }
 
@@ -203,6 +204,23 @@ mod tests {
             ee_orientation_error_rad: 0.1,
             library: None,
         }
+    }
+
+    #[test]
+    fn stop_reasons_are_written_as_the_scripts_read_them() {
+        let all = [
+            (StopReason::Success, "success"),
+            (StopReason::TimeBudget, "time_budget"),
+            (StopReason::IterationBudget, "iteration_budget"),
+            (StopReason::Interrupted, "interrupted"),
+        ];
+        for (reason, name) in all {
+            let json = serde_json::to_string(&reason).unwrap();
+            assert_eq!(json, format!("\"{name}\""));
+            assert_eq!(serde_json::from_str::<StopReason>(&json).unwrap(), reason);
+        }
+        assert_eq!(StopReason::Interrupted.describe(), "interrupted");
+        assert!(serde_json::from_str::<StopReason>("\"killed\"").is_err());
     }
 
     #[test]

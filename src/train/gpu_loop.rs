@@ -23,6 +23,7 @@ use super::preflight::Preflight;
 use super::progress::ProgressMode;
 use super::replicas::Replicas;
 use super::session::{IterationStats, RunSession};
+use super::stop::StopFlag;
 use super::summary::RunSummary;
 use super::trainer::Trainer;
 use crate::cuda::Gpu;
@@ -54,6 +55,9 @@ pub struct TrainSetup {
     pub progress: ProgressMode,
     /// CUDA device ordinal (when `config.run.gpus` names none; one device there replaces it).
     pub device: usize,
+    /// Stops the run after the current iteration, with a checkpoint (`train` connects it to
+    /// SIGINT and SIGTERM; src/train/stop.rs).
+    pub stop: StopFlag,
 }
 
 /// What the training loop drives: one [`Trainer`], or the [`Replicas`] of several GPUs.
@@ -154,7 +158,8 @@ impl LoopTrainer for LatentTrainer {
     }
 }
 
-/// Trains on the GPU until the session says stop (success, time or iteration budget):
+/// Trains on the GPU until the session says stop (success, time or iteration budget, or
+/// `setup.stop` requested):
 /// opens the device, builds the [`Trainer`] (not active time), restores the checkpoint of a
 /// resumed run, then iterates: one graph replay per iteration, an evaluation every
 /// `run.eval_interval` iterations, checkpoints at `run.checkpoint_interval` and at the end.
@@ -177,6 +182,7 @@ pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
             &setup.store,
             &setup.start,
             setup.progress,
+            &setup.stop,
         );
     }
     let device = run.gpus.first().map_or(setup.device, |&d| d as usize);
@@ -188,12 +194,14 @@ pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
         &setup.store,
         &setup.start,
         setup.progress,
+        &setup.stop,
     )
 }
 
 /// [`train_on_gpu`] on an open GPU (the hyperparameter search trains trial after trial on
 /// one): `config` is the resolved configuration (for a resumed run, its `[run]` section
-/// replaces the run directory's). `run.gpus` is not read: this is one GPU.
+/// replaces the run directory's). `run.gpus` is not read: this is one GPU. `stop` ends the run
+/// after the iteration it is requested in (stop reason `interrupted`).
 pub fn train_with<'a>(
     gpu: &Gpu,
     config: &TrainConfig,
@@ -201,9 +209,10 @@ pub fn train_with<'a>(
     store: &PlanStore,
     start: &RunStart,
     progress: ProgressMode,
+    stop: &StopFlag,
 ) -> Result<RunSummary, TrainError> {
     let motion = motion.into();
-    let (session, checkpoint) = open_session(config, start, progress)?;
+    let (session, checkpoint) = open_session(config, start, progress, stop)?;
     let setup = std::time::Instant::now();
     let mut trainer = Trainer::new(gpu, store, motion, session.config())?;
     let scorer = Scorer::new(trainer.evaluation_rollout().0, motion, session.config())?;
@@ -245,7 +254,8 @@ fn train_latent_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
         .map_or(setup.device, |&d| d as usize);
     let gpu = Gpu::open(device)?;
     let motion = setup.motion.tracked();
-    let (session, checkpoint) = open_session(&setup.config, &setup.start, setup.progress)?;
+    let (session, checkpoint) =
+        open_session(&setup.config, &setup.start, setup.progress, &setup.stop)?;
     let started = std::time::Instant::now();
     let mut trainer = LatentTrainer::new(&gpu, &setup.store, motion, session.config(), &teacher)?;
     let scorer = Scorer::new(trainer.evaluation_rollout(), motion, session.config())?;
@@ -332,14 +342,19 @@ impl Scorer {
 /// replica of the rollout and the update per GPU, gradients and statistics all-reduced through
 /// NCCL inside their graphs, evaluation and checkpoints on the first. Otherwise as
 /// [`train_with`]; a resumed run must use as many GPUs as it trained on.
+///
+/// A stop request is read by this thread, which drives every GPU's iteration: every replica
+/// finishes the iteration it is in (no rank is left waiting in an all-reduce), none starts
+/// another, and rank 0's state is checkpointed as at any checkpoint.
 pub fn train_on_gpus(
     config: &TrainConfig,
     motion: &ReferenceMotion,
     store: &PlanStore,
     start: &RunStart,
     progress: ProgressMode,
+    stop: &StopFlag,
 ) -> Result<RunSummary, TrainError> {
-    let (session, checkpoint) = open_session(config, start, progress)?;
+    let (session, checkpoint) = open_session(config, start, progress, stop)?;
     let devices: Vec<usize> = session
         .config()
         .run
@@ -355,11 +370,13 @@ pub fn train_on_gpus(
     run_loop(session, &mut replicas, checkpoint, &scorer, setup, notes)
 }
 
-/// Opens the run directory (new or resumed) and prints the resume's warnings.
+/// Opens the run directory (new or resumed), connects the stop request and prints the
+/// resume's warnings.
 fn open_session(
     config: &TrainConfig,
     start: &RunStart,
     progress: ProgressMode,
+    stop: &StopFlag,
 ) -> Result<(RunSession, Option<Checkpoint>), TrainError> {
     let (mut session, checkpoint, warnings) = match start {
         RunStart::New { root, overwrite } => (
@@ -372,6 +389,7 @@ fn open_session(
             RunSession::resume(root, |c| c.run = run, progress)?
         }
     };
+    session.stop_on(stop.clone());
     for warning in &warnings {
         session.progress().note(&format!("warning: {warning}"));
     }

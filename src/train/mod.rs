@@ -28,6 +28,7 @@ pub mod replicas;
 mod report;
 pub mod run_dir;
 mod session;
+pub mod stop;
 pub(crate) mod summary;
 mod trainer;
 
@@ -64,5 +65,6 @@ pub use replicas::{Replicas, replica_seed};
 pub use report::{IterationReport, replica_mismatch};
 pub use run_dir::{ResumedRun, RunDir, default_run_dir};
 pub use session::{IterationStats, IterationStep, NextStep, RunSession, check_same_gpu_count};
+pub use stop::{StopFlag, StopSignal};
 pub use summary::RunSummary;
 pub use trainer::Trainer;

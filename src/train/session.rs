@@ -16,6 +16,10 @@
 //! if let Some(reason) = next.stop { return session.finish(reason); }
 //! ```
 //!
+//! A stop request ([`RunSession::stop_on`]: SIGINT or SIGTERM, src/train/stop.rs) is read in
+//! `record`, between iterations: the iteration that was running completes, is recorded and
+//! checkpointed, and the run finishes with [`StopReason::Interrupted`].
+//!
 //! Everything here runs on the CPU, so the whole sequence (including a crash and a resume) is
 //! tested without a GPU.
 
@@ -31,6 +35,7 @@ use super::library_evaluation::clips_table;
 use super::metrics::{EpisodeEnds, IterationRecord, MetricsLog, UpdateStats};
 use super::progress::{Progress, ProgressMode};
 use super::run_dir::{ResumedRun, RunDir};
+use super::stop::StopFlag;
 use super::summary::RunSummary;
 
 /// What the GPU reports about one iteration (the per-iteration statistics copy).
@@ -100,6 +105,8 @@ pub struct RunSession {
     curve_drawn: Option<std::time::Instant>,
     /// What the evaluations have reached so far (the stop rule's history).
     reached: Milestones,
+    /// A request to stop after the current iteration (a signal's).
+    stop: StopFlag,
 }
 
 /// A run resumes on as many GPUs as it trained on (which devices may change): the checkpoint
@@ -227,7 +234,14 @@ impl RunSession {
             iteration_start_s: active,
             curve_drawn: None,
             reached,
+            stop: StopFlag::new(),
         }
+    }
+
+    /// Stops the run after the iteration during which `flag` is set (see the module
+    /// documentation); a new session has a flag of its own that nothing sets.
+    pub fn stop_on(&mut self, flag: StopFlag) {
+        self.stop = flag;
     }
 
     pub fn config(&self) -> &TrainConfig {
@@ -297,7 +311,8 @@ impl RunSession {
     /// Records an iteration (with its evaluation, when one ran): appends it to
     /// `metrics.jsonl`, redraws `curve.png` after an evaluation (at most every few seconds;
     /// [`RunSession::finish`] draws the final one), updates the progress
-    /// display, and says whether to checkpoint and whether to stop.
+    /// display, and says whether to checkpoint and whether to stop (a stop requested through
+    /// [`RunSession::stop_on`] stops here, with a checkpoint).
     pub fn record(
         &mut self,
         step: IterationStep,
@@ -313,9 +328,12 @@ impl RunSession {
             self.reached.success |= e.success;
             self.reached.pose_error |= e.meets_pose_error_target();
         }
+        // A budget or success reached at this iteration ends the run as it would have
+        // anyway; otherwise a stop request ends it here.
         let stop = self
             .rule
-            .check_milestones(record.iteration, record.active_time_s, self.reached);
+            .check_milestones(record.iteration, record.active_time_s, self.reached)
+            .or_else(|| self.stop.is_requested().then_some(StopReason::Interrupted));
         self.progress.iteration(&record);
         self.records.push(record);
         let curve_due = self

@@ -266,6 +266,21 @@ mod tests {
     }
 
     #[test]
+    fn an_interrupted_run_reads_back_with_its_reason_and_results() {
+        let s = RunSummary::from_records("walk", 3, &records(12, 10), StopReason::Interrupted);
+        let json = serde_json::to_string_pretty(&s).unwrap();
+        assert!(json.contains("\"stop_reason\": \"interrupted\""), "{json}");
+        let back: RunSummary = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, s);
+        assert_eq!((back.iterations, back.success_iteration), (12, Some(10)));
+        let text = back.report();
+        assert!(
+            text.contains("stopped after 12 iterations (interrupted)"),
+            "{text}"
+        );
+    }
+
+    #[test]
     fn pose_error_and_clip_start_times_are_their_first_evaluations() {
         let mut records = records(20, 15);
         // The pose error target is met first at iteration 10 (0.05 <= 0.06 in every

@@ -13,6 +13,10 @@
 //! differ, and at every setup, restore and checkpoint, an exact checksum of each replica's
 //! whole state ([`Trainer::replica_digest`]) decides, and replicas that differ stop the run.
 //!
+//! Stopping (SIGINT, SIGTERM; src/train/stop.rs): the coordinating thread reads the request
+//! between iterations, so every rank completes the same last iteration and none is left in an
+//! all-reduce; the final checkpoint is rank 0's, as every checkpoint is.
+//!
 //! Failures: a worker's error (or a worker that stops) fails the call that was waiting for it,
 //! the communicators are aborted so that the other GPUs' collectives waiting for it give up,
 //! and the run stops with that error; nothing is written after it, so the last checkpoint
