@@ -246,7 +246,7 @@ fn a_short_distillation_run_evaluates_checkpoints_and_its_decoder_loads() {
         .output()
         .expect("train runs");
     check_success(&out, "train the tracker");
-    let teacher = tracker_run.join("checkpoints/iter_2.safetensors");
+    let teacher = tracker_run.join("checkpoints/iter_00000002.safetensors");
     assert!(teacher.is_file(), "{}", teacher.display());
 
     config.latent = Some(LatentConfig {
@@ -284,7 +284,7 @@ fn a_short_distillation_run_evaluates_checkpoints_and_its_decoder_loads() {
         .expect("per-clip results");
     assert_eq!(clips.len(), 3);
     assert!(latent_run.join("clips.tsv").is_file());
-    let checkpoint = latent_run.join("checkpoints/iter_4.safetensors");
+    let checkpoint = latent_run.join("checkpoints/iter_00000004.safetensors");
     let frozen = load_frozen_decoder(&checkpoint).expect("a latent checkpoint");
     assert_eq!(frozen.latent_size, 64);
     assert_eq!(frozen.action_size, 28);
