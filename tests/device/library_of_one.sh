@@ -33,7 +33,22 @@ for build in before after; do
       > "$dir/$tag.eval.json" 2> "$dir/$tag.eval.log" || echo "eval $tag failed: $(tail -2 "$dir/$tag.eval.log")"
   done
 done
-same() { if cmp -s "$1" "$2"; then echo identical; else echo DIFFER; fi; }
+# Recordings are compared by content: their JSON header (tensor names, shapes, offsets and the
+# metadata) parsed, and the tensor bytes after it. The header's metadata keys come out in a
+# process-dependent order (safetensors serializes a hash map), so the files' bytes may differ
+# where nothing recorded does (first device run, 2026-11-26: after vs after "DIFFER" by bytes).
+same() {
+  if python3 - "$1" "$2" <<'PY'; then echo identical; else echo DIFFER; fi
+import json, struct, sys
+def parts(path):
+    data = open(path, "rb").read()
+    if not path.endswith(".safetensors"):
+        return data
+    n = struct.unpack("<Q", data[:8])[0]
+    return json.loads(data[8:8 + n]), data[8 + n:]
+sys.exit(0 if parts(sys.argv[1]) == parts(sys.argv[2]) else 1)
+PY
+}
 {
   for what in safetensors eval.json; do
     echo "$what: before vs before $(same "$dir/before_1.$what" "$dir/before_2.$what"), after vs after $(same "$dir/after_1.$what" "$dir/after_2.$what"), before vs after $(same "$dir/before_1.$what" "$dir/after_1.$what")"
