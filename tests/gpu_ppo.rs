@@ -35,7 +35,7 @@ use instantmimic::ppo::loss::{LOSS_TERMS, LossGradients};
 use instantmimic::ppo::reduce::{
     record_clear, record_column_sums, record_sum_and_squares, record_sum_of_squares,
 };
-use instantmimic::ppo::{GaussianPolicy, LayerShape, PpoUpdate};
+use instantmimic::ppo::{GaussianPolicy, GemmSetting, LayerShape, PpoUpdate};
 use instantmimic::train::TrainConfig;
 use ppo_support::*;
 use rand::SeedableRng;
@@ -728,6 +728,90 @@ fn one_update_step_has_the_float64_gradients_of_the_ppo_loss() {
         "the first step keeps the rate or raises it by 1.5 (KL ~ 0): {}",
         stats.learning_rate
     );
+}
+
+/// `ppo.concurrent_networks`: the actor's and the critic's work recorded as two branches of the
+/// update's graph (the critic with its own cuBLAS handle and scratch) computes the float64
+/// gradients of the PPO loss, on both GEMM paths, and a 3 x 4 update replayed twice ends where
+/// the sequential one does (the two differ only in the order of the reductions' atomics),
+/// with the same kernels in the graph.
+#[test]
+fn concurrent_networks_give_the_sequential_update() {
+    for gemm in [GemmSetting::Warp, GemmSetting::Auto] {
+        let (gpu, _kernels, policy, update, rollout, config) = small_setup_with(1, 1, 5, |c| {
+            c.policy.gemm = gemm;
+            c.ppo.concurrent_networks = true;
+            c.ppo.separate_grad_clipping = true;
+        });
+        let host = host_policy(&policy);
+        let (obs, targets, c, _) = host_targets(&rollout, &host, &config);
+        let rows = obs.len() / policy.observation_size();
+        let (ref_actor, ref_critic) = host.gradients(&obs, rows, &targets, &c);
+        let nodes = run_one_update(&gpu, &update, &rollout);
+        println!(
+            "{gemm:?} ({}): concurrent update graph (1 x 1): {nodes:?}",
+            policy.gemm().describe()
+        );
+        let (actor_grads, critic_grads) = update.gradients();
+        check(
+            "actor gradients (concurrent)",
+            &download(&actor_grads.flat),
+            &ref_actor,
+        );
+        check(
+            "critic gradients (concurrent)",
+            &download(&critic_grads.flat),
+            &ref_critic,
+        );
+
+        let run = |concurrent: bool| {
+            let (gpu, _kernels, policy, update, rollout, _) = small_setup_with(3, 4, 6, |c| {
+                c.policy.gemm = gemm;
+                c.ppo.concurrent_networks = concurrent;
+                c.ppo.separate_grad_clipping = true;
+            });
+            let graph = gpu
+                .stream()
+                .capture(|s| update.record(s, &rollout.batch()))
+                .expect("capture");
+            let nodes = graph.node_counts().expect("node counts");
+            for _ in 0..2 {
+                graph.launch(gpu.stream()).expect("launch");
+            }
+            gpu.synchronize().expect("update");
+            let stats = update.read_statistics().expect("statistics");
+            let params = [
+                download(policy.actor_parameters()),
+                download(policy.critic_parameters()),
+            ];
+            (nodes, stats, params)
+        };
+        let (sequential_nodes, sequential_stats, sequential) = run(false);
+        let (concurrent_nodes, concurrent_stats, concurrent) = run(true);
+        assert_eq!(
+            sequential_nodes.get("kernel"),
+            concurrent_nodes.get("kernel"),
+            "{sequential_nodes:?} against {concurrent_nodes:?}"
+        );
+        println!(
+            "{gemm:?}: sequential {sequential_stats:?}\n      concurrent {concurrent_stats:?}"
+        );
+        for (name, a, b) in [
+            ("actor", &sequential[0], &concurrent[0]),
+            ("critic", &sequential[1], &concurrent[1]),
+        ] {
+            let worst = a
+                .iter()
+                .zip(b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f64::max);
+            println!("{gemm:?}: {name} parameters after 2 updates differ by at most {worst:.3e}");
+            assert!(worst <= 1e-5, "{gemm:?}: {name} parameters {worst:e} apart");
+        }
+        let relative = |x: f32, y: f32| f64::from((x - y).abs()) / f64::from(x.abs().max(1e-6));
+        assert!(relative(sequential_stats.value_loss, concurrent_stats.value_loss) < 1e-3);
+        assert!(relative(sequential_stats.grad_norm, concurrent_stats.grad_norm) < 1e-3);
+    }
 }
 
 /// `ppo.value_normalization` and `ppo.separate_grad_clipping` in a whole update (1 x 1): before

@@ -1,10 +1,11 @@
 //! Whole training iterations against the physics floor (`bench full`, issue 20): frames per
 //! second of the rollout and the update as `train` runs them (the iteration's graph, the
 //! report's readback, the host waiting for it: what the active clock measures), once with the
-//! update after the rollout (the default) and once beside the next rollout
-//! (`ppo.overlap_update`), each against the physics-only floor replayed from the rollout's
-//! states (`bench rollout`'s floor, the same code), with a breakdown of the sequential
-//! iteration: the rollout's stages, the update, and the rest.
+//! update after the rollout (the default), once so with the actor's and the critic's work as
+//! concurrent branches of the update (`ppo.concurrent_networks`), and once beside the next
+//! rollout (`ppo.overlap_update`), each against the physics-only floor replayed from the
+//! rollout's states (`bench rollout`'s floor, the same code), with a breakdown of the
+//! sequential iteration: the rollout's stages, the update, and the rest.
 //!
 //! A frame is one control step of one env; an iteration that ran a rollout more (the
 //! overlapped loop filling its pipeline, only in the warm-up unless it is 0) counts its frames.
@@ -27,6 +28,8 @@ use crate::train::{TrainConfig, TrainError, Trainer};
 pub struct LoopCase {
     /// `ppo.overlap_update`.
     pub overlap_update: bool,
+    /// `ppo.concurrent_networks`.
+    pub concurrent_networks: bool,
     /// Building the trainer (plans, kernels, graphs).
     pub setup_seconds: f64,
     /// Median over rounds of frames per wall second of the timed iterations, and every
@@ -63,6 +66,11 @@ pub struct FullBench {
     pub rounds_floor_frames_per_s: Vec<f64>,
     pub floor_rollout_ms: f64,
     pub sequential: LoopCase,
+    /// The sequential loop with `ppo.concurrent_networks`, its update alone (ms, its own
+    /// graph, event-timed) and `concurrent.frames_per_s / sequential.frames_per_s`.
+    pub concurrent: LoopCase,
+    pub concurrent_update_ms: f64,
+    pub concurrent_speedup: f64,
     pub overlapped: LoopCase,
     /// `overlapped.frames_per_s / sequential.frames_per_s`.
     pub overlap_speedup: f64,
@@ -82,7 +90,8 @@ pub struct FullBench {
     pub hidden_fraction: f64,
 }
 
-/// Builds the trainer of `config` twice, without and with `ppo.overlap_update`, and times
+/// Builds the trainer of `config` three times: as it is, with `ppo.concurrent_networks`, and
+/// with `ppo.overlap_update` (each with the other off), and times
 /// `rounds` x `iterations` whole iterations of each (after `warmup` untimed ones per round);
 /// with the sequential one also the physics-only floor from the rollout's states, the rollout
 /// graph alone, its stages and the update alone. One trainer at a time: the first is dropped
@@ -101,39 +110,53 @@ pub fn bench_full(
     }
     let rounds = rounds.max(1);
     let frames = u64::from(config.env.num_envs) * u64::from(config.ppo.horizon);
-    let with_overlap = |on: bool| {
+    let variant = |overlap_update: bool, concurrent_networks: bool| {
         let mut c = config.clone();
-        c.ppo.overlap_update = on;
+        c.ppo.overlap_update = overlap_update;
+        c.ppo.concurrent_networks = concurrent_networks;
         c.run.gpus.clear();
         c.validate("bench full")?;
         Ok::<TrainConfig, TrainError>(c)
     };
+    // Builds the variant's trainer and times its iterations; the trainer is kept for more.
+    let run = |overlap: bool, concurrent: bool| {
+        let started = Instant::now();
+        let mut trainer = Trainer::new(gpu, store, motion, &variant(overlap, concurrent)?)?;
+        let setup_seconds = started.elapsed().as_secs_f64();
+        let timed = time_rounds(&mut trainer, frames, warmup, iterations, rounds)?;
+        let mut case = timed.case(overlap, setup_seconds, trainer.iteration_graph_nodes()?);
+        case.concurrent_networks = concurrent;
+        Ok::<(Trainer, LoopCase), TrainError>((trainer, case))
+    };
 
-    let _range = NvtxRange::push("sequential");
-    let started = Instant::now();
-    let mut trainer = Trainer::new(gpu, store, motion, &with_overlap(false)?)?;
-    let setup_seconds = started.elapsed().as_secs_f64();
+    let range = NvtxRange::push("sequential");
+    let (trainer, sequential) = run(false, false)?;
     let gemm = trainer.gemm().describe();
-    let timed = time_rounds(&mut trainer, frames, warmup, iterations, rounds)?;
-    let sequential = timed.case(false, setup_seconds, trainer.iteration_graph_nodes()?);
     let parts = time_parts(gpu, &trainer, frames, warmup, iterations, rounds)?;
     drop(trainer);
-    drop(_range);
+    drop(range);
 
-    let _range = NvtxRange::push("overlapped");
-    let started = Instant::now();
-    let mut trainer = Trainer::new(gpu, store, motion, &with_overlap(true)?)?;
-    let setup_seconds = started.elapsed().as_secs_f64();
-    let timed = time_rounds(&mut trainer, frames, warmup, iterations, rounds)?;
-    let overlapped = timed.case(true, setup_seconds, trainer.iteration_graph_nodes()?);
+    let range = NvtxRange::push("concurrent networks");
+    let (trainer, concurrent) = run(false, true)?;
+    let concurrent_update_ms = time_update(gpu, &trainer, warmup, iterations)?;
     drop(trainer);
+    drop(range);
+
+    let range = NvtxRange::push("overlapped");
+    let (trainer, overlapped) = run(true, false)?;
+    drop(trainer);
+    drop(range);
 
     let floor = median(&parts.floor);
     let with_ratio = |mut case: LoopCase| {
         case.ratio_to_floor = case.frames_per_s / floor;
         case
     };
-    let (sequential, overlapped) = (with_ratio(sequential), with_ratio(overlapped));
+    let (sequential, concurrent, overlapped) = (
+        with_ratio(sequential),
+        with_ratio(concurrent),
+        with_ratio(overlapped),
+    );
     let hidden_ms = sequential.iteration_ms - overlapped.iteration_ms;
     Ok(FullBench {
         gpu: gpu.info().name.clone(),
@@ -151,6 +174,9 @@ pub fn bench_full(
         rounds_floor_frames_per_s: parts.floor,
         floor_rollout_ms: frames as f64 / floor * 1e3,
         overlap_speedup: overlapped.frames_per_s / sequential.frames_per_s,
+        concurrent_speedup: concurrent.frames_per_s / sequential.frames_per_s,
+        concurrent_update_ms,
+        concurrent,
         rest_ms: sequential.iteration_ms - parts.rollout_ms - parts.update_ms,
         hidden_fraction: hidden_ms / parts.update_ms,
         hidden_ms,
@@ -189,6 +215,7 @@ impl TimedRounds {
             .map_or(0, |(i, _)| i);
         LoopCase {
             overlap_update,
+            concurrent_networks: false,
             setup_seconds,
             frames_per_s,
             rounds_frames_per_s: self.frames_per_s.clone(),
@@ -291,14 +318,25 @@ fn time_parts(
         .map(|(stage, ms)| (stage, ms / timed_total * rollout_ms))
         .collect();
 
-    let update = trainer.capture_update()?;
-    let seconds = timed_seconds(gpu, "update", warmup, launches, || {
-        update.launch(gpu.stream()).map_err(TrainError::from)
-    })?;
     Ok(Parts {
         floor,
         rollout_ms,
         stage_ms,
-        update_ms: seconds / f64::from(launches) * 1e3,
+        update_ms: time_update(gpu, trainer, warmup, launches)?,
     })
+}
+
+/// Milliseconds per launch of `trainer`'s update alone (its own graph, event-timed). It
+/// changes the trainer's state: time it after its iterations.
+fn time_update(
+    gpu: &Gpu,
+    trainer: &Trainer,
+    warmup: u32,
+    launches: u32,
+) -> Result<f64, TrainError> {
+    let update = trainer.capture_update()?;
+    let seconds = timed_seconds(gpu, "update", warmup, launches, || {
+        update.launch(gpu.stream()).map_err(TrainError::from)
+    })?;
+    Ok(seconds / f64::from(launches) * 1e3)
 }

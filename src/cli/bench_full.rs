@@ -46,6 +46,7 @@ pub(super) fn run(args: FullArgs) -> Result<()> {
     // One GPU, --device; both settings of the overlap are measured.
     config.run.gpus.clear();
     config.ppo.overlap_update = false;
+    config.ppo.concurrent_networks = false;
     config.validate(&label)?;
     let (store, motion) = benchmark_inputs(
         &config,
@@ -104,10 +105,16 @@ fn report(r: &FullBench) -> String {
     let _ = writeln!(out, "|---|---|---|---|---|---|");
     for (name, case) in [
         ("update after the rollout", &r.sequential),
+        ("the same, actor and critic concurrent", &r.concurrent),
         ("update beside the next rollout", &r.overlapped),
     ] {
         let _ = writeln!(out, "{}", row(name, case, &rounds));
     }
+    let _ = writeln!(
+        out,
+        "concurrent networks: {:.3}x the frames/s; the update alone {:.2} ms against {:.2} ms",
+        r.concurrent_speedup, r.concurrent_update_ms, r.update_ms
+    );
     let _ = writeln!(
         out,
         "overlap: {:.3}x the frames/s; {:.2} ms of the update's {:.2} ms hidden per iteration ({:.0}%)",
@@ -167,6 +174,7 @@ mod tests {
     fn case(overlap_update: bool, frames_per_s: f64, iteration_ms: f64) -> LoopCase {
         LoopCase {
             overlap_update,
+            concurrent_networks: false,
             setup_seconds: 2.0,
             frames_per_s,
             rounds_frames_per_s: vec![frames_per_s; 3],
@@ -178,7 +186,7 @@ mod tests {
 
     /// The text report of made-up figures (no GPU): every figure lands in its place.
     #[test]
-    fn the_report_lists_both_loops_the_floor_and_the_parts() {
+    fn the_report_lists_the_three_loops_the_floor_and_the_parts() {
         let stage_ms = BTreeMap::from([(RolloutStage::Physics, 30.0), (RolloutStage::Policy, 1.0)]);
         let r = FullBench {
             gpu: "test GPU".to_owned(),
@@ -196,6 +204,12 @@ mod tests {
             rounds_floor_frames_per_s: vec![1.0e6; 3],
             floor_rollout_ms: 16.384,
             sequential: case(false, 0.5e6, 32.768),
+            concurrent: LoopCase {
+                concurrent_networks: true,
+                ..case(false, 0.55e6, 29.79)
+            },
+            concurrent_update_ms: 12.0,
+            concurrent_speedup: 1.1,
             overlapped: case(true, 0.8e6, 20.48),
             overlap_speedup: 1.6,
             rollout_ms: 31.0,
@@ -212,6 +226,8 @@ mod tests {
             "physics floor (from the rollout's states): 1.000 M frames/s",
             "| update after the rollout | 0.500 | 0.500 | 32.77 |",
             "| update beside the next rollout | 0.800 | 0.800 | 20.48 |",
+            "| the same, actor and critic concurrent | 0.550 | 0.550 | 29.79 |",
+            "concurrent networks: 1.100x the frames/s; the update alone 12.00 ms against 15.00 ms",
             "overlap: 1.600x the frames/s; 12.29 ms of the update's 15.00 ms hidden per iteration (82%)",
             "physics",
             "update",
@@ -221,6 +237,7 @@ mod tests {
         // The JSON form carries the same fields.
         let json = serde_json::to_value(&r).expect("json");
         assert_eq!(json["overlapped"]["overlap_update"], true);
+        assert_eq!(json["concurrent"]["concurrent_networks"], true);
         assert_eq!(json["stage_ms"]["physics"], 30.0);
     }
 }

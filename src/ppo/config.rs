@@ -90,8 +90,17 @@ pub struct PpoConfig {
     /// branches of one CUDA graph) instead of after it (docs/train.md, "Overlapping the
     /// update"): the rollout samples from a copy of the parameters taken before each update,
     /// one update behind, and the PPO ratio (log-probabilities stored at sampling time)
-    /// corrects for the lag. One GPU only. Off by default; not yet run on a GPU.
+    /// corrects for the lag. One GPU only. Off by default: on the H100 it hid 9% of the
+    /// update and the lag took the backflip 2.9x the frames (BENCHMARKS.md).
     pub overlap_update: bool,
+    /// Record the actor's and the critic's forward passes, backward passes and Adam steps of
+    /// each minibatch as two branches of the update's graph, which the GPU may run at the same
+    /// time (the critic then has its own cuBLAS handle and scratch), instead of one after the
+    /// other. The same operations on the same data: the same update, bit for bit
+    /// (docs/ppo.md, "Concurrent networks"). Off by default until measured on a GPU. Left out
+    /// of written configurations when off, so their checkpoints stay readable by older builds.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub concurrent_networks: bool,
 }
 
 impl Default for PpoConfig {
@@ -114,6 +123,7 @@ impl Default for PpoConfig {
             adaptive_learning_rate: true,
             values_in_update: true,
             overlap_update: false,
+            concurrent_networks: false,
             max_grad_norm: 1.0,
         }
     }

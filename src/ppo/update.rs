@@ -164,6 +164,10 @@ pub struct PpoUpdate {
     /// The cuBLAS path's input-gradient products `dz w^T` (`[rows x widest hidden layer]`,
     /// shared by the actor's and the critic's backward passes); none for Warp tiles.
     input_gradient_scratch: Option<DeviceArray<f32>>,
+    /// `ppo.concurrent_networks`: the actor's and the critic's work of each minibatch as two
+    /// branches of the graph; the critic then has its own cuBLAS handle and this scratch.
+    concurrent_networks: bool,
+    critic_input_gradient_scratch: Option<DeviceArray<f32>>,
     actor_moments: AdamMoments,
     critic_moments: AdamMoments,
     advantages: Advantages,
@@ -227,11 +231,28 @@ impl PpoUpdate {
         let log_std_grad = actor_grads.flat.view(log_std_offset, [a])?;
         let steps = epochs * minibatches;
         let gemm = policy.gemm();
-        let input_gradient_scratch = if gemm.uses_cublas() {
-            let len = input_gradient_scratch_len(rows, &[&actor_shapes, &critic_shapes]);
-            Some(DeviceArray::zeros(gpu, [len.max(1)])?)
+        let scratch = |networks: &[&[LayerShape]]| -> Result<_, PpoError> {
+            Ok(if gemm.uses_cublas() {
+                let len = input_gradient_scratch_len(rows, networks);
+                Some(DeviceArray::zeros(gpu, [len.max(1)])?)
+            } else {
+                None
+            })
+        };
+        let concurrent = q.concurrent_networks;
+        // Concurrent branches must not share a cuBLAS workspace or a scratch buffer.
+        let (input_gradient_scratch, critic_input_gradient_scratch, critic_gemm) = if concurrent {
+            (
+                scratch(&[&actor_shapes])?,
+                scratch(&[&critic_shapes])?,
+                gemm.separate(gpu)?,
+            )
         } else {
-            None
+            (
+                scratch(&[&actor_shapes, &critic_shapes])?,
+                None,
+                gemm.clone(),
+            )
         };
         Ok(PpoUpdate {
             gpu: gpu.clone(),
@@ -272,7 +293,7 @@ impl PpoUpdate {
                 &critic_shapes,
                 share(&critic_params)?,
                 rows,
-                gemm.clone(),
+                critic_gemm,
             )?,
             // With `values_in_update` the critic values every observation row of the rollout
             // (T + 1 rows of N) in one pass; otherwise only the bootstrap row T.
@@ -300,6 +321,8 @@ impl PpoUpdate {
             critic_grads,
             log_std_grad,
             input_gradient_scratch,
+            concurrent_networks: concurrent,
+            critic_input_gradient_scratch,
             advantages: Advantages::zeros(gpu, horizon, envs)?,
             value_normalization: ValueNormalization::new(gpu, q.value_normalization)?,
             separate_grad_clipping: q.separate_grad_clipping,
@@ -462,14 +485,29 @@ impl PpoUpdate {
         Ok(())
     }
 
-    /// Forward, loss, backward, schedule and Adam for the gathered minibatch, step `slot`.
+    /// Forward, loss, backward, schedule and Adam for the gathered minibatch, step `slot`. With
+    /// `ppo.concurrent_networks` (inside a capture) the actor's and the critic's forward
+    /// passes, backward passes and Adam steps are recorded as two branches each
+    /// ([`record_branches`]); the loss, the all-reduces, the schedule and the gradient norms
+    /// join them, in the same order as without.
     fn record_minibatch_step(&self, stream: &Stream, slot: usize) -> Result<(), PpoError> {
         let k = &*self.kernels;
         let obs = &self.minibatch.observations;
-        self.actor.record(k, stream, obs)?;
-        self.critic.record(k, stream, obs)?;
-        record_clear(stream, &self.actor_grads.flat)?;
-        record_clear(stream, &self.critic_grads.flat)?;
+        let branching = self.concurrent_networks && stream.is_capturing()?;
+        record_branches(
+            stream,
+            branching,
+            |s| {
+                self.actor.record(k, s, obs)?;
+                record_clear(s, &self.actor_grads.flat)?;
+                Ok(())
+            },
+            |s| {
+                self.critic.record(k, s, obs)?;
+                record_clear(s, &self.critic_grads.flat)?;
+                Ok(())
+            },
+        )?;
         self.loss.record(
             k,
             stream,
@@ -484,25 +522,40 @@ impl PpoUpdate {
         let sums = self.loss_sums.view(slot * width, [width])?;
         record_column_sums(k, stream, &self.loss.terms, &sums)?;
         let blocks = self.target_blocks;
-        record_mlp_backward(
-            k,
+        let critic_scratch = self
+            .critic_input_gradient_scratch
+            .as_ref()
+            .or(self.input_gradient_scratch.as_ref());
+        record_branches(
             stream,
-            &self.actor,
-            obs,
-            &self.loss.d_mean,
-            &self.actor_grads,
-            blocks,
-            self.input_gradient_scratch.as_ref(),
-        )?;
-        record_mlp_backward(
-            k,
-            stream,
-            &self.critic,
-            obs,
-            &self.loss.d_value,
-            &self.critic_grads,
-            blocks,
-            self.input_gradient_scratch.as_ref(),
+            branching,
+            |s| {
+                let scratch = self.input_gradient_scratch.as_ref();
+                record_mlp_backward(
+                    k,
+                    s,
+                    &self.actor,
+                    obs,
+                    &self.loss.d_mean,
+                    &self.actor_grads,
+                    blocks,
+                    scratch,
+                )
+            },
+            |s| {
+                let d_value = &self.loss.d_value;
+                let grads = &self.critic_grads;
+                record_mlp_backward(
+                    k,
+                    s,
+                    &self.critic,
+                    obs,
+                    d_value,
+                    grads,
+                    blocks,
+                    critic_scratch,
+                )
+            },
         )?;
         if let Some(replicas) = &self.replicas {
             // Before anything reads them: the schedule (KL, log std), the norm and Adam.
@@ -523,7 +576,8 @@ impl PpoUpdate {
             &self.adam_step,
         )?;
         // Slot 2s holds the actor's squared norm, 2s + 1 the critic's; clipped together, both
-        // add into 2s (and 2s + 1 stays 0).
+        // add into 2s (and 2s + 1 stays 0). One after the other in either mode: clipped
+        // together they add into one value, in this order.
         let actor_slot = 2 * slot;
         let critic_slot = if self.separate_grad_clipping {
             actor_slot + 1
@@ -548,23 +602,10 @@ impl PpoUpdate {
             let norms = [self.grad_norm_sq.view(actor_slot, [2])?.collective()?];
             replicas.all_reduce(stream, &norms, ReduceOp::Max)?;
         }
-        for (params, grads, moments, slot) in [
-            (
-                &self.actor_params,
-                &self.actor_grads,
-                &self.actor_moments,
-                actor_slot,
-            ),
-            (
-                &self.critic_params,
-                &self.critic_grads,
-                &self.critic_moments,
-                critic_slot,
-            ),
-        ] {
+        let adam_step = |s: &Stream, params, grads: &MlpGradients, moments: &AdamMoments, slot| {
             moments.record_step(
                 k,
-                stream,
+                s,
                 params,
                 &grads.flat,
                 &self.learning_rate,
@@ -572,9 +613,25 @@ impl PpoUpdate {
                 &self.grad_norm_sq,
                 slot,
                 &self.adam,
-            )?;
-        }
-        Ok(())
+            )
+        };
+        record_branches(
+            stream,
+            branching,
+            |s| {
+                adam_step(
+                    s,
+                    &self.actor_params,
+                    &self.actor_grads,
+                    &self.actor_moments,
+                    actor_slot,
+                )
+            },
+            |s| {
+                let (params, grads) = (&self.critic_params, &self.critic_grads);
+                adam_step(s, params, grads, &self.critic_moments, critic_slot)
+            },
+        )
     }
 
     /// The statistics of the last recorded update, `[PpoStatistics::LEN]` `f32` (layout:
@@ -680,4 +737,28 @@ mod tests {
         );
         assert!((f.total() / 1e12 - 1.5401).abs() < 1e-4, "{}", f.total());
     }
+}
+
+/// Records `first` then `second` on `stream`; with `branching` (the stream capturing) as two
+/// branches of the graph from the current point, which the GPU may run at the same time, joined
+/// again before whatever is recorded next. The two must not write what the other reads.
+fn record_branches(
+    stream: &Stream,
+    branching: bool,
+    first: impl FnOnce(&Stream) -> Result<(), PpoError>,
+    second: impl FnOnce(&Stream) -> Result<(), PpoError>,
+) -> Result<(), PpoError> {
+    if !branching {
+        first(stream)?;
+        return second(stream);
+    }
+    let start = stream.capture_frontier()?;
+    first(stream)?;
+    let first_done = stream.capture_frontier()?;
+    stream.set_capture_frontier(&start)?;
+    second(stream)?;
+    let mut joined = stream.capture_frontier()?;
+    joined.extend(&first_done);
+    stream.set_capture_frontier(&joined)?;
+    Ok(())
 }

@@ -486,3 +486,15 @@ fn latent_and_goal_are_alternatives() {
         .to_string();
     assert!(e.contains("[latent]") && e.contains("[goal]"), "{e}");
 }
+
+#[test]
+fn concurrent_networks_is_written_only_when_on() {
+    let mut c = TrainConfig::with_motion("walk");
+    let off = c.to_toml().unwrap();
+    assert!(!off.contains("concurrent_networks"), "{off}");
+    c.ppo.concurrent_networks = true;
+    let on = c.to_toml().unwrap();
+    assert!(on.contains("concurrent_networks = true"), "{on}");
+    let back = TrainConfig::from_toml(&on, "on.toml").unwrap();
+    assert!(back.ppo.concurrent_networks);
+}
