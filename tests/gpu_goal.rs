@@ -19,43 +19,22 @@ mod small_run_support;
 
 use instantmimic::cuda::Gpu;
 use instantmimic::env::{GOAL_OBSERVATION, Rollout, TrackedMotion};
-use instantmimic::motion::find::resolve_motion;
-use instantmimic::motion::{Character, MotionLibrary, MotionLibraryBuilder};
+use instantmimic::motion::Character;
 use instantmimic::plan::PlanStore;
 use instantmimic::ppo::GaussianPolicy;
 use instantmimic::train::TrainConfig;
 
-use small_run_support::{binary, check_success, metrics};
+use small_run_support::{binary, built_in_library, check_success, metrics, small_goal_config};
 
 /// `configs/goal/reach.toml` at the 32-world size with short iterations.
 fn goal_config() -> TrainConfig {
     // Embedded: the test binary runs on the GPU machine, away from this checkout.
-    let mut config = TrainConfig::from_toml(
+    let config = small_goal_config(
         include_str!("../configs/goal/reach.toml"),
         "configs/goal/reach.toml",
-    )
-    .expect("configs/goal/reach.toml parses");
-    config.env.num_envs = 32;
-    config.ppo.horizon = 32;
-    config.ppo.minibatches = 2;
-    config.ppo.epochs = 2;
-    config.run.eval_interval = 2;
-    config.run.time_budget_s = 600.0;
+    );
     config.validate("test").expect("a valid goal config");
     config
-}
-
-fn library(character: &Character, clips: &[&str]) -> MotionLibrary {
-    let mut builder = MotionLibraryBuilder::new("gpu_goal", 1.0 / 30.0);
-    for name in clips {
-        let motion = resolve_motion(name, None)
-            .and_then(|resolved| resolved.load(character))
-            .unwrap_or_else(|e| panic!("the built-in {name} loads: {e}"));
-        builder
-            .push(name, "built in", &motion, 1.0)
-            .expect("the clip joins the library");
-    }
-    builder.finish().expect("clips")
 }
 
 #[test]
@@ -64,7 +43,7 @@ fn goal_rollout_replays_keep_goals_and_count_every_ended_episode() {
     let store = PlanStore::new(None);
     let config = goal_config();
     let character = Character::humanoid().expect("the humanoid");
-    let library = library(&character, &["walk", "run"]);
+    let library = built_in_library("gpu_goal", &character, &["walk", "run"]);
     let motion = TrackedMotion::Library {
         character: &character,
         library: &library,

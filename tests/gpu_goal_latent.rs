@@ -24,15 +24,16 @@ use std::path::{Path, PathBuf};
 
 use instantmimic::cuda::Gpu;
 use instantmimic::env::TrackedMotion;
-use instantmimic::motion::find::resolve_motion;
-use instantmimic::motion::{Character, MotionLibrary, MotionLibraryBuilder};
+use instantmimic::motion::Character;
 use instantmimic::plan::PlanStore;
 use instantmimic::train::goal_latent::{DECODER_DIGEST, decoder_digest};
 use instantmimic::train::latent_trainer::{insert_latent_networks, latent_shapes};
 use instantmimic::train::{
     ActionMode, Checkpoint, CheckpointMeta, PolicyShapes, TrainConfig, Trainer,
 };
-use small_run_support::{binary, check_success, metrics, snapshot};
+use small_run_support::{
+    binary, built_in_library, check_success, metrics, small_goal_config, snapshot,
+};
 
 /// A latent controller's checkpoint (the committed latent configuration with absolute PD
 /// targets, initial parameters from `seed`) in `dir`, and its decoder digest.
@@ -72,33 +73,13 @@ fn latent_checkpoint(dir: &Path, seed: u64) -> (PathBuf, [i32; 5]) {
 /// `configs/goal/reach_latent.toml` at the 32-world size with short iterations, driving
 /// `decoder`.
 fn goal_config(decoder: &Path) -> TrainConfig {
-    let mut config = TrainConfig::from_toml(
+    let mut config = small_goal_config(
         include_str!("../configs/goal/reach_latent.toml"),
         "configs/goal/reach_latent.toml",
-    )
-    .expect("configs/goal/reach_latent.toml parses");
-    config.env.num_envs = 32;
-    config.ppo.horizon = 32;
-    config.ppo.minibatches = 2;
-    config.ppo.epochs = 2;
-    config.run.eval_interval = 2;
-    config.run.time_budget_s = 600.0;
+    );
     config.goal.as_mut().expect("[goal]").decoder = decoder.display().to_string();
     config.validate("test").expect("a valid goal config");
     config
-}
-
-fn library(character: &Character, clips: &[&str]) -> MotionLibrary {
-    let mut builder = MotionLibraryBuilder::new("gpu_goal_latent", 1.0 / 30.0);
-    for name in clips {
-        let motion = resolve_motion(name, None)
-            .and_then(|resolved| resolved.load(character))
-            .unwrap_or_else(|e| panic!("the built-in {name} loads: {e}"));
-        builder
-            .push(name, "built in", &motion, 1.0)
-            .expect("the clip joins the library");
-    }
-    builder.finish().expect("clips")
 }
 
 #[test]
@@ -109,7 +90,7 @@ fn the_head_trains_in_z_and_the_frozen_decoder_never_changes() {
     let gpu = Gpu::open(0).expect("a GPU");
     let store = PlanStore::new(None);
     let character = Character::humanoid().expect("the humanoid");
-    let library = library(&character, &["walk", "run"]);
+    let library = built_in_library("gpu_goal_latent", &character, &["walk", "run"]);
     let motion = TrackedMotion::Library {
         character: &character,
         library: &library,

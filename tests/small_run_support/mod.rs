@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use instantmimic::motion::find::{MOTIONS_ENV, resolve_motion};
-use instantmimic::motion::{Character, ReferenceMotion};
+use instantmimic::motion::{Character, MotionLibrary, MotionLibraryBuilder, ReferenceMotion};
 use instantmimic::train::{Checkpoint, CheckpointMeta, TrainConfig, Trainer};
 
 /// A built-in clip, loaded for the humanoid.
@@ -82,4 +82,32 @@ pub fn check_success(out: &Output, what: &str) {
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
     );
+}
+
+/// The built-in clips `clips` as one motion library named `name` for `character`, at 30 Hz.
+pub fn built_in_library(name: &str, character: &Character, clips: &[&str]) -> MotionLibrary {
+    let mut builder = MotionLibraryBuilder::new(name, 1.0 / 30.0);
+    for clip in clips {
+        let motion = resolve_motion(clip, None)
+            .and_then(|resolved| resolved.load(character))
+            .unwrap_or_else(|e| panic!("the built-in {clip} loads: {e}"));
+        builder
+            .push(clip, "built in", &motion, 1.0)
+            .expect("the clip joins the library");
+    }
+    builder.finish().expect("clips")
+}
+
+/// A goal-task configuration (`text`, from `label`) at the 32-world size with short
+/// iterations (horizon 32, 2 epochs x 2 minibatches, evaluation every 2); not yet validated.
+pub fn small_goal_config(text: &str, label: &str) -> TrainConfig {
+    let mut config =
+        TrainConfig::from_toml(text, label).unwrap_or_else(|e| panic!("{label} parses: {e}"));
+    config.env.num_envs = 32;
+    config.ppo.horizon = 32;
+    config.ppo.minibatches = 2;
+    config.ppo.epochs = 2;
+    config.run.eval_interval = 2;
+    config.run.time_budget_s = 600.0;
+    config
 }
