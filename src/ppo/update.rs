@@ -714,6 +714,30 @@ impl PpoUpdate {
     }
 }
 
+/// Records `first` then `second` on `stream`; with `branching` (the stream capturing) as two
+/// branches of the graph from the current point, which the GPU may run at the same time, joined
+/// again before whatever is recorded next. The two must not write what the other reads.
+fn record_branches(
+    stream: &Stream,
+    branching: bool,
+    first: impl FnOnce(&Stream) -> Result<(), PpoError>,
+    second: impl FnOnce(&Stream) -> Result<(), PpoError>,
+) -> Result<(), PpoError> {
+    if !branching {
+        first(stream)?;
+        return second(stream);
+    }
+    let start = stream.capture_frontier()?;
+    first(stream)?;
+    let first_done = stream.capture_frontier()?;
+    stream.set_capture_frontier(&start)?;
+    second(stream)?;
+    let mut joined = stream.capture_frontier()?;
+    joined.extend(&first_done);
+    stream.set_capture_frontier(&joined)?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -737,28 +761,4 @@ mod tests {
         );
         assert!((f.total() / 1e12 - 1.5401).abs() < 1e-4, "{}", f.total());
     }
-}
-
-/// Records `first` then `second` on `stream`; with `branching` (the stream capturing) as two
-/// branches of the graph from the current point, which the GPU may run at the same time, joined
-/// again before whatever is recorded next. The two must not write what the other reads.
-fn record_branches(
-    stream: &Stream,
-    branching: bool,
-    first: impl FnOnce(&Stream) -> Result<(), PpoError>,
-    second: impl FnOnce(&Stream) -> Result<(), PpoError>,
-) -> Result<(), PpoError> {
-    if !branching {
-        first(stream)?;
-        return second(stream);
-    }
-    let start = stream.capture_frontier()?;
-    first(stream)?;
-    let first_done = stream.capture_frontier()?;
-    stream.set_capture_frontier(&start)?;
-    second(stream)?;
-    let mut joined = stream.capture_frontier()?;
-    joined.extend(&first_done);
-    stream.set_capture_frontier(&joined)?;
-    Ok(())
 }
