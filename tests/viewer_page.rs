@@ -302,7 +302,10 @@ fn a_goal_replay_page_draws_the_goal_and_counts_the_goals_reached() {
     let character = Character::humanoid().expect("humanoid");
     let recording = goal_replay(&character, 2, 90).expect("goal recording");
     let reached = recording.goals().expect("goals").reached()[89];
-    assert!(reached >= 2.0, "the synthetic walk reaches goals: {reached}");
+    assert!(
+        reached >= 2.0,
+        "the synthetic walk reaches goals: {reached}"
+    );
     let html = page_html(&recording, &character, "synthetic goal replay").expect("page");
     let dir = tempfile::tempdir().expect("temporary directory");
     let page = dir.path().join("goal.html");

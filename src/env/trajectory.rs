@@ -43,11 +43,7 @@ impl Trajectory {
     }
 
     /// This record with the goal task's goals and counters (`counters` columns per env).
-    pub(super) fn with_goals(
-        mut self,
-        gpu: &Gpu,
-        counters: usize,
-    ) -> Result<Trajectory, EnvError> {
+    pub(super) fn with_goals(mut self, gpu: &Gpu, counters: usize) -> Result<Trajectory, EnvError> {
         let [frames, envs] = self.ref_time.shape();
         self.goals = Some((
             DeviceArray::zeros(gpu, [frames, envs, 2])?,
@@ -114,11 +110,9 @@ impl Trajectory {
             xquat: self.xquat.download()?,
             ref_time: self.ref_time.download()?,
             goals: match &self.goals {
-                Some((goals, counters)) => Some((
-                    goals.download()?,
-                    counters.download()?,
-                    counters.shape()[2],
-                )),
+                Some((goals, counters)) => {
+                    Some((goals.download()?, counters.download()?, counters.shape()[2]))
+                }
                 None => None,
             },
         })

@@ -4,9 +4,7 @@
 
 use crate::motion::{Character, SyntheticMotion};
 
-use super::{
-    EpisodeInfo, GoalTrack, Outcome, Recording, RecordingError, RecordingMeta, Track,
-};
+use super::{EpisodeInfo, GoalTrack, Outcome, Recording, RecordingError, RecordingMeta, Track};
 
 /// `episodes` episodes of `frames` frames at 30 Hz, starting 0.25 s apart in the clip: episode
 /// 0 succeeds, the others fail at two thirds of their frames.

@@ -242,22 +242,35 @@ fn a_goal_track_is_checked_when_read() {
     let half = filtered(&bytes, |name| name != tensor_names::GOAL_REACHED);
     let err = Recording::from_bytes(&half, "half.safetensors", &character).expect_err("half");
     assert!(
-        err.to_string()
-            .contains("half.safetensors: corrupt or truncated recording: the goal track lacks one of"),
+        err.to_string().contains(
+            "half.safetensors: corrupt or truncated recording: the goal track lacks one of"
+        ),
         "{err}"
     );
     // A goal track claimed by a version-1 file.
     let mut old = recording.clone();
     old.meta.format_version = 1;
-    let err = Recording::from_bytes(&old.to_bytes().expect("bytes"), "old.safetensors", &character)
-        .expect_err("a goal track in version 1");
-    assert!(err.to_string().contains("goal tracks came with version 2"), "{err}");
+    let err = Recording::from_bytes(
+        &old.to_bytes().expect("bytes"),
+        "old.safetensors",
+        &character,
+    )
+    .expect_err("a goal track in version 1");
+    assert!(
+        err.to_string().contains("goal tracks came with version 2"),
+        "{err}"
+    );
     // Goals of a clip alone (no simulated track) are refused when built.
     let clip = Recording::from_motion(&synthetic(&character), &spec()).expect("clip");
     let mut goals = GoalTrack::new();
     for _ in 0..clip.meta.total_frames() {
         goals.push([1.0, 0.0], 0);
     }
-    let err = clip.with_goals(goals, &character).expect_err("no simulated track");
-    assert!(err.to_string().contains("without a simulated track"), "{err}");
+    let err = clip
+        .with_goals(goals, &character)
+        .expect_err("no simulated track");
+    assert!(
+        err.to_string().contains("without a simulated track"),
+        "{err}"
+    );
 }
