@@ -211,3 +211,144 @@ pub fn format_goal_evaluation(report: &GoalEvaluationReport) -> String {
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::motion::Character;
+    use crate::train::CheckpointMeta;
+    use crate::train::checkpoint::tensor_names::{ACTOR, CRITIC, OBS_COUNT, OBS_M2, OBS_MEAN};
+    use crate::train::preflight::PolicyShapes;
+
+    fn reach() -> TrainConfig {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/goal/reach.toml");
+        TrainConfig::load(&path).expect("valid goal config")
+    }
+
+    /// A checkpoint of `config` holding a policy of `shapes` (zeros), saved in `dir`.
+    fn policy_checkpoint(dir: &Path, config: &TrainConfig, shapes: &PolicyShapes) -> Checkpoint {
+        let mut c = Checkpoint::new(CheckpointMeta::new(config, 6, 3.0, 1000).expect("meta"));
+        let d = shapes.observation_size;
+        c.insert(
+            ACTOR,
+            &[shapes.actor_params],
+            vec![0.0f32; shapes.actor_params],
+        )
+        .expect("actor");
+        c.insert(
+            CRITIC,
+            &[shapes.critic_params],
+            vec![0.0f32; shapes.critic_params],
+        )
+        .expect("critic");
+        c.insert(OBS_COUNT, &[2], vec![1.0f64, 1.0]).expect("count");
+        c.insert(OBS_MEAN, &[d], vec![0.0f64; d]).expect("mean");
+        c.insert(OBS_M2, &[d], vec![1.0f64; d]).expect("m2");
+        let path = dir.join("iter_6.safetensors");
+        c.save(&path).expect("saved");
+        Checkpoint::load(&path).expect("loads")
+    }
+
+    #[test]
+    fn a_goal_checkpoint_is_checked_before_the_gpu() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let store = PlanStore::new(None);
+        let config = reach();
+        let character = Character::humanoid().expect("humanoid");
+        let shapes = PolicyShapes::new(&config, &character).expect("shapes");
+        assert_eq!(shapes.observation_size, 266);
+        let checkpoint = policy_checkpoint(dir.path(), &config, &shapes);
+        let checked = check_goal_checkpoint(&checkpoint, None, None, &store).expect("fits");
+        // Evaluated at the evaluation's size: one 10-s episode of 300 steps per env.
+        assert_eq!(checked.config.env.num_envs, config.run.eval_envs);
+        assert_eq!(checked.episode_steps(), 300);
+        assert!(checked.decoder.is_none());
+        let text = checked.describe(2);
+        assert!(
+            text.contains("episodes of 10 s (300 steps), PD-target action space"),
+            "{text}"
+        );
+        assert!(
+            text.contains(&format!("2 x {} envs", config.run.eval_envs)),
+            "{text}"
+        );
+
+        let one_line = |e: TrainError| {
+            let e = e.to_string();
+            assert!(!e.contains('\n'), "{e}");
+            e
+        };
+        // --decoder on a PD-target goal run.
+        let e = one_line(
+            check_goal_checkpoint(
+                &checkpoint,
+                Some(Path::new("latent.safetensors")),
+                None,
+                &store,
+            )
+            .err()
+            .expect("refused"),
+        );
+        assert!(
+            e.contains("--decoder latent.safetensors: ") && e.contains("drives no decoder"),
+            "{e}"
+        );
+        // A policy of another size.
+        let mut smaller = shapes;
+        smaller.critic_params -= 1;
+        let other = policy_checkpoint(dir.path(), &config, &smaller);
+        let e = one_line(
+            check_goal_checkpoint(&other, None, None, &store)
+                .err()
+                .expect("refused"),
+        );
+        assert!(e.contains("critic.params"), "{e}");
+        // A tracking checkpoint.
+        let tracking = TrainConfig::with_motion("walk");
+        let walk = PolicyShapes::new(&tracking, &character).expect("shapes");
+        let tracked = policy_checkpoint(dir.path(), &tracking, &walk);
+        assert!(!is_goal_checkpoint(&tracked).expect("config"));
+        assert!(is_goal_checkpoint(&checkpoint).expect("config"));
+        let e = one_line(
+            check_goal_checkpoint(&tracked, None, None, &store)
+                .err()
+                .expect("refused"),
+        );
+        assert!(e.contains("a tracking checkpoint, not a goal run's"), "{e}");
+    }
+
+    #[test]
+    fn rounds_are_reported_alone_and_together() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let config = reach();
+        let character = Character::humanoid().expect("humanoid");
+        let shapes = PolicyShapes::new(&config, &character).expect("shapes");
+        let checkpoint = policy_checkpoint(dir.path(), &config, &shapes);
+        let checked =
+            check_goal_checkpoint(&checkpoint, None, None, &PlanStore::new(None)).expect("fits");
+        let tally = |goals, falls| GoalTally {
+            episodes: 32,
+            goals,
+            falls,
+        };
+        let report = goal_evaluation_report(&checked, &[tally(256, 4), tally(192, 8)]);
+        assert_eq!(report.overall.episodes, 64);
+        assert_eq!(report.overall.goals_per_episode, 7.0);
+        assert_eq!(report.overall.fall_rate, 12.0 / 64.0);
+        let text = format_goal_evaluation(&report);
+        assert!(
+            text.contains("goals per episode    7.00 (per 10 s episode; 64 episodes)"),
+            "{text}"
+        );
+        assert!(text.contains("fall rate            0.188"), "{text}");
+        assert!(
+            text.contains(
+                "round 1              6.00 goals per episode, fall rate 0.250 (32 episodes)"
+            ),
+            "{text}"
+        );
+        let json = serde_json::to_value(&report).expect("json");
+        assert_eq!(json["overall"]["goals_per_episode"], 7.0);
+        assert_eq!(json["episode_steps"], 300);
+    }
+}
