@@ -138,7 +138,12 @@ fn checkpoint_reader_never_panics() {
 fn recording_reader_never_panics() {
     let character = humanoid();
     let recording = synthetic::lagging_replay(&character, 2, 12).expect("a synthetic recording");
-    let seeds = vec![recording.to_bytes().expect("a recording serializes")];
+    // A goal replay's file too (format version 2, with a goal track).
+    let goals = synthetic::goal_replay(&character, 2, 12).expect("a synthetic goal replay");
+    let seeds = vec![
+        recording.to_bytes().expect("a recording serializes"),
+        goals.to_bytes().expect("a goal recording serializes"),
+    ];
     campaign("recording", &seeds, Kind::Binary, |b| {
         Recording::from_bytes(b, "fuzz.safetensors", &character).is_ok()
     });

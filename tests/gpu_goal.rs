@@ -7,7 +7,10 @@
 //!   of the goal task's size.
 //! - `instantmimic train --config configs/goal/reach.toml` (at the 32-world size, a few
 //!   iterations) writes the goal task's rates per iteration and on evaluation iterations (each
-//!   of the 32 evaluation envs' first episode), and the last evaluation into `summary.json`.
+//!   of the 32 evaluation envs' first episode), and the last evaluation into `summary.json`;
+//!   its `replay.html`; then `eval --json` of its last checkpoint (2 rounds of 32 episodes,
+//!   rates in range) and `replay` (a page with the goals, a recording whose goal track starts
+//!   each episode 1-3 m from the root with no goal reached).
 //!
 //! The goal kernels against their f64 references run on the GPU in tests/gpu_env_kernels.rs
 //! (`gpu_goal_reward_termination_...`, `gpu_goal_reset_...`, `gpu_goal_observe_...`), beside
@@ -16,6 +19,8 @@
 #![cfg(feature = "gpu")]
 
 mod small_run_support;
+
+mod goal_see_support;
 
 use instantmimic::cuda::Gpu;
 use instantmimic::env::{GOAL_OBSERVATION, Rollout, TrackedMotion};
@@ -168,4 +173,9 @@ fn a_short_goal_run_reports_goals_per_episode_and_the_fall_rate() {
         summary["goal_evaluation"]["goals_per_episode"].is_number(),
         "{summary}"
     );
+    // The run's replay page (run.replay), then eval and replay of its last checkpoint.
+    assert!(run.join("replay.html").is_file(), "no replay.html");
+    let checkpoint = goal_see_support::last_checkpoint(&run);
+    goal_see_support::eval_goal(&checkpoint, 32, &[]);
+    goal_see_support::replay_goal(&checkpoint, dir.path(), &[]);
 }

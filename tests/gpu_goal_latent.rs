@@ -15,10 +15,14 @@
 //!   recording another decoder is refused on restore.
 //! - Through the binary: `train --config <reach_latent at 32 worlds> --decoder <checkpoint>`
 //!   writes the goal rates per iteration and `summary.json`'s last goal evaluation, and its
-//!   checkpoints record the decoder's digest.
+//!   checkpoints record the decoder's digest; its `replay.html`; `eval --json` and `replay` of
+//!   its last checkpoint through the decoder its configuration names, `eval --decoder` with a
+//!   moved copy of it, and another decoder refused (the digest).
 #![cfg(feature = "gpu")]
 
 mod small_run_support;
+
+mod goal_see_support;
 
 use std::path::{Path, PathBuf};
 
@@ -237,4 +241,26 @@ fn a_short_latent_goal_run_through_the_binary_reports_goals_per_episode() {
         found += 1;
     }
     assert!(found > 0, "no checkpoint in {}", checkpoints.display());
+    // eval and replay of the last checkpoint drive the decoder its configuration names...
+    assert!(run.join("replay.html").is_file(), "no replay.html");
+    let checkpoint = goal_see_support::last_checkpoint(&run);
+    goal_see_support::eval_goal(&checkpoint, 32, &[]);
+    goal_see_support::replay_goal(&checkpoint, dir.path(), &[]);
+    // ...or a copy of it moved elsewhere (--decoder); another decoder is refused in one line.
+    let moved = dir.path().join("moved_decoder.safetensors");
+    std::fs::copy(&decoder_path, &moved).expect("copy the decoder");
+    let moved = moved.display().to_string();
+    goal_see_support::eval_goal(&checkpoint, 32, &["--decoder", &moved]);
+    let (other, _) = latent_checkpoint(dir.path(), 6);
+    let out = binary()
+        .args(["eval", "--checkpoint"])
+        .arg(&checkpoint)
+        .arg("--decoder")
+        .arg(&other)
+        .output()
+        .expect("eval runs");
+    assert!(!out.status.success(), "another decoder was accepted");
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    let last = err.trim_end().lines().last().unwrap_or("");
+    assert!(last.contains("another decoder"), "{err}");
 }

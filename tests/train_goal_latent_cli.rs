@@ -1,8 +1,9 @@
 //! `instantmimic train --config configs/goal/reach_latent.toml --decoder <checkpoint>` without a
 //! GPU (docs/goal.md, "The latent action space"): the dry run loads the decoder and prints the
 //! three networks and the latent size; a decoder of another shape or task, or `--decoder` on a
-//! configuration without `[goal]`, fails with one line naming the file or the flag; `eval`
-//! refuses a goal checkpoint in one line. The latent
+//! configuration without `[goal]`, fails with one line naming the file or the flag; `eval` and
+//! `replay` of a latent goal checkpoint refuse, in one line, one trained with another decoder
+//! (the digest), and `--decoder` on a tracking checkpoint. The latent
 //! checkpoints are written by the latent module's own writer
 //! (`train::latent_trainer::insert_latent_networks`).
 
@@ -11,6 +12,7 @@ mod train_cli_support;
 use std::path::{Path, PathBuf};
 
 use instantmimic::motion::Character;
+use instantmimic::train::goal_latent::{DECODER_DIGEST, load_goal_decoder};
 use instantmimic::train::latent_trainer::{insert_latent_networks, latent_shapes};
 use instantmimic::train::{ActionMode, Checkpoint, CheckpointMeta, PolicyShapes, TrainConfig};
 use train_cli_support::{one_line_error, resolved_config, run, succeeded};
@@ -213,20 +215,144 @@ fn decoder_on_a_configuration_without_goal_fails_with_one_line() {
     );
 }
 
+/// A goal run's checkpoint of `config` at `dir/iter_8.safetensors`, with `digest` (the
+/// decoder's, as the run records it) and, with `policy`, the head's parameters and statistics.
+fn write_goal_checkpoint(
+    dir: &Path,
+    config: &TrainConfig,
+    digest: Option<[i32; 5]>,
+    policy: Option<&PolicyShapes>,
+) -> String {
+    let mut c = Checkpoint::new(CheckpointMeta::new(config, 8, 2.0, 100).expect("meta"));
+    if let Some(d) = digest {
+        c.insert(DECODER_DIGEST, &[5], d.to_vec()).expect("digest");
+    }
+    if let Some(p) = policy {
+        let d = p.observation_size;
+        c.insert(
+            "actor.params",
+            &[p.actor_params],
+            vec![0.0f32; p.actor_params],
+        )
+        .expect("actor");
+        c.insert(
+            "critic.params",
+            &[p.critic_params],
+            vec![0.0f32; p.critic_params],
+        )
+        .expect("critic");
+        c.insert("obs_norm.count", &[2], vec![1.0f64, 1.0])
+            .expect("count");
+        c.insert("obs_norm.mean", &[d], vec![0.0f64; d])
+            .expect("mean");
+        c.insert("obs_norm.m2", &[d], vec![1.0f64; d]).expect("m2");
+    }
+    let path = dir.join("iter_8.safetensors");
+    c.save(&path).expect("saved");
+    path.display().to_string()
+}
+
 #[test]
-fn eval_refuses_a_goal_checkpoint_with_one_line() {
+fn eval_and_replay_check_a_latent_goal_checkpoint_before_the_gpu() {
     let dir = tempfile::tempdir().expect("temp dir");
     let decoder = write_latent(dir.path(), "latent.safetensors", &latent_config(), None);
     let mut config = TrainConfig::load(&repo().join(CONFIG)).expect("valid");
     config.goal.as_mut().expect("[goal]").decoder = decoder.display().to_string();
-    let path = dir.path().join("iter_8.safetensors");
-    Checkpoint::new(CheckpointMeta::new(&config, 8, 2.0, 100).expect("meta"))
+    let character = Character::humanoid().expect("embedded humanoid");
+    let loaded = load_goal_decoder(&config, &character)
+        .expect("the decoder fits")
+        .expect("a decoder is named");
+    let page = dir.path().join("goal.html").display().to_string();
+    let eval = |checkpoint: &str, extra: &[&str]| {
+        let mut args = vec!["eval", "--checkpoint", checkpoint];
+        args.extend_from_slice(extra);
+        last_error_line(&run(&args, None, repo()))
+    };
+    let replay = |checkpoint: &str, extra: &[&str]| {
+        let mut args = vec!["replay", "--checkpoint", checkpoint, "--out", &page];
+        args.extend_from_slice(extra);
+        last_error_line(&run(&args, None, repo()))
+    };
+
+    // No digest: not trained with this decoder (or any).
+    let checkpoint = write_goal_checkpoint(dir.path(), &config, None, None);
+    for err in [eval(&checkpoint, &[]), replay(&checkpoint, &[])] {
+        assert!(
+            err.contains("iter_8.safetensors: records no latent decoder"),
+            "{err}"
+        );
+    }
+    // Another decoder's digest (a changed decoder file).
+    let mut other = loaded.digest;
+    other[0] ^= 1;
+    let checkpoint = write_goal_checkpoint(dir.path(), &config, Some(other), None);
+    for err in [eval(&checkpoint, &[]), replay(&checkpoint, &[])] {
+        assert!(
+            err.contains("iter_8.safetensors: trained with the decoder of")
+                && err.contains("(another decoder)"),
+            "{err}"
+        );
+    }
+    // The decoder's own digest, but no head: the policy check names the tensor.
+    let checkpoint = write_goal_checkpoint(dir.path(), &config, Some(loaded.digest), None);
+    let err = eval(&checkpoint, &[]);
+    assert!(err.contains("actor.params"), "{err}");
+    // --decoder replaces the decoder the configuration names: a file that is not a latent
+    // controller's checkpoint is refused naming it.
+    let missing = dir.path().join("moved.safetensors").display().to_string();
+    let err = eval(&checkpoint, &["--decoder", &missing]);
+    assert!(err.contains("moved.safetensors"), "{err}");
+    // The flags a goal replay has no use for.
+    let head = loaded.head_shapes(&config);
+    let checkpoint = write_goal_checkpoint(dir.path(), &config, Some(loaded.digest), Some(&head));
+    let err = replay(&checkpoint, &["--start", "spread"]);
+    assert!(
+        err.contains("--start: ") && err.contains("goal run's"),
+        "{err}"
+    );
+    let err = replay(&checkpoint, &["--steps", "30"]);
+    assert!(
+        err.contains("--steps: ") && err.contains("goal.episode_s"),
+        "{err}"
+    );
+    // Everything checks out: what is left needs the GPU (eval runs on device 0; without one,
+    // the last line says so).
+    let out = run(&["eval", "--checkpoint", &checkpoint], None, repo());
+    if !out.status.success() {
+        let err = last_error_line(&out);
+        assert!(err.contains("needs an NVIDIA GPU"), "{err}");
+    }
+}
+
+#[test]
+fn decoder_on_a_tracking_checkpoint_fails_with_one_line() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let decoder = write_latent(dir.path(), "latent.safetensors", &latent_config(), None);
+    let decoder = decoder.display().to_string();
+    let tracking = TrainConfig::with_motion("walk");
+    let path = dir.path().join("iter_3.safetensors");
+    Checkpoint::new(CheckpointMeta::new(&tracking, 3, 2.0, 100).expect("meta"))
         .save(&path)
         .expect("saved");
     let checkpoint = path.display().to_string();
-    let err = one_line_error(&run(&["eval", "--checkpoint", &checkpoint], None, repo()));
-    assert!(
-        err.contains("iter_8.safetensors: a goal task's checkpoint"),
-        "{err}"
-    );
+    let page = dir.path().join("walk.html").display().to_string();
+    for args in [
+        vec!["eval", "--checkpoint", &checkpoint, "--decoder", &decoder],
+        vec![
+            "replay",
+            "--checkpoint",
+            &checkpoint,
+            "--out",
+            &page,
+            "--decoder",
+            &decoder,
+        ],
+    ] {
+        let err = one_line_error(&run(&args, None, repo()));
+        assert!(
+            err.contains("--decoder ")
+                && err.contains("iter_3.safetensors is a tracking checkpoint"),
+            "{err}"
+        );
+    }
 }

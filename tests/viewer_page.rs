@@ -2,7 +2,8 @@
 //! Chromium opens it, runs its self-test (`#selftest`, src/viewer/page/viewer.js) and takes a
 //! screenshot. Asserted: the canvas is not blank, the character is in view, no error reached the
 //! console, the scrubber moves the pose, and nothing was fetched (the page's own resource list
-//! and Chromium's net log, checked against a page that does fetch).
+//! and Chromium's net log, checked against a page that does fetch). A goal-task replay's page
+//! also draws the goal marker, moves it as goals are reached and counts them in its overlay.
 //!
 //! Needs Chromium: `$INSTANTMIMIC_CHROMIUM` or `chromium` on the PATH (tests/run.sh installs
 //! Debian's package when missing); without it the tests print a note and pass.
@@ -15,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use instantmimic::motion::Character;
-use instantmimic::recording::synthetic::lagging_replay;
+use instantmimic::recording::synthetic::{goal_replay, lagging_replay};
 use instantmimic::viewer::page_html;
 use serde_json::Value;
 
@@ -288,6 +289,62 @@ fn a_replay_page_with_a_ghost_and_errors_works_in_a_browser() {
         .filter(|p| p[0] > 170 && p[1] > 80 && p[1] < 150 && p[2] < 90)
         .count();
     assert!(red > 30 && orange > 2000, "red {red}, orange {orange}");
+    keep(&page);
+    keep(&shot);
+}
+
+#[test]
+fn a_goal_replay_page_draws_the_goal_and_counts_the_goals_reached() {
+    let Some(chromium) = chromium() else {
+        skip_support::skip("no chromium (set INSTANTMIMIC_CHROMIUM): the page was not opened");
+        return;
+    };
+    let character = Character::humanoid().expect("humanoid");
+    let recording = goal_replay(&character, 2, 90).expect("goal recording");
+    let reached = recording.goals().expect("goals").reached()[89];
+    assert!(
+        reached >= 2.0,
+        "the synthetic walk reaches goals: {reached}"
+    );
+    let html = page_html(&recording, &character, "synthetic goal replay").expect("page");
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let page = dir.path().join("goal.html");
+    std::fs::write(&page, html).expect("write page");
+    let result = self_test(&chromium, dir.path(), &page, &dir.path().join("net.json"));
+    assert_clean_self_test(&result, "goal replay");
+    assert_eq!(result["has_plot"], false, "{result}");
+    let goal = &result["goal"];
+    let number = |key: &str| goal[key].as_f64().unwrap_or(f64::NAN);
+    // The marker is drawn (a disc, a post and a ball: a few hundred pixels at 3.6 m) and in view.
+    assert!(number("marker_pixels") > 200.0, "{result}");
+    assert_eq!(goal["marker_in_view_at_start"], true, "{result}");
+    assert_eq!(goal["ghost_drawn"], false, "{result}");
+    // By the last frame the marker has moved on to later goals, and the overlay counts them.
+    assert!(number("marker_moved_m") > 1.0, "{result}");
+    assert_eq!(number("reached_at_end"), f64::from(reached), "{result}");
+    assert_eq!(
+        goal["overlay_at_start"],
+        format!("goals reached: 0 of {reached}"),
+        "{result}"
+    );
+    assert_eq!(
+        goal["overlay_at_end"],
+        format!("goals reached: {reached} of {reached}"),
+        "{result}"
+    );
+    let shot = dir.path().join("goal.png");
+    run_chromium(
+        &chromium,
+        &dir.path().join("profile-shot"),
+        &file_url(&page, "frame=20"),
+        &[format!("--screenshot={}", shot.display())],
+    );
+    let (pixels, _) = read_png(&shot);
+    let green = pixels
+        .chunks_exact(3)
+        .filter(|p| p[1] > 120 && p[1] as i32 - p[0] as i32 > 50 && p[1] as i32 - p[2] as i32 > 30)
+        .count();
+    assert!(green > 150, "{green} green pixels (the goal marker)");
     keep(&page);
     keep(&shot);
 }

@@ -32,6 +32,10 @@ pub struct EvalArgs {
     /// Print the result as JSON.
     #[arg(long)]
     json: bool,
+    /// A goal run in the latent action space: the latent controller's checkpoint, when it
+    /// moved since training (its parameters must be those the run trained with).
+    #[arg(long)]
+    decoder: Option<PathBuf>,
 }
 
 /// What the checkpoint says about itself (printed before the evaluation).
@@ -59,15 +63,27 @@ pub fn run(args: EvalArgs) -> Result<()> {
     }
     let checkpoint = Checkpoint::load(&args.checkpoint)?;
     let config = checkpoint.meta.config(checkpoint.source())?;
+    let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
+    let store = PlanStore::new(args.assets.as_deref());
     if config.goal.is_some() {
-        // A latent goal checkpoint's decoder would be checked by its digest (Trainer::restore).
+        // Goals per episode and the fall rate (src/cli/goal_checkpoint.rs).
+        return super::goal_checkpoint::eval_goal(&super::goal_checkpoint::GoalEvalJob {
+            checkpoint: &checkpoint,
+            decoder: args.decoder.as_deref(),
+            rounds: args.episodes,
+            motions_dir: motions_dir.as_deref(),
+            store: &store,
+            json: args.json,
+            header: checkpoint_report(&checkpoint),
+        });
+    }
+    if let Some(decoder) = &args.decoder {
         bail!(
-            "{}: a goal task's checkpoint; eval scores tracking episodes (a goal run evaluates itself while training: metrics.jsonl's goal.evaluation, docs/goal.md)",
+            "--decoder {}: {} is a tracking checkpoint; --decoder names the decoder of a goal run in the latent action space",
+            decoder.display(),
             checkpoint.source()
         );
     }
-    let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
-    let store = PlanStore::new(args.assets.as_deref());
     let (checks, motion) = preflight(&config, motions_dir.as_deref(), &store)?;
     for line in &checks.motion_notices {
         eprintln!("{line}");

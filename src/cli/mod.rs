@@ -4,6 +4,7 @@ mod bench;
 mod bench_full;
 mod eval;
 mod export;
+mod goal_checkpoint;
 mod gpu;
 mod hpo;
 mod motion;

@@ -61,6 +61,10 @@ pub struct ReplayArgs {
     /// CUDA device ordinal.
     #[arg(long, default_value_t = 0)]
     device: usize,
+    /// A goal run in the latent action space: the latent controller's checkpoint, when it
+    /// moved since training (its parameters must be those the run trained with).
+    #[arg(long)]
+    decoder: Option<PathBuf>,
 }
 
 /// What [`write_replay`] replays and where it writes.
@@ -77,6 +81,8 @@ pub(super) struct ReplayJob<'a> {
     pub device: usize,
     /// Print the motion's notices (a user's clip replacing a built-in one); `train` has already.
     pub motion_notices: bool,
+    /// A goal checkpoint's decoder, replacing the one its configuration names.
+    pub decoder: Option<&'a Path>,
 }
 
 /// Checks everything that needs no GPU (the output paths, the checkpoint and its policy's
@@ -89,6 +95,17 @@ pub(super) fn write_replay(job: &ReplayJob<'_>) -> Result<String> {
     }
     let checkpoint = Checkpoint::load(job.checkpoint)?;
     let mut config = checkpoint.meta.config(checkpoint.source())?;
+    if config.goal.is_some() {
+        // The goals and the goals reached (src/cli/goal_checkpoint.rs).
+        return super::goal_checkpoint::write_goal_replay(job, &checkpoint);
+    }
+    if let Some(decoder) = job.decoder {
+        anyhow::bail!(
+            "--decoder {}: {} is a tracking checkpoint; --decoder names the decoder of a goal run in the latent action space",
+            decoder.display(),
+            checkpoint.source()
+        );
+    }
     if let Some(start) = job.start {
         config.run.eval_start = start;
     }
@@ -204,6 +221,7 @@ pub fn run(args: ReplayArgs) -> Result<()> {
         store: &store,
         device: args.device,
         motion_notices: true,
+        decoder: args.decoder.as_deref(),
     })?;
     print!("{report}");
     Ok(())

@@ -384,17 +384,12 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let root = match &start {
         RunStart::New { root, .. } | RunStart::Resume { root } => root.clone(),
     };
-    // A replay plays one clip: a library's run writes none (docs/library.md).
-    // The goal task's episodes are not tracking episodes: it writes none either (docs/goal.md).
-    let replay = config.run.replay && config.motion_library.is_none() && config.goal.is_none();
-    if config.run.replay && config.motion_library.is_some() {
+    // A replay plays one clip: a library's tracking run writes none (docs/library.md). A goal
+    // run's replay shows its goals, whatever its resets draw from (docs/goal.md).
+    let replay = config.run.replay && (config.motion_library.is_none() || config.goal.is_some());
+    if config.run.replay && !replay {
         eprintln!(
             "note: no {} for a motion library (replay plays one clip; run.replay is ignored)",
-            REPLAY_FILE
-        );
-    } else if config.run.replay && config.goal.is_some() {
-        eprintln!(
-            "note: no {} for the goal task (replay plays tracking episodes; run.replay is ignored)",
             REPLAY_FILE
         );
     }
@@ -480,6 +475,7 @@ fn replay_final_policy(
         store,
         device,
         motion_notices: false,
+        decoder: None,
     })?;
     Ok(format!(
         "replay               the final policy (iteration {iteration}) as the evaluation runs it (--no-replay: none)\n{report}"

@@ -18,6 +18,9 @@ pub struct Trajectory {
     xpos: DeviceArray4<f32>,
     xquat: DeviceArray4<f32>,
     ref_time: DeviceArray2<f32>,
+    /// The goal task's: each env's goal `[frames, envs, 2]` and counters `[frames, envs, 6]`
+    /// (goals this episode among them) after the step's reward (None when tracking).
+    goals: Option<(DeviceArray3<f32>, DeviceArray3<i32>)>,
 }
 
 impl Trajectory {
@@ -35,7 +38,39 @@ impl Trajectory {
             xpos: DeviceArray::zeros(gpu, [frames, envs, nbody, 3])?,
             xquat: DeviceArray::zeros(gpu, [frames, envs, nbody, 4])?,
             ref_time: DeviceArray::zeros(gpu, [frames, envs])?,
+            goals: None,
         })
+    }
+
+    /// This record with the goal task's goals and counters (`counters` columns per env).
+    pub(super) fn with_goals(mut self, gpu: &Gpu, counters: usize) -> Result<Trajectory, EnvError> {
+        let [frames, envs] = self.ref_time.shape();
+        self.goals = Some((
+            DeviceArray::zeros(gpu, [frames, envs, 2])?,
+            DeviceArray::zeros(gpu, [frames, envs, counters])?,
+        ));
+        Ok(self)
+    }
+
+    /// Whether it records the goal task's goals.
+    pub fn has_goals(&self) -> bool {
+        self.goals.is_some()
+    }
+
+    /// Queues the copies of frame `frame` of the goal task's goals `[envs, 2]` and counters
+    /// `[envs, C]` (nothing when this record keeps none).
+    pub(super) fn record_goals(
+        &self,
+        s: &Stream,
+        frame: usize,
+        goal: &DeviceArray2<f32>,
+        counters: &DeviceArray2<i32>,
+    ) -> Result<(), EnvError> {
+        if let Some((goals, counts)) = &self.goals {
+            goal.copy_into(s, goals, frame * goal.len())?;
+            counters.copy_into(s, counts, frame * counters.len())?;
+        }
+        Ok(())
     }
 
     /// Frames it holds.
@@ -74,6 +109,12 @@ impl Trajectory {
             xpos: self.xpos.download()?,
             xquat: self.xquat.download()?,
             ref_time: self.ref_time.download()?,
+            goals: match &self.goals {
+                Some((goals, counters)) => {
+                    Some((goals.download()?, counters.download()?, counters.shape()[2]))
+                }
+                None => None,
+            },
         })
     }
 }
@@ -90,6 +131,8 @@ pub struct TrajectoryFrames {
     xpos: Vec<f32>,
     xquat: Vec<f32>,
     ref_time: Vec<f32>,
+    /// Goals `[frames, envs, 2]`, counters `[frames, envs, C]` and C (the goal task's).
+    goals: Option<(Vec<f32>, Vec<i32>, usize)>,
 }
 
 impl TrajectoryFrames {
@@ -122,5 +165,19 @@ impl TrajectoryFrames {
     /// The clip time (s) of env `env`'s state at `frame`.
     pub fn ref_time(&self, frame: usize, env: usize) -> f32 {
         self.ref_time[frame * self.envs + env]
+    }
+
+    /// Env `env`'s goal (world x, y) at `frame` (None when tracking).
+    pub fn goal(&self, frame: usize, env: usize) -> Option<[f32; 2]> {
+        let (goals, _, _) = self.goals.as_ref()?;
+        let at = (frame * self.envs + env) * 2;
+        Some([goals[at], goals[at + 1]])
+    }
+
+    /// Env `env`'s goals reached in its episode up to `frame` (None when tracking).
+    pub fn goals_reached(&self, frame: usize, env: usize) -> Option<i32> {
+        let (_, counters, columns) = self.goals.as_ref()?;
+        let at = (frame * self.envs + env) * columns;
+        Some(counters[at + crate::env::GoalCounter::GoalsThisEpisode as usize])
     }
 }

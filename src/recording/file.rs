@@ -8,7 +8,8 @@
 //! `__metadata__`: `format` = [`RECORDING_FORMAT_NAME`], `instantmimic-recording` = the
 //! [`RecordingMeta`] as JSON. Tensors ([`tensor_names`]): `{track}.qpos [R, nq]`,
 //! `{track}.body_pos [R, B, 3]`, `{track}.body_quat [R, B, 4]` for `reference` and (when
-//! simulated) `simulated`, and `errors.{pose,global_mpjpe,ee_position,ee_orientation} [R]`.
+//! simulated) `simulated`, and `errors.{pose,global_mpjpe,ee_position,ee_orientation} [R]`; from format version 2, a
+//! goal-task replay's `goal.position [R, 2]` and `goal.reached [R]` (optional).
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -16,7 +17,8 @@ use std::path::Path;
 use safetensors::tensor::{Dtype, TensorView};
 
 use super::{
-    RECORDING_FORMAT_VERSION, Recording, RecordingError, RecordingMeta, Track, TrackingErrors,
+    GoalTrack, RECORDING_FORMAT_VERSION, Recording, RecordingError, RecordingMeta, Track,
+    TrackingErrors,
 };
 use crate::files::tagged::{FORMAT_KEY, TaggedFileError, open_tagged};
 use crate::files::write_bytes_atomically;
@@ -36,6 +38,9 @@ pub mod tensor_names {
     pub const BODY_QUAT: &str = "body_quat";
     /// Prefix of the tracking errors.
     pub const ERRORS: &str = "errors";
+    /// The goal track's tensors (format version 2).
+    pub const GOAL_POSITION: &str = "goal.position";
+    pub const GOAL_REACHED: &str = "goal.reached";
 }
 
 fn le_bytes(values: &[f32]) -> Vec<u8> {
@@ -73,6 +78,18 @@ impl Recording {
             for (name, values) in errors.series() {
                 tensors.push((format!("{ERRORS}.{name}"), vec![rows], le_bytes(values)));
             }
+        }
+        if let Some(goals) = &self.goals {
+            tensors.push((
+                GOAL_POSITION.to_string(),
+                vec![rows, 2],
+                le_bytes(goals.positions()),
+            ));
+            tensors.push((
+                GOAL_REACHED.to_string(),
+                vec![rows],
+                le_bytes(goals.reached()),
+            ));
         }
         let mut views = Vec::with_capacity(tensors.len());
         for (name, shape, bytes) in &tensors {
@@ -190,10 +207,22 @@ impl Recording {
         } else {
             None
         };
+        let goals = match (
+            take(GOAL_POSITION.to_string(), vec![rows, 2])?,
+            take(GOAL_REACHED.to_string(), vec![rows])?,
+        ) {
+            (Some(position), Some(reached)) => Some(GoalTrack::from_parts(position, reached)),
+            (None, None) => None,
+            _ => {
+                return Err(corrupt(format!(
+                    "the goal track lacks one of `{GOAL_POSITION}` and `{GOAL_REACHED}`"
+                )));
+            }
+        };
         if let Some(name) = tensors.keys().next() {
             return Err(corrupt(format!("unexpected tensor `{name}`")));
         }
-        Recording::from_parts(meta, reference, simulated, errors, character, source)
+        Recording::from_parts(meta, reference, simulated, errors, goals, character, source)
     }
 
     /// Writes the recording to `path` atomically.

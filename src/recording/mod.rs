@@ -16,6 +16,7 @@
 mod errors;
 mod file;
 mod from_motion;
+mod goal;
 pub mod synthetic;
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -27,9 +28,13 @@ use crate::motion::{Character, MotionError, forward_kinematics};
 pub use errors::{TrackingErrors, tracking_errors};
 pub use file::{RECORDING_FORMAT_NAME, tensor_names};
 pub use from_motion::{ClipRecordingSpec, frames_covering};
+pub use goal::GoalTrack;
 
-/// The version of the layout below; a reader refuses newer files.
-pub const RECORDING_FORMAT_VERSION: u32 = 1;
+/// The version of the layout below; a reader refuses newer files. Version 2 added the optional
+/// goal track (a goal-task replay); version-1 files read as before.
+pub const RECORDING_FORMAT_VERSION: u32 = 2;
+/// The first version that may hold a goal track.
+pub const GOAL_TRACK_VERSION: u32 = 2;
 /// How far a stored quaternion may be from unit length (f32 storage rounds at ~1e-7).
 const QUATERNION_TOLERANCE: f64 = 1e-3;
 /// How far a stored body position may be from the kinematics of the stored qpos (m): f32
@@ -389,6 +394,8 @@ pub struct Recording {
     reference: Track,
     simulated: Option<Track>,
     errors: Option<TrackingErrors>,
+    /// A goal-task replay's goals per frame (format version 2).
+    goals: Option<GoalTrack>,
 }
 
 impl Recording {
@@ -408,9 +415,23 @@ impl Recording {
             reference,
             simulated,
             errors,
+            goals: None,
         };
         recording.validate(character, "recording")?;
         Ok(recording)
+    }
+
+    /// This recording with `goals`, one frame per row (a goal-task replay), checked against
+    /// its episodes; the format version becomes [`GOAL_TRACK_VERSION`] or later.
+    pub fn with_goals(
+        mut self,
+        goals: GoalTrack,
+        character: &Character,
+    ) -> Result<Recording, RecordingError> {
+        self.meta.format_version = self.meta.format_version.max(GOAL_TRACK_VERSION);
+        self.goals = Some(goals);
+        self.validate(character, "recording")?;
+        Ok(self)
     }
 
     /// Assembles a recording read from a file (errors as stored) and validates it.
@@ -419,6 +440,7 @@ impl Recording {
         reference: Track,
         simulated: Option<Track>,
         errors: Option<TrackingErrors>,
+        goals: Option<GoalTrack>,
         character: &Character,
         source: &str,
     ) -> Result<Recording, RecordingError> {
@@ -427,6 +449,7 @@ impl Recording {
             reference,
             simulated,
             errors,
+            goals,
         };
         recording.validate(character, source)?;
         Ok(recording)
@@ -488,6 +511,23 @@ impl Recording {
                 return Err(invalid(problem));
             }
         }
+        if let Some(goals) = &self.goals {
+            if self.meta.format_version < GOAL_TRACK_VERSION {
+                return Err(invalid(format!(
+                    "a goal track in a recording of format version {} (goal tracks came with version {GOAL_TRACK_VERSION})",
+                    self.meta.format_version
+                )));
+            }
+            if self.simulated.is_none() {
+                return Err(invalid(
+                    "a goal track without a simulated track (goals are a replay's)".into(),
+                ));
+            }
+            let frames: Vec<usize> = self.meta.episodes.iter().map(|e| e.frames).collect();
+            if let Some(problem) = goals.problem(&frames) {
+                return Err(invalid(problem));
+            }
+        }
         match (&self.errors, &self.simulated) {
             (Some(errors), Some(_)) => errors.check(rows).map_err(invalid),
             (None, None) => Ok(()),
@@ -511,6 +551,11 @@ impl Recording {
 
     pub fn errors(&self) -> Option<&TrackingErrors> {
         self.errors.as_ref()
+    }
+
+    /// A goal-task replay's goals per frame (None otherwise).
+    pub fn goals(&self) -> Option<&GoalTrack> {
+        self.goals.as_ref()
     }
 
     pub fn episodes(&self) -> &[EpisodeInfo] {

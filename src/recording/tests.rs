@@ -193,3 +193,84 @@ fn inconsistent_parts_are_refused_when_built() {
         .expect_err("short qpos");
     assert!(err.contains("expected 43, 45 and 60"), "{err}");
 }
+
+#[test]
+fn a_goal_replay_round_trips_through_its_file() {
+    let character = humanoid();
+    let recording = synthetic::goal_replay(&character, 2, 75).expect("goal replay");
+    assert_eq!(recording.meta.format_version, GOAL_TRACK_VERSION);
+    let goals = recording.goals().expect("a goal track");
+    assert_eq!(goals.rows(), 150);
+    // The walk reaches goals; each episode's count starts again at 0.
+    assert!(goals.reached()[74] >= 2.0, "{:?}", &goals.reached()[..75]);
+    assert_eq!(goals.reached()[75], 0.0);
+    let bytes = recording.to_bytes().expect("bytes");
+    let back = Recording::from_bytes(&bytes, "goal.safetensors", &character).expect("reads");
+    assert_eq!(back, recording);
+}
+
+#[test]
+fn a_version_1_recording_still_reads() {
+    // Version 1's layout is version 2's without a goal track: what a version-1 writer wrote.
+    let character = humanoid();
+    let mut recording = shifted_recording(&character);
+    recording.meta.format_version = 1;
+    let bytes = recording.to_bytes().expect("bytes");
+    let back = Recording::from_bytes(&bytes, "v1.safetensors", &character).expect("reads");
+    assert_eq!(back.meta.format_version, 1);
+    assert!(back.goals().is_none());
+    assert_eq!(back, recording);
+}
+
+/// `bytes` with the tensors `keep` accepts, the metadata kept.
+fn filtered(bytes: &[u8], keep: impl Fn(&str) -> bool) -> Vec<u8> {
+    let (_, metadata) = safetensors::SafeTensors::read_metadata(bytes).expect("header");
+    let file = safetensors::SafeTensors::deserialize(bytes).expect("file");
+    let views: Vec<(String, safetensors::tensor::TensorView<'_>)> = file
+        .tensors()
+        .into_iter()
+        .filter(|(name, _)| keep(name))
+        .collect();
+    safetensors::serialize(views, metadata.metadata().clone()).expect("serialized")
+}
+
+#[test]
+fn a_goal_track_is_checked_when_read() {
+    let character = humanoid();
+    let recording = synthetic::goal_replay(&character, 1, 40).expect("goal replay");
+    let bytes = recording.to_bytes().expect("bytes");
+    let half = filtered(&bytes, |name| name != tensor_names::GOAL_REACHED);
+    let err = Recording::from_bytes(&half, "half.safetensors", &character).expect_err("half");
+    assert!(
+        err.to_string().contains(
+            "half.safetensors: corrupt or truncated recording: the goal track lacks one of"
+        ),
+        "{err}"
+    );
+    // A goal track claimed by a version-1 file.
+    let mut old = recording.clone();
+    old.meta.format_version = 1;
+    let err = Recording::from_bytes(
+        &old.to_bytes().expect("bytes"),
+        "old.safetensors",
+        &character,
+    )
+    .expect_err("a goal track in version 1");
+    assert!(
+        err.to_string().contains("goal tracks came with version 2"),
+        "{err}"
+    );
+    // Goals of a clip alone (no simulated track) are refused when built.
+    let clip = Recording::from_motion(&synthetic(&character), &spec()).expect("clip");
+    let mut goals = GoalTrack::new();
+    for _ in 0..clip.meta.total_frames() {
+        goals.push([1.0, 0.0], 0);
+    }
+    let err = clip
+        .with_goals(goals, &character)
+        .expect_err("no simulated track");
+    assert!(
+        err.to_string().contains("without a simulated track"),
+        "{err}"
+    );
+}

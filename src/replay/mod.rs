@@ -14,6 +14,7 @@
 //!   the CPU).
 
 mod assemble;
+mod goal;
 
 use thiserror::Error;
 
@@ -29,6 +30,10 @@ use crate::train::{
 };
 
 pub use assemble::{RecordedEpisode, ReplaySource, assemble_recording};
+pub use goal::{
+    GoalReplay, GoalReplayInput, GoalReplaySource, RecordedGoalEpisode, assemble_goal_recording,
+    record_goal_replay,
+};
 
 /// Episodes a replay records unless told otherwise.
 pub const DEFAULT_EPISODES: u32 = 4;

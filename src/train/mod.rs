@@ -15,6 +15,7 @@ pub mod divergence;
 mod error;
 pub mod evaluation;
 pub mod goal;
+pub mod goal_evaluation;
 pub mod goal_latent;
 mod gpu_loop;
 pub mod latent_trainer;

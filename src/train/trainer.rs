@@ -23,7 +23,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use crate::cuda::{Communicator, DeviceRange, Gpu, Graph, Readback};
-use crate::env::{GoalTally, Rollout, RolloutPolicy, TrackedMotion};
+use crate::env::{GoalTally, Rollout, RolloutPolicy, TrackedMotion, Trajectory};
 use crate::kernels::DeviceArray;
 use crate::latent::LatentDecoder;
 use crate::plan::PlanStore;
@@ -305,10 +305,7 @@ impl Trainer {
         let rollout = GoalRates::from(&total.since(&self.goal_seen));
         self.goal_seen = total;
         let evaluation = if evaluate {
-            self.evaluation.reset_all()?;
-            self.evaluation_graph.launch(self.gpu.stream())?;
-            self.gpu.synchronize()?;
-            self.evaluation.goal_tally()?.map(|t| GoalRates::from(&t))
+            self.evaluate_goal()?.map(|t| GoalRates::from(&t))
         } else {
             None
         };
@@ -333,6 +330,38 @@ impl Trainer {
     /// Control steps of one evaluation episode.
     pub fn evaluation_steps(&self) -> u32 {
         self.evaluation.horizon() as u32
+    }
+
+    /// The goal task's evaluation of the current policy (None when tracking; waits for the
+    /// GPU): every evaluation env's first episode, mean actions, no reset noise, every env
+    /// starting at its clip's start, the run's seed (what `goal.evaluation` records).
+    pub fn evaluate_goal(&self) -> Result<Option<GoalTally>, TrainError> {
+        if !self.evaluation.is_goal_task() {
+            return Ok(None);
+        }
+        self.evaluation.reset_all()?;
+        self.evaluation_graph.launch(self.gpu.stream())?;
+        self.gpu.synchronize()?;
+        Ok(self.evaluation.goal_tally()?)
+    }
+
+    /// The evaluation rollout captured as the evaluation runs it (the policy's mean actions,
+    /// through the frozen decoder in a latent goal run), recording every env's state into
+    /// `trajectory` (from the evaluation rollout's `new_trajectory`) at every step. The graph
+    /// writes into `trajectory` at each launch: keep it alive as long as the graph.
+    pub fn capture_recorded_evaluation(
+        &self,
+        trajectory: &Trajectory,
+    ) -> Result<Graph, TrainError> {
+        Ok(match &self.decoder {
+            Some(d) => self.evaluation.capture_recorded(
+                &d.evaluation.driven_by(&self.evaluation_policy)?,
+                trajectory,
+            )?,
+            None => self
+                .evaluation
+                .capture_recorded(&self.evaluation_policy, trajectory)?,
+        })
     }
 
     /// The evaluation rollout (the paper's protocol on `run.eval_envs` envs) and the policy it

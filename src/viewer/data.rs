@@ -40,6 +40,14 @@ pub struct PageErrors {
     pub ee_orientation: String,
 }
 
+/// A goal-task replay's goals: base64 f32 `position [rows * 2]` (world x, y) and
+/// `reached [rows]` (goals reached in the episode so far).
+#[derive(Clone, Debug, Serialize)]
+pub struct PageGoals {
+    pub position: String,
+    pub reached: String,
+}
+
 /// An episode with its first row.
 #[derive(Clone, Debug, Serialize)]
 pub struct PageEpisode {
@@ -67,6 +75,9 @@ pub struct PageData {
     pub reference: PageTrack,
     pub simulated: Option<PageTrack>,
     pub errors: Option<PageErrors>,
+    /// A goal-task replay's goals (the page then draws the goal and counts the goals reached
+    /// instead of the ghost and the error plot).
+    pub goals: Option<PageGoals>,
 }
 
 fn base64_f32(values: &[f32]) -> String {
@@ -150,6 +161,10 @@ pub fn page_data(recording: &Recording, character: &Character, title: &str) -> P
             global_mpjpe: base64_f32(&e.global_mpjpe),
             ee_position: base64_f32(&e.ee_position),
             ee_orientation: base64_f32(&e.ee_orientation),
+        }),
+        goals: recording.goals().map(|g| PageGoals {
+            position: base64_f32(g.positions()),
+            reached: base64_f32(g.reached()),
         }),
     }
 }

@@ -618,13 +618,12 @@ impl Rollout {
     /// An empty record of every env's state for each of this rollout's frames: the state it
     /// starts from and the one after each control step.
     pub fn new_trajectory(&self) -> Result<Trajectory, RolloutError> {
-        Ok(Trajectory::zeros(
-            &self.gpu,
-            self.horizon + 1,
-            self.num_envs,
-            NQ,
-            NBODY,
-        )?)
+        let trajectory = Trajectory::zeros(&self.gpu, self.horizon + 1, self.num_envs, NQ, NBODY)?;
+        // The goal task's record keeps each frame's goal and goals reached too.
+        Ok(match &self.task {
+            Task::Goal(goal) => trajectory.with_goals(&self.gpu, goal.counters.shape()[1])?,
+            Task::Tracking(_) => trajectory,
+        })
     }
 
     /// Captures the rollout into a graph that also copies every env's state into
@@ -776,6 +775,9 @@ impl Rollout {
     ) -> Result<(), RolloutError> {
         let p = &self.physics;
         trajectory.record_frame(s, frame, &p.qpos, &p.xpos, &p.xquat, &self.state.ref_time)?;
+        if let Task::Goal(goal) = &self.task {
+            trajectory.record_goals(s, frame, &goal.goal, &goal.counters)?;
+        }
         Ok(())
     }
 

@@ -1,5 +1,7 @@
 // The replay page's script (src/viewer/page/viewer.js, inlined by src/viewer/mod.rs): draws the
-// recorded bodies with three.js, plays them, and plots the tracking errors under the view.
+// recorded bodies with three.js, plays them, and plots the tracking errors under the view. A
+// goal-task replay (data.goals) draws the goal on the ground and counts the goals reached
+// instead: its reference track is its simulated one, and it has no tracking errors to show.
 // World frame: MuJoCo's, Z up. Quaternions in the data are (w, x, y, z); three.js wants x, y, z, w.
 
 const data = JSON.parse(document.getElementById("recording-data").textContent);
@@ -23,13 +25,15 @@ function floats(text) {
   return new Float32Array(bytes.buffer);
 }
 
-const COLORS = { simulated: 0xd9732f, reference: 0x3b7dd8 };
+const COLORS = { simulated: 0xd9732f, reference: 0x3b7dd8, goal: 0x2e9d57 };
 const bodyCount = data.bodies.length;
 const tracks = {
   reference: { pos: floats(data.reference.pos), quat: floats(data.reference.quat) },
   simulated: data.simulated && { pos: floats(data.simulated.pos), quat: floats(data.simulated.quat) },
 };
-const errors = data.errors && Object.fromEntries(Object.entries(data.errors).map(([k, v]) => [k, floats(v)]));
+const goals = data.goals && { position: floats(data.goals.position), reached: floats(data.goals.reached) };
+// A goal replay's errors are against its own poses (all zero): the page shows the goals instead.
+const errors = !goals && data.errors && Object.fromEntries(Object.entries(data.errors).map(([k, v]) => [k, floats(v)]));
 // The character drawn solid: the simulated one, or the reference for a clip alone.
 const solidTrack = tracks.simulated ? "simulated" : "reference";
 
@@ -106,10 +110,26 @@ function buildCharacter(material) {
 
 const characters = {};
 characters[solidTrack] = buildCharacter(new THREE.MeshStandardMaterial({ color: COLORS[solidTrack], roughness: 0.55 }));
-if (tracks.simulated) {
+if (tracks.simulated && !goals) {
   characters.reference = buildCharacter(new THREE.MeshStandardMaterial({
     color: COLORS.reference, roughness: 0.55, transparent: true, opacity: 0.32, depthWrite: false,
   }));
+}
+
+// The goal: a disc on the ground with a post above it, moved to each frame's goal.
+let goalMarker = null;
+if (goals) {
+  const material = new THREE.MeshStandardMaterial({ color: COLORS.goal, roughness: 0.5 });
+  goalMarker = new THREE.Group();
+  goalMarker.name = "goal";
+  const disc = new THREE.Mesh(new THREE.CylinderGeometry(0.25, 0.25, 0.02, 32).rotateX(Math.PI / 2), material);
+  disc.position.z = 0.01;
+  const post = new THREE.Mesh(new THREE.CylinderGeometry(0.03, 0.03, 1.2, 12).rotateX(Math.PI / 2), material);
+  post.position.z = 0.6;
+  const flag = new THREE.Mesh(new THREE.SphereGeometry(0.1, 16, 12), material);
+  flag.position.z = 1.25;
+  goalMarker.add(disc, post, flag);
+  scene.add(goalMarker);
 }
 
 // --- state -------------------------------------------------------------------------------
@@ -163,6 +183,7 @@ function showFrame(frame) {
     const root = characters[solidTrack][0].position;
     state.target.set(root.x, root.y, 0.9);
   }
+  if (goals) showGoal(ep, row);
   $("scrubber").value = String(state.frame);
   const t = state.frame * data.control_dt;
   $("time").textContent = `${t.toFixed(2)} s, frame ${state.frame} / ${ep.frames - 1}`;
@@ -170,8 +191,26 @@ function showFrame(frame) {
   render();
 }
 
+function showGoal(ep, row) {
+  const [gx, gy] = [goals.position[2 * row], goals.position[2 * row + 1]];
+  goalMarker.position.set(gx, gy, 0);
+  const root = characters[solidTrack][0].position;
+  const reached = goals.reached[row];
+  const total = goals.reached[ep.first_row + ep.frames - 1];
+  $("goal-overlay").textContent = `goals reached: ${reached} of ${total}`;
+  $("plot-readout").textContent = `frame ${state.frame}: goal at (${gx.toFixed(2)}, ${gy.toFixed(2)}) m, ` +
+    `${Math.hypot(gx - root.x, gy - root.y).toFixed(2)} m from the root; ${reached} goals reached so far`;
+}
+
 // --- controls ------------------------------------------------------------------------------
 function describeEpisode(ep, i) {
+  if (goals) {
+    const total = goals.reached[ep.first_row + ep.frames - 1];
+    const span = `${((ep.frames - 1) * data.control_dt).toFixed(2)} s`;
+    return ep.outcome === "failed"
+      ? `episode ${i}: ${total} goals reached, then fell at frame ${ep.failed_frame} (${span})`
+      : `episode ${i}: ${total} goals reached in ${span}`;
+  }
   const start = `starts at ${ep.start_time_s.toFixed(2)} s of the clip`;
   switch (ep.outcome) {
     case "reference": return `the reference clip, ${ep.frames} frames at ${(1 / data.control_dt).toFixed(1)} Hz`;
@@ -230,7 +269,8 @@ $("scrubber").addEventListener("input", (e) => {
   state.playTime = state.frame * data.control_dt;
 });
 $("speed").addEventListener("change", (e) => { state.speed = parseFloat(e.target.value); });
-$("ghost").disabled = !tracks.simulated;
+$("ghost").disabled = !characters.reference;
+$("goal-overlay").hidden = !goals;
 $("ghost").addEventListener("change", (e) => {
   for (const group of characters.reference) group.visible = e.target.checked;
   render();
@@ -370,6 +410,8 @@ if (errors) {
     $("plot").addEventListener("pointermove", move);
     window.addEventListener("pointerup", () => $("plot").removeEventListener("pointermove", move), { once: true });
   });
+} else if (goals) {
+  $("plot").hidden = true;
 } else {
   $("plot").hidden = true;
   $("plot-readout").textContent = "No tracking errors to plot: this page shows a reference clip alone. " +
@@ -378,9 +420,11 @@ if (errors) {
 
 // --- start -----------------------------------------------------------------------------------
 const swatch = (track, label) => `<span class="swatch" style="background:#${COLORS[track].toString(16)}${track === solidTrack ? "" : "66"}"></span>${label}`;
-$("legend").innerHTML = tracks.simulated
-  ? swatch("simulated", "simulated") + swatch("reference", "reference (ghost)")
-  : swatch("reference", "reference");
+$("legend").innerHTML = goals
+  ? swatch("simulated", "simulated") + swatch("goal", "goal")
+  : tracks.simulated
+    ? swatch("simulated", "simulated") + swatch("reference", "reference (ghost)")
+    : swatch("reference", "reference");
 $("summary").textContent = `${data.motion_source} · ${data.producer}` + (data.checkpoint ? ` · ${data.checkpoint}` : "");
 $("status").textContent = "";
 resize();
@@ -420,6 +464,17 @@ function selfTest() {
     const p = g.getWorldPosition(new THREE.Vector3()).project(camera);
     return Math.abs(p.x) <= 1 && Math.abs(p.y) <= 1 && p.z > -1 && p.z < 1;
   });
+  // The goal marker's own pixels, and where it and the overlay stand at frame 0.
+  let goalPixels = null;
+  let goalAtStart = null;
+  let overlayAtStart = null;
+  if (goalMarker) {
+    goalMarker.visible = false;
+    goalPixels = differing(first, pixels());
+    goalMarker.visible = true;
+    goalAtStart = goalMarker.position.clone();
+    overlayAtStart = $("goal-overlay").textContent;
+  }
   const before = solid.map((g) => g.position.clone());
   const middle = Math.floor((episode().frames - 1) / 2);
   const scrubber = $("scrubber");
@@ -427,6 +482,25 @@ function selfTest() {
   scrubber.dispatchEvent(new Event("input", { bubbles: true }));
   const moved = Math.max(...solid.map((g, b) => g.position.distanceTo(before[b])));
   const scrubbed = pixels();
+  let goal = null;
+  if (goalMarker) {
+    // The last frame: every goal of the episode reached by then.
+    showFrame(episode().frames - 1);
+    goal = {
+      marker_pixels: goalPixels,
+      overlay_at_start: overlayAtStart,
+      overlay_at_end: $("goal-overlay").textContent,
+      reached_at_end: goals.reached[episode().first_row + episode().frames - 1],
+      marker_moved_m: goalMarker.position.distanceTo(goalAtStart),
+      marker_in_view_at_start: (() => {
+        showFrame(0);
+        const p = goalMarker.getWorldPosition(new THREE.Vector3()).project(camera);
+        return Math.abs(p.x) <= 1 && Math.abs(p.y) <= 1;
+      })(),
+      ghost_drawn: !!characters.reference,
+    };
+    showFrame(middle);
+  }
   const resources = performance.getEntriesByType("resource").map((r) => r.name)
     .filter((name) => !name.startsWith("blob:") && !name.startsWith("data:"));
   const result = {
@@ -441,6 +515,7 @@ function selfTest() {
     scrub_changed_pixels: differing(first, scrubbed),
     episodes: data.episodes.length,
     has_plot: !!errors,
+    goal,
     resources,
     errors: window.viewerErrors,
   };
