@@ -6,6 +6,7 @@ mod eval;
 mod export;
 mod gpu;
 mod hpo;
+mod library_eval;
 mod motion;
 mod motion_library;
 mod motion_list;

@@ -14,6 +14,7 @@
 //!   the CPU).
 
 mod assemble;
+pub mod library;
 
 use thiserror::Error;
 
