@@ -483,3 +483,7 @@ pub fn format_library_report(summary: &EvaluationSummary, threshold: f64) -> Str
     let _ = writeln!(out, "average pose error   {:.4} m", summary.pose_error_m);
     out
 }
+
+#[cfg(test)]
+#[path = "library_policy_tests.rs"]
+mod tests;
