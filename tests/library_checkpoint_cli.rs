@@ -85,8 +85,14 @@ fn eval_of_a_library_tracker_checks_everything_before_the_gpu() {
         &load("configs/train/library_shipped.toml"),
     );
     let text = stopped_at_the_gpu(&run(&["eval", "--checkpoint", &ckpt], None, repo()));
-    assert!(text.contains("trained              motion library (13 clips) seed 0: 20 iterations"), "{text}");
-    assert!(text.contains("policy               motion library tracker\n"), "{text}");
+    assert!(
+        text.contains("trained              motion library (13 clips) seed 0: 20 iterations"),
+        "{text}"
+    );
+    assert!(
+        text.contains("policy               motion library tracker\n"),
+        "{text}"
+    );
     assert!(
         text.contains("library              motion library (13 clips) (the one it trained on)"),
         "{text}"
@@ -117,7 +123,9 @@ fn eval_of_the_held_out_latent_controller_on_its_unseen_clips() {
     ];
     let text = stopped_at_the_gpu(&run(&args, None, repo()));
     assert!(
-        text.contains("policy               latent controller (deterministic student: z = the encoder's mean)"),
+        text.contains(
+            "policy               latent controller (deterministic student: z = the encoder's mean)"
+        ),
         "{text}"
     );
     assert!(
@@ -141,7 +149,11 @@ fn eval_refusals_are_one_line() {
         "tracker.safetensors",
         &load("configs/train/library_shipped.toml"),
     );
-    let walk = write_tracker(dir.path(), "walk.safetensors", &load("configs/train/walk.toml"));
+    let walk = write_tracker(
+        dir.path(),
+        "walk.safetensors",
+        &load("configs/train/walk.toml"),
+    );
     let clip_dir = dir.path().join("other_character");
     std::fs::create_dir(&clip_dir).expect("dir");
     std::fs::write(
@@ -156,7 +168,12 @@ fn eval_refusals_are_one_line() {
             "--episodes 2: a library checkpoint's evaluation is one round",
         ),
         (
-            vec!["--checkpoint", &walk, "--library", "configs/library/held_out_test.toml"],
+            vec![
+                "--checkpoint",
+                &walk,
+                "--library",
+                "configs/library/held_out_test.toml",
+            ],
             "--library: for a motion library tracker's or a latent controller's checkpoint;",
         ),
         (
@@ -168,7 +185,12 @@ fn eval_refusals_are_one_line() {
             "8 columns",
         ),
         (
-            vec!["--checkpoint", &tracker, "--library", "configs/library/missing.toml"],
+            vec![
+                "--checkpoint",
+                &tracker,
+                "--library",
+                "configs/library/missing.toml",
+            ],
             "configs/library/missing.toml",
         ),
         (
@@ -197,7 +219,10 @@ fn a_latent_checkpoint_of_another_layout_is_refused_naming_the_file() {
     c.save(Path::new(&path)).expect("saved");
     let err = error_line(&run(&["eval", "--checkpoint", &path], None, repo()));
     assert!(err.contains(&path), "{err}");
-    assert!(err.contains("this library's observation layout needs"), "{err}");
+    assert!(
+        err.contains("this library's observation layout needs"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -213,7 +238,11 @@ fn replay_of_a_library_checkpoint_checks_the_clip_and_its_flags() {
         "latent.safetensors",
         &load("configs/latent/held_out.toml"),
     );
-    let walk = write_tracker(dir.path(), "walk.safetensors", &load("configs/train/walk.toml"));
+    let walk = write_tracker(
+        dir.path(),
+        "walk.safetensors",
+        &load("configs/train/walk.toml"),
+    );
     let page = dir.path().join("page.html").display().to_string();
     let replay = |extra: &[&str]| {
         let mut args = vec!["replay", "--out", &page];
@@ -222,7 +251,14 @@ fn replay_of_a_library_checkpoint_checks_the_clip_and_its_flags() {
     };
     // Valid: the first clip, or a named one, of either kind: stopped at the GPU.
     stopped_at_the_gpu(&replay(&["--checkpoint", &tracker]));
-    stopped_at_the_gpu(&replay(&["--checkpoint", &latent, "--clip", "walk", "--episodes", "8"]));
+    stopped_at_the_gpu(&replay(&[
+        "--checkpoint",
+        &latent,
+        "--clip",
+        "walk",
+        "--episodes",
+        "8",
+    ]));
     let cases: Vec<(Vec<&str>, String)> = vec![
         (
             vec!["--checkpoint", &latent, "--clip", "jog"],
@@ -254,13 +290,21 @@ fn replay_of_a_library_checkpoint_checks_the_clip_and_its_flags() {
 
 #[test]
 fn the_held_out_libraries_split_the_built_in_clips_as_documented() {
-    let train: BTreeSet<String> = clips_of("configs/library/held_out_train.toml").into_iter().collect();
-    let test: BTreeSet<String> = clips_of("configs/library/held_out_test.toml").into_iter().collect();
-    let all: BTreeSet<String> = clips_of("configs/library/shipped.toml").into_iter().collect();
+    let train: BTreeSet<String> = clips_of("configs/library/held_out_train.toml")
+        .into_iter()
+        .collect();
+    let test: BTreeSet<String> = clips_of("configs/library/held_out_test.toml")
+        .into_iter()
+        .collect();
+    let all: BTreeSet<String> = clips_of("configs/library/shipped.toml")
+        .into_iter()
+        .collect();
     assert_eq!(train.len(), 10);
     assert_eq!(
         test,
-        ["dance_spin", "jog", "stealthy_walk"].map(String::from).into()
+        ["dance_spin", "jog", "stealthy_walk"]
+            .map(String::from)
+            .into()
     );
     assert!(train.is_disjoint(&test));
     assert_eq!(train.union(&test).cloned().collect::<BTreeSet<_>>(), all);

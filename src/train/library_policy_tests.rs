@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use super::*;
 use crate::motion::Character;
-use crate::train::library_evaluation::{ClipScore, LibraryEvaluation};
 use crate::train::latent_trainer::insert_latent_networks;
+use crate::train::library_evaluation::{ClipScore, LibraryEvaluation};
 use crate::train::{CheckpointMeta, PolicyShapes};
 
 fn repo(path: &str) -> PathBuf {
@@ -189,8 +189,14 @@ fn a_clip_is_found_by_name_and_another_name_lists_the_librarys() {
     let prepared = prepare_library_policy(&checkpoint, None, None, &store()).expect("fits");
     assert_eq!(prepared.clip_index("backflip").expect("a clip"), 0);
     assert_eq!(prepared.clip_index("walk").expect("a clip"), 12);
-    let e = prepared.clip_index("moonwalk").expect_err("none").to_string();
-    assert!(e.starts_with("--clip moonwalk: no clip of that name in "), "{e}");
+    let e = prepared
+        .clip_index("moonwalk")
+        .expect_err("none")
+        .to_string();
+    assert!(
+        e.starts_with("--clip moonwalk: no clip of that name in "),
+        "{e}"
+    );
     assert!(
         e.ends_with("its clips: backflip, cartwheel, crawl, dance_b, dance_spin, getup_facedown, getup_faceup, jog, punch, run, spinkick, stealthy_walk, walk"),
         "{e}"
@@ -204,7 +210,13 @@ fn policy_only_keeps_the_policy_and_its_statistics() {
     let names: Vec<&str> = policy.names().collect();
     assert_eq!(
         names,
-        ["actor.params", "critic.params", "obs_norm.count", "obs_norm.m2", "obs_norm.mean"]
+        [
+            "actor.params",
+            "critic.params",
+            "obs_norm.count",
+            "obs_norm.m2",
+            "obs_norm.mean"
+        ]
     );
     assert_eq!(
         policy.tensor("actor.params"),
@@ -274,13 +286,19 @@ fn the_clip_table_has_a_row_per_clip_and_one_for_the_library() {
 #[test]
 fn the_report_names_each_clip_and_both_fractions() {
     let text = format_library_report(&summary(), 0.95);
-    assert!(text.contains("clips                1 of 2 at 0.8 (0.500)"), "{text}");
+    assert!(
+        text.contains("clips                1 of 2 at 0.8 (0.500)"),
+        "{text}"
+    );
     assert!(
         text.contains("episodes             17 of 20 succeed (0.850; threshold 0.95: fail)"),
         "{text}"
     );
     assert!(text.contains("success              no"), "{text}");
-    let jog = text.lines().find(|l| l.trim_start().starts_with("jog")).expect("jog");
+    let jog = text
+        .lines()
+        .find(|l| l.trim_start().starts_with("jog"))
+        .expect("jog");
     assert!(jog.contains(" 10 ") && jog.contains("1.000"), "{jog}");
     assert!(text.contains("(10 s windows)"), "{text}");
 }
