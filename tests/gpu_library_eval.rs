@@ -107,6 +107,7 @@ fn library_checkpoints_evaluate_on_their_library_and_on_another_and_replay_a_cli
         assert_eq!(clip_names(&own), ["walk", "punch", "spinkick"], "{kind}");
         assert_eq!(episodes(&own), 32, "{kind}");
         assert_eq!(own["other_library"], false);
+        assert_eq!(own["policy"], kind);
         let rate = own["evaluation"]["success_rate"].as_f64().expect("a rate");
         assert!((0.0..=1.0).contains(&rate), "{own}");
 

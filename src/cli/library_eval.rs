@@ -97,7 +97,7 @@ pub(super) fn eval_library(job: &LibraryEvalJob<'_>) -> Result<()> {
     if job.json {
         let report = LibraryEvalJson {
             checkpoint: job.checkpoint.source(),
-            policy: prepared.kind.describe(),
+            policy: prepared.kind.name(),
             library: &prepared.preflight.motion_source,
             trained_on: &prepared.trained_on,
             other_library: prepared.other_library,

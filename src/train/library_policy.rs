@@ -49,6 +49,14 @@ impl LibraryPolicyKind {
         }
     }
 
+    /// `tracker` or `latent` (`eval --json`'s `policy`).
+    pub fn name(self) -> &'static str {
+        match self {
+            LibraryPolicyKind::Tracker => "tracker",
+            LibraryPolicyKind::Latent => "latent",
+        }
+    }
+
     pub fn describe(self) -> &'static str {
         match self {
             LibraryPolicyKind::Tracker => "motion library tracker",
