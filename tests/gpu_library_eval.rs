@@ -9,7 +9,7 @@
 //! - `eval --library` on a library of 2 other clips reports rows for those clips (and says it
 //!   is another library), and `--out` writes their table;
 //! - `replay` of each writes the page of a clip (`--clip`, or the first), its episodes those of
-//!   that clip.
+//!   that clip, also of a clip of the other library (`--library`).
 #![cfg(feature = "gpu")]
 
 mod small_run_support;

@@ -259,7 +259,20 @@ fn replay_of_a_library_checkpoint_checks_the_clip_and_its_flags() {
         "--episodes",
         "8",
     ]));
+    // A clip it never saw, from another library.
+    stopped_at_the_gpu(&replay(&[
+        "--checkpoint",
+        &latent,
+        "--library",
+        "configs/library/held_out_test.toml",
+        "--clip",
+        "jog",
+    ]));
     let cases: Vec<(Vec<&str>, String)> = vec![
+        (
+            vec!["--checkpoint", &walk, "--library", "configs/library/held_out_test.toml"],
+            "--library: for a motion library tracker's or a latent controller's checkpoint;".to_string(),
+        ),
         (
             vec!["--checkpoint", &latent, "--clip", "jog"],
             "--clip jog: no clip of that name in motion library (10 clips); its clips: backflip, cartwheel, crawl, dance_b, getup_facedown, getup_faceup, punch, run, spinkick, walk".to_string(),

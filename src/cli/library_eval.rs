@@ -126,6 +126,8 @@ pub(super) struct LibraryReplayJob<'a> {
     pub checkpoint: &'a Checkpoint,
     pub label: &'a str,
     pub clip: Option<&'a str>,
+    /// Another library than the one it trained on.
+    pub library: Option<&'a Path>,
     pub episodes: u32,
     pub page: &'a Path,
     pub recording: Option<&'a Path>,
@@ -135,13 +137,14 @@ pub(super) struct LibraryReplayJob<'a> {
 }
 
 /// Runs `replay` of a library checkpoint: one clip's episodes (the first clip unless `--clip`
-/// names another) of the library evaluation, written as the replay page.
+/// names another) of the library evaluation (of its library, or of `--library`'s), written as
+/// the replay page.
 pub(super) fn replay_library(job: &LibraryReplayJob<'_>) -> Result<String> {
     super::output::check_output_path(job.page)?;
     if let Some(path) = job.recording {
         super::output::check_output_path(path)?;
     }
-    let prepared = prepare_library_policy(job.checkpoint, None, job.motions_dir, job.store)?;
+    let prepared = prepare_library_policy(job.checkpoint, job.library, job.motions_dir, job.store)?;
     for line in &prepared.preflight.motion_notices {
         eprintln!("{line}");
     }

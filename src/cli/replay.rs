@@ -66,6 +66,10 @@ pub struct ReplayArgs {
     /// its first clip).
     #[arg(long)]
     clip: Option<String>,
+    /// Replay a library checkpoint on another motion library (a library file or a directory of
+    /// clips), e.g. clips it never saw.
+    #[arg(long)]
+    library: Option<PathBuf>,
 }
 
 /// What [`write_replay`] replays and where it writes.
@@ -234,9 +238,14 @@ fn replay_library_checkpoint(
     let checkpoint = Checkpoint::load(&args.checkpoint)?;
     let config = checkpoint.meta.config(checkpoint.source())?;
     if LibraryPolicyKind::of(&config).is_none() {
-        if let Some(clip) = &args.clip {
+        let flag = match (&args.clip, &args.library) {
+            (Some(clip), _) => Some(format!("--clip {clip}")),
+            (None, Some(_)) => Some("--library".to_string()),
+            (None, None) => None,
+        };
+        if let Some(flag) = flag {
             anyhow::bail!(
-                "--clip {clip}: for a motion library tracker's or a latent controller's checkpoint; {} tracks one clip ({})",
+                "{flag}: for a motion library tracker's or a latent controller's checkpoint; {} tracks one clip ({})",
                 checkpoint.source(),
                 config.motion
             );
@@ -258,6 +267,7 @@ fn replay_library_checkpoint(
         checkpoint: &checkpoint,
         label: &label,
         clip: args.clip.as_deref(),
+        library: args.library.as_deref(),
         episodes: args.episodes,
         page: &args.out,
         recording: args.save_recording.as_deref(),
