@@ -8,8 +8,10 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::Args;
 
+use super::library_eval::LibraryEvalJob;
 use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
+use crate::train::library_policy::LibraryPolicyKind;
 use crate::train::{
     Checkpoint, evaluate_on_gpu, evaluation_steps, format_evaluation_report, preflight,
 };
@@ -36,10 +38,18 @@ pub struct EvalArgs {
     /// moved since training (its parameters must be those the run trained with).
     #[arg(long)]
     decoder: Option<PathBuf>,
+    /// A motion library (a library file or a directory of clips) to evaluate a library
+    /// tracker's or a latent controller's checkpoint on, instead of the one it trained on
+    /// (clips it never saw; the same character and observation layout).
+    #[arg(long)]
+    library: Option<PathBuf>,
+    /// Write the per-clip table of a library checkpoint's evaluation here (TSV, as clips.tsv).
+    #[arg(long)]
+    out: Option<PathBuf>,
 }
 
 /// What the checkpoint says about itself (printed before the evaluation).
-fn checkpoint_report(checkpoint: &Checkpoint) -> String {
+pub(super) fn checkpoint_report(checkpoint: &Checkpoint) -> String {
     let m = &checkpoint.meta;
     let mut out = String::new();
     let _ = writeln!(out, "checkpoint           {}", checkpoint.source());
@@ -66,6 +76,12 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
     let store = PlanStore::new(args.assets.as_deref());
     if config.goal.is_some() {
+        if args.library.is_some() || args.out.is_some() {
+            bail!(
+                "--library and --out score a motion library tracker's or a latent controller's checkpoint; {} is a goal-task checkpoint",
+                checkpoint.source()
+            );
+        }
         // Goals per episode and the fall rate (src/cli/goal_checkpoint.rs).
         return super::goal_checkpoint::eval_goal(&super::goal_checkpoint::GoalEvalJob {
             checkpoint: &checkpoint,
@@ -83,6 +99,29 @@ pub fn run(args: EvalArgs) -> Result<()> {
             decoder.display(),
             checkpoint.source()
         );
+    }
+    if LibraryPolicyKind::of(&config).is_some() {
+        return super::library_eval::eval_library(&LibraryEvalJob {
+            checkpoint: &checkpoint,
+            library: args.library.as_deref(),
+            out: args.out.as_deref(),
+            episodes: args.episodes,
+            motions_dir: motions_dir.as_deref(),
+            store: &store,
+            json: args.json,
+        });
+    }
+    for (flag, given) in [
+        ("--library", args.library.is_some()),
+        ("--out", args.out.is_some()),
+    ] {
+        if given {
+            bail!(
+                "{flag}: for a motion library tracker's or a latent controller's checkpoint; {} tracks one clip ({})",
+                checkpoint.source(),
+                config.motion
+            );
+        }
     }
     let (checks, motion) = preflight(&config, motions_dir.as_deref(), &store)?;
     for line in &checks.motion_notices {

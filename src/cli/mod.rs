@@ -7,6 +7,7 @@ mod export;
 mod goal_checkpoint;
 mod gpu;
 mod hpo;
+mod library_eval;
 mod motion;
 mod motion_library;
 mod motion_list;

@@ -11,8 +11,9 @@ use clap::{Args, ValueEnum};
 use crate::cuda::Gpu;
 use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
-use crate::recording::Outcome;
+use crate::recording::{Outcome, Recording};
 use crate::replay::{DEFAULT_EPISODES, Replay, ReplayInput, chosen_envs, record_replay};
+use crate::train::library_policy::LibraryPolicyKind;
 use crate::train::{Checkpoint, EvalStart, format_evaluation_report, preflight};
 use crate::viewer::save_page;
 
@@ -65,6 +66,14 @@ pub struct ReplayArgs {
     /// moved since training (its parameters must be those the run trained with).
     #[arg(long)]
     decoder: Option<PathBuf>,
+    /// The clip of a library tracker's or a latent controller's library to replay (default:
+    /// its first clip).
+    #[arg(long)]
+    clip: Option<String>,
+    /// Replay a library checkpoint on another motion library (a library file or a directory of
+    /// clips), e.g. clips it never saw.
+    #[arg(long)]
+    library: Option<PathBuf>,
 }
 
 /// What [`write_replay`] replays and where it writes.
@@ -169,11 +178,11 @@ pub(super) fn write_replay(job: &ReplayJob<'_>) -> Result<String> {
     Ok(report)
 }
 
-/// One line per recorded episode, then the evaluation of every env of the same rollout.
-fn episodes_report(replay: &Replay, envs: &[usize], steps: u32, threshold: f64) -> String {
+/// One line per recorded episode of `recording`, which ran in `envs`.
+pub(super) fn episode_lines(recording: &Recording, envs: &[usize]) -> String {
     let mut out = String::new();
-    let dt = replay.recording.meta.control_dt;
-    for (e, (info, env)) in replay.recording.episodes().iter().zip(envs).enumerate() {
+    let dt = recording.meta.control_dt;
+    for (e, (info, env)) in recording.episodes().iter().zip(envs).enumerate() {
         let outcome = match info.outcome {
             Outcome::Succeeded => "succeeds".to_string(),
             Outcome::Completed => "completes, past the global MPJPE bound".to_string(),
@@ -194,6 +203,12 @@ fn episodes_report(replay: &Replay, envs: &[usize], steps: u32, threshold: f64) 
             info.frames.saturating_sub(1)
         );
     }
+    out
+}
+
+/// One line per recorded episode, then the evaluation of every env of the same rollout.
+fn episodes_report(replay: &Replay, envs: &[usize], steps: u32, threshold: f64) -> String {
+    let mut out = episode_lines(&replay.recording, envs);
     let _ = writeln!(
         out,
         "evaluation           every env of the same rollout ({} x {steps} steps):",
@@ -207,6 +222,10 @@ fn episodes_report(replay: &Replay, envs: &[usize], steps: u32, threshold: f64) 
 pub fn run(args: ReplayArgs) -> Result<()> {
     let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
     let store = PlanStore::new(args.assets.as_deref());
+    if let Some(report) = replay_library_checkpoint(&args, motions_dir.as_deref(), &store)? {
+        print!("{report}");
+        return Ok(());
+    }
     let report = write_replay(&ReplayJob {
         checkpoint: &args.checkpoint,
         episodes: args.episodes,
@@ -225,4 +244,58 @@ pub fn run(args: ReplayArgs) -> Result<()> {
     })?;
     print!("{report}");
     Ok(())
+}
+
+/// `replay` of a library tracker's or a latent controller's checkpoint (src/cli/library_eval.rs);
+/// None for a single clip's checkpoint, on which `--clip` is refused.
+fn replay_library_checkpoint(
+    args: &ReplayArgs,
+    motions_dir: Option<&Path>,
+    store: &PlanStore,
+) -> Result<Option<String>> {
+    let checkpoint = Checkpoint::load(&args.checkpoint)?;
+    let config = checkpoint.meta.config(checkpoint.source())?;
+    if LibraryPolicyKind::of(&config).is_none() {
+        let flag = match (&args.clip, &args.library) {
+            (Some(clip), _) => Some(format!("--clip {clip}")),
+            (None, Some(_)) => Some("--library".to_string()),
+            (None, None) => None,
+        };
+        if let Some(flag) = flag {
+            let what = if config.goal.is_some() {
+                "is a goal-task checkpoint".to_owned()
+            } else {
+                format!("tracks one clip ({})", config.motion)
+            };
+            anyhow::bail!(
+                "{flag}: for a motion library tracker's or a latent controller's checkpoint; {} {what}",
+                checkpoint.source()
+            );
+        }
+        return Ok(None);
+    }
+    for (flag, given) in [
+        ("--start", args.start.is_some()),
+        ("--steps", args.steps.is_some()),
+    ] {
+        if given {
+            anyhow::bail!(
+                "{flag}: a library checkpoint's replay plays its clip as the library evaluation does (spread starts, one episode of the clip); leave {flag} out"
+            );
+        }
+    }
+    let label = args.checkpoint.display().to_string();
+    let report = super::library_eval::replay_library(&super::library_eval::LibraryReplayJob {
+        checkpoint: &checkpoint,
+        label: &label,
+        clip: args.clip.as_deref(),
+        library: args.library.as_deref(),
+        episodes: args.episodes,
+        page: &args.out,
+        recording: args.save_recording.as_deref(),
+        motions_dir,
+        store,
+        device: args.device,
+    })?;
+    Ok(Some(report))
 }

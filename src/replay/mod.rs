@@ -15,6 +15,7 @@
 
 mod assemble;
 mod goal;
+pub mod library;
 
 use thiserror::Error;
 

@@ -132,7 +132,7 @@ fn library_error(error: crate::motion::MotionLibraryError) -> TrainError {
     TrainError::Setup(error.to_string())
 }
 
-/// A command that takes one clip (`bench`; `eval`, `replay` and the search's trials refuse a
+/// A command that takes one clip (`bench`; the search's trials refuse a
 /// library in `load_motion`) given a library's configuration: says so in one line.
 pub fn single_clip_only(config: &TrainConfig, command: &str) -> Result<(), TrainError> {
     if config.motion_library.is_some() {

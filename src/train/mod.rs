@@ -21,6 +21,7 @@ mod gpu_loop;
 pub mod latent_trainer;
 pub mod library;
 pub mod library_evaluation;
+pub mod library_policy;
 pub mod metrics;
 mod pipeline;
 pub mod preflight;

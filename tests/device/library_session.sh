@@ -50,7 +50,7 @@ newest_checkpoint() { ls "$OUT/runs/$1"/checkpoints/*.safetensors 2>/dev/null | 
 
 lane0() {
   local t
-  for t in ${TESTS:-gpu_latent gpu_goal gpu_env_kernels gpu_rollout gpu_train}; do
+  for t in ${TESTS:-gpu_latent gpu_library_eval gpu_goal gpu_env_kernels gpu_rollout gpu_train}; do
     [ -x "$BIN/$t" ] || { note "test $t: not staged"; continue; }
     local t0; t0=$(date +%s)
     if CUDA_VISIBLE_DEVICES=0 INSTANTMIMIC_NO_SKIP=1 INSTANTMIMIC_BIN=$BIN/instantmimic timeout "${TEST_TIMEOUT:-240}" \

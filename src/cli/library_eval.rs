@@ -1,0 +1,216 @@
+//! `eval` and `replay` of a motion library tracker's or a latent controller's checkpoint
+//! (docs/library.md, "Scoring a checkpoint"; docs/replay.md): the library evaluation the
+//! training runs, on the library the checkpoint trained on or on another (`--library`), and
+//! the replay page of one of its clips.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::{Context, Result, bail};
+use serde::Serialize;
+
+use crate::cuda::Gpu;
+use crate::plan::PlanStore;
+use crate::replay::library::{LibraryReplayInput, record_library_replay};
+use crate::train::library_policy::{
+    LibraryPolicy, LibraryPolicyEvaluator, evaluation_clips_table, format_library_report,
+    prepare_library_policy,
+};
+use crate::train::{Checkpoint, EvaluationSummary};
+use crate::viewer::save_page;
+
+/// What `eval` was given for a library checkpoint.
+pub(super) struct LibraryEvalJob<'a> {
+    pub checkpoint: &'a Checkpoint,
+    pub library: Option<&'a Path>,
+    pub out: Option<&'a Path>,
+    pub episodes: u32,
+    pub motions_dir: Option<&'a Path>,
+    pub store: &'a PlanStore,
+    pub json: bool,
+}
+
+/// `eval --json` of a library checkpoint.
+#[derive(Serialize)]
+struct LibraryEvalJson<'a> {
+    checkpoint: &'a str,
+    policy: &'a str,
+    library: &'a str,
+    trained_on: &'a str,
+    other_library: bool,
+    evaluation: &'a EvaluationSummary,
+}
+
+/// The lines `eval` and `replay` print about the checkpoint and the library it is run on.
+fn library_lines(prepared: &LibraryPolicy) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "policy               {}", prepared.kind.describe());
+    let _ = writeln!(
+        out,
+        "library              {}{}",
+        prepared.preflight.motion_source,
+        if prepared.other_library {
+            format!(", not the one it trained on ({})", prepared.trained_on)
+        } else {
+            " (the one it trained on)".to_string()
+        }
+    );
+    let plan = &prepared.plan;
+    let _ = writeln!(
+        out,
+        "evaluation           {} envs over {} clips (env i plays clip i mod {}), episodes of up to {} steps, success at {} of the episodes and every clip at {}",
+        plan.envs,
+        plan.clips.len(),
+        plan.clips.len(),
+        plan.longest_steps(),
+        prepared.config.run.success_rate,
+        crate::train::CLIP_SUCCESS_RATE
+    );
+    out
+}
+
+/// Runs `eval` of a library checkpoint.
+pub(super) fn eval_library(job: &LibraryEvalJob<'_>) -> Result<()> {
+    if job.episodes != 1 {
+        bail!(
+            "--episodes {}: a library checkpoint's evaluation is one round (every clip from its spread starts, deterministic); leave --episodes out",
+            job.episodes
+        );
+    }
+    if let Some(path) = job.out {
+        super::output::check_output_path(path)?;
+    }
+    let prepared = prepare_library_policy(job.checkpoint, job.library, job.motions_dir, job.store)?;
+    for line in &prepared.preflight.motion_notices {
+        eprintln!("{line}");
+    }
+    if !job.json {
+        print!("{}", super::eval::checkpoint_report(job.checkpoint));
+        print!("{}", library_lines(&prepared));
+    }
+    let gpu = Gpu::open(0)?;
+    let evaluator = LibraryPolicyEvaluator::new(&gpu, job.store, &prepared, job.checkpoint)?;
+    let episodes = evaluator.evaluate()?;
+    let summary = prepared
+        .plan
+        .summarize(&episodes, prepared.config.run.success_rate)?;
+    if job.json {
+        let report = LibraryEvalJson {
+            checkpoint: job.checkpoint.source(),
+            policy: prepared.kind.name(),
+            library: &prepared.preflight.motion_source,
+            trained_on: &prepared.trained_on,
+            other_library: prepared.other_library,
+            evaluation: &summary,
+        };
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!(
+            "{}",
+            format_library_report(&summary, prepared.config.run.success_rate)
+        );
+    }
+    if let Some(path) = job.out {
+        let table = evaluation_clips_table(&summary).context("the evaluation has no clips")?;
+        crate::train::write_bytes_atomically(path, table.as_bytes())
+            .with_context(|| format!("writing {}", path.display()))?;
+        if !job.json {
+            println!("wrote                {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+/// What `replay` was given for a library checkpoint.
+pub(super) struct LibraryReplayJob<'a> {
+    pub checkpoint: &'a Checkpoint,
+    pub label: &'a str,
+    pub clip: Option<&'a str>,
+    /// Another library than the one it trained on.
+    pub library: Option<&'a Path>,
+    pub episodes: u32,
+    pub page: &'a Path,
+    pub recording: Option<&'a Path>,
+    pub motions_dir: Option<&'a Path>,
+    pub store: &'a PlanStore,
+    pub device: usize,
+}
+
+/// Runs `replay` of a library checkpoint: one clip's episodes (the first clip unless `--clip`
+/// names another) of the library evaluation (of its library, or of `--library`'s), written as
+/// the replay page.
+pub(super) fn replay_library(job: &LibraryReplayJob<'_>) -> Result<String> {
+    super::output::check_output_path(job.page)?;
+    if let Some(path) = job.recording {
+        super::output::check_output_path(path)?;
+    }
+    let prepared = prepare_library_policy(job.checkpoint, job.library, job.motions_dir, job.store)?;
+    for line in &prepared.preflight.motion_notices {
+        eprintln!("{line}");
+    }
+    let clip = match job.clip {
+        Some(name) => prepared.clip_index(name)?,
+        None => 0,
+    };
+    // Checked before the GPU opens: the clip's starts bound the episodes.
+    crate::replay::library::library_chosen_envs(
+        clip,
+        prepared.plan.clips.len(),
+        prepared.plan.envs,
+        job.episodes,
+    )?;
+    let gpu = Gpu::open(job.device)?;
+    let replay = record_library_replay(
+        &gpu,
+        &LibraryReplayInput {
+            prepared: &prepared,
+            checkpoint: job.checkpoint,
+            store: job.store,
+            checkpoint_label: job.label,
+            clip,
+            episodes: job.episodes,
+        },
+    )?;
+    let name = &prepared.plan.clips[clip].name;
+    let m = &job.checkpoint.meta;
+    let title = format!(
+        "{name} ({} of the library): replay of iteration {} (seed {}, {:.1} s active)",
+        prepared.kind.describe(),
+        m.iteration,
+        m.seed,
+        m.active_time_s
+    );
+    let character = prepared.motion.tracked().character();
+    let bytes = save_page(job.page, &replay.recording, character, &title)?;
+    let mut report = library_lines(&prepared);
+    let _ = writeln!(
+        report,
+        "clip                 {name} (clip {clip} of {}: {})",
+        prepared.plan.clips.len(),
+        prepared.clip_names().join(", ")
+    );
+    report.push_str(&super::replay::episode_lines(
+        &replay.recording,
+        &replay.envs,
+    ));
+    let _ = writeln!(
+        report,
+        "evaluation           every env of the same rollout:"
+    );
+    report.push_str(&format_library_report(
+        &replay.summary,
+        prepared.config.run.success_rate,
+    ));
+    let _ = writeln!(
+        report,
+        "wrote                {} ({:.2} MB, {} frames)",
+        job.page.display(),
+        bytes as f64 / 1e6,
+        replay.recording.meta.total_frames()
+    );
+    if let Some(path) = job.recording {
+        replay.recording.save(path)?;
+        let _ = writeln!(report, "wrote                {}", path.display());
+    }
+    Ok(report)
+}

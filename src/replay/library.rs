@@ -1,0 +1,169 @@
+//! `replay` of a motion library tracker's or a latent controller's checkpoint: the library's
+//! evaluation rollout run once with a record, as `eval` runs it (env i plays clip i mod C from
+//! its spread starts), and the episodes of one clip turned into a recording (docs/replay.md,
+//! "A library checkpoint").
+
+use crate::cuda::Gpu;
+use crate::motion::TableLayout;
+use crate::plan::PlanStore;
+use crate::recording::Recording;
+use crate::train::library_policy::{LibraryPolicy, LibraryPolicyEvaluator};
+use crate::train::{Checkpoint, EnvEvaluation, EvaluationSummary};
+
+use super::assemble::{RecordedEpisode, ReplaySource, assemble_recording};
+use super::{ReplayError, chosen_envs};
+
+/// The evaluation envs that play clip `clip` of `clips` on `envs` envs (env i plays clip
+/// i mod C), `episodes` of them spread evenly over the clip's starts, its first start first.
+pub fn library_chosen_envs(
+    clip: usize,
+    clips: usize,
+    envs: usize,
+    episodes: u32,
+) -> Result<Vec<usize>, ReplayError> {
+    let own: Vec<usize> = (clip..envs).step_by(clips.max(1)).collect();
+    let picks = chosen_envs(episodes, own.len() as u32).map_err(|_| {
+        ReplayError::Setup(format!(
+            "--episodes {episodes}: the evaluation plays this clip from {} starts; give 1 to {}",
+            own.len(),
+            own.len()
+        ))
+    })?;
+    Ok(picks.into_iter().map(|k| own[k]).collect())
+}
+
+/// A library replay: the recording of one clip's chosen envs, and the evaluation of every env
+/// of the same rollout (what `eval` reports).
+pub struct LibraryReplay {
+    pub recording: Recording,
+    pub clip: usize,
+    /// The env each episode of the recording ran in.
+    pub envs: Vec<usize>,
+    pub evaluations: Vec<EnvEvaluation>,
+    pub summary: EvaluationSummary,
+}
+
+/// What to replay: a checked library checkpoint, the clip, and how many of its episodes.
+pub struct LibraryReplayInput<'a> {
+    pub prepared: &'a LibraryPolicy,
+    pub checkpoint: &'a Checkpoint,
+    pub store: &'a PlanStore,
+    pub checkpoint_label: &'a str,
+    pub clip: usize,
+    pub episodes: u32,
+}
+
+/// Runs the library's evaluation rollout of `input.checkpoint` once on `gpu`, recording every
+/// env after every control step, and assembles the chosen envs of the clip into a recording.
+pub fn record_library_replay(
+    gpu: &Gpu,
+    input: &LibraryReplayInput<'_>,
+) -> Result<LibraryReplay, ReplayError> {
+    let prepared = input.prepared;
+    let plan = &prepared.plan;
+    let envs = library_chosen_envs(input.clip, plan.clips.len(), plan.envs, input.episodes)?;
+    let evaluator = LibraryPolicyEvaluator::new(gpu, input.store, prepared, input.checkpoint)?;
+    let (rollout, policy) = evaluator.evaluation_rollout();
+    let trajectory = rollout.new_trajectory()?;
+    // The graph writes into `trajectory` and the policy's buffers at every launch: all live to
+    // the end of this call.
+    let graph = rollout.capture_recorded(policy, &trajectory)?;
+    rollout.reset_all()?;
+    graph.launch(gpu.stream())?;
+    gpu.synchronize()?;
+    let scores = rollout
+        .episode_scores()
+        .ok_or_else(|| ReplayError::Setup("the evaluation rollout keeps no scores".to_owned()))?
+        .download()?;
+    let evaluations: Vec<EnvEvaluation> = scores.iter().map(EnvEvaluation::from).collect();
+    let summary = plan.summarize(&evaluations, prepared.config.run.success_rate)?;
+    let frames = trajectory.download()?;
+    let terminated = rollout.storage.terminated.download()?;
+    let truncated = rollout.storage.truncated.download()?;
+    let (horizon, n) = (rollout.horizon(), rollout.num_envs());
+    // The clip's episode ends after its own steps (a shorter clip than the longest goes on
+    // being simulated, unscored, to the rollout's horizon).
+    let clip_steps = plan.clips[input.clip].evaluation.steps as usize;
+    let layout = TableLayout::for_character(prepared.motion.tracked().character());
+    let mut episodes = Vec::with_capacity(envs.len());
+    for &env in &envs {
+        let ended =
+            (0..horizon).find(|&t| terminated[t * n + env] != 0 || truncated[t * n + env] != 0);
+        let count = ended.map_or(horizon + 1, |t| t + 2).min(clip_steps + 1);
+        let mut episode = RecordedEpisode {
+            env,
+            evaluation: evaluations[env],
+            qpos: Vec::new(),
+            body_pos: Vec::new(),
+            body_quat: Vec::new(),
+            times: Vec::with_capacity(count),
+            reference_rows: Vec::new(),
+        };
+        for f in 0..count {
+            episode.qpos.extend_from_slice(frames.qpos(f, env));
+            episode.body_pos.extend_from_slice(frames.body_pos(f, env));
+            episode
+                .body_quat
+                .extend_from_slice(frames.body_quat(f, env));
+            episode.times.push(frames.ref_time(f, env));
+        }
+        episodes.push(episode);
+    }
+    let times: Vec<f32> = episodes
+        .iter()
+        .flat_map(|e| e.times.iter().copied())
+        .collect();
+    let clip_ids = vec![input.clip as i32; times.len()];
+    let rows = rollout.reference_rows(&clip_ids, &times)?;
+    let mut offset = 0;
+    for episode in &mut episodes {
+        let len = episode.times.len() * layout.stride;
+        episode.reference_rows = rows[offset..offset + len].to_vec();
+        offset += len;
+    }
+    let planned = &plan.clips[input.clip];
+    let source = ReplaySource {
+        motion: planned.name.clone(),
+        motion_source: format!(
+            "clip {} of {}",
+            planned.name, prepared.preflight.motion_source
+        ),
+        checkpoint: input.checkpoint_label.to_string(),
+        control_dt: rollout.control_dt(),
+    };
+    let character = prepared.motion.tracked().character();
+    let recording = assemble_recording(character, &layout, &source, &episodes)?;
+    Ok(LibraryReplay {
+        recording,
+        clip: input.clip,
+        envs,
+        evaluations,
+        summary,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_clips_envs_are_every_cth_spread_over_its_starts() {
+        // 32 envs over 3 clips: clip 1 plays envs 1, 4, ..., 31 (11 starts).
+        assert_eq!(
+            library_chosen_envs(1, 3, 32, 11).unwrap(),
+            [1, 4, 7, 10, 13, 16, 19, 22, 25, 28, 31]
+        );
+        assert_eq!(library_chosen_envs(1, 3, 32, 2).unwrap(), [1, 16]);
+        assert_eq!(library_chosen_envs(2, 3, 32, 1).unwrap(), [2]);
+        assert_eq!(
+            library_chosen_envs(0, 13, 4096, 4).unwrap(),
+            [0, 1027, 2054, 3081]
+        );
+        let e = library_chosen_envs(2, 3, 32, 11).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "--episodes 11: the evaluation plays this clip from 10 starts; give 1 to 10"
+        );
+        assert!(library_chosen_envs(0, 3, 32, 0).is_err());
+    }
+}
