@@ -1,6 +1,7 @@
 //! `instantmimic train` on a motion library, without a GPU: the dry run of the committed
-//! library configurations, a library's paths relative to its configuration file, and bad input
-//! failing with one line that names the clip or the key (docs/library.md).
+//! library configurations (on one GPU and on several), a library's paths relative to its
+//! configuration file, bad input failing with one line that names the clip or the key
+//! (docs/library.md), and the latent controller and goal task refused on several GPUs.
 
 mod train_cli_support;
 
@@ -146,6 +147,29 @@ fn a_library_on_several_gpus_dry_runs_with_the_plan() {
         );
         nccl_error(&out);
         assert!(!ws.path().join("runs").exists());
+    }
+}
+
+/// The latent controller and the goal task still train on one GPU: one line naming the key.
+#[test]
+fn latent_and_goal_runs_on_several_gpus_are_refused_in_one_line() {
+    for (config, expected) in [
+        (
+            "configs/latent/library.toml",
+            "`latent` = [latent]: the latent controller trains on one GPU",
+        ),
+        (
+            "configs/goal/reach.toml",
+            "`run.gpus` = [0, 1]: the goal task trains on one GPU",
+        ),
+        (
+            "configs/goal/reach_latent.toml",
+            "`run.gpus` = [0, 1]: the goal task trains on one GPU",
+        ),
+    ] {
+        let args = ["train", "--config", config, "--gpus", "0,1", "--dry-run"];
+        let err = one_line_error(&run(&args, None, repo()));
+        assert!(err.contains(expected), "{config}: {err}");
     }
 }
 
