@@ -18,6 +18,11 @@
 //!   as many GPUs and refuses another count; a rank waiting for a peer that never comes is
 //!   released by an abort instead of hanging; `train --gpus` sent SIGTERM stops every GPU after
 //!   the same iteration (the checkpoint's replica checksums agree), exits with 143 and resumes.
+//! - `several_gpus_a_library_*` (issue 19 on several GPUs): a motion library of 3 built-in
+//!   clips at 32 envs per GPU keeps bit-identical replicas for 20 iterations (the checksums
+//!   include the start sampler's merged `[clips, bins]` counts and CDF), and rank 0's start
+//!   sampler moved off its initial CDF over every clip's bins; `train --gpus` on a library
+//!   writes its run with `clips.tsv` (rank 0's per-clip evaluation) and resumes on as many GPUs.
 //!
 //! Without NCCL, or with fewer than 2 GPUs for the `several_gpus_*` tests, a test skips with a
 //! note, and fails with `INSTANTMIMIC_NO_SKIP=1` (tests/skip_support; tests/device/session.sh
@@ -35,14 +40,19 @@ use instantmimic::cuda::{
     CollectiveBuffer, CollectiveElement, CollectivePlacement, Communicator, DeviceRange, Gpu,
     ReduceOp, nccl_version,
 };
+use instantmimic::env::TrackedMotion;
 use instantmimic::kernels::{DeviceArray, EnvKernels};
+use instantmimic::motion::{Character, LibraryConfig};
 use instantmimic::plan::PlanStore;
 use instantmimic::ppo::{GaussianPolicy, PpoUpdate};
-use instantmimic::train::{IterationReport, Replicas, TrainConfig, Trainer, replica_mismatch};
+use instantmimic::train::checkpoint::tensor_names::{PHASE_CDF, PHASE_VISITS};
+use instantmimic::train::{
+    Checkpoint, CheckpointMeta, IterationReport, Replicas, TrainConfig, Trainer, replica_mismatch,
+};
 use ppo_support::RolloutStorage;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
-use small_run_support::{binary, built_in_motion, check_success, metrics};
+use small_run_support::{binary, built_in_library, built_in_motion, check_success, metrics};
 
 /// Whether NCCL can be opened (else the test skips, or fails with INSTANTMIMIC_NO_SKIP=1).
 fn nccl_or_skip() -> bool {
@@ -237,7 +247,7 @@ fn several_gpus_replicas_stay_bit_identical_for_100_iterations() {
     );
     let motion = built_in_motion("backflip");
     let replicas = Replicas::start(&devices, &config, &motion, &PlanStore::new(None));
-    replicas_stay_bit_identical(replicas.expect("replicas"), &devices, 100, false);
+    replicas_stay_bit_identical(&mut replicas.expect("replicas"), &devices, 100, false);
 }
 
 /// `run.nccl_in_graph = true`: NCCL's all-reduces captured into the iteration graph. On the
@@ -254,7 +264,7 @@ fn several_gpus_with_the_all_reduces_in_the_graph_stay_identical_or_fail_cleanly
     config.run.nccl_in_graph = true;
     let motion = built_in_motion("backflip");
     match Replicas::start(&devices, &config, &motion, &PlanStore::new(None)) {
-        Ok(replicas) => replicas_stay_bit_identical(replicas, &devices, 20, true),
+        Ok(mut replicas) => replicas_stay_bit_identical(&mut replicas, &devices, 20, true),
         Err(e) => {
             let text = e.to_string();
             println!("the capture was refused: {text}");
@@ -267,7 +277,7 @@ fn several_gpus_with_the_all_reduces_in_the_graph_stay_identical_or_fail_cleanly
 }
 
 fn replicas_stay_bit_identical(
-    mut replicas: Replicas,
+    replicas: &mut Replicas,
     devices: &[usize],
     iterations: u32,
     in_graph: bool,
@@ -378,6 +388,149 @@ fn several_gpus_train_writes_its_run_and_resumes_on_as_many_gpus() {
         .filter_map(|r| r["iteration"].as_u64())
         .collect();
     assert_eq!(iterations, (1..=8).collect::<Vec<_>>());
+}
+
+/// The library of the several-GPU library tests: 3 built-in clips of different lengths and
+/// loop modes (a wrapped walk, a clamped punch and a get-up).
+const LIBRARY_CLIPS: [&str; 3] = ["walk", "punch", "getup_faceup"];
+
+/// The small config (32 envs per GPU, 32 evaluation envs) on [`LIBRARY_CLIPS`].
+fn small_library_config() -> TrainConfig {
+    let mut config = small_run_support::small_config("backflip");
+    config.motion = String::new();
+    config.motion_library = Some(LibraryConfig {
+        clips: Some(LIBRARY_CLIPS.iter().map(|c| (*c).to_owned()).collect()),
+        ..Default::default()
+    });
+    config.run.replay = false;
+    config.validate("test").expect("a library config");
+    config
+}
+
+#[test]
+fn several_gpus_a_library_keeps_bit_identical_replicas_for_20_iterations() {
+    let Some(devices) = several_gpus_or_skip() else {
+        return;
+    };
+    let config = small_library_config();
+    let character = Character::humanoid().expect("the humanoid");
+    let library = built_in_library("three", &character, &LIBRARY_CLIPS);
+    let motion = TrackedMotion::Library {
+        character: &character,
+        library: &library,
+    };
+    let replicas = Replicas::start(&devices, &config, motion, &PlanStore::new(None));
+    let mut replicas = replicas.expect("library replicas");
+    let cells = LIBRARY_CLIPS.len() * config.env.phase_bins as usize;
+    let before = phase_tensors(&mut replicas, &config, cells);
+    replicas_stay_bit_identical(&mut replicas, &devices, 20, false);
+    let (visits, cdf) = phase_tensors(&mut replicas, &config, cells);
+    let bins = config.env.phase_bins as usize;
+    for (c, clip) in LIBRARY_CLIPS.iter().enumerate() {
+        let visited: f32 = visits[c * bins..(c + 1) * bins].iter().sum();
+        println!("{clip}: decayed visits {visited:.1} (every GPU's envs, averaged)");
+        assert!(visited > 0.0, "{clip}: no visit was counted");
+    }
+    assert_eq!(cdf[cells - 1], 1.0);
+    assert!(cdf.windows(2).all(|w| w[0] <= w[1]), "{cdf:?}");
+    assert_ne!(
+        before.1, cdf,
+        "the start sampler's CDF never moved off its initial one"
+    );
+}
+
+/// Rank 0's start-sampler visits and CDF over every (clip, bin) cell, from a checkpoint (which
+/// compares every replica's checksum first).
+fn phase_tensors(
+    replicas: &mut Replicas,
+    config: &TrainConfig,
+    cells: usize,
+) -> (Vec<f32>, Vec<f32>) {
+    let meta = CheckpointMeta::new(config, 0, 0.0, 0).expect("meta");
+    let mut checkpoint = Checkpoint::new(meta);
+    replicas.save_into(&mut checkpoint).expect("save");
+    let get = |name: &str| -> Vec<f32> {
+        checkpoint
+            .get::<f32>(name, &[cells])
+            .unwrap_or_else(|e| panic!("{name}: {e}"))
+            .to_vec()
+    };
+    (get(PHASE_VISITS), get(PHASE_CDF))
+}
+
+#[test]
+fn several_gpus_train_on_a_library_writes_its_clip_table_and_resumes() {
+    let Some(devices) = several_gpus_or_skip() else {
+        return;
+    };
+    let gpus = format!("{},{}", devices[0], devices[1]);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut config = small_library_config();
+    config.run.max_iterations = 4;
+    config.run.checkpoint_interval = 2;
+    let config_path = dir.path().join("library.toml");
+    std::fs::write(&config_path, config.to_toml().expect("toml")).expect("write config");
+    let run = dir.path().join("run");
+    let out = binary()
+        .args(["train", "--progress", "lines", "--gpus", &gpus, "--config"])
+        .arg(&config_path)
+        .arg("--out")
+        .arg(&run)
+        .output()
+        .expect("train runs");
+    check_success(&out, "train --gpus on a library");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    println!("{stdout}");
+    assert!(
+        stdout.contains("motion library: 3 clips, evaluated on 32 envs"),
+        "{stdout}"
+    );
+    let records = metrics(&run);
+    assert_eq!(records.len(), 4);
+    let per_iteration = 2 * u64::from(config.env.num_envs) * u64::from(config.ppo.horizon);
+    assert_eq!(records[3]["frames"].as_u64(), Some(4 * per_iteration));
+    // Rank 0's evaluation, scored clip by clip: its 32 envs play clip i mod 3.
+    let e = &records[1]["evaluation"];
+    let clips = e["library"]["clips"].as_array().expect("per-clip results");
+    assert_eq!(clips.len(), 3, "{e}");
+    assert_eq!(clips[2]["name"], "getup_faceup");
+    let episodes: u64 = clips.iter().map(|c| c["episodes"].as_u64().unwrap()).sum();
+    assert_eq!(episodes, 32, "{e}");
+    let table = std::fs::read_to_string(run.join("clips.tsv")).expect("clips.tsv");
+    assert_eq!(table.lines().count(), 5, "{table}");
+    assert!(
+        table.lines().nth(1).unwrap().starts_with("walk\t"),
+        "{table}"
+    );
+    assert!(run.join("checkpoints/iter_00000004.safetensors").exists());
+    assert!(!run.join("replay.html").exists());
+    // Another GPU count is refused; the same count resumes.
+    let out = binary()
+        .args(["train", "--resume"])
+        .arg(&run)
+        .args(["--gpus", &devices[0].to_string(), "--max-iterations", "6"])
+        .output()
+        .expect("train runs");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("run.gpus: this run trained on 2 GPUs"),
+        "{err}"
+    );
+    let out = binary()
+        .args(["train", "--progress", "lines", "--resume"])
+        .arg(&run)
+        .args(["--gpus", &gpus, "--max-iterations", "6"])
+        .output()
+        .expect("train resumes");
+    check_success(&out, "train --resume --gpus on a library");
+    let iterations: Vec<u64> = metrics(&run)
+        .iter()
+        .filter_map(|r| r["iteration"].as_u64())
+        .collect();
+    assert_eq!(iterations, (1..=6).collect::<Vec<_>>());
+    let table = std::fs::read_to_string(run.join("clips.tsv")).expect("clips.tsv");
+    assert_eq!(table.lines().count(), 5, "{table}");
 }
 
 #[test]

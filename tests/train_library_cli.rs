@@ -1,6 +1,7 @@
 //! `instantmimic train` on a motion library, without a GPU: the dry run of the committed
-//! library configurations, a library's paths relative to its configuration file, and bad input
-//! failing with one line that names the clip or the key (docs/library.md).
+//! library configurations (on one GPU and on several), a library's paths relative to its
+//! configuration file, bad input failing with one line that names the clip or the key
+//! (docs/library.md), and the latent controller and goal task refused on several GPUs.
 
 mod train_cli_support;
 
@@ -81,6 +82,97 @@ fn the_all_clips_config_evaluates_the_long_clips_over_windows() {
     );
 }
 
+/// Several GPUs train a library as they train a clip (docs/train.md, "Several GPUs"): the dry
+/// run checks the library, then NCCL, and prints the plan with every GPU's envs; without NCCL
+/// it stops at NCCL's one line, after the library passed, with no run directory made.
+#[test]
+fn a_library_on_several_gpus_dry_runs_with_the_plan() {
+    let ws = workspace();
+    let args = |gpus: &str| {
+        vec![
+            "train".to_owned(),
+            "--config".to_owned(),
+            repo()
+                .join("configs/train/library_shipped.toml")
+                .display()
+                .to_string(),
+            "--envs".to_owned(),
+            "32".to_owned(),
+            "--gpus".to_owned(),
+            gpus.to_owned(),
+            "--dry-run".to_owned(),
+        ]
+    };
+    let dry = |gpus: &str| {
+        let owned = args(gpus);
+        let borrowed: Vec<&str> = owned.iter().map(String::as_str).collect();
+        run(&borrowed, None, ws.path())
+    };
+    let text = succeeded(&dry("3"));
+    assert!(text.contains("motion library (13 clips)"), "{text}");
+    assert_eq!(resolved_config(&text).run.gpus, vec![3]);
+    let out = dry("0,1");
+    if instantmimic::cuda::nccl_version().is_ok() {
+        let text = succeeded(&out);
+        assert!(
+            text.contains("GPUs [0, 1]: 32 envs each (64 in all), NCCL"),
+            "{text}"
+        );
+        assert!(text.contains("motion library (13 clips)"), "{text}");
+        assert!(text.contains("clip          backflip ("), "{text}");
+        let config = resolved_config(&text);
+        assert_eq!(config.run.gpus, vec![0, 1]);
+        assert!(config.motion_library.is_some());
+    } else {
+        // The library was loaded and checked first (its clips' notices), then NCCL: one error.
+        let nccl_error = |out: &std::process::Output| {
+            assert!(!out.status.success());
+            let err = String::from_utf8_lossy(&out.stderr).into_owned();
+            let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
+            assert_eq!(errors.len(), 1, "{err}");
+            assert!(errors[0].contains("NCCL is not available"), "{err}");
+            assert!(!errors[0].contains("motion library"), "{err}");
+            err
+        };
+        let err = nccl_error(&out);
+        assert!(err.contains("humanoid3d_backflip.txt (built in)"), "{err}");
+        let out = run(
+            &args("0,1")
+                .iter()
+                .map(String::as_str)
+                .filter(|a| *a != "--dry-run")
+                .collect::<Vec<_>>(),
+            None,
+            ws.path(),
+        );
+        nccl_error(&out);
+        assert!(!ws.path().join("runs").exists());
+    }
+}
+
+/// The latent controller and the goal task still train on one GPU: one line naming the key.
+#[test]
+fn latent_and_goal_runs_on_several_gpus_are_refused_in_one_line() {
+    for (config, expected) in [
+        (
+            "configs/latent/library.toml",
+            "`latent` = [latent]: the latent controller trains on one GPU",
+        ),
+        (
+            "configs/goal/reach.toml",
+            "`run.gpus` = [0, 1]: the goal task trains on one GPU",
+        ),
+        (
+            "configs/goal/reach_latent.toml",
+            "`run.gpus` = [0, 1]: the goal task trains on one GPU",
+        ),
+    ] {
+        let args = ["train", "--config", config, "--gpus", "0,1", "--dry-run"];
+        let err = one_line_error(&run(&args, None, repo()));
+        assert!(err.contains(expected), "{config}: {err}");
+    }
+}
+
 #[test]
 fn a_library_configs_paths_are_relative_to_the_file() {
     let ws = workspace();
@@ -159,36 +251,24 @@ fn bad_libraries_fail_with_one_line_naming_the_clip_or_the_key() {
     );
     let motions = path("motions");
     let arg = |name: &str| path(name).display().to_string();
-    for (name, extra, expected) in [
-        ("empty.toml", None, "the motion library has no clips"),
+    for (name, expected) in [
+        ("empty.toml", "the motion library has no clips"),
         (
             "both.toml",
-            None,
             "`motion_library` = motion library (1 clip): `motion` and `[motion_library]` are alternatives",
         ),
-        (
-            "neither.toml",
-            None,
-            "`motion` = \"\": name a motion or a file",
-        ),
-        ("dir.toml", None, "motion library clip \"broken\": "),
-        ("other.toml", None, "motion library clip \"other\": "),
+        ("neither.toml", "`motion` = \"\": name a motion or a file"),
+        ("dir.toml", "motion library clip \"broken\": "),
+        ("other.toml", "motion library clip \"other\": "),
         (
             "weight.toml",
-            None,
             "motion library clip \"walk\" (`clip[0].weight`): the weight -1 must be positive",
-        ),
-        (
-            "other.toml",
-            Some("--gpus=0,1"),
-            "`run.gpus` = [0, 1]: a motion library trains on one GPU",
         ),
     ] {
         let config = arg(name);
-        let mut args = vec!["train", "--config", config.as_str(), "--dry-run"];
-        args.extend(extra);
+        let args = ["train", "--config", config.as_str(), "--dry-run"];
         let err = one_line_error(&run(&args, Some(&motions), ws.path()));
-        assert!(err.contains(expected), "{name} {extra:?}: {err}");
+        assert!(err.contains(expected), "{name}: {err}");
     }
     let err = one_line_error(&run(
         &["train", "--config", &arg("other.toml"), "--dry-run"],

@@ -310,12 +310,6 @@ impl TrainConfig {
                         path: name.to_string(),
                         error,
                     })?;
-                check!(
-                    !run.data_parallel(),
-                    "run.gpus",
-                    format!("{:?}", run.gpus),
-                    "a motion library trains on one GPU for now (several GPUs train one clip)"
-                );
             }
         }
         check!(

@@ -420,13 +420,40 @@ fn a_motion_library_replaces_the_motion_and_round_trips() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("unknown field `clip`"), "{e}");
-    let e = TrainConfig::from_toml(
-        "[motion_library]\nclips = [\"walk\"]\n[run]\ngpus = [0, 1]\n",
+}
+
+#[test]
+fn a_library_trains_on_several_gpus_while_latent_and_goal_stay_on_one() {
+    let library = TrainConfig::from_toml(
+        "[motion_library]\nclips = [\"walk\", \"run\"]\n[run]\ngpus = [0, 1]\n",
         "t",
     )
-    .unwrap_err()
-    .to_string();
-    assert!(e.contains("`run.gpus`") && e.contains("one GPU"), "{e}");
+    .expect("a library on two GPUs");
+    assert!(library.run.data_parallel());
+    assert!(library.motion_library.is_some());
+    let shipped = TrainConfig::load(std::path::Path::new("configs/train/library_shipped.toml"))
+        .expect("the shipped library");
+    let mut several = shipped.clone();
+    several.run.gpus = vec![0, 1, 2, 3];
+    several.validate("library_shipped.toml").expect("on 4 GPUs");
+    for (path, expected) in [
+        (
+            "configs/latent/library.toml",
+            "the latent controller trains on one GPU",
+        ),
+        ("configs/goal/reach.toml", "the goal task trains on one GPU"),
+        (
+            "configs/goal/reach_latent.toml",
+            "the goal task trains on one GPU",
+        ),
+    ] {
+        let mut config = TrainConfig::load(std::path::Path::new(path)).expect(path);
+        config.validate(path).expect("valid on one GPU");
+        config.run.gpus = vec![0, 1];
+        let e = config.validate(path).unwrap_err().to_string();
+        assert!(e.contains(expected), "{path}: {e}");
+        assert_eq!(e.lines().count(), 1, "{path}: {e}");
+    }
 }
 
 #[test]

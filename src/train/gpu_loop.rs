@@ -2,8 +2,8 @@
 //! [`train_on_gpu`] / [`evaluate_on_gpu`], which build a [`Trainer`] (or, with `run.gpus`
 //! naming several devices, the [`Replicas`] of every GPU) and drive a [`RunSession`]
 //! (src/train/session.rs documents the call sequence). One loop drives either, through
-//! [`LoopTrainer`]. A motion library trains on one GPU, through the same loop; its evaluation
-//! is scored per clip ([`Scorer`]).
+//! [`LoopTrainer`]. A motion library trains through the same loop, on one GPU or several; its
+//! evaluation is scored per clip ([`Scorer`]).
 
 use std::path::PathBuf;
 
@@ -170,15 +170,9 @@ pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
     }
     let run = &setup.config.run;
     if run.data_parallel() {
-        let motion = setup.motion.clip().ok_or_else(|| {
-            TrainError::Setup(
-                "run.gpus: a motion library trains on one GPU for now (several GPUs train one clip)"
-                    .to_owned(),
-            )
-        })?;
         return train_on_gpus(
             &setup.config,
-            motion,
+            setup.motion.tracked(),
             &setup.store,
             &setup.start,
             setup.progress,
@@ -230,13 +224,7 @@ pub fn train_with<'a>(
         ));
     }
     if let Scorer::Library(plan) = &scorer {
-        notes.push(format!(
-            "motion library: {} clips, evaluated on {} envs (clip i mod {}), episodes of up to {} steps",
-            plan.clips.len(),
-            plan.envs,
-            plan.clips.len(),
-            plan.longest_steps()
-        ));
+        notes.push(library_note(plan));
     }
     run_loop(session, &mut trainer, checkpoint, &scorer, setup, notes)
 }
@@ -293,16 +281,7 @@ impl Scorer {
                 start_times: Vec::new(),
             },
             TrackedMotion::Clip(motion) => Scorer::for_clip(motion, config),
-            TrackedMotion::Library { .. } => {
-                let evaluations = rollout.clip_evaluations().ok_or_else(|| {
-                    TrainError::Setup("the evaluation rollout has no clip plan".to_owned())
-                })?;
-                Scorer::Library(LibraryPlan::new(
-                    rollout.library(),
-                    evaluations,
-                    rollout.num_envs(),
-                )?)
-            }
+            TrackedMotion::Library { .. } => Scorer::Library(library_plan(rollout)?),
         })
     }
 
@@ -338,17 +317,42 @@ impl Scorer {
     }
 }
 
+/// How the evaluation rollout `rollout` (of a motion library) plays every clip.
+fn library_plan(rollout: &Rollout) -> Result<LibraryPlan, TrainError> {
+    let evaluations = rollout
+        .clip_evaluations()
+        .ok_or_else(|| TrainError::Setup("the evaluation rollout has no clip plan".to_owned()))?;
+    Ok(LibraryPlan::new(
+        rollout.library(),
+        evaluations,
+        rollout.num_envs(),
+    )?)
+}
+
+/// The library note of a run's output.
+fn library_note(plan: &LibraryPlan) -> String {
+    format!(
+        "motion library: {} clips, evaluated on {} envs (clip i mod {}), episodes of up to {} steps",
+        plan.clips.len(),
+        plan.envs,
+        plan.clips.len(),
+        plan.longest_steps()
+    )
+}
+
 /// Trains on every device of `config.run.gpus` at once (docs/train.md, "Several GPUs"): one
 /// replica of the rollout and the update per GPU, gradients and statistics all-reduced through
 /// NCCL inside their graphs, evaluation and checkpoints on the first. Otherwise as
-/// [`train_with`]; a resumed run must use as many GPUs as it trained on.
+/// [`train_with`]; a resumed run must use as many GPUs as it trained on. A motion library
+/// trains as one clip does: every GPU holds the whole library table, and rank 0 evaluates it
+/// clip by clip (`clips.tsv`).
 ///
 /// A stop request is read by this thread, which drives every GPU's iteration: every replica
 /// finishes the iteration it is in (no rank is left waiting in an all-reduce), none starts
 /// another, and rank 0's state is checkpointed as at any checkpoint.
-pub fn train_on_gpus(
+pub fn train_on_gpus<'a>(
     config: &TrainConfig,
-    motion: &ReferenceMotion,
+    motion: impl Into<TrackedMotion<'a>>,
     store: &PlanStore,
     start: &RunStart,
     progress: ProgressMode,
@@ -362,11 +366,20 @@ pub fn train_on_gpus(
         .iter()
         .map(|&d| d as usize)
         .collect();
+    let motion = motion.into();
     let setup = std::time::Instant::now();
     let mut replicas = Replicas::start(&devices, session.config(), motion, store)?;
     let mut notes = vec![format!("GEMMs: {} (every GPU)", replicas.gemm())];
     notes.extend(replicas.take_notes());
-    let scorer = Scorer::for_clip(motion, session.config());
+    let scorer = match motion {
+        TrackedMotion::Clip(clip) => Scorer::for_clip(clip, session.config()),
+        // Rank 0 evaluates: its evaluation rollout's plan scores the episodes.
+        TrackedMotion::Library { .. } => {
+            let plan = replicas.on_rank0(|t| library_plan(t.evaluation_rollout().0))?;
+            notes.push(library_note(&plan));
+            Scorer::Library(plan)
+        }
+    };
     run_loop(session, &mut replicas, checkpoint, &scorer, setup, notes)
 }
 

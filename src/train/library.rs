@@ -35,6 +35,18 @@ impl TrainMotion {
         }
     }
 
+    /// An owned copy of `motion` (each GPU's worker of a run on several GPUs builds its
+    /// replica from one).
+    pub fn owned(motion: TrackedMotion<'_>) -> TrainMotion {
+        match motion {
+            TrackedMotion::Clip(motion) => TrainMotion::Clip(motion.clone()),
+            TrackedMotion::Library { character, library } => TrainMotion::Library {
+                character: character.clone(),
+                library: library.clone(),
+            },
+        }
+    }
+
     /// The single clip (None for a library).
     pub fn clip(&self) -> Option<&ReferenceMotion> {
         match self {

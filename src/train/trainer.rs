@@ -472,7 +472,8 @@ impl Trainer {
 
     /// A checksum (CRC-32 of the bytes) of everything that decides the next update and the
     /// next rollout's statistics: the parameters, the observation normalization, the optimizer's
-    /// state, the return statistics and the start-phase CDF (waits for the GPU). The replicas
+    /// state, the return statistics and the start sampler's decayed counts and CDF per (clip,
+    /// phase bin) cell (waits for the GPU). The replicas
     /// of a run on several GPUs must have equal digests: an exact check, where the per
     /// iteration comparison of the sums of squares is a cheap one.
     pub fn replica_digest(&self) -> Result<u32, TrainError> {
@@ -498,8 +499,12 @@ impl Trainer {
             crc.update(moments.as_bytes());
         }
         crc.update(self.update.value_statistics().download()?.as_bytes());
-        let (_, _, cdf, iteration) = self.rollout.phase_statistics();
-        crc.update(cdf.download()?.as_bytes());
+        // The decayed counts decide the next CDF: every rollout merges them over the GPUs
+        // (`[clips, bins]`, a motion library's cells as a clip's bins), so they too must agree.
+        let (visits, failures, cdf, iteration) = self.rollout.phase_statistics();
+        for counts in [visits, failures, cdf] {
+            crc.update(counts.download()?.as_bytes());
+        }
         crc.update(iteration.download()?.as_bytes());
         Ok(crc.finalize())
     }

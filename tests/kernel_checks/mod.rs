@@ -22,6 +22,7 @@ pub mod gemm_epilogue;
 pub mod goal;
 pub mod normalize;
 pub mod observe;
+pub mod phase_merge;
 pub mod physics;
 pub mod policy;
 pub mod program;

@@ -11,7 +11,8 @@
 //! a one-cell CDF puts every start in that cell, noise 0 gives the reference state at the
 //! written start time, and with noise the quaternions stay unit, the root position stays exact
 //! and the recovered noise has mean 0 and deviation 1. `phase_statistics_update`: the CDF over
-//! cells weighted by each clip's weight, against f64.
+//! cells weighted by each clip's weight, against f64, and after the several-GPU merge
+//! ([`super::phase_merge`]).
 
 use instantmimic::env::layout::{BALL, JointLayout};
 use instantmimic::kernels::{PHASE_STATISTICS_UPDATE, RESET_MASKED, ResetParams};
@@ -779,4 +780,8 @@ pub fn statistics_checks(_fx: &Fixture) -> Vec<Check> {
         statistics_case(&[1.0 / 22.0; 22], 20, 1, 44),
         statistics_case(&[0.5, 0.3, 0.2], 7, 32, 45),
     ]
+    .into_iter()
+    // A library's counts merged over several GPUs (train --gpus on a library).
+    .chain(super::phase_merge::checks())
+    .collect()
 }

@@ -30,13 +30,14 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
 use crate::cuda::{CollectivePlacement, Communicator, nccl_version};
-use crate::motion::ReferenceMotion;
+use crate::env::TrackedMotion;
 use crate::plan::{PhysicsOverflow, PlanStore};
 
 use super::checkpoint::Checkpoint;
 use super::config::TrainConfig;
 use super::error::TrainError;
 use super::evaluation::EnvEvaluation;
+use super::library::TrainMotion;
 use super::report::{IterationReport, replica_mismatch};
 use super::session::IterationStats;
 use super::trainer::Trainer;
@@ -81,11 +82,13 @@ pub struct Replicas {
 impl Replicas {
     /// Makes one NCCL communicator per device of `devices` (rank i on `devices[i]`), starts a
     /// worker per device that builds its replica of `config` (each with `env.num_envs` envs),
-    /// waits for all of them, and checks that they hold the same state.
-    pub fn start(
+    /// waits for all of them, and checks that they hold the same state. `motion` is one clip or
+    /// a motion library: every GPU holds the whole library table and merges its per-(clip, phase
+    /// bin) start statistics with the others' every rollout, as a clip's per-bin ones.
+    pub fn start<'a>(
         devices: &[usize],
         config: &TrainConfig,
-        motion: &ReferenceMotion,
+        motion: impl Into<TrackedMotion<'a>>,
         store: &PlanStore,
     ) -> Result<Replicas, TrainError> {
         let placement = if config.run.nccl_in_graph {
@@ -97,7 +100,7 @@ impl Replicas {
         let (replies_to, replies) = std::sync::mpsc::channel();
         let start = Start {
             config: Arc::new(config.clone()),
-            motion: Arc::new(motion.clone()),
+            motion: Arc::new(TrainMotion::owned(motion.into())),
             store: Arc::new(store.clone()),
         };
         let mut replicas = Replicas {
@@ -270,8 +273,8 @@ impl Replicas {
         self.gather(call, &ranks)
     }
 
-    /// Runs `job` on rank 0's trainer.
-    fn on_rank0<R, F>(&mut self, job: F) -> Result<R, TrainError>
+    /// Runs `job` on rank 0's trainer (the training loop asks it for the evaluation's plan).
+    pub(super) fn on_rank0<R, F>(&mut self, job: F) -> Result<R, TrainError>
     where
         R: Send + 'static,
         F: FnOnce(&mut Trainer) -> Result<R, TrainError> + Send + 'static,

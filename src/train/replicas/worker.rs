@@ -9,11 +9,11 @@ use std::sync::mpsc::{Receiver, Sender};
 use std::thread::JoinHandle;
 
 use crate::cuda::{Communicator, Gpu};
-use crate::motion::ReferenceMotion;
 use crate::plan::PlanStore;
 
 use super::super::config::TrainConfig;
 use super::super::error::TrainError;
+use super::super::library::TrainMotion;
 use super::super::trainer::Trainer;
 
 /// A job's answer, type-erased (the coordinator downcasts it to what it asked for).
@@ -47,7 +47,8 @@ pub(super) struct Built {
 /// Everything a worker starts from (shared with the other workers).
 pub(super) struct Start {
     pub config: Arc<TrainConfig>,
-    pub motion: Arc<ReferenceMotion>,
+    /// One clip, or a motion library (every GPU holds the whole library table).
+    pub motion: Arc<TrainMotion>,
     pub store: Arc<PlanStore>,
 }
 
@@ -111,7 +112,7 @@ fn run(
             let trainer = Trainer::replica(
                 &gpu,
                 &start.store,
-                start.motion.as_ref(),
+                start.motion.tracked(),
                 &start.config,
                 &communicator,
             )?;
