@@ -1,16 +1,14 @@
 //! Recording a rollout for a replay (src/replay/): every env's state at each frame into a
 //! [`Trajectory`], and the reference rows the kernels looked up.
 
-use crate::cuda::Graph;
-use crate::kernels::DeviceArray;
-
-use super::super::physics_state::{NBODY, NQ};
-use super::super::policy::RolloutPolicy;
-use super::super::stages::StageRecorder;
-use super::super::task::Task;
-use super::super::trajectory::Trajectory;
 use super::{Rollout, RolloutError};
-use crate::cuda::Stream;
+use crate::cuda::{Graph, Stream};
+use crate::env::physics_state::{NBODY, NQ};
+use crate::env::policy::RolloutPolicy;
+use crate::env::stages::StageRecorder;
+use crate::env::task::Task;
+use crate::env::trajectory::Trajectory;
+use crate::kernels::DeviceArray;
 
 impl Rollout {
     /// An empty record of every env's state for each of this rollout's frames: the state it
