@@ -10,8 +10,8 @@ use crate::recording::Recording;
 use crate::train::library_policy::{LibraryPolicy, LibraryPolicyEvaluator};
 use crate::train::{Checkpoint, EnvEvaluation, EvaluationSummary};
 
-use super::assemble::{RecordedEpisode, ReplaySource, assemble_recording};
-use super::{ReplayError, chosen_envs};
+use super::assemble::{ReplaySource, assemble_recording};
+use super::{ReplayError, chosen_envs, first_episode_frames, recorded_episode};
 
 /// The evaluation envs that play clip `clip` of `clips` on `envs` envs (env i plays clip
 /// i mod C), `episodes` of them spread evenly over the clip's starts, its first start first.
@@ -87,27 +87,9 @@ pub fn record_library_replay(
     let layout = TableLayout::for_character(prepared.motion.tracked().character());
     let mut episodes = Vec::with_capacity(envs.len());
     for &env in &envs {
-        let ended =
-            (0..horizon).find(|&t| terminated[t * n + env] != 0 || truncated[t * n + env] != 0);
-        let count = ended.map_or(horizon + 1, |t| t + 2).min(clip_steps + 1);
-        let mut episode = RecordedEpisode {
-            env,
-            evaluation: evaluations[env],
-            qpos: Vec::new(),
-            body_pos: Vec::new(),
-            body_quat: Vec::new(),
-            times: Vec::with_capacity(count),
-            reference_rows: Vec::new(),
-        };
-        for f in 0..count {
-            episode.qpos.extend_from_slice(frames.qpos(f, env));
-            episode.body_pos.extend_from_slice(frames.body_pos(f, env));
-            episode
-                .body_quat
-                .extend_from_slice(frames.body_quat(f, env));
-            episode.times.push(frames.ref_time(f, env));
-        }
-        episodes.push(episode);
+        let count =
+            first_episode_frames(&terminated, &truncated, horizon, n, env).min(clip_steps + 1);
+        episodes.push(recorded_episode(&frames, env, evaluations[env], count));
     }
     let times: Vec<f32> = episodes
         .iter()

@@ -20,7 +20,7 @@ pub mod library;
 use thiserror::Error;
 
 use crate::cuda::{CudaError, Gpu};
-use crate::env::RolloutError;
+use crate::env::{RolloutError, TrajectoryFrames};
 use crate::kernels::EnvError;
 use crate::motion::{ReferenceMotion, TableLayout};
 use crate::plan::PlanStore;
@@ -134,27 +134,8 @@ pub fn record_replay(gpu: &Gpu, input: &ReplayInput<'_>) -> Result<Replay, Repla
     for &env in &envs {
         // The evaluation ends each env's episode once, at its last step; should anything end
         // it earlier, the env is reset in the same step and what follows is another episode.
-        let ended =
-            (0..horizon).find(|&t| terminated[t * n + env] != 0 || truncated[t * n + env] != 0);
-        let count = ended.map_or(horizon + 1, |t| t + 2);
-        let mut episode = RecordedEpisode {
-            env,
-            evaluation: evaluations[env],
-            qpos: Vec::new(),
-            body_pos: Vec::new(),
-            body_quat: Vec::new(),
-            times: Vec::with_capacity(count),
-            reference_rows: Vec::new(),
-        };
-        for f in 0..count {
-            episode.qpos.extend_from_slice(frames.qpos(f, env));
-            episode.body_pos.extend_from_slice(frames.body_pos(f, env));
-            episode
-                .body_quat
-                .extend_from_slice(frames.body_quat(f, env));
-            episode.times.push(frames.ref_time(f, env));
-        }
-        episodes.push(episode);
+        let count = first_episode_frames(&terminated, &truncated, horizon, n, env);
+        episodes.push(recorded_episode(&frames, env, evaluations[env], count));
     }
     // One lookup for every frame of every episode, by the kernels' own arithmetic.
     let times: Vec<f32> = episodes
@@ -182,6 +163,48 @@ pub fn record_replay(gpu: &Gpu, input: &ReplayInput<'_>) -> Result<Replay, Repla
         evaluations,
         summary,
     })
+}
+
+/// Frames of env `env`'s first episode in a recorded rollout of `horizon` steps over `n` envs
+/// (`terminated`, `truncated`: `[horizon, n]`): up to the state after the step that ended it,
+/// else every frame (`horizon + 1`).
+pub(crate) fn first_episode_frames(
+    terminated: &[i32],
+    truncated: &[i32],
+    horizon: usize,
+    n: usize,
+    env: usize,
+) -> usize {
+    let ended = (0..horizon).find(|&t| terminated[t * n + env] != 0 || truncated[t * n + env] != 0);
+    ended.map_or(horizon + 1, |t| t + 2)
+}
+
+/// Env `env`'s first `count` frames of `frames` (states and clip times), scored `evaluation`;
+/// the reference rows are looked up afterwards, for every episode at once.
+pub(crate) fn recorded_episode(
+    frames: &TrajectoryFrames,
+    env: usize,
+    evaluation: EnvEvaluation,
+    count: usize,
+) -> RecordedEpisode {
+    let mut episode = RecordedEpisode {
+        env,
+        evaluation,
+        qpos: Vec::new(),
+        body_pos: Vec::new(),
+        body_quat: Vec::new(),
+        times: Vec::with_capacity(count),
+        reference_rows: Vec::new(),
+    };
+    for f in 0..count {
+        episode.qpos.extend_from_slice(frames.qpos(f, env));
+        episode.body_pos.extend_from_slice(frames.body_pos(f, env));
+        episode
+            .body_quat
+            .extend_from_slice(frames.body_quat(f, env));
+        episode.times.push(frames.ref_time(f, env));
+    }
+    episode
 }
 
 #[cfg(test)]

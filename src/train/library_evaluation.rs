@@ -233,6 +233,58 @@ fn summarize_mixed(episodes: &[EnvEvaluation]) -> EvaluationSummary {
     }
 }
 
+/// The columns of a per-clip table that every library evaluation has (`clips.tsv` adds the
+/// active time at which each reached [`CLIP_SUCCESS_RATE`]; `eval --out` writes these alone).
+pub(crate) const CLIP_TABLE_COLUMNS: &str = "clip\tduration_s\tloop\tevaluated_over\tepisode_steps\tepisodes\tsucceeded\tsuccess_rate\tglobal_mpjpe_m\tpose_error_m";
+
+/// A table's number: 4 decimals, `-` when not finite (no step was scored).
+fn table_number(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.4}")
+    } else {
+        "-".to_string()
+    }
+}
+
+/// Clip `c`'s row of [`CLIP_TABLE_COLUMNS`].
+pub(crate) fn clip_table_row(c: &ClipScore) -> String {
+    let over = c
+        .window_s
+        .map_or("whole clip".to_string(), |w| format!("{w} s windows"));
+    format!(
+        "{}\t{:.3}\t{}\t{over}\t{}\t{}\t{}\t{:.3}\t{}\t{}",
+        c.name,
+        c.duration_s,
+        c.loop_mode,
+        c.episode_steps,
+        c.episodes,
+        c.succeeded,
+        c.success_rate,
+        table_number(c.global_mpjpe_m),
+        table_number(c.pose_error_m),
+    )
+}
+
+/// The whole library's row of [`CLIP_TABLE_COLUMNS`] for evaluation `summary` (its episodes,
+/// and how many clips reached [`CLIP_SUCCESS_RATE`] in the first column).
+pub(crate) fn library_table_row(
+    library: &LibraryEvaluation,
+    summary: &EvaluationSummary,
+) -> String {
+    format!(
+        "all ({} of {} clips at {CLIP_SUCCESS_RATE})\t{:.3}\t-\t-\t{}\t{}\t{}\t{:.3}\t{}\t{}",
+        library.clips_at_threshold,
+        library.clips.len(),
+        library.clips.iter().map(|c| c.duration_s).sum::<f64>(),
+        summary.episode_steps,
+        summary.episodes,
+        summary.succeeded,
+        summary.success_rate,
+        table_number(summary.global_mpjpe_m),
+        table_number(summary.pose_error_m),
+    )
+}
+
 /// `clips.tsv`: the latest evaluation's per-clip table, with the active time at which each
 /// clip first reached [`CLIP_SUCCESS_RATE`], and a last row for the whole library (the run's
 /// time to success: episodes and every clip). None before a library evaluation.
@@ -253,48 +305,15 @@ pub fn clips_table(records: &[IterationRecord]) -> Option<String> {
         })
     };
     let time = |t: Option<f64>| t.map_or("-".to_string(), |t| format!("{t:.3}"));
-    let number = |x: f64| {
-        if x.is_finite() {
-            format!("{x:.4}")
-        } else {
-            "-".to_string()
-        }
-    };
-    let mut out = String::from(
-        "clip\tduration_s\tloop\tevaluated_over\tepisode_steps\tepisodes\tsucceeded\tsuccess_rate\tglobal_mpjpe_m\tpose_error_m\ttime_to_threshold_s\n",
-    );
+    let mut out = format!("{CLIP_TABLE_COLUMNS}\ttime_to_threshold_s\n");
     for c in &library.clips {
-        let over = c
-            .window_s
-            .map_or("whole clip".to_string(), |w| format!("{w} s windows"));
-        let _ = writeln!(
-            out,
-            "{}\t{:.3}\t{}\t{over}\t{}\t{}\t{}\t{:.3}\t{}\t{}\t{}",
-            c.name,
-            c.duration_s,
-            c.loop_mode,
-            c.episode_steps,
-            c.episodes,
-            c.succeeded,
-            c.success_rate,
-            number(c.global_mpjpe_m),
-            number(c.pose_error_m),
-            time(first_at(&c.name))
-        );
+        let _ = writeln!(out, "{}\t{}", clip_table_row(c), time(first_at(&c.name)));
     }
     let run_success = evaluated().find_map(|(t, e, _)| e.success.then_some(t));
     let _ = writeln!(
         out,
-        "all ({} of {} clips at {CLIP_SUCCESS_RATE})\t{:.3}\t-\t-\t{}\t{}\t{}\t{:.3}\t{}\t{}\t{}",
-        library.clips_at_threshold,
-        library.clips.len(),
-        library.clips.iter().map(|c| c.duration_s).sum::<f64>(),
-        last.episode_steps,
-        last.episodes,
-        last.succeeded,
-        last.success_rate,
-        number(last.global_mpjpe_m),
-        number(last.pose_error_m),
+        "{}\t{}",
+        library_table_row(library, last),
         time(run_success)
     );
     Some(out)

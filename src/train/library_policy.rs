@@ -14,7 +14,9 @@ use super::error::TrainError;
 use super::evaluation::{EnvEvaluation, EvaluationSummary};
 use super::latent_trainer::{latent_shapes, latent_tensor_names};
 use super::library::{TrainMotion, preflight_training};
-use super::library_evaluation::{CLIP_SUCCESS_RATE, LibraryPlan};
+use super::library_evaluation::{
+    CLIP_SUCCESS_RATE, CLIP_TABLE_COLUMNS, LibraryPlan, clip_table_row, library_table_row,
+};
 use super::preflight::Preflight;
 use super::trainer::Trainer;
 use crate::cuda::{Gpu, Graph};
@@ -379,47 +381,11 @@ impl LibraryPolicyEvaluator {
 /// the whole library. None for an evaluation of one clip.
 pub fn evaluation_clips_table(summary: &EvaluationSummary) -> Option<String> {
     let library = summary.library.as_ref()?;
-    let number = |x: f64| {
-        if x.is_finite() {
-            format!("{x:.4}")
-        } else {
-            "-".to_string()
-        }
-    };
-    let mut out = String::from(
-        "clip\tduration_s\tloop\tevaluated_over\tepisode_steps\tepisodes\tsucceeded\tsuccess_rate\tglobal_mpjpe_m\tpose_error_m\n",
-    );
+    let mut out = format!("{CLIP_TABLE_COLUMNS}\n");
     for c in &library.clips {
-        let over = c
-            .window_s
-            .map_or("whole clip".to_string(), |w| format!("{w} s windows"));
-        let _ = writeln!(
-            out,
-            "{}\t{:.3}\t{}\t{over}\t{}\t{}\t{}\t{:.3}\t{}\t{}",
-            c.name,
-            c.duration_s,
-            c.loop_mode,
-            c.episode_steps,
-            c.episodes,
-            c.succeeded,
-            c.success_rate,
-            number(c.global_mpjpe_m),
-            number(c.pose_error_m),
-        );
+        let _ = writeln!(out, "{}", clip_table_row(c));
     }
-    let _ = writeln!(
-        out,
-        "all ({} of {} clips at {CLIP_SUCCESS_RATE})\t{:.3}\t-\t-\t{}\t{}\t{}\t{:.3}\t{}\t{}",
-        library.clips_at_threshold,
-        library.clips.len(),
-        library.clips.iter().map(|c| c.duration_s).sum::<f64>(),
-        summary.episode_steps,
-        summary.episodes,
-        summary.succeeded,
-        summary.success_rate,
-        number(summary.global_mpjpe_m),
-        number(summary.pose_error_m),
-    );
+    let _ = writeln!(out, "{}", library_table_row(library, summary));
     Some(out)
 }
 
