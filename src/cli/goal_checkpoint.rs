@@ -16,7 +16,6 @@ use crate::train::Checkpoint;
 use crate::train::goal_evaluation::{
     check_goal_checkpoint, evaluate_goal_on_gpu, format_goal_evaluation,
 };
-use crate::viewer::save_page;
 
 /// What `eval` was asked for, for a goal checkpoint.
 pub(super) struct GoalEvalJob<'a> {
@@ -87,19 +86,16 @@ pub(super) fn write_goal_replay(job: &ReplayJob<'_>, checkpoint: &Checkpoint) ->
         checked.config.motion, m.iteration, m.seed, m.active_time_s
     );
     let character = checked.motion.tracked().character().clone();
-    let bytes = save_page(job.page, &replay.recording, &character, &title)?;
     let mut report = goal_episodes_report(&replay, checked.config.run.eval_envs);
-    let _ = writeln!(
-        report,
-        "wrote                {} ({:.2} MB, {} frames)",
-        job.page.display(),
-        bytes as f64 / 1e6,
-        replay.recording.meta.total_frames()
-    );
-    if let Some(path) = job.recording {
-        replay.recording.save(path)?;
-        let _ = writeln!(report, "wrote                {}", path.display());
-    }
+    let (page, recording) = (job.page, job.recording);
+    super::replay::write_page(
+        &mut report,
+        &replay.recording,
+        &character,
+        &title,
+        page,
+        recording,
+    )?;
     Ok(report)
 }
 

@@ -17,7 +17,6 @@ use crate::train::library_policy::{
     prepare_library_policy,
 };
 use crate::train::{Checkpoint, EvaluationSummary};
-use crate::viewer::save_page;
 
 /// What `eval` was given for a library checkpoint.
 pub(super) struct LibraryEvalJob<'a> {
@@ -181,7 +180,6 @@ pub(super) fn replay_library(job: &LibraryReplayJob<'_>) -> Result<String> {
         m.active_time_s
     );
     let character = prepared.motion.tracked().character();
-    let bytes = save_page(job.page, &replay.recording, character, &title)?;
     let mut report = library_lines(&prepared);
     let _ = writeln!(
         report,
@@ -201,16 +199,14 @@ pub(super) fn replay_library(job: &LibraryReplayJob<'_>) -> Result<String> {
         &replay.summary,
         prepared.config.run.success_rate,
     ));
-    let _ = writeln!(
-        report,
-        "wrote                {} ({:.2} MB, {} frames)",
-        job.page.display(),
-        bytes as f64 / 1e6,
-        replay.recording.meta.total_frames()
-    );
-    if let Some(path) = job.recording {
-        replay.recording.save(path)?;
-        let _ = writeln!(report, "wrote                {}", path.display());
-    }
+    let (page, recording) = (job.page, job.recording);
+    super::replay::write_page(
+        &mut report,
+        &replay.recording,
+        character,
+        &title,
+        page,
+        recording,
+    )?;
     Ok(report)
 }

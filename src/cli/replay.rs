@@ -9,6 +9,7 @@ use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
 
 use crate::cuda::Gpu;
+use crate::motion::Character;
 use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
 use crate::recording::{Outcome, Recording};
@@ -162,20 +163,42 @@ pub(super) fn write_replay(job: &ReplayJob<'_>) -> Result<String> {
         "{}: replay of iteration {} (seed {}, {:.1} s active)",
         config.motion, m.iteration, m.seed, m.active_time_s
     );
-    let bytes = save_page(job.page, &replay.recording, motion.character(), &title)?;
     let mut report = episodes_report(&replay, &envs, checks.eval_steps, config.run.success_rate);
+    let character = motion.character();
+    write_page(
+        &mut report,
+        &replay.recording,
+        character,
+        &title,
+        job.page,
+        job.recording,
+    )?;
+    Ok(report)
+}
+
+/// Writes `recording`'s replay page to `page` (and the recording to `save_recording`, when
+/// given) and adds a line for each file to `report`.
+pub(super) fn write_page(
+    report: &mut String,
+    recording: &Recording,
+    character: &Character,
+    title: &str,
+    page: &Path,
+    save_recording: Option<&Path>,
+) -> Result<()> {
+    let bytes = save_page(page, recording, character, title)?;
     let _ = writeln!(
         report,
         "wrote                {} ({:.2} MB, {} frames)",
-        job.page.display(),
+        page.display(),
         bytes as f64 / 1e6,
-        replay.recording.meta.total_frames()
+        recording.meta.total_frames()
     );
-    if let Some(path) = job.recording {
-        replay.recording.save(path)?;
+    if let Some(path) = save_recording {
+        recording.save(path)?;
         let _ = writeln!(report, "wrote                {}", path.display());
     }
-    Ok(report)
+    Ok(())
 }
 
 /// One line per recorded episode of `recording`, which ran in `envs`.
