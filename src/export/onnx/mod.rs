@@ -185,7 +185,12 @@ pub fn goal_observation_blocks(
     motors: usize,
     effectors: usize,
 ) -> Vec<ObservationBlock> {
-    let mut blocks = observation_blocks(&goal_observation_config(obs), motors, effectors);
+    // The reference blocks the goal task turns off are there with size 0; they are left out.
+    let mut blocks: Vec<ObservationBlock> =
+        observation_blocks(&goal_observation_config(obs), motors, effectors)
+            .into_iter()
+            .filter(|b| b.size > 0)
+            .collect();
     let offset = blocks.last().map_or(0, |b| b.offset + b.size);
     blocks.push(ObservationBlock {
         name: "goal".to_string(),
