@@ -2,6 +2,9 @@
 //! then the MLP, float32 initializers, input `obs [batch, D]` and output `actions [batch, A]`
 //! (the mean action) with a named dynamic batch axis, and the deployment contract in
 //! `metadata_props` ([`contract`]). No GPU: the weights are the checkpoint's.
+//! A goal checkpoint exports the same way (its contract's blocks the goal observation's; in a
+//! latent action space the head, prior and decoder composed); a latent controller exports as
+//! two models ([`latent`]).
 //!
 //! The graph: `Sub(obs, mean)`, `Mul(·, 1 / sqrt(var + 1e-8))`, `Clip(·, -clip, clip)`, then per
 //! layer `Gemm(x, W, b)` with `Elu` between layers. The normalizer stays three nodes rather than
