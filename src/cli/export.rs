@@ -5,12 +5,14 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
 use clap::Args;
+use prost::Message as _;
 
 use crate::export::Format;
 use crate::export::bvh::bvh_text;
 use crate::export::deepmimic::deepmimic_text;
 use crate::export::glb::glb_bytes;
 use crate::export::onnx::export_policy;
+use crate::export::onnx::latent::export_latent_controller;
 use crate::files::write_bytes_atomically;
 use crate::motion::Character;
 use crate::motion::find::{motions_dir_from_env, resolve_motion};
@@ -107,6 +109,9 @@ fn onnx_export(path: &Path, args: &ExportArgs, character: &Character) -> Result<
         .first()
         .map(|p| p.physics_dt)
         .ok_or_else(|| anyhow!("no plans for {} worlds", config.run.eval_envs))?;
+    if config.latent.is_some() {
+        return latent_export(&checkpoint, args, character, physics_dt, &sidecar);
+    }
     let export = export_policy(&checkpoint, character, physics_dt)?;
     write_bytes_atomically(&sidecar, export.contract_json()?.as_bytes())
         .with_context(|| format!("writing {}", sidecar.display()))?;
@@ -118,6 +123,48 @@ fn onnx_export(path: &Path, args: &ExportArgs, character: &Character) -> Result<
             c.motion,
             c.observation.size,
             c.action.size,
+            crate::export::onnx::OPSET,
+            sidecar.display()
+        ),
+    ))
+}
+
+/// A latent controller's two models: the decoder (and prior) as the bytes for `args.out`, the
+/// encoder written beside it (`policy.onnx` -> `policy.encoder.onnx`), the contract to
+/// `sidecar`.
+fn latent_export(
+    checkpoint: &Checkpoint,
+    args: &ExportArgs,
+    character: &Character,
+    physics_dt: f64,
+    sidecar: &Path,
+) -> Result<(Vec<u8>, String)> {
+    let encoder_path = args.out.with_extension("encoder.onnx");
+    let file_name = |p: &Path| {
+        p.file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+    };
+    let export = export_latent_controller(
+        checkpoint,
+        character,
+        physics_dt,
+        [&file_name(&args.out), &file_name(&encoder_path)],
+    )?;
+    write_bytes_atomically(&encoder_path, &export.encoder.encode_to_vec())
+        .with_context(|| format!("writing {}", encoder_path.display()))?;
+    write_bytes_atomically(sidecar, export.contract_json()?.as_bytes())
+        .with_context(|| format!("writing {}", sidecar.display()))?;
+    let c = &export.contract;
+    Ok((
+        export.decoder.encode_to_vec(),
+        format!(
+            "{} latent controller: decoder and prior here (proprio {} + z {} -> action {}), encoder in {} (observation {} -> z); opset {}; contract in {}",
+            c.policy.motion,
+            c.proprio_columns.len(),
+            c.latent_size,
+            c.policy.action.size,
+            encoder_path.display(),
+            c.policy.observation.size,
             crate::export::onnx::OPSET,
             sidecar.display()
         ),

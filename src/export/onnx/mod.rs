@@ -2,24 +2,32 @@
 //! then the MLP, float32 initializers, input `obs [batch, D]` and output `actions [batch, A]`
 //! (the mean action) with a named dynamic batch axis, and the deployment contract in
 //! `metadata_props` ([`contract`]). No GPU: the weights are the checkpoint's.
+//! A goal checkpoint exports the same way (its contract's blocks the goal observation's; in a
+//! latent action space the head, prior and decoder composed); a latent controller exports as
+//! two models ([`latent`]).
 //!
 //! The graph: `Sub(obs, mean)`, `Mul(·, 1 / sqrt(var + 1e-8))`, `Clip(·, -clip, clip)`, then per
 //! layer `Gemm(x, W, b)` with `Elu` between layers. The normalizer stays three nodes rather than
 //! being folded into the first layer's weights: the clip between them is not linear.
 
 pub mod contract;
+pub mod graph;
+pub mod latent;
 pub mod proto;
 
 use prost::Message as _;
 
-use crate::env::layout::JointLayout;
+use crate::env::layout::{JointLayout, ObservationBlock, observation_blocks};
+use crate::env::{GOAL_OBSERVATION, ObsConfig, goal_observation_config};
 use crate::motion::Character;
 use crate::ppo::{LayerShape, mlp_layout};
 use crate::train::checkpoint::tensor_names;
+use crate::train::goal_latent::{DECODER_DIGEST, load_goal_decoder};
 use crate::train::{Checkpoint, PolicyShapes, TrainConfig, TrainError};
 
 use super::{ExportError, Format};
 use contract::{PolicyContract, VARIANCE_EPSILON};
+use graph::{GraphBuilder, value_info};
 use proto::*;
 
 /// The ONNX operator set the model uses.
@@ -75,47 +83,6 @@ pub fn normalizer(count: &[f64], mean: &[f64], m2: &[f64]) -> (Vec<f64>, Vec<f64
     }
 }
 
-fn tensor(name: &str, dims: &[usize], values: impl IntoIterator<Item = f32>) -> TensorProto {
-    TensorProto {
-        dims: dims.iter().map(|&d| d as i64).collect(),
-        data_type: FLOAT,
-        name: name.to_string(),
-        raw_data: values.into_iter().flat_map(|v| v.to_le_bytes()).collect(),
-    }
-}
-
-fn node(op: &str, inputs: &[&str], output: &str) -> NodeProto {
-    NodeProto {
-        input: inputs.iter().map(|s| s.to_string()).collect(),
-        output: vec![output.to_string()],
-        name: output.to_string(),
-        op_type: op.to_string(),
-        ..Default::default()
-    }
-}
-
-fn value_info(name: &str, size: usize, doc: &str) -> ValueInfoProto {
-    ValueInfoProto {
-        name: name.to_string(),
-        r#type: Some(TypeProto {
-            tensor_type: Some(TensorTypeProto {
-                elem_type: FLOAT,
-                shape: Some(TensorShapeProto {
-                    dim: vec![
-                        Dimension {
-                            value: Some(DimensionValue::DimParam(BATCH.to_string())),
-                        },
-                        Dimension {
-                            value: Some(DimensionValue::DimValue(size as i64)),
-                        },
-                    ],
-                }),
-            }),
-        }),
-        doc_string: doc.to_string(),
-    }
-}
-
 /// The actor's layers in the checkpoint's flat parameters (`GaussianPolicy`'s layout).
 pub fn actor_layers(config: &TrainConfig, shapes: &PolicyShapes) -> Vec<LayerShape> {
     mlp_layout(
@@ -137,21 +104,112 @@ pub fn export_policy(
         .meta
         .config(checkpoint.source())
         .map_err(TrainError::from)?;
-    if config.goal.is_some() {
-        // The contract describes tracking's observation blocks, not the goal task's.
+    if config.latent.is_some() {
         return Err(ExportError::Unsupported(format!(
-            "{}: a goal-task policy; its ONNX export is not built yet (docs/goal.md)",
+            "{}: a latent controller's checkpoint; export it with latent::export_latent_controller (two models)",
             checkpoint.source()
         )));
     }
-    let shapes = PolicyShapes::new(&config, character)?;
+    // A goal run in a latent action space drives the decoder its configuration names, which
+    // must be the one it was trained with (the digest, as eval checks it).
+    let decoder = load_goal_decoder(&config, character)?;
+    let shapes = match &decoder {
+        Some(d) => {
+            d.check_checkpoint(checkpoint)?;
+            d.head_shapes(&config)
+        }
+        None if checkpoint.tensor(DECODER_DIGEST).is_some() => {
+            return Err(ExportError::Unsupported(format!(
+                "{}: records a latent decoder's digest, but its configuration names no goal.decoder",
+                checkpoint.source()
+            )));
+        }
+        None => PolicyShapes::new(&config, character)?,
+    };
     shapes.check(checkpoint)?;
     let layout = JointLayout::for_character(character)
         .map_err(|e| ExportError::Unsupported(e.to_string()))?;
-    let (d, a) = (shapes.observation_size, shapes.action_size);
+    let d = shapes.observation_size;
     let actor = checkpoint
         .get::<f32>(tensor_names::ACTOR, &[shapes.actor_params])
         .map_err(TrainError::from)?;
+    let (mean, inv_std) = checkpoint_normalizer(checkpoint, d)?;
+
+    let mut graph = GraphBuilder::default();
+    let normalized = graph.normalize(INPUT, "obs", &mean, &inv_std, config.obs.clip);
+    let layers = actor_layers(&config, &shapes);
+    let what = match &decoder {
+        None => {
+            graph.mlp("actor", "actor", &layers, actor, &normalized, OUTPUT);
+            if config.goal.is_some() {
+                "goal policy (PD targets)"
+            } else {
+                "tracking policy"
+            }
+        }
+        Some(d) => {
+            latent::compose_latent_goal(&mut graph, d, &layers, actor, &normalized);
+            "goal policy (latent head, prior and frozen decoder composed)"
+        }
+    };
+    let mut contract =
+        PolicyContract::new(&checkpoint.meta, &config, character, &layout, d, physics_dt);
+    if config.goal.is_some() {
+        contract.observation.blocks =
+            goal_observation_blocks(&config.obs, layout.num_motors, layout.end_effectors.len());
+    }
+    let mut metadata = contract
+        .metadata()
+        .map_err(|e| encode_error(e.to_string()))?;
+    if let Some(d) = &decoder {
+        metadata.extend(latent::goal_decoder_metadata(d));
+    }
+    let model = graph.model(
+        "actor",
+        format!(
+            "{} {what} (iteration {}, seed {}): observation -> mean action; see metadata_props",
+            contract.motion, contract.checkpoint.iteration, contract.checkpoint.seed
+        ),
+        vec![value_info(
+            INPUT,
+            d,
+            "raw observation (contract: observation.blocks)",
+        )],
+        vec![value_info(OUTPUT, layout.num_motors, "mean action")],
+        metadata,
+    );
+    Ok(PolicyExport { model, contract })
+}
+
+/// The goal task's observation blocks: the character's own state (no reference blocks), then
+/// the goal (docs/goal.md).
+pub fn goal_observation_blocks(
+    obs: &ObsConfig,
+    motors: usize,
+    effectors: usize,
+) -> Vec<ObservationBlock> {
+    // The reference blocks the goal task turns off are there with size 0; they are left out.
+    let mut blocks: Vec<ObservationBlock> =
+        observation_blocks(&goal_observation_config(obs), motors, effectors)
+            .into_iter()
+            .filter(|b| b.size > 0)
+            .collect();
+    let offset = blocks.last().map_or(0, |b| b.offset + b.size);
+    blocks.push(ObservationBlock {
+        name: "goal".to_string(),
+        offset,
+        size: GOAL_OBSERVATION,
+        frame: "heading".to_string(),
+        description: "the goal relative to the root in the root's heading frame (x, y), then its horizontal distance, in metres".to_string(),
+    });
+    blocks
+}
+
+/// The normalizer (mean, 1 / std) of a checkpoint's observation statistics of `d` values.
+pub fn checkpoint_normalizer(
+    checkpoint: &Checkpoint,
+    d: usize,
+) -> Result<(Vec<f64>, Vec<f64>), ExportError> {
     let count = checkpoint
         .get::<f64>(tensor_names::OBS_COUNT, &[2])
         .map_err(TrainError::from)?;
@@ -161,94 +219,5 @@ pub fn export_policy(
     let m2 = checkpoint
         .get::<f64>(tensor_names::OBS_M2, &[d])
         .map_err(TrainError::from)?;
-    let (mean, inv_std) = normalizer(count, mean, m2);
-    let clip = config.obs.clip;
-
-    let mut initializer = vec![
-        tensor("obs_mean", &[d], mean.iter().map(|&v| v as f32)),
-        tensor("obs_inv_std", &[d], inv_std.iter().map(|&v| v as f32)),
-        tensor("obs_clip_min", &[], [-clip]),
-        tensor("obs_clip_max", &[], [clip]),
-    ];
-    let mut nodes = vec![
-        node("Sub", &[INPUT, "obs_mean"], "obs_centered"),
-        node("Mul", &["obs_centered", "obs_inv_std"], "obs_scaled"),
-        node(
-            "Clip",
-            &["obs_scaled", "obs_clip_min", "obs_clip_max"],
-            "obs_normalized",
-        ),
-    ];
-    let layers = actor_layers(&config, &shapes);
-    let mut x = "obs_normalized".to_string();
-    for (l, layer) in layers.iter().enumerate() {
-        let (w, b) = (format!("actor.{l}.weight"), format!("actor.{l}.bias"));
-        initializer.push(tensor(
-            &w,
-            &[layer.inputs, layer.outputs],
-            actor[layer.offset..layer.bias_offset()].iter().copied(),
-        ));
-        initializer.push(tensor(
-            &b,
-            &[layer.outputs],
-            actor[layer.bias_offset()..layer.end()].iter().copied(),
-        ));
-        let last = l + 1 == layers.len();
-        let y = if last {
-            OUTPUT.to_string()
-        } else {
-            format!("actor.{l}.linear")
-        };
-        nodes.push(node("Gemm", &[&x, &w, &b], &y));
-        if !last {
-            let z = format!("actor.{l}.elu");
-            let mut elu = node("Elu", &[&y], &z);
-            elu.attribute.push(AttributeProto {
-                name: "alpha".to_string(),
-                r#type: ATTRIBUTE_FLOAT,
-                f: 1.0,
-                i: 0,
-            });
-            nodes.push(elu);
-            x = z;
-        }
-    }
-
-    let contract =
-        PolicyContract::new(&checkpoint.meta, &config, character, &layout, d, physics_dt);
-    let metadata_props = contract
-        .metadata()
-        .map_err(|e| encode_error(e.to_string()))?
-        .into_iter()
-        .map(|(key, value)| StringStringEntryProto { key, value })
-        .collect();
-    let model = ModelProto {
-        ir_version: IR_VERSION,
-        opset_import: vec![OperatorSetIdProto {
-            domain: String::new(),
-            version: OPSET,
-        }],
-        producer_name: "instantmimic".to_string(),
-        producer_version: env!("CARGO_PKG_VERSION").to_string(),
-        domain: String::new(),
-        model_version: 1,
-        doc_string: format!(
-            "{} tracking policy (iteration {}, seed {}): observation -> mean action; see metadata_props",
-            contract.motion, contract.checkpoint.iteration, contract.checkpoint.seed
-        ),
-        graph: Some(GraphProto {
-            node: nodes,
-            name: "actor".to_string(),
-            initializer,
-            doc_string: String::new(),
-            input: vec![value_info(
-                INPUT,
-                d,
-                "raw observation (contract: observation.blocks)",
-            )],
-            output: vec![value_info(OUTPUT, a, "mean action")],
-        }),
-        metadata_props,
-    };
-    Ok(PolicyExport { model, contract })
+    Ok(normalizer(count, mean, m2))
 }

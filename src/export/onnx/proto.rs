@@ -4,8 +4,12 @@
 
 /// `TensorProto.DataType.FLOAT`.
 pub const FLOAT: i32 = 1;
+/// `TensorProto.DataType.INT64` (Gather's indices, Slice's bounds).
+pub const INT64: i32 = 7;
 /// `AttributeProto.AttributeType.FLOAT`.
 pub const ATTRIBUTE_FLOAT: i32 = 1;
+/// `AttributeProto.AttributeType.INT`.
+pub const ATTRIBUTE_INT: i32 = 2;
 
 #[derive(Clone, PartialEq, prost::Message)]
 pub struct ModelProto {
