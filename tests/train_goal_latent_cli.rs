@@ -152,7 +152,11 @@ fn a_decoder_that_does_not_fit_fails_with_one_line_naming_the_file() {
                 "not a latent controller's checkpoint",
             ],
         ),
-        (&missing, &[], &["missing.safetensors"]),
+        (
+            &missing,
+            &[],
+            &["goal.decoder (train --decoder)", "missing.safetensors"],
+        ),
         (
             &good,
             &["env.action_scale=1.0"],

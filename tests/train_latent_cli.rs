@@ -134,4 +134,22 @@ fn no_teacher_or_no_latent_section_fails_with_one_line() {
         repo(),
     );
     assert!(last_error_line(&out).contains("no [latent] section"));
+    // A teacher that is not there: the line names the key and the file.
+    let out = run(
+        &[
+            "train",
+            "--config",
+            "configs/latent/library.toml",
+            "--teacher",
+            "not_there.safetensors",
+            "--dry-run",
+        ],
+        None,
+        repo(),
+    );
+    let line = last_error_line(&out);
+    assert!(
+        line.contains("latent.teacher (train --teacher)") && line.contains("not_there.safetensors"),
+        "{line}"
+    );
 }

@@ -64,7 +64,9 @@ pub fn load_goal_decoder(
     };
     let path = Path::new(&goal.decoder);
     let source = path.display().to_string();
-    let checkpoint = Checkpoint::load(path)?;
+    // Name the key: the path may have come from the config file or from --decoder.
+    let checkpoint = Checkpoint::load(path)
+        .map_err(|e| TrainError::Setup(format!("goal.decoder (train --decoder): {e}")))?;
     let trained = checkpoint.meta.config(&source)?;
     let frozen = frozen_decoder_of(&checkpoint, &source)?;
     let refuse = |reason: String| Err(TrainError::Setup(format!("{source}: {reason}")));

@@ -375,7 +375,9 @@ pub fn load_teacher(
         ));
     }
     let path = Path::new(&latent.teacher);
-    let checkpoint = Checkpoint::load(path)?;
+    // Name the key: the path may have come from the config file or from --teacher.
+    let checkpoint = Checkpoint::load(path)
+        .map_err(|e| TrainError::Setup(format!("latent.teacher (train --teacher): {e}")))?;
     let source = path.display().to_string();
     let teacher_config = checkpoint.meta.config(&source)?;
     if teacher_config.latent.is_some() {
