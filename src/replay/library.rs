@@ -6,12 +6,11 @@
 use crate::cuda::Gpu;
 use crate::motion::TableLayout;
 use crate::plan::PlanStore;
-use crate::recording::Recording;
 use crate::train::library_policy::{LibraryPolicy, LibraryPolicyEvaluator};
-use crate::train::{Checkpoint, EnvEvaluation, EvaluationSummary};
+use crate::train::{Checkpoint, EnvEvaluation};
 
 use super::assemble::{ReplaySource, assemble_recording};
-use super::{ReplayError, chosen_envs, first_episode_frames, recorded_episode};
+use super::{Replay, ReplayError, chosen_envs, first_episode_frames, recorded_episode};
 
 /// The evaluation envs that play clip `clip` of `clips` on `envs` envs (env i plays clip
 /// i mod C), `episodes` of them spread evenly over the clip's starts, its first start first.
@@ -32,17 +31,6 @@ pub fn library_chosen_envs(
     Ok(picks.into_iter().map(|k| own[k]).collect())
 }
 
-/// A library replay: the recording of one clip's chosen envs, and the evaluation of every env
-/// of the same rollout (what `eval` reports).
-pub struct LibraryReplay {
-    pub recording: Recording,
-    pub clip: usize,
-    /// The env each episode of the recording ran in.
-    pub envs: Vec<usize>,
-    pub evaluations: Vec<EnvEvaluation>,
-    pub summary: EvaluationSummary,
-}
-
 /// What to replay: a checked library checkpoint, the clip, and how many of its episodes.
 pub struct LibraryReplayInput<'a> {
     pub prepared: &'a LibraryPolicy,
@@ -54,11 +42,12 @@ pub struct LibraryReplayInput<'a> {
 }
 
 /// Runs the library's evaluation rollout of `input.checkpoint` once on `gpu`, recording every
-/// env after every control step, and assembles the chosen envs of the clip into a recording.
+/// env after every control step, and assembles the chosen envs of the clip (`input.clip`) into
+/// a recording.
 pub fn record_library_replay(
     gpu: &Gpu,
     input: &LibraryReplayInput<'_>,
-) -> Result<LibraryReplay, ReplayError> {
+) -> Result<Replay, ReplayError> {
     let prepared = input.prepared;
     let plan = &prepared.plan;
     let envs = library_chosen_envs(input.clip, plan.clips.len(), plan.envs, input.episodes)?;
@@ -115,9 +104,9 @@ pub fn record_library_replay(
     };
     let character = prepared.motion.tracked().character();
     let recording = assemble_recording(character, &layout, &source, &episodes)?;
-    Ok(LibraryReplay {
+    // The clip's chosen envs' recording; the evaluation of every env (every clip).
+    Ok(Replay {
         recording,
-        clip: input.clip,
         envs,
         evaluations,
         summary,
