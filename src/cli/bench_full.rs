@@ -18,8 +18,8 @@ pub(super) struct FullArgs {
     #[arg(long, default_value = "backflip")]
     motion: String,
     /// Training configuration (TOML) instead of the motion's committed one; --motion replaces
-    /// its `motion`. Its `ppo.overlap_update` and `run.gpus` are not read: both ways are
-    /// measured, on --device.
+    /// its `motion`. Its `ppo.overlap_update`, `ppo.concurrent_networks` and `run.gpus` are not
+    /// read: each loop is measured, on --device.
     #[arg(long)]
     config: Option<PathBuf>,
     #[command(flatten)]

@@ -24,7 +24,7 @@ use crate::env::RolloutStorage;
 use crate::kernels::{AdamParams, DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
 use crate::ppo::adam::{AdamMoments, adam_params};
 use crate::ppo::backward::{MlpGradients, input_gradient_scratch_len};
-use crate::ppo::batch::record_shuffle;
+use crate::ppo::batch::{minibatch_rows, record_shuffle};
 use crate::ppo::policy::Mlp;
 use crate::ppo::reduce::{record_clear, record_column_sums, record_sum_of_squares};
 
@@ -156,17 +156,8 @@ impl DistillationUpdate {
     ) -> Result<DistillationUpdate, LatentError> {
         let (epochs, minibatches) = (config.epochs as usize, config.minibatches as usize);
         let samples = horizon * envs;
-        if samples == 0 || epochs == 0 || minibatches == 0 || !samples.is_multiple_of(minibatches) {
-            return Err(LatentError::Shape(format!(
-                "{horizon} x {envs} rows in {minibatches} minibatches (latent.minibatches), {epochs} epochs: sizes must be positive and the minibatches must divide the rows"
-            )));
-        }
-        if samples > i32::MAX as usize {
-            return Err(LatentError::Shape(format!(
-                "{samples} rows: indices are i32"
-            )));
-        }
-        let rows = samples / minibatches;
+        let rows = minibatch_rows(horizon, envs, epochs, minibatches)
+            .map_err(|e| LatentError::Shape(format!("latent.epochs, latent.minibatches: {e}")))?;
         let shapes = student.shapes().clone();
         let (d, a, p, l) = (
             shapes.observation_size,

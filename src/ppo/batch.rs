@@ -319,3 +319,24 @@ impl Minibatch {
         Ok(())
     }
 }
+
+/// Rows per minibatch when `horizon` x `envs` samples are split into `minibatches` for
+/// `epochs` passes; why not, when a size is 0, the minibatches do not divide the samples, or a
+/// sample index would not fit the kernels' `i32`.
+pub fn minibatch_rows(
+    horizon: usize,
+    envs: usize,
+    epochs: usize,
+    minibatches: usize,
+) -> Result<usize, String> {
+    let samples = horizon * envs;
+    if samples == 0 || epochs == 0 || minibatches == 0 || !samples.is_multiple_of(minibatches) {
+        return Err(format!(
+            "{horizon} x {envs} samples in {minibatches} minibatches, {epochs} epochs: sizes must be positive and the minibatches must divide the samples"
+        ));
+    }
+    if samples > i32::MAX as usize {
+        return Err(format!("{samples} samples: indices are i32"));
+    }
+    Ok(samples / minibatches)
+}

@@ -50,7 +50,9 @@ use super::adam::{
     AdamMoments, LEARNING_RATE_MAX, LEARNING_RATE_MIN, adam_params, record_schedule,
 };
 use super::backward::{MlpGradients, input_gradient_scratch_len, record_mlp_backward};
-use super::batch::{Advantages, Minibatch, PpoBatch, ValueNormalization, record_shuffle};
+use super::batch::{
+    Advantages, Minibatch, PpoBatch, ValueNormalization, minibatch_rows, record_shuffle,
+};
 use super::config::{KlMeasure, PpoConfig};
 use super::loss::{LOSS_TERMS, LossGradients, PpoStatistics};
 use super::policy::{GaussianPolicy, LayerShape, Mlp, PolicyError};
@@ -208,17 +210,7 @@ impl PpoUpdate {
         let horizon = q.horizon as usize;
         let (epochs, minibatches) = (q.epochs as usize, q.minibatches as usize);
         let samples = horizon * envs;
-        if samples == 0 || epochs == 0 || minibatches == 0 || !samples.is_multiple_of(minibatches) {
-            return Err(PpoError::Shape(format!(
-                "{horizon} x {envs} samples in {minibatches} minibatches, {epochs} epochs: sizes must be positive and the minibatches must divide the samples"
-            )));
-        }
-        if samples > i32::MAX as usize {
-            return Err(PpoError::Shape(format!(
-                "{samples} samples: indices are i32"
-            )));
-        }
-        let rows = samples / minibatches;
+        let rows = minibatch_rows(horizon, envs, epochs, minibatches).map_err(PpoError::Shape)?;
         let (d, a) = (policy.observation_size(), policy.action_size());
         let actor_shapes = policy.actor_layers().to_vec();
         let critic_shapes = policy.critic_layers().to_vec();
