@@ -385,6 +385,18 @@ pub fn load_teacher(
             "{source}: a latent controller's checkpoint; the teacher is a tracker's (train --config configs/train/library_shipped.toml)"
         )));
     }
+    // The student learns the teacher's actions as they are: they command the same PD targets
+    // only under the same action mode and scale.
+    let (teacher_env, env) = (&teacher_config.env, &config.env);
+    if teacher_env.action_mode != env.action_mode || teacher_env.action_scale != env.action_scale {
+        return Err(TrainError::Setup(format!(
+            "{source}: the tracker acts with env.action_mode = \"{}\", env.action_scale = {} and this run with \"{}\", {}: its actions would command other PD targets (train the tracker with this run's [env] action keys, or copy them)",
+            format!("{:?}", teacher_env.action_mode).to_lowercase(),
+            teacher_env.action_scale,
+            format!("{:?}", env.action_mode).to_lowercase(),
+            env.action_scale
+        )));
+    }
     let f32s = |name: &str| -> Result<&[f32], TrainError> {
         let len = checkpoint.tensor(name).map_or(0, |t| t.data.len());
         Ok(checkpoint.get::<f32>(name, &[len])?)

@@ -41,11 +41,21 @@ fn the_committed_latent_config_shares_the_trackers_task_and_validates() {
     assert_eq!(section.latent_size, 64);
     assert_eq!(section.kl_weight, 0.01);
     assert!(tracker.latent.is_none());
-    // The student sees what the teacher saw, in the same envs, on the same clips.
-    assert_eq!(latent.obs, tracker.obs);
-    assert_eq!(latent.env, tracker.env);
-    assert_eq!(latent.motion_library, tracker.motion_library);
-    assert_eq!(latent.ppo.horizon, tracker.ppo.horizon);
+    // The student sees what the teacher saw, in the same envs, on the same clips; so does the
+    // latent controller of every clip with its tracker.
+    for (latent, tracker) in [
+        (latent.clone(), tracker),
+        (
+            TrainConfig::load(&repo("configs/latent/all.toml")).expect("valid"),
+            TrainConfig::load(&repo("configs/train/library_all.toml")).expect("valid"),
+        ),
+    ] {
+        assert_eq!(latent.obs, tracker.obs);
+        assert_eq!(latent.env, tracker.env);
+        assert_eq!(latent.motion_library, tracker.motion_library);
+        assert_eq!(latent.ppo.horizon, tracker.ppo.horizon);
+        assert_eq!(latent.run.eval_interval, tracker.run.eval_interval);
+    }
     // The stored configuration round-trips with its section.
     let text = latent.to_toml().expect("toml");
     assert_eq!(
@@ -113,6 +123,21 @@ fn the_teacher_is_loaded_and_one_of_another_shape_refused_with_one_line() {
         .expect_err("refused")
         .to_string();
     assert!(e.contains("actor.params") && e.starts_with(&wrong), "{e}");
+
+    // A tracker of another action mode: its actions mean other PD targets.
+    let absolute_dir = tempfile::tempdir().expect("temp dir");
+    let mut absolute = tracker.clone();
+    absolute.env.action_mode = crate::env::ActionMode::Absolute;
+    let other_mode = tracker_checkpoint(absolute_dir.path(), &absolute, shapes.actor_params);
+    latent.latent.as_mut().expect("section").teacher = other_mode.clone();
+    let e = load_teacher(&latent, &shapes)
+        .expect_err("refused")
+        .to_string();
+    assert!(
+        e.starts_with(&other_mode) && e.contains("env.action_mode = \"absolute\""),
+        "{e}"
+    );
+    assert!(!e.contains('\n'), "{e}");
 
     // A latent controller's checkpoint is no teacher.
     let fourth = tempfile::tempdir().expect("temp dir");
