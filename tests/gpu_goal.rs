@@ -131,6 +131,7 @@ fn a_short_goal_run_reports_goals_per_episode_and_the_fall_rate() {
     let dir = tempfile::tempdir().expect("temp dir");
     let mut config = goal_config();
     config.run.max_iterations = 4;
+    config.run.replay = true;
     config.run.checkpoint_interval = 2;
     let path = dir.path().join("goal.toml");
     std::fs::write(&path, config.to_toml().expect("toml")).expect("write config");

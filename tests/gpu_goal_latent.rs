@@ -191,6 +191,7 @@ fn a_short_latent_goal_run_through_the_binary_reports_goals_per_episode() {
     let mut config = goal_config(&decoder_path);
     config.goal.as_mut().expect("[goal]").decoder.clear();
     config.run.max_iterations = 4;
+    config.run.replay = true;
     config.run.checkpoint_interval = 2;
     let path = dir.path().join("reach_latent.toml");
     std::fs::write(&path, config.to_toml().expect("toml")).expect("write config");
