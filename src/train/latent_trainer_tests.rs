@@ -39,7 +39,7 @@ fn the_committed_latent_config_shares_the_trackers_task_and_validates() {
     let tracker = TrainConfig::load(&repo("configs/train/library_shipped.toml")).expect("valid");
     let section = latent.latent.as_ref().expect("a [latent] section");
     assert_eq!(section.latent_size, 64);
-    assert_eq!(section.kl_weight, 0.01);
+    assert_eq!(section.kl_weight, 0.001);
     assert!(tracker.latent.is_none());
     // The student sees what the teacher saw, in the same envs, on the same clips; so does the
     // latent controller of every clip with its tracker.
@@ -69,7 +69,7 @@ fn latent_keys_are_validated_with_the_key_named() {
     let text = std::fs::read_to_string(repo("configs/latent/library.toml")).expect("read");
     for (from, to, key) in [
         ("latent_size = 64", "latent_size = 0", "latent.latent_size"),
-        ("kl_weight = 0.01", "kl_weight = -1.0", "latent.kl_weight"),
+        ("kl_weight = 0.001", "kl_weight = -1.0", "latent.kl_weight"),
         (
             "minibatches = 4\n#",
             "minibatches = 3\n#",

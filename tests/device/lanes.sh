@@ -13,10 +13,18 @@
 # allowed past it: `train` gets `timeout` at the deadline, whose SIGTERM makes it stop after
 # the current iteration with a checkpoint (exit 143), so the run can be resumed in the next
 # call. Each line of $OUT/summary.txt is one finished step; the summary is printed last.
-# KEEP: the runs whose directories (with their newest checkpoint) come back as run_NAME.tar.
+# KEEP: the runs whose directories (with their newest checkpoint), xz-packed, come back as
+# run_NAME.txz (a file must stay under 16 MiB: a library run's metrics.jsonl alone passes 10 MB
+# in 15 minutes). A plan file given as the argument is sourced first; it may set all of the above.
 #   tests/device/stage.sh; then there:
 #   BIN=.device-bin LANE1='train tracker 520 --config configs/train/library_all.toml' tests/device/lanes.sh
+#   BIN=.device-bin tests/device/lanes.sh tests/device/plans/NAME.sh
 set -uo pipefail
+if [ -n "${1:-}" ]; then
+  [ -f "$1" ] || { echo "lanes.sh: no plan file $1" >&2; exit 2; }
+  # shellcheck disable=SC1090
+  . "$1"
+fi
 cd "$(dirname "$0")/../.."
 . tests/device/common.sh
 export BIN NCCL_NVLS_ENABLE=${NCCL_NVLS_ENABLE:-0}
@@ -110,16 +118,19 @@ for d in "$OUT"/runs/*/checkpoints; do
 done
 note "all done in $(( $(date +%s) - start )) s"
 # What comes back is at most 8 files, 2 folders down: summary.txt, logs.txz (every log and run
-# directory without its checkpoints) and run_NAME.tar for each run named in KEEP (the run
-# directory with its newest checkpoint, to resume or to teach in the next call; at most 6).
+# directory without its checkpoints) and run_NAME.txz for each run named in KEEP (the run
+# directory with its newest checkpoint, xz-packed, to resume or to teach in the next call; at
+# most 6).
 tar cJf "$OUT/logs.txz" -C "$OUT" --exclude='*.safetensors' --exclude=logs.txz \
   $(cd "$OUT" && ls | grep -v -e '^summary.txt$' -e '^logs.txz$')
 kept=0
 for name in ${KEEP:-}; do
   if [ ! -d "$OUT/runs/$name" ]; then note "keep $name: no such run"; continue; fi
   if [ "$kept" -ge 6 ]; then note "keep $name: more than 6 runs to keep, left out"; continue; fi
-  tar cf "$OUT/run_$name.tar" -C "$OUT/runs" "$name" && kept=$((kept + 1))
+  tar cJf "$OUT/run_$name.txz" -C "$OUT/runs" "$name" && kept=$((kept + 1))
+  size=$(stat -c %s "$OUT/run_$name.txz")
+  [ "$size" -lt $((16 << 20)) ] || note "keep $name: run_$name.txz is $size bytes, over the 16 MiB a file may bring back"
 done
-find "$OUT" -mindepth 1 -maxdepth 1 ! -name summary.txt ! -name logs.txz ! -name 'run_*.tar' -exec rm -rf {} +
+find "$OUT" -mindepth 1 -maxdepth 1 ! -name summary.txt ! -name logs.txz ! -name 'run_*.txz' -exec rm -rf {} +
 ls -la "$OUT"
 echo "==== summary"; cat "$summary"
