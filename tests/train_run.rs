@@ -7,8 +7,9 @@ use std::path::Path;
 
 use instantmimic::train::checkpoint::tensor_names;
 use instantmimic::train::{
-    EpisodeEnds, EvaluationSummary, IterationRecord, IterationStats, MetricsLog, ProgressMode,
-    RunDir, RunSession, StopReason, TrainConfig, TrainError, UpdateStats, curve,
+    EpisodeEnds, EvaluationSummary, GoalRates, GoalRecord, IterationRecord, IterationStats,
+    MetricsLog, ProgressMode, RunDir, RunSession, StopReason, TrainConfig, TrainError, UpdateStats,
+    curve,
 };
 
 fn config(max_iterations: u64) -> TrainConfig {
@@ -351,6 +352,77 @@ fn a_damaged_line_before_the_end_is_an_error_naming_it() {
     );
 }
 
+/// The curve's pixels (RGB) and a counter of one color's pixels.
+fn curve_pixels(png_bytes: Vec<u8>) -> Vec<u8> {
+    let decoder = png::Decoder::new(std::io::Cursor::new(png_bytes));
+    let mut reader = decoder.read_info().unwrap();
+    let mut pixels = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut pixels).unwrap();
+    assert_eq!(
+        (info.width, info.height),
+        (curve::CURVE_WIDTH, curve::CURVE_HEIGHT)
+    );
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    pixels.truncate(info.buffer_size());
+    pixels
+}
+
+fn count(pixels: &[u8], c: plotters::style::RGBColor) -> usize {
+    pixels
+        .chunks_exact(3)
+        .filter(|p| p[0] == c.0 && p[1] == c.1 && p[2] == c.2)
+        .count()
+}
+
+#[test]
+fn a_goal_runs_curve_draws_goals_per_episode_instead_of_a_success_rate() {
+    let records: Vec<IterationRecord> = (1..=40)
+        .map(|i| IterationRecord {
+            iteration: i,
+            active_time_s: 0.1 * i as f64,
+            frames: 512 * i,
+            frames_per_s: 5120.0,
+            mean_return: 1.0,
+            mean_episode_length: 5.0 * i as f64,
+            update: UpdateStats::default(),
+            termination: Default::default(),
+            evaluation: None,
+            divergence: None,
+            goal: Some(GoalRecord {
+                rollout: GoalRates {
+                    episodes: 10,
+                    goals_per_episode: 1.0,
+                    fall_rate: 0.5,
+                },
+                evaluation: (i % 5 == 0).then_some(GoalRates {
+                    episodes: 32,
+                    goals_per_episode: 0.2 * i as f64,
+                    fall_rate: 0.1,
+                }),
+            }),
+        })
+        .collect();
+    let png = curve::learning_curve_png(
+        &records,
+        "reach (seed 0)",
+        300.0,
+        curve::RightAxis::GoalsPerEpisode,
+    )
+    .unwrap();
+    let pixels = curve_pixels(png);
+    assert!(
+        count(&pixels, curve::GOALS_COLOR) > 500,
+        "{}",
+        count(&pixels, curve::GOALS_COLOR)
+    );
+    assert!(count(&pixels, curve::EPISODE_LENGTH_COLOR) > 500);
+    assert_eq!(
+        count(&pixels, curve::SUCCESS_RATE_COLOR),
+        0,
+        "no success rate"
+    );
+}
+
 #[test]
 fn the_learning_curve_is_a_png_with_both_series() {
     let records: Vec<IterationRecord> = (1..=40)
@@ -368,22 +440,10 @@ fn the_learning_curve_is_a_png_with_both_series() {
             goal: None,
         })
         .collect();
-    let png_bytes = curve::learning_curve_png(&records, "walk (seed 0)", 300.0, 0.9).unwrap();
-    let decoder = png::Decoder::new(std::io::Cursor::new(png_bytes));
-    let mut reader = decoder.read_info().unwrap();
-    let mut pixels = vec![0; reader.output_buffer_size().unwrap()];
-    let info = reader.next_frame(&mut pixels).unwrap();
-    assert_eq!(
-        (info.width, info.height),
-        (curve::CURVE_WIDTH, curve::CURVE_HEIGHT)
-    );
-    assert_eq!(info.color_type, png::ColorType::Rgb);
-    let count = |c: plotters::style::RGBColor| {
-        pixels[..info.buffer_size()]
-            .chunks_exact(3)
-            .filter(|p| p[0] == c.0 && p[1] == c.1 && p[2] == c.2)
-            .count()
-    };
+    let threshold = curve::RightAxis::SuccessRate { threshold: 0.9 };
+    let png_bytes = curve::learning_curve_png(&records, "walk (seed 0)", 300.0, threshold).unwrap();
+    let pixels = curve_pixels(png_bytes);
+    let count = |c| count(&pixels, c);
     // Both lines are drawn (hundreds of pixels each, not a stray legend swatch).
     assert!(
         count(curve::EPISODE_LENGTH_COLOR) > 500,
@@ -395,8 +455,9 @@ fn the_learning_curve_is_a_png_with_both_series() {
         "{}",
         count(curve::SUCCESS_RATE_COLOR)
     );
+    assert_eq!(count(curve::GOALS_COLOR), 0);
     // No records at all still draws (a run killed before its first iteration).
-    assert!(curve::learning_curve_png(&[], "empty", 300.0, 0.9).is_ok());
+    assert!(curve::learning_curve_png(&[], "empty", 300.0, threshold).is_ok());
 }
 
 /// The overlapped loop (`ppo.overlap_update`) runs one rollout more where it fills its

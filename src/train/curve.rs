@@ -1,6 +1,7 @@
 //! `curve.png`: the learning curve of a run: mean episode length (left axis, every iteration)
-//! and evaluation success rate (right axis, every evaluation) against active training time,
-//! with the success threshold as a dashed line. Drawn into a pixel buffer with the embedded
+//! and the evaluation (right axis, every evaluation) against active training time: a tracking
+//! run's success rate with the success threshold as a dashed line, a goal run's goals per
+//! episode with the last fall rate in the legend. Drawn into a pixel buffer with the embedded
 //! font (as `hpo/plot.rs`), so it needs no system fonts or libraries.
 
 use std::path::Path;
@@ -16,18 +17,78 @@ pub const CURVE_HEIGHT: u32 = 600;
 /// Series colors (tests look for them in the image).
 pub const EPISODE_LENGTH_COLOR: RGBColor = RGBColor(40, 100, 200);
 pub const SUCCESS_RATE_COLOR: RGBColor = RGBColor(215, 80, 30);
+pub const GOALS_COLOR: RGBColor = RGBColor(30, 150, 70);
 
+/// What the curve's right axis shows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RightAxis {
+    /// A tracking run's evaluation success rate, with `threshold` (the run's success rate)
+    /// dashed.
+    SuccessRate { threshold: f64 },
+    /// A goal run's evaluation goals per episode (the goal task has no success rate).
+    GoalsPerEpisode,
+}
+
+/// The right axis's series: its points, label, color and upper bound.
+struct RightSeries {
+    points: Vec<(f64, f64)>,
+    label: String,
+    color: RGBColor,
+    top: f64,
+    threshold: Option<f64>,
+}
+
+fn right_series(records: &[IterationRecord], axis: RightAxis) -> RightSeries {
+    let finite = |&(t, y): &(f64, f64)| t.is_finite() && y.is_finite();
+    match axis {
+        RightAxis::SuccessRate { threshold } => RightSeries {
+            points: records
+                .iter()
+                .filter_map(|r| Some((r.active_time_s, r.evaluation.as_ref()?.success_rate)))
+                .filter(finite)
+                .collect(),
+            label: "success rate".to_owned(),
+            color: SUCCESS_RATE_COLOR,
+            top: 1.05,
+            threshold: Some(threshold),
+        },
+        RightAxis::GoalsPerEpisode => {
+            let evaluations: Vec<(f64, f64, f64)> = records
+                .iter()
+                .filter_map(|r| {
+                    let e = r.goal.as_ref()?.evaluation.as_ref()?;
+                    Some((r.active_time_s, e.goals_per_episode, e.fall_rate))
+                })
+                .filter(|&(t, g, _)| finite(&(t, g)))
+                .collect();
+            let most = evaluations.iter().map(|e| e.1).fold(0.0, f64::max);
+            let label = match evaluations.last() {
+                Some(&(_, goals, falls)) if falls.is_finite() => {
+                    format!("goals per episode (last {goals:.2}, fall rate {falls:.3})")
+                }
+                _ => "goals per episode".to_owned(),
+            };
+            RightSeries {
+                points: evaluations.iter().map(|&(t, g, _)| (t, g)).collect(),
+                label,
+                color: GOALS_COLOR,
+                top: (most * 1.1).max(1.0),
+                threshold: None,
+            }
+        }
+    }
+}
 fn plot_error(e: impl std::fmt::Display) -> TrainError {
     TrainError::Plot(e.to_string())
 }
 
 /// The learning curve as PNG bytes. `max_episode_length` sets the left axis (the episode
-/// length limit); `threshold` is the success rate drawn as a dashed line.
+/// length limit); `right` says what the right axis shows.
 pub fn learning_curve_png(
     records: &[IterationRecord],
     title: &str,
     max_episode_length: f64,
-    threshold: f64,
+    right: RightAxis,
 ) -> Result<Vec<u8>, TrainError> {
     let finite = |x: f64| x.is_finite();
     let lengths: Vec<(f64, f64)> = records
@@ -35,14 +96,10 @@ pub fn learning_curve_png(
         .map(|r| (r.active_time_s, r.mean_episode_length))
         .filter(|&(t, l)| finite(t) && finite(l))
         .collect();
-    let success: Vec<(f64, f64)> = records
-        .iter()
-        .filter_map(|r| Some((r.active_time_s, r.evaluation.as_ref()?.success_rate)))
-        .filter(|&(t, s)| finite(t) && finite(s))
-        .collect();
+    let series = right_series(records, right);
     let t_max = lengths
         .iter()
-        .chain(&success)
+        .chain(&series.points)
         .map(|p| p.0)
         .fold(0.0, f64::max);
     let t_hi = if t_max > 0.0 { t_max * 1.02 } else { 1.0 };
@@ -61,7 +118,7 @@ pub fn learning_curve_png(
             .right_y_label_area_size(72)
             .build_cartesian_2d(0f64..t_hi, 0f64..l_hi)
             .map_err(plot_error)?
-            .set_secondary_coord(0f64..t_hi, 0f64..1.05f64);
+            .set_secondary_coord(0f64..t_hi, 0f64..series.top);
         chart
             .configure_mesh()
             .x_desc("active training time (s)")
@@ -74,7 +131,10 @@ pub fn learning_curve_png(
             .map_err(plot_error)?;
         chart
             .configure_secondary_axes()
-            .y_desc("evaluation success rate")
+            .y_desc(match right {
+                RightAxis::SuccessRate { .. } => "evaluation success rate",
+                RightAxis::GoalsPerEpisode => "evaluation goals per episode",
+            })
             .label_style(("sans-serif", 15))
             .axis_desc_style(("sans-serif", 17))
             .draw()
@@ -92,34 +152,38 @@ pub fn learning_curve_png(
                     EPISODE_LENGTH_COLOR.stroke_width(2),
                 )
             });
-        let grey = RGBColor(120, 120, 120);
-        chart
-            .draw_secondary_series(DashedLineSeries::new(
-                [(0.0, threshold), (t_hi, threshold)],
-                8,
-                6,
-                grey.stroke_width(1),
-            ))
-            .map_err(plot_error)?
-            .label(format!("success threshold {threshold}"))
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(1))
-            });
+        if let Some(threshold) = series.threshold {
+            let grey = RGBColor(120, 120, 120);
+            chart
+                .draw_secondary_series(DashedLineSeries::new(
+                    [(0.0, threshold), (t_hi, threshold)],
+                    8,
+                    6,
+                    grey.stroke_width(1),
+                ))
+                .map_err(plot_error)?
+                .label(format!("success threshold {threshold}"))
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(1))
+                });
+        }
+        let color = series.color;
         chart
             .draw_secondary_series(LineSeries::new(
-                success.iter().copied(),
-                SUCCESS_RATE_COLOR.stroke_width(2),
+                series.points.iter().copied(),
+                color.stroke_width(2),
             ))
             .map_err(plot_error)?;
         chart
             .draw_secondary_series(
-                success
+                series
+                    .points
                     .iter()
-                    .map(|&p| Circle::new(p, 4, SUCCESS_RATE_COLOR.filled())),
+                    .map(|&p| Circle::new(p, 4, color.filled())),
             )
             .map_err(plot_error)?
-            .label("success rate")
-            .legend(|(x, y)| Circle::new((x + 10, y), 4, SUCCESS_RATE_COLOR.filled()));
+            .label(series.label.as_str())
+            .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
         chart
             .configure_series_labels()
             .background_style(WHITE.mix(0.85))
@@ -138,8 +202,8 @@ pub fn write_learning_curve(
     records: &[IterationRecord],
     title: &str,
     max_episode_length: f64,
-    threshold: f64,
+    right: RightAxis,
 ) -> Result<(), TrainError> {
-    let png = learning_curve_png(records, title, max_episode_length, threshold)?;
+    let png = learning_curve_png(records, title, max_episode_length, right)?;
     write_bytes_atomically(path, &png).map_err(|e| TrainError::io(path, e))
 }

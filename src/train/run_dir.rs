@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 
 use super::checkpoint::{Checkpoint, CheckpointDir};
 use super::config::TrainConfig;
-use super::curve::write_learning_curve;
+use super::curve::{RightAxis, write_learning_curve};
 use super::error::TrainError;
 use super::evaluation::EnvEpisodeRow;
 use super::metrics::{IterationRecord, MetricsLog};
@@ -211,12 +211,21 @@ impl RunDir {
         records: &[IterationRecord],
     ) -> Result<(), TrainError> {
         let title = format!("{} (seed {})", config.motion_label(), config.seed);
+        // The left axis reaches at least the episode limit and every length drawn (a goal
+        // episode's own limit, goal.episode_s, is in the lengths once an episode ends by it).
+        let right = if config.goal.is_some() {
+            RightAxis::GoalsPerEpisode
+        } else {
+            RightAxis::SuccessRate {
+                threshold: config.run.success_rate,
+            }
+        };
         write_learning_curve(
             &self.curve_path(),
             records,
             &title,
             f64::from(config.env.max_episode_steps),
-            config.run.success_rate,
+            right,
         )
     }
 
