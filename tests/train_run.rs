@@ -374,20 +374,27 @@ fn count(pixels: &[u8], c: plotters::style::RGBColor) -> usize {
         .count()
 }
 
+/// Iteration `i` of a curve's records: 0.1 s and 5 steps of episode length per iteration.
+fn curve_record(i: u64) -> IterationRecord {
+    IterationRecord {
+        iteration: i,
+        active_time_s: 0.1 * i as f64,
+        frames: 512 * i,
+        frames_per_s: 5120.0,
+        mean_return: 1.0,
+        mean_episode_length: 5.0 * i as f64,
+        update: UpdateStats::default(),
+        termination: Default::default(),
+        evaluation: None,
+        divergence: None,
+        goal: None,
+    }
+}
+
 #[test]
 fn a_goal_runs_curve_draws_goals_per_episode_instead_of_a_success_rate() {
     let records: Vec<IterationRecord> = (1..=40)
         .map(|i| IterationRecord {
-            iteration: i,
-            active_time_s: 0.1 * i as f64,
-            frames: 512 * i,
-            frames_per_s: 5120.0,
-            mean_return: 1.0,
-            mean_episode_length: 5.0 * i as f64,
-            update: UpdateStats::default(),
-            termination: Default::default(),
-            evaluation: None,
-            divergence: None,
             goal: Some(GoalRecord {
                 rollout: GoalRates {
                     episodes: 10,
@@ -400,6 +407,7 @@ fn a_goal_runs_curve_draws_goals_per_episode_instead_of_a_success_rate() {
                     fall_rate: 0.1,
                 }),
             }),
+            ..curve_record(i)
         })
         .collect();
     let png = curve::learning_curve_png(
@@ -427,17 +435,8 @@ fn a_goal_runs_curve_draws_goals_per_episode_instead_of_a_success_rate() {
 fn the_learning_curve_is_a_png_with_both_series() {
     let records: Vec<IterationRecord> = (1..=40)
         .map(|i| IterationRecord {
-            iteration: i,
-            active_time_s: 0.1 * i as f64,
-            frames: 512 * i,
-            frames_per_s: 5120.0,
-            mean_return: 1.0,
-            mean_episode_length: 5.0 * i as f64,
-            update: UpdateStats::default(),
-            termination: Default::default(),
             evaluation: (i % 5 == 0).then(|| evaluation(i, 30)),
-            divergence: None,
-            goal: None,
+            ..curve_record(i)
         })
         .collect();
     let threshold = curve::RightAxis::SuccessRate { threshold: 0.9 };
