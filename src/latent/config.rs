@@ -11,9 +11,9 @@ pub struct LatentConfig {
     /// Components of z.
     pub latent_size: u32,
     /// Weight of the KL term (mean over latent components) against the reconstruction's mean
-    /// squared error (mean over actions). 0.01 as PULSE: large enough that the prior learns
-    /// the encoder's distribution (the goal task samples around the prior's mean), small
-    /// enough that the reconstruction, which the tracking success depends on, dominates.
+    /// squared error (mean over actions). 0.001: PULSE's 0.01 kept z so close to the prior
+    /// (0.02 nats per component on the H100) that a goal task acting in z could barely steer;
+    /// 0.001 tracked as well and steered better (docs/latent.md, "Measured").
     pub kl_weight: f32,
     /// Hidden layers of the encoder (full observation -> mu, log sigma), the decoder
     /// (character state and z -> action) and the prior (character state -> mu, log sigma).
@@ -38,7 +38,7 @@ impl Default for LatentConfig {
     fn default() -> Self {
         LatentConfig {
             latent_size: 64,
-            kl_weight: 0.01,
+            kl_weight: 0.001,
             // About the tracker's actor (400, 200, 100): the encoder and decoder each do
             // the part of its work, the prior sees less and predicts less.
             encoder_hidden: vec![512, 256],
