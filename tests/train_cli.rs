@@ -399,6 +399,28 @@ fn bench_rollout_takes_every_gemm_setting_by_its_config_name() {
     }
 }
 
+/// `bench full --set KEY=VALUE` overrides a key as `train --set` does: a bad value or an unknown
+/// key fails in one line naming it, before any GPU is opened.
+#[test]
+fn bench_full_set_overrides_a_key_and_refuses_a_bad_one_in_one_line() {
+    let dir = workspace();
+    for (set, expected) in [
+        ("ppo.minibatches=0", "`ppo.minibatches` = 0"),
+        ("ppo.nosuch=1", "unknown field `nosuch`"),
+    ] {
+        let out = run(&["bench", "full", "--set", set], None, dir.path());
+        let err = one_line_error(&out);
+        assert!(err.contains(expected), "--set {set}: {err}");
+    }
+    let out = run(&["bench", "full", "--set", "minibatches"], None, dir.path());
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("expected KEY=VALUE"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// A clip in the motions directory with a built-in clip's name replaces it, and the run says so
 /// in one line on stderr.
 #[test]

@@ -22,6 +22,9 @@ pub(super) struct FullArgs {
     /// read: each loop is measured, on --device.
     #[arg(long)]
     config: Option<PathBuf>,
+    /// Override one configuration key, as `train --set` (repeatable; e.g. ppo.minibatches=2).
+    #[arg(long = "set", value_name = "KEY=VALUE", value_parser = super::train::parse_override)]
+    set: Vec<(String, String)>,
     #[command(flatten)]
     shape: LoopShapeArgs,
     /// Timed iterations per round (and floor launches per round).
@@ -41,7 +44,8 @@ pub(super) fn run(args: FullArgs) -> Result<()> {
     if args.iterations == 0 {
         bail!("--iterations must be at least 1");
     }
-    let (mut config, label) = benchmark_config(args.config.as_deref(), &args.motion, "bench full")?;
+    let (config, label) = benchmark_config(args.config.as_deref(), &args.motion, "bench full")?;
+    let mut config = config.with_overrides(&args.set, &label)?;
     args.shape.apply(&mut config);
     // One GPU, --device; both settings of the overlap are measured.
     config.run.gpus.clear();

@@ -220,8 +220,8 @@ fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
     Ok((config, label))
 }
 
-/// `--set KEY=VALUE`.
-fn parse_override(text: &str) -> Result<(String, String), String> {
+/// `--set KEY=VALUE` (also `bench full`'s).
+pub(super) fn parse_override(text: &str) -> Result<(String, String), String> {
     match text.split_once('=') {
         Some((key, value)) if !key.trim().is_empty() => {
             Ok((key.trim().to_string(), value.trim().to_string()))
