@@ -7,7 +7,7 @@
 //!   `eval` reads its checkpoint back.
 //! - A run killed with SIGKILL mid-training resumes from its last checkpoint and its metrics
 //!   continue without a gap or a duplicate (issue 5's acceptance).
-//! - A short run on a motion library evaluates every clip, writes `clips.tsv` and the
+//! - A short run on a motion library evaluates every clip, writes `clips.tsv`, `clips.png` and the
 //!   per-clip results in its metrics, and resumes (docs/library.md).
 //! - A run sent SIGINT mid-training stops after its current iteration with a checkpoint of it
 //!   and `summary.json` (stop reason `interrupted`), exits with 130, and `--resume` continues
@@ -225,6 +225,9 @@ fn a_short_library_run_scores_every_clip_and_writes_its_clip_table() {
     );
     let table = std::fs::read_to_string(run.join("clips.tsv")).expect("clips.tsv");
     assert_eq!(table.lines().count(), 6, "{table}");
+    // The per-clip chart beside the curve.
+    let chart = std::fs::read(run.join("clips.png")).expect("clips.png");
+    assert!(chart.starts_with(b"\x89PNG"), "clips.png is a PNG");
     assert!(
         table.lines().nth(1).unwrap().starts_with("walk\t"),
         "{table}"

@@ -4,6 +4,8 @@
 //! config.toml      the resolved configuration (what --resume reloads)
 //! metrics.jsonl    one record per iteration (metrics.rs)
 //! curve.png        the learning curve, redrawn after every evaluation
+//! clips.tsv        a motion library's per-clip table, after every evaluation
+//! clips.png        a motion library's per-clip success over time, with curve.png
 //! checkpoints/     iter_<iteration>.safetensors, the last run.keep_checkpoints of them
 //! summary.json     the final report (written when the run stops)
 //! evaluation.json  every env's episode of the last evaluation (written when the run stops)
@@ -18,6 +20,7 @@
 use std::path::{Path, PathBuf};
 
 use super::checkpoint::{Checkpoint, CheckpointDir};
+use super::clips_chart::clips_chart_png;
 use super::config::TrainConfig;
 use super::curve::{RightAxis, write_learning_curve};
 use super::error::TrainError;
@@ -44,6 +47,7 @@ pub const SUMMARY_FILE: &str = "summary.json";
 pub const EVALUATION_FILE: &str = "evaluation.json";
 /// A motion library's per-clip evaluation table.
 pub const CLIPS_FILE: &str = "clips.tsv";
+pub const CLIPS_CHART_FILE: &str = "clips.png";
 pub const REPLAY_FILE: &str = "replay.html";
 /// Everything a run writes (what `--overwrite` removes; other files are left alone).
 const RUN_ENTRIES: [&str; 8] = [
@@ -204,13 +208,18 @@ impl RunDir {
         write_bytes_atomically(&path, text.as_bytes()).map_err(|e| TrainError::io(&path, e))
     }
 
-    /// Redraws `curve.png` from the records.
+    /// Redraws `curve.png` from the records, and `clips.png` when they hold a motion library's
+    /// evaluations.
     pub fn write_curve(
         &self,
         config: &TrainConfig,
         records: &[IterationRecord],
     ) -> Result<(), TrainError> {
         let title = format!("{} (seed {})", config.motion_label(), config.seed);
+        if let Some(png) = clips_chart_png(records, &title) {
+            let path = self.root.join(CLIPS_CHART_FILE);
+            write_bytes_atomically(&path, &png?).map_err(|e| TrainError::io(&path, e))?;
+        }
         // The left axis reaches at least the episode limit and every length drawn (a goal
         // episode's own limit, goal.episode_s, is in the lengths once an episode ends by it).
         let right = if config.goal.is_some() {
