@@ -236,8 +236,10 @@ fn sigint_stops_the_search_with_130() {
 fn a_second_signal_ends_the_search_at_once() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("run");
-    // Trials of 2 s: both signals land during one.
-    let (mut child, _) = spawn_search(tmp.path(), &out, 2000);
+    // Trials of 5 s: both signals land during one, even on a loaded 2-core machine (with 2 s
+    // trials a clean run once saw the trial end between the signals and the search stop with
+    // 143).
+    let (mut child, _) = spawn_search(tmp.path(), &out, 5000);
     wait_for_cycles(&out, 1);
     send(&child, "-TERM");
     // Two signals pending at once would be delivered as one.
