@@ -1,7 +1,11 @@
 #!/usr/bin/env bash
 # Build the release binary and the GPU test binaries here, and stage them for the GPU machine.
-#   tests/device/stage.sh [--train-only] [DIR]   (default .device-bin; ignored by git via .git/info/exclude)
+#   tests/device/stage.sh [--train-only] [--only "gpu_a gpu_b ..."] [DIR]
+#   (DIR default .device-bin; ignored by git via .git/info/exclude)
 # --train-only stages the release binary alone (a training campaign, tests/device/campaign.sh).
+# --only stages the release binary and the named test and benchmark binaries alone: the whole
+# set packs to about 35 MB, which with the 21 MB tree leaves little of a call's 64 MiB for run
+# directories carried from an earlier call.
 # DIR then holds bin.txz: `instantmimic`, one stripped binary per tests/gpu_*.rs (named after
 # the file), one per benches/*.rs (bench_<name>), and motions/ (session.sh's INSTANTMIMIC_MOTIONS): the
 # shipped clips are built into the binaries, so it holds only DeepMimic's long clips
@@ -10,7 +14,16 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 TRAIN_ONLY=0
-if [ "${1:-}" = --train-only ]; then TRAIN_ONLY=1; shift; fi
+ONLY=
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --train-only) TRAIN_ONLY=1; shift ;;
+    --only) [ $# -ge 2 ] || { echo "stage.sh: --only needs a list of binaries" >&2; exit 2; }
+            ONLY=$2; shift 2 ;;
+    -*) echo "stage.sh: unknown option $1" >&2; exit 2 ;;
+    *) break ;;
+  esac
+done
 DIR=${1:-.device-bin}
 LONG_MOTIONS=$(cd .. && pwd)/shared/data/motions/long
 mkdir -p .git/info
@@ -36,6 +49,16 @@ for line in sys.stdin:
     if m.get("reason") == "compiler-artifact" and m.get("executable") and "bench" in m["target"]["kind"]:
         print(m["target"]["name"], m["executable"])
 ' | while read -r name exe; do cp "$exe" "$DIR/bench_$name"; done
+fi
+if [ -n "$ONLY" ]; then
+  for name in $ONLY; do
+    [ -f "$DIR/$name" ] || { echo "stage.sh: --only names $name, which is no test or benchmark binary" >&2; exit 2; }
+  done
+  for f in "$DIR"/*; do
+    name=$(basename "$f")
+    [ "$name" = instantmimic ] && continue
+    case " $ONLY " in *" $name "*) ;; *) rm -f "$f" ;; esac
+  done
 fi
 strip "$DIR"/*
 mkdir -p "$DIR/motions"
