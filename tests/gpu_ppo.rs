@@ -66,6 +66,19 @@ fn download2(a: &DeviceArray2<f32>) -> Vec<f64> {
     to_f64(&a.download().expect("download"))
 }
 
+/// `max |a - b|` over the elements.
+fn largest_difference(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+/// `|x - y| / max(|x|, 1e-6)`.
+fn relative(x: f32, y: f32) -> f64 {
+    f64::from((x - y).abs()) / f64::from(x.abs().max(1e-6))
+}
+
 #[test]
 fn gae_matches_the_float64_reference() {
     let (gpu, kernels) = gpu();
@@ -800,15 +813,10 @@ fn concurrent_networks_give_the_sequential_update() {
             ("actor", &sequential[0], &concurrent[0]),
             ("critic", &sequential[1], &concurrent[1]),
         ] {
-            let worst = a
-                .iter()
-                .zip(b)
-                .map(|(x, y)| (x - y).abs())
-                .fold(0.0, f64::max);
+            let worst = largest_difference(a, b);
             println!("{gemm:?}: {name} parameters after 2 updates differ by at most {worst:.3e}");
             assert!(worst <= 1e-5, "{gemm:?}: {name} parameters {worst:e} apart");
         }
-        let relative = |x: f32, y: f32| f64::from((x - y).abs()) / f64::from(x.abs().max(1e-6));
         assert!(relative(sequential_stats.value_loss, concurrent_stats.value_loss) < 1e-3);
         assert!(relative(sequential_stats.grad_norm, concurrent_stats.grad_norm) < 1e-3);
     }
@@ -859,7 +867,6 @@ fn concurrent_networks_follow_the_sequential_update_over_30_updates_with_the_tra
         };
         let (sequential_trace, sequential) = run(false);
         let (concurrent_trace, concurrent) = run(true);
-        let relative = |x: f32, y: f32| f64::from((x - y).abs()) / f64::from(x.abs().max(1e-6));
         for (i, (a, b)) in sequential_trace.iter().zip(&concurrent_trace).enumerate() {
             println!(
                 "{gemm:?} update {:2}: learning rate {:.3e} / {:.3e}, kl {:.3e} / {:.3e}, value loss {:.4e} / {:.4e}, grad norm {:.4e} / {:.4e}",
@@ -890,11 +897,7 @@ fn concurrent_networks_follow_the_sequential_update_over_30_updates_with_the_tra
             ("actor", &sequential[0], &concurrent[0]),
             ("critic", &sequential[1], &concurrent[1]),
         ] {
-            let worst = a
-                .iter()
-                .zip(b)
-                .map(|(x, y)| (x - y).abs())
-                .fold(0.0, f64::max);
+            let worst = largest_difference(a, b);
             let scale = a.iter().map(|x| x.abs()).fold(0.0, f64::max);
             println!(
                 "{gemm:?}: {name} parameters after {UPDATES} updates differ by at most {worst:.3e} (largest {scale:.3e})"

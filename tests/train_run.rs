@@ -69,12 +69,23 @@ fn evaluation(iteration: u64, success_from: u64) -> EvaluationSummary {
 /// stop reason. The checkpoint holds one tensor derived from the iteration, so a resume can be
 /// checked to restore the right one.
 fn drive(session: &mut RunSession, stop_after: u64, success_from: u64) -> Option<StopReason> {
+    drive_with(session, stop_after, |iteration| {
+        evaluation(iteration, success_from)
+    })
+}
+
+/// [`drive`] with the evaluations `evaluate` makes.
+fn drive_with(
+    session: &mut RunSession,
+    stop_after: u64,
+    evaluate: impl Fn(u64) -> EvaluationSummary,
+) -> Option<StopReason> {
     while session.iteration() < stop_after {
         session.start_iteration();
         std::thread::sleep(std::time::Duration::from_millis(1));
         let step = session.finish_iteration(stats(session.iteration() + 1));
         let iteration = step.iteration;
-        let eval = step.evaluate.then(|| evaluation(iteration, success_from));
+        let eval = step.evaluate.then(|| evaluate(iteration));
         let next = session.record(step, eval).unwrap();
         if next.checkpoint_due {
             let mut ckpt = session.new_checkpoint().unwrap();
@@ -193,6 +204,55 @@ fn session_checkpoints(root: &Path) -> Vec<u64> {
         .into_iter()
         .map(|(i, _)| i)
         .collect()
+}
+
+/// A motion library's evaluations: `clips.tsv` and `clips.png` beside the curve; a single
+/// clip's run writes neither.
+#[test]
+fn a_library_run_writes_its_clips_table_and_chart() {
+    use instantmimic::train::library_evaluation::{ClipScore, LibraryEvaluation};
+    let clip = |name: &str, success_rate: f64| ClipScore {
+        name: name.to_owned(),
+        duration_s: 1.0,
+        loop_mode: "wrap".to_owned(),
+        window_s: None,
+        episode_steps: 30,
+        episodes: 16,
+        succeeded: (success_rate * 16.0) as u32,
+        success_rate,
+        global_mpjpe_m: 0.1,
+        pose_error_m: 0.05,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("run");
+    let mut session =
+        RunSession::start_new(&root, &config(30), false, ProgressMode::Quiet).unwrap();
+    drive_with(&mut session, 30, |iteration| EvaluationSummary {
+        library: Some(LibraryEvaluation {
+            clips: vec![clip("walk", 1.0), clip("backflip", iteration as f64 / 30.0)],
+            clips_at_threshold: 1,
+            clip_fraction: 0.5,
+            episodes_pass: false,
+            all_clips_pass: false,
+        }),
+        ..evaluation(iteration, 1000)
+    });
+    session.finish(StopReason::IterationBudget).unwrap();
+    let chart = std::fs::read(root.join("clips.png")).expect("clips.png");
+    assert!(chart.starts_with(b"\x89PNG"));
+    let table = std::fs::read_to_string(root.join("clips.tsv")).expect("clips.tsv");
+    assert!(
+        table.lines().any(|l| l.starts_with("backflip\t")),
+        "{table}"
+    );
+
+    let single = dir.path().join("single");
+    let mut session =
+        RunSession::start_new(&single, &config(10), false, ProgressMode::Quiet).unwrap();
+    drive(&mut session, 10, 1000);
+    session.finish(StopReason::IterationBudget).unwrap();
+    assert!(single.join("curve.png").is_file());
+    assert!(!single.join("clips.png").exists() && !single.join("clips.tsv").exists());
 }
 
 #[test]
