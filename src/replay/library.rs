@@ -7,10 +7,10 @@ use crate::cuda::Gpu;
 use crate::motion::TableLayout;
 use crate::plan::PlanStore;
 use crate::train::library_policy::{LibraryPolicy, LibraryPolicyEvaluator};
-use crate::train::{Checkpoint, EnvEvaluation};
+use crate::train::Checkpoint;
 
 use super::assemble::{ReplaySource, assemble_recording};
-use super::{Replay, ReplayError, chosen_envs, first_episode_frames, recorded_episode};
+use super::{Replay, ReplayError, chosen_envs, run_recorded};
 
 /// The evaluation envs that play clip `clip` of `clips` on `envs` envs (env i plays clip
 /// i mod C), `episodes` of them spread evenly over the clip's starts, its first start first.
@@ -53,45 +53,13 @@ pub fn record_library_replay(
     let envs = library_chosen_envs(input.clip, plan.clips.len(), plan.envs, input.episodes)?;
     let evaluator = LibraryPolicyEvaluator::new(gpu, input.store, prepared, input.checkpoint)?;
     let (rollout, policy) = evaluator.evaluation_rollout();
-    let trajectory = rollout.new_trajectory()?;
-    // The graph writes into `trajectory` and the policy's buffers at every launch: all live to
-    // the end of this call.
-    let graph = rollout.capture_recorded(policy, &trajectory)?;
-    rollout.reset_all()?;
-    graph.launch(gpu.stream())?;
-    gpu.synchronize()?;
-    let scores = rollout
-        .episode_scores()
-        .ok_or_else(|| ReplayError::Setup("the evaluation rollout keeps no scores".to_owned()))?
-        .download()?;
-    let evaluations: Vec<EnvEvaluation> = scores.iter().map(EnvEvaluation::from).collect();
-    let summary = plan.summarize(&evaluations, prepared.config.run.success_rate)?;
-    let frames = trajectory.download()?;
-    let terminated = rollout.storage.terminated.download()?;
-    let truncated = rollout.storage.truncated.download()?;
-    let (horizon, n) = (rollout.horizon(), rollout.num_envs());
+    let run = run_recorded(gpu, rollout, policy)?;
+    let summary = plan.summarize(&run.evaluations, prepared.config.run.success_rate)?;
     // The clip's episode ends after its own steps (a shorter clip than the longest goes on
     // being simulated, unscored, to the rollout's horizon).
     let clip_steps = plan.clips[input.clip].evaluation.steps as usize;
     let layout = TableLayout::for_character(prepared.motion.tracked().character());
-    let mut episodes = Vec::with_capacity(envs.len());
-    for &env in &envs {
-        let count =
-            first_episode_frames(&terminated, &truncated, horizon, n, env).min(clip_steps + 1);
-        episodes.push(recorded_episode(&frames, env, evaluations[env], count));
-    }
-    let times: Vec<f32> = episodes
-        .iter()
-        .flat_map(|e| e.times.iter().copied())
-        .collect();
-    let clip_ids = vec![input.clip as i32; times.len()];
-    let rows = rollout.reference_rows(&clip_ids, &times)?;
-    let mut offset = 0;
-    for episode in &mut episodes {
-        let len = episode.times.len() * layout.stride;
-        episode.reference_rows = rows[offset..offset + len].to_vec();
-        offset += len;
-    }
+    let episodes = run.episodes(rollout, &envs, input.clip as i32, clip_steps + 1, &layout)?;
     let planned = &plan.clips[input.clip];
     let source = ReplaySource {
         motion: planned.name.clone(),
@@ -108,7 +76,7 @@ pub fn record_library_replay(
     Ok(Replay {
         recording,
         envs,
-        evaluations,
+        evaluations: run.evaluations,
         summary,
     })
 }

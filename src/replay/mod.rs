@@ -20,7 +20,7 @@ pub mod library;
 use thiserror::Error;
 
 use crate::cuda::{CudaError, Gpu};
-use crate::env::{RolloutError, TrajectoryFrames};
+use crate::env::{Rollout, RolloutError, RolloutPolicy, TrajectoryFrames};
 use crate::kernels::EnvError;
 use crate::motion::{ReferenceMotion, TableLayout};
 use crate::plan::PlanStore;
@@ -108,6 +108,48 @@ pub fn record_replay(gpu: &Gpu, input: &ReplayInput<'_>) -> Result<Replay, Repla
     let envs = chosen_envs(input.episodes, config.run.eval_envs)?;
     let trainer = evaluation_trainer(gpu, config, input.checkpoint, input.motion, input.store)?;
     let (rollout, policy) = trainer.evaluation_rollout();
+    let run = run_recorded(gpu, rollout, policy)?;
+    let summary = summarize(
+        &run.evaluations,
+        trainer.evaluation_steps(),
+        config.run.success_rate,
+    )?;
+    let layout = TableLayout::for_character(input.motion.character());
+    // A replay plays one clip: the library of one, whose clip id is 0. The evaluation ends
+    // each env's episode once, at its last step.
+    let episodes = run.episodes(rollout, &envs, 0, usize::MAX, &layout)?;
+    let source = ReplaySource {
+        motion: config.motion.clone(),
+        motion_source: input.motion_source.to_string(),
+        checkpoint: input.checkpoint_label.to_string(),
+        control_dt: rollout.control_dt(),
+    };
+    let recording = assemble_recording(input.motion.character(), &layout, &source, &episodes)?;
+    Ok(Replay {
+        recording,
+        envs,
+        evaluations: run.evaluations,
+        summary,
+    })
+}
+
+/// What one recorded launch of an evaluation rollout leaves on the host.
+pub(crate) struct RecordedRun {
+    /// Every evaluation env's score, env by env.
+    pub(crate) evaluations: Vec<EnvEvaluation>,
+    frames: TrajectoryFrames,
+    /// `[horizon, n]` each.
+    terminated: Vec<i32>,
+    truncated: Vec<i32>,
+}
+
+/// Launches `rollout`'s evaluation once from a reset, with `policy`, recording every env after
+/// every control step, and downloads the scores, the frames and the episode ends.
+pub(crate) fn run_recorded(
+    gpu: &Gpu,
+    rollout: &Rollout,
+    policy: &dyn RolloutPolicy,
+) -> Result<RecordedRun, ReplayError> {
     let trajectory = rollout.new_trajectory()?;
     // The graph writes into `trajectory` and the policy's buffers at every launch: all live to
     // the end of this call.
@@ -119,50 +161,50 @@ pub fn record_replay(gpu: &Gpu, input: &ReplayInput<'_>) -> Result<Replay, Repla
         .episode_scores()
         .ok_or_else(|| ReplayError::Setup("the evaluation rollout keeps no scores".to_owned()))?
         .download()?;
-    let evaluations: Vec<EnvEvaluation> = scores.iter().map(EnvEvaluation::from).collect();
-    let summary = summarize(
-        &evaluations,
-        trainer.evaluation_steps(),
-        config.run.success_rate,
-    )?;
-    let frames = trajectory.download()?;
-    let terminated = rollout.storage.terminated.download()?;
-    let truncated = rollout.storage.truncated.download()?;
-    let (horizon, n) = (rollout.horizon(), rollout.num_envs());
-    let layout = TableLayout::for_character(input.motion.character());
-    let mut episodes = Vec::with_capacity(envs.len());
-    for &env in &envs {
-        // The evaluation ends each env's episode once, at its last step; should anything end
-        // it earlier, the env is reset in the same step and what follows is another episode.
-        let count = first_episode_frames(&terminated, &truncated, horizon, n, env);
-        episodes.push(recorded_episode(&frames, env, evaluations[env], count));
-    }
-    // One lookup for every frame of every episode, by the kernels' own arithmetic.
-    let times: Vec<f32> = episodes
-        .iter()
-        .flat_map(|e| e.times.iter().copied())
-        .collect();
-    // A replay plays one clip: the library of one, whose clip id is 0.
-    let rows = rollout.reference_rows(&vec![0; times.len()], &times)?;
-    let mut offset = 0;
-    for episode in &mut episodes {
-        let len = episode.times.len() * layout.stride;
-        episode.reference_rows = rows[offset..offset + len].to_vec();
-        offset += len;
-    }
-    let source = ReplaySource {
-        motion: config.motion.clone(),
-        motion_source: input.motion_source.to_string(),
-        checkpoint: input.checkpoint_label.to_string(),
-        control_dt: rollout.control_dt(),
-    };
-    let recording = assemble_recording(input.motion.character(), &layout, &source, &episodes)?;
-    Ok(Replay {
-        recording,
-        envs,
-        evaluations,
-        summary,
+    Ok(RecordedRun {
+        evaluations: scores.iter().map(EnvEvaluation::from).collect(),
+        frames: trajectory.download()?,
+        terminated: rollout.storage.terminated.download()?,
+        truncated: rollout.storage.truncated.download()?,
     })
+}
+
+impl RecordedRun {
+    /// The first episode of each of `envs`, at most `max_frames` frames, with the reference
+    /// rows of clip `clip` at its frames' times (one lookup for every frame of every episode,
+    /// by the kernels' own arithmetic). Should anything end an episode before the evaluation's
+    /// last step, the env is reset in the same step and what follows is another episode.
+    pub(crate) fn episodes(
+        &self,
+        rollout: &Rollout,
+        envs: &[usize],
+        clip: i32,
+        max_frames: usize,
+        layout: &TableLayout,
+    ) -> Result<Vec<RecordedEpisode>, ReplayError> {
+        let (horizon, n) = (rollout.horizon(), rollout.num_envs());
+        let mut episodes: Vec<RecordedEpisode> = envs
+            .iter()
+            .map(|&env| {
+                let count =
+                    first_episode_frames(&self.terminated, &self.truncated, horizon, n, env)
+                        .min(max_frames);
+                recorded_episode(&self.frames, env, self.evaluations[env], count)
+            })
+            .collect();
+        let times: Vec<f32> = episodes
+            .iter()
+            .flat_map(|e| e.times.iter().copied())
+            .collect();
+        let rows = rollout.reference_rows(&vec![clip; times.len()], &times)?;
+        let mut offset = 0;
+        for episode in &mut episodes {
+            let len = episode.times.len() * layout.stride;
+            episode.reference_rows = rows[offset..offset + len].to_vec();
+            offset += len;
+        }
+        Ok(episodes)
+    }
 }
 
 /// Frames of env `env`'s first episode in a recorded rollout of `horizon` steps over `n` envs
