@@ -328,16 +328,8 @@ fn several_gpus_train_writes_its_run_and_resumes_on_as_many_gpus() {
     let mut config = small_run_support::small_config("backflip");
     config.run.max_iterations = 6;
     config.run.checkpoint_interval = 3;
-    let config_path = dir.path().join("config.toml");
-    std::fs::write(&config_path, config.to_toml().expect("toml")).expect("write config");
-    let run = dir.path().join("run");
-    let out = binary()
-        .args(["train", "--progress", "lines", "--gpus", &gpus, "--config"])
-        .arg(&config_path)
-        .arg("--out")
-        .arg(&run)
-        .output()
-        .expect("train runs");
+    let (mut command, run) = train_on_gpus(dir.path(), &config, &gpus);
+    let out = command.output().expect("train runs");
     check_success(&out, "train --gpus");
     let text = String::from_utf8_lossy(&out.stdout);
     println!("{text}");
@@ -395,6 +387,25 @@ fn several_gpus_train_writes_its_run_and_resumes_on_as_many_gpus() {
 const LIBRARY_CLIPS: [&str; 3] = ["walk", "punch", "getup_faceup"];
 
 /// The small config (32 envs per GPU, 32 evaluation envs) on [`LIBRARY_CLIPS`].
+/// `train --progress lines --gpus GPUS --config <config written into dir> --out dir/run`,
+/// ready to run or spawn, and the run directory.
+fn train_on_gpus(
+    dir: &std::path::Path,
+    config: &TrainConfig,
+    gpus: &str,
+) -> (std::process::Command, std::path::PathBuf) {
+    let config_path = dir.join("config.toml");
+    std::fs::write(&config_path, config.to_toml().expect("toml")).expect("write config");
+    let run = dir.join("run");
+    let mut command = binary();
+    command
+        .args(["train", "--progress", "lines", "--gpus", gpus, "--config"])
+        .arg(&config_path)
+        .arg("--out")
+        .arg(&run);
+    (command, run)
+}
+
 fn small_library_config() -> TrainConfig {
     let mut config = small_run_support::small_config("backflip");
     config.motion = String::new();
@@ -468,16 +479,8 @@ fn several_gpus_train_on_a_library_writes_its_clip_table_and_resumes() {
     let mut config = small_library_config();
     config.run.max_iterations = 4;
     config.run.checkpoint_interval = 2;
-    let config_path = dir.path().join("library.toml");
-    std::fs::write(&config_path, config.to_toml().expect("toml")).expect("write config");
-    let run = dir.path().join("run");
-    let out = binary()
-        .args(["train", "--progress", "lines", "--gpus", &gpus, "--config"])
-        .arg(&config_path)
-        .arg("--out")
-        .arg(&run)
-        .output()
-        .expect("train runs");
+    let (mut command, run) = train_on_gpus(dir.path(), &config, &gpus);
+    let out = command.output().expect("train runs");
     check_success(&out, "train --gpus on a library");
     let stdout = String::from_utf8_lossy(&out.stdout);
     println!("{stdout}");
@@ -544,14 +547,8 @@ fn several_gpus_sigterm_stops_every_gpu_after_the_same_iteration_and_resumes() {
     config.run.max_iterations = 200;
     // No periodic checkpoint before the stop: the one found after it is the stop's.
     config.run.checkpoint_interval = 100;
-    let config_path = dir.path().join("config.toml");
-    std::fs::write(&config_path, config.to_toml().expect("toml")).expect("write config");
-    let run = dir.path().join("run");
-    let child = binary()
-        .args(["train", "--progress", "lines", "--gpus", &gpus, "--config"])
-        .arg(&config_path)
-        .arg("--out")
-        .arg(&run)
+    let (mut command, run) = train_on_gpus(dir.path(), &config, &gpus);
+    let child = command
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()

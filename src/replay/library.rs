@@ -6,8 +6,8 @@
 use crate::cuda::Gpu;
 use crate::motion::TableLayout;
 use crate::plan::PlanStore;
-use crate::train::library_policy::{LibraryPolicy, LibraryPolicyEvaluator};
 use crate::train::Checkpoint;
+use crate::train::library_policy::{LibraryPolicy, LibraryPolicyEvaluator};
 
 use super::assemble::{ReplaySource, assemble_recording};
 use super::{Replay, ReplayError, chosen_envs, run_recorded};
