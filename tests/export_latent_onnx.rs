@@ -7,9 +7,12 @@
 //! onnxruntime comes from the build-step Python (`INSTANTMIMIC_BUILD_PYTHON`, set by
 //! tests/run.sh); without it the onnxruntime part prints a note.
 
+mod onnx_support;
 mod skip_support;
 
-use std::path::{Path, PathBuf};
+use onnx_support::{export, python};
+
+use std::path::Path;
 use std::process::{Command, Output};
 
 use instantmimic::export::onnx::latent::{LATENT_KEY, LatentContract};
@@ -87,37 +90,12 @@ fn write_latent(path: &Path, seed: u64) -> ([Vec<f32>; 3], [Vec<f64>; 3]) {
     (networks, stats)
 }
 
-fn path_str(path: &Path) -> &str {
-    path.to_str().expect("utf-8 path")
-}
-
-fn export(checkpoint: &Path, out: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_instantmimic"))
-        .args([
-            "export",
-            "--checkpoint",
-            path_str(checkpoint),
-            "--format",
-            "onnx",
-            "--out",
-            path_str(out),
-        ])
-        .output()
-        .expect("the binary runs")
-}
-
 fn stderr_last_line(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr)
         .lines()
         .last()
         .unwrap_or_default()
         .to_string()
-}
-
-fn python() -> Option<PathBuf> {
-    std::env::var_os("INSTANTMIMIC_BUILD_PYTHON")
-        .filter(|p| !p.is_empty())
-        .map(PathBuf::from)
 }
 
 /// `model` run in onnxruntime on `feeds` (input name -> rows), or None (noted) without it.

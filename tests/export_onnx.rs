@@ -7,10 +7,13 @@
 //! onnxruntime comes from the build-step Python (`kernels_py/requirements.txt`, set up by
 //! tests/run.sh as `INSTANTMIMIC_BUILD_PYTHON`); without it that part prints a note.
 
+mod onnx_support;
 mod skip_support;
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use onnx_support::{export, path_str, python, run};
+
+use std::path::Path;
+use std::process::Command;
 
 use instantmimic::export::onnx::contract::{CONTRACT_KEY, PolicyContract};
 use instantmimic::export::onnx::proto::{DimensionValue, FLOAT, ModelProto};
@@ -122,29 +125,6 @@ fn forward_f64(checkpoint: &Checkpoint, config: &TrainConfig, obs: &[f32]) -> Ve
     x
 }
 
-fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_instantmimic"))
-        .args(args)
-        .output()
-        .expect("the binary runs")
-}
-
-fn path_str(path: &Path) -> &str {
-    path.to_str().expect("utf-8 path")
-}
-
-fn export(checkpoint: &Path, out: &Path) -> Output {
-    run(&[
-        "export",
-        "--checkpoint",
-        path_str(checkpoint),
-        "--format",
-        "onnx",
-        "--out",
-        path_str(out),
-    ])
-}
-
 /// Observations around the normalizer's mean, a few far out (clipped by the graph).
 fn random_observations(checkpoint: &Checkpoint, rows: usize, seed: u64) -> Vec<Vec<f32>> {
     let mean = checkpoint.tensor(tensor_names::OBS_MEAN).expect("mean");
@@ -168,12 +148,6 @@ fn random_observations(checkpoint: &Checkpoint, rows: usize, seed: u64) -> Vec<V
                 .collect()
         })
         .collect()
-}
-
-fn python() -> Option<PathBuf> {
-    std::env::var_os("INSTANTMIMIC_BUILD_PYTHON")
-        .filter(|p| !p.is_empty())
-        .map(PathBuf::from)
 }
 
 #[test]
