@@ -225,16 +225,9 @@ fn replays_of_the_captured_update_lower_the_loss_on_a_fixed_batch() {
 #[test]
 fn a_short_distillation_run_evaluates_checkpoints_and_its_decoder_loads() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let mut config = small_run_support::small_config("backflip");
-    config.motion = String::new();
-    config.motion_library = Some(instantmimic::motion::LibraryConfig {
-        clips: Some(vec!["walk".into(), "punch".into(), "spinkick".into()]),
-        ..Default::default()
-    });
+    let mut config = small_run_support::small_library_config(&["walk", "punch", "spinkick"]);
     config.run.max_iterations = 2;
     config.run.checkpoint_interval = 2;
-    config.run.replay = false;
-    config.validate("test").expect("a library config");
     let tracker_toml = dir.path().join("tracker.toml");
     std::fs::write(&tracker_toml, config.to_toml().expect("toml")).expect("write config");
     let tracker_run = dir.path().join("tracker");

@@ -17,7 +17,6 @@ mod small_run_support;
 use std::path::{Path, PathBuf};
 
 use instantmimic::latent::LatentConfig;
-use instantmimic::motion::LibraryConfig;
 use small_run_support::{binary, check_success};
 
 /// Trains `config` (written beside `run`) into `run`, with `extra` arguments.
@@ -67,16 +66,9 @@ fn episodes(report: &serde_json::Value) -> u64 {
 
 /// A tracker and its latent student, each trained 2 iterations on walk, punch and spinkick.
 fn checkpoints(dir: &Path) -> (PathBuf, PathBuf) {
-    let mut config = small_run_support::small_config("backflip");
-    config.motion = String::new();
-    config.motion_library = Some(LibraryConfig {
-        clips: Some(vec!["walk".into(), "punch".into(), "spinkick".into()]),
-        ..Default::default()
-    });
+    let mut config = small_run_support::small_library_config(&["walk", "punch", "spinkick"]);
     config.run.max_iterations = 2;
     config.run.checkpoint_interval = 2;
-    config.run.replay = false;
-    config.validate("test").expect("a library config");
     let tracker_run = dir.join("tracker");
     train(&config, &tracker_run, &[]);
     let tracker = tracker_run.join("checkpoints/iter_00000002.safetensors");

@@ -42,7 +42,7 @@ use instantmimic::cuda::{
 };
 use instantmimic::env::TrackedMotion;
 use instantmimic::kernels::{DeviceArray, EnvKernels};
-use instantmimic::motion::{Character, LibraryConfig};
+use instantmimic::motion::Character;
 use instantmimic::plan::PlanStore;
 use instantmimic::ppo::{GaussianPolicy, PpoUpdate};
 use instantmimic::train::checkpoint::tensor_names::{PHASE_CDF, PHASE_VISITS};
@@ -407,15 +407,7 @@ fn train_on_gpus(
 }
 
 fn small_library_config() -> TrainConfig {
-    let mut config = small_run_support::small_config("backflip");
-    config.motion = String::new();
-    config.motion_library = Some(LibraryConfig {
-        clips: Some(LIBRARY_CLIPS.iter().map(|c| (*c).to_owned()).collect()),
-        ..Default::default()
-    });
-    config.run.replay = false;
-    config.validate("test").expect("a library config");
-    config
+    small_run_support::small_library_config(&LIBRARY_CLIPS)
 }
 
 #[test]

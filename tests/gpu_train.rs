@@ -181,20 +181,10 @@ fn a_killed_run_resumes_from_its_checkpoint_without_a_gap_in_its_metrics() {
 #[test]
 fn a_short_library_run_scores_every_clip_and_writes_its_clip_table() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let mut config = small_run_support::small_config("backflip");
-    config.motion = String::new();
-    config.motion_library = Some(instantmimic::motion::LibraryConfig {
-        clips: Some(vec![
-            "walk".into(),
-            "punch".into(),
-            "spinkick".into(),
-            "getup_faceup".into(),
-        ]),
-        ..Default::default()
-    });
+    let mut config =
+        small_run_support::small_library_config(&["walk", "punch", "spinkick", "getup_faceup"]);
     config.run.max_iterations = 4;
     config.run.checkpoint_interval = 2;
-    config.run.replay = false;
     config.validate("test").expect("a library config");
     let path = dir.path().join("library.toml");
     std::fs::write(&path, config.to_toml().expect("toml")).expect("write config");

@@ -74,6 +74,20 @@ pub fn small_config(motion: &str) -> TrainConfig {
     config
 }
 
+/// [`small_config`] of the backflip's committed keys on a library of the built-in `clips`, with
+/// no replay page (a library run writes none), validated.
+pub fn small_library_config(clips: &[&str]) -> TrainConfig {
+    let mut config = small_config("backflip");
+    config.motion = String::new();
+    config.motion_library = Some(instantmimic::motion::LibraryConfig {
+        clips: Some(clips.iter().map(|c| (*c).to_owned()).collect()),
+        ..Default::default()
+    });
+    config.run.replay = false;
+    config.validate("test").expect("a library config");
+    config
+}
+
 /// Fails the test with the command's output unless it succeeded (`what` names it).
 pub fn check_success(out: &Output, what: &str) {
     assert!(
