@@ -86,6 +86,7 @@ newest_checkpoint() { ls "$OUT/runs/$1"/checkpoints/*.safetensors 2>/dev/null | 
 library_eval() {
   local name=$1 checkpoint=$2 library=$3
   if [ -z "$checkpoint" ]; then note "$name: no checkpoint"; return; fi
+  if [ "$(left)" -lt 20 ]; then note "$name: skipped (session time)"; return; fi
   local t0; t0=$(date +%s)
   run_bounded 200 "$OUT/runs/$name.log" "$BIN/instantmimic" eval --checkpoint "$checkpoint" \
     --library "$library" --out "$OUT/runs/$name.tsv"
