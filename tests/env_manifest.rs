@@ -24,7 +24,7 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 42] = [
+const EXPECTED_KERNELS: [(&str, &str); 43] = [
     ("control", "pd_control"),
     ("evaluate", "evaluation_accumulate"),
     ("gae", "gae_advantages"),
@@ -53,6 +53,7 @@ const EXPECTED_KERNELS: [(&str, &str); 42] = [
     ("observe", "observation_normalize"),
     ("optimizer", "ppo_minibatch_schedule"),
     ("optimizer", "adam_update"),
+    ("optimizer", "log_std_floor"),
     ("policy", "linear_elu"),
     ("policy", "linear"),
     ("policy", "gaussian_sample"),

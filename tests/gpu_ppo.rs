@@ -822,6 +822,56 @@ fn concurrent_networks_give_the_sequential_update() {
     }
 }
 
+/// `ppo.min_log_std`: one update step (1 epoch x 1 minibatch) with the floor at the initial
+/// log std leaves each log std at `max(step without the floor, floor)`, bit for bit, with some
+/// actions raised and some not, and every other parameter as the step without the floor left
+/// it (the clamp comes after the Adam step and changes nothing else).
+#[test]
+fn min_log_std_clamps_the_log_std_after_the_step_and_changes_nothing_else() {
+    let run = |floor: Option<f32>| {
+        let (gpu, _kernels, policy, update, rollout, _) = small_setup_with(1, 1, 9, |c| {
+            c.ppo.min_log_std = floor;
+        });
+        run_one_update(&gpu, &update, &rollout);
+        let actor = policy.actor_parameters().download().expect("actor");
+        let critic = policy.critic_parameters().download().expect("critic");
+        (actor, critic, policy.action_size())
+    };
+    let floor = -1.0f32;
+    let (free_actor, free_critic, a) = run(None);
+    let (floored_actor, floored_critic, _) = run(Some(floor));
+    let split = free_actor.len() - a;
+    assert_eq!(
+        free_actor[..split]
+            .iter()
+            .map(|x| x.to_bits())
+            .collect::<Vec<_>>(),
+        floored_actor[..split]
+            .iter()
+            .map(|x| x.to_bits())
+            .collect::<Vec<_>>(),
+        "the actor's weights differ"
+    );
+    assert_eq!(
+        free_critic.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+        floored_critic
+            .iter()
+            .map(|x| x.to_bits())
+            .collect::<Vec<_>>(),
+        "the critic's weights differ"
+    );
+    let (free, floored) = (&free_actor[split..], &floored_actor[split..]);
+    println!("log std without the floor {free:?}, with {floored:?}");
+    for (x, y) in free.iter().zip(floored) {
+        assert_eq!(x.max(floor).to_bits(), y.to_bits(), "{x} floored to {y}");
+    }
+    let raised = free.iter().filter(|&&x| x < floor).count();
+    assert!(
+        raised > 0 && raised < a,
+        "{raised} of {a} log stds below the floor: the case does not tell a clamp from none"
+    );
+}
+
 /// `ppo.concurrent_networks` with the committed training keys (values in the update, value
 /// normalization, the adaptive learning rate, 3 epochs x 4 minibatches, 400-200-100 networks)
 /// over 30 updates of one batch: the parameters and every update's statistics follow the

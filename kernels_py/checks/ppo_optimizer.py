@@ -6,6 +6,8 @@
   step count.
 - `adam_update`: torch's Adam with global-norm clipping (a norm above the threshold and one
   below), at steps 1 and 7, several steps in a row against the reference's own trajectory.
+- `log_std_floor`: values below the floor raised to it exactly, the others untouched bit for
+  bit (a floor of -inf changes nothing).
 - `ppo_update_statistics`: means over minibatch slots, the learning rate, advantage moments,
   the update counter; the mean gradient norm from two squared norms per step (actor and
   critic clipped separately, or the global norm and 0).
@@ -122,6 +124,22 @@ def check_adam(v: Verdict, rng):
     v.error("Adam, 5 clipped steps: moments", np.stack([md.numpy(), vd.numpy()]), np.stack([ref[1], ref[2]]))
 
 
+def check_log_std_floor(v: Verdict, rng):
+    a = 28
+    log_std = f32(rng.uniform(-4.0, -1.0, a))
+    log_std[0] = f32(-2.5)  # at the floor: unchanged
+    for floor in [-2.5, -float("inf")]:
+        d = array(log_std)
+        wp.launch(optimizer.log_std_floor, dim=a, inputs=[d, floor], device="cpu")
+        ref = np.maximum(log_std.astype(np.float64), floor)
+        out = d.numpy()
+        v.error(f"log std floor {floor}", out, ref, limit=0.0)
+        kept = log_std >= floor
+        v.check(f"log std floor {floor}: values above it kept bit for bit", np.array_equal(out[kept].view(np.uint32), log_std[kept].astype(np.float32).view(np.uint32)))
+        raised = int((~kept).sum())
+        v.check(f"log std floor {floor}: {raised} values raised", (floor == -float("inf")) == (raised == 0), f"{raised}")
+
+
 def check_statistics(v: Verdict, rng):
     steps, a, samples = 20, 4, 1000
     for separate in [True, False]:
@@ -158,6 +176,7 @@ def main() -> int:
     v = Verdict("ppo_optimizer")
     check_schedule(v, rng)
     check_adam(v, rng)
+    check_log_std_floor(v, rng)
     check_statistics(v, rng)
     return v.finish()
 

@@ -14,6 +14,8 @@ Per minibatch, in this order on the stream:
    scaled by `min(1, max_grad_norm / (norm + 1e-6))` (torch's `clip_grad_norm_`), then Adam as
    torch computes it: `m = b1 m + (1 - b1) g`, `v = b2 v + (1 - b2) g^2`,
    `p -= lr / (1 - b1^t) * m / (sqrt(v) / sqrt(1 - b2^t) + eps)` (bias corrections in float64).
+4. `log_std_floor` (one thread per action; only with `ppo.min_log_std`): the actor's log std
+   clamped from below.
 """
 
 import warp as wp
@@ -107,6 +109,17 @@ def adam_update(
     denom = wp.sqrt(v) / wp.float32(wp.sqrt(bias2)) + hp.epsilon
     params[i] = params[i] - step_size * m / denom
 
+
+@wp.kernel
+def log_std_floor(log_std: wp.array(dtype=wp.float32), floor: wp.float32):
+    """One thread per action, after the actor's Adam step (config `ppo.min_log_std`): keeps each
+    log std at or above `floor`. A library's easy clips keep pulling the shared log std down
+    until the hard clips get no exploration and the adaptive rate, whose KL grows as 1/sigma^2
+    per unit of mean change, drops to its floor; a clamp after the step is a projection, and the
+    parameter moves up again as soon as its gradient says so."""
+    i = wp.tid()
+    log_std[i] = wp.max(log_std[i], floor)
+
 # Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
 # dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
 # writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
@@ -121,5 +134,8 @@ LAUNCH = {
         "dim <= len(grads)",
         "dim <= len(moment1)",
         "dim <= len(moment2)",
+    ),
+    "log_std_floor": (
+        "dim == len(log_std)",
     ),
 }

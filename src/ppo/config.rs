@@ -101,6 +101,12 @@ pub struct PpoConfig {
     /// of written configurations when off, so their checkpoints stay readable by older builds.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub concurrent_networks: bool,
+    /// A floor under the actor's log standard deviations, applied after every Adam step (none:
+    /// no floor). With many clips the easy ones pull the one shared log std down until the hard
+    /// ones are no longer explored (docs/library.md, "Exploration"). Left out of written
+    /// configurations when unset, as `concurrent_networks`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min_log_std: Option<f32>,
 }
 
 impl Default for PpoConfig {
@@ -124,6 +130,7 @@ impl Default for PpoConfig {
             values_in_update: true,
             overlap_update: false,
             concurrent_networks: false,
+            min_log_std: None,
             max_grad_norm: 1.0,
         }
     }

@@ -163,6 +163,8 @@ pub struct PpoUpdate {
     actor_grads: MlpGradients,
     critic_grads: MlpGradients,
     log_std_grad: DeviceArray<f32>,
+    /// `ppo.min_log_std`: the floor kept under `log_std` after every actor step.
+    min_log_std: Option<f32>,
     /// The cuBLAS path's input-gradient products `dz w^T` (`[rows x widest hidden layer]`,
     /// shared by the actor's and the critic's backward passes); none for Warp tiles.
     input_gradient_scratch: Option<DeviceArray<f32>>,
@@ -312,6 +314,7 @@ impl PpoUpdate {
             actor_grads,
             critic_grads,
             log_std_grad,
+            min_log_std: q.min_log_std,
             input_gradient_scratch,
             concurrent_networks: concurrent,
             critic_input_gradient_scratch,
@@ -617,7 +620,11 @@ impl PpoUpdate {
                     &self.actor_grads,
                     &self.actor_moments,
                     actor_slot,
-                )
+                )?;
+                if let Some(floor) = self.min_log_std {
+                    k.log_std_floor(s, self.action_size, &self.log_std, floor)?;
+                }
+                Ok(())
             },
             |s| {
                 let (params, grads) = (&self.critic_params, &self.critic_grads);

@@ -435,6 +435,12 @@ impl TrainConfig {
             p.init_log_std,
             "must be in [-10, 2]"
         );
+        if let Some(floor) = q.min_log_std
+            && !(-10.0..=p.init_log_std).contains(&floor)
+        {
+            let reason = format!("must be in [-10, policy.init_log_std = {}]", p.init_log_std);
+            return Err(bad("ppo.min_log_std", floor.to_string(), &reason));
+        }
         check!(
             p.init_hidden_gain > 0.0 && p.init_hidden_gain <= 10.0,
             "policy.init_hidden_gain",

@@ -484,9 +484,12 @@ fn the_library_configs_train_the_general_defaults_sections_on_a_library() {
     for (name, clips) in [("library_shipped", 13), ("library_all", 22)] {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("configs/train/{name}.toml"));
         let c = TrainConfig::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        // The one key set for a library (docs/library.md, "Exploration").
+        let mut ppo = d.ppo.clone();
+        ppo.min_log_std = Some(-2.0);
         assert_eq!(
             (&c.env, &c.reward, &c.obs, &c.policy, &c.ppo),
-            (&d.env, &d.reward, &d.obs, &d.policy, &d.ppo),
+            (&d.env, &d.reward, &d.obs, &d.policy, &ppo),
             "{name}"
         );
         let library = c.motion_library.as_ref().unwrap();
@@ -524,4 +527,24 @@ fn concurrent_networks_is_written_only_when_on() {
     assert!(on.contains("concurrent_networks = true"), "{on}");
     let back = TrainConfig::from_toml(&on, "on.toml").unwrap();
     assert!(back.ppo.concurrent_networks);
+}
+
+#[test]
+fn min_log_std_is_written_only_when_set_and_stays_at_or_below_the_initial_log_std() {
+    let mut c = TrainConfig::with_motion("walk");
+    assert_eq!(c.ppo.min_log_std, None);
+    assert!(!c.to_toml().unwrap().contains("min_log_std"));
+    c.policy.init_log_std = -1.5;
+    c.ppo.min_log_std = Some(-2.0);
+    let on = c.to_toml().unwrap();
+    let back = TrainConfig::from_toml(&on, "on.toml").unwrap();
+    assert_eq!(back.ppo.min_log_std, Some(-2.0));
+    for bad in [-1.0f32, -11.0, f32::NAN] {
+        c.ppo.min_log_std = Some(bad);
+        let e = c.validate("floor.toml").unwrap_err().to_string();
+        assert!(
+            e.contains("ppo.min_log_std") && e.contains("policy.init_log_std = -1.5"),
+            "{bad}: {e}"
+        );
+    }
 }
