@@ -2,7 +2,8 @@
 //! requested, the search ends with `HpoError::Interrupted` at its last committed cycle, and
 //! `hpo --resume` then gives the state of a straight run. The command itself, sent SIGTERM
 //! (or SIGINT) while it runs the synthetic objective, says how to resume and exits with 143
-//! (130); a second signal ends it at once, its state still resumable.
+//! (130); a second SIGINT ends it at once, its state still resumable, and a second SIGTERM (as
+//! `timeout` may send) stops it cleanly as one does.
 
 mod hpo_support;
 
@@ -171,11 +172,22 @@ fn send(child: &Child, signal: &str) {
 
 /// Sends `signal` (`kill`'s spelling) mid-search: the search stops between trials with `code`.
 fn stopped_cleanly(signal: &str, name: &str, code: i32) {
+    stopped_cleanly_after(&[signal], name, code);
+}
+
+/// [`stopped_cleanly`] after `signals`, sent 200 ms apart (two signals pending at once would
+/// be delivered as one).
+fn stopped_cleanly_after(signals: &[&str], name: &str, code: i32) {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("run");
     let (child, text) = spawn_search(tmp.path(), &out, 15);
     wait_for_cycles(&out, 3);
-    send(&child, signal);
+    for (i, signal) in signals.iter().enumerate() {
+        if i > 0 {
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        send(&child, signal);
+    }
     let started = Instant::now();
     let output = child.wait_with_output().unwrap();
     let (stdout, stderr) = (
@@ -232,8 +244,15 @@ fn sigint_stops_the_search_with_130() {
     stopped_cleanly("-INT", "SIGINT", 130);
 }
 
+/// `timeout` sends its SIGTERM to the command and to its process group: a second SIGTERM is
+/// the same request, not the at-once end a second Ctrl-C is.
 #[test]
-fn a_second_signal_ends_the_search_at_once() {
+fn a_repeated_sigterm_still_stops_the_search_cleanly() {
+    stopped_cleanly_after(&["-TERM", "-TERM"], "SIGTERM", 143);
+}
+
+#[test]
+fn a_second_sigint_ends_the_search_at_once() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("run");
     // Trials of 5 s: both signals land during one, even on a loaded 2-core machine (with 2 s
@@ -245,14 +264,14 @@ fn a_second_signal_ends_the_search_at_once() {
     // Two signals pending at once would be delivered as one.
     std::thread::sleep(Duration::from_millis(200));
     let started = Instant::now();
-    send(&child, "-TERM");
+    send(&child, "-INT");
     let status = child.wait().unwrap();
     assert!(
         started.elapsed() < Duration::from_millis(1500),
         "not at once"
     );
     // Ended by the signal's default action, not by a clean stop.
-    assert_eq!((status.code(), status.signal()), (None, Some(15)));
+    assert_eq!((status.code(), status.signal()), (None, Some(2)));
     // The committed state is whole: the search resumes from it.
     let resumed = Search::resume(&out, None).unwrap();
     assert_eq!(resumed.cycles_done(), 0);

@@ -3,8 +3,12 @@
 //! ([`RunSession::record`](super::RunSession::record)); the run then checkpoints, writes its
 //! metrics, curve and `summary.json` (stop reason `interrupted`) and ends. Nothing is cut
 //! short: the signal handler only stores to atomics, so no graph launch, device copy or file
-//! write is interrupted. A second signal runs the signal's default action (the process ends
-//! at once, as if no handler were installed).
+//! write is interrupted. A second SIGINT runs the signal's default action (the process ends
+//! at once, as if no handler were installed); a second SIGTERM is the same request again:
+//! `timeout` sends its SIGTERM both to the command and to the command's process group, so one
+//! `timeout` can deliver it twice (docs/train.md, "Stopping a run": 3 of 4 runs stopped by
+//! `timeout` on 2026-11-26 lost their final checkpoint and summary). Something that must end a
+//! run at once sends SIGKILL, as `timeout -k` does.
 
 use std::io;
 use std::sync::Arc;
@@ -61,9 +65,12 @@ pub struct StopFlag {
     requested: Arc<AtomicBool>,
     /// The number of the signal that asked (0 before any).
     signal: Arc<AtomicUsize>,
-    /// Once set, a signal runs its default action instead (the second signal of a stop, or
-    /// any signal after [`StopFlag::stop_at_once_from_now`]).
+    /// Once set, SIGINT runs its default action instead (the second signal of a stop, or any
+    /// after [`StopFlag::stop_at_once_from_now`]).
     at_once: Arc<AtomicBool>,
+    /// Once set, SIGTERM runs its default action instead: only after
+    /// [`StopFlag::stop_at_once_from_now`], never by a SIGTERM itself.
+    terminate_at_once: Arc<AtomicBool>,
 }
 
 impl StopFlag {
@@ -74,14 +81,16 @@ impl StopFlag {
 
     /// A flag that SIGINT and SIGTERM set. The handlers only store to this flag's atomics
     /// (signal-hook runs them inside its async-signal-safe handler); the first signal sets the
-    /// request, the second runs the signal's default action (the process ends with the
-    /// shell's status 130 or 143). Call once per process: handlers of an earlier flag stay
-    /// registered.
+    /// request. A second SIGINT (after either signal) runs SIGINT's default action (the
+    /// process ends with the shell's status 130); SIGTERM only ever repeats the request, until
+    /// [`StopFlag::stop_at_once_from_now`]. Call once per process: handlers of an earlier flag
+    /// stay registered.
     pub fn on_signals() -> io::Result<StopFlag> {
         let flag = StopFlag::new();
-        for signal in [SIGINT, SIGTERM] {
+        for (signal, default_when) in [(SIGINT, &flag.at_once), (SIGTERM, &flag.terminate_at_once)]
+        {
             // Order matters: the default action is checked before this signal arms it.
-            signal_hook::flag::register_conditional_default(signal, Arc::clone(&flag.at_once))?;
+            signal_hook::flag::register_conditional_default(signal, Arc::clone(default_when))?;
             signal_hook::flag::register_usize(signal, Arc::clone(&flag.signal), signal as usize)?;
             signal_hook::flag::register(signal, Arc::clone(&flag.requested))?;
             signal_hook::flag::register(signal, Arc::clone(&flag.at_once))?;
@@ -119,6 +128,7 @@ impl StopFlag {
     /// the loops that nothing checks the flag in (writing `replay.html` after a run).
     pub fn stop_at_once_from_now(&self) {
         self.at_once.store(true, Ordering::SeqCst);
+        self.terminate_at_once.store(true, Ordering::SeqCst);
     }
 }
 
