@@ -213,6 +213,20 @@ fn a_short_library_run_scores_every_clip_and_writes_its_clip_table() {
             .sum::<u64>(),
         32
     );
+    // The reset sampler's part per clip: shares of one draw, rates of failures per visit.
+    let shares: Vec<f64> = clips
+        .iter()
+        .map(|c| c["reset_share"].as_f64().expect("reset_share"))
+        .collect();
+    assert!(
+        (shares.iter().sum::<f64>() - 1.0).abs() < 1e-5 && shares.iter().all(|&s| s > 0.0),
+        "{shares:?}"
+    );
+    assert!(clips.iter().all(|c| {
+        c["training_failure_rate"]
+            .as_f64()
+            .is_none_or(|r| (0.0..=1.0).contains(&r))
+    }));
     let table = std::fs::read_to_string(run.join("clips.tsv")).expect("clips.tsv");
     assert_eq!(table.lines().count(), 6, "{table}");
     // The per-clip chart beside the curve.

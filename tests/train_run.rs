@@ -222,6 +222,9 @@ fn a_library_run_writes_its_clips_table_and_chart() {
         success_rate,
         global_mpjpe_m: 0.1,
         pose_error_m: 0.05,
+        // The reset sampler's part, as the trainer adds it (no failure rate: no visit yet).
+        reset_share: Some(0.25),
+        training_failure_rate: (success_rate < 1.0).then_some(0.5),
     };
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().join("run");
@@ -245,6 +248,18 @@ fn a_library_run_writes_its_clips_table_and_chart() {
         table.lines().any(|l| l.starts_with("backflip\t")),
         "{table}"
     );
+    assert!(
+        table.lines().next().is_some_and(
+            |h| h.ends_with("\ttime_to_threshold_s\treset_share\ttraining_failure_rate")
+        ),
+        "{table}"
+    );
+    let walk: Vec<&str> = table
+        .lines()
+        .find(|l| l.starts_with("walk\t"))
+        .map(|l| l.split('\t').collect())
+        .unwrap_or_default();
+    assert!(walk.ends_with(&["0.250", "-"]), "{table}");
 
     let single = dir.path().join("single");
     let mut session =

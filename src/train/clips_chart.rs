@@ -144,6 +144,8 @@ mod tests {
             success_rate,
             global_mpjpe_m: 0.1,
             pose_error_m: 0.05,
+            reset_share: None,
+            training_failure_rate: None,
         }
     }
 

@@ -8,6 +8,7 @@
 use std::path::PathBuf;
 
 use super::checkpoint::Checkpoint;
+use super::clip_sampling::ClipSampling;
 use super::config::TrainConfig;
 use super::divergence::{DivergenceEvent, DivergenceGuard, non_finite_report};
 use super::error::TrainError;
@@ -73,6 +74,11 @@ trait LoopTrainer {
     fn physics_overflow(&mut self) -> Result<PhysicsOverflow, TrainError>;
     /// Lines for the run's output since the last call.
     fn notes(&mut self) -> Vec<String>;
+    /// Each clip's part in the reset sampler, for a library's evaluation (none where the
+    /// trainer does not say).
+    fn clip_sampling(&mut self) -> Result<Option<Vec<ClipSampling>>, TrainError> {
+        Ok(None)
+    }
 }
 
 impl LoopTrainer for Trainer {
@@ -99,6 +105,9 @@ impl LoopTrainer for Trainer {
     }
     fn notes(&mut self) -> Vec<String> {
         Vec::new()
+    }
+    fn clip_sampling(&mut self) -> Result<Option<Vec<ClipSampling>>, TrainError> {
+        Trainer::clip_sampling(self).map(Some)
     }
 }
 
@@ -127,6 +136,9 @@ impl LoopTrainer for Replicas {
     }
     fn notes(&mut self) -> Vec<String> {
         self.take_notes()
+    }
+    fn clip_sampling(&mut self) -> Result<Option<Vec<ClipSampling>>, TrainError> {
+        Replicas::clip_sampling(self).map(Some)
     }
 }
 
@@ -470,7 +482,12 @@ fn run_loop<T: LoopTrainer>(
             let started = std::time::Instant::now();
             let episodes = trainer.evaluate()?;
             wall.evaluation(started);
-            let summary = scorer.summarize(&episodes, trainer.evaluation_steps(), threshold)?;
+            let mut summary = scorer.summarize(&episodes, trainer.evaluation_steps(), threshold)?;
+            if let Some(library) = summary.library.as_mut()
+                && let Some(sampling) = trainer.clip_sampling()?
+            {
+                library.set_sampling(&sampling);
+            }
             last_episodes = episodes;
             Some(summary)
         } else {

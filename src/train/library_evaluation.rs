@@ -9,12 +9,14 @@
 //! of the episodes and every clip at [`CLIP_SUCCESS_RATE`] (issue 19's acceptance).
 //!
 //! `clips.tsv` in the run directory is the per-clip table of the latest evaluation, with the
-//! active time at which each clip first reached [`CLIP_SUCCESS_RATE`].
+//! active time at which each clip first reached [`CLIP_SUCCESS_RATE`] and the reset sampler's
+//! share and failure rate for the clip ([`super::clip_sampling`]).
 
 use std::fmt::Write as _;
 
 use serde::{Deserialize, Serialize};
 
+use super::clip_sampling::ClipSampling;
 use super::evaluation::{
     EnvEpisodeRow, EnvEvaluation, EvaluationError, EvaluationSummary, summarize,
 };
@@ -66,6 +68,12 @@ pub struct ClipScore {
     pub global_mpjpe_m: f64,
     #[serde(deserialize_with = "nan_from_null")]
     pub pose_error_m: f64,
+    /// Training runs: the clip's share of the reset sampler's next resets and its failures per
+    /// visit there ([`super::clip_sampling`]); absent from `eval`'s scores.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reset_share: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub training_failure_rate: Option<f64>,
 }
 
 /// The library part of an evaluation (`EvaluationSummary::library`).
@@ -79,6 +87,20 @@ pub struct LibraryEvaluation {
     pub episodes_pass: bool,
     /// Whether every clip reached [`CLIP_SUCCESS_RATE`].
     pub all_clips_pass: bool,
+}
+
+impl LibraryEvaluation {
+    /// Adds the reset sampler's part for each clip (`sampling` in the library's clip order; a
+    /// list of another length is left out: it is not this library's).
+    pub fn set_sampling(&mut self, sampling: &[ClipSampling]) {
+        if sampling.len() != self.clips.len() {
+            return;
+        }
+        for (clip, s) in self.clips.iter_mut().zip(sampling) {
+            clip.reset_share = Some(s.reset_share);
+            clip.training_failure_rate = s.failure_rate;
+        }
+    }
 }
 
 impl LibraryPlan {
@@ -169,6 +191,8 @@ impl LibraryPlan {
                 success_rate: s.success_rate,
                 global_mpjpe_m: s.global_mpjpe_m,
                 pose_error_m: s.pose_error_m,
+                reset_share: None,
+                training_failure_rate: None,
             });
         }
         let at_threshold = scores
@@ -305,14 +329,23 @@ pub fn clips_table(records: &[IterationRecord]) -> Option<String> {
         })
     };
     let time = |t: Option<f64>| t.map_or("-".to_string(), |t| format!("{t:.3}"));
-    let mut out = format!("{CLIP_TABLE_COLUMNS}\ttime_to_threshold_s\n");
+    let rate = |x: Option<f64>| x.map_or("-".to_string(), |x| format!("{x:.3}"));
+    let mut out =
+        format!("{CLIP_TABLE_COLUMNS}\ttime_to_threshold_s\treset_share\ttraining_failure_rate\n");
     for c in &library.clips {
-        let _ = writeln!(out, "{}\t{}", clip_table_row(c), time(first_at(&c.name)));
+        let _ = writeln!(
+            out,
+            "{}\t{}\t{}\t{}",
+            clip_table_row(c),
+            time(first_at(&c.name)),
+            rate(c.reset_share),
+            rate(c.training_failure_rate)
+        );
     }
     let run_success = evaluated().find_map(|(t, e, _)| e.success.then_some(t));
     let _ = writeln!(
         out,
-        "{}\t{}",
+        "{}\t{}\t-\t-",
         library_table_row(library, last),
         time(run_success)
     );

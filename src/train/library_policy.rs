@@ -377,8 +377,8 @@ impl LibraryPolicyEvaluator {
 }
 
 /// The per-clip table of one evaluation of a checkpoint (`eval --out`): `clips.tsv`'s columns
-/// but the time to threshold (a checkpoint's evaluation has no training time), then a row for
-/// the whole library. None for an evaluation of one clip.
+/// but the training's (time to threshold, the reset sampler's share and failure rate), then a
+/// row for the whole library. None for an evaluation of one clip.
 pub fn evaluation_clips_table(summary: &EvaluationSummary) -> Option<String> {
     let library = summary.library.as_ref()?;
     let mut out = format!("{CLIP_TABLE_COLUMNS}\n");

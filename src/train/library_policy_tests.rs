@@ -236,6 +236,8 @@ fn summary() -> EvaluationSummary {
         success_rate: f64::from(succeeded) / 10.0,
         global_mpjpe_m: 0.05,
         pose_error_m: f64::NAN,
+        reset_share: None,
+        training_failure_rate: None,
     };
     EvaluationSummary {
         episodes: 20,

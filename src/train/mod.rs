@@ -7,6 +7,7 @@
 //! [`library_evaluation`]).
 
 pub mod checkpoint;
+pub mod clip_sampling;
 pub mod clips_chart;
 mod clock;
 mod config;

@@ -31,6 +31,7 @@ use crate::ppo::{GaussianPolicy, PolicyGemm, PpoBatch, PpoOptimizerState, PpoUpd
 
 use super::checkpoint::tensor_names;
 use super::checkpoint::{Checkpoint, CheckpointError};
+use super::clip_sampling::{ClipSampling, clip_sampling};
 use super::config::TrainConfig;
 use super::device_report::{REPORT_BYTES, read_report, record_parameter_squares, record_report};
 use super::error::TrainError;
@@ -292,6 +293,26 @@ impl Trainer {
             })?
             .download()?;
         Ok(scores.iter().map(EnvEvaluation::from).collect())
+    }
+
+    /// What the adaptive reset sampler gives each clip now (waits for the GPU): its share of the
+    /// next rollout's resets and its recent failure rate ([`clip_sampling`]).
+    pub fn clip_sampling(&self) -> Result<Vec<ClipSampling>, TrainError> {
+        self.gpu.synchronize()?;
+        let (visits, failures, cdf, _) = self.rollout.phase_statistics();
+        let [clips, bins] = cdf.shape();
+        clip_sampling(
+            &cdf.download()?,
+            &visits.download()?,
+            &failures.download()?,
+            clips,
+            bins,
+        )
+        .ok_or_else(|| {
+            TrainError::Setup(format!(
+                "the reset sampler's statistics are not a CDF over {clips} clips x {bins} bins"
+            ))
+        })
     }
 
     /// The goal task's record of the iteration just run (None when tracking; waits for the

@@ -34,6 +34,7 @@ use crate::env::TrackedMotion;
 use crate::plan::{PhysicsOverflow, PlanStore};
 
 use super::checkpoint::Checkpoint;
+use super::clip_sampling::ClipSampling;
 use super::config::TrainConfig;
 use super::error::TrainError;
 use super::evaluation::EnvEvaluation;
@@ -200,6 +201,12 @@ impl Replicas {
     /// The evaluation, on rank 0 (every replica holds the same policy and normalization).
     pub fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, TrainError> {
         self.on_rank0(|t| t.evaluate())
+    }
+
+    /// The reset sampler's part per clip, from rank 0 (every replica samples from the same
+    /// averaged statistics).
+    pub fn clip_sampling(&mut self) -> Result<Vec<ClipSampling>, TrainError> {
+        self.on_rank0(|t| t.clip_sampling())
     }
 
     /// Fills `checkpoint` from rank 0, after checking that every replica holds the same state.
