@@ -213,17 +213,20 @@ fn a_short_library_run_scores_every_clip_and_writes_its_clip_table() {
             .sum::<u64>(),
         32
     );
-    // The reset sampler's part per clip: shares of one draw, rates of failures per visit.
-    let shares: Vec<f64> = clips
-        .iter()
-        .map(|c| c["reset_share"].as_f64().expect("reset_share"))
-        .collect();
-    assert!(
-        (shares.iter().sum::<f64>() - 1.0).abs() < 1e-5 && shares.iter().all(|&s| s > 0.0),
-        "{shares:?}"
-    );
+    // The reset sampler's part per clip: shares of the resets and of the frames, each summing
+    // to 1, and failing steps per step.
+    for key in ["reset_share", "frame_share"] {
+        let shares: Vec<f64> = clips
+            .iter()
+            .map(|c| c[key].as_f64().unwrap_or_else(|| panic!("{key}: {e}")))
+            .collect();
+        assert!(
+            (shares.iter().sum::<f64>() - 1.0).abs() < 1e-5 && shares.iter().all(|&s| s > 0.0),
+            "{key}: {shares:?}"
+        );
+    }
     assert!(clips.iter().all(|c| {
-        c["training_failure_rate"]
+        c["failures_per_step"]
             .as_f64()
             .is_none_or(|r| (0.0..=1.0).contains(&r))
     }));

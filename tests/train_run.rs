@@ -224,7 +224,8 @@ fn a_library_run_writes_its_clips_table_and_chart() {
         pose_error_m: 0.05,
         // The reset sampler's part, as the trainer adds it (no failure rate: no visit yet).
         reset_share: Some(0.25),
-        training_failure_rate: (success_rate < 1.0).then_some(0.5),
+        frame_share: Some(0.5),
+        failures_per_step: (success_rate < 1.0).then_some(0.01),
     };
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().join("run");
@@ -249,9 +250,11 @@ fn a_library_run_writes_its_clips_table_and_chart() {
         "{table}"
     );
     assert!(
-        table.lines().next().is_some_and(
-            |h| h.ends_with("\ttime_to_threshold_s\treset_share\ttraining_failure_rate")
-        ),
+        table
+            .lines()
+            .next()
+            .is_some_and(|h| h
+                .ends_with("\ttime_to_threshold_s\treset_share\tframe_share\tfailures_per_step")),
         "{table}"
     );
     let walk: Vec<&str> = table
@@ -259,7 +262,7 @@ fn a_library_run_writes_its_clips_table_and_chart() {
         .find(|l| l.starts_with("walk\t"))
         .map(|l| l.split('\t').collect())
         .unwrap_or_default();
-    assert!(walk.ends_with(&["0.250", "-"]), "{table}");
+    assert!(walk.ends_with(&["0.250", "0.500", "-"]), "{table}");
 
     let single = dir.path().join("single");
     let mut session =

@@ -145,7 +145,8 @@ mod tests {
             global_mpjpe_m: 0.1,
             pose_error_m: 0.05,
             reset_share: None,
-            training_failure_rate: None,
+            frame_share: None,
+            failures_per_step: None,
         }
     }
 

@@ -10,7 +10,7 @@
 //!
 //! `clips.tsv` in the run directory is the per-clip table of the latest evaluation, with the
 //! active time at which each clip first reached [`CLIP_SUCCESS_RATE`] and the reset sampler's
-//! share and failure rate for the clip ([`super::clip_sampling`]).
+//! part for the clip ([`super::clip_sampling`]).
 
 use std::fmt::Write as _;
 
@@ -68,12 +68,15 @@ pub struct ClipScore {
     pub global_mpjpe_m: f64,
     #[serde(deserialize_with = "nan_from_null")]
     pub pose_error_m: f64,
-    /// Training runs: the clip's share of the reset sampler's next resets and its failures per
-    /// visit there ([`super::clip_sampling`]); absent from `eval`'s scores.
+    /// Training runs: the clip's share of the reset sampler's next resets and of the training
+    /// frames, and its failing steps per step ([`super::clip_sampling`]); absent from `eval`'s
+    /// scores.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reset_share: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub training_failure_rate: Option<f64>,
+    pub frame_share: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub failures_per_step: Option<f64>,
 }
 
 /// The library part of an evaluation (`EvaluationSummary::library`).
@@ -98,7 +101,8 @@ impl LibraryEvaluation {
         }
         for (clip, s) in self.clips.iter_mut().zip(sampling) {
             clip.reset_share = Some(s.reset_share);
-            clip.training_failure_rate = s.failure_rate;
+            clip.frame_share = s.frame_share;
+            clip.failures_per_step = s.failures_per_step;
         }
     }
 }
@@ -192,7 +196,8 @@ impl LibraryPlan {
                 global_mpjpe_m: s.global_mpjpe_m,
                 pose_error_m: s.pose_error_m,
                 reset_share: None,
-                training_failure_rate: None,
+                frame_share: None,
+                failures_per_step: None,
             });
         }
         let at_threshold = scores
@@ -330,22 +335,24 @@ pub fn clips_table(records: &[IterationRecord]) -> Option<String> {
     };
     let time = |t: Option<f64>| t.map_or("-".to_string(), |t| format!("{t:.3}"));
     let rate = |x: Option<f64>| x.map_or("-".to_string(), |x| format!("{x:.3}"));
-    let mut out =
-        format!("{CLIP_TABLE_COLUMNS}\ttime_to_threshold_s\treset_share\ttraining_failure_rate\n");
+    let mut out = format!(
+        "{CLIP_TABLE_COLUMNS}\ttime_to_threshold_s\treset_share\tframe_share\tfailures_per_step\n"
+    );
     for c in &library.clips {
         let _ = writeln!(
             out,
-            "{}\t{}\t{}\t{}",
+            "{}\t{}\t{}\t{}\t{}",
             clip_table_row(c),
             time(first_at(&c.name)),
             rate(c.reset_share),
-            rate(c.training_failure_rate)
+            rate(c.frame_share),
+            rate(c.failures_per_step)
         );
     }
     let run_success = evaluated().find_map(|(t, e, _)| e.success.then_some(t));
     let _ = writeln!(
         out,
-        "{}\t{}\t-\t-",
+        "{}\t{}\t-\t-\t-",
         library_table_row(library, last),
         time(run_success)
     );

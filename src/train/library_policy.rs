@@ -377,7 +377,7 @@ impl LibraryPolicyEvaluator {
 }
 
 /// The per-clip table of one evaluation of a checkpoint (`eval --out`): `clips.tsv`'s columns
-/// but the training's (time to threshold, the reset sampler's share and failure rate), then a
+/// but the training's (time to threshold and the reset sampler's three), then a
 /// row for the whole library. None for an evaluation of one clip.
 pub fn evaluation_clips_table(summary: &EvaluationSummary) -> Option<String> {
     let library = summary.library.as_ref()?;

@@ -237,7 +237,8 @@ fn summary() -> EvaluationSummary {
         global_mpjpe_m: 0.05,
         pose_error_m: f64::NAN,
         reset_share: None,
-        training_failure_rate: None,
+        frame_share: None,
+        failures_per_step: None,
     };
     EvaluationSummary {
         episodes: 20,

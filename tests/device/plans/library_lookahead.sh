@@ -6,8 +6,8 @@
 # "Exploration in a library"). The guess left: the observation sees the reference only 66 ms
 # ahead (2 frames, 1 step apart) while a flip's takeoff is prepared 0.3-0.5 s before; frames 5
 # and 10 steps ahead (167 and 333 ms) show the coming motion. The base run also records the
-# reset sampler's share and failure rate per clip (clips.tsv, since 1eeab79): whether the
-# hard clips get the resets.
+# reset sampler's reset share, frame share and failures per step per clip (clips.tsv): whether the
+# hard clips get the resets and the frames.
 #   tests/device/stage.sh --train-only .device-train
 #   BIN=.device-train tests/device/lanes.sh tests/device/plans/library_lookahead.sh
 SESSION_S=${SESSION_S:-530}
