@@ -169,9 +169,10 @@ fn the_clips_table_lists_each_clip_with_its_time_to_threshold() {
         "{}",
         lines[1]
     );
-    assert!(lines[1].ends_with("\t2.000"), "{}", lines[1]);
+    // Then the time to 0.8 and the sampler's three columns (none without a trainer's).
+    assert!(lines[1].ends_with("\t2.000\t-\t-\t-"), "{}", lines[1]);
     assert!(
-        lines[3].contains("10 s windows") && lines[3].ends_with("\t-"),
+        lines[3].contains("10 s windows") && lines[3].ends_with("\t-\t-\t-\t-"),
         "{}",
         lines[3]
     );
@@ -182,11 +183,36 @@ fn the_clips_table_lists_each_clip_with_its_time_to_threshold() {
     );
     let table = clips_table(&records).unwrap();
     assert!(
-        table.lines().nth(3).unwrap().ends_with("\t3.000"),
+        table.lines().nth(3).unwrap().ends_with("\t3.000\t-\t-\t-"),
         "{table}"
     );
     assert!(
-        table.lines().nth(4).unwrap().ends_with("\t3.000"),
+        table.lines().nth(4).unwrap().ends_with("\t3.000\t-\t-\t-"),
+        "{table}"
+    );
+    // With the sampler's part, the clip's row carries it.
+    let mut sampled = records.clone();
+    if let Some(library) = sampled[2]
+        .evaluation
+        .as_mut()
+        .and_then(|e| e.library.as_mut())
+    {
+        let part = ClipSampling {
+            reset_share: 0.5,
+            frame_share: Some(0.25),
+            failures_per_step: None,
+        };
+        library.set_sampling(&[part; 3]);
+        // Another library's list is left out.
+        library.set_sampling(&[part; 2]);
+    }
+    let table = clips_table(&sampled).unwrap();
+    assert!(
+        table
+            .lines()
+            .nth(1)
+            .unwrap()
+            .ends_with("\t2.000\t0.500\t0.250\t-"),
         "{table}"
     );
 }
