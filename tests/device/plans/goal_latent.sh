@@ -6,7 +6,7 @@
 # tracker carried in $R (the 407-s one of 2026-11-26: .device-runs/all_absolute.safetensors,
 # carried with .device-runs), then the goal task trains on it: the committed keys (seeds 0-2)
 # and, with 4 GPUs, the residual scale 2 (seed 0). With 2 GPUs, GPU 1 runs seeds 1 and 2.
-#   BIN=.device-bin tests/device/lanes.sh tests/device/plans/goal_latent.sh   (carry .device-runs)
+#   BIN=.device-train tests/device/lanes.sh tests/device/plans/goal_latent.sh   (carry .device-train and .device-runs)
 R=${R:-$PWD/.device-runs}
 SESSION_S=${SESSION_S:-530}
 KEEP=${KEEP:-latent}
