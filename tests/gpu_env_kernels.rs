@@ -259,11 +259,12 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             dim,
             a.f32(0),
             a.f32(1),
-            &a.array(2),
+            a.f32(2),
             &a.array(3),
             &a.array(4),
             &a.array(5),
             &a.array(6),
+            &a.array(7),
         ),
         "observe" => kernels.observe(
             s,

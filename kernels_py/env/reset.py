@@ -164,10 +164,30 @@ def reset_masked(
     episode_step[n] = 0
 
 
+@wp.func
+def clip_turnover(
+    phase_visits: wp.array2d(dtype=wp.float32),
+    phase_failures: wp.array2d(dtype=wp.float32),
+    c: wp.int32,
+    frames_horizon: wp.float32,
+) -> wp.float32:
+    """Clip c's episodes per step, `h_c + 1 / T`: its failures per step over all its cells (the
+    decayed counts; 0 before a visit) plus the truncation at T steps. 1 when T <= 0."""
+    if frames_horizon <= 0.0:
+        return 1.0
+    v = float(0.0)
+    f = float(0.0)
+    for b in range(phase_visits.shape[1]):
+        v += phase_visits[c, b]
+        f += phase_failures[c, b]
+    return f / wp.max(v, 1.0) + 1.0 / frames_horizon
+
+
 @wp.kernel
 def phase_statistics_update(
     decay: wp.float32,
     floor: wp.float32,
+    frames_horizon: wp.float32,
     clip_weight: wp.array(dtype=wp.float32),
     phase_visits: wp.array2d(dtype=wp.float32),
     phase_failures: wp.array2d(dtype=wp.float32),
@@ -181,19 +201,34 @@ def phase_statistics_update(
     every failure rate 0 a clip's share of resets is its weight (fractions summing to 1); the
     floor keeps every cell's share above `weight * floor / (bins * (1 + floor))`. One thread
     in order, as the one clip's bins always were: a library of one (weight 1) gets today's CDF
-    bit for bit, and the few hundred cells of a library cost microseconds once per rollout."""
+    bit for bit, and the few hundred cells of a library cost microseconds once per rollout.
+
+    With `frames_horizon` T > 0 (config `env.phase_share = "frames"`, T the training's
+    `max_episode_steps`) the weights set each clip's share of the frames instead of the resets:
+    an env plays its clip until the episode fails or is truncated, so with h_c the clip's
+    failures per step over all its cells an episode lasts about `1 / (h_c + 1 / T)` steps, and
+    each of the clip's cells is weighted by `h_c + 1 / T` as well. A clip whose episodes fail
+    within steps then gets the resets that make up its frames. T = 0: as before, bit for bit."""
     if wp.tid() != 0:
         return
     clips = phase_cdf.shape[0]
     bins = phase_cdf.shape[1]
     total = float(0.0)
     for c in range(clips):
+        turnover = clip_turnover(phase_visits, phase_failures, c, frames_horizon)
         for b in range(bins):
-            total += clip_weight[c] * (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor)
+            w = clip_weight[c] * (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor)
+            if frames_horizon > 0.0:
+                w = w * turnover
+            total += w
     acc = float(0.0)
     for c in range(clips):
+        turnover = clip_turnover(phase_visits, phase_failures, c, frames_horizon)
         for b in range(bins):
-            acc += clip_weight[c] * (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor) / total
+            w = clip_weight[c] * (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor)
+            if frames_horizon > 0.0:
+                w = w * turnover
+            acc += w / total
             phase_cdf[c, b] = acc
             phase_visits[c, b] = phase_visits[c, b] * decay
             phase_failures[c, b] = phase_failures[c, b] * decay

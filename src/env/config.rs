@@ -40,6 +40,30 @@ pub struct EnvConfig {
     pub phase_bins: u32,
     pub phase_floor: f32,
     pub phase_decay: f32,
+    /// What the adaptive sampler's weights set: each clip's share of the resets (default), or
+    /// of the training frames (docs/library.md, "Exploration"). Left out of written
+    /// configurations at the default, so their checkpoints stay readable by older builds.
+    #[serde(skip_serializing_if = "PhaseShare::is_resets")]
+    pub phase_share: PhaseShare,
+}
+
+/// `env.phase_share` (kernels_py/env/reset.py `phase_statistics_update`).
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum PhaseShare {
+    /// A cell's weight is its share of the resets.
+    #[default]
+    Resets,
+    /// Each clip's cells are weighted by its episodes per step as well, so that the weights
+    /// set the clip's share of the frames: a clip whose episodes fail within steps gets the
+    /// resets that make up its frames.
+    Frames,
+}
+
+impl PhaseShare {
+    fn is_resets(&self) -> bool {
+        *self == PhaseShare::Resets
+    }
 }
 
 impl Default for EnvConfig {
@@ -60,6 +84,7 @@ impl Default for EnvConfig {
             phase_bins: 20,
             phase_floor: 0.1,
             phase_decay: 0.99,
+            phase_share: PhaseShare::Resets,
         }
     }
 }

@@ -31,7 +31,7 @@ mod trajectory;
 
 pub use config::{
     ActionMode, EndEffectorFrame, EnvConfig, EvalStart, EvaluationProtocol, GoalConfig, ObsConfig,
-    RewardConfig, RolloutConfig, TaskConfig,
+    PhaseShare, RewardConfig, RolloutConfig, TaskConfig,
 };
 pub use evaluation::{
     COMPLETED, ClipEvaluation, EpisodeScore, EpisodeScores, FAILED, LIBRARY_EVALUATION_WINDOW_S,

@@ -4,7 +4,7 @@
 use crate::cuda::{Communicator, Gpu, ReduceOp, Stream};
 use crate::kernels::{DeviceArray, DeviceArray2, EnvError, EnvKernels};
 
-use super::config::EnvConfig;
+use super::config::{EnvConfig, PhaseShare};
 
 /// Adaptive start sampling (kernels_py/env/reset.py): decayed visit and failure counts per
 /// (clip, phase bin) cell `[clips, bins]`, the clips' weights, the sampling CDF over every cell
@@ -19,6 +19,9 @@ pub(super) struct PhaseStatistics {
     clip_weight: DeviceArray<f32>,
     decay: f32,
     floor: f32,
+    /// `env.phase_share = "frames"`: the training's episode limit T (the sampler weights each
+    /// clip by its episodes per step, `h + 1 / T`); 0 for "resets".
+    frames_horizon: f32,
     /// Replicas on other GPUs whose counts are averaged in before each update (none: this GPU
     /// only), so that every replica samples start phases from the same CDF.
     pub(super) replicas: Option<Communicator>,
@@ -54,6 +57,10 @@ impl PhaseStatistics {
             clip_weight: DeviceArray::from_slice(gpu, [clips], weights)?,
             decay: config.phase_decay,
             floor: config.phase_floor,
+            frames_horizon: match config.phase_share {
+                PhaseShare::Resets => 0.0,
+                PhaseShare::Frames => config.max_episode_steps as f32,
+            },
             replicas: None,
         })
     }
@@ -71,6 +78,7 @@ impl PhaseStatistics {
             1,
             self.decay,
             self.floor,
+            self.frames_horizon,
             &self.clip_weight,
             &self.visits,
             &self.failures,

@@ -548,3 +548,20 @@ fn min_log_std_is_written_only_when_set_and_stays_at_or_below_the_initial_log_st
         );
     }
 }
+
+#[test]
+fn phase_share_is_resets_unless_the_config_says_frames_and_written_only_then() {
+    let mut c = TrainConfig::with_motion("walk");
+    assert_eq!(c.env.phase_share, crate::env::PhaseShare::Resets);
+    assert!(!c.to_toml().unwrap().contains("phase_share"));
+    c.env.phase_share = crate::env::PhaseShare::Frames;
+    let on = c.to_toml().unwrap();
+    assert!(on.contains("phase_share = \"frames\""), "{on}");
+    let back = TrainConfig::from_toml(&on, "on.toml").unwrap();
+    assert_eq!(back.env.phase_share, crate::env::PhaseShare::Frames);
+    let bad = on.replace("\"frames\"", "\"steps\"");
+    let e = TrainConfig::from_toml(&bad, "bad.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("phase_share") || e.contains("steps"), "{e}");
+}

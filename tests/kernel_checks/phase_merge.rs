@@ -74,6 +74,7 @@ fn merged_statistics_case(weights: &[f32], bins: usize, ranks: usize, seed: u64)
     let args = vec![
         Arg::Scalar(Scalar::F32(decay)),
         Arg::Scalar(Scalar::F32(floor)),
+        Arg::Scalar(Scalar::F32(0.0)),
         p.f32("clip_weight", &[clips], weights.clone()),
         p.f32("phase_visits", &[clips, bins], visits.clone()),
         p.f32("phase_failures", &[clips, bins], failures.clone()),
@@ -83,9 +84,15 @@ fn merged_statistics_case(weights: &[f32], bins: usize, ranks: usize, seed: u64)
     p.launch(&PHASE_STATISTICS_UPDATE, 1, args);
     Check::new(p, move |p, out| {
         let mut r = Report::new(&p.name);
-        let (single_cdf, _, _) =
-            reference_statistics(decay, floor, &weights, &single_visits, &single_failures);
-        let (_, v, f) = reference_statistics(decay, floor, &weights, &visits, &failures);
+        let (single_cdf, _, _) = reference_statistics(
+            decay,
+            floor,
+            0.0,
+            &weights,
+            &single_visits,
+            &single_failures,
+        );
+        let (_, v, f) = reference_statistics(decay, floor, 0.0, &weights, &visits, &failures);
         r.relative(
             "phase_cdf against one GPU with every rank's envs",
             &wide(out.f32("phase_cdf")),
@@ -134,6 +141,7 @@ fn merged_statistics_by_hand() -> Check {
     let args = vec![
         Arg::Scalar(Scalar::F32(0.5)),
         Arg::Scalar(Scalar::F32(0.1)),
+        Arg::Scalar(Scalar::F32(0.0)),
         p.f32("clip_weight", &[2], vec![0.75, 0.25]),
         p.f32("phase_visits", &[2, 2], visits),
         p.f32("phase_failures", &[2, 2], failures),

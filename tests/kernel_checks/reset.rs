@@ -530,15 +530,28 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
 }
 
 /// The f64 reference of `phase_statistics_update`: the CDF over every (clip, bin) cell (clip
-/// after clip, each cell weighted by its clip's weight), decayed counts.
+/// after clip, each cell weighted by its clip's weight and, with `frames_horizon` T > 0, by
+/// the clip's episodes per step `h + 1 / T`), decayed counts.
 pub fn reference_statistics(
     decay: f32,
     floor: f32,
+    frames_horizon: f32,
     weights: &[f32],
     visits: &[f32],
     failures: &[f32],
 ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let bins = visits.len() / weights.len();
+    let turnover: Vec<f64> = (0..weights.len())
+        .map(|c| {
+            if frames_horizon <= 0.0 {
+                return 1.0;
+            }
+            let row = c * bins..(c + 1) * bins;
+            let v: f64 = visits[row.clone()].iter().map(|&x| f64::from(x)).sum();
+            let f: f64 = failures[row].iter().map(|&x| f64::from(x)).sum();
+            f / v.max(1.0) + 1.0 / f64::from(frames_horizon)
+        })
+        .collect();
     let rate: Vec<f64> = visits
         .iter()
         .zip(failures)
@@ -546,6 +559,7 @@ pub fn reference_statistics(
         .map(|(cell, (&v, &f))| {
             f64::from(weights[cell / bins])
                 * (f64::from(f) / f64::from(v).max(1.0) + f64::from(floor))
+                * turnover[cell / bins]
         })
         .collect();
     let total: f64 = rate.iter().sum();
@@ -564,8 +578,15 @@ pub fn reference_statistics(
     (cdf, decayed(visits), decayed(failures))
 }
 
-/// `weights`: the clips' weight fractions (`[1.0]`: a single clip).
-fn statistics_case(weights: &[f32], bins: usize, threads: usize, seed: u64) -> Check {
+/// `weights`: the clips' weight fractions (`[1.0]`: a single clip); `frames_horizon`: the
+/// kernel's T (0: shares of resets).
+fn statistics_case(
+    weights: &[f32],
+    bins: usize,
+    threads: usize,
+    seed: u64,
+    frames_horizon: f32,
+) -> Check {
     let mut rng = Sampler::new(seed);
     let (decay, floor) = (0.99f32, 0.1f32);
     let clips = weights.len();
@@ -583,16 +604,22 @@ fn statistics_case(weights: &[f32], bins: usize, threads: usize, seed: u64) -> C
         .map(|&v| (f64::from(v) * rng.uniform(0.0, 1.0)) as f32)
         .collect();
     let iteration = rng.index(0, 1000) as i32;
+    let share = if frames_horizon > 0.0 {
+        format!(", shares of frames (T = {frames_horizon})")
+    } else {
+        String::new()
+    };
     let mut p = Program::new(if clips == 1 {
-        format!("phase_statistics_update: {bins} bins, launched over {threads} threads")
+        format!("phase_statistics_update: {bins} bins, launched over {threads} threads{share}")
     } else {
         format!(
-            "phase_statistics_update: {clips} clips of weights {weights:?} x {bins} bins, launched over {threads} threads"
+            "phase_statistics_update: {clips} clips of weights {weights:?} x {bins} bins, launched over {threads} threads{share}"
         )
     });
     let args = vec![
         Arg::Scalar(Scalar::F32(decay)),
         Arg::Scalar(Scalar::F32(floor)),
+        Arg::Scalar(Scalar::F32(frames_horizon)),
         p.f32("clip_weight", &[clips], weights.clone()),
         p.f32("phase_visits", &[clips, bins], visits.clone()),
         p.f32("phase_failures", &[clips, bins], failures.clone()),
@@ -602,7 +629,8 @@ fn statistics_case(weights: &[f32], bins: usize, threads: usize, seed: u64) -> C
     p.launch(&PHASE_STATISTICS_UPDATE, threads, args);
     Check::new(p, move |p, out| {
         let mut r = Report::new(&p.name);
-        let (cdf, v, f) = reference_statistics(decay, floor, &weights, &visits, &failures);
+        let (cdf, v, f) =
+            reference_statistics(decay, floor, frames_horizon, &weights, &visits, &failures);
         r.relative("phase_cdf", &wide(out.f32("phase_cdf")), &cdf);
         r.check(
             out.f32("phase_cdf")[cells - 1] == 1.0,
@@ -773,12 +801,17 @@ pub fn reset_checks(fx: &Fixture) -> Vec<Check> {
 
 pub fn statistics_checks(_fx: &Fixture) -> Vec<Check> {
     vec![
-        statistics_case(&[1.0], 20, 1, 41),
-        statistics_case(&[1.0], 7, 64, 42),
-        statistics_case(&[1.0], 1, 3, 43),
+        statistics_case(&[1.0], 20, 1, 41, 0.0),
+        statistics_case(&[1.0], 7, 64, 42, 0.0),
+        statistics_case(&[1.0], 1, 3, 43, 0.0),
         // A library: 22 clips x 20 bins (the all-clips library's 440 cells), and 3 clips.
-        statistics_case(&[1.0 / 22.0; 22], 20, 1, 44),
-        statistics_case(&[0.5, 0.3, 0.2], 7, 32, 45),
+        statistics_case(&[1.0 / 22.0; 22], 20, 1, 44, 0.0),
+        statistics_case(&[0.5, 0.3, 0.2], 7, 32, 45, 0.0),
+        // Shares of frames (env.phase_share = "frames"): the 22 clips with T = 300, and one
+        // clip, whose CDF the clip's common factor leaves as it was.
+        statistics_case(&[1.0 / 22.0; 22], 20, 1, 46, 300.0),
+        statistics_case(&[0.5, 0.3, 0.2], 7, 32, 47, 60.0),
+        statistics_case(&[1.0], 20, 1, 41, 300.0),
     ]
     .into_iter()
     // A library's counts merged over several GPUs (train --gpus on a library).
