@@ -183,6 +183,20 @@ def clip_turnover(
     return f / wp.max(v, 1.0) + 1.0 / frames_horizon
 
 
+@wp.func
+def cell_weight(
+    clip_weight: wp.array(dtype=wp.float32),
+    phase_visits: wp.array2d(dtype=wp.float32),
+    phase_failures: wp.array2d(dtype=wp.float32),
+    c: wp.int32,
+    b: wp.int32,
+    floor: wp.float32,
+) -> wp.float32:
+    """The resets' sampling weight of cell (c, b): `clip_weight[c] * (failures / max(visits, 1) +
+    floor)`."""
+    return clip_weight[c] * (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor)
+
+
 @wp.kernel
 def phase_statistics_update(
     decay: wp.float32,
@@ -213,19 +227,22 @@ def phase_statistics_update(
         return
     clips = phase_cdf.shape[0]
     bins = phase_cdf.shape[1]
+    # Resets (T <= 0) add each weight as the kernel always did, which NVRTC contracts into one
+    # fused multiply-add: a product by a turnover of 1 first would round twice and change the
+    # CDF's last bits.
     total = float(0.0)
     for c in range(clips):
         turnover = clip_turnover(phase_visits, phase_failures, c, frames_horizon)
         for b in range(bins):
-            w = clip_weight[c] * (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor)
             if frames_horizon > 0.0:
-                w = w * turnover
-            total += w
+                total += cell_weight(clip_weight, phase_visits, phase_failures, c, b, floor) * turnover
+            else:
+                total += cell_weight(clip_weight, phase_visits, phase_failures, c, b, floor)
     acc = float(0.0)
     for c in range(clips):
         turnover = clip_turnover(phase_visits, phase_failures, c, frames_horizon)
         for b in range(bins):
-            w = clip_weight[c] * (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor)
+            w = cell_weight(clip_weight, phase_visits, phase_failures, c, b, floor)
             if frames_horizon > 0.0:
                 w = w * turnover
             acc += w / total
