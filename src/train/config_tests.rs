@@ -563,5 +563,8 @@ fn phase_share_is_resets_unless_the_config_says_frames_and_written_only_then() {
     let e = TrainConfig::from_toml(&bad, "bad.toml")
         .unwrap_err()
         .to_string();
-    assert!(e.contains("phase_share") || e.contains("steps"), "{e}");
+    assert!(
+        e.contains("phase_share") && e.contains("expected `resets` or `frames`"),
+        "{e}"
+    );
 }
