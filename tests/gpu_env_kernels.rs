@@ -260,11 +260,12 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             a.f32(0),
             a.f32(1),
             a.f32(2),
-            &a.array(3),
+            a.f32(3),
             &a.array(4),
             &a.array(5),
             &a.array(6),
             &a.array(7),
+            &a.array(8),
         ),
         "observe" => kernels.observe(
             s,

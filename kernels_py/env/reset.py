@@ -175,12 +175,46 @@ def clip_turnover(
     decayed counts; 0 before a visit) plus the truncation at T steps. 1 when T <= 0."""
     if frames_horizon <= 0.0:
         return 1.0
+    return clip_failure_rate(phase_visits, phase_failures, c) + 1.0 / frames_horizon
+
+
+@wp.func
+def clip_failure_rate(
+    phase_visits: wp.array2d(dtype=wp.float32),
+    phase_failures: wp.array2d(dtype=wp.float32),
+    c: wp.int32,
+) -> wp.float32:
+    """Clip c's failures per step `h_c` over all its cells (the decayed counts; 0 before a
+    visit)."""
     v = float(0.0)
     f = float(0.0)
     for b in range(phase_visits.shape[1]):
         v += phase_visits[c, b]
         f += phase_failures[c, b]
-    return f / wp.max(v, 1.0) + 1.0 / frames_horizon
+    return f / wp.max(v, 1.0)
+
+
+@wp.func
+def clip_share(
+    clip_weight: wp.array(dtype=wp.float32),
+    phase_visits: wp.array2d(dtype=wp.float32),
+    phase_failures: wp.array2d(dtype=wp.float32),
+    c: wp.int32,
+    base_share: wp.float32,
+    failure_total: wp.float32,
+    floor: wp.float32,
+) -> wp.float32:
+    """`env.clip_base_share` s: clip c's share `w_c * (s + (1 - s) * h_c / H)` (H the weighted
+    failures per step of every clip; `w_c` before any failure), divided by the sum of its
+    cells' `rate + floor`, by which each cell is multiplied to split the share over the bins."""
+    share = clip_weight[c]
+    if failure_total > 0.0:
+        h = clip_failure_rate(phase_visits, phase_failures, c)
+        share = clip_weight[c] * (base_share + (1.0 - base_share) * h / failure_total)
+    bins_total = float(0.0)
+    for b in range(phase_visits.shape[1]):
+        bins_total += phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor
+    return share / bins_total
 
 
 @wp.func
@@ -202,6 +236,7 @@ def phase_statistics_update(
     decay: wp.float32,
     floor: wp.float32,
     frames_horizon: wp.float32,
+    clip_base_share: wp.float32,
     clip_weight: wp.array(dtype=wp.float32),
     phase_visits: wp.array2d(dtype=wp.float32),
     phase_failures: wp.array2d(dtype=wp.float32),
@@ -222,7 +257,14 @@ def phase_statistics_update(
     an env plays its clip until the episode fails or is truncated, so with h_c the clip's
     failures per step over all its cells an episode lasts about `1 / (h_c + 1 / T)` steps, and
     each of the clip's cells is weighted by `h_c + 1 / T` as well. A clip whose episodes fail
-    within steps then gets the resets that make up its frames. T = 0: as before, bit for bit."""
+    within steps then gets the resets that make up its frames. T = 0: as before, bit for bit.
+
+    With `clip_base_share` s >= 0 (config `env.clip_base_share`; < 0: off, as above bit for
+    bit) the clips' shares no longer come from their cells' `rate + floor`, whose floor (0.1 per
+    step) outweighs any clip's failures per step (a backflip's 0.04): clip c gets `w_c * (s +
+    (1 - s) * h_c / H)` of the resets (or, with T > 0, of the frames), H = sum of `w_c * h_c`,
+    split over its bins by `rate + floor` as before. Before any failure (H = 0) the shares are
+    the weights."""
     if wp.tid() != 0:
         return
     clips = phase_cdf.shape[0]
@@ -230,20 +272,38 @@ def phase_statistics_update(
     # Resets (T <= 0) add each weight as the kernel always did, which NVRTC contracts into one
     # fused multiply-add: a product by a turnover of 1 first would round twice and change the
     # CDF's last bits.
+    failure_total = float(0.0)
+    if clip_base_share >= 0.0:
+        for c in range(clips):
+            failure_total += clip_weight[c] * clip_failure_rate(phase_visits, phase_failures, c)
     total = float(0.0)
     for c in range(clips):
         turnover = clip_turnover(phase_visits, phase_failures, c, frames_horizon)
-        for b in range(bins):
-            if frames_horizon > 0.0:
-                total += cell_weight(clip_weight, phase_visits, phase_failures, c, b, floor) * turnover
-            else:
-                total += cell_weight(clip_weight, phase_visits, phase_failures, c, b, floor)
+        if clip_base_share >= 0.0:
+            scale = turnover * clip_share(
+                clip_weight, phase_visits, phase_failures, c, clip_base_share, failure_total, floor
+            )
+            for b in range(bins):
+                total += (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor) * scale
+        else:
+            for b in range(bins):
+                if frames_horizon > 0.0:
+                    total += cell_weight(clip_weight, phase_visits, phase_failures, c, b, floor) * turnover
+                else:
+                    total += cell_weight(clip_weight, phase_visits, phase_failures, c, b, floor)
     acc = float(0.0)
     for c in range(clips):
         turnover = clip_turnover(phase_visits, phase_failures, c, frames_horizon)
+        scale = float(0.0)
+        if clip_base_share >= 0.0:
+            scale = turnover * clip_share(
+                clip_weight, phase_visits, phase_failures, c, clip_base_share, failure_total, floor
+            )
         for b in range(bins):
             w = cell_weight(clip_weight, phase_visits, phase_failures, c, b, floor)
-            if frames_horizon > 0.0:
+            if clip_base_share >= 0.0:
+                w = (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor) * scale
+            elif frames_horizon > 0.0:
                 w = w * turnover
             acc += w / total
             phase_cdf[c, b] = acc

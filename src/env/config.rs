@@ -45,6 +45,13 @@ pub struct EnvConfig {
     /// configurations at the default, so their checkpoints stay readable by older builds.
     #[serde(skip_serializing_if = "PhaseShare::is_resets")]
     pub phase_share: PhaseShare,
+    /// Each clip's share (of the resets, or of the frames with `phase_share = "frames"`) as
+    /// `w * (s + (1 - s) * h / H)`: s of it by the clips' weights w, the rest in proportion to
+    /// their failures per step h (H: the weighted sum over the clips). Unset: a clip's share is
+    /// the sum of its cells' weights, whose per-step floor outweighs any clip's failure rate
+    /// (docs/library.md, "The reset sampler"). Written only when set.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub clip_base_share: Option<f32>,
 }
 
 /// `env.phase_share` (kernels_py/env/reset.py `phase_statistics_update`).
@@ -85,6 +92,7 @@ impl Default for EnvConfig {
             phase_floor: 0.1,
             phase_decay: 0.99,
             phase_share: PhaseShare::Resets,
+            clip_base_share: None,
         }
     }
 }

@@ -22,6 +22,8 @@ pub(super) struct PhaseStatistics {
     /// `env.phase_share = "frames"`: the training's episode limit T (the sampler weights each
     /// clip by its episodes per step, `h + 1 / T`); 0 for "resets".
     frames_horizon: f32,
+    /// `env.clip_base_share`, or -1 when unset (the kernel's "off").
+    clip_base_share: f32,
     /// Replicas on other GPUs whose counts are averaged in before each update (none: this GPU
     /// only), so that every replica samples start phases from the same CDF.
     pub(super) replicas: Option<Communicator>,
@@ -61,6 +63,7 @@ impl PhaseStatistics {
                 PhaseShare::Resets => 0.0,
                 PhaseShare::Frames => config.max_episode_steps as f32,
             },
+            clip_base_share: config.clip_base_share.unwrap_or(-1.0),
             replicas: None,
         })
     }
@@ -79,6 +82,7 @@ impl PhaseStatistics {
             self.decay,
             self.floor,
             self.frames_horizon,
+            self.clip_base_share,
             &self.clip_weight,
             &self.visits,
             &self.failures,

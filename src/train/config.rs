@@ -387,6 +387,14 @@ impl TrainConfig {
             e.phase_floor,
             "must be positive"
         );
+        if let Some(share) = e.clip_base_share {
+            check!(
+                (0.0..=1.0).contains(&share),
+                "env.clip_base_share",
+                share,
+                "must be in [0, 1] (the part of each clip's share set by its weight alone)"
+            );
+        }
         check!(
             e.phase_decay > 0.0 && e.phase_decay <= 1.0,
             "env.phase_decay",

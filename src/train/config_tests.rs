@@ -568,3 +568,22 @@ fn phase_share_is_resets_unless_the_config_says_frames_and_written_only_then() {
         "{e}"
     );
 }
+
+#[test]
+fn clip_base_share_is_unset_by_default_written_only_when_set_and_kept_in_zero_to_one() {
+    let mut c = TrainConfig::with_motion("walk");
+    assert_eq!(c.env.clip_base_share, None);
+    assert!(!c.to_toml().unwrap().contains("clip_base_share"));
+    c.env.clip_base_share = Some(0.3);
+    let on = c.to_toml().unwrap();
+    assert!(on.contains("clip_base_share = 0.3"), "{on}");
+    let back = TrainConfig::from_toml(&on, "on.toml").unwrap();
+    assert_eq!(back.env.clip_base_share, Some(0.3));
+    for bad in ["-0.1", "1.5", "nan"] {
+        let text = on.replace("clip_base_share = 0.3", &format!("clip_base_share = {bad}"));
+        let e = TrainConfig::from_toml(&text, "bad.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("env.clip_base_share") && e.contains("[0, 1]"), "{bad}: {e}");
+    }
+}

@@ -75,6 +75,7 @@ fn merged_statistics_case(weights: &[f32], bins: usize, ranks: usize, seed: u64)
         Arg::Scalar(Scalar::F32(decay)),
         Arg::Scalar(Scalar::F32(floor)),
         Arg::Scalar(Scalar::F32(0.0)),
+        Arg::Scalar(Scalar::F32(-1.0)),
         p.f32("clip_weight", &[clips], weights.clone()),
         p.f32("phase_visits", &[clips, bins], visits.clone()),
         p.f32("phase_failures", &[clips, bins], failures.clone()),
@@ -88,11 +89,12 @@ fn merged_statistics_case(weights: &[f32], bins: usize, ranks: usize, seed: u64)
             decay,
             floor,
             0.0,
+            -1.0,
             &weights,
             &single_visits,
             &single_failures,
         );
-        let (_, v, f) = reference_statistics(decay, floor, 0.0, &weights, &visits, &failures);
+        let (_, v, f) = reference_statistics(decay, floor, 0.0, -1.0, &weights, &visits, &failures);
         r.relative(
             "phase_cdf against one GPU with every rank's envs",
             &wide(out.f32("phase_cdf")),
@@ -142,6 +144,7 @@ fn merged_statistics_by_hand() -> Check {
         Arg::Scalar(Scalar::F32(0.5)),
         Arg::Scalar(Scalar::F32(0.1)),
         Arg::Scalar(Scalar::F32(0.0)),
+        Arg::Scalar(Scalar::F32(-1.0)),
         p.f32("clip_weight", &[2], vec![0.75, 0.25]),
         p.f32("phase_visits", &[2, 2], visits),
         p.f32("phase_failures", &[2, 2], failures),

@@ -529,38 +529,86 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
     })
 }
 
+/// Each clip's failures per step over all its cells (`[C * bins]` counts, clip after clip).
+pub fn clip_failure_rates(clips: usize, visits: &[f32], failures: &[f32]) -> Vec<f64> {
+    let bins = visits.len() / clips;
+    (0..clips)
+        .map(|c| {
+            let row = c * bins..(c + 1) * bins;
+            let v: f64 = visits[row.clone()].iter().map(|&x| f64::from(x)).sum();
+            let f: f64 = failures[row].iter().map(|&x| f64::from(x)).sum();
+            f / v.max(1.0)
+        })
+        .collect()
+}
+
+/// `env.clip_base_share` s: the clips' target shares `w_c * (s + (1 - s) * h_c / H)`, the
+/// weights before any failure.
+pub fn clip_target_shares(weights: &[f32], rates: &[f64], base_share: f32) -> Vec<f64> {
+    let s = f64::from(base_share);
+    let total: f64 = weights
+        .iter()
+        .zip(rates)
+        .map(|(&w, h)| f64::from(w) * h)
+        .sum();
+    weights
+        .iter()
+        .zip(rates)
+        .map(|(&w, h)| {
+            let w = f64::from(w);
+            if total > 0.0 {
+                w * (s + (1.0 - s) * h / total)
+            } else {
+                w
+            }
+        })
+        .collect()
+}
+
 /// The f64 reference of `phase_statistics_update`: the CDF over every (clip, bin) cell (clip
 /// after clip, each cell weighted by its clip's weight and, with `frames_horizon` T > 0, by
-/// the clip's episodes per step `h + 1 / T`), decayed counts.
+/// the clip's episodes per step `h + 1 / T`), decayed counts. With `clip_base_share` s >= 0
+/// a clip's cells share [`clip_target_shares`] in proportion to their `rate + floor` instead
+/// of carrying its weight each (then times `h + 1 / T` with T > 0).
 pub fn reference_statistics(
     decay: f32,
     floor: f32,
     frames_horizon: f32,
+    clip_base_share: f32,
     weights: &[f32],
     visits: &[f32],
     failures: &[f32],
 ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
-    let bins = visits.len() / weights.len();
-    let turnover: Vec<f64> = (0..weights.len())
-        .map(|c| {
+    let clips = weights.len();
+    let bins = visits.len() / clips;
+    let rates = clip_failure_rates(clips, visits, failures);
+    let turnover: Vec<f64> = rates
+        .iter()
+        .map(|h| {
             if frames_horizon <= 0.0 {
-                return 1.0;
+                1.0
+            } else {
+                h + 1.0 / f64::from(frames_horizon)
             }
-            let row = c * bins..(c + 1) * bins;
-            let v: f64 = visits[row.clone()].iter().map(|&x| f64::from(x)).sum();
-            let f: f64 = failures[row].iter().map(|&x| f64::from(x)).sum();
-            f / v.max(1.0) + 1.0 / f64::from(frames_horizon)
         })
         .collect();
-    let rate: Vec<f64> = visits
+    let cell_rate: Vec<f64> = visits
         .iter()
         .zip(failures)
+        .map(|(&v, &f)| f64::from(f) / f64::from(v).max(1.0) + f64::from(floor))
+        .collect();
+    let clip_scale: Vec<f64> = if clip_base_share >= 0.0 {
+        let shares = clip_target_shares(weights, &rates, clip_base_share);
+        (0..clips)
+            .map(|c| shares[c] / cell_rate[c * bins..(c + 1) * bins].iter().sum::<f64>())
+            .collect()
+    } else {
+        weights.iter().map(|&w| f64::from(w)).collect()
+    };
+    let rate: Vec<f64> = cell_rate
+        .iter()
         .enumerate()
-        .map(|(cell, (&v, &f))| {
-            f64::from(weights[cell / bins])
-                * (f64::from(f) / f64::from(v).max(1.0) + f64::from(floor))
-                * turnover[cell / bins]
-        })
+        .map(|(cell, x)| clip_scale[cell / bins] * x * turnover[cell / bins])
         .collect();
     let total: f64 = rate.iter().sum();
     let mut acc = 0.0;
@@ -579,13 +627,14 @@ pub fn reference_statistics(
 }
 
 /// `weights`: the clips' weight fractions (`[1.0]`: a single clip); `frames_horizon`: the
-/// kernel's T (0: shares of resets).
+/// kernel's T (0: shares of resets); `clip_base_share`: `env.clip_base_share` (-1: unset).
 fn statistics_case(
     weights: &[f32],
     bins: usize,
     threads: usize,
     seed: u64,
     frames_horizon: f32,
+    clip_base_share: f32,
 ) -> Check {
     let mut rng = Sampler::new(seed);
     let (decay, floor) = (0.99f32, 0.1f32);
@@ -604,11 +653,14 @@ fn statistics_case(
         .map(|&v| (f64::from(v) * rng.uniform(0.0, 1.0)) as f32)
         .collect();
     let iteration = rng.index(0, 1000) as i32;
-    let share = if frames_horizon > 0.0 {
+    let mut share = if frames_horizon > 0.0 {
         format!(", shares of frames (T = {frames_horizon})")
     } else {
         String::new()
     };
+    if clip_base_share >= 0.0 {
+        share += &format!(", clip base share {clip_base_share}");
+    }
     let mut p = Program::new(if clips == 1 {
         format!("phase_statistics_update: {bins} bins, launched over {threads} threads{share}")
     } else {
@@ -620,6 +672,7 @@ fn statistics_case(
         Arg::Scalar(Scalar::F32(decay)),
         Arg::Scalar(Scalar::F32(floor)),
         Arg::Scalar(Scalar::F32(frames_horizon)),
+        Arg::Scalar(Scalar::F32(clip_base_share)),
         p.f32("clip_weight", &[clips], weights.clone()),
         p.f32("phase_visits", &[clips, bins], visits.clone()),
         p.f32("phase_failures", &[clips, bins], failures.clone()),
@@ -629,8 +682,15 @@ fn statistics_case(
     p.launch(&PHASE_STATISTICS_UPDATE, threads, args);
     Check::new(p, move |p, out| {
         let mut r = Report::new(&p.name);
-        let (cdf, v, f) =
-            reference_statistics(decay, floor, frames_horizon, &weights, &visits, &failures);
+        let (cdf, v, f) = reference_statistics(
+            decay,
+            floor,
+            frames_horizon,
+            clip_base_share,
+            &weights,
+            &visits,
+            &failures,
+        );
         r.relative("phase_cdf", &wide(out.f32("phase_cdf")), &cdf);
         r.check(
             out.f32("phase_cdf")[cells - 1] == 1.0,
@@ -648,6 +708,31 @@ fn statistics_case(
             r.note(format!(
                 "clips' shares of resets {shares:.3?} for weights {weights:?}"
             ));
+            if clip_base_share >= 0.0 {
+                // What the key promises, from the kernel's CDF: each clip's share of the
+                // resets, divided by its episodes per step (frames), is its target share.
+                let rates = clip_failure_rates(clips, &visits, &failures);
+                let gpu = wide(out.f32("phase_cdf"));
+                let mut played: Vec<f64> = (0..clips)
+                    .map(|c| {
+                        let before = if c == 0 { 0.0 } else { gpu[c * bins - 1] };
+                        let turnover = if frames_horizon > 0.0 {
+                            rates[c] + 1.0 / f64::from(frames_horizon)
+                        } else {
+                            1.0
+                        };
+                        (gpu[(c + 1) * bins - 1] - before) / turnover
+                    })
+                    .collect();
+                let sum: f64 = played.iter().sum();
+                played.iter_mut().for_each(|x| *x /= sum);
+                let target = clip_target_shares(&weights, &rates, clip_base_share);
+                r.relative(
+                    "clips' shares against env.clip_base_share's targets",
+                    &played,
+                    &target,
+                );
+            }
         }
         r.relative("phase_visits (decayed)", &wide(out.f32("phase_visits")), &v);
         r.relative(
@@ -801,17 +886,23 @@ pub fn reset_checks(fx: &Fixture) -> Vec<Check> {
 
 pub fn statistics_checks(_fx: &Fixture) -> Vec<Check> {
     vec![
-        statistics_case(&[1.0], 20, 1, 41, 0.0),
-        statistics_case(&[1.0], 7, 64, 42, 0.0),
-        statistics_case(&[1.0], 1, 3, 43, 0.0),
+        statistics_case(&[1.0], 20, 1, 41, 0.0, -1.0),
+        statistics_case(&[1.0], 7, 64, 42, 0.0, -1.0),
+        statistics_case(&[1.0], 1, 3, 43, 0.0, -1.0),
         // A library: 22 clips x 20 bins (the all-clips library's 440 cells), and 3 clips.
-        statistics_case(&[1.0 / 22.0; 22], 20, 1, 44, 0.0),
-        statistics_case(&[0.5, 0.3, 0.2], 7, 32, 45, 0.0),
+        statistics_case(&[1.0 / 22.0; 22], 20, 1, 44, 0.0, -1.0),
+        statistics_case(&[0.5, 0.3, 0.2], 7, 32, 45, 0.0, -1.0),
         // Shares of frames (env.phase_share = "frames"): the 22 clips with T = 300, and one
         // clip, whose CDF the clip's common factor leaves as it was.
-        statistics_case(&[1.0 / 22.0; 22], 20, 1, 46, 300.0),
-        statistics_case(&[0.5, 0.3, 0.2], 7, 32, 47, 60.0),
-        statistics_case(&[1.0], 20, 1, 41, 300.0),
+        statistics_case(&[1.0 / 22.0; 22], 20, 1, 46, 300.0, -1.0),
+        statistics_case(&[0.5, 0.3, 0.2], 7, 32, 47, 60.0, -1.0),
+        statistics_case(&[1.0], 20, 1, 41, 300.0, -1.0),
+        // env.clip_base_share: shares of frames and of resets, the ends 0 and 1, one clip.
+        statistics_case(&[1.0 / 22.0; 22], 20, 1, 48, 300.0, 0.3),
+        statistics_case(&[0.5, 0.3, 0.2], 7, 32, 49, 0.0, 0.5),
+        statistics_case(&[0.5, 0.3, 0.2], 7, 1, 50, 60.0, 0.0),
+        statistics_case(&[0.25; 4], 5, 1, 51, 300.0, 1.0),
+        statistics_case(&[1.0], 20, 1, 52, 300.0, 0.3),
     ]
     .into_iter()
     // A library's counts merged over several GPUs (train --gpus on a library).
