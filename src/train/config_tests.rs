@@ -484,12 +484,16 @@ fn the_library_configs_train_the_general_defaults_sections_on_a_library() {
     for (name, clips) in [("library_shipped", 13), ("library_all", 22)] {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("configs/train/{name}.toml"));
         let c = TrainConfig::load(&path).unwrap_or_else(|e| panic!("{e}"));
-        // The one key set for a library (docs/library.md, "Exploration").
+        // The three keys set for a library (docs/library.md, "Exploration" and "The reset
+        // sampler").
         let mut ppo = d.ppo.clone();
         ppo.min_log_std = Some(-2.0);
+        let mut env = d.env.clone();
+        env.phase_share = crate::env::PhaseShare::Frames;
+        env.clip_base_share = Some(0.3);
         assert_eq!(
             (&c.env, &c.reward, &c.obs, &c.policy, &c.ppo),
-            (&d.env, &d.reward, &d.obs, &d.policy, &ppo),
+            (&env, &d.reward, &d.obs, &d.policy, &ppo),
             "{name}"
         );
         let library = c.motion_library.as_ref().unwrap();
