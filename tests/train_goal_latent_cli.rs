@@ -91,7 +91,7 @@ fn the_dry_run_loads_the_decoder_and_prints_the_three_networks() {
     for line in [
         format!("decoder       {path} (frozen, with its observation statistics): latent size 64"),
         // The goal observation (263 character-state values and 3 of the goal) in, z out.
-        "head (PPO) 266 -> [400, 200, 100] -> 64 (z = mu_prior + 1 x action)".to_owned(),
+        "head (PPO) 266 -> [400, 200, 100] -> 64 (z = mu_prior + 3 x action)".to_owned(),
         "prior 263 -> [512, 256] -> 128".to_owned(),
         "decoder 263 + 64 -> [512, 256, 128] -> 28 (the PD targets)".to_owned(),
         "263 goal-observation columns feed the prior and decoder (263 of 362 in its training observation)".to_owned(),
@@ -103,7 +103,7 @@ fn the_dry_run_loads_the_decoder_and_prints_the_three_networks() {
     let config = resolved_config(&text);
     let goal = config.goal.expect("a [goal] section");
     assert_eq!(goal.decoder, path);
-    assert_eq!(goal.latent_action_scale, 1.0);
+    assert_eq!(goal.latent_action_scale, 3.0);
 
     // Without a decoder the same configuration trains PD targets.
     let out = run(&["train", "--config", CONFIG, "--dry-run"], None, repo());

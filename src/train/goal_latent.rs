@@ -293,7 +293,7 @@ mod tests {
         let reach = TrainConfig::load(&repo("configs/goal/reach.toml")).expect("valid");
         let (g, r) = (latent.goal.clone().unwrap(), reach.goal.clone().unwrap());
         assert!(g.decoder.is_empty(), "no decoder is committed");
-        assert_eq!(g.latent_action_scale, 1.0);
+        assert_eq!(g.latent_action_scale, 3.0);
         // The task is reach.toml's; only the action space's keys differ.
         assert_eq!(
             (g.episode_s, g.min_distance, g.max_distance, g.reach_radius),
@@ -302,7 +302,7 @@ mod tests {
         assert_eq!(latent.obs, reach.obs);
         assert_eq!(latent.ppo, reach.ppo);
         assert_eq!(latent.motion_library, reach.motion_library);
-        assert_eq!(latent.policy.init_log_std, -1.0);
+        assert_eq!(latent.policy.init_log_std, -0.5);
         assert_eq!(latent.env.action_scale, 0.875);
         // A bad latent action scale is refused with its key.
         let mut bad = latent.clone();
