@@ -588,6 +588,9 @@ fn clip_base_share_is_unset_by_default_written_only_when_set_and_kept_in_zero_to
         let e = TrainConfig::from_toml(&text, "bad.toml")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("env.clip_base_share") && e.contains("[0, 1]"), "{bad}: {e}");
+        assert!(
+            e.contains("env.clip_base_share") && e.contains("[0, 1]"),
+            "{bad}: {e}"
+        );
     }
 }
