@@ -302,3 +302,108 @@ fn a_command_of_one_clip_refuses_a_library_in_one_line() {
         );
     }
 }
+
+/// `train --library`: a newcomer's directory of clips trains on the built-in library
+/// configuration (its keys tuned for libraries), a library file's paths are its own, --config's
+/// library is replaced, and bad input fails in one line.
+#[test]
+fn train_library_takes_a_directory_or_a_file_with_the_library_keys() {
+    let ws = workspace();
+    let path = |name: &str| ws.path().join(name);
+    std::fs::create_dir(path("mine")).unwrap();
+    for name in ["humanoid3d_a.txt", "humanoid3d_b.txt"] {
+        std::fs::write(
+            path("mine").join(name),
+            SyntheticMotion::default().to_json(),
+        )
+        .unwrap();
+    }
+    let mine = path("mine").display().to_string();
+    let text = succeeded(&run(
+        &["train", "--library", mine.as_str(), "--dry-run"],
+        None,
+        ws.path(),
+    ));
+    assert!(
+        text.contains("configuration configs/train/library_shipped.toml (built in) with --library"),
+        "{text}"
+    );
+    assert!(text.contains("clip          a (31 frames"), "{text}");
+    assert!(text.contains("clip          b (31 frames"), "{text}");
+    assert!(text.contains("run directory runs/library-seed0"), "{text}");
+    let config = resolved_config(&text);
+    assert!(config.motion.is_empty());
+    assert_eq!(
+        config.motion_library.as_ref().and_then(|l| l.dir.clone()),
+        Some(path("mine"))
+    );
+    // The library keys of the built-in configuration (docs/library.md).
+    assert_eq!(
+        config.env.phase_share,
+        instantmimic::env::PhaseShare::Frames
+    );
+    assert_eq!(config.env.clip_base_share, Some(0.3));
+    assert_eq!(config.ppo.min_log_std, Some(-2.0));
+
+    // A library file, run from elsewhere: its relative paths start from its directory; with
+    // --config, the configuration's library is replaced and its other keys are kept.
+    std::fs::write(
+        path("lib.toml"),
+        "[motion_library]\nclips = [\"mine/humanoid3d_a.txt\", \"walk\"]\n",
+    )
+    .unwrap();
+    std::fs::write(
+        path("base.toml"),
+        "[motion_library]\nclips = [\"run\"]\n[env]\nnum_envs = 32\n[ppo]\nhorizon = 4\n",
+    )
+    .unwrap();
+    let (lib, base) = (
+        path("lib.toml").display().to_string(),
+        path("base.toml").display().to_string(),
+    );
+    let parent = ws.path().parent().unwrap();
+    let args = [
+        "train",
+        "--config",
+        base.as_str(),
+        "--library",
+        lib.as_str(),
+        "--dry-run",
+    ];
+    let text = succeeded(&run(&args, None, parent));
+    assert!(text.contains("with --library"), "{text}");
+    assert!(text.contains("clip          a (31 frames"), "{text}");
+    assert!(text.contains("clip          walk (39 frames"), "{text}");
+    assert!(!text.contains("clip          run ("), "{text}");
+    let config = resolved_config(&text);
+    assert_eq!(config.env.num_envs, 32);
+
+    // Bad input: one line naming the flag or the path.
+    std::fs::create_dir(path("empty")).unwrap();
+    std::fs::write(path("notes.toml"), "seed = 1\n").unwrap();
+    for (arg, expected) in [
+        (path("missing"), "--library: "),
+        (path("empty"), "holds no `*.txt` files"),
+        (path("notes.toml"), "--library: "),
+    ] {
+        let arg = arg.display().to_string();
+        let err = one_line_error(&run(
+            &["train", "--library", arg.as_str(), "--dry-run"],
+            None,
+            ws.path(),
+        ));
+        assert!(err.contains(expected) && err.contains(&arg), "{arg}: {err}");
+    }
+    // clap's own refusal: its first line names both flags.
+    let out = run(
+        &["train", "--library", mine.as_str(), "--motion", "walk"],
+        None,
+        ws.path(),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    let first = err.lines().next().unwrap_or_default();
+    assert!(
+        !out.status.success() && first.contains("--library") && first.contains("--motion"),
+        "{err}"
+    );
+}

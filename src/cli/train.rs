@@ -16,6 +16,7 @@ use clap::{Args, ValueEnum};
 use super::replay::{ReplayJob, write_replay};
 use super::stopped::Stopped;
 use crate::cuda::nccl_version;
+use crate::motion::LibraryConfig;
 use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
 use crate::replay::DEFAULT_EPISODES;
@@ -45,10 +46,16 @@ pub struct TrainArgs {
     /// configs/train/<name>.toml (built in); other motions use configs/train/default.toml (built in).
     #[arg(long)]
     motion: Option<String>,
-    /// Training configuration (TOML); --motion, if given, replaces its `motion` (or its
-    /// `[motion_library]`).
+    /// Training configuration (TOML); --motion or --library, if given, replaces its `motion` (or
+    /// its `[motion_library]`).
     #[arg(long)]
     config: Option<PathBuf>,
+    /// A motion library to train one policy on: a directory of DeepMimic clips (every `*.txt` in
+    /// it) or a file with a `[motion_library]` section (clips, dir or manifest). Without
+    /// --config: configs/train/library_shipped.toml (built in), whose keys are tuned for
+    /// libraries (docs/library.md).
+    #[arg(long, conflicts_with = "motion")]
+    library: Option<PathBuf>,
     /// Random seed, overriding `seed`.
     #[arg(long)]
     seed: Option<u64>,
@@ -57,7 +64,7 @@ pub struct TrainArgs {
     out: Option<PathBuf>,
     /// Continue the run in this directory from its newest good checkpoint (its config.toml;
     /// only budgets and evaluation settings may be overridden).
-    #[arg(long, conflicts_with_all = ["motion", "config", "seed", "out", "overwrite", "envs", "horizon", "set"])]
+    #[arg(long, conflicts_with_all = ["motion", "library", "config", "seed", "out", "overwrite", "envs", "horizon", "set"])]
     resume: Option<PathBuf>,
     /// Replace the run files of a non-empty --out directory.
     #[arg(long)]
@@ -160,15 +167,19 @@ impl TrainArgs {
 
 /// The configuration of a new run and the label naming where it came from.
 fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
-    let (mut config, mut label) = match (&args.config, &args.motion) {
-        (Some(path), _) => (TrainConfig::load(path)?, path.display().to_string()),
-        (None, Some(motion)) => {
+    let (mut config, mut label) = match (&args.config, &args.motion, &args.library) {
+        (Some(path), _, _) => (TrainConfig::load(path)?, path.display().to_string()),
+        (None, Some(motion), _) => {
             let (label, config) = TrainConfig::committed(motion)
                 .unwrap_or_else(|| TrainConfig::general_default(motion));
             (config?, label)
         }
-        (None, None) => bail!(
-            "name a motion with --motion, a configuration with --config, or a run to continue with --resume"
+        (None, None, Some(_)) => {
+            let (label, config) = TrainConfig::library_default();
+            (config?, label)
+        }
+        (None, None, None) => bail!(
+            "name a motion with --motion, a library with --library, a configuration with --config, or a run to continue with --resume"
         ),
     };
     let mut flags = Vec::new();
@@ -178,6 +189,12 @@ fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
         }
         config.motion = motion.clone();
         config.motion_library = None;
+    }
+    if let Some(path) = &args.library {
+        flags.push("--library");
+        let library = LibraryConfig::at_path(path).context("--library")?;
+        config.motion.clear();
+        config.motion_library = Some(library);
     }
     if let Some(seed) = args.seed {
         config.seed = seed;

@@ -254,6 +254,19 @@ impl LibraryConfig {
         }
     }
 
+    /// The library a path names, as `train --library` takes it: a directory (every `*.txt` file
+    /// in it) or a file with a `[motion_library]` section, whose relative paths start from the
+    /// file's directory.
+    pub fn at_path(path: &Path) -> Result<LibraryConfig, MotionLibraryError> {
+        if path.is_dir() {
+            return Ok(LibraryConfig {
+                dir: Some(path.to_path_buf()),
+                ..LibraryConfig::default()
+            });
+        }
+        Ok(LibraryConfig::load(path)?.rebased(path.parent()))
+    }
+
     /// A short description for labels and run names: the clips' count, the directory or the
     /// manifest.
     pub fn describe(&self) -> String {

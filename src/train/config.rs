@@ -200,7 +200,22 @@ pub const COMMITTED_CONFIGS: [(&str, &str); 5] = [
 /// built in): the backflip's tuned configuration.
 pub const DEFAULT_CONFIG: &str = include_str!("../../configs/train/default.toml");
 
+/// The built-in library configuration for `train --library` without --config
+/// (`configs/train/library_shipped.toml`): the general default's keys plus the library's (the
+/// log-std floor and the reset sampler's shares of frames; docs/library.md).
+pub const LIBRARY_CONFIG: &str = include_str!("../../configs/train/library_shipped.toml");
+
 impl TrainConfig {
+    /// The built-in library configuration (its `[motion_library]` is the 13 built-in clips) and
+    /// its label.
+    pub fn library_default() -> (String, Result<TrainConfig, ConfigError>) {
+        let label = "configs/train/library_shipped.toml (built in)";
+        (
+            label.to_owned(),
+            TrainConfig::from_toml(LIBRARY_CONFIG, label),
+        )
+    }
+
     /// The built-in general default for `motion` (a name or a path) and its label.
     pub fn general_default(motion: &str) -> (String, Result<TrainConfig, ConfigError>) {
         let label = "configs/train/default.toml (built in; no committed config for this motion)";
