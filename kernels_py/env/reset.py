@@ -213,8 +213,20 @@ def clip_share(
         share = clip_weight[c] * (base_share + (1.0 - base_share) * h / failure_total)
     bins_total = float(0.0)
     for b in range(phase_visits.shape[1]):
-        bins_total += phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor
+        bins_total += cell_rate(phase_visits, phase_failures, c, b, floor)
     return share / bins_total
+
+
+@wp.func
+def cell_rate(
+    phase_visits: wp.array2d(dtype=wp.float32),
+    phase_failures: wp.array2d(dtype=wp.float32),
+    c: wp.int32,
+    b: wp.int32,
+    floor: wp.float32,
+) -> wp.float32:
+    """Cell (c, b)'s failures per visit plus the floor: its weight within its clip."""
+    return phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor
 
 
 @wp.func
@@ -284,7 +296,7 @@ def phase_statistics_update(
                 clip_weight, phase_visits, phase_failures, c, clip_base_share, failure_total, floor
             )
             for b in range(bins):
-                total += (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor) * scale
+                total += cell_rate(phase_visits, phase_failures, c, b, floor) * scale
         else:
             for b in range(bins):
                 if frames_horizon > 0.0:
@@ -302,7 +314,7 @@ def phase_statistics_update(
         for b in range(bins):
             w = cell_weight(clip_weight, phase_visits, phase_failures, c, b, floor)
             if clip_base_share >= 0.0:
-                w = (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor) * scale
+                w = cell_rate(phase_visits, phase_failures, c, b, floor) * scale
             elif frames_horizon > 0.0:
                 w = w * turnover
             acc += w / total
