@@ -122,6 +122,9 @@ note "all done in $(( $(date +%s) - start )) s"
 # directory without its checkpoints) and run_NAME.txz for each run named in KEEP (the run
 # directory with its newest checkpoint, xz-packed, to resume or to teach in the next call; at
 # most 6).
+# xz on every core: the device machine has 16-128, and packing four library runs on one took
+# about 40 s of the call's 600.
+export XZ_OPT=${XZ_OPT:--T0}
 tar cJf "$OUT/logs.txz" -C "$OUT" --exclude='*.safetensors' --exclude=logs.txz \
   $(cd "$OUT" && ls | grep -v -e '^summary.txt$' -e '^logs.txz$')
 kept=0
