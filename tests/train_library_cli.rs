@@ -289,7 +289,6 @@ fn a_command_of_one_clip_refuses_a_library_in_one_line() {
     let config = ws.path().join("lib.toml").display().to_string();
     for command in [
         vec!["bench", "rollout"],
-        vec!["bench", "full"],
         vec!["bench", "train-gpus", "--gpus", "0,1"],
     ] {
         let mut args = command.clone();
@@ -404,6 +403,57 @@ fn train_library_takes_a_directory_or_a_file_with_the_library_keys() {
     let first = err.lines().next().unwrap_or_default();
     assert!(
         !out.status.success() && first.contains("--library") && first.contains("--motion"),
+        "{err}"
+    );
+}
+
+/// `bench full` times a library's whole iterations (`--library` or a library's `--config`): it
+/// gets past the configuration and the library's checks to opening the device (`--device 99`:
+/// no driver here, no such GPU on a machine with one); a bad library fails in one line before.
+#[test]
+fn bench_full_takes_a_library() {
+    let ws = workspace();
+    std::fs::create_dir(ws.path().join("mine")).unwrap();
+    std::fs::write(
+        ws.path().join("mine/humanoid3d_a.txt"),
+        SyntheticMotion::default().to_json(),
+    )
+    .unwrap();
+    let mine = ws.path().join("mine").display().to_string();
+    for args in [
+        vec![
+            "bench",
+            "full",
+            "--device",
+            "99",
+            "--library",
+            mine.as_str(),
+        ],
+        vec![
+            "bench",
+            "full",
+            "--device",
+            "99",
+            "--config",
+            "configs/train/library_shipped.toml",
+        ],
+    ] {
+        let out = run(&args, None, repo());
+        let err = String::from_utf8_lossy(&out.stderr);
+        let last = err.lines().last().unwrap_or_default();
+        assert!(
+            !out.status.success() && (last.contains("driver") || last.contains("device")),
+            "{args:?}: {err}"
+        );
+    }
+    let missing = ws.path().join("missing").display().to_string();
+    let err = one_line_error(&run(
+        &["bench", "full", "--library", missing.as_str()],
+        None,
+        repo(),
+    ));
+    assert!(
+        err.contains("--library: ") && err.contains(&missing),
         "{err}"
     );
 }

@@ -18,8 +18,7 @@ use serde::Serialize;
 use super::rollout::{median, physics_only_graph, time_floor_from_rollout_states, time_graph};
 use super::timing::timed_seconds;
 use crate::cuda::{Gpu, NvtxRange};
-use crate::env::{RolloutError, RolloutStage};
-use crate::motion::ReferenceMotion;
+use crate::env::{RolloutError, RolloutStage, TrackedMotion};
 use crate::plan::PlanStore;
 use crate::train::{TrainConfig, TrainError, Trainer};
 
@@ -90,8 +89,19 @@ pub struct FullBench {
     pub hidden_fraction: f64,
 }
 
-/// Builds the trainer of `config` three times: as it is, with `ppo.concurrent_networks`, and
-/// with `ppo.overlap_update` (each with the other off), and times
+/// The name a report gives `motion`: the clip's, or the library's clip count.
+fn motion_label(motion: TrackedMotion<'_>) -> String {
+    match motion {
+        TrackedMotion::Clip(clip) => clip.clip().name().to_owned(),
+        TrackedMotion::Library { library, .. } => {
+            format!("motion library ({} clips)", library.num_clips())
+        }
+    }
+}
+
+/// Builds the trainer of `config` on `motion` (a clip, or a motion library) three times: as it
+/// is, with `ppo.concurrent_networks`, and with `ppo.overlap_update` (each with the other off),
+/// and times
 /// `rounds` x `iterations` whole iterations of each (after `warmup` untimed ones per round);
 /// with the sequential one also the physics-only floor from the rollout's states, the rollout
 /// graph alone, its stages and the update alone. One trainer at a time: the first is dropped
@@ -99,7 +109,7 @@ pub struct FullBench {
 pub fn bench_full(
     gpu: &Gpu,
     store: &PlanStore,
-    motion: &ReferenceMotion,
+    motion: TrackedMotion<'_>,
     config: &TrainConfig,
     iterations: u32,
     warmup: u32,
@@ -160,7 +170,7 @@ pub fn bench_full(
     let hidden_ms = sequential.iteration_ms - overlapped.iteration_ms;
     Ok(FullBench {
         gpu: gpu.info().name.clone(),
-        motion: motion.clip().name().to_owned(),
+        motion: motion_label(motion),
         num_envs: config.env.num_envs,
         substeps: config.env.substeps,
         horizon: config.ppo.horizon,

@@ -8,18 +8,27 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 
-use super::bench::{BenchRunArgs, LoopShapeArgs, benchmark_config, benchmark_inputs, print_result};
+use super::bench::{BenchRunArgs, LoopShapeArgs, print_result};
+use super::train::motion_or_library_config;
 use crate::bench::{FullBench, LoopCase, bench_full};
 use crate::cuda::Gpu;
+use crate::motion::find::motions_dir_from_env;
+use crate::plan::PlanStore;
+use crate::train::preflight_training;
 
 #[derive(Args, Debug)]
 pub(super) struct FullArgs {
-    /// A clip name (its committed config, else configs/train/default.toml) or a DeepMimic file.
-    #[arg(long, default_value = "backflip")]
-    motion: String,
-    /// Training configuration (TOML) instead of the motion's committed one; --motion replaces
-    /// its `motion`. Its `ppo.overlap_update`, `ppo.concurrent_networks` and `run.gpus` are not
-    /// read: each loop is measured, on --device.
+    /// A clip name (its committed config, else configs/train/default.toml) or a DeepMimic file
+    /// (default: backflip, unless --config or --library names what to train on).
+    #[arg(long)]
+    motion: Option<String>,
+    /// A motion library, as `train --library` takes it (a directory of clips or a file with a
+    /// `[motion_library]` section); without --config, the built-in library configuration.
+    #[arg(long, conflicts_with = "motion")]
+    library: Option<PathBuf>,
+    /// Training configuration (TOML) instead of the motion's committed one (a clip's or a
+    /// library's); --motion or --library replaces what it trains on. Its `ppo.overlap_update`,
+    /// `ppo.concurrent_networks` and `run.gpus` are not read: each loop is measured, on --device.
     #[arg(long)]
     config: Option<PathBuf>,
     /// Override one configuration key, as `train --set` (repeatable; e.g. ppo.minibatches=2).
@@ -44,7 +53,15 @@ pub(super) fn run(args: FullArgs) -> Result<()> {
     if args.iterations == 0 {
         bail!("--iterations must be at least 1");
     }
-    let (config, label) = benchmark_config(args.config.as_deref(), &args.motion, "bench full")?;
+    let motion = match (&args.motion, &args.config, &args.library) {
+        (None, None, None) => Some("backflip"),
+        (motion, _, _) => motion.as_deref(),
+    };
+    let (config, mut label, flags) =
+        motion_or_library_config(args.config.as_deref(), motion, args.library.as_deref())?;
+    if !flags.is_empty() {
+        label = format!("{label} with {}", flags.join(", "));
+    }
     let mut config = config.with_overrides(&args.set, &label)?;
     args.shape.apply(&mut config);
     // One GPU, --device; both settings of the overlap are measured.
@@ -52,16 +69,17 @@ pub(super) fn run(args: FullArgs) -> Result<()> {
     config.ppo.overlap_update = false;
     config.ppo.concurrent_networks = false;
     config.validate(&label)?;
-    let (store, motion) = benchmark_inputs(
-        &config,
-        args.run.motions_dir.as_deref(),
-        args.run.assets.as_deref(),
-    )?;
+    let store = PlanStore::new(args.run.assets.as_deref());
+    let motions_dir = args.run.motions_dir.clone().or_else(motions_dir_from_env);
+    let (checks, motion) = preflight_training(&config, motions_dir.as_deref(), &store)?;
+    for line in &checks.motion_notices {
+        eprintln!("{line}");
+    }
     let gpu = Gpu::open(args.run.device)?;
     let result = bench_full(
         &gpu,
         &store,
-        &motion,
+        motion.tracked(),
         &config,
         args.iterations,
         args.warmup,

@@ -165,9 +165,16 @@ impl TrainArgs {
     }
 }
 
-/// The configuration of a new run and the label naming where it came from.
-fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
-    let (mut config, mut label) = match (&args.config, &args.motion, &args.library) {
+/// The configuration that `--config`, `--motion` and `--library` name (`train`'s and `bench
+/// full`'s): the file, else the motion's committed or the general default, else the built-in
+/// library configuration; --motion or --library then replaces its motion or library. Returns
+/// it, its label and the flags that changed a --config file.
+pub(super) fn motion_or_library_config(
+    config: Option<&Path>,
+    motion: Option<&str>,
+    library: Option<&Path>,
+) -> Result<(TrainConfig, String, Vec<&'static str>)> {
+    let (mut resolved, label) = match (config, motion, library) {
         (Some(path), _, _) => (TrainConfig::load(path)?, path.display().to_string()),
         (None, Some(motion), _) => {
             let (label, config) = TrainConfig::committed(motion)
@@ -183,19 +190,28 @@ fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
         ),
     };
     let mut flags = Vec::new();
-    if let Some(motion) = &args.motion {
-        if args.config.is_some() {
+    if let Some(motion) = motion {
+        if config.is_some() {
             flags.push("--motion");
         }
-        config.motion = motion.clone();
-        config.motion_library = None;
+        resolved.motion = motion.to_owned();
+        resolved.motion_library = None;
     }
-    if let Some(path) = &args.library {
+    if let Some(path) = library {
         flags.push("--library");
-        let library = LibraryConfig::at_path(path).context("--library")?;
-        config.motion.clear();
-        config.motion_library = Some(library);
+        resolved.motion.clear();
+        resolved.motion_library = Some(LibraryConfig::at_path(path).context("--library")?);
     }
+    Ok((resolved, label, flags))
+}
+
+/// The configuration of a new run and the label naming where it came from.
+fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
+    let (mut config, mut label, mut flags) = motion_or_library_config(
+        args.config.as_deref(),
+        args.motion.as_deref(),
+        args.library.as_deref(),
+    )?;
     if let Some(seed) = args.seed {
         config.seed = seed;
         flags.push("--seed");
