@@ -12,6 +12,8 @@
 //! - A run sent SIGINT mid-training stops after its current iteration with a checkpoint of it
 //!   and `summary.json` (stop reason `interrupted`), exits with 130, and `--resume` continues
 //!   from that iteration (docs/train.md, "Stopping a run").
+//! - `bench full` of a motion library (the sampler's library keys on) times its three loops
+//!   against the physics floor and reports every figure.
 #![cfg(feature = "gpu")]
 
 mod small_run_support;
@@ -354,4 +356,45 @@ fn a_run_sent_sigint_checkpoints_its_last_iteration_exits_130_and_resumes() {
         serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).expect("summary"))
             .expect("summary.json");
     assert_eq!(summary["stop_reason"], "iteration_budget", "{summary}");
+}
+
+#[test]
+fn bench_full_times_a_library_against_the_physics_floor() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut config = small_run_support::small_library_config(&["walk", "backflip"]);
+    config.env.phase_share = instantmimic::env::PhaseShare::Frames;
+    config.env.clip_base_share = Some(0.3);
+    config.validate("test").expect("a library config");
+    let path = dir.path().join("config.toml");
+    std::fs::write(&path, config.to_toml().expect("toml")).expect("write config");
+    let out = binary()
+        .args([
+            "bench",
+            "full",
+            "--json",
+            "--iterations",
+            "2",
+            "--warmup",
+            "1",
+            "--rounds",
+            "1",
+            "--config",
+        ])
+        .arg(&path)
+        .output()
+        .expect("bench full runs");
+    check_success(&out, "bench full");
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).expect("bench full prints JSON");
+    assert_eq!(r["motion"], "motion library (2 clips)", "{r}");
+    assert_eq!(r["num_envs"], 32, "{r}");
+    let positive = |v: &serde_json::Value| v.as_f64().is_some_and(|x| x.is_finite() && x > 0.0);
+    for key in ["floor_frames_per_s", "rollout_ms", "update_ms"] {
+        assert!(positive(&r[key]), "{key}: {r}");
+    }
+    for case in ["sequential", "concurrent", "overlapped"] {
+        for key in ["frames_per_s", "ratio_to_floor", "iteration_ms"] {
+            assert!(positive(&r[case][key]), "{case}.{key}: {r}");
+        }
+    }
+    assert!(positive(&r["stage_ms"]["physics"]), "{r}");
 }
