@@ -8,8 +8,9 @@
 #   controller of configs/latent/all.toml from it: "within 5 points of the tracker".
 # - GPU 2: the 13 shipped clips (library_shipped.toml) with the keys, then the held-out tracker
 #   (library_held_out.toml, the teacher of docs/latent.md's unseen clips).
-# - GPU 3: GPU tests (gpu_train with bench full of a library), then the goal task on the decoder carried in $R (latent_kl001, 7.56 median
-#   with the committed keys) with init_log_std 0.0 and with scale 4 (seed 0).
+# - GPU 3: GPU tests (gpu_train with bench full of a library), then the goal task on the
+#   decoder carried in $R (latent_kl001, 7.56 median with the committed keys) with
+#   init_log_std 0.0 and with scale 4 (seed 0).
 # A tracker stops at success or at its lane's wall limit with a checkpoint; the latent run then
 # distils from the newest checkpoint either way.
 #   tests/device/stage.sh --only "gpu_goal_latent gpu_library_eval gpu_latent gpu_rollout gpu_train" .device-small
