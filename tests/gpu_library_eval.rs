@@ -9,7 +9,9 @@
 //! - `eval --library` on a library of 2 other clips reports rows for those clips (and says it
 //!   is another library), and `--out` writes their table;
 //! - `replay` of each writes the page of a clip (`--clip`, or the first), its episodes those of
-//!   that clip, also of a clip of the other library (`--library`).
+//!   that clip, also of a clip of the other library (`--library`);
+//! - `replay --all-clips` writes a page per clip and an index linking them with each clip's
+//!   success rate.
 #![cfg(feature = "gpu")]
 
 mod small_run_support;
@@ -160,5 +162,30 @@ fn library_checkpoints_evaluate_on_their_library_and_on_another_and_replay_a_cli
             String::from_utf8_lossy(&out.stdout).contains("clip                 walk (clip 0 of 3")
         );
         assert!(first.is_file());
+
+        let pages = dir.path().join(format!("{kind}_pages"));
+        let out = binary()
+            .args(["replay", "--all-clips", "--episodes", "2", "--checkpoint"])
+            .arg(checkpoint)
+            .arg("--out")
+            .arg(&pages)
+            .output()
+            .expect("replay runs");
+        check_success(&out, "replay every clip");
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(stdout.contains("and 3 clip pages beside it"), "{stdout}");
+        let index = std::fs::read_to_string(pages.join("index.html")).expect("the index");
+        for (page, clip) in [
+            ("0_walk.html", "walk"),
+            ("1_punch.html", "punch"),
+            ("2_spinkick.html", "spinkick"),
+        ] {
+            let html = std::fs::read_to_string(pages.join(page)).expect("a clip's page");
+            assert!(html.contains(clip), "{page} names its clip");
+            assert!(
+                index.contains(&format!("<a href=\"{page}\">{clip}</a>")),
+                "{index}"
+            );
+        }
     }
 }

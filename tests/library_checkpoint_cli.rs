@@ -301,6 +301,77 @@ fn replay_of_a_library_checkpoint_checks_the_clip_and_its_flags() {
     }
 }
 
+/// `replay --all-clips`: a directory of pages from one evaluation run. Everything is checked
+/// before the GPU opens: the flag needs a library checkpoint, --out may not be a file and its
+/// parent must exist, every clip's starts bound --episodes; --clip and --save-recording are
+/// clap's refusals.
+#[test]
+fn replay_of_every_clip_checks_its_directory_and_flags_before_the_gpu() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let tracker = write_tracker(
+        dir.path(),
+        "tracker.safetensors",
+        &load("configs/train/library_shipped.toml"),
+    );
+    let walk = write_tracker(
+        dir.path(),
+        "walk.safetensors",
+        &load("configs/train/walk.toml"),
+    );
+    let pages = dir.path().join("pages").display().to_string();
+    let replay = |out: &str, extra: &[&str]| {
+        let mut args = vec!["replay", "--all-clips", "--out", out];
+        args.extend(extra.iter().copied());
+        run(&args, None, repo())
+    };
+    stopped_at_the_gpu(&replay(&pages, &["--checkpoint", &tracker]));
+    assert!(
+        !dir.path().join("pages").exists(),
+        "nothing is written before the GPU's work"
+    );
+    let file = dir.path().join("page.html");
+    std::fs::write(&file, "x").expect("a file");
+    let file = file.display().to_string();
+    let nested = dir.path().join("missing/pages").display().to_string();
+    let cases: Vec<(&str, Vec<&str>, String)> = vec![
+        (
+            &pages,
+            vec!["--checkpoint", &walk],
+            "--all-clips: for a motion library tracker's or a latent controller's checkpoint;"
+                .to_string(),
+        ),
+        (
+            &file,
+            vec!["--checkpoint", &tracker],
+            "--all-clips writes a directory of pages; this is a file".to_string(),
+        ),
+        (
+            &nested,
+            vec!["--checkpoint", &tracker],
+            "missing does not exist (create it first)".to_string(),
+        ),
+        (
+            // 4096 envs over 13 clips: the last clips have 315 starts.
+            &pages,
+            vec!["--checkpoint", &tracker, "--episodes", "316"],
+            "--episodes 316: the evaluation plays this clip from 315 starts".to_string(),
+        ),
+    ];
+    for (out, args, expected) in cases {
+        let err = error_line(&replay(out, &args));
+        assert!(err.contains(&expected), "{out} {args:?}: {err}");
+    }
+    for flag in [["--clip", "walk"], ["--save-recording", "r.safetensors"]] {
+        let out = replay(&pages, &["--checkpoint", &tracker, flag[0], flag[1]]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        let first = err.lines().next().unwrap_or_default();
+        assert!(
+            !out.status.success() && first.contains("--all-clips") && first.contains(flag[0]),
+            "{err}"
+        );
+    }
+}
+
 #[test]
 fn the_held_out_libraries_split_the_built_in_clips_as_documented() {
     let train: BTreeSet<String> = clips_of("configs/library/held_out_train.toml")

@@ -11,12 +11,13 @@ use serde::Serialize;
 
 use crate::cuda::Gpu;
 use crate::plan::PlanStore;
-use crate::replay::library::{LibraryReplayInput, record_library_replay};
+use crate::replay::library::{LibraryReplayInput, record_library_replay, record_library_replays};
 use crate::train::library_policy::{
     LibraryPolicy, LibraryPolicyEvaluator, evaluation_clips_table, format_library_report,
     prepare_library_policy,
 };
 use crate::train::{Checkpoint, EvaluationSummary};
+use crate::viewer::{ClipPageRow, clip_page_name, save_index_page, save_page};
 
 /// What `eval` was given for a library checkpoint.
 pub(super) struct LibraryEvalJob<'a> {
@@ -125,6 +126,8 @@ pub(super) struct LibraryReplayJob<'a> {
     pub checkpoint: &'a Checkpoint,
     pub label: &'a str,
     pub clip: Option<&'a str>,
+    /// Every clip: `page` is a directory of pages and an index.
+    pub all_clips: bool,
     /// Another library than the one it trained on.
     pub library: Option<&'a Path>,
     pub episodes: u32,
@@ -139,6 +142,9 @@ pub(super) struct LibraryReplayJob<'a> {
 /// names another) of the library evaluation (of its library, or of `--library`'s), written as
 /// the replay page.
 pub(super) fn replay_library(job: &LibraryReplayJob<'_>) -> Result<String> {
+    if job.all_clips {
+        return replay_every_clip(job);
+    }
     super::output::check_output_path(job.page)?;
     if let Some(path) = job.recording {
         super::output::check_output_path(path)?;
@@ -171,14 +177,7 @@ pub(super) fn replay_library(job: &LibraryReplayJob<'_>) -> Result<String> {
         },
     )?;
     let name = &prepared.plan.clips[clip].name;
-    let m = &job.checkpoint.meta;
-    let title = format!(
-        "{name} ({} of the library): replay of iteration {} (seed {}, {:.1} s active)",
-        prepared.kind.describe(),
-        m.iteration,
-        m.seed,
-        m.active_time_s
-    );
+    let title = clip_page_title(name, &prepared, job.checkpoint);
     let character = prepared.motion.tracked().character();
     let mut report = library_lines(&prepared);
     let _ = writeln!(
@@ -208,5 +207,135 @@ pub(super) fn replay_library(job: &LibraryReplayJob<'_>) -> Result<String> {
         page,
         recording,
     )?;
+    Ok(report)
+}
+
+/// The title of a clip's replay page.
+fn clip_page_title(name: &str, prepared: &LibraryPolicy, checkpoint: &Checkpoint) -> String {
+    let m = &checkpoint.meta;
+    format!(
+        "{name} ({} of the library): replay of iteration {} (seed {}, {:.1} s active)",
+        prepared.kind.describe(),
+        m.iteration,
+        m.seed,
+        m.active_time_s
+    )
+}
+
+/// `replay --all-clips`: every clip's page and the index, into the directory `job.page`, from
+/// one run of the library evaluation.
+fn replay_every_clip(job: &LibraryReplayJob<'_>) -> Result<String> {
+    let dir = job.page;
+    if dir.exists() && !dir.is_dir() {
+        bail!(
+            "{}: --all-clips writes a directory of pages; this is a file",
+            dir.display()
+        );
+    }
+    // The directory's own parent must exist, as a page's directory must.
+    let parent = match dir.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => parent,
+        _ => Path::new("."),
+    };
+    if !parent.is_dir() {
+        bail!(
+            "{}: the directory {} does not exist (create it first)",
+            dir.display(),
+            parent.display()
+        );
+    }
+    let prepared = prepare_library_policy(job.checkpoint, job.library, job.motions_dir, job.store)?;
+    for line in &prepared.preflight.motion_notices {
+        eprintln!("{line}");
+    }
+    let clips: Vec<usize> = (0..prepared.plan.clips.len()).collect();
+    // Checked before the GPU opens: every clip's starts bound the episodes.
+    for &clip in &clips {
+        crate::replay::library::library_chosen_envs(
+            clip,
+            clips.len(),
+            prepared.plan.envs,
+            job.episodes,
+        )?;
+    }
+    let gpu = Gpu::open(job.device)?;
+    let replays = record_library_replays(
+        &gpu,
+        &LibraryReplayInput {
+            prepared: &prepared,
+            checkpoint: job.checkpoint,
+            store: job.store,
+            checkpoint_label: job.label,
+            clip: 0,
+            episodes: job.episodes,
+        },
+        &clips,
+    )?;
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let scores = replays
+        .summary
+        .library
+        .as_ref()
+        .map(|l| l.clips.as_slice())
+        .unwrap_or_default();
+    let width = clips.len().saturating_sub(1).to_string().len();
+    let character = prepared.motion.tracked().character();
+    let (mut rows, mut bytes) = (Vec::with_capacity(clips.len()), 0usize);
+    for replay in &replays.clips {
+        let planned = &prepared.plan.clips[replay.clip];
+        let page = clip_page_name(replay.clip, width, &planned.name);
+        let title = clip_page_title(&planned.name, &prepared, job.checkpoint);
+        bytes += save_page(&dir.join(&page), &replay.recording, character, &title)?;
+        let score = scores.get(replay.clip);
+        rows.push(ClipPageRow {
+            clip: planned.name.clone(),
+            page,
+            duration_s: score.map_or(f64::NAN, |s| s.duration_s),
+            episodes: score.map_or(0, |s| s.episodes),
+            succeeded: score.map_or(0, |s| s.succeeded),
+            success_rate: score.map_or(f64::NAN, |s| s.success_rate),
+            global_mpjpe_m: score.map_or(f64::NAN, |s| s.global_mpjpe_m),
+        });
+    }
+    let m = &job.checkpoint.meta;
+    let summary = &replays.summary;
+    let lines = vec![
+        format!(
+            "{} of {} ({}), iteration {} (seed {}, {:.1} s active)",
+            prepared.kind.describe(),
+            prepared.preflight.motion_source,
+            job.label,
+            m.iteration,
+            m.seed,
+            m.active_time_s
+        ),
+        format!(
+            "{} of {} evaluation episodes succeeded ({:.3}); global MPJPE {:.3} m; each clip's page holds {} of its episodes",
+            summary.succeeded,
+            summary.episodes,
+            summary.success_rate,
+            summary.global_mpjpe_m,
+            job.episodes
+        ),
+    ];
+    let index = dir.join("index.html");
+    let title = format!(
+        "{} ({} clips)",
+        prepared.preflight.motion_source,
+        clips.len()
+    );
+    save_index_page(&index, &title, &lines, &rows)?;
+    let mut report = library_lines(&prepared);
+    report.push_str(&format_library_report(
+        summary,
+        prepared.config.run.success_rate,
+    ));
+    let _ = writeln!(
+        report,
+        "wrote                {} and {} clip pages beside it ({:.1} MB)",
+        index.display(),
+        rows.len(),
+        bytes as f64 / 1e6
+    );
     Ok(report)
 }

@@ -47,12 +47,18 @@ pub struct ReplayArgs {
     /// 300 steps are 10 s at 30 Hz.
     #[arg(long)]
     steps: Option<u32>,
-    /// The HTML page to write (its directory must exist).
+    /// The HTML page to write (its directory must exist); with --all-clips, the directory of
+    /// pages (created if missing; its parent must exist).
     #[arg(long)]
     out: PathBuf,
     /// Also write the recording (safetensors; `export --recording` reads it).
     #[arg(long)]
     save_recording: Option<PathBuf>,
+    /// Every clip of a library checkpoint's library from one evaluation run: --out is then a
+    /// directory with a page per clip (`NN_<clip>.html`) and `index.html`, a table of every
+    /// clip's success linking to its page.
+    #[arg(long, conflicts_with_all = ["clip", "save_recording"])]
+    all_clips: bool,
     /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
     /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
@@ -279,10 +285,11 @@ fn replay_library_checkpoint(
     let checkpoint = Checkpoint::load(&args.checkpoint)?;
     let config = checkpoint.meta.config(checkpoint.source())?;
     if LibraryPolicyKind::of(&config).is_none() {
-        let flag = match (&args.clip, &args.library) {
-            (Some(clip), _) => Some(format!("--clip {clip}")),
-            (None, Some(_)) => Some("--library".to_string()),
-            (None, None) => None,
+        let flag = match (&args.clip, &args.library, args.all_clips) {
+            (Some(clip), _, _) => Some(format!("--clip {clip}")),
+            (None, Some(_), _) => Some("--library".to_string()),
+            (None, None, true) => Some("--all-clips".to_string()),
+            (None, None, false) => None,
         };
         if let Some(flag) = flag {
             let what = if config.goal.is_some() {
@@ -312,6 +319,7 @@ fn replay_library_checkpoint(
         checkpoint: &checkpoint,
         label: &label,
         clip: args.clip.as_deref(),
+        all_clips: args.all_clips,
         library: args.library.as_deref(),
         episodes: args.episodes,
         page: &args.out,

@@ -6,8 +6,9 @@
 use crate::cuda::Gpu;
 use crate::motion::TableLayout;
 use crate::plan::PlanStore;
-use crate::train::Checkpoint;
+use crate::recording::Recording;
 use crate::train::library_policy::{LibraryPolicy, LibraryPolicyEvaluator};
+use crate::train::{Checkpoint, EnvEvaluation, EvaluationSummary};
 
 use super::assemble::{ReplaySource, assemble_recording};
 use super::{Replay, ReplayError, chosen_envs, run_recorded};
@@ -41,6 +42,23 @@ pub struct LibraryReplayInput<'a> {
     pub episodes: u32,
 }
 
+/// One clip's episodes of a recorded library evaluation.
+pub struct ClipReplay {
+    /// The clip's index in the library.
+    pub clip: usize,
+    pub recording: Recording,
+    /// The env each episode of the recording ran in.
+    pub envs: Vec<usize>,
+}
+
+/// Several clips' recordings from one recorded evaluation rollout, and the evaluation of every
+/// env (every clip).
+pub struct LibraryReplays {
+    pub clips: Vec<ClipReplay>,
+    pub evaluations: Vec<EnvEvaluation>,
+    pub summary: EvaluationSummary,
+}
+
 /// Runs the library's evaluation rollout of `input.checkpoint` once on `gpu`, recording every
 /// env after every control step, and assembles the chosen envs of the clip (`input.clip`) into
 /// a recording.
@@ -48,34 +66,63 @@ pub fn record_library_replay(
     gpu: &Gpu,
     input: &LibraryReplayInput<'_>,
 ) -> Result<Replay, ReplayError> {
+    let mut replays = record_library_replays(gpu, input, &[input.clip])?;
+    let Some(clip) = replays.clips.pop() else {
+        return Err(ReplayError::Setup("no clip was recorded".to_owned()));
+    };
+    // The clip's chosen envs' recording; the evaluation of every env (every clip).
+    Ok(Replay {
+        recording: clip.recording,
+        envs: clip.envs,
+        evaluations: replays.evaluations,
+        summary: replays.summary,
+    })
+}
+
+/// [`record_library_replay`] of each clip of `clips` (indices into the library, `input.clip`
+/// unread) from one run of the evaluation rollout: `input.episodes` of each clip's envs.
+pub fn record_library_replays(
+    gpu: &Gpu,
+    input: &LibraryReplayInput<'_>,
+    clips: &[usize],
+) -> Result<LibraryReplays, ReplayError> {
     let prepared = input.prepared;
     let plan = &prepared.plan;
-    let envs = library_chosen_envs(input.clip, plan.clips.len(), plan.envs, input.episodes)?;
+    let chosen = clips
+        .iter()
+        .map(|&clip| library_chosen_envs(clip, plan.clips.len(), plan.envs, input.episodes))
+        .collect::<Result<Vec<_>, _>>()?;
     let evaluator = LibraryPolicyEvaluator::new(gpu, input.store, prepared, input.checkpoint)?;
     let (rollout, policy) = evaluator.evaluation_rollout();
     let run = run_recorded(gpu, rollout, policy)?;
     let summary = plan.summarize(&run.evaluations, prepared.config.run.success_rate)?;
-    // The clip's episode ends after its own steps (a shorter clip than the longest goes on
-    // being simulated, unscored, to the rollout's horizon).
-    let clip_steps = plan.clips[input.clip].evaluation.steps as usize;
-    let layout = TableLayout::for_character(prepared.motion.tracked().character());
-    let episodes = run.episodes(rollout, &envs, input.clip as i32, clip_steps + 1, &layout)?;
-    let planned = &plan.clips[input.clip];
-    let source = ReplaySource {
-        motion: planned.name.clone(),
-        motion_source: format!(
-            "clip {} of {}",
-            planned.name, prepared.preflight.motion_source
-        ),
-        checkpoint: input.checkpoint_label.to_string(),
-        control_dt: rollout.control_dt(),
-    };
     let character = prepared.motion.tracked().character();
-    let recording = assemble_recording(character, &layout, &source, &episodes)?;
-    // The clip's chosen envs' recording; the evaluation of every env (every clip).
-    Ok(Replay {
-        recording,
-        envs,
+    let layout = TableLayout::for_character(character);
+    let mut replays = Vec::with_capacity(clips.len());
+    for (&clip, envs) in clips.iter().zip(chosen) {
+        // The clip's episode ends after its own steps (a shorter clip than the longest goes on
+        // being simulated, unscored, to the rollout's horizon).
+        let planned = &plan.clips[clip];
+        let clip_steps = planned.evaluation.steps as usize;
+        let episodes = run.episodes(rollout, &envs, clip as i32, clip_steps + 1, &layout)?;
+        let source = ReplaySource {
+            motion: planned.name.clone(),
+            motion_source: format!(
+                "clip {} of {}",
+                planned.name, prepared.preflight.motion_source
+            ),
+            checkpoint: input.checkpoint_label.to_string(),
+            control_dt: rollout.control_dt(),
+        };
+        let recording = assemble_recording(character, &layout, &source, &episodes)?;
+        replays.push(ClipReplay {
+            clip,
+            recording,
+            envs,
+        });
+    }
+    Ok(LibraryReplays {
+        clips: replays,
         evaluations: run.evaluations,
         summary,
     })

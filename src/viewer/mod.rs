@@ -9,6 +9,7 @@
 //! URL are for screenshots and the headless-browser test (`tests/viewer_page.rs`).
 
 mod data;
+mod index;
 
 use std::path::Path;
 
@@ -19,6 +20,7 @@ use crate::motion::Character;
 use crate::recording::Recording;
 
 pub use data::{PageData, page_data};
+pub use index::{ClipPageRow, clip_page_name, index_html, save_index_page};
 
 /// three.js 0.185.1 from npm (assets/three/README.md).
 pub const THREE_CORE: &str = include_str!("../../assets/three/three.core.min.js");
