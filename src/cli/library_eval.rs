@@ -11,7 +11,9 @@ use serde::Serialize;
 
 use crate::cuda::Gpu;
 use crate::plan::PlanStore;
-use crate::replay::library::{LibraryReplayInput, record_library_replay, record_library_replays};
+use crate::replay::library::{
+    LibraryReplayInput, LibraryReplays, library_chosen_envs, record_library_replays,
+};
 use crate::train::library_policy::{
     LibraryPolicy, LibraryPolicyEvaluator, evaluation_clips_table, format_library_report,
     prepare_library_policy,
@@ -157,25 +159,10 @@ pub(super) fn replay_library(job: &LibraryReplayJob<'_>) -> Result<String> {
         Some(name) => prepared.clip_index(name)?,
         None => 0,
     };
-    // Checked before the GPU opens: the clip's starts bound the episodes.
-    crate::replay::library::library_chosen_envs(
-        clip,
-        prepared.plan.clips.len(),
-        prepared.plan.envs,
-        job.episodes,
-    )?;
-    let gpu = Gpu::open(job.device)?;
-    let replay = record_library_replay(
-        &gpu,
-        &LibraryReplayInput {
-            prepared: &prepared,
-            checkpoint: job.checkpoint,
-            store: job.store,
-            checkpoint_label: job.label,
-            clip,
-            episodes: job.episodes,
-        },
-    )?;
+    let mut replays = record_clips(job, &prepared, &[clip])?;
+    let Some(replay) = replays.clips.pop() else {
+        bail!("no clip was recorded");
+    };
     let name = &prepared.plan.clips[clip].name;
     let title = clip_page_title(name, &prepared, job.checkpoint);
     let character = prepared.motion.tracked().character();
@@ -195,7 +182,7 @@ pub(super) fn replay_library(job: &LibraryReplayJob<'_>) -> Result<String> {
         "evaluation           every env of the same rollout:"
     );
     report.push_str(&format_library_report(
-        &replay.summary,
+        &replays.summary,
         prepared.config.run.success_rate,
     ));
     let (page, recording) = (job.page, job.recording);
@@ -208,6 +195,32 @@ pub(super) fn replay_library(job: &LibraryReplayJob<'_>) -> Result<String> {
         recording,
     )?;
     Ok(report)
+}
+
+/// Checks that every clip of `clips` has `job.episodes` starts (before the GPU opens), then
+/// records them from one run of the library evaluation.
+fn record_clips(
+    job: &LibraryReplayJob<'_>,
+    prepared: &LibraryPolicy,
+    clips: &[usize],
+) -> Result<LibraryReplays> {
+    for &clip in clips {
+        library_chosen_envs(
+            clip,
+            prepared.plan.clips.len(),
+            prepared.plan.envs,
+            job.episodes,
+        )?;
+    }
+    let gpu = Gpu::open(job.device)?;
+    let input = LibraryReplayInput {
+        prepared,
+        checkpoint: job.checkpoint,
+        store: job.store,
+        checkpoint_label: job.label,
+        episodes: job.episodes,
+    };
+    Ok(record_library_replays(&gpu, &input, clips)?)
 }
 
 /// The title of a clip's replay page.
@@ -249,28 +262,7 @@ fn replay_every_clip(job: &LibraryReplayJob<'_>) -> Result<String> {
         eprintln!("{line}");
     }
     let clips: Vec<usize> = (0..prepared.plan.clips.len()).collect();
-    // Checked before the GPU opens: every clip's starts bound the episodes.
-    for &clip in &clips {
-        crate::replay::library::library_chosen_envs(
-            clip,
-            clips.len(),
-            prepared.plan.envs,
-            job.episodes,
-        )?;
-    }
-    let gpu = Gpu::open(job.device)?;
-    let replays = record_library_replays(
-        &gpu,
-        &LibraryReplayInput {
-            prepared: &prepared,
-            checkpoint: job.checkpoint,
-            store: job.store,
-            checkpoint_label: job.label,
-            clip: 0,
-            episodes: job.episodes,
-        },
-        &clips,
-    )?;
+    let replays = record_clips(job, &prepared, &clips)?;
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let scores = replays
         .summary

@@ -11,7 +11,7 @@ use crate::train::library_policy::{LibraryPolicy, LibraryPolicyEvaluator};
 use crate::train::{Checkpoint, EnvEvaluation, EvaluationSummary};
 
 use super::assemble::{ReplaySource, assemble_recording};
-use super::{Replay, ReplayError, chosen_envs, run_recorded};
+use super::{ReplayError, chosen_envs, run_recorded};
 
 /// The evaluation envs that play clip `clip` of `clips` on `envs` envs (env i plays clip
 /// i mod C), `episodes` of them spread evenly over the clip's starts, its first start first.
@@ -32,13 +32,12 @@ pub fn library_chosen_envs(
     Ok(picks.into_iter().map(|k| own[k]).collect())
 }
 
-/// What to replay: a checked library checkpoint, the clip, and how many of its episodes.
+/// What to replay: a checked library checkpoint, and how many episodes of each clip.
 pub struct LibraryReplayInput<'a> {
     pub prepared: &'a LibraryPolicy,
     pub checkpoint: &'a Checkpoint,
     pub store: &'a PlanStore,
     pub checkpoint_label: &'a str,
-    pub clip: usize,
     pub episodes: u32,
 }
 
@@ -60,27 +59,8 @@ pub struct LibraryReplays {
 }
 
 /// Runs the library's evaluation rollout of `input.checkpoint` once on `gpu`, recording every
-/// env after every control step, and assembles the chosen envs of the clip (`input.clip`) into
-/// a recording.
-pub fn record_library_replay(
-    gpu: &Gpu,
-    input: &LibraryReplayInput<'_>,
-) -> Result<Replay, ReplayError> {
-    let mut replays = record_library_replays(gpu, input, &[input.clip])?;
-    let Some(clip) = replays.clips.pop() else {
-        return Err(ReplayError::Setup("no clip was recorded".to_owned()));
-    };
-    // The clip's chosen envs' recording; the evaluation of every env (every clip).
-    Ok(Replay {
-        recording: clip.recording,
-        envs: clip.envs,
-        evaluations: replays.evaluations,
-        summary: replays.summary,
-    })
-}
-
-/// [`record_library_replay`] of each clip of `clips` (indices into the library, `input.clip`
-/// unread) from one run of the evaluation rollout: `input.episodes` of each clip's envs.
+/// env after every control step, and assembles `input.episodes` of the envs of each clip of
+/// `clips` (indices into the library), spread over its starts, into a recording per clip.
 pub fn record_library_replays(
     gpu: &Gpu,
     input: &LibraryReplayInput<'_>,
