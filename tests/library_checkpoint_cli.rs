@@ -52,6 +52,17 @@ fn write_latent(dir: &Path, name: &str, config: &TrainConfig) -> String {
     path.display().to_string()
 }
 
+/// A tracker of the 13 shipped clips and one of the walk alone, in `dir`.
+fn shipped_and_walk_trackers(dir: &Path) -> (String, String) {
+    let tracker = write_tracker(
+        dir,
+        "tracker.safetensors",
+        &load("configs/train/library_shipped.toml"),
+    );
+    let walk = write_tracker(dir, "walk.safetensors", &load("configs/train/walk.toml"));
+    (tracker, walk)
+}
+
 /// The error of a failed command: one line, after the clips' load warnings (the built-in
 /// clips' renormalized quaternions), if any.
 fn error_line(out: &Output) -> String {
@@ -228,20 +239,11 @@ fn a_latent_checkpoint_of_another_layout_is_refused_naming_the_file() {
 #[test]
 fn replay_of_a_library_checkpoint_checks_the_clip_and_its_flags() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let tracker = write_tracker(
-        dir.path(),
-        "tracker.safetensors",
-        &load("configs/train/library_shipped.toml"),
-    );
+    let (tracker, walk) = shipped_and_walk_trackers(dir.path());
     let latent = write_latent(
         dir.path(),
         "latent.safetensors",
         &load("configs/latent/held_out.toml"),
-    );
-    let walk = write_tracker(
-        dir.path(),
-        "walk.safetensors",
-        &load("configs/train/walk.toml"),
     );
     let page = dir.path().join("page.html").display().to_string();
     let replay = |extra: &[&str]| {
@@ -308,16 +310,7 @@ fn replay_of_a_library_checkpoint_checks_the_clip_and_its_flags() {
 #[test]
 fn replay_of_every_clip_checks_its_directory_and_flags_before_the_gpu() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let tracker = write_tracker(
-        dir.path(),
-        "tracker.safetensors",
-        &load("configs/train/library_shipped.toml"),
-    );
-    let walk = write_tracker(
-        dir.path(),
-        "walk.safetensors",
-        &load("configs/train/walk.toml"),
-    );
+    let (tracker, walk) = shipped_and_walk_trackers(dir.path());
     let pages = dir.path().join("pages").display().to_string();
     let replay = |out: &str, extra: &[&str]| {
         let mut args = vec!["replay", "--all-clips", "--out", out];
