@@ -7,8 +7,9 @@
 //!   `eval` reads its checkpoint back.
 //! - A run killed with SIGKILL mid-training resumes from its last checkpoint and its metrics
 //!   continue without a gap or a duplicate (issue 5's acceptance).
-//! - A short run on a motion library evaluates every clip, writes `clips.tsv`, `clips.png` and the
-//!   per-clip results in its metrics, and resumes (docs/library.md).
+//! - A short run on a motion library evaluates every clip, writes `clips.tsv`, `clips.png`, the
+//!   per-clip results in its metrics and `replay/` (a page per clip and an index), and resumes
+//!   (docs/library.md).
 //! - A run sent SIGINT mid-training stops after its current iteration with a checkpoint of it
 //!   and `summary.json` (stop reason `interrupted`), exits with 130, and `--resume` continues
 //!   from that iteration (docs/train.md, "Stopping a run").
@@ -187,6 +188,8 @@ fn a_short_library_run_scores_every_clip_and_writes_its_clip_table() {
         small_run_support::small_library_config(&["walk", "punch", "spinkick", "getup_faceup"]);
     config.run.max_iterations = 4;
     config.run.checkpoint_interval = 2;
+    // The pages of every clip at the end, as the library configs write them.
+    config.run.replay = true;
     config.validate("test").expect("a library config");
     let path = dir.path().join("library.toml");
     std::fs::write(&path, config.to_toml().expect("toml")).expect("write config");
@@ -251,7 +254,18 @@ fn a_short_library_run_scores_every_clip_and_writes_its_clip_table() {
     )
     .expect("JSON");
     assert!(summary["library"].is_object(), "{summary}");
+    // replay/: a page per clip and the index linking them, no replay.html.
     assert!(!run.join("replay.html").exists());
+    let index = std::fs::read_to_string(run.join("replay/index.html")).expect("replay/index.html");
+    for page in [
+        "0_walk.html",
+        "1_punch.html",
+        "2_spinkick.html",
+        "3_getup_faceup.html",
+    ] {
+        assert!(run.join("replay").join(page).is_file(), "{page}");
+        assert!(index.contains(page), "{index}");
+    }
     // It resumes like a run of one clip.
     let out = binary()
         .args([

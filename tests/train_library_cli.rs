@@ -330,6 +330,12 @@ fn train_library_takes_a_directory_or_a_file_with_the_library_keys() {
     assert!(text.contains("clip          a (31 frames"), "{text}");
     assert!(text.contains("clip          b (31 frames"), "{text}");
     assert!(text.contains("run directory runs/library-seed0"), "{text}");
+    assert!(
+        text.contains(
+            "replay        replay/ of the final policy at the end: index.html and a page per clip"
+        ),
+        "{text}"
+    );
     let config = resolved_config(&text);
     assert!(config.motion.is_empty());
     assert_eq!(

@@ -124,12 +124,16 @@ pub(super) fn eval_library(job: &LibraryEvalJob<'_>) -> Result<()> {
 }
 
 /// What `replay` was given for a library checkpoint.
+#[derive(Clone, Copy)]
 pub(super) struct LibraryReplayJob<'a> {
     pub checkpoint: &'a Checkpoint,
     pub label: &'a str,
     pub clip: Option<&'a str>,
     /// Every clip: `page` is a directory of pages and an index.
     pub all_clips: bool,
+    /// With `all_clips`: fewer episodes per clip when a clip has fewer starts (the pages a
+    /// training run writes at its end), rather than an error.
+    pub fit_episodes: bool,
     /// Another library than the one it trained on.
     pub library: Option<&'a Path>,
     pub episodes: u32,
@@ -262,6 +266,18 @@ fn replay_every_clip(job: &LibraryReplayJob<'_>) -> Result<String> {
         eprintln!("{line}");
     }
     let clips: Vec<usize> = (0..prepared.plan.clips.len()).collect();
+    let fitted;
+    let job = if job.fit_episodes {
+        // Env i plays clip i mod C: the last clip has the fewest starts.
+        let fewest = (prepared.plan.envs / clips.len().max(1)).max(1) as u32;
+        fitted = LibraryReplayJob {
+            episodes: job.episodes.min(fewest),
+            ..*job
+        };
+        &fitted
+    } else {
+        job
+    };
     let replays = record_clips(job, &prepared, &clips)?;
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let scores = replays

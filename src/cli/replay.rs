@@ -320,6 +320,7 @@ fn replay_library_checkpoint(
         label: &label,
         clip: args.clip.as_deref(),
         all_clips: args.all_clips,
+        fit_episodes: false,
         library: args.library.as_deref(),
         episodes: args.episodes,
         page: &args.out,

@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 
+use super::library_eval::{LibraryReplayJob, replay_library};
 use super::replay::{ReplayJob, write_replay};
 use super::stopped::Stopped;
 use crate::cuda::nccl_version;
@@ -22,10 +23,10 @@ use crate::plan::PlanStore;
 use crate::replay::DEFAULT_EPISODES;
 use crate::train::goal_latent::load_goal_decoder;
 use crate::train::latent_trainer::{latent_shapes, load_teacher};
-use crate::train::run_dir::{CHECKPOINTS_DIR, REPLAY_FILE};
+use crate::train::run_dir::{CHECKPOINTS_DIR, REPLAY_DIR, REPLAY_FILE};
 use crate::train::{
-    CheckpointDir, ProgressMode, RunDir, RunStart, RunSummary, StopFlag, StopReason, StopSignal,
-    TrainConfig, TrainSetup, check_same_gpu_count, default_run_dir, preflight_training,
+    Checkpoint, CheckpointDir, ProgressMode, RunDir, RunStart, RunSummary, StopFlag, StopReason,
+    StopSignal, TrainConfig, TrainSetup, check_same_gpu_count, default_run_dir, preflight_training,
     train_on_gpu,
 };
 
@@ -87,7 +88,8 @@ pub struct TrainArgs {
     /// Iterations between evaluations, overriding `run.eval_interval`.
     #[arg(long)]
     eval_interval: Option<u32>,
-    /// Write no `replay.html` at the end of the run (overriding `run.replay`).
+    /// Write no `replay.html` (a library: no `replay/` pages) at the end of the run (overriding
+    /// `run.replay`).
     #[arg(long)]
     no_replay: bool,
     /// Override any configuration key: `--set ppo.clip=0.25 --set reward.ee_frame=root`
@@ -417,15 +419,15 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let root = match &start {
         RunStart::New { root, .. } | RunStart::Resume { root } => root.clone(),
     };
-    // A replay plays one clip: a library's tracking run writes none (docs/library.md). A goal
-    // run's replay shows its goals, whatever its resets draw from (docs/goal.md).
-    let replay = config.run.replay && (config.motion_library.is_none() || config.goal.is_some());
-    if config.run.replay && !replay {
-        eprintln!(
-            "note: no {} for a motion library (replay plays one clip; run.replay is ignored)",
-            REPLAY_FILE
-        );
-    }
+    // A clip's run writes replay.html; a motion library's tracking run (tracker or latent
+    // controller) a page per clip and an index in replay/ (docs/library.md). A goal run's
+    // replay shows its goals, whatever its resets draw from (docs/goal.md).
+    let replay = config.run.replay;
+    let replay_out = if config.motion_library.is_some() && config.goal.is_none() {
+        root.join(REPLAY_DIR)
+    } else {
+        root.join(REPLAY_FILE)
+    };
     let keep = config.run.keep_checkpoints;
     let device = args.first_device(&config);
     let stop = StopFlag::on_signals().context("cannot handle SIGINT and SIGTERM")?;
@@ -454,12 +456,17 @@ pub fn run(args: TrainArgs) -> Result<()> {
     stop.stop_at_once_from_now();
     if replay {
         // The run's results are written; a replay that fails leaves them as they are.
-        match replay_final_policy(&root, keep, motions_dir.as_deref(), &store, device) {
+        let written = replay_final_policy(
+            &root,
+            &replay_out,
+            keep,
+            motions_dir.as_deref(),
+            &store,
+            device,
+        );
+        match written {
             Ok(report) => print!("{report}"),
-            Err(e) => eprintln!(
-                "warning: {} not written: {e:#}",
-                root.join(REPLAY_FILE).display()
-            ),
+            Err(e) => eprintln!("warning: {} not written: {e:#}", replay_out.display()),
         }
     }
     Ok(())
@@ -483,10 +490,12 @@ fn stopped_line(signal: StopSignal, summary: &RunSummary, root: &Path) -> String
     }
 }
 
-/// Writes `replay.html` into the run directory from its newest checkpoint (the final policy:
-/// a run checkpoints when it stops), replayed as the evaluation runs it.
+/// Writes `out` (`replay.html`, or a library's `replay/` directory of pages) into the run
+/// directory from its newest checkpoint (the final policy: a run checkpoints when it stops),
+/// replayed as the evaluation runs it.
 fn replay_final_policy(
     root: &Path,
+    out: &Path,
     keep: u32,
     motions_dir: Option<&Path>,
     store: &PlanStore,
@@ -496,13 +505,35 @@ fn replay_final_policy(
     let Some((iteration, checkpoint)) = checkpoints.list()?.pop() else {
         bail!("the run has no checkpoint to replay");
     };
-    let page = root.join(REPLAY_FILE);
+    let heading = format!(
+        "replay               the final policy (iteration {iteration}) as the evaluation runs it (--no-replay: none)"
+    );
+    if out.file_name().and_then(|n| n.to_str()) == Some(REPLAY_DIR) {
+        let loaded = Checkpoint::load(&checkpoint)?;
+        let label = checkpoint.display().to_string();
+        let report = replay_library(&LibraryReplayJob {
+            checkpoint: &loaded,
+            label: &label,
+            clip: None,
+            all_clips: true,
+            fit_episodes: true,
+            library: None,
+            episodes: DEFAULT_EPISODES,
+            page: out,
+            recording: None,
+            motions_dir,
+            store,
+            device,
+        })?;
+        return Ok(format!("{heading}\n{report}"));
+    }
+    let page = out;
     let report = write_replay(&ReplayJob {
         checkpoint: &checkpoint,
         episodes: DEFAULT_EPISODES,
         start: None,
         steps: None,
-        page: &page,
+        page,
         recording: None,
         motions_dir,
         store,
@@ -510,9 +541,7 @@ fn replay_final_policy(
         motion_notices: false,
         decoder: None,
     })?;
-    Ok(format!(
-        "replay               the final policy (iteration {iteration}) as the evaluation runs it (--no-replay: none)\n{report}"
-    ))
+    Ok(format!("{heading}\n{report}"))
 }
 
 #[cfg(test)]

@@ -502,7 +502,7 @@ fn the_library_configs_train_the_general_defaults_sections_on_a_library() {
             (c.run.eval_envs, c.run.success_rate, c.run.time_budget_s),
             (4096, 0.95, 900.0)
         );
-        assert!(!c.run.replay);
+        assert!(c.run.replay, "{name}: the pages of every clip at the end");
     }
 }
 

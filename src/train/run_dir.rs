@@ -49,8 +49,10 @@ pub const EVALUATION_FILE: &str = "evaluation.json";
 pub const CLIPS_FILE: &str = "clips.tsv";
 pub const CLIPS_CHART_FILE: &str = "clips.png";
 pub const REPLAY_FILE: &str = "replay.html";
+/// A motion library run's replay: a page per clip and `index.html` (`replay --all-clips`).
+pub const REPLAY_DIR: &str = "replay";
 /// Everything a run writes (what `--overwrite` removes; other files are left alone).
-const RUN_ENTRIES: [&str; 8] = [
+const RUN_ENTRIES: [&str; 10] = [
     CONFIG_FILE,
     METRICS_FILE,
     CURVE_FILE,
@@ -58,7 +60,9 @@ const RUN_ENTRIES: [&str; 8] = [
     SUMMARY_FILE,
     EVALUATION_FILE,
     CLIPS_FILE,
+    CLIPS_CHART_FILE,
     REPLAY_FILE,
+    REPLAY_DIR,
 ];
 
 /// The directory of one run.

@@ -13,6 +13,7 @@
 # allowed past it: `train` gets `timeout` at the deadline, whose SIGTERM makes it stop after
 # the current iteration with a checkpoint (exit 143), so the run can be resumed in the next
 # call. Each line of $OUT/summary.txt is one finished step; the summary is printed last.
+# REPLAY=1: the runs write their replay pages (default: --no-replay).
 # KEEP: the runs whose directories (with their newest checkpoint), xz-packed, come back as
 # run_NAME.txz (a file must stay under 16 MiB: a library run's metrics.jsonl alone passes 10 MB
 # in 15 minutes). A plan file given as the argument is sourced first; it may set all of the above.
@@ -30,6 +31,10 @@ cd "$(dirname "$0")/../.."
 export BIN NCCL_NVLS_ENABLE=${NCCL_NVLS_ENABLE:-0}
 LD_LIBRARY_PATH=$(toolkit_libs)
 export LD_LIBRARY_PATH
+# Runs write no replay pages unless REPLAY=1: a library's are 20-30 MB, over what a kept run
+# may bring back.
+replay_flag=--no-replay
+[ "${REPLAY:-0}" = 1 ] && replay_flag=
 start=$(date +%s)
 deadline=$(( start + ${SESSION_S:-530} ))
 summary="$OUT/summary.txt"
@@ -57,7 +62,7 @@ train() {
   if [ "$(left)" -lt 40 ]; then note "$name: skipped (session time)"; return; fi
   local t0; t0=$(date +%s)
   run_bounded "$wall" "$OUT/runs/$name.log" "$BIN/instantmimic" train --out "$OUT/runs/$name" --overwrite \
-    --progress lines "$@"
+    --progress lines $replay_flag "$@"
   report_run "$name" $? "$t0"
 }
 resume() {
@@ -67,7 +72,7 @@ resume() {
   rm -rf "$OUT/runs/$name"; cp -r "$from" "$OUT/runs/$name"; chmod -R u+w "$OUT/runs/$name"
   local t0; t0=$(date +%s)
   run_bounded "$wall" "$OUT/runs/$name.log" "$BIN/instantmimic" train --resume "$OUT/runs/$name" \
-    --progress lines "$@"
+    --progress lines $replay_flag "$@"
   report_run "$name" $? "$t0"
 }
 gpu_test() {
