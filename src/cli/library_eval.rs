@@ -124,7 +124,6 @@ pub(super) fn eval_library(job: &LibraryEvalJob<'_>) -> Result<()> {
 }
 
 /// What `replay` was given for a library checkpoint.
-#[derive(Clone, Copy)]
 pub(super) struct LibraryReplayJob<'a> {
     pub checkpoint: &'a Checkpoint,
     pub label: &'a str,
@@ -163,7 +162,7 @@ pub(super) fn replay_library(job: &LibraryReplayJob<'_>) -> Result<String> {
         Some(name) => prepared.clip_index(name)?,
         None => 0,
     };
-    let mut replays = record_clips(job, &prepared, &[clip])?;
+    let mut replays = record_clips(job, &prepared, &[clip], job.episodes)?;
     let Some(replay) = replays.clips.pop() else {
         bail!("no clip was recorded");
     };
@@ -201,19 +200,20 @@ pub(super) fn replay_library(job: &LibraryReplayJob<'_>) -> Result<String> {
     Ok(report)
 }
 
-/// Checks that every clip of `clips` has `job.episodes` starts (before the GPU opens), then
+/// Checks that every clip of `clips` has `episodes` starts (before the GPU opens), then
 /// records them from one run of the library evaluation.
 fn record_clips(
     job: &LibraryReplayJob<'_>,
     prepared: &LibraryPolicy,
     clips: &[usize],
+    episodes: u32,
 ) -> Result<LibraryReplays> {
     for &clip in clips {
         library_chosen_envs(
             clip,
             prepared.plan.clips.len(),
             prepared.plan.envs,
-            job.episodes,
+            episodes,
         )?;
     }
     let gpu = Gpu::open(job.device)?;
@@ -222,7 +222,7 @@ fn record_clips(
         checkpoint: job.checkpoint,
         store: job.store,
         checkpoint_label: job.label,
-        episodes: job.episodes,
+        episodes,
     };
     Ok(record_library_replays(&gpu, &input, clips)?)
 }
@@ -243,42 +243,20 @@ fn clip_page_title(name: &str, prepared: &LibraryPolicy, checkpoint: &Checkpoint
 /// one run of the library evaluation.
 fn replay_every_clip(job: &LibraryReplayJob<'_>) -> Result<String> {
     let dir = job.page;
-    if dir.exists() && !dir.is_dir() {
-        bail!(
-            "{}: --all-clips writes a directory of pages; this is a file",
-            dir.display()
-        );
-    }
-    // The directory's own parent must exist, as a page's directory must.
-    let parent = match dir.parent() {
-        Some(parent) if !parent.as_os_str().is_empty() => parent,
-        _ => Path::new("."),
-    };
-    if !parent.is_dir() {
-        bail!(
-            "{}: the directory {} does not exist (create it first)",
-            dir.display(),
-            parent.display()
-        );
-    }
+    super::output::check_output_dir(dir, "--all-clips")?;
     let prepared = prepare_library_policy(job.checkpoint, job.library, job.motions_dir, job.store)?;
     for line in &prepared.preflight.motion_notices {
         eprintln!("{line}");
     }
     let clips: Vec<usize> = (0..prepared.plan.clips.len()).collect();
-    let fitted;
-    let job = if job.fit_episodes {
+    let episodes = if job.fit_episodes {
         // Env i plays clip i mod C: the last clip has the fewest starts.
         let fewest = (prepared.plan.envs / clips.len().max(1)).max(1) as u32;
-        fitted = LibraryReplayJob {
-            episodes: job.episodes.min(fewest),
-            ..*job
-        };
-        &fitted
+        job.episodes.min(fewest)
     } else {
-        job
+        job.episodes
     };
-    let replays = record_clips(job, &prepared, &clips)?;
+    let replays = record_clips(job, &prepared, &clips, episodes)?;
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let scores = replays
         .summary
@@ -323,7 +301,7 @@ fn replay_every_clip(job: &LibraryReplayJob<'_>) -> Result<String> {
             summary.episodes,
             summary.success_rate,
             summary.global_mpjpe_m,
-            job.episodes
+            episodes
         ),
     ];
     let index = dir.join("index.html");

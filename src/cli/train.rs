@@ -419,15 +419,11 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let root = match &start {
         RunStart::New { root, .. } | RunStart::Resume { root } => root.clone(),
     };
-    // A clip's run writes replay.html; a motion library's tracking run (tracker or latent
-    // controller) a page per clip and an index in replay/ (docs/library.md). A goal run's
-    // replay shows its goals, whatever its resets draw from (docs/goal.md).
+    // A clip's run (and a goal run) writes replay.html; a motion library's tracking run a page
+    // per clip and an index in replay/ (docs/library.md).
     let replay = config.run.replay;
-    let replay_out = if config.motion_library.is_some() && config.goal.is_none() {
-        root.join(REPLAY_DIR)
-    } else {
-        root.join(REPLAY_FILE)
-    };
+    let every_clip = config.replays_every_clip();
+    let replay_out = root.join(if every_clip { REPLAY_DIR } else { REPLAY_FILE });
     let keep = config.run.keep_checkpoints;
     let device = args.first_device(&config);
     let stop = StopFlag::on_signals().context("cannot handle SIGINT and SIGTERM")?;
@@ -459,6 +455,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         let written = replay_final_policy(
             &root,
             &replay_out,
+            every_clip,
             keep,
             motions_dir.as_deref(),
             &store,
@@ -490,12 +487,13 @@ fn stopped_line(signal: StopSignal, summary: &RunSummary, root: &Path) -> String
     }
 }
 
-/// Writes `out` (`replay.html`, or a library's `replay/` directory of pages) into the run
-/// directory from its newest checkpoint (the final policy: a run checkpoints when it stops),
-/// replayed as the evaluation runs it.
+/// Writes `out` (`replay.html`, or with `every_clip` a library's `replay/` directory of pages)
+/// into the run directory from its newest checkpoint (the final policy: a run checkpoints when
+/// it stops), replayed as the evaluation runs it.
 fn replay_final_policy(
     root: &Path,
     out: &Path,
+    every_clip: bool,
     keep: u32,
     motions_dir: Option<&Path>,
     store: &PlanStore,
@@ -508,7 +506,7 @@ fn replay_final_policy(
     let heading = format!(
         "replay               the final policy (iteration {iteration}) as the evaluation runs it (--no-replay: none)"
     );
-    if out.file_name().and_then(|n| n.to_str()) == Some(REPLAY_DIR) {
+    if every_clip {
         let loaded = Checkpoint::load(&checkpoint)?;
         let label = checkpoint.display().to_string();
         let report = replay_library(&LibraryReplayJob {

@@ -206,6 +206,13 @@ pub const DEFAULT_CONFIG: &str = include_str!("../../configs/train/default.toml"
 pub const LIBRARY_CONFIG: &str = include_str!("../../configs/train/library_shipped.toml");
 
 impl TrainConfig {
+    /// Whether the run's final replay is a page per clip and an index (`replay/`, as `replay
+    /// --all-clips` writes them): a motion library's tracking run, tracker or latent controller.
+    /// A goal run's replay is one page of its goals whatever its resets draw from.
+    pub fn replays_every_clip(&self) -> bool {
+        self.motion_library.is_some() && self.goal.is_none()
+    }
+
     /// The built-in library configuration (its `[motion_library]` is the 13 built-in clips) and
     /// its label.
     pub fn library_default() -> (String, Result<TrainConfig, ConfigError>) {

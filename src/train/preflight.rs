@@ -294,7 +294,7 @@ impl Preflight {
         let _ = writeln!(
             out,
             "replay        {}",
-            if config.run.replay && config.motion_library.is_some() && config.goal.is_none() {
+            if config.run.replay && config.replays_every_clip() {
                 "replay/ of the final policy at the end: index.html and a page per clip (run.replay; --no-replay: none)"
             } else if config.run.replay {
                 "replay.html of the final policy at the end (run.replay; --no-replay: none)"
