@@ -243,6 +243,46 @@ def cell_weight(
     return clip_weight[c] * (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor)
 
 
+@wp.func
+def clip_scale(
+    clip_weight: wp.array(dtype=wp.float32),
+    phase_visits: wp.array2d(dtype=wp.float32),
+    phase_failures: wp.array2d(dtype=wp.float32),
+    c: wp.int32,
+    floor: wp.float32,
+    frames_horizon: wp.float32,
+    clip_base_share: wp.float32,
+    failure_total: wp.float32,
+) -> wp.float32:
+    """What clip c's cells are multiplied by: its turnover (1 for shares of resets), and with
+    `clip_base_share` >= 0 its [`clip_share`] over its cells' `rate + floor` as well."""
+    turnover = clip_turnover(phase_visits, phase_failures, c, frames_horizon)
+    if clip_base_share >= 0.0:
+        return turnover * clip_share(
+            clip_weight, phase_visits, phase_failures, c, clip_base_share, failure_total, floor
+        )
+    return turnover
+
+
+@wp.func
+def sampling_weight(
+    clip_weight: wp.array(dtype=wp.float32),
+    phase_visits: wp.array2d(dtype=wp.float32),
+    phase_failures: wp.array2d(dtype=wp.float32),
+    c: wp.int32,
+    b: wp.int32,
+    floor: wp.float32,
+    scale: wp.float32,
+    clip_base_share: wp.float32,
+) -> wp.float32:
+    """Cell (c, b)'s unnormalized probability, with its clip's [`clip_scale`]: `rate + floor`
+    times it when the clips' shares come from `clip_base_share`, else the cell's weight times it
+    (exactly the weight for shares of resets, whose scale is 1)."""
+    if clip_base_share >= 0.0:
+        return cell_rate(phase_visits, phase_failures, c, b, floor) * scale
+    return cell_weight(clip_weight, phase_visits, phase_failures, c, b, floor) * scale
+
+
 @wp.kernel
 def phase_statistics_update(
     decay: wp.float32,
@@ -281,42 +321,36 @@ def phase_statistics_update(
         return
     clips = phase_cdf.shape[0]
     bins = phase_cdf.shape[1]
-    # Resets (T <= 0) add each weight as the kernel always did, which NVRTC contracts into one
-    # fused multiply-add: a product by a turnover of 1 first would round twice and change the
-    # CDF's last bits.
     failure_total = float(0.0)
     if clip_base_share >= 0.0:
         for c in range(clips):
             failure_total += clip_weight[c] * clip_failure_rate(phase_visits, phase_failures, c)
     total = float(0.0)
     for c in range(clips):
-        turnover = clip_turnover(phase_visits, phase_failures, c, frames_horizon)
-        if clip_base_share >= 0.0:
-            scale = turnover * clip_share(
-                clip_weight, phase_visits, phase_failures, c, clip_base_share, failure_total, floor
-            )
-            for b in range(bins):
-                total += cell_rate(phase_visits, phase_failures, c, b, floor) * scale
-        else:
-            for b in range(bins):
-                if frames_horizon > 0.0:
-                    total += cell_weight(clip_weight, phase_visits, phase_failures, c, b, floor) * turnover
-                else:
-                    total += cell_weight(clip_weight, phase_visits, phase_failures, c, b, floor)
+        scale = clip_scale(
+            clip_weight, phase_visits, phase_failures, c, floor, frames_horizon, clip_base_share,
+            failure_total,
+        )
+        for b in range(bins):
+            if clip_base_share < 0.0 and frames_horizon <= 0.0:
+                # Resets add each weight as the kernel always did, which NVRTC contracts into
+                # one fused multiply-add: a product by a scale of 1 first would round twice and
+                # change the CDF's last bits.
+                total += cell_weight(clip_weight, phase_visits, phase_failures, c, b, floor)
+            else:
+                total += sampling_weight(
+                    clip_weight, phase_visits, phase_failures, c, b, floor, scale, clip_base_share
+                )
     acc = float(0.0)
     for c in range(clips):
-        turnover = clip_turnover(phase_visits, phase_failures, c, frames_horizon)
-        scale = float(0.0)
-        if clip_base_share >= 0.0:
-            scale = turnover * clip_share(
-                clip_weight, phase_visits, phase_failures, c, clip_base_share, failure_total, floor
-            )
+        scale = clip_scale(
+            clip_weight, phase_visits, phase_failures, c, floor, frames_horizon, clip_base_share,
+            failure_total,
+        )
         for b in range(bins):
-            w = cell_weight(clip_weight, phase_visits, phase_failures, c, b, floor)
-            if clip_base_share >= 0.0:
-                w = cell_rate(phase_visits, phase_failures, c, b, floor) * scale
-            elif frames_horizon > 0.0:
-                w = w * turnover
+            w = sampling_weight(
+                clip_weight, phase_visits, phase_failures, c, b, floor, scale, clip_base_share
+            )
             acc += w / total
             phase_cdf[c, b] = acc
             phase_visits[c, b] = phase_visits[c, b] * decay
