@@ -5,7 +5,7 @@
 #   mkdir -p .device-runs && tar xJf run_latent_abs2.txz -C .device-runs
 #   BIN=.device-small tests/device/lanes.sh tests/device/plans/goal_bar_decoder.sh   (carry .device-small and .device-runs)
 R=${R:-$PWD/.device-runs}
-SESSION_S=${SESSION_S:-300}
+SESSION_S=${SESSION_S:-330}
 KEEP=${KEEP:-}
 DECODER=$(ls "$R"/latent_abs2/checkpoints/*.safetensors 2>/dev/null | sort | tail -1)
 GOAL="--config configs/goal/reach_latent.toml --time-budget 60 --set run.eval_interval=30 --decoder $DECODER"
