@@ -411,4 +411,24 @@ fn bench_full_times_a_library_against_the_physics_floor() {
         }
     }
     assert!(positive(&r["stage_ms"]["physics"]), "{r}");
+    // The update's parts: every one timed, together the update's time.
+    let parts = r["update_stage_ms"].as_object().expect("update_stage_ms");
+    for part in [
+        "advantages",
+        "gather",
+        "forward",
+        "loss",
+        "backward",
+        "clipping",
+        "adam",
+        "statistics",
+    ] {
+        assert!(positive(&parts[part]), "update part {part}: {r}");
+    }
+    let sum: f64 = parts.values().filter_map(serde_json::Value::as_f64).sum();
+    let update_ms = r["update_ms"].as_f64().expect("update_ms");
+    assert!(
+        (sum - update_ms).abs() < 1e-6 * update_ms.max(1.0),
+        "{sum} against {update_ms}: {r}"
+    );
 }

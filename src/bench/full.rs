@@ -5,7 +5,7 @@
 //! concurrent branches of the update (`ppo.concurrent_networks`), and once beside the next
 //! rollout (`ppo.overlap_update`), each against the physics-only floor replayed from the
 //! rollout's states (`bench rollout`'s floor, the same code), with a breakdown of the
-//! sequential iteration: the rollout's stages, the update, and the rest.
+//! sequential iteration: the rollout's stages, the update's parts, and the rest.
 //!
 //! A frame is one control step of one env; an iteration that ran a rollout more (the
 //! overlapped loop filling its pipeline, only in the warm-up unless it is 0) counts its frames.
@@ -17,9 +17,10 @@ use serde::Serialize;
 
 use super::rollout::{median, physics_only_graph, time_floor_from_rollout_states, time_graph};
 use super::timing::timed_seconds;
-use crate::cuda::{Gpu, NvtxRange};
-use crate::env::{RolloutError, RolloutStage, TrackedMotion};
+use crate::cuda::{Gpu, Graph, NvtxRange};
+use crate::env::{RolloutError, RolloutStage, Stage, StageEvents, TrackedMotion};
 use crate::plan::PlanStore;
+use crate::ppo::UpdateStage;
 use crate::train::{TrainConfig, TrainError, Trainer};
 
 /// One way of running the loop, measured.
@@ -81,6 +82,9 @@ pub struct FullBench {
     pub rollout_ms: f64,
     pub stage_ms: BTreeMap<RolloutStage, f64>,
     pub update_ms: f64,
+    /// The update's parts (its own graph with an event at every part's boundary, summed over
+    /// the minibatch steps, scaled to `update_ms`).
+    pub update_stage_ms: BTreeMap<UpdateStage, f64>,
     pub rest_ms: f64,
     /// The update's milliseconds per iteration that the overlap took off the sequential
     /// iteration (`sequential.iteration_ms - overlapped.iteration_ms`), and that over
@@ -195,6 +199,7 @@ pub fn bench_full(
         rollout_ms: parts.rollout_ms,
         stage_ms: parts.stage_ms,
         update_ms: parts.update_ms,
+        update_stage_ms: parts.update_stage_ms,
     })
 }
 
@@ -274,6 +279,7 @@ struct Parts {
     rollout_ms: f64,
     stage_ms: BTreeMap<RolloutStage, f64>,
     update_ms: f64,
+    update_stage_ms: BTreeMap<UpdateStage, f64>,
 }
 
 /// With `trainer`'s rollout and policy: the physics-only floor from the rollout's states and
@@ -310,30 +316,48 @@ fn time_parts(
     let rollout_ms = frames as f64 / median(&rollout_fps) * 1e3;
 
     let (timed_graph, events) = rollout.capture(policy, true)?;
-    let events = events.ok_or_else(|| TrainError::Setup("no stage events".to_owned()))?;
-    let mut raw: BTreeMap<RolloutStage, f64> = BTreeMap::new();
-    for _ in 0..warmup {
-        timed_graph.launch(gpu.stream())?;
-    }
-    for _ in 0..launches {
-        timed_graph.launch(gpu.stream())?;
-        for (stage, ms) in events.elapsed_ms()? {
-            *raw.entry(stage).or_insert(0.0) += ms / f64::from(launches);
-        }
-    }
-    // The events slow the timed graph a little: its shares, scaled to the plain rollout's time.
-    let timed_total: f64 = raw.values().sum();
-    let stage_ms = raw
-        .into_iter()
-        .map(|(stage, ms)| (stage, ms / timed_total * rollout_ms))
-        .collect();
+    let stage_ms = time_stages(gpu, &timed_graph, events, warmup, launches, rollout_ms)?;
+    drop(timed_graph);
 
+    let update_ms = time_update(gpu, trainer, warmup, launches)?;
+    let (timed_update, events) = trainer.capture_update_staged(true)?;
+    let update_stage_ms = time_stages(gpu, &timed_update, events, warmup, launches, update_ms)?;
     Ok(Parts {
         floor,
         rollout_ms,
         stage_ms,
-        update_ms: time_update(gpu, trainer, warmup, launches)?,
+        update_ms,
+        update_stage_ms,
     })
+}
+
+/// Milliseconds per stage of `graph` (captured with a timed [`crate::env::StageRecorder`]
+/// whose `events` these are), averaged over `launches` after `warmup`. The events slow the
+/// timed graph a little: its shares are scaled to `total_ms`, the plain graph's time.
+fn time_stages<S: Stage>(
+    gpu: &Gpu,
+    graph: &Graph,
+    events: Option<StageEvents<S>>,
+    warmup: u32,
+    launches: u32,
+    total_ms: f64,
+) -> Result<BTreeMap<S, f64>, TrainError> {
+    let events = events.ok_or_else(|| TrainError::Setup("no stage events".to_owned()))?;
+    let mut raw: BTreeMap<S, f64> = BTreeMap::new();
+    for _ in 0..warmup {
+        graph.launch(gpu.stream())?;
+    }
+    for _ in 0..launches {
+        graph.launch(gpu.stream())?;
+        for (stage, ms) in events.elapsed_ms()? {
+            *raw.entry(stage).or_insert(0.0) += ms / f64::from(launches);
+        }
+    }
+    let timed_total: f64 = raw.values().sum();
+    Ok(raw
+        .into_iter()
+        .map(|(stage, ms)| (stage, ms / timed_total * total_ms))
+        .collect())
 }
 
 /// Milliseconds per launch of `trainer`'s update alone (its own graph, event-timed). It

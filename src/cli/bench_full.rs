@@ -1,6 +1,6 @@
 //! `instantmimic bench full`: whole training iterations, with the update after the rollout and
-//! overlapped with the next one (`ppo.overlap_update`), against the physics-only floor
-//! (`crate::bench::bench_full`).
+//! overlapped with the next one (`ppo.overlap_update`), against the physics-only floor, with
+//! the rollout's stages and the update's parts (`crate::bench::bench_full`).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -12,6 +12,7 @@ use super::bench::{BenchRunArgs, LoopShapeArgs, print_result};
 use super::train::motion_or_library_config;
 use crate::bench::{FullBench, LoopCase, bench_full};
 use crate::cuda::Gpu;
+use crate::env::Stage;
 use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
 use crate::train::preflight_training;
@@ -167,12 +168,27 @@ fn report(r: &FullBench) -> String {
             share(*ms)
         );
     }
-    for (name, ms) in [
-        ("update", r.update_ms),
-        ("rest (readback, gaps, host)", r.rest_ms),
-    ] {
-        let _ = writeln!(out, "  {name:<28} {ms:>9.3} ms  {:>5.1}%", share(ms));
+    let _ = writeln!(
+        out,
+        "  {:<28} {:>9.3} ms  {:>5.1}%",
+        "update",
+        r.update_ms,
+        share(r.update_ms)
+    );
+    let steps = f64::from(r.epochs * r.minibatches).max(1.0);
+    for (stage, ms) in &r.update_stage_ms {
+        let _ = writeln!(
+            out,
+            "    {:<26} {:>9.3} ms  {:>5.1}%  ({:.1} us per minibatch step)",
+            stage.name(),
+            ms,
+            share(*ms),
+            ms / steps * 1e3
+        );
     }
+    let rest = r.rest_ms;
+    let name = "rest (readback, gaps, host)";
+    let _ = writeln!(out, "  {name:<28} {rest:>9.3} ms  {:>5.1}%", share(rest));
     out
 }
 
@@ -191,6 +207,7 @@ fn row(name: &str, case: &LoopCase, rounds: &dyn Fn(&[f64]) -> String) -> String
 mod tests {
     use super::*;
     use crate::env::RolloutStage;
+    use crate::ppo::UpdateStage;
     use std::collections::BTreeMap;
 
     fn case(overlap_update: bool, frames_per_s: f64, iteration_ms: f64) -> LoopCase {
@@ -237,6 +254,11 @@ mod tests {
             rollout_ms: 31.0,
             stage_ms,
             update_ms: 15.0,
+            update_stage_ms: BTreeMap::from([
+                (UpdateStage::Forward, 3.0),
+                (UpdateStage::Backward, 6.0),
+                (UpdateStage::Adam, 1.2),
+            ]),
             rest_ms: -13.232,
             hidden_ms: 12.288,
             hidden_fraction: 0.8192,
@@ -253,6 +275,8 @@ mod tests {
             "overlap: 1.600x the frames/s; 12.29 ms of the update's 15.00 ms hidden per iteration (82%)",
             "physics",
             "update",
+            "backward                       6.000 ms   18.3%  (500.0 us per minibatch step)",
+            "adam                           1.200 ms    3.7%  (100.0 us per minibatch step)",
         ] {
             assert!(text.contains(needle), "{needle:?} in:\n{text}");
         }
@@ -261,5 +285,6 @@ mod tests {
         assert_eq!(json["overlapped"]["overlap_update"], true);
         assert_eq!(json["concurrent"]["concurrent_networks"], true);
         assert_eq!(json["stage_ms"]["physics"], 30.0);
+        assert_eq!(json["update_stage_ms"]["forward"], 3.0);
     }
 }

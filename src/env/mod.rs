@@ -43,7 +43,7 @@ pub use physics_state::PhysicsState;
 pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;
 pub use rollout::{EpisodeState, Rollout, RolloutError};
-pub use stages::{RolloutStage, StageEvents, StageRecorder};
+pub use stages::{RolloutStage, Stage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 pub use storage::{ActStorage, RolloutStorage};
 pub use task::{

@@ -1,4 +1,6 @@
-//! The stages of a control step, as NVTX ranges (for nsys) and as CUDA events (per-stage time).
+//! The stages of a control step, as NVTX ranges (for nsys) and as CUDA events (per-stage time);
+//! the recorder also serves other captured work with stages of its own ([`Stage`]: the PPO
+//! update's parts).
 //!
 //! A rollout is captured once. While it is captured, every stage of every control step is pushed
 //! as an NVTX range, so a capture under `nsys profile --cuda-graph-trace=node` names the kernels
@@ -32,6 +34,18 @@ pub enum RolloutStage {
     Bookkeeping,
 }
 
+/// A named part of captured work, timed by [`StageRecorder`].
+pub trait Stage: Copy + Ord {
+    /// The NVTX range's and the report's name.
+    fn name(self) -> &'static str;
+}
+
+impl Stage for RolloutStage {
+    fn name(self) -> &'static str {
+        RolloutStage::name(self)
+    }
+}
+
 impl RolloutStage {
     pub const ALL: [RolloutStage; 6] = [
         RolloutStage::Policy,
@@ -54,26 +68,26 @@ impl RolloutStage {
     }
 }
 
-/// Records stages while a rollout is captured: an NVTX range around each, and with timing on,
-/// an event after each (the first event marks the start).
-pub struct StageRecorder {
-    timing: Option<StageEvents>,
+/// Records stages while work is captured (a rollout's by default): an NVTX range around each,
+/// and with timing on, an event after each (the first event marks the start).
+pub struct StageRecorder<S = RolloutStage> {
+    timing: Option<StageEvents<S>>,
 }
 
 /// The events of one profiled capture, in recording order.
-pub struct StageEvents {
+pub struct StageEvents<S = RolloutStage> {
     start: Event,
-    ends: Vec<(RolloutStage, Event)>,
+    ends: Vec<(S, Event)>,
 }
 
-impl StageRecorder {
+impl<S: Stage> StageRecorder<S> {
     /// Names stages only (no events in the graph).
-    pub fn untimed() -> StageRecorder {
+    pub fn untimed() -> StageRecorder<S> {
         StageRecorder { timing: None }
     }
 
     /// Also records an event at every stage boundary into the graph being captured on `stream`.
-    pub fn timed(gpu: &Gpu, stream: &Stream) -> Result<StageRecorder, CudaError> {
+    pub fn timed(gpu: &Gpu, stream: &Stream) -> Result<StageRecorder<S>, CudaError> {
         let start = gpu.new_event()?;
         start.record_in_capture(stream)?;
         Ok(StageRecorder {
@@ -86,13 +100,7 @@ impl StageRecorder {
 
     /// Runs `body` (which queues the stage's work on `stream`) inside the stage's NVTX range,
     /// followed by the stage's event when timing.
-    pub fn stage<E, F>(
-        &mut self,
-        gpu: &Gpu,
-        stream: &Stream,
-        stage: RolloutStage,
-        body: F,
-    ) -> Result<(), E>
+    pub fn stage<E, F>(&mut self, gpu: &Gpu, stream: &Stream, stage: S, body: F) -> Result<(), E>
     where
         F: FnOnce(&Stream) -> Result<(), E>,
         E: From<CudaError>,
@@ -110,15 +118,15 @@ impl StageRecorder {
     }
 
     /// The events, once the capture is done (None when untimed).
-    pub fn into_events(self) -> Option<StageEvents> {
+    pub fn into_events(self) -> Option<StageEvents<S>> {
         self.timing
     }
 }
 
-impl StageEvents {
+impl<S: Stage> StageEvents<S> {
     /// Milliseconds per stage in the last replay of the graph that holds these events (waits for
     /// it to finish).
-    pub fn elapsed_ms(&self) -> Result<BTreeMap<RolloutStage, f64>, CudaError> {
+    pub fn elapsed_ms(&self) -> Result<BTreeMap<S, f64>, CudaError> {
         let mut totals = BTreeMap::new();
         let Some((_, last)) = self.ends.last() else {
             return Ok(totals);

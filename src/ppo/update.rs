@@ -42,6 +42,7 @@ use std::sync::Arc;
 use thiserror::Error;
 
 use crate::cuda::{Communicator, CudaError, Gpu, ReduceOp, Stream};
+use crate::env::StageRecorder;
 use crate::kernels::{
     AdamParams, DeviceArray, DeviceArray2, EnvError, EnvKernels, PpoLossParams, ScheduleParams,
 };
@@ -54,11 +55,16 @@ use super::batch::{
     Advantages, Minibatch, PpoBatch, ValueNormalization, minibatch_rows, record_shuffle,
 };
 use super::config::{KlMeasure, PpoConfig};
+use super::flops::UpdateFlops;
 use super::loss::{LOSS_TERMS, LossGradients, PpoStatistics};
 use super::policy::{GaussianPolicy, LayerShape, Mlp, PolicyError};
 use super::reduce::{
     record_clear, record_column_sums, record_sum_and_squares, record_sum_of_squares,
 };
+use super::update_stages::UpdateStage;
+
+/// The update's stage recorder: NVTX ranges, and events when timed.
+type Stages = StageRecorder<UpdateStage>;
 
 /// Why an update cannot be built or recorded.
 #[derive(Debug, Error)]
@@ -88,45 +94,6 @@ pub struct PpoOptimizerState {
     pub actor_moment2: Vec<f32>,
     pub critic_moment1: Vec<f32>,
     pub critic_moment2: Vec<f32>,
-}
-
-/// Floating-point operations of one update (multiply and add counted as 2).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct UpdateFlops {
-    /// Forward passes of actor and critic over every minibatch row of every epoch, and the
-    /// critic over the bootstrap row.
-    pub forward: f64,
-    /// Weight gradients (`x^T dz`) and input gradients (`dz w^T`, not for the first layer).
-    pub backward: f64,
-}
-
-impl UpdateFlops {
-    /// For networks `actor` and `critic`, `samples` = T x N rows per epoch, `epochs`, and the
-    /// `envs` bootstrap rows.
-    pub fn of(
-        actor: &[LayerShape],
-        critic: &[LayerShape],
-        samples: usize,
-        epochs: usize,
-        envs: usize,
-    ) -> UpdateFlops {
-        let macs = |layers: &[LayerShape]| -> f64 {
-            layers.iter().map(|l| (l.inputs * l.outputs) as f64).sum()
-        };
-        let input_macs =
-            |layers: &[LayerShape]| -> f64 { macs(layers) - macs(&layers[..layers.len().min(1)]) };
-        let rows = (samples * epochs) as f64;
-        UpdateFlops {
-            forward: 2.0 * rows * (macs(actor) + macs(critic)) + 2.0 * envs as f64 * macs(critic),
-            backward: 2.0
-                * rows
-                * (macs(actor) + macs(critic) + input_macs(actor) + input_macs(critic)),
-        }
-    }
-
-    pub fn total(&self) -> f64 {
-        self.forward + self.backward
-    }
 }
 
 /// Everything one update needs, allocated once; [`PpoUpdate::record`] queues the update.
@@ -349,7 +316,18 @@ impl PpoUpdate {
     /// [`Stream::capture`]. The statistics land in [`PpoUpdate::statistics`] at the end.
     /// `batch` was sampled by this update's policy, whose parameters have not changed since.
     pub fn record(&self, stream: &Stream, batch: &PpoBatch<'_>) -> Result<(), PpoError> {
-        self.record_update(stream, batch, true)
+        self.record_update(stream, batch, true, &mut Stages::untimed())
+    }
+
+    /// [`PpoUpdate::record`] with each [`UpdateStage`] handed to `stages` (a timed recorder
+    /// puts an event at every stage boundary into the capture: `bench full`'s breakdown).
+    pub fn record_staged(
+        &self,
+        stream: &Stream,
+        batch: &PpoBatch<'_>,
+        stages: &mut StageRecorder<UpdateStage>,
+    ) -> Result<(), PpoError> {
+        self.record_update(stream, batch, true, stages)
     }
 
     /// Queues a copy of `sampled_with` as the log std the next lagged batch was sampled with
@@ -379,7 +357,7 @@ impl PpoUpdate {
     /// The ratio and the sampled KL read the log-probabilities stored at sampling time, so
     /// they measure the new policy against the one that sampled, as PPO asks.
     pub fn record_lagged(&self, stream: &Stream, batch: &PpoBatch<'_>) -> Result<(), PpoError> {
-        self.record_update(stream, batch, false)
+        self.record_update(stream, batch, false, &mut Stages::untimed())
     }
 
     /// The update; with `own_log_std`, the policy's current log std is the sampling one.
@@ -388,6 +366,7 @@ impl PpoUpdate {
         stream: &Stream,
         batch: &PpoBatch<'_>,
         own_log_std: bool,
+        stages: &mut Stages,
     ) -> Result<(), PpoError> {
         let (t, n, d, a) = (
             self.horizon,
@@ -396,6 +375,58 @@ impl PpoUpdate {
             self.action_size,
         );
         batch.check(t, n, d, a)?;
+        let gpu = &self.gpu;
+        stages.stage(gpu, stream, UpdateStage::Advantages, |s| {
+            self.record_advantages(s, batch, own_log_std)
+        })?;
+        let rows = self.minibatch.rows();
+        let k = &*self.kernels;
+        for epoch in 0..self.epochs {
+            for mb in 0..self.minibatches {
+                stages.stage(gpu, stream, UpdateStage::Gather, |s| {
+                    if mb == 0 {
+                        let counter = &self.update_counter;
+                        record_shuffle(k, s, counter, self.seed, epoch, &self.permutation)?;
+                    }
+                    self.minibatch.record_gather(
+                        k,
+                        s,
+                        batch,
+                        &self.advantages,
+                        &self.advantage_moments,
+                        &self.value_normalization,
+                        &self.permutation,
+                        mb * rows,
+                    )
+                })?;
+                self.record_minibatch_step(stream, epoch * self.minibatches + mb, stages)?;
+            }
+        }
+        stages.stage(gpu, stream, UpdateStage::Statistics, |s| {
+            k.ppo_update_statistics(
+                s,
+                1,
+                &self.loss_sums,
+                &self.grad_norm_sq,
+                &self.advantage_moments,
+                (t * n) as i32,
+                &self.learning_rate,
+                &self.update_counter,
+                &self.statistics,
+            )
+        })?;
+        Ok(())
+    }
+
+    /// Step 1 of the module docs: the clears, the values and bootstrap, GAE, the value
+    /// normalization's update and the advantages' moments.
+    fn record_advantages(
+        &self,
+        stream: &Stream,
+        batch: &PpoBatch<'_>,
+        own_log_std: bool,
+    ) -> Result<(), PpoError> {
+        let (t, n, d) = (self.horizon, self.envs, self.observation_size);
         let k = &*self.kernels;
         record_clear(stream, &self.loss_sums)?;
         record_clear(stream, &self.grad_norm_sq)?;
@@ -440,43 +471,6 @@ impl PpoUpdate {
             let moments = [self.advantage_moments.collective()?];
             replicas.all_reduce(stream, &moments, ReduceOp::Average)?;
         }
-
-        let rows = self.minibatch.rows();
-        for epoch in 0..self.epochs {
-            record_shuffle(
-                k,
-                stream,
-                &self.update_counter,
-                self.seed,
-                epoch,
-                &self.permutation,
-            )?;
-            for mb in 0..self.minibatches {
-                let slot = epoch * self.minibatches + mb;
-                self.minibatch.record_gather(
-                    k,
-                    stream,
-                    batch,
-                    &self.advantages,
-                    &self.advantage_moments,
-                    &self.value_normalization,
-                    &self.permutation,
-                    mb * rows,
-                )?;
-                self.record_minibatch_step(stream, slot)?;
-            }
-        }
-        k.ppo_update_statistics(
-            stream,
-            1,
-            &self.loss_sums,
-            &self.grad_norm_sq,
-            &self.advantage_moments,
-            (t * n) as i32,
-            &self.learning_rate,
-            &self.update_counter,
-            &self.statistics,
-        )?;
         Ok(())
     }
 
@@ -485,37 +479,125 @@ impl PpoUpdate {
     /// passes, backward passes and Adam steps are recorded as two branches each
     /// ([`record_branches`]); the loss, the all-reduces, the schedule and the gradient norms
     /// join them, in the same order as without.
-    fn record_minibatch_step(&self, stream: &Stream, slot: usize) -> Result<(), PpoError> {
-        let k = &*self.kernels;
+    fn record_minibatch_step(
+        &self,
+        stream: &Stream,
+        slot: usize,
+        stages: &mut Stages,
+    ) -> Result<(), PpoError> {
+        let (k, gpu) = (&*self.kernels, &self.gpu);
         let obs = &self.minibatch.observations;
         let branching = self.concurrent_networks && stream.is_capturing()?;
-        record_branches(
-            stream,
-            branching,
-            |s| {
-                self.actor.record(k, s, obs)?;
-                record_clear(s, &self.actor_grads.flat)?;
-                Ok(())
-            },
-            |s| {
-                self.critic.record(k, s, obs)?;
-                record_clear(s, &self.critic_grads.flat)?;
-                Ok(())
-            },
-        )?;
-        self.loss.record(
-            k,
-            stream,
-            &self.minibatch,
-            self.actor.output(),
-            &self.log_std,
-            &self.old_log_std,
-            self.critic.output(),
-            &self.loss_params,
-        )?;
+        stages.stage(gpu, stream, UpdateStage::Forward, |stream| {
+            record_branches(
+                stream,
+                branching,
+                |s| {
+                    self.actor.record(k, s, obs)?;
+                    record_clear(s, &self.actor_grads.flat)?;
+                    Ok(())
+                },
+                |s| {
+                    self.critic.record(k, s, obs)?;
+                    record_clear(s, &self.critic_grads.flat)?;
+                    Ok(())
+                },
+            )
+        })?;
         let width = LOSS_TERMS + self.action_size;
         let sums = self.loss_sums.view(slot * width, [width])?;
-        record_column_sums(k, stream, &self.loss.terms, &sums)?;
+        stages.stage(gpu, stream, UpdateStage::Loss, |s| {
+            self.loss.record(
+                k,
+                s,
+                &self.minibatch,
+                self.actor.output(),
+                &self.log_std,
+                &self.old_log_std,
+                self.critic.output(),
+                &self.loss_params,
+            )?;
+            record_column_sums(k, s, &self.loss.terms, &sums)
+        })?;
+        stages.stage(gpu, stream, UpdateStage::Backward, |stream| {
+            self.record_backward(stream, branching, &sums)
+        })?;
+        // Slot 2s holds the actor's squared norm, 2s + 1 the critic's; clipped together, both
+        // add into 2s (and 2s + 1 stays 0). One after the other in either mode: clipped
+        // together they add into one value, in this order.
+        let actor_slot = 2 * slot;
+        let critic_slot = if self.separate_grad_clipping {
+            actor_slot + 1
+        } else {
+            actor_slot
+        };
+        stages.stage(gpu, stream, UpdateStage::Clipping, |s| {
+            record_schedule(
+                k,
+                s,
+                &sums,
+                &self.schedule,
+                &self.log_std_grad,
+                &self.learning_rate,
+                &self.adam_step,
+            )?;
+            let norms = &self.grad_norm_sq;
+            record_sum_of_squares(k, s, &self.actor_grads.flat, norms, actor_slot)?;
+            record_sum_of_squares(k, s, &self.critic_grads.flat, norms, critic_slot)?;
+            if let Some(replicas) = &self.replicas {
+                let norms = [norms.view(actor_slot, [2])?.collective()?];
+                replicas.all_reduce(s, &norms, ReduceOp::Max)?;
+            }
+            Ok::<(), PpoError>(())
+        })?;
+        let adam_step = |s: &Stream, params, grads: &MlpGradients, moments: &AdamMoments, slot| {
+            moments.record_step(
+                k,
+                s,
+                params,
+                &grads.flat,
+                &self.learning_rate,
+                &self.adam_step,
+                &self.grad_norm_sq,
+                slot,
+                &self.adam,
+            )
+        };
+        stages.stage(gpu, stream, UpdateStage::Adam, |stream| {
+            record_branches(
+                stream,
+                branching,
+                |s| {
+                    adam_step(
+                        s,
+                        &self.actor_params,
+                        &self.actor_grads,
+                        &self.actor_moments,
+                        actor_slot,
+                    )?;
+                    if let Some(floor) = self.min_log_std {
+                        k.log_std_floor(s, self.action_size, &self.log_std, floor)?;
+                    }
+                    Ok(())
+                },
+                |s| {
+                    let (params, grads) = (&self.critic_params, &self.critic_grads);
+                    adam_step(s, params, grads, &self.critic_moments, critic_slot)
+                },
+            )
+        })
+    }
+
+    /// The actor's and the critic's backward passes of the minibatch step whose loss sums are
+    /// `sums`, and on several GPUs the all-reduce of their gradients and of `sums`.
+    fn record_backward(
+        &self,
+        stream: &Stream,
+        branching: bool,
+        sums: &DeviceArray<f32>,
+    ) -> Result<(), PpoError> {
+        let k = &*self.kernels;
+        let obs = &self.minibatch.observations;
         let blocks = self.target_blocks;
         let critic_scratch = self
             .critic_input_gradient_scratch
@@ -561,76 +643,7 @@ impl PpoUpdate {
             ];
             replicas.all_reduce(stream, &averaged, ReduceOp::Average)?;
         }
-        record_schedule(
-            k,
-            stream,
-            &sums,
-            &self.schedule,
-            &self.log_std_grad,
-            &self.learning_rate,
-            &self.adam_step,
-        )?;
-        // Slot 2s holds the actor's squared norm, 2s + 1 the critic's; clipped together, both
-        // add into 2s (and 2s + 1 stays 0). One after the other in either mode: clipped
-        // together they add into one value, in this order.
-        let actor_slot = 2 * slot;
-        let critic_slot = if self.separate_grad_clipping {
-            actor_slot + 1
-        } else {
-            actor_slot
-        };
-        record_sum_of_squares(
-            k,
-            stream,
-            &self.actor_grads.flat,
-            &self.grad_norm_sq,
-            actor_slot,
-        )?;
-        record_sum_of_squares(
-            k,
-            stream,
-            &self.critic_grads.flat,
-            &self.grad_norm_sq,
-            critic_slot,
-        )?;
-        if let Some(replicas) = &self.replicas {
-            let norms = [self.grad_norm_sq.view(actor_slot, [2])?.collective()?];
-            replicas.all_reduce(stream, &norms, ReduceOp::Max)?;
-        }
-        let adam_step = |s: &Stream, params, grads: &MlpGradients, moments: &AdamMoments, slot| {
-            moments.record_step(
-                k,
-                s,
-                params,
-                &grads.flat,
-                &self.learning_rate,
-                &self.adam_step,
-                &self.grad_norm_sq,
-                slot,
-                &self.adam,
-            )
-        };
-        record_branches(
-            stream,
-            branching,
-            |s| {
-                adam_step(
-                    s,
-                    &self.actor_params,
-                    &self.actor_grads,
-                    &self.actor_moments,
-                    actor_slot,
-                )?;
-                if let Some(floor) = self.min_log_std {
-                    k.log_std_floor(s, self.action_size, &self.log_std, floor)?;
-                }
-                Ok(())
-            },
-            |s| {
-                let (params, grads) = (&self.critic_params, &self.critic_grads);
-                adam_step(s, params, grads, &self.critic_moments, critic_slot)
-            },
-        )
+        Ok(())
     }
 
     /// The statistics of the last recorded update, `[PpoStatistics::LEN]` `f32` (layout:
@@ -735,29 +748,4 @@ fn record_branches(
     joined.extend(&first_done);
     stream.set_capture_frontier(&joined)?;
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::ppo::mlp_layout;
-
-    #[test]
-    fn flops_of_the_baseline_update() {
-        let actor = mlp_layout(353, &[400, 200, 100], 28);
-        let critic = mlp_layout(353, &[400, 200, 100], 1);
-        let f = UpdateFlops::of(&actor, &critic, 32 * 4096, 5, 4096);
-        // multiply-adds per row: actor 141200 + 80000 + 20000 + 2800 = 244000, critic 241300;
-        // input gradients skip the first layers (141200 each)
-        let rows = 32.0 * 4096.0 * 5.0;
-        assert_eq!(
-            f.forward,
-            2.0 * rows * (244000.0 + 241300.0) + 2.0 * 4096.0 * 241300.0
-        );
-        assert_eq!(
-            f.backward,
-            2.0 * rows * (244000.0 + 241300.0 + 102800.0 + 100100.0)
-        );
-        assert!((f.total() / 1e12 - 1.5401).abs() < 1e-4, "{}", f.total());
-    }
 }

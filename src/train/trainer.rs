@@ -23,11 +23,13 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use crate::cuda::{Communicator, DeviceRange, Gpu, Graph, Readback};
-use crate::env::{GoalTally, Rollout, RolloutPolicy, TrackedMotion, Trajectory};
+use crate::env::{
+    GoalTally, Rollout, RolloutPolicy, StageEvents, StageRecorder, TrackedMotion, Trajectory,
+};
 use crate::kernels::DeviceArray;
 use crate::latent::LatentDecoder;
 use crate::plan::PlanStore;
-use crate::ppo::{GaussianPolicy, PolicyGemm, PpoBatch, PpoOptimizerState, PpoUpdate};
+use crate::ppo::{GaussianPolicy, PolicyGemm, PpoBatch, PpoOptimizerState, PpoUpdate, UpdateStage};
 
 use super::checkpoint::tensor_names;
 use super::checkpoint::{Checkpoint, CheckpointError};
@@ -571,14 +573,31 @@ impl Trainer {
     /// The update alone, of the batch in the rollout's own storage, captured as a graph of its
     /// own (`bench full` times it). Launching it trains the parameters.
     pub fn capture_update(&self) -> Result<Graph, TrainError> {
+        let (graph, _) = self.capture_update_staged(false)?;
+        Ok(graph)
+    }
+
+    /// [`Trainer::capture_update`]; with `timed`, an event at every [`UpdateStage`] boundary
+    /// (for [`StageEvents::elapsed_ms`]; the graph is then a little slower).
+    pub fn capture_update_staged(
+        &self,
+        timed: bool,
+    ) -> Result<(Graph, Option<StageEvents<UpdateStage>>), TrainError> {
         let stream = self.gpu.stream();
+        let mut events = None;
         let graph = stream.capture(|s| {
-            self.update
-                .record(s, &PpoBatch::from(&self.rollout.storage))?;
+            let mut stages = if timed {
+                StageRecorder::timed(&self.gpu, s)?
+            } else {
+                StageRecorder::untimed()
+            };
+            let batch = PpoBatch::from(&self.rollout.storage);
+            self.update.record_staged(s, &batch, &mut stages)?;
+            events = stages.into_events();
             Ok::<(), TrainError>(())
         })?;
         graph.upload(stream)?;
-        Ok(graph)
+        Ok((graph, events))
     }
 
     /// Node kinds of the graph one iteration launches (the steady graph of the overlapped
