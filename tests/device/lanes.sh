@@ -5,6 +5,8 @@
 #   resume NAME FROM WALL_S ARGS...  copies the run directory FROM (carried from an earlier
 #                                  call) to $OUT/runs/NAME and continues it (train --resume)
 #   gpu_test NAME...               the staged GPU test binaries, one after another
+#   bench NAME WALL_S ARGS...      instantmimic bench ARGS > $OUT/runs/NAME.log (its last lines
+#                                  go to the summary)
 #   library_eval NAME CHECKPOINT LIBRARY   eval --library LIBRARY --out $OUT/runs/NAME.tsv
 #   newest_checkpoint NAME         the newest checkpoint of $OUT/runs/NAME
 #   wait_for FILE_GLOB SECONDS     waits until another lane has written it
@@ -86,6 +88,14 @@ gpu_test() {
     note "test $t $s $(( $(date +%s) - t0 )) s $(grep -o 'test result: .*; [0-9]* ignored' "$OUT/test_$t.log" | tail -1)"
     [ "$s" = FAIL ] && grep -E "panicked|FAILED|^error" "$OUT/test_$t.log" | head -4 | tee -a "$summary"
   done
+}
+bench() {
+  local name=$1 wall=$2; shift 2
+  if [ "$(left)" -lt 40 ]; then note "$name: skipped (session time)"; return; fi
+  local t0; t0=$(date +%s)
+  run_bounded "$wall" "$OUT/runs/$name.log" "$BIN/instantmimic" bench "$@"
+  note "$name (rc $?, $(( $(date +%s) - t0 )) s): bench $*"
+  tail -n 22 "$OUT/runs/$name.log" | sed 's/^/    /' | tee -a "$summary" > /dev/null
 }
 newest_checkpoint() { ls "$OUT/runs/$1"/checkpoints/*.safetensors 2>/dev/null | sort | tail -1; }
 library_eval() {
