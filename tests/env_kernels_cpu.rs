@@ -25,8 +25,8 @@ fn run_on_cpu(kernel: &str, checks: impl FnOnce(&Fixture) -> Vec<Check>) {
 /// All check families, as the two executions run them.
 fn all_checks(fixture: &Fixture) -> Vec<Check> {
     use kernel_checks::{
-        control, episode, evaluate, gemm_epilogue, goal, normalize, observe, policy, reset,
-        statistics, tracking,
+        control, episode, evaluate, gemm_epilogue, goal, kinematics, normalize, observe, policy,
+        reset, statistics, tracking,
     };
     [
         control::checks(fixture),
@@ -43,6 +43,7 @@ fn all_checks(fixture: &Fixture) -> Vec<Check> {
         episode::checks(fixture),
         statistics::checks(fixture),
         goal::checks(fixture),
+        kinematics::checks(fixture),
     ]
     .into_iter()
     .flatten()
@@ -187,4 +188,9 @@ fn goal_reset_matches_the_f64_reference() {
 #[test]
 fn goal_observe_matches_the_f64_reference() {
     run_on_cpu("goal_observe", kernel_checks::goal::observe_checks);
+}
+
+#[test]
+fn body_kinematics_matches_the_f64_reference() {
+    run_on_cpu("body_kinematics", kernel_checks::kinematics::checks);
 }

@@ -24,7 +24,7 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 43] = [
+const EXPECTED_KERNELS: [(&str, &str); 44] = [
     ("control", "pd_control"),
     ("evaluate", "evaluation_accumulate"),
     ("gae", "gae_advantages"),
@@ -35,6 +35,7 @@ const EXPECTED_KERNELS: [(&str, &str); 43] = [
     ("goal", "goal_reward_termination"),
     ("goal", "goal_reset"),
     ("goal", "goal_observe"),
+    ("kinematics", "body_kinematics"),
     ("latent", "latent_split_observation"),
     ("latent", "latent_sample"),
     ("latent", "latent_reconstruction_gradient"),

@@ -401,6 +401,22 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             &a.array(7),
             &a.array(8),
         ),
+        "body_kinematics" => kernels.body_kinematics(
+            s,
+            dim,
+            &a.array(0),
+            &a.array(1),
+            &a.array(2),
+            a.i32(3),
+            &a.array(4),
+            &a.array(5),
+            &a.array(6),
+            a.f32(7),
+            &a.array(8),
+            &a.array(9),
+            &a.array(10),
+            &a.array(11),
+        ),
         "goal_observe" => {
             kernels.goal_observe(s, dim, &a.array(0), &a.array(1), a.i32(2), &a.array(3))
         }
@@ -565,4 +581,9 @@ fn gpu_goal_reset_matches_the_f64_reference() {
 #[test]
 fn gpu_goal_observe_matches_the_f64_reference() {
     run_on_gpu("goal_observe", kernel_checks::goal::observe_checks);
+}
+
+#[test]
+fn gpu_body_kinematics_matches_the_f64_reference() {
+    run_on_gpu("body_kinematics", kernel_checks::kinematics::checks);
 }

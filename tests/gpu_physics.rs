@@ -23,6 +23,9 @@ mod skip_support;
 use std::path::{Path, PathBuf};
 
 use instantmimic::cuda::Gpu;
+use instantmimic::env::{BodyModel, DeviceBodyModel, PhysicsState};
+use instantmimic::kernels::{DeviceArray, EnvKernels};
+use instantmimic::motion::Character;
 use instantmimic::plan::{PhysicsOverflow, PlanStore, ReplayOrder, Simulation};
 
 fn read_f32(path: &Path) -> Vec<f32> {
@@ -263,4 +266,93 @@ fn kinematics_plan_reads_the_state_the_step_plan_writes() {
         }
     }
     println!("kinematics plan moved all {checked} bodies by the root offset");
+}
+
+/// `||a - b|| / ||b||` over the elements `keep` selects (indices into both).
+fn relative_over(a: &[f32], b: &[f32], keep: impl Fn(usize) -> bool) -> f64 {
+    let (mut diff, mut norm) = (0.0f64, 0.0f64);
+    for i in (0..b.len()).filter(|&i| keep(i)) {
+        let (x, y) = (f64::from(a[i]), f64::from(b[i]));
+        if !x.is_finite() {
+            return f64::INFINITY;
+        }
+        diff += (x - y) * (x - y);
+        norm += y * y;
+    }
+    (diff / norm.max(1e-30)).sqrt()
+}
+
+/// `env.body_kinematics = "fused"`: the `body_kinematics` kernel against the kinematics plan
+/// (MuJoCo Warp's `fwd_kinematics` and `com_vel`) on the same states, MuJoCo Warp's own from
+/// the default reference's cases after their steps: `xpos`, `xquat`, `cvel` of bodies 1.. and
+/// `subtree_com[:, 1]` within 1e-5 (relative, per array); after a reset only the envs marked
+/// done are written, the others left as they were.
+#[test]
+fn body_kinematics_kernel_matches_the_kinematics_plan() {
+    let gpu = Gpu::open(0).expect("a GPU");
+    let r = Reference::load(
+        Path::new("tests/fixtures/physics_reference/default_32").into(),
+        None,
+    );
+    let kernels = EnvKernels::load(&gpu).expect("env kernels");
+    let character = Character::humanoid().expect("the humanoid");
+    let model = DeviceBodyModel::upload(&gpu, &BodyModel::for_character(&character).unwrap())
+        .expect("the body tables");
+    let n = r.nworld as usize;
+    let mut checked = 0;
+    for case in r.summary["cases"].as_array().expect("cases") {
+        let sim = load_case(&gpu, &r, case, ReplayOrder::Dag);
+        for _ in 0..5 {
+            sim.run("step").expect("step");
+        }
+        sim.run("kinematics").expect("kinematics");
+        gpu.stream().synchronize().unwrap();
+        let fields = ["d.xpos", "d.xquat", "d.subtree_com", "d.cvel"];
+        let read = |name: &str| sim.buffer::<f32>(name).unwrap().read().unwrap();
+        let plan: Vec<Vec<f32>> = fields.iter().map(|f| read(f)).collect();
+        let physics = PhysicsState::view(&sim).expect("the state buffers");
+        // Even envs were reset (only_done): odd ones must keep what they hold (NaN here).
+        let flags: Vec<i32> = (0..n).map(|e| i32::from(e % 2 == 0)).collect();
+        let done = DeviceArray::from_slice(&gpu, [n], &flags).unwrap();
+        for only_done in [false, true] {
+            for (f, values) in fields.iter().zip(&plan) {
+                sim.buffer::<f32>(f)
+                    .unwrap()
+                    .write(&vec![f32::NAN; values.len()])
+                    .unwrap();
+            }
+            model
+                .record(&kernels, gpu.stream(), n, &physics, &done, only_done)
+                .expect("body_kinematics");
+            gpu.stream().synchronize().unwrap();
+            let name = case["name"].as_str().unwrap_or("?");
+            for (f, expected) in fields.iter().zip(&plan) {
+                let got = read(f);
+                let width = expected.len() / n / 16;
+                let written = |i: usize| {
+                    let (e, b) = (i / width / 16, i / width % 16);
+                    let body = if *f == "d.subtree_com" {
+                        b == 1
+                    } else {
+                        b >= 1
+                    };
+                    body && (!only_done || flags[e] != 0)
+                };
+                let error = relative_over(&got, expected, written);
+                println!("{name}, only_done {only_done}: {f} relative error {error:.2e}");
+                assert!(error <= 1e-5, "{name}: {f} off the plan by {error:.2e}");
+                if only_done {
+                    let untouched = (0..got.len())
+                        .filter(|&i| (i / width / 16) % 2 == 1)
+                        .all(|i| got[i].is_nan());
+                    assert!(
+                        untouched,
+                        "{name}: {f} written for an env that was not reset"
+                    );
+                }
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked > 0, "no case in the reference");
 }

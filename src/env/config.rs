@@ -52,6 +52,31 @@ pub struct EnvConfig {
     /// (docs/library.md, "The reset sampler"). Written only when set.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub clip_base_share: Option<f32>,
+    /// What computes the body kinematics the reward and observation read, after the physics
+    /// substeps and after a reset: MuJoCo Warp's kinematics plan (default), or one kernel of
+    /// ours for those outputs only, after a reset only for the envs reset (docs/env.md, "Fused
+    /// body kinematics"). Written only when not the default.
+    #[serde(skip_serializing_if = "BodyKinematics::is_plan")]
+    pub body_kinematics: BodyKinematics,
+}
+
+/// `env.body_kinematics` (kernels_py/env/kinematics.py).
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum BodyKinematics {
+    /// The kinematics plan (MuJoCo Warp's `fwd_kinematics` and `com_vel`) over every world,
+    /// after the physics substeps and again after the masked reset.
+    #[default]
+    Plan,
+    /// `body_kinematics`: `xpos`, `xquat`, the center of mass and `cvel` in one launch, after a
+    /// reset only for the envs that were reset.
+    Fused,
+}
+
+impl BodyKinematics {
+    fn is_plan(&self) -> bool {
+        *self == BodyKinematics::Plan
+    }
 }
 
 /// `env.phase_share` (kernels_py/env/reset.py `phase_statistics_update`).
@@ -93,6 +118,7 @@ impl Default for EnvConfig {
             phase_decay: 0.99,
             phase_share: PhaseShare::Resets,
             clip_base_share: None,
+            body_kinematics: BodyKinematics::Plan,
         }
     }
 }

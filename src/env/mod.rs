@@ -12,6 +12,7 @@
 //! - [`config`]: the task's configuration sections and [`RolloutConfig`], what a rollout is
 //!   built from.
 
+pub mod body_model;
 pub mod config;
 mod evaluation;
 mod goal_counters;
@@ -29,9 +30,10 @@ mod task;
 mod tracked;
 mod trajectory;
 
+pub use body_model::{BodyModel, DeviceBodyModel};
 pub use config::{
-    ActionMode, EndEffectorFrame, EnvConfig, EvalStart, EvaluationProtocol, GoalConfig, ObsConfig,
-    PhaseShare, RewardConfig, RolloutConfig, TaskConfig,
+    ActionMode, BodyKinematics, EndEffectorFrame, EnvConfig, EvalStart, EvaluationProtocol,
+    GoalConfig, ObsConfig, PhaseShare, RewardConfig, RolloutConfig, TaskConfig,
 };
 pub use evaluation::{
     COMPLETED, ClipEvaluation, EpisodeScore, EpisodeScores, FAILED, LIBRARY_EVALUATION_WINDOW_S,

@@ -20,7 +20,8 @@ pub struct PhysicsState {
 }
 
 impl PhysicsState {
-    pub(super) fn view(sim: &Simulation) -> Result<PhysicsState, EnvError> {
+    /// `sim`'s state buffers, shared (not copies): what a kernel writes here the plans read.
+    pub fn view(sim: &Simulation) -> Result<PhysicsState, EnvError> {
         let n = sim.nworld() as usize;
         Ok(PhysicsState {
             qpos: DeviceArray::from_simulation(sim, "d.qpos", [n, NQ])?,

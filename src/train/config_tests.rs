@@ -574,6 +574,34 @@ fn phase_share_is_resets_unless_the_config_says_frames_and_written_only_then() {
 }
 
 #[test]
+fn body_kinematics_is_the_plan_unless_the_config_says_fused_and_written_only_then() {
+    use crate::env::BodyKinematics;
+    let mut c = TrainConfig::with_motion("walk");
+    assert_eq!(c.env.body_kinematics, BodyKinematics::Plan);
+    assert!(!c.to_toml().unwrap().contains("body_kinematics"));
+    c.env.body_kinematics = BodyKinematics::Fused;
+    let on = c.to_toml().unwrap();
+    assert!(on.contains("body_kinematics = \"fused\""), "{on}");
+    let back = TrainConfig::from_toml(&on, "on.toml").unwrap();
+    assert_eq!(back.env.body_kinematics, BodyKinematics::Fused);
+    let set = TrainConfig::with_motion("walk")
+        .with_overrides(
+            &[("env.body_kinematics".to_owned(), "fused".to_owned())],
+            "walk",
+        )
+        .unwrap();
+    assert_eq!(set.env.body_kinematics, BodyKinematics::Fused);
+    let bad = on.replace("\"fused\"", "\"kernel\"");
+    let e = TrainConfig::from_toml(&bad, "bad.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("body_kinematics") && e.contains("expected `plan` or `fused`"),
+        "{e}"
+    );
+}
+
+#[test]
 fn clip_base_share_is_unset_by_default_written_only_when_set_and_kept_in_zero_to_one() {
     let mut c = TrainConfig::with_motion("walk");
     assert_eq!(c.env.clip_base_share, None);

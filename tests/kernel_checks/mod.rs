@@ -20,6 +20,7 @@ pub mod episode;
 pub mod evaluate;
 pub mod gemm_epilogue;
 pub mod goal;
+pub mod kinematics;
 pub mod normalize;
 pub mod observe;
 pub mod phase_merge;

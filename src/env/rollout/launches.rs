@@ -177,7 +177,29 @@ impl Rollout {
                 &goal.counters,
             )?;
         }
-        self.sim.record("kinematics", s)?;
+        self.record_kinematics(s, true)?;
+        Ok(())
+    }
+
+    /// The body kinematics the reward and observation read, of the current state: the
+    /// kinematics plan over every world, or with `env.body_kinematics = "fused"` one
+    /// `body_kinematics` launch, after a reset (`after_reset`) only for the envs reset.
+    pub(super) fn record_kinematics(
+        &self,
+        s: &Stream,
+        after_reset: bool,
+    ) -> Result<(), RolloutError> {
+        match &self.body_kinematics {
+            None => self.sim.record("kinematics", s)?,
+            Some(model) => model.record(
+                &self.kernels,
+                s,
+                self.num_envs,
+                &self.physics,
+                &self.state.done,
+                after_reset,
+            )?,
+        }
         Ok(())
     }
 

@@ -22,7 +22,8 @@ use crate::motion::MotionLibrary;
 use crate::plan::{PlanStore, Simulation, SimulationError};
 
 use super::DeviceReferenceTable;
-use super::config::{ActionMode, RolloutConfig, TaskConfig};
+use super::body_model::{BodyModel, DeviceBodyModel};
+use super::config::{ActionMode, BodyKinematics, RolloutConfig, TaskConfig};
 use super::evaluation::{ClipEvaluation, EpisodeScores, clip_evaluation, yardstick};
 use super::goal_counters::GoalTally;
 use super::layout::{
@@ -92,6 +93,10 @@ pub struct Rollout {
     table: Arc<DeviceReferenceTable>,
     /// The character's joints as the kernels read them, on the host and the device.
     layout: JointLayout,
+    /// The character's bodies as `body_kinematics` reads them, and on the device with
+    /// `env.body_kinematics = "fused"` (none: the kinematics plan).
+    bodies: BodyModel,
+    body_kinematics: Option<DeviceBodyModel>,
     physics: PhysicsState,
     pub state: EpisodeState,
     pub storage: RolloutStorage,
@@ -188,7 +193,7 @@ impl Rollout {
         let sim = Simulation::load(gpu, store, config.env.num_envs, &["step", "kinematics"])?;
         let physics_dt = physics_timestep(&sim)?;
         let control_dt = physics_dt * f64::from(config.env.substeps);
-        let (library, table, layout) = match source {
+        let (library, table, layout, bodies) = match source {
             Source::Training(motion) => {
                 let character = motion.character();
                 if character.nq() != NQ || character.nv() != NV || character.actuators().len() != NU
@@ -204,13 +209,19 @@ impl Rollout {
                 let library = motion.library(control_dt)?;
                 let table = DeviceReferenceTable::from_library(gpu, &library)?;
                 let layout = JointLayout::for_character(character)?;
-                (Arc::new(library), Arc::new(table), layout)
+                let bodies = BodyModel::for_character(character)?;
+                (Arc::new(library), Arc::new(table), layout, bodies)
             }
             Source::Evaluation(training) => (
                 Arc::clone(&training.library),
                 Arc::clone(&training.table),
                 training.layout.clone(),
+                training.bodies.clone(),
             ),
+        };
+        let body_kinematics = match config.env.body_kinematics {
+            BodyKinematics::Plan => None,
+            BodyKinematics::Fused => Some(DeviceBodyModel::upload(gpu, &bodies)?),
         };
         let clips = library.num_clips();
         let physics = PhysicsState::view(&sim)?;
@@ -339,6 +350,8 @@ impl Rollout {
             library,
             table,
             layout,
+            bodies,
+            body_kinematics,
             physics,
             state,
             storage,
@@ -668,7 +681,7 @@ impl Rollout {
                 Ok::<(), RolloutError>(())
             })?;
             stages.stage(gpu, s, RolloutStage::PostPhysics, |s| {
-                self.sim.record("kinematics", s)?;
+                self.record_kinematics(s, false)?;
                 self.record_reward(s, storage, t32)?;
                 match &self.purpose {
                     Purpose::Evaluation(scores, yardstick, _) => {
