@@ -18,6 +18,7 @@ MuJoCo's own in `tests/fixtures/kinematics_golden.json`).
 
 import warp as wp
 
+from env.observe import body_quat, body_vec3
 from env.rotation import qmul, qrotate
 
 wp.set_module_options({"enable_backward": False})
@@ -48,11 +49,6 @@ QPOS0 = wp.constant(6)
 @wp.func
 def frame3(a: wp.array2d(dtype=wp.float32), b: wp.int32, c: wp.int32) -> wp.vec3:
     return wp.vec3(a[b, c], a[b, c + 1], a[b, c + 2])
-
-
-@wp.func
-def state3(a: wp.array3d(dtype=wp.float32), n: wp.int32, b: wp.int32, c: wp.int32) -> wp.vec3:
-    return wp.vec3(a[n, b, c], a[n, b, c + 1], a[n, b, c + 2])
 
 
 @wp.func
@@ -98,8 +94,8 @@ def body_kinematics(
             pos = wp.vec3(qpos[n, a], qpos[n, a + 1], qpos[n, a + 2])
             quat = unit_quat(wp.vec4(qpos[n, a + 3], qpos[n, a + 4], qpos[n, a + 5], qpos[n, a + 6]))
         else:
-            parent_quat = wp.vec4(xquat[n, parent, 0], xquat[n, parent, 1], xquat[n, parent, 2], xquat[n, parent, 3])
-            pos = state3(xpos, n, parent, 0) + qrotate(parent_quat, frame3(body_frame, b, POS))
+            parent_quat = body_quat(xquat, n, parent)
+            pos = body_vec3(xpos, n, parent, 0) + qrotate(parent_quat, frame3(body_frame, b, POS))
             quat = qmul(parent_quat, wp.vec4(body_frame[b, QUAT], body_frame[b, QUAT + 1], body_frame[b, QUAT + 2], body_frame[b, QUAT + 3]))
             if kind != NO_JOINT:
                 anchor_local = frame3(joint_frame, b, ANCHOR)
@@ -131,11 +127,11 @@ def body_kinematics(
         w = wp.vec3(0.0, 0.0, 0.0)
         lin = wp.vec3(0.0, 0.0, 0.0)
         if parent > 0:
-            w = state3(cvel, n, parent, 0)
-            lin = state3(cvel, n, parent, 3)
+            w = body_vec3(cvel, n, parent, 0)
+            lin = body_vec3(cvel, n, parent, 3)
         if kind != NO_JOINT:
-            quat = wp.vec4(xquat[n, b, 0], xquat[n, b, 1], xquat[n, b, 2], xquat[n, b, 3])
-            anchor = state3(xpos, n, b, 0) + qrotate(quat, frame3(joint_frame, b, ANCHOR))
+            quat = body_quat(xquat, n, b)
+            anchor = body_vec3(xpos, n, b, 0) + qrotate(quat, frame3(joint_frame, b, ANCHOR))
             joint_w = wp.vec3(0.0, 0.0, 0.0)
             if kind == FREE:
                 lin += wp.vec3(qvel[n, v], qvel[n, v + 1], qvel[n, v + 2])
