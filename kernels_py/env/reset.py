@@ -240,7 +240,7 @@ def cell_weight(
 ) -> wp.float32:
     """The resets' sampling weight of cell (c, b): `clip_weight[c] * (failures / max(visits, 1) +
     floor)`."""
-    return clip_weight[c] * (phase_failures[c, b] / wp.max(phase_visits[c, b], 1.0) + floor)
+    return clip_weight[c] * cell_rate(phase_visits, phase_failures, c, b, floor)
 
 
 @wp.func
