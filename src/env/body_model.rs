@@ -2,6 +2,7 @@
 //! kinematics.py: the fused body kinematics, docs/env.md): three tables by MuJoCo body id, the
 //! world (id 0) included, built from the character file.
 
+use super::layout::setup_error;
 use super::physics_state::PhysicsState;
 use crate::cuda::{Gpu, Stream};
 use crate::kernels::{DeviceArray, DeviceArray2, EnvError, EnvKernels};
@@ -33,9 +34,10 @@ pub struct BodyModel {
 }
 
 fn int(value: usize, what: &str) -> Result<i32, EnvError> {
-    i32::try_from(value).map_err(|_| EnvError::ArrayShape {
-        shape: vec![value],
-        reason: format!("the character's {what} {value} does not fit an int32"),
+    i32::try_from(value).map_err(|_| {
+        setup_error(format!(
+            "the character's {what} {value} does not fit an int32"
+        ))
     })
 }
 
@@ -62,13 +64,10 @@ impl BodyModel {
                         JointType::Ball => BALL,
                         JointType::Hinge => HINGE,
                         JointType::Slide => {
-                            return Err(EnvError::ArrayShape {
-                                shape: vec![id],
-                                reason: format!(
-                                    "body {id} ({}) has a slide joint, which the fused kinematics does not support",
-                                    body.name
-                                ),
-                            });
+                            return Err(setup_error(format!(
+                                "body {id} ({}) has a slide joint, which the fused kinematics does not support",
+                                body.name
+                            )));
                         }
                     };
                     (

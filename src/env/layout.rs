@@ -46,7 +46,8 @@ pub struct JointLayout {
     pub num_motors: usize,
 }
 
-fn setup_error(reason: String) -> EnvError {
+/// A character the env kernels cannot be set up for (shared with `body_model`).
+pub(super) fn setup_error(reason: String) -> EnvError {
     EnvError::ArrayShape {
         shape: Vec::new(),
         reason,
