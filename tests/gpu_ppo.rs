@@ -823,11 +823,15 @@ fn concurrent_networks_give_the_sequential_update() {
 }
 
 /// `ppo.min_log_std`: one update step (1 epoch x 1 minibatch) with the floor at the initial
-/// log std leaves each log std at `max(step without the floor, floor)`, bit for bit, with some
-/// actions raised and some not, and every other parameter as the step without the floor left
-/// it (the clamp comes after the Adam step and changes nothing else).
+/// log std leaves each log std at `max(step without the floor, floor)` (exactly the floor where
+/// it was raised), with some actions raised and some not, and every other parameter as the step
+/// without the floor left it (the clamp comes after the Adam step and changes nothing else).
+/// Two runs of the update agree up to the order of its atomic additions (the column sums of the
+/// bias gradients), so "as left" is within `SAME`, far below what a clamp writes (the floor,
+/// -1, over weights of about 0.1 and log stds that moved by about 1e-3).
 #[test]
 fn min_log_std_clamps_the_log_std_after_the_step_and_changes_nothing_else() {
+    const SAME: f64 = 1e-5;
     let run = |floor: Option<f32>| {
         let (gpu, _kernels, policy, update, rollout, _) = small_setup_with(1, 1, 9, |c| {
             c.ppo.min_log_std = floor;
@@ -837,33 +841,34 @@ fn min_log_std_clamps_the_log_std_after_the_step_and_changes_nothing_else() {
         let critic = policy.critic_parameters().download().expect("critic");
         (actor, critic, policy.action_size())
     };
+    let widen = |x: &[f32]| x.iter().map(|&v| f64::from(v)).collect::<Vec<_>>();
     let floor = -1.0f32;
     let (free_actor, free_critic, a) = run(None);
     let (floored_actor, floored_critic, _) = run(Some(floor));
     let split = free_actor.len() - a;
-    assert_eq!(
-        free_actor[..split]
-            .iter()
-            .map(|x| x.to_bits())
-            .collect::<Vec<_>>(),
-        floored_actor[..split]
-            .iter()
-            .map(|x| x.to_bits())
-            .collect::<Vec<_>>(),
-        "the actor's weights differ"
+    let actor_apart = largest_difference(
+        &widen(&free_actor[..split]),
+        &widen(&floored_actor[..split]),
     );
-    assert_eq!(
-        free_critic.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
-        floored_critic
-            .iter()
-            .map(|x| x.to_bits())
-            .collect::<Vec<_>>(),
-        "the critic's weights differ"
+    let critic_apart = largest_difference(&widen(&free_critic), &widen(&floored_critic));
+    println!("the actor's weights {actor_apart:.3e} apart, the critic's {critic_apart:.3e}");
+    assert!(
+        actor_apart <= SAME,
+        "the actor's weights differ by {actor_apart:e}"
+    );
+    assert!(
+        critic_apart <= SAME,
+        "the critic's weights differ by {critic_apart:e}"
     );
     let (free, floored) = (&free_actor[split..], &floored_actor[split..]);
     println!("log std without the floor {free:?}, with {floored:?}");
-    for (x, y) in free.iter().zip(floored) {
-        assert_eq!(x.max(floor).to_bits(), y.to_bits(), "{x} floored to {y}");
+    for (&x, &y) in free.iter().zip(floored) {
+        if f64::from(x) < f64::from(floor) - SAME {
+            assert_eq!(y.to_bits(), floor.to_bits(), "{x} floored to {y}");
+        } else {
+            let apart = f64::from((x.max(floor) - y).abs());
+            assert!(apart <= SAME, "{x} floored to {y}");
+        }
     }
     let raised = free.iter().filter(|&&x| x < floor).count();
     assert!(

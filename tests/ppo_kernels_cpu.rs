@@ -65,8 +65,6 @@ fn rust_and_kernels_agree_on_shared_constants() {
     for (name, rust) in [
         ("TILE_THREADS", reduce::TILE_THREADS),
         ("SUM_CHUNK", reduce::SUM_CHUNK),
-        ("COLUMN_ROWS", reduce::COLUMN_ROWS),
-        ("COLUMN_TILE", reduce::COLUMN_TILE),
     ] {
         assert_eq!(
             python_constant(&reduce_py, "reduce.py", name),

@@ -162,8 +162,7 @@ def check_mlp_cublas_path(v: Verdict, rng):
         dw0 = rng.standard_normal(ws[i].shape)
         dw = dw0.astype(np.float32) + gemm(below.T, dz_np)  # cuBLAS with beta = 1
         db = zeros(bs[i].shape)
-        blocks = -(-bs[i].shape[0] // 64) * -(-m // 64)
-        wp.launch_tiled(reduce.column_sums, dim=[blocks], inputs=[dz_d, 1, db], block_dim=THREADS, device="cpu")
+        wp.launch(reduce.column_sums, dim=bs[i].shape[0] * m, inputs=[dz_d, 1, db], device="cpu")
         v.error(f"MLP backward dw[{i}], cuBLAS path (beta 1 onto earlier values)", dw, f32(dw0) + ref_dw[i])
         v.error(f"MLP backward db[{i}], cuBLAS path (column_sums)", db.numpy(), ref_db[i])
         if i > 0:
@@ -174,13 +173,13 @@ def check_mlp_cublas_path(v: Verdict, rng):
 
 
 def check_reductions(v: Verdict, rng):
-    for rows, cols, chunks in [(300, 33, 1), (300, 33, 2), (1000, 130, 3), (5, 70, 1)]:
+    for rows, cols, per_thread in [(300, 33, 1), (300, 33, 7), (1000, 130, 64), (5, 70, 8), (4096, 28, 16)]:
         x = rng.standard_normal((rows, cols))
         out0 = rng.standard_normal(cols)
         out = array(out0)
-        blocks = -(-cols // 64) * -(-rows // (64 * chunks))
-        wp.launch_tiled(reduce.column_sums, dim=[blocks], inputs=[array(x), chunks, out], block_dim=THREADS, device="cpu")
-        v.error(f"column_sums, {rows} x {cols}, {chunks} chunks per block", out.numpy(), out0 + x.sum(axis=0))
+        threads = cols * -(-rows // per_thread)
+        wp.launch(reduce.column_sums, dim=threads, inputs=[array(x), per_thread, out], device="cpu")
+        v.error(f"column_sums, {rows} x {cols}, {per_thread} rows per thread", out.numpy(), out0 + x.sum(axis=0))
     for size in [1, 2047, 2048, 5000, 100_001]:
         x = (rng.standard_normal(size) + 0.5).astype(np.float32).astype(np.float64)
         out = array(np.array([7.0, 1.5, -2.0]), dtype=wp.float64)

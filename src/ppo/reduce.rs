@@ -10,11 +10,18 @@ use super::PpoError;
 pub const TILE_THREADS: usize = 128;
 /// Values per block of `sum_of_squares` and `sum_and_squares` (reduce.py `SUM_CHUNK`).
 pub const SUM_CHUNK: usize = 2048;
-/// Rows and columns of one tile of `column_sums` (reduce.py `COLUMN_ROWS`, `COLUMN_TILE`).
-pub const COLUMN_ROWS: usize = 64;
-pub const COLUMN_TILE: usize = 64;
-/// Row tiles one block of `column_sums` adds up before its atomic add.
-const COLUMN_CHUNKS_PER_BLOCK: usize = 4;
+/// Threads `column_sums` aims for (about 4 per core of an H100's 132 SMs at full occupancy:
+/// enough rows in flight to cover the loads' latency) and the fewest rows one thread adds up
+/// (fewer would spend more on the atomic add than on the rows).
+const COLUMN_SUM_THREADS: usize = 65_536;
+const MIN_ROWS_PER_THREAD: usize = 8;
+
+/// Rows each thread of `column_sums` adds for an `[rows, cols]` matrix.
+pub fn column_sum_rows_per_thread(rows: usize, cols: usize) -> usize {
+    (rows * cols)
+        .div_ceil(COLUMN_SUM_THREADS)
+        .clamp(MIN_ROWS_PER_THREAD, rows.max(MIN_ROWS_PER_THREAD))
+}
 
 /// Queues `out[c] += sum_r x[r, c]` (`x [R, C]`, `out [C]`).
 pub fn record_column_sums(
@@ -31,14 +38,12 @@ pub fn record_column_sums(
             out.shape()
         )));
     }
-    let blocks = cols.div_ceil(COLUMN_TILE) * rows.div_ceil(COLUMN_ROWS * COLUMN_CHUNKS_PER_BLOCK);
-    kernels.column_sums(
-        stream,
-        [blocks, TILE_THREADS],
-        x,
-        COLUMN_CHUNKS_PER_BLOCK as i32,
-        out,
-    )?;
+    if rows == 0 || cols == 0 {
+        return Ok(());
+    }
+    let per_thread = column_sum_rows_per_thread(rows, cols);
+    let threads = cols * rows.div_ceil(per_thread);
+    kernels.column_sums(stream, threads, x, per_thread as i32, out)?;
     Ok(())
 }
 
@@ -86,4 +91,40 @@ pub fn record_clear<T: crate::kernels::Element, const N: usize>(
 ) -> Result<(), PpoError> {
     array.record_zero(stream)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn column_sum_chunks_cover_every_row_once() {
+        for (rows, cols) in [
+            (4096, 400),
+            (4096, 28),
+            (16384, 1),
+            (5, 70),
+            (1, 1),
+            (100_000, 3),
+        ] {
+            let per_thread = column_sum_rows_per_thread(rows, cols);
+            assert!(per_thread >= MIN_ROWS_PER_THREAD, "{rows} x {cols}");
+            let chunks = rows.div_ceil(per_thread);
+            // Chunk k covers [k * per_thread, (k + 1) * per_thread): every row once, no chunk empty.
+            assert!(chunks * per_thread >= rows && (chunks - 1) * per_thread < rows);
+            let threads = cols * chunks;
+            assert!(threads <= rows * cols, "the launch contract: dim <= len(x)");
+            if rows * cols >= COLUMN_SUM_THREADS * MIN_ROWS_PER_THREAD {
+                // Big enough to fill the target, and not much over it.
+                assert!(
+                    threads >= COLUMN_SUM_THREADS / 2,
+                    "{rows} x {cols}: {threads}"
+                );
+                assert!(
+                    threads <= 2 * COLUMN_SUM_THREADS,
+                    "{rows} x {cols}: {threads}"
+                );
+            }
+        }
+    }
 }

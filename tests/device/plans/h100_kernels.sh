@@ -1,0 +1,27 @@
+# Issue 20 on one H100, one call: the PPO update's kernels one by one (Nsight Compute's
+# gpu__time_duration of each kernel node of one `bench full` iteration whose name is not
+# MuJoCo Warp's physics), then the backflip's time to success with the fused kinematics and
+# TF32 products, alone and with the actor and critic as concurrent branches, seeds 0-2
+# (tests/device/lanes.sh plan).
+#   BIN=.device-small tests/device/lanes.sh tests/device/plans/h100_kernels.sh   (carry .device-small)
+SESSION_S=${SESSION_S:-540}
+KEEP=${KEEP:-}
+FULL='full --motion backflip --envs 4096'
+UPDATE_KERNELS='regex:gemm|xmma|cutlass|splitK|Kernel|column_sums|elu|bias|ppo|adam|gather|minibatch|sum_of|sum_and|shuffle|gae|schedule|value|log_std|statistic|bootstrap|policy|sample'
+kernels() {
+  local ncu; ncu=$(command -v ncu || ls /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | tail -1)
+  [ -n "$ncu" ] || { note "kernels: no ncu"; return; }
+  local t0; t0=$(date +%s)
+  CUDA_VISIBLE_DEVICES=$GPU timeout 200 "$ncu" --clock-control none --metrics gpu__time_duration.sum \
+    --kernel-name "$UPDATE_KERNELS" --launch-count 2500 --csv --page raw \
+    "$BIN/instantmimic" bench $FULL --iterations 2 --warmup 1 --rounds 1 > "$OUT/runs/ncu.csv" 2> "$OUT/runs/ncu.err"
+  note "kernels (rc $?, $(( $(date +%s) - t0 )) s): $(wc -l < "$OUT/runs/ncu.csv") lines"
+}
+three() {
+  local name=$1; shift
+  local seed
+  for seed in 0 1 2; do
+    train "${name}_$seed" 60 --motion backflip --seed "$seed" --time-budget 45 --set env.body_kinematics=fused "$@"
+  done
+}
+LANE0="kernels; bench full_fused_tf32 80 $FULL --set env.body_kinematics=fused --set policy.gemm=cublas_tf32; three tf32 --set policy.gemm=cublas_tf32; three tf32_concurrent --set policy.gemm=cublas_tf32 --set ppo.concurrent_networks=true"
