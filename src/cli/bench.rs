@@ -133,6 +133,9 @@ pub(super) fn benchmark_inputs(
 pub(super) enum GemmArg {
     /// cuBLAS f32 when libcublas can be loaded, else Warp tiles.
     Auto,
+    /// cuBLAS, TF32 products when libcublas loads, else Warp's tile kernels.
+    #[value(name = "auto_tf32")]
+    AutoTf32,
     /// Warp's tile kernels.
     Warp,
     /// cuBLAS, f32 products (an error without libcublas).
@@ -146,6 +149,7 @@ impl From<GemmArg> for GemmSetting {
     fn from(arg: GemmArg) -> GemmSetting {
         match arg {
             GemmArg::Auto => GemmSetting::Auto,
+            GemmArg::AutoTf32 => GemmSetting::AutoTf32,
             GemmArg::Warp => GemmSetting::Warp,
             GemmArg::Cublas => GemmSetting::Cublas,
             GemmArg::CublasTf32 => GemmSetting::CublasTf32,

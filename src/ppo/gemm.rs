@@ -62,15 +62,16 @@ impl PolicyGemm {
         }
     }
 
-    /// The path `setting` asks for on `gpu`: `auto` is cuBLAS f32 when libcublas opens, else
-    /// Warp tiles; `cublas` and `cublas_tf32` are a [`CudaError::BlasUnavailable`] when it
-    /// does not. Not inside a capture (cuBLAS allocates its workspace here).
+    /// The path `setting` asks for on `gpu`: `auto` (`auto_tf32`) is cuBLAS with f32 (TF32)
+    /// products when libcublas opens, else Warp tiles; `cublas` and `cublas_tf32` are a
+    /// [`CudaError::BlasUnavailable`] when it does not. Not inside a capture (cuBLAS allocates its workspace here).
     pub fn open(gpu: &Gpu, setting: GemmSetting) -> Result<PolicyGemm, CudaError> {
         let math = match setting {
             GemmSetting::Warp => return Ok(PolicyGemm::warp_tiles()),
             GemmSetting::Auto | GemmSetting::Cublas => GemmMath::F32,
-            GemmSetting::CublasTf32 => GemmMath::Tf32,
+            GemmSetting::AutoTf32 | GemmSetting::CublasTf32 => GemmMath::Tf32,
         };
+        let falls_back = matches!(setting, GemmSetting::Auto | GemmSetting::AutoTf32);
         match Blas::open(gpu) {
             Ok(blas) => Ok(PolicyGemm {
                 setting,
@@ -78,7 +79,7 @@ impl PolicyGemm {
                 blas: Some(blas),
                 fallback: None,
             }),
-            Err(e) if setting == GemmSetting::Auto => Ok(PolicyGemm {
+            Err(e) if falls_back => Ok(PolicyGemm {
                 setting,
                 path: GemmPath::WarpTiles,
                 blas: None,
@@ -118,6 +119,7 @@ impl PolicyGemm {
     pub fn describe(&self) -> String {
         let setting = match self.setting {
             GemmSetting::Auto => "auto",
+            GemmSetting::AutoTf32 => "auto_tf32",
             GemmSetting::Warp => "warp",
             GemmSetting::Cublas => "cublas",
             GemmSetting::CublasTf32 => "cublas_tf32",
