@@ -165,6 +165,10 @@ fn committed_configs_are_the_tuned_baseline_with_their_run_settings() {
     issue16.ppo.separate_grad_clipping = true;
     issue16.reward.ee_pos_weight = 10.0;
     issue16.ppo.horizon = 4;
+    // Issue 20's loop settings (BENCHMARKS.md, "The whole loop against the physics floor").
+    issue16.env.body_kinematics = crate::env::BodyKinematics::Fused;
+    issue16.policy.gemm = GemmSetting::AutoTf32;
+    issue16.ppo.concurrent_networks = true;
     for (name, _) in COMMITTED_CONFIGS {
         let (label, config) = TrainConfig::committed(name).unwrap();
         let config = config.unwrap_or_else(|e| panic!("{label}: {e}"));
