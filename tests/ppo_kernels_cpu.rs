@@ -13,6 +13,7 @@ mod skip_support;
 
 use std::path::Path;
 
+use instantmimic::env::layout;
 use instantmimic::ppo::PpoStatistics;
 use instantmimic::ppo::{backward, loss, reduce};
 
@@ -125,4 +126,16 @@ fn rust_and_kernels_agree_on_shared_constants() {
         python_constant(&stats_py, "ppo_statistics.py", "NUM_STATS"),
         PpoStatistics::LEN
     );
+    // Not a PPO kernel, but the same kind of shared constant: the launch of `observe`.
+    let observe_py = kernel_source("observe.py");
+    for (name, rust) in [
+        ("NUM_BODIES", layout::OBSERVED_BODIES),
+        ("OBSERVE_SLOTS", layout::OBSERVE_SLOTS),
+    ] {
+        assert_eq!(
+            python_constant(&observe_py, "observe.py", name),
+            rust,
+            "{name}"
+        );
+    }
 }

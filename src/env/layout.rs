@@ -174,6 +174,9 @@ impl DeviceJointLayout {
 
 /// Number of bodies the observation describes (the humanoid's 15, world excluded).
 pub const OBSERVED_BODIES: usize = 15;
+/// Threads of `observe` per env (observe.py `OBSERVE_SLOTS`): one per observed body and one for
+/// the root and the rest of the row.
+pub const OBSERVE_SLOTS: usize = OBSERVED_BODIES + 1;
 
 /// The observation size for `obs` (docs/env.md table) with `motors` actions and `effectors` end
 /// effectors.

@@ -11,7 +11,7 @@
 //! is as wide as `layout::observation_size` says, and padding columns after it must stay
 //! untouched.
 
-use instantmimic::env::layout::{JointLayout, observation_params, observation_size};
+use instantmimic::env::layout::{JointLayout, OBSERVE_SLOTS, observation_params, observation_size};
 use instantmimic::kernels::{OBSERVE, ObservationParams};
 use instantmimic::motion::table::HUMANOID_LAYOUT;
 use instantmimic::train::ObsConfig;
@@ -276,7 +276,7 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, obs: ObsConfig, seed: u64) ->
         Arg::Struct(StructArg::Observation(params)),
         p.f32("obs", &[n, stride], nan_f32(n * stride)),
     ];
-    p.launch(&OBSERVE, n, args);
+    p.launch(&OBSERVE, n * OBSERVE_SLOTS, args);
 
     Check::new(p, move |p, out| {
         let mut r = Report::new(&p.name);

@@ -10,6 +10,7 @@ use super::super::storage::RolloutStorage;
 use super::super::task::Task;
 use super::{Rollout, RolloutError};
 use crate::env::config::ActionMode;
+use crate::env::layout::OBSERVE_SLOTS;
 
 impl Rollout {
     pub(super) fn record_scores(
@@ -216,7 +217,7 @@ impl Rollout {
         let norm = &self.normalizer;
         self.kernels.observe(
             s,
-            self.num_envs,
+            self.num_envs * OBSERVE_SLOTS,
             &p.qpos,
             &p.qvel,
             &p.xpos,
