@@ -15,7 +15,7 @@ use std::path::Path;
 
 use instantmimic::env::layout;
 use instantmimic::ppo::PpoStatistics;
-use instantmimic::ppo::{backward, loss, reduce};
+use instantmimic::ppo::{backward, batch, loss, reduce};
 
 const CHECKS: [&str; 5] = [
     "kernels_py/checks/ppo_gae.py",
@@ -125,6 +125,11 @@ fn rust_and_kernels_agree_on_shared_constants() {
     assert_eq!(
         python_constant(&stats_py, "ppo_statistics.py", "NUM_STATS"),
         PpoStatistics::LEN
+    );
+    let minibatch_py = kernel_source("minibatch.py");
+    assert_eq!(
+        python_constant(&minibatch_py, "minibatch.py", "GATHER_COLUMNS"),
+        batch::GATHER_COLUMNS
     );
     // Not a PPO kernel, but the same kind of shared constant: the launch of `observe`.
     let observe_py = kernel_source("observe.py");

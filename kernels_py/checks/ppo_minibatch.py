@@ -83,7 +83,7 @@ def check_gather(v: Verdict, rng):
             for normalized, stats, mode in [(0, STATS, "off"), (1, STATS, "on"), (1, STATS_EMPTY, "on, count 0")]:
                 outs = [zeros((m, d)), zeros((m, a)), zeros((m, a)), zeros(m), zeros(m), zeros(m), zeros(m)]
                 values = [normalized, array(stats, dtype=wp.float64)]
-                wp.launch(minibatch.gather_minibatch, dim=m * max(d, a), inputs=[perm_d, k * m, *inputs, *values, *outs], device="cpu")
+                wp.launch(minibatch.gather_minibatch, dim=m * -(-max(d, a) // minibatch.GATHER_COLUMNS), inputs=[perm_d, k * m, *inputs, *values, *outs], device="cpu")
                 how = f"{what}, value normalization {mode}"
                 v.error(f"gathered observations, {how}", outs[0].numpy(), obs[t, e], limit=0.0)
                 v.error(f"gathered actions, {how}", outs[1].numpy(), act[t, e], limit=0.0)

@@ -8,6 +8,9 @@ use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
 
 use super::PpoError;
 
+/// Columns each thread of `gather_minibatch` copies (minibatch.py `GATHER_COLUMNS`).
+pub const GATHER_COLUMNS: usize = 4;
+
 /// The rollout's data, `[T, N, ...]` (`T` = horizon, `N` = envs): what
 /// [`super::PpoUpdate::record`] reads. Flags are 0 or 1.
 pub struct PpoBatch<'a> {
@@ -295,7 +298,7 @@ impl Minibatch {
         }
         kernels.gather_minibatch(
             stream,
-            m * d.max(a),
+            m * d.max(a).div_ceil(GATHER_COLUMNS),
             permutation,
             start as i32,
             batch.observations,
