@@ -278,6 +278,7 @@ fn mlp_forward_and_backward_of_every_gemm_path_match_f64_under_capture() {
                     let dz = if l == last { &d_out_d } else { &activations[l] };
                     let below = if l == 0 { &x_d } else { &activations[l - 1] };
                     let (dw, db) = &grad_views[l];
+                    let db = (l == last || !gemm.bias_with_input_gradient()).then_some(db);
                     gemm.record_weight_gradient(&kernels, s, below, dz, dw, db, target_blocks)?;
                     if l > 0 {
                         gemm.record_input_gradient_elu(
@@ -287,6 +288,7 @@ fn mlp_forward_and_backward_of_every_gemm_path_match_f64_under_capture() {
                             &weights[l].0,
                             below,
                             Some(&scratch),
+                            &grad_views[l - 1].1,
                         )?;
                     }
                 }

@@ -316,7 +316,9 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
         "linear" => kernels.linear(s, dim, &a.array(0), &a.array(1), &a.array(2), &a.array(3)),
         "bias_elu" => kernels.bias_elu(s, dim, &a.array(0), &a.array(1)),
         "bias_add" => kernels.bias_add(s, dim, &a.array(0), &a.array(1)),
-        "elu_input_gradient" => kernels.elu_input_gradient(s, dim, &a.array(0), &a.array(1)),
+        "elu_input_gradient" => {
+            kernels.elu_input_gradient(s, dim, &a.array(0), a.i32(1), &a.array(2), &a.array(3))
+        }
         "gaussian_sample" => kernels.gaussian_sample(
             s,
             dim,

@@ -157,17 +157,26 @@ def check_mlp_cublas_path(v: Verdict, rng):
     v.error("MLP forward, cuBLAS path (product + bias_elu / bias_add)", ys[-1].numpy(), acts[-1])
     dz_np = d_out
     dz_d = array(d_out)
+    # The output layer's bias gradient is `column_sums`; each hidden layer's comes with the
+    # input gradient of the layer above (`elu_input_gradient`), accumulated onto earlier values.
+    db = zeros(bs[-1].shape)
+    wp.launch(reduce.column_sums, dim=bs[-1].shape[0] * m, inputs=[dz_d, 1, db], device="cpu")
+    db_expected = ref_db[-1]
     for i in reversed(range(layers)):
         below = x if i == 0 else ys[i - 1].numpy()
         dw0 = rng.standard_normal(ws[i].shape)
         dw = dw0.astype(np.float32) + gemm(below.T, dz_np)  # cuBLAS with beta = 1
-        db = zeros(bs[i].shape)
-        wp.launch(reduce.column_sums, dim=bs[i].shape[0] * m, inputs=[dz_d, 1, db], device="cpu")
         v.error(f"MLP backward dw[{i}], cuBLAS path (beta 1 onto earlier values)", dw, f32(dw0) + ref_dw[i])
-        v.error(f"MLP backward db[{i}], cuBLAS path (column_sums)", db.numpy(), ref_db[i])
+        how = "column_sums" if i == layers - 1 else "with the input gradient above"
+        v.error(f"MLP backward db[{i}], cuBLAS path ({how})", db.numpy(), db_expected)
         if i > 0:
             g = array(gemm(dz_np, ws[i].T))
-            launch_elementwise(gemm_epilogue.elu_input_gradient, g, ys[i - 1])
+            db0 = rng.standard_normal(bs[i - 1].shape)
+            db = array(db0)
+            per_thread = 7
+            threads = bs[i - 1].shape[0] * -(-m // per_thread)
+            wp.launch(gemm_epilogue.elu_input_gradient, dim=threads, inputs=[g, per_thread, ys[i - 1], db], device="cpu")
+            db_expected = f32(db0) + ref_db[i - 1]
             dz_d = ys[i - 1]
             dz_np = dz_d.numpy()
 

@@ -11,13 +11,16 @@ modules):
 - `elu_input_gradient`: `y <- g * elu'(y)`, where `y` is the ELU output of the layer below
   (this layer's input) and `g = dz @ w^T` (cuBLAS into a scratch buffer):
   `elu'(z) = 1 if z > 0 else exp(z) = y + 1`. Like the tile kernel, the gradient of the
-  pre-activation replaces the stored activation.
+  pre-activation replaces the stored activation. It also adds that gradient's column sums to
+  `db`: the bias gradient of the layer below, which would otherwise take a second pass
+  (reduce.py's `column_sums`, which the output layer's bias gradient still uses).
 
-The weight gradient is cuBLAS's `x^T dz` and the bias gradient reduce.py's `column_sums`.
+The weight gradient is cuBLAS's `x^T dz`.
 
-One thread per element of the `[M, N]` matrix `y`: launch `M * N` threads (element `tid`,
-row-major). Memory-bound: each element is read and written once (`elu_input_gradient` also
-reads `g`).
+`bias_elu` and `bias_add` run one thread per element of the `[M, N]` matrix `y`: launch `M * N`
+threads (element `tid`, row-major). `elu_input_gradient` runs one thread per column and chunk
+of rows, as `column_sums`. Memory-bound: each element is read and written once
+(`elu_input_gradient` also reads `g`).
 """
 
 import warp as wp
@@ -49,14 +52,29 @@ def bias_add(bias: wp.array(dtype=wp.float32), y: wp.array2d(dtype=wp.float32)):
 
 
 @wp.kernel
-def elu_input_gradient(g: wp.array2d(dtype=wp.float32), y: wp.array2d(dtype=wp.float32)):
-    """y[i, j] <- g[i, j] * elu'(y[i, j]), in place; g and y [M, K], y the ELU output of the
-    layer below. Launch M * K threads."""
-    tid = wp.tid()
-    k = y.shape[1]
-    i = tid // k
-    j = tid - i * k
-    y[i, j] = elu_backward(g[i, j], y[i, j])
+def elu_input_gradient(
+    g: wp.array2d(dtype=wp.float32),
+    rows_per_thread: wp.int32,
+    y: wp.array2d(dtype=wp.float32),
+    db: wp.array(dtype=wp.float32),
+):
+    """y[i, j] <- g[i, j] * elu'(y[i, j]), in place, and db[j] += the sum over i of the new
+    y[i, j]; g and y [M, K], y the ELU output of the layer below, db [K] its bias gradient.
+    Thread t covers column `t % K` and rows `[k * rows_per_thread, (k + 1) * rows_per_thread)`
+    with `k = t // K`; launch K * ceil(M / rows_per_thread) threads."""
+    t = wp.tid()
+    cols = y.shape[1]
+    k = t // cols
+    j = t - k * cols
+    begin = k * rows_per_thread
+    end = wp.min(begin + rows_per_thread, y.shape[0])
+    acc = float(0.0)
+    for i in range(begin, end):
+        d = elu_backward(g[i, j], y[i, j])
+        y[i, j] = d
+        acc += d
+    if begin < end:
+        wp.atomic_add(db, j, acc)
 
 # Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
 # dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
@@ -71,7 +89,8 @@ LAUNCH = {
         "dim == len(y)",
     ),
     "elu_input_gradient": (
-        "dim == len(y)",
+        "dim <= len(y)",
         "dim <= extent(g, 0) * extent(y, 1)",
+        "dim <= extent(y, 0) * len(db)",
     ),
 }

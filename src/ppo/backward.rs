@@ -196,14 +196,21 @@ pub(crate) fn record_mlp_backward(
         } else {
             &mlp.activations[l - 1]
         };
-        let (dw, db) = grads
-            .layer(l)
-            .ok_or_else(|| PpoError::Shape(format!("no gradient buffer for layer {l}")))?;
+        let layer = |l: usize| {
+            grads
+                .layer(l)
+                .ok_or_else(|| PpoError::Shape(format!("no gradient buffer for layer {l}")))
+        };
+        let (dw, db) = layer(l)?;
+        // A hidden layer's bias gradient may have come with the input gradient above.
+        let db = (l == last || !gemm.bias_with_input_gradient()).then_some(db);
         // The weight gradient reads x (the layer below's output) before the input gradient
         // overwrites it.
         gemm.record_weight_gradient(kernels, stream, x, dz, dw, db, target_blocks)?;
         if l > 0 {
-            gemm.record_input_gradient_elu(kernels, stream, dz, &mlp.layers[l].0, x, scratch)?;
+            let (_, db_below) = layer(l - 1)?;
+            let w = &mlp.layers[l].0;
+            gemm.record_input_gradient_elu(kernels, stream, dz, w, x, scratch, db_below)?;
         }
     }
     Ok(())

@@ -24,7 +24,7 @@ use super::backward::{
     weight_gradient_shape,
 };
 use super::policy::{PolicyError, TILE, TILE_THREADS};
-use super::reduce::record_column_sums;
+use super::reduce::{column_sum_rows_per_thread, record_column_sums};
 
 /// The resolved path of the GEMMs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -194,8 +194,17 @@ impl PolicyGemm {
         Ok(())
     }
 
-    /// Queues `dw += x^T dz`, `db += sum_rows dz` (x `[M, K]`, dz `[M, N]`, dw `[K, N]`, db
-    /// `[N]`); `target_blocks` sizes the split-K reduction of the Warp path.
+    /// Whether a hidden layer's bias gradient comes with the input gradient of the layer above
+    /// ([`PolicyGemm::record_input_gradient_elu`]'s epilogue, the cuBLAS path) rather than with
+    /// the layer's own weight gradient (the Warp path's tile kernel).
+    pub fn bias_with_input_gradient(&self) -> bool {
+        self.uses_cublas()
+    }
+
+    /// Queues `dw += x^T dz` and, with `db`, `db += sum_rows dz` (x `[M, K]`, dz `[M, N]`, dw
+    /// `[K, N]`, db `[N]`); `target_blocks` sizes the split-K reduction of the Warp path. `db`
+    /// is `None` where the input gradient of the layer above added it
+    /// ([`PolicyGemm::bias_with_input_gradient`]); the Warp path always needs it.
     #[allow(clippy::too_many_arguments)]
     pub fn record_weight_gradient(
         &self,
@@ -204,23 +213,34 @@ impl PolicyGemm {
         x: &DeviceArray2<f32>,
         dz: &DeviceArray2<f32>,
         dw: &DeviceArray2<f32>,
-        db: &DeviceArray<f32>,
+        db: Option<&DeviceArray<f32>>,
         target_blocks: usize,
     ) -> Result<(), PpoError> {
         if self.path == GemmPath::WarpTiles {
+            let db = db.ok_or_else(|| {
+                PpoError::Shape("the Warp path's weight gradient adds the bias gradient".to_owned())
+            })?;
             // It checks the shapes itself.
             return record_linear_backward_weight(kernels, stream, x, dz, dw, db, target_blocks);
         }
-        weight_gradient_shape(x, dz, dw, db)?;
         let (blas, math) = self.blas()?;
+        if let Some(db) = db {
+            weight_gradient_shape(x, dz, dw, db)?;
+        }
         let (xm, dzm, dwm) = (x.blas_matrix()?, dz.blas_matrix()?, dw.blas_matrix()?);
         blas.gemm(stream, xm.transposed(), dzm.plain(), dwm, 1.0, math)?;
-        record_column_sums(kernels, stream, dz, db)
+        match db {
+            Some(db) => record_column_sums(kernels, stream, dz, db),
+            None => Ok(()),
+        }
     }
 
     /// Queues `y_prev <- (dz @ w^T) * elu'(y_prev)` in place (dz `[M, N]`, w `[K, N]`, y_prev
     /// `[M, K]`, the ELU output of the layer below). The cuBLAS path writes the product into
-    /// `scratch` first (at least M x K values; the Warp path needs none).
+    /// `scratch` first (at least M x K values; the Warp path needs none) and adds the column
+    /// sums of the new `y_prev`, the layer below's bias gradient, to `db_prev` (`[K]`); the Warp
+    /// path leaves `db_prev` to that layer's weight gradient.
+    #[allow(clippy::too_many_arguments)]
     pub fn record_input_gradient_elu(
         &self,
         kernels: &EnvKernels,
@@ -229,12 +249,19 @@ impl PolicyGemm {
         w: &DeviceArray2<f32>,
         y_prev: &DeviceArray2<f32>,
         scratch: Option<&DeviceArray<f32>>,
+        db_prev: &DeviceArray<f32>,
     ) -> Result<(), PpoError> {
         if self.path == GemmPath::WarpTiles {
             // It checks the shapes itself.
             return record_linear_backward_input_elu(kernels, stream, dz, w, y_prev);
         }
         let [m, k, _] = input_gradient_shape(dz, w, y_prev)?;
+        if db_prev.shape() != [k] {
+            return Err(PpoError::Shape(format!(
+                "bias gradient {:?} of a layer of {k} outputs",
+                db_prev.shape()
+            )));
+        }
         let (blas, math) = self.blas()?;
         let scratch = scratch.ok_or_else(|| {
             PpoError::Shape("the cuBLAS input gradient needs a scratch buffer".to_owned())
@@ -242,7 +269,16 @@ impl PolicyGemm {
         let product = scratch.view(0, [m, k])?;
         let (dzm, wm, gm) = (dz.blas_matrix()?, w.blas_matrix()?, product.blas_matrix()?);
         blas.gemm(stream, dzm.plain(), wm.transposed(), gm, 0.0, math)?;
-        kernels.elu_input_gradient(stream, m * k, &product, y_prev)?;
+        let per_thread = column_sum_rows_per_thread(m, k);
+        let threads = k * m.div_ceil(per_thread);
+        kernels.elu_input_gradient(
+            stream,
+            threads,
+            &product,
+            per_thread as i32,
+            y_prev,
+            db_prev,
+        )?;
         Ok(())
     }
 }

@@ -1,19 +1,22 @@
 //! The epilogues of the cuBLAS GEMM path (kernels_py/env/gemm_epilogue.py): `bias_elu` and
-//! `bias_add` after `y = x @ w`, `elu_input_gradient` after `g = dz @ w^T`, each in place, one
-//! thread per element.
+//! `bias_add` after `y = x @ w` (one thread per element), `elu_input_gradient` after
+//! `g = dz @ w^T` with the bias gradient of the layer below (one thread per column and chunk
+//! of rows), each in place.
 //!
 //! Each case gives the kernel the product a GEMM would write (computed here in f64 and rounded
 //! to f32, what cuBLAS's f32 product is up to its own rounding) and judges the result against
 //! the f64 reference of the whole layer step: `act(x @ w + b)` ([`linear_reference`], the
 //! reference of the tile kernels too), and `(dz @ w^T) * elu'(y)` with
-//! `elu'(z) = 1 if z > 0 else y + 1` (mlp_backward.py's formula). Shapes that are not multiples
+//! `elu'(z) = 1 if z > 0 else y + 1` (mlp_backward.py's formula) with its column sums added to
+//! earlier values. Shapes that are not multiples
 //! of anything, a single element, and the actor's widest layer.
 
 use instantmimic::kernels::{BIAS_ADD, BIAS_ELU, ELU_INPUT_GRADIENT};
+use instantmimic::ppo::reduce::column_sum_rows_per_thread;
 
 use super::compare::{Report, wide};
 use super::policy::{elu, linear_reference};
-use super::program::Program;
+use super::program::{Arg, Program, Scalar};
 use super::rng::Sampler;
 use super::{Check, Fixture};
 
@@ -70,12 +73,19 @@ fn input_gradient_case(m: usize, k: usize, n: usize, seed: u64) -> Check {
                 .sum()
         })
         .collect();
-    let mut p = Program::new(format!("elu_input_gradient: {m} x {n} -> {k}"));
+    // Earlier values in the bias gradient: the kernel adds to them.
+    let db0 = normals(&mut rng, k, 1.0);
+    let per_thread = column_sum_rows_per_thread(m, k);
+    let mut p = Program::new(format!(
+        "elu_input_gradient: {m} x {n} -> {k}, {per_thread} rows a thread"
+    ));
     let args = vec![
         p.f32("g", &[m, k], to_f32(&product)),
+        Arg::Scalar(Scalar::I32(per_thread as i32)),
         p.f32("y", &[m, k], y.clone()),
+        p.f32("db", &[k], db0.clone()),
     ];
-    p.launch(&ELU_INPUT_GRADIENT, m * k, args);
+    p.launch(&ELU_INPUT_GRADIENT, k * m.div_ceil(per_thread), args);
     Check::new(p, move |p, out| {
         let mut r = Report::new(&p.name);
         let expected: Vec<f64> = product
@@ -91,6 +101,10 @@ fn input_gradient_case(m: usize, k: usize, n: usize, seed: u64) -> Check {
             &wide(out.f32("y")),
             &expected,
         );
+        let db: Vec<f64> = (0..k)
+            .map(|j| f64::from(db0[j]) + (0..m).map(|i| expected[i * k + j]).sum::<f64>())
+            .collect();
+        r.relative("db + its column sums", &wide(out.f32("db")), &db);
         r.bitwise_f32("g untouched", out.f32("g"), p.input_f32("g"));
         let active = y.iter().filter(|v| **v > 0.0).count();
         r.note(format!("{active} of {} units active", y.len()));
@@ -109,5 +123,6 @@ pub fn checks(_fx: &Fixture) -> Vec<Check> {
         input_gradient_case(100, 70, 45, 97),
         input_gradient_case(1, 1, 1, 98),
         input_gradient_case(64, 400, 200, 99),
+        input_gradient_case(4096, 200, 400, 100),
     ]
 }
