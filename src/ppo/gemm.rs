@@ -24,7 +24,7 @@ use super::backward::{
     weight_gradient_shape,
 };
 use super::policy::{PolicyError, TILE, TILE_THREADS};
-use super::reduce::{column_sum_rows_per_thread, record_column_sums};
+use super::reduce::{ColumnChunks, record_column_sums};
 
 /// The resolved path of the GEMMs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -269,13 +269,12 @@ impl PolicyGemm {
         let product = scratch.view(0, [m, k])?;
         let (dzm, wm, gm) = (dz.blas_matrix()?, w.blas_matrix()?, product.blas_matrix()?);
         blas.gemm(stream, dzm.plain(), wm.transposed(), gm, 0.0, math)?;
-        let per_thread = column_sum_rows_per_thread(m, k);
-        let threads = k * m.div_ceil(per_thread);
+        let chunks = ColumnChunks::of(m, k);
         kernels.elu_input_gradient(
             stream,
-            threads,
+            chunks.threads,
             &product,
-            per_thread as i32,
+            chunks.rows_per_thread as i32,
             y_prev,
             db_prev,
         )?;

@@ -10,17 +10,32 @@ use super::PpoError;
 pub const TILE_THREADS: usize = 128;
 /// Values per block of `sum_of_squares` and `sum_and_squares` (reduce.py `SUM_CHUNK`).
 pub const SUM_CHUNK: usize = 2048;
-/// Threads `column_sums` aims for (about 4 per core of an H100's 132 SMs at full occupancy:
-/// enough rows in flight to cover the loads' latency) and the fewest rows one thread adds up
-/// (fewer would spend more on the atomic add than on the rows).
+/// Threads a column-chunk launch aims for (about 4 per core of an H100's 132 SMs at full
+/// occupancy: enough rows in flight to cover the loads' latency) and the fewest rows one thread
+/// adds up (fewer would spend more on the atomic add than on the rows).
 const COLUMN_SUM_THREADS: usize = 65_536;
 const MIN_ROWS_PER_THREAD: usize = 8;
 
-/// Rows each thread of `column_sums` adds for an `[rows, cols]` matrix.
-pub fn column_sum_rows_per_thread(rows: usize, cols: usize) -> usize {
-    (rows * cols)
-        .div_ceil(COLUMN_SUM_THREADS)
-        .clamp(MIN_ROWS_PER_THREAD, rows.max(MIN_ROWS_PER_THREAD))
+/// The launch of a kernel that runs one thread per column and chunk of rows of an `[rows,
+/// cols]` matrix and adds each chunk's sum with one atomic: `column_sums` and gemm_epilogue.py's
+/// `elu_input_gradient`. Thread t covers column `t % cols`, rows `[k * rows_per_thread, (k + 1)
+/// * rows_per_thread)` with `k = t / cols`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ColumnChunks {
+    pub rows_per_thread: usize,
+    pub threads: usize,
+}
+
+impl ColumnChunks {
+    pub fn of(rows: usize, cols: usize) -> ColumnChunks {
+        let rows_per_thread = (rows * cols)
+            .div_ceil(COLUMN_SUM_THREADS)
+            .clamp(MIN_ROWS_PER_THREAD, rows.max(MIN_ROWS_PER_THREAD));
+        ColumnChunks {
+            rows_per_thread,
+            threads: cols * rows.div_ceil(rows_per_thread),
+        }
+    }
 }
 
 /// Queues `out[c] += sum_r x[r, c]` (`x [R, C]`, `out [C]`).
@@ -41,9 +56,9 @@ pub fn record_column_sums(
     if rows == 0 || cols == 0 {
         return Ok(());
     }
-    let per_thread = column_sum_rows_per_thread(rows, cols);
-    let threads = cols * rows.div_ceil(per_thread);
-    kernels.column_sums(stream, threads, x, per_thread as i32, out)?;
+    let chunks = ColumnChunks::of(rows, cols);
+    let per_thread = chunks.rows_per_thread as i32;
+    kernels.column_sums(stream, chunks.threads, x, per_thread, out)?;
     Ok(())
 }
 
@@ -107,12 +122,15 @@ mod tests {
             (1, 1),
             (100_000, 3),
         ] {
-            let per_thread = column_sum_rows_per_thread(rows, cols);
+            let ColumnChunks {
+                rows_per_thread: per_thread,
+                threads,
+            } = ColumnChunks::of(rows, cols);
             assert!(per_thread >= MIN_ROWS_PER_THREAD, "{rows} x {cols}");
             let chunks = rows.div_ceil(per_thread);
             // Chunk k covers [k * per_thread, (k + 1) * per_thread): every row once, no chunk empty.
             assert!(chunks * per_thread >= rows && (chunks - 1) * per_thread < rows);
-            let threads = cols * chunks;
+            assert_eq!(threads, cols * chunks);
             assert!(threads <= rows * cols, "the launch contract: dim <= len(x)");
             if rows * cols >= COLUMN_SUM_THREADS * MIN_ROWS_PER_THREAD {
                 // Big enough to fill the target, and not much over it.

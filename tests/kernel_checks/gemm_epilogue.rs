@@ -12,7 +12,7 @@
 //! of anything, a single element, and the actor's widest layer.
 
 use instantmimic::kernels::{BIAS_ADD, BIAS_ELU, ELU_INPUT_GRADIENT};
-use instantmimic::ppo::reduce::column_sum_rows_per_thread;
+use instantmimic::ppo::reduce::ColumnChunks;
 
 use super::compare::{Report, wide};
 use super::policy::{elu, linear_reference};
@@ -75,7 +75,8 @@ fn input_gradient_case(m: usize, k: usize, n: usize, seed: u64) -> Check {
         .collect();
     // Earlier values in the bias gradient: the kernel adds to them.
     let db0 = normals(&mut rng, k, 1.0);
-    let per_thread = column_sum_rows_per_thread(m, k);
+    let chunks = ColumnChunks::of(m, k);
+    let per_thread = chunks.rows_per_thread;
     let mut p = Program::new(format!(
         "elu_input_gradient: {m} x {n} -> {k}, {per_thread} rows a thread"
     ));
@@ -85,7 +86,7 @@ fn input_gradient_case(m: usize, k: usize, n: usize, seed: u64) -> Check {
         p.f32("y", &[m, k], y.clone()),
         p.f32("db", &[k], db0.clone()),
     ];
-    p.launch(&ELU_INPUT_GRADIENT, k * m.div_ceil(per_thread), args);
+    p.launch(&ELU_INPUT_GRADIENT, chunks.threads, args);
     Check::new(p, move |p, out| {
         let mut r = Report::new(&p.name);
         let expected: Vec<f64> = product
