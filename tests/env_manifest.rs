@@ -24,8 +24,9 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 44] = [
+const EXPECTED_KERNELS: [(&str, &str); 45] = [
     ("control", "pd_control"),
+    ("control", "pd_targets"),
     ("evaluate", "evaluation_accumulate"),
     ("gae", "gae_advantages"),
     ("gae", "value_statistics_update"),
@@ -189,10 +190,10 @@ fn launch_contracts_and_directions_are_validated() {
         (json!([]), "no launch rule for axis 0"),
         (json!(["dim == extent(nothing, 0)"]), "no parameter nothing"),
         (
-            json!(["dim == extent(table, 1)"]),
-            "axis 1 of parameter table",
+            json!(["dim == extent(dof_damping, 1)"]),
+            "axis 1 of parameter dof_damping",
         ),
-        (json!(["dim <= len(table) * "]), "found the end"),
+        (json!(["dim <= len(dof_damping) * "]), "found the end"),
         (json!(["dim[1] == len(table)"]), "axis 1 of a 1-D launch"),
         (json!(["threads == len(table)"]), "expected `dim`"),
         (json!(["dim != len(table)"]), "unexpected '!'"),

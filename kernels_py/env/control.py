@@ -1,9 +1,11 @@
 """Actions to PD controls (docs/env.md, "Actions and PD control").
 
-`pd_control` runs before every physics substep: it turns the policy's normalized actions into PD
-targets and the targets and the current joint positions into motor torques in `d.ctrl`. Targets
-are recomputed each substep instead of stored: a few transcendental functions per joint cost less
-than a round trip of a target buffer through memory, and the kernel stays one launch.
+`pd_targets` runs once per control step: it turns the policy's normalized actions into PD
+targets, `[N, J, 4]` (a rotation for a ball joint, an angle for a hinge). `pd_control` runs before
+every physics substep: it turns the targets and the current joint positions and velocities into
+motor torques in `d.ctrl`. One kernel did both before every substep until the reference lookup and
+slerp of each target, repeated per substep, were measured at 15 us a launch on an H100
+(issue 20, 2026-11-27).
 
 Targets are absolute (relative to the zero pose, DeepMimic's) or residual: an offset from the
 reference pose at the end of the control step (`ref_time + target_dt`). A fresh policy's mean
@@ -39,7 +41,7 @@ ROOT_DOFS = wp.constant(6)
 
 @wp.kernel
 def pd_control(
-    actions: wp.array2d(dtype=wp.float32),
+    targets: wp.array3d(dtype=wp.float32),
     qpos: wp.array2d(dtype=wp.float32),
     qvel: wp.array2d(dtype=wp.float32),
     dof_damping: wp.array(dtype=wp.float32),
@@ -48,6 +50,39 @@ def pd_control(
     joint_dof: wp.array(dtype=wp.int32),
     joint_kp: wp.array(dtype=wp.float32),
     joint_limit: wp.array(dtype=wp.float32),
+    ctrl: wp.array2d(dtype=wp.float32),
+):
+    """ctrl[n, m] for every (env n, joint j), before every substep: `clamp(P - kd v,
+    +-joint_limit[j]) + kd v` with `kd = dof_damping[dof]`, `v = qvel[n, dof]` per motor and P:
+    ball joints `kp * qlog(conj(q) target)` (a rotation vector in the joint's frame), hinges
+    `kp * (target - theta)`, the targets from `pd_targets`. Launch N * J threads."""
+    tid = wp.tid()
+    nj = joint_kind.shape[0]
+    n = tid // nj
+    j = tid - n * nj
+    m = joint_dof[j] - ROOT_DOFS
+    a = joint_qpos[j]
+    kp = joint_kp[j]
+    limit = joint_limit[j]
+    d = joint_dof[j]
+    if joint_kind[j] == BALL:
+        target = wp.vec4(targets[n, j, 0], targets[n, j, 1], targets[n, j, 2], targets[n, j, 3])
+        q = wp.vec4(qpos[n, a], qpos[n, a + 1], qpos[n, a + 2], qpos[n, a + 3])
+        e = qlog(qmul(qconj(q), target))
+        for i in range(3):
+            damping = dof_damping[d + i] * qvel[n, d + i]
+            ctrl[n, m + i] = wp.clamp(kp * e[i] - damping, -limit, limit) + damping
+    else:
+        damping = dof_damping[d] * qvel[n, d]
+        ctrl[n, m] = wp.clamp(kp * (targets[n, j, 0] - qpos[n, a]) - damping, -limit, limit) + damping
+
+
+@wp.kernel
+def pd_targets(
+    actions: wp.array2d(dtype=wp.float32),
+    joint_kind: wp.array(dtype=wp.int32),
+    joint_qpos: wp.array(dtype=wp.int32),
+    joint_dof: wp.array(dtype=wp.int32),
     joint_scale: wp.array(dtype=wp.float32),
     joint_center: wp.array(dtype=wp.float32),
     table: wp.array(dtype=wp.float32),
@@ -57,15 +92,13 @@ def pd_control(
     target_dt: wp.float32,
     residual: wp.int32,
     action_scale: wp.float32,
-    ctrl: wp.array2d(dtype=wp.float32),
+    targets: wp.array3d(dtype=wp.float32),
 ):
-    """ctrl[n, m] for every (env n, joint j): `clamp(P - kd v, +-joint_limit[j]) + kd v` with
-    `kd = dof_damping[dof]`, `v = qvel[n, dof]` per motor and P: ball joints
-    `kp * qlog(conj(q) qexp(s a))` (a rotation vector in the joint's frame), hinges
-    `kp * (center + s a - theta)`, with `s = action_scale * joint_scale[j]`. With `residual`
-    not 0 the zero pose and the centers are replaced by the reference pose of the env's clip
-    `clip_id[n]` at `ref_time[n] + target_dt`: `q_ref qexp(s a)` and `theta_ref + s a`. Launch
-    N * J threads."""
+    """targets[n, j, :] for every (env n, joint j), once per control step: ball joints the
+    target rotation (w, x, y, z) `qexp(s a)`, hinges the target angle `center + s a` in slot 0,
+    with `s = action_scale * joint_scale[j]`. With `residual` not 0 the zero pose and the centers
+    are replaced by the reference pose of the env's clip `clip_id[n]` at `ref_time[n] +
+    target_dt`: `q_ref qexp(s a)` and `theta_ref + s a`. Launch N * J threads."""
     tid = wp.tid()
     nj = joint_kind.shape[0]
     n = tid // nj
@@ -73,27 +106,19 @@ def pd_control(
     m = joint_dof[j] - ROOT_DOFS
     a = joint_qpos[j]
     s = action_scale * joint_scale[j]
-    kp = joint_kp[j]
-    limit = joint_limit[j]
-    d = joint_dof[j]
     if joint_kind[j] == BALL:
         target = qexp(wp.vec3(s * actions[n, m], s * actions[n, m + 1], s * actions[n, m + 2]))
         if residual != 0:
             at = reference_locate(table, clip_base(clip_offsets, clip_id[n]), ref_time[n] + target_dt)
             target = qmul(reference_quat_wxyz(table, at, a), target)
-        q = wp.vec4(qpos[n, a], qpos[n, a + 1], qpos[n, a + 2], qpos[n, a + 3])
-        e = qlog(qmul(qconj(q), target))
-        for i in range(3):
-            damping = dof_damping[d + i] * qvel[n, d + i]
-            ctrl[n, m + i] = wp.clamp(kp * e[i] - damping, -limit, limit) + damping
+        for c in range(4):
+            targets[n, j, c] = target[c]
     else:
         base = joint_center[j]
         if residual != 0:
             at = reference_locate(table, clip_base(clip_offsets, clip_id[n]), ref_time[n] + target_dt)
             base = reference_value(table, at, a)
-        angle = base + s * actions[n, m]
-        damping = dof_damping[d] * qvel[n, d]
-        ctrl[n, m] = wp.clamp(kp * (angle - qpos[n, a]) - damping, -limit, limit) + damping
+        targets[n, j, 0] = base + s * actions[n, m]
 
 # Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
 # dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
@@ -103,9 +128,13 @@ def pd_control(
 LAUNCH = {
     "pd_control": (
         "dim == extent(ctrl, 0) * extent(joint_kind, 0)",
-        "dim <= extent(actions, 0) * extent(joint_kind, 0)",
+        "dim <= extent(targets, 0) * extent(joint_kind, 0)",
         "dim <= extent(qpos, 0) * extent(joint_kind, 0)",
         "dim <= extent(qvel, 0) * extent(joint_kind, 0)",
+    ),
+    "pd_targets": (
+        "dim == extent(targets, 0) * extent(joint_kind, 0)",
+        "dim <= extent(actions, 0) * extent(joint_kind, 0)",
         "dim <= len(clip_id) * extent(joint_kind, 0)",
         "dim <= len(ref_time) * extent(joint_kind, 0)",
     ),

@@ -177,7 +177,7 @@ enum BenchCommand {
     /// Physics steps per second of the step plan's CUDA graph.
     Physics(PhysicsArgs),
     /// Frames per second of the rollout graph against its physics-only floor, with the time of
-    /// each stage (policy, physics, post-physics, reset, observation).
+    /// each stage (policy, PD control, physics, body kinematics, reward, reset, observation).
     Rollout(RolloutArgs),
     /// The policy's GEMMs: Warp's tile kernel against cuBLAS (f32 and TF32; cuBLAS comes with
     /// the CUDA toolkit and is found through the library path).

@@ -22,11 +22,16 @@ use crate::cuda::{CudaError, Event, Gpu, NvtxRange, Stream};
 pub enum RolloutStage {
     /// Actor and critic forward, action sampling, rollout storage of actions and values.
     Policy,
-    /// The physics substeps: PD control and the step plan, `substeps` times.
+    /// PD control before each physics substep: the actions to motor torques.
+    Control,
+    /// The physics substeps: the step plan, `substeps` times.
     Physics,
-    /// The kinematics plan, reward and termination.
-    PostPhysics,
-    /// The masked reset and the kinematics plan that follows it.
+    /// The body kinematics after the physics, and after a reset for the envs reset (the
+    /// kinematics plan, or `env.body_kinematics = "fused"`).
+    Kinematics,
+    /// Reward, termination and the rollout statistics.
+    Reward,
+    /// The masked reset.
     Reset,
     /// Observation, its normalization and storage.
     Observation,
@@ -47,10 +52,12 @@ impl Stage for RolloutStage {
 }
 
 impl RolloutStage {
-    pub const ALL: [RolloutStage; 6] = [
+    pub const ALL: [RolloutStage; 8] = [
         RolloutStage::Policy,
+        RolloutStage::Control,
         RolloutStage::Physics,
-        RolloutStage::PostPhysics,
+        RolloutStage::Kinematics,
+        RolloutStage::Reward,
         RolloutStage::Reset,
         RolloutStage::Observation,
         RolloutStage::Bookkeeping,
@@ -59,8 +66,10 @@ impl RolloutStage {
     pub fn name(self) -> &'static str {
         match self {
             RolloutStage::Policy => "policy",
+            RolloutStage::Control => "pd control",
             RolloutStage::Physics => "physics",
-            RolloutStage::PostPhysics => "post-physics",
+            RolloutStage::Kinematics => "body kinematics",
+            RolloutStage::Reward => "reward",
             RolloutStage::Reset => "reset",
             RolloutStage::Observation => "observation",
             RolloutStage::Bookkeeping => "bookkeeping",
@@ -115,6 +124,11 @@ impl<S: Stage> StageRecorder<S> {
             timing.ends.push((stage, event));
         }
         Ok(())
+    }
+
+    /// Whether an event follows every stage (the stages must then stay a chain).
+    pub fn is_timed(&self) -> bool {
+        self.timing.is_some()
     }
 
     /// The events, once the capture is done (None when untimed).

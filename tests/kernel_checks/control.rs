@@ -1,4 +1,5 @@
-//! `pd_control` (kernels_py/env/control.py; docs/env.md, "Actions and PD control").
+//! `pd_targets` once, then `pd_control` twice (two substeps of one control step;
+//! kernels_py/env/control.py; docs/env.md, "Actions and PD control").
 //!
 //! Reference: per motor, `ctrl = clamp(P - kd v, +-limit) + kd v` with the dof's damping kd and
 //! velocity v, and P for ball joint j `kp * qlog(conj(q) * qexp(s a))`, for a hinge
@@ -9,7 +10,7 @@
 //! half far and fast (clamped).
 
 use instantmimic::env::layout::{BALL, JointLayout};
-use instantmimic::kernels::PD_CONTROL;
+use instantmimic::kernels::{PD_CONTROL, PD_TARGETS};
 use instantmimic::motion::table::HUMANOID_LAYOUT;
 
 use super::compare::{Report, wide};
@@ -203,20 +204,19 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, residual: Option<&Clip>, seed
         None => "absolute".to_string(),
     };
     let mut p = Program::new(format!(
-        "pd_control: {n} envs x {j} joints, action_scale {action_scale}, {mode}"
+        "pd_targets, pd_control: {n} envs x {j} joints, action_scale {action_scale}, {mode}"
     ));
     let tracked = residual.unwrap_or(&fx.main);
     let (table, offsets) = (tracked.data(), tracked.offsets());
-    let args = vec![
+    let joint_kind = p.i32("joint_kind", &[j], layout.kind.clone());
+    let joint_qpos = p.i32("joint_qpos", &[j], layout.qpos.clone());
+    let joint_dof = p.i32("joint_dof", &[j], layout.dof.clone());
+    let targets = p.f32("pd_targets", &[n, j, 4], nan_f32(n * j * 4));
+    let target_args = vec![
         p.f32("actions", &[n, NU], actions),
-        p.f32("qpos", &[n, NQ], qpos),
-        p.f32("qvel", &[n, NV], qvel),
-        p.f32("dof_damping", &[NV], damping),
-        p.i32("joint_kind", &[j], layout.kind.clone()),
-        p.i32("joint_qpos", &[j], layout.qpos.clone()),
-        p.i32("joint_dof", &[j], layout.dof.clone()),
-        p.f32("joint_kp", &[j], layout.kp.clone()),
-        p.f32("joint_limit", &[j], layout.limit.clone()),
+        joint_kind.clone(),
+        joint_qpos.clone(),
+        joint_dof.clone(),
         p.f32("joint_scale", &[j], layout.scale.clone()),
         p.f32("joint_center", &[j], layout.center.clone()),
         p.f32("table", &[table.len()], table),
@@ -226,9 +226,24 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, residual: Option<&Clip>, seed
         Arg::Scalar(Scalar::F32(DT)),
         Arg::Scalar(Scalar::I32(i32::from(residual.is_some()))),
         Arg::Scalar(Scalar::F32(action_scale)),
+        targets.clone(),
+    ];
+    p.launch(&PD_TARGETS, n * j, target_args);
+    let control_args = vec![
+        targets,
+        p.f32("qpos", &[n, NQ], qpos),
+        p.f32("qvel", &[n, NV], qvel),
+        p.f32("dof_damping", &[NV], damping),
+        joint_kind,
+        joint_qpos,
+        joint_dof,
+        p.f32("joint_kp", &[j], layout.kp.clone()),
+        p.f32("joint_limit", &[j], layout.limit.clone()),
         p.f32("ctrl", &[n, NU], nan_f32(n * NU)),
     ];
-    p.launch(&PD_CONTROL, n * j, args);
+    // Twice, as before two substeps: the targets hold, the torques are the same.
+    p.launch(&PD_CONTROL, n * j, control_args.clone());
+    p.launch(&PD_CONTROL, n * j, control_args);
     Check::new(p, move |p, out| {
         let mut r = Report::new(&p.name);
         let (expected, counts) = reference(

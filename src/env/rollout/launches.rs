@@ -46,20 +46,17 @@ impl Rollout {
         Ok(())
     }
 
-    pub(super) fn record_pd_control(&self, s: &Stream) -> Result<(), RolloutError> {
+    /// The PD targets of this control step's actions (once per control step: the actions and
+    /// the reference time hold over its substeps).
+    pub(super) fn record_pd_targets(&self, s: &Stream) -> Result<(), RolloutError> {
         let j = &self.joints;
-        self.kernels.pd_control(
+        self.kernels.pd_targets(
             s,
             self.num_envs * j.num_joints,
             &self.state.actions,
-            &self.physics.qpos,
-            &self.physics.qvel,
-            &self.physics.dof_damping,
             &j.kind,
             &j.qpos,
             &j.dof,
-            &j.kp,
-            &j.limit,
             &j.scale,
             &j.center,
             self.table.table(),
@@ -70,6 +67,26 @@ impl Rollout {
             self.control_dt as f32,
             i32::from(self.action_mode == ActionMode::Residual),
             self.action_scale,
+            &self.state.pd_targets,
+        )?;
+        Ok(())
+    }
+
+    /// The torques of one substep, from the targets [`Rollout::record_pd_targets`] left.
+    pub(super) fn record_pd_control(&self, s: &Stream) -> Result<(), RolloutError> {
+        let j = &self.joints;
+        self.kernels.pd_control(
+            s,
+            self.num_envs * j.num_joints,
+            &self.state.pd_targets,
+            &self.physics.qpos,
+            &self.physics.qvel,
+            &self.physics.dof_damping,
+            &j.kind,
+            &j.qpos,
+            &j.dof,
+            &j.kp,
+            &j.limit,
             &self.physics.ctrl,
         )?;
         Ok(())
@@ -135,8 +152,8 @@ impl Rollout {
         Ok(())
     }
 
-    /// The masked reset of step `t`, then the kinematics plan (for every env: the ones not
-    /// reset are unchanged by it).
+    /// The masked reset of step `t`; the body kinematics of the envs reset follow it
+    /// ([`Rollout::record_kinematics`] after a reset).
     pub(super) fn record_reset(&self, s: &Stream, t: i32) -> Result<(), RolloutError> {
         let (p, st) = (&self.physics, &self.state);
         self.kernels.reset_masked(
@@ -178,7 +195,6 @@ impl Rollout {
                 &goal.counters,
             )?;
         }
-        self.record_kinematics(s, true)?;
         Ok(())
     }
 

@@ -41,7 +41,8 @@ use super::task::{GoalTask, Task, goal_observation_config, goal_observation_size
 use super::tracked::TrackedMotion;
 use super::trajectory::Trajectory;
 use crate::kernels::{
-    DeviceArray, DeviceArray2, EnvError, EnvKernels, ObservationParams, ResetParams, Yardstick,
+    DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels, ObservationParams, ResetParams,
+    Yardstick,
 };
 
 /// Why a rollout cannot be built or run.
@@ -76,6 +77,9 @@ pub struct EpisodeState {
     pub failure: DeviceArray<i32>,
     /// The action applied in the last control step `[N, A]` (the observation's previous action).
     pub actions: DeviceArray2<f32>,
+    /// Its PD targets `[N, J, 4]` (control.py `pd_targets`: a rotation per ball joint, an angle
+    /// per hinge), which `pd_control` reads before every substep.
+    pub pd_targets: DeviceArray3<f32>,
     /// The five tracking errors of the last step `[N, 5]` (metrics; the reward's terms: means
     /// per joint, non-root dof or end effector, docs/env.md "Reward").
     pub errors: DeviceArray2<f32>,
@@ -328,6 +332,7 @@ impl Rollout {
             done: DeviceArray::from_slice(gpu, [n], &vec![1; n])?,
             failure: DeviceArray::zeros(gpu, [n])?,
             actions: DeviceArray::zeros(gpu, [n, NU])?,
+            pd_targets: DeviceArray::zeros(gpu, [n, joints.num_joints, 4])?,
             errors: DeviceArray::zeros(gpu, [n, 5])?,
         };
         let storage = RolloutStorage::zeros(gpu, horizon, n, obs_size, NU)?;
@@ -466,6 +471,7 @@ impl Rollout {
             goal.clear_counters()?;
         }
         self.record_reset(stream, 0)?;
+        self.record_kinematics(stream, true)?;
         self.record_observation(stream, &self.storage, 0, self.is_training())?;
         stream.synchronize()?;
         Ok(())
@@ -673,15 +679,17 @@ impl Rollout {
             stages.stage(gpu, s, RolloutStage::Policy, |s| {
                 self.record_policy(s, policy, storage, t)
             })?;
-            stages.stage(gpu, s, RolloutStage::Physics, |s| {
-                for _ in 0..self.substeps {
-                    self.record_pd_control(s)?;
-                    self.sim.record("step", s)?;
-                }
-                Ok::<(), RolloutError>(())
+            stages.stage(gpu, s, RolloutStage::Control, |s| self.record_pd_targets(s))?;
+            for _ in 0..self.substeps {
+                stages.stage(gpu, s, RolloutStage::Control, |s| self.record_pd_control(s))?;
+                stages.stage(gpu, s, RolloutStage::Physics, |s| {
+                    self.sim.record("step", s).map_err(RolloutError::from)
+                })?;
+            }
+            stages.stage(gpu, s, RolloutStage::Kinematics, |s| {
+                self.record_kinematics(s, false)
             })?;
-            stages.stage(gpu, s, RolloutStage::PostPhysics, |s| {
-                self.record_kinematics(s, false)?;
+            stages.stage(gpu, s, RolloutStage::Reward, |s| {
                 self.record_reward(s, storage, t32)?;
                 match &self.purpose {
                     Purpose::Evaluation(scores, yardstick, _) => {
@@ -705,6 +713,9 @@ impl Rollout {
                 Ok::<(), RolloutError>(())
             })?;
             stages.stage(gpu, s, RolloutStage::Reset, |s| self.record_reset(s, t32))?;
+            stages.stage(gpu, s, RolloutStage::Kinematics, |s| {
+                self.record_kinematics(s, true)
+            })?;
             stages.stage(gpu, s, RolloutStage::Observation, |s| {
                 self.record_observation(s, storage, t + 1, self.is_training())
             })?;
