@@ -189,6 +189,71 @@ fn cublas_gemm_with_transposes_views_and_beta_matches_f64() {
     assert!(err.contains("overlaps"), "{err}");
 }
 
+/// A matrix whose rows are padded past its columns (`DeviceArray2::blas_columns`: the update's
+/// minibatch observations, rows of a multiple of 16 bytes) as either operand, plain and
+/// transposed, against f64 on the unpadded values; the padding (NaN here) is never read, and a
+/// row stride under the columns or past the buffer is refused.
+#[test]
+fn cublas_reads_the_columns_of_padded_rows() {
+    let gpu = Gpu::open(0).expect("a GPU");
+    let Some(blas) = open_blas(&gpu) else { return };
+    let mut rng = StdRng::seed_from_u64(5);
+    let (m, k, n, padded) = (41, 362, 19, 364);
+    let x_values = normal(&mut rng, m * k, 0.0, 1.0);
+    let mut stored = vec![f32::NAN; m * padded];
+    for i in 0..m {
+        stored[i * padded..i * padded + k].copy_from_slice(&x_values[i * k..(i + 1) * k]);
+    }
+    let x = DeviceArray2::<f32>::from_slice(&gpu, [m, padded], &stored).unwrap();
+    let w_values = normal(&mut rng, k * n, 0.0, 0.1);
+    let w = DeviceArray2::<f32>::from_slice(&gpu, [k, n], &w_values).unwrap();
+    let y = DeviceArray2::<f32>::zeros(&gpu, [m, n]).unwrap();
+    let stream = gpu.stream();
+    let xm = x.blas_columns(k).unwrap();
+    blas.gemm(
+        stream,
+        xm.plain(),
+        w.blas_matrix().unwrap().plain(),
+        y.blas_matrix().unwrap(),
+        0.0,
+        GemmMath::F32,
+    )
+    .unwrap();
+    let expected = product(&x_values, &w_values, m, k, n, false, false);
+    check(
+        "x (rows padded) @ w",
+        &to_f64(&y.download().unwrap()),
+        &expected,
+        1e-5,
+    );
+    // The weight gradient's form: x^T dz into [k, n].
+    let dz_values = normal(&mut rng, m * n, 0.0, 1.0);
+    let dz = DeviceArray2::<f32>::from_slice(&gpu, [m, n], &dz_values).unwrap();
+    let dw = DeviceArray2::<f32>::zeros(&gpu, [k, n]).unwrap();
+    blas.gemm(
+        stream,
+        xm.transposed(),
+        dz.blas_matrix().unwrap().plain(),
+        dw.blas_matrix().unwrap(),
+        0.0,
+        GemmMath::F32,
+    )
+    .unwrap();
+    let expected = product(&x_values, &dz_values, k, m, n, true, false);
+    check(
+        "x^T (rows padded) @ dz",
+        &to_f64(&dw.download().unwrap()),
+        &expected,
+        1e-5,
+    );
+    let err = x.blas_columns(padded + 1).unwrap_err().to_string();
+    assert!(err.contains("apart"), "{err}");
+    let err = BlasMatrix::with_row_stride(x.memory(), 3, m, k, padded)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("need"), "{err}");
+}
+
 /// The paths to test: Warp tiles always, the cuBLAS ones when libcublas opens.
 fn gemm_paths(gpu: &Gpu) -> Vec<(PolicyGemm, f64)> {
     let mut paths = vec![(PolicyGemm::warp_tiles(), F32_LIMIT)];

@@ -235,7 +235,7 @@ fn loss_gradients_match_finite_differences() {
         to32(&targets.returns),
     );
 
-    let mb = Minibatch::zeros(&gpu, m, 1, a).unwrap();
+    let mb = Minibatch::zeros(&gpu, m, 1, 1, a).unwrap();
     mb.actions.upload(&actions).unwrap();
     mb.log_probs.upload(&old_log_probs).unwrap();
     mb.values.upload(&old_values).unwrap();
@@ -747,7 +747,9 @@ fn one_update_step_has_the_float64_gradients_of_the_ppo_loss() {
 /// update's graph (the critic with its own cuBLAS handle and scratch) computes the float64
 /// gradients of the PPO loss, on both GEMM paths, and a 3 x 4 update replayed twice ends where
 /// the sequential one does (the two differ only in the order of the reductions' atomics),
-/// with the same kernels in the graph.
+/// with the same kernels in the graph: with the gathers run ahead into two minibatch buffers
+/// and the schedule and gradient norms as branches (update/pipeline.rs), with separate and
+/// with joint gradient clipping.
 #[test]
 fn concurrent_networks_give_the_sequential_update() {
     for gemm in [GemmSetting::Warp, GemmSetting::Auto] {
@@ -777,11 +779,11 @@ fn concurrent_networks_give_the_sequential_update() {
             &ref_critic,
         );
 
-        let run = |concurrent: bool| {
+        let run = |concurrent: bool, separate: bool| {
             let (gpu, _kernels, policy, update, rollout, _) = small_setup_with(3, 4, 6, |c| {
                 c.policy.gemm = gemm;
                 c.ppo.concurrent_networks = concurrent;
-                c.ppo.separate_grad_clipping = true;
+                c.ppo.separate_grad_clipping = separate;
             });
             let graph = gpu
                 .stream()
@@ -799,26 +801,32 @@ fn concurrent_networks_give_the_sequential_update() {
             ];
             (nodes, stats, params)
         };
-        let (sequential_nodes, sequential_stats, sequential) = run(false);
-        let (concurrent_nodes, concurrent_stats, concurrent) = run(true);
-        assert_eq!(
-            sequential_nodes.get("kernel"),
-            concurrent_nodes.get("kernel"),
-            "{sequential_nodes:?} against {concurrent_nodes:?}"
-        );
-        println!(
-            "{gemm:?}: sequential {sequential_stats:?}\n      concurrent {concurrent_stats:?}"
-        );
-        for (name, a, b) in [
-            ("actor", &sequential[0], &concurrent[0]),
-            ("critic", &sequential[1], &concurrent[1]),
-        ] {
-            let worst = largest_difference(a, b);
-            println!("{gemm:?}: {name} parameters after 2 updates differ by at most {worst:.3e}");
-            assert!(worst <= 1e-5, "{gemm:?}: {name} parameters {worst:e} apart");
+        // Separate clipping lets each network's norm end its own branch; one norm over both
+        // keeps the chain's order (update/pipeline.rs).
+        for separate in [true, false] {
+            let (sequential_nodes, sequential_stats, sequential) = run(false, separate);
+            let (concurrent_nodes, concurrent_stats, concurrent) = run(true, separate);
+            assert_eq!(
+                sequential_nodes.get("kernel"),
+                concurrent_nodes.get("kernel"),
+                "{sequential_nodes:?} against {concurrent_nodes:?}"
+            );
+            println!(
+                "{gemm:?}, separate clipping {separate}: sequential {sequential_stats:?}\n      concurrent {concurrent_stats:?}"
+            );
+            for (name, a, b) in [
+                ("actor", &sequential[0], &concurrent[0]),
+                ("critic", &sequential[1], &concurrent[1]),
+            ] {
+                let worst = largest_difference(a, b);
+                println!(
+                    "{gemm:?}: {name} parameters after 2 updates differ by at most {worst:.3e}"
+                );
+                assert!(worst <= 1e-5, "{gemm:?}: {name} parameters {worst:e} apart");
+            }
+            assert!(relative(sequential_stats.value_loss, concurrent_stats.value_loss) < 1e-3);
+            assert!(relative(sequential_stats.grad_norm, concurrent_stats.grad_norm) < 1e-3);
         }
-        assert!(relative(sequential_stats.value_loss, concurrent_stats.value_loss) < 1e-3);
-        assert!(relative(sequential_stats.grad_norm, concurrent_stats.grad_norm) < 1e-3);
     }
 }
 

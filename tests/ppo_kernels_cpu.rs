@@ -126,6 +126,14 @@ fn rust_and_kernels_agree_on_shared_constants() {
         python_constant(&stats_py, "ppo_statistics.py", "NUM_STATS"),
         PpoStatistics::LEN
     );
+    assert_eq!(
+        python_constant(
+            &kernel_source("gemm_epilogue.py"),
+            "gemm_epilogue.py",
+            "GRADIENT_ROWS"
+        ),
+        reduce::GRADIENT_ROWS
+    );
     let minibatch_py = kernel_source("minibatch.py");
     assert_eq!(
         python_constant(&minibatch_py, "minibatch.py", "GATHER_COLUMNS"),

@@ -18,8 +18,11 @@ modules):
 The weight gradient is cuBLAS's `x^T dz`.
 
 `bias_elu` and `bias_add` run one thread per element of the `[M, N]` matrix `y`: launch `M * N`
-threads (element `tid`, row-major). `elu_input_gradient` runs one thread per column and chunk
-of rows, as `column_sums`. Memory-bound: each element is read and written once
+threads (element `tid`, row-major); four elements a thread were slower on an H100 (2026-11-27).
+`elu_input_gradient` runs one thread per column and chunk of rows, as `column_sums`, and loads `GRADIENT_ROWS` rows of `g` and `y` before it stores any:
+a store to `y` followed by the next row's load is a chain the compiler may not reorder (it
+cannot prove the rows apart), and row by row that chain took 15 us per launch on an H100
+(Nsight Compute, 2026-11-27). Memory-bound: each element is read and written once
 (`elu_input_gradient` also reads `g`).
 """
 
@@ -29,6 +32,11 @@ from env.mlp_backward import elu_backward
 from env.policy import elu
 
 wp.set_module_options({"enable_backward": False})
+
+# Rows of g and y that elu_input_gradient holds in registers at once (src/ppo/reduce.rs
+# `GRADIENT_ROWS`); Warp unrolls the constant loops over them.
+GRADIENT_ROWS = wp.constant(16)
+gradient_rows = wp.types.vector(length=GRADIENT_ROWS, dtype=wp.float32)
 
 
 @wp.kernel
@@ -69,10 +77,18 @@ def elu_input_gradient(
     begin = k * rows_per_thread
     end = wp.min(begin + rows_per_thread, y.shape[0])
     acc = float(0.0)
-    for i in range(begin, end):
-        d = elu_backward(g[i, j], y[i, j])
-        y[i, j] = d
-        acc += d
+    for base in range(begin, end, GRADIENT_ROWS):
+        gs = gradient_rows()
+        ys = gradient_rows()
+        for r in range(GRADIENT_ROWS):
+            if base + r < end:
+                gs[r] = g[base + r, j]
+                ys[r] = y[base + r, j]
+        for r in range(GRADIENT_ROWS):
+            if base + r < end:
+                d = elu_backward(gs[r], ys[r])
+                y[base + r, j] = d
+                acc += d
     if begin < end:
         wp.atomic_add(db, j, acc)
 

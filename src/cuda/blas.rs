@@ -42,15 +42,17 @@ pub enum GemmMath {
     Tf32,
 }
 
-/// A row-major `rows x cols` f32 matrix stored contiguously in a device allocation from value
-/// `offset` on (e.g. one layer's weights in a flat parameter buffer). Built only through
-/// [`BlasMatrix::new`], which checks that it lies inside the allocation.
+/// A row-major `rows x cols` f32 matrix in a device allocation from value `offset` on (e.g. one
+/// layer's weights in a flat parameter buffer), its rows `row_stride >= cols` values apart
+/// (`cols` when stored contiguously). Built only through [`BlasMatrix::new`] and
+/// [`BlasMatrix::with_row_stride`], which check that it lies inside the allocation.
 #[derive(Clone, Copy, Debug)]
 pub struct BlasMatrix<'a> {
     memory: &'a Arc<DeviceMemory>,
     offset: usize,
     rows: usize,
     cols: usize,
+    row_stride: usize,
 }
 
 impl<'a> BlasMatrix<'a> {
@@ -62,6 +64,20 @@ impl<'a> BlasMatrix<'a> {
         rows: usize,
         cols: usize,
     ) -> Result<BlasMatrix<'a>, CudaError> {
+        BlasMatrix::with_row_stride(memory, offset, rows, cols, cols)
+    }
+
+    /// The matrix of `rows x cols` values at value `offset` of `memory` whose rows start
+    /// `row_stride` values apart (the values between a row's end and the next row's start are
+    /// not part of it: padding that aligns the rows); an error unless `row_stride >= cols`, it
+    /// fits inside the allocation and neither dimension is 0.
+    pub fn with_row_stride(
+        memory: &'a Arc<DeviceMemory>,
+        offset: usize,
+        rows: usize,
+        cols: usize,
+        row_stride: usize,
+    ) -> Result<BlasMatrix<'a>, CudaError> {
         let invalid = |reason: String| CudaError::InvalidArgument {
             operation: "BlasMatrix::new",
             reason,
@@ -69,14 +85,20 @@ impl<'a> BlasMatrix<'a> {
         if rows == 0 || cols == 0 {
             return Err(invalid(format!("a {rows} x {cols} matrix is empty")));
         }
-        let end_bytes = rows
-            .checked_mul(cols)
+        if row_stride < cols {
+            return Err(invalid(format!(
+                "rows of {cols} values cannot start {row_stride} values apart"
+            )));
+        }
+        let end_bytes = (rows - 1)
+            .checked_mul(row_stride)
+            .and_then(|n| n.checked_add(cols))
             .and_then(|n| n.checked_add(offset))
             .and_then(|end| end.checked_mul(4))
             .ok_or_else(|| invalid(format!("{rows} x {cols} values at {offset} overflow")))?;
         if end_bytes > memory.len() || memory.device_ptr() == 0 {
             return Err(invalid(format!(
-                "{rows} x {cols} f32 values at value {offset} need {end_bytes} bytes, the buffer has {}",
+                "{rows} x {cols} f32 values {row_stride} apart at value {offset} need {end_bytes} bytes, the buffer has {}",
                 memory.len()
             )));
         }
@@ -85,6 +107,7 @@ impl<'a> BlasMatrix<'a> {
             offset,
             rows,
             cols,
+            row_stride,
         })
     }
 
@@ -119,7 +142,10 @@ impl<'a> BlasMatrix<'a> {
     /// Byte range `[start, end)` in the address space.
     fn byte_range(&self) -> (u64, u64) {
         let start = self.device_ptr();
-        (start, start + (self.rows * self.cols * 4) as u64)
+        (
+            start,
+            start + (((self.rows - 1) * self.row_stride + self.cols) * 4) as u64,
+        )
     }
 
     /// `(rows, cols)` of the operand `op(self)`.
@@ -271,7 +297,11 @@ impl Blas {
             i32::try_from(v).map_err(|_| invalid(format!("dimension {v} does not fit an int")))
         };
         let (mi, ni, ki) = (dim(m)?, dim(n)?, dim(k)?);
-        let (lda, ldb, ldc) = (dim(a.matrix.cols)?, dim(b.matrix.cols)?, dim(c.cols)?);
+        let (lda, ldb, ldc) = (
+            dim(a.matrix.row_stride)?,
+            dim(b.matrix.row_stride)?,
+            dim(c.row_stride)?,
+        );
         let compute = match math {
             GemmMath::F32 => sys::cublasComputeType_t::CUBLAS_COMPUTE_32F,
             GemmMath::Tf32 => sys::cublasComputeType_t::CUBLAS_COMPUTE_32F_FAST_TF32,
@@ -300,8 +330,8 @@ impl Blas {
         .map_err(blas_error("cublasSetWorkspace"))?;
         // Row-major X [r, c] is column-major X^T with leading dimension c, so cuBLAS computes
         // c^T = op(b)^T op(a)^T: b first, a second, each with its own transpose flag.
-        // SAFETY: a, b and c lie inside live allocations (BlasMatrix::new checked each range)
-        // with the dimensions and leading dimensions given here (checked to chain above), c
+        // SAFETY: a, b and c lie inside live allocations (BlasMatrix::with_row_stride checked
+        // each range, row stride included) with the dimensions and leading dimensions given here (checked to chain above), c
         // does not overlap a or b, every operand is f32 storage; alpha and beta are host
         // scalars read during the call (host pointer mode, set in `open`).
         unsafe {

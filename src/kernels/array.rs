@@ -323,4 +323,17 @@ impl DeviceArray<f32, 2> {
         let [rows, cols] = self.shape;
         Ok(BlasMatrix::new(&self.memory, self.offset, rows, cols)?)
     }
+
+    /// The first `cols` columns of this matrix as cuBLAS reads them: the rest of each row is
+    /// padding that keeps the rows aligned. An error if the matrix has fewer columns.
+    pub fn blas_columns(&self, cols: usize) -> Result<BlasMatrix<'_>, EnvError> {
+        let [rows, stride] = self.shape;
+        Ok(BlasMatrix::with_row_stride(
+            &self.memory,
+            self.offset,
+            rows,
+            cols,
+            stride,
+        )?)
+    }
 }

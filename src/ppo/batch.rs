@@ -238,7 +238,10 @@ pub fn record_shuffle(
 
 /// One minibatch, gathered into contiguous rows `[M, ...]`.
 pub struct Minibatch {
+    /// `[M, D']`: the `D` observations of each row, then `D' - D` zeros that align the rows for
+    /// cuBLAS (`gemm::padded_input_width`).
     pub observations: DeviceArray2<f32>,
+    observation_size: usize,
     pub actions: DeviceArray2<f32>,
     /// The rollout's means of the actions.
     pub means: DeviceArray2<f32>,
@@ -250,14 +253,23 @@ pub struct Minibatch {
 }
 
 impl Minibatch {
+    /// A minibatch of `rows` samples of `observations` values, each row's stored in
+    /// `observation_width >= observations` values (the rest stay 0).
     pub fn zeros(
         gpu: &Gpu,
         rows: usize,
         observations: usize,
+        observation_width: usize,
         actions: usize,
     ) -> Result<Minibatch, PpoError> {
+        if observation_width < observations {
+            return Err(PpoError::Shape(format!(
+                "minibatch rows of {observation_width} values for {observations} observations"
+            )));
+        }
         Ok(Minibatch {
-            observations: DeviceArray::zeros(gpu, [rows, observations])?,
+            observations: DeviceArray::zeros(gpu, [rows, observation_width])?,
+            observation_size: observations,
             actions: DeviceArray::zeros(gpu, [rows, actions])?,
             means: DeviceArray::zeros(gpu, [rows, actions])?,
             log_probs: DeviceArray::zeros(gpu, [rows])?,
@@ -286,7 +298,7 @@ impl Minibatch {
         permutation: &DeviceArray<i32>,
         start: usize,
     ) -> Result<(), PpoError> {
-        let [m, d] = self.observations.shape();
+        let (m, d) = (self.rows(), self.observation_size);
         let a = self.actions.shape()[1];
         let [t, n] = advantages.advantages.shape();
         batch.check(t, n, d, a)?;

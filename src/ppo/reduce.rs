@@ -26,11 +26,22 @@ pub struct ColumnChunks {
     pub threads: usize,
 }
 
+/// Rows of `g` and `y` that `elu_input_gradient` loads before it stores (gemm_epilogue.py
+/// `GRADIENT_ROWS`): one such batch per thread.
+pub const GRADIENT_ROWS: usize = 16;
+
 impl ColumnChunks {
+    /// `column_sums`' chunks: about [`COLUMN_SUM_THREADS`] threads.
     pub fn of(rows: usize, cols: usize) -> ColumnChunks {
         let rows_per_thread = (rows * cols)
             .div_ceil(COLUMN_SUM_THREADS)
             .clamp(MIN_ROWS_PER_THREAD, rows.max(MIN_ROWS_PER_THREAD));
+        ColumnChunks::with_rows(rows, cols, rows_per_thread)
+    }
+
+    /// Chunks of `rows_per_thread` rows (at least 1).
+    pub fn with_rows(rows: usize, cols: usize, rows_per_thread: usize) -> ColumnChunks {
+        let rows_per_thread = rows_per_thread.max(1);
         ColumnChunks {
             rows_per_thread,
             threads: cols * rows.div_ceil(rows_per_thread),
@@ -132,6 +143,9 @@ mod tests {
             assert!(chunks * per_thread >= rows && (chunks - 1) * per_thread < rows);
             assert_eq!(threads, cols * chunks);
             assert!(threads <= rows * cols, "the launch contract: dim <= len(x)");
+            let gradient = ColumnChunks::with_rows(rows, cols, GRADIENT_ROWS);
+            assert_eq!(gradient.threads, cols * rows.div_ceil(GRADIENT_ROWS));
+            assert!(gradient.threads <= rows * cols, "{rows} x {cols}");
             if rows * cols >= COLUMN_SUM_THREADS * MIN_ROWS_PER_THREAD {
                 // Big enough to fill the target, and not much over it.
                 assert!(

@@ -56,12 +56,15 @@ use super::batch::{
 };
 use super::config::{KlMeasure, PpoConfig};
 use super::flops::UpdateFlops;
+use super::gemm::padded_input_width;
 use super::loss::{LOSS_TERMS, LossGradients, PpoStatistics};
 use super::policy::{GaussianPolicy, LayerShape, Mlp, PolicyError};
 use super::reduce::{
     record_clear, record_column_sums, record_sum_and_squares, record_sum_of_squares,
 };
 use super::update_stages::UpdateStage;
+
+mod pipeline;
 
 /// The update's stage recorder: NVTX ranges, and events when timed.
 type Stages = StageRecorder<UpdateStage>;
@@ -147,6 +150,9 @@ pub struct PpoUpdate {
     separate_grad_clipping: bool,
     permutation: DeviceArray<i32>,
     minibatch: Minibatch,
+    /// With `ppo.concurrent_networks`, the second minibatch buffer: the next minibatch is
+    /// gathered into it while the current one trains (update/pipeline.rs).
+    next_minibatch: Option<Minibatch>,
     loss: LossGradients,
     /// Per minibatch step: column sums of the loss terms `[S, LOSS_TERMS + A]` and the squared
     /// gradient norms `[2 S]` (actor, critic; or global, 0); the advantages' sum and sum of
@@ -289,7 +295,18 @@ impl PpoUpdate {
             value_normalization: ValueNormalization::new(gpu, q.value_normalization)?,
             separate_grad_clipping: q.separate_grad_clipping,
             permutation: DeviceArray::zeros(gpu, [samples])?,
-            minibatch: Minibatch::zeros(gpu, rows, d, a)?,
+            minibatch: Minibatch::zeros(gpu, rows, d, padded_input_width(gemm, d), a)?,
+            next_minibatch: if concurrent {
+                Some(Minibatch::zeros(
+                    gpu,
+                    rows,
+                    d,
+                    padded_input_width(gemm, d),
+                    a,
+                )?)
+            } else {
+                None
+            },
             loss: LossGradients::zeros(gpu, rows, a)?,
             loss_sums: DeviceArray::zeros(gpu, [steps, LOSS_TERMS + a])?,
             grad_norm_sq: DeviceArray::zeros(gpu, [2 * steps])?,
@@ -379,8 +396,38 @@ impl PpoUpdate {
         stages.stage(gpu, stream, UpdateStage::Advantages, |s| {
             self.record_advantages(s, batch, own_log_std)
         })?;
-        let rows = self.minibatch.rows();
         let k = &*self.kernels;
+        if self.pipelines(stream, stages)? {
+            self.record_pipelined_epochs(stream, batch)?;
+        } else {
+            self.record_epochs(stream, batch, stages)?;
+        }
+        stages.stage(gpu, stream, UpdateStage::Statistics, |s| {
+            k.ppo_update_statistics(
+                s,
+                1,
+                &self.loss_sums,
+                &self.grad_norm_sq,
+                &self.advantage_moments,
+                (t * n) as i32,
+                &self.learning_rate,
+                &self.update_counter,
+                &self.statistics,
+            )
+        })?;
+        Ok(())
+    }
+
+    /// Steps 2 and 3 of the module docs as a chain: every epoch's shuffle, and per minibatch
+    /// the gather and the step.
+    fn record_epochs(
+        &self,
+        stream: &Stream,
+        batch: &PpoBatch<'_>,
+        stages: &mut Stages,
+    ) -> Result<(), PpoError> {
+        let (gpu, k) = (&self.gpu, &*self.kernels);
+        let rows = self.minibatch.rows();
         for epoch in 0..self.epochs {
             for mb in 0..self.minibatches {
                 stages.stage(gpu, stream, UpdateStage::Gather, |s| {
@@ -402,19 +449,6 @@ impl PpoUpdate {
                 self.record_minibatch_step(stream, epoch * self.minibatches + mb, stages)?;
             }
         }
-        stages.stage(gpu, stream, UpdateStage::Statistics, |s| {
-            k.ppo_update_statistics(
-                s,
-                1,
-                &self.loss_sums,
-                &self.grad_norm_sq,
-                &self.advantage_moments,
-                (t * n) as i32,
-                &self.learning_rate,
-                &self.update_counter,
-                &self.statistics,
-            )
-        })?;
         Ok(())
     }
 

@@ -12,7 +12,7 @@
 //! of anything, a single element, and the actor's widest layer.
 
 use instantmimic::kernels::{BIAS_ADD, BIAS_ELU, ELU_INPUT_GRADIENT};
-use instantmimic::ppo::reduce::ColumnChunks;
+use instantmimic::ppo::reduce::{ColumnChunks, GRADIENT_ROWS};
 
 use super::compare::{Report, wide};
 use super::policy::{elu, linear_reference};
@@ -58,7 +58,8 @@ fn forward_case(m: usize, k: usize, n: usize, elu_layer: bool, seed: u64) -> Che
 
 /// The input gradient through ELU: `g = dz @ w^T` as the GEMM writes it, `y` the layer below's
 /// ELU output.
-fn input_gradient_case(m: usize, k: usize, n: usize, seed: u64) -> Check {
+/// `per_thread` rows a thread: the product's [`GRADIENT_ROWS`], or any other.
+fn input_gradient_case(m: usize, k: usize, n: usize, per_thread: usize, seed: u64) -> Check {
     let mut rng = Sampler::new(seed);
     let dz = normals(&mut rng, m * n, 1e-2);
     let w = normals(&mut rng, k * n, (2.0 / k as f64).sqrt());
@@ -75,8 +76,7 @@ fn input_gradient_case(m: usize, k: usize, n: usize, seed: u64) -> Check {
         .collect();
     // Earlier values in the bias gradient: the kernel adds to them.
     let db0 = normals(&mut rng, k, 1.0);
-    let chunks = ColumnChunks::of(m, k);
-    let per_thread = chunks.rows_per_thread;
+    let chunks = ColumnChunks::with_rows(m, k, per_thread);
     let mut p = Program::new(format!(
         "elu_input_gradient: {m} x {n} -> {k}, {per_thread} rows a thread"
     ));
@@ -121,9 +121,10 @@ pub fn checks(_fx: &Fixture) -> Vec<Check> {
         forward_case(100, 37, 70, false, 94),
         forward_case(65, 100, 28, false, 95),
         forward_case(7, 100, 1, false, 96),
-        input_gradient_case(100, 70, 45, 97),
-        input_gradient_case(1, 1, 1, 98),
-        input_gradient_case(64, 400, 200, 99),
-        input_gradient_case(4096, 200, 400, 100),
+        input_gradient_case(100, 70, 45, GRADIENT_ROWS, 97),
+        input_gradient_case(1, 1, 1, GRADIENT_ROWS, 98),
+        input_gradient_case(64, 400, 200, 7, 99),
+        input_gradient_case(300, 33, 10, 37, 101),
+        input_gradient_case(4096, 200, 400, GRADIENT_ROWS, 100),
     ]
 }
