@@ -24,7 +24,7 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 45] = [
+const EXPECTED_KERNELS: [(&str, &str); 46] = [
     ("control", "pd_control"),
     ("control", "pd_targets"),
     ("evaluate", "evaluation_accumulate"),
@@ -36,7 +36,8 @@ const EXPECTED_KERNELS: [(&str, &str); 45] = [
     ("goal", "goal_reward_termination"),
     ("goal", "goal_reset"),
     ("goal", "goal_observe"),
-    ("kinematics", "body_kinematics"),
+    ("kinematics", "body_frames"),
+    ("kinematics", "body_velocities"),
     ("latent", "latent_split_observation"),
     ("latent", "latent_sample"),
     ("latent", "latent_reconstruction_gradient"),

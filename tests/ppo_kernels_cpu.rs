@@ -139,7 +139,16 @@ fn rust_and_kernels_agree_on_shared_constants() {
         python_constant(&minibatch_py, "minibatch.py", "GATHER_COLUMNS"),
         batch::GATHER_COLUMNS
     );
-    // Not a PPO kernel, but the same kind of shared constant: the launch of `observe`.
+    // Not PPO kernels, but the same kind of shared constant: the fused kinematics' longest
+    // chain, and the launch of `observe`.
+    assert_eq!(
+        python_constant(
+            &kernel_source("kinematics.py"),
+            "kinematics.py",
+            "MAX_DEPTH"
+        ),
+        instantmimic::env::body_model::MAX_CHAIN_DEPTH
+    );
     let observe_py = kernel_source("observe.py");
     for (name, rust) in [
         ("NUM_BODIES", layout::OBSERVED_BODIES),

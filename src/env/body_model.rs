@@ -1,4 +1,4 @@
-//! The character's bodies and joints as `body_kinematics` reads them (kernels_py/env/
+//! The character's bodies and joints as the fused kinematics (`body_frames`, `body_velocities`) reads them (kernels_py/env/
 //! kinematics.py: the fused body kinematics, docs/env.md): three tables by MuJoCo body id, the
 //! world (id 0) included, built from the character file.
 
@@ -14,6 +14,9 @@ pub const NO_JOINT: i32 = -1;
 pub const FREE: i32 = 0;
 pub const BALL: i32 = 1;
 pub const HINGE: i32 = 2;
+/// The longest chain from the world's child down to a body that the kernels compose
+/// (kinematics.py `MAX_DEPTH`).
+pub const MAX_CHAIN_DEPTH: usize = 15;
 /// `body_index` columns: parent id, joint kind, qpos address, dof address.
 pub const BODY_INDEX_COLUMNS: usize = 4;
 /// `body_frame` columns: position (3) and orientation (w, x, y, z) in the parent's frame, center
@@ -42,6 +45,17 @@ fn int(value: usize, what: &str) -> Result<i32, EnvError> {
 }
 
 impl BodyModel {
+    /// Bodies from `id` up to the world's child, `id` included (0 for the world).
+    fn chain_depth(&self, id: usize) -> usize {
+        let mut depth = 0;
+        let mut body = id;
+        while body > 0 && depth <= self.bodies {
+            depth += 1;
+            body = self.body_index[body * BODY_INDEX_COLUMNS] as usize;
+        }
+        depth
+    }
+
     /// The tables of `character`. Each body has at most one joint (free, ball or hinge: the
     /// character loader refuses the others).
     pub fn for_character(character: &Character) -> Result<BodyModel, EnvError> {
@@ -110,11 +124,20 @@ impl BodyModel {
             ];
             model.joint_frame.extend(joint_row.map(|v| v as f32));
         }
+        for (id, body) in bodies.iter().enumerate().skip(1) {
+            let depth = model.chain_depth(id);
+            if depth > MAX_CHAIN_DEPTH {
+                return Err(setup_error(format!(
+                    "body {id} ({}) lies {depth} bodies below the world; the fused kinematics composes chains of at most {MAX_CHAIN_DEPTH} (use env.body_kinematics = \"plan\")",
+                    body.name
+                )));
+            }
+        }
         Ok(model)
     }
 }
 
-/// A [`BodyModel`] on the GPU, and the launch of `body_kinematics` on a rollout's physics.
+/// A [`BodyModel`] on the GPU, and the launches of the fused kinematics on a rollout's physics.
 pub struct DeviceBodyModel {
     body_index: DeviceArray2<i32>,
     body_frame: DeviceArray2<f32>,
@@ -137,8 +160,8 @@ impl DeviceBodyModel {
         })
     }
 
-    /// Queues `body_kinematics` over `envs` envs of `physics`: every env, or with `done` only
-    /// those whose flag is set (after a masked reset).
+    /// Queues `body_frames` and `body_velocities` over `envs` envs of `physics`: every env, or
+    /// with `done` only those whose flag is set (after a masked reset).
     pub fn record(
         &self,
         kernels: &EnvKernels,
@@ -148,10 +171,22 @@ impl DeviceBodyModel {
         done: &DeviceArray<i32>,
         only_done: bool,
     ) -> Result<(), EnvError> {
-        kernels.body_kinematics(
+        let threads = envs * self.body_index.shape()[0].saturating_sub(1);
+        kernels.body_frames(
             stream,
-            envs,
+            threads,
             &physics.qpos,
+            done,
+            i32::from(only_done),
+            &self.body_index,
+            &self.body_frame,
+            &self.joint_frame,
+            &physics.xpos,
+            &physics.xquat,
+        )?;
+        kernels.body_velocities(
+            stream,
+            threads,
             &physics.qvel,
             done,
             i32::from(only_done),
@@ -195,6 +230,11 @@ mod tests {
             );
             kinds[(kind + 1) as usize] += 1;
         }
+        let deepest = (1..m.bodies).map(|b| m.chain_depth(b)).max();
+        assert!(
+            deepest.is_some_and(|d| (2..=MAX_CHAIN_DEPTH).contains(&d)),
+            "{deepest:?}"
+        );
         let count = |kind: i32| kinds[(kind + 1) as usize];
         assert!(count(BALL) > 0 && count(HINGE) > 0, "{kinds:?}");
         let mass: f32 = (0..m.bodies)

@@ -68,8 +68,8 @@ pub enum BodyKinematics {
     /// after the physics substeps and again after the masked reset.
     #[default]
     Plan,
-    /// `body_kinematics`: `xpos`, `xquat`, the center of mass and `cvel` in one launch, after a
-    /// reset only for the envs that were reset.
+    /// `body_frames` and `body_velocities`: `xpos`, `xquat`, the center of mass and `cvel` in two
+    /// launches, after a reset only for the envs that were reset.
     Fused,
 }
 

@@ -1,4 +1,4 @@
-//! `body_kinematics` (kernels_py/env/kinematics.py, the fused body kinematics) against the f64
+//! `body_frames` then `body_velocities` (kernels_py/env/kinematics.py, the fused body kinematics) against the f64
 //! kinematics of `instantmimic::motion` (`forward_kinematics`, `body_velocities`: MuJoCo's, as
 //! `tests/fixtures/kinematics_golden.json` checks), from the kernel's f32 inputs.
 //!
@@ -10,7 +10,7 @@
 
 use instantmimic::env::BodyModel;
 use instantmimic::env::body_model::{BODY_FRAME_COLUMNS, BODY_INDEX_COLUMNS, JOINT_FRAME_COLUMNS};
-use instantmimic::kernels::BODY_KINEMATICS;
+use instantmimic::kernels::{BODY_FRAMES, BODY_VELOCITIES};
 use instantmimic::motion::character::JointType;
 use instantmimic::motion::velocity::body_velocities;
 use instantmimic::motion::{Character, forward_kinematics};
@@ -91,40 +91,58 @@ fn case(fx: &Fixture, n: usize, only_done: bool, seed: u64) -> Check {
         subtree_com[row(3, 0)..row(3, 2)].fill(f32::NAN);
     }
     let mut p = Program::new(format!(
-        "body_kinematics: {n} envs, {}",
+        "body_frames, body_velocities: {n} envs, {}",
         if only_done {
             "only those done"
         } else {
             "every env"
         }
     ));
-    let args = vec![
+    let done_arg = p.i32("done", &[n], done.clone());
+    let only_done_arg = Arg::Scalar(Scalar::I32(i32::from(only_done)));
+    let body_index = p.i32(
+        "body_index",
+        &[nbody, BODY_INDEX_COLUMNS],
+        model.body_index.clone(),
+    );
+    let body_frame = p.f32(
+        "body_frame",
+        &[nbody, BODY_FRAME_COLUMNS],
+        model.body_frame.clone(),
+    );
+    let joint_frame = p.f32(
+        "joint_frame",
+        &[nbody, JOINT_FRAME_COLUMNS],
+        model.joint_frame.clone(),
+    );
+    let xpos_arg = p.f32("xpos", &[n, nbody, 3], xpos.clone());
+    let xquat_arg = p.f32("xquat", &[n, nbody, 4], xquat.clone());
+    let threads = n * (nbody - 1);
+    let frames = vec![
         p.f32("qpos", &[n, nq], qpos.clone()),
+        done_arg.clone(),
+        only_done_arg.clone(),
+        body_index.clone(),
+        body_frame.clone(),
+        joint_frame.clone(),
+        xpos_arg.clone(),
+        xquat_arg.clone(),
+    ];
+    p.launch(&BODY_FRAMES, threads, frames);
+    let velocities = vec![
         p.f32("qvel", &[n, nv], qvel.clone()),
-        p.i32("done", &[n], done.clone()),
-        Arg::Scalar(Scalar::I32(i32::from(only_done))),
-        p.i32(
-            "body_index",
-            &[nbody, BODY_INDEX_COLUMNS],
-            model.body_index.clone(),
-        ),
-        p.f32(
-            "body_frame",
-            &[nbody, BODY_FRAME_COLUMNS],
-            model.body_frame.clone(),
-        ),
-        p.f32(
-            "joint_frame",
-            &[nbody, JOINT_FRAME_COLUMNS],
-            model.joint_frame.clone(),
-        ),
+        done_arg,
+        only_done_arg,
+        body_index,
+        body_frame,
+        joint_frame,
         Arg::Scalar(Scalar::F32(model.total_mass)),
-        p.f32("xpos", &[n, nbody, 3], xpos.clone()),
-        p.f32("xquat", &[n, nbody, 4], xquat.clone()),
+        xpos_arg,
+        xquat_arg,
         p.f32("subtree_com", &[n, nbody, 3], subtree_com.clone()),
         p.f32("cvel", &[n, nbody, 6], cvel.clone()),
     ];
-    p.launch(&BODY_KINEMATICS, n, args);
+    p.launch(&BODY_VELOCITIES, threads, velocities);
 
     Check::new(p, move |p, out| {
         let mut r = Report::new(&p.name);

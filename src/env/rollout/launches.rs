@@ -199,8 +199,9 @@ impl Rollout {
     }
 
     /// The body kinematics the reward and observation read, of the current state: the
-    /// kinematics plan over every world, or with `env.body_kinematics = "fused"` one
-    /// `body_kinematics` launch, after a reset (`after_reset`) only for the envs reset.
+    /// kinematics plan over every world, or with `env.body_kinematics = "fused"` the
+    /// `body_frames` and `body_velocities` launches, after a reset (`after_reset`) only for
+    /// the envs reset.
     pub(super) fn record_kinematics(
         &self,
         s: &Stream,

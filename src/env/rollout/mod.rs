@@ -97,7 +97,7 @@ pub struct Rollout {
     table: Arc<DeviceReferenceTable>,
     /// The character's joints as the kernels read them, on the host and the device.
     layout: JointLayout,
-    /// The character's bodies as `body_kinematics` reads them, and on the device with
+    /// The character's bodies as `body_frames` and `body_velocities` read them, and on the device with
     /// `env.body_kinematics = "fused"` (none: the kinematics plan).
     bodies: BodyModel,
     body_kinematics: Option<DeviceBodyModel>,
