@@ -51,9 +51,7 @@ use super::adam::{
     AdamMoments, LEARNING_RATE_MAX, LEARNING_RATE_MIN, adam_params, record_schedule,
 };
 use super::backward::{MlpGradients, input_gradient_scratch_len, record_mlp_backward};
-use super::batch::{
-    Advantages, Minibatch, PpoBatch, ValueNormalization, minibatch_rows, record_shuffle,
-};
+use super::batch::{Advantages, Minibatch, PpoBatch, ValueNormalization, minibatch_rows};
 use super::config::{KlMeasure, PpoConfig};
 use super::flops::UpdateFlops;
 use super::gemm::padded_input_width;
@@ -426,28 +424,11 @@ impl PpoUpdate {
         batch: &PpoBatch<'_>,
         stages: &mut Stages,
     ) -> Result<(), PpoError> {
-        let (gpu, k) = (&self.gpu, &*self.kernels);
-        let rows = self.minibatch.rows();
-        for epoch in 0..self.epochs {
-            for mb in 0..self.minibatches {
-                stages.stage(gpu, stream, UpdateStage::Gather, |s| {
-                    if mb == 0 {
-                        let counter = &self.update_counter;
-                        record_shuffle(k, s, counter, self.seed, epoch, &self.permutation)?;
-                    }
-                    self.minibatch.record_gather(
-                        k,
-                        s,
-                        batch,
-                        &self.advantages,
-                        &self.advantage_moments,
-                        &self.value_normalization,
-                        &self.permutation,
-                        mb * rows,
-                    )
-                })?;
-                self.record_minibatch_step(stream, epoch * self.minibatches + mb, stages)?;
-            }
+        for slot in 0..self.epochs * self.minibatches {
+            stages.stage(&self.gpu, stream, UpdateStage::Gather, |s| {
+                self.record_gather_of(s, batch, slot)
+            })?;
+            self.record_minibatch_step(stream, slot, stages)?;
         }
         Ok(())
     }
@@ -520,7 +501,8 @@ impl PpoUpdate {
         stages: &mut Stages,
     ) -> Result<(), PpoError> {
         let (k, gpu) = (&*self.kernels, &self.gpu);
-        let obs = &self.minibatch.observations;
+        let minibatch = self.minibatch_of(slot);
+        let obs = &minibatch.observations;
         let branching = self.concurrent_networks && stream.is_capturing()?;
         stages.stage(gpu, stream, UpdateStage::Forward, |stream| {
             record_branches(
@@ -544,7 +526,7 @@ impl PpoUpdate {
             self.loss.record(
                 k,
                 s,
-                &self.minibatch,
+                minibatch,
                 self.actor.output(),
                 &self.log_std,
                 &self.old_log_std,
@@ -554,7 +536,7 @@ impl PpoUpdate {
             record_column_sums(k, s, &self.loss.terms, &sums)
         })?;
         stages.stage(gpu, stream, UpdateStage::Backward, |stream| {
-            self.record_backward(stream, branching, &sums)
+            self.record_backward(stream, branching, &minibatch.observations, &sums)
         })?;
         // Slot 2s holds the actor's squared norm, 2s + 1 the critic's; clipped together, both
         // add into 2s (and 2s + 1 stays 0). One after the other in either mode: clipped
@@ -628,10 +610,10 @@ impl PpoUpdate {
         &self,
         stream: &Stream,
         branching: bool,
+        obs: &DeviceArray2<f32>,
         sums: &DeviceArray<f32>,
     ) -> Result<(), PpoError> {
         let k = &*self.kernels;
-        let obs = &self.minibatch.observations;
         let blocks = self.target_blocks;
         let critic_scratch = self
             .critic_input_gradient_scratch

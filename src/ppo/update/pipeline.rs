@@ -35,8 +35,9 @@ impl PpoUpdate {
             && stream.is_capturing()?)
     }
 
-    /// The minibatch buffer of step `slot`: the two alternate when the gathers run ahead.
-    fn minibatch_of(&self, slot: usize) -> &Minibatch {
+    /// The minibatch buffer of step `slot`: with a second buffer the two alternate (in the
+    /// chain too, so that both paths gather and read the same buffers).
+    pub(super) fn minibatch_of(&self, slot: usize) -> &Minibatch {
         match &self.next_minibatch {
             Some(next) if slot % 2 == 1 => next,
             _ => &self.minibatch,
@@ -44,7 +45,7 @@ impl PpoUpdate {
     }
 
     /// Queues the shuffle (first minibatch of an epoch) and the gather of step `slot`.
-    fn record_gather_of(
+    pub(super) fn record_gather_of(
         &self,
         stream: &Stream,
         batch: &PpoBatch<'_>,
