@@ -523,16 +523,7 @@ impl PpoUpdate {
         let width = LOSS_TERMS + self.action_size;
         let sums = self.loss_sums.view(slot * width, [width])?;
         stages.stage(gpu, stream, UpdateStage::Loss, |s| {
-            self.loss.record(
-                k,
-                s,
-                minibatch,
-                self.actor.output(),
-                &self.log_std,
-                &self.old_log_std,
-                self.critic.output(),
-                &self.loss_params,
-            )?;
+            self.record_loss(s, minibatch)?;
             record_column_sums(k, s, &self.loss.terms, &sums)
         })?;
         stages.stage(gpu, stream, UpdateStage::Backward, |stream| {
@@ -602,6 +593,21 @@ impl PpoUpdate {
                 },
             )
         })
+    }
+
+    /// The loss gradients of `minibatch` after both forward passes over it.
+    fn record_loss(&self, stream: &Stream, minibatch: &Minibatch) -> Result<(), PpoError> {
+        self.loss.record(
+            &self.kernels,
+            stream,
+            minibatch,
+            self.actor.output(),
+            &self.log_std,
+            &self.old_log_std,
+            self.critic.output(),
+            &self.loss_params,
+        )?;
+        Ok(())
     }
 
     /// The actor's and the critic's backward passes of the minibatch step whose loss sums are

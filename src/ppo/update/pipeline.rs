@@ -133,16 +133,7 @@ impl PpoUpdate {
         }
         stream.set_capture_frontier(&forward)?;
 
-        self.loss.record(
-            k,
-            stream,
-            minibatch,
-            self.actor.output(),
-            &self.log_std,
-            &self.old_log_std,
-            self.critic.output(),
-            &self.loss_params,
-        )?;
+        self.record_loss(stream, minibatch)?;
         let loss = stream.capture_frontier()?;
 
         let width = LOSS_TERMS + self.action_size;
