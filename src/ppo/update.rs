@@ -47,22 +47,21 @@ use crate::kernels::{
     AdamParams, DeviceArray, DeviceArray2, EnvError, EnvKernels, PpoLossParams, ScheduleParams,
 };
 
-use super::adam::{
-    AdamMoments, LEARNING_RATE_MAX, LEARNING_RATE_MIN, adam_params, record_schedule,
-};
-use super::backward::{MlpGradients, input_gradient_scratch_len, record_mlp_backward};
+use super::adam::{AdamMoments, LEARNING_RATE_MAX, LEARNING_RATE_MIN, adam_params};
+use super::backward::{MlpGradients, input_gradient_scratch_len};
 use super::batch::{Advantages, Minibatch, PpoBatch, ValueNormalization, minibatch_rows};
 use super::config::{KlMeasure, PpoConfig};
 use super::flops::UpdateFlops;
 use super::gemm::padded_input_width;
 use super::loss::{LOSS_TERMS, LossGradients, PpoStatistics};
 use super::policy::{GaussianPolicy, LayerShape, Mlp, PolicyError};
-use super::reduce::{
-    record_clear, record_column_sums, record_sum_and_squares, record_sum_of_squares,
-};
+use super::reduce::{record_clear, record_column_sums, record_sum_and_squares};
 use super::update_stages::UpdateStage;
 
 mod pipeline;
+mod step_parts;
+
+use step_parts::Network;
 
 /// The update's stage recorder: NVTX ranges, and events when timed.
 type Stages = StageRecorder<UpdateStage>;
@@ -509,14 +508,12 @@ impl PpoUpdate {
                 stream,
                 branching,
                 |s| {
-                    self.actor.record(k, s, obs)?;
-                    record_clear(s, &self.actor_grads.flat)?;
-                    Ok(())
+                    self.record_forward_of(s, Network::Actor, obs)?;
+                    self.record_clear_of(s, Network::Actor)
                 },
                 |s| {
-                    self.critic.record(k, s, obs)?;
-                    record_clear(s, &self.critic_grads.flat)?;
-                    Ok(())
+                    self.record_forward_of(s, Network::Critic, obs)?;
+                    self.record_clear_of(s, Network::Critic)
                 },
             )
         })?;
@@ -529,85 +526,26 @@ impl PpoUpdate {
         stages.stage(gpu, stream, UpdateStage::Backward, |stream| {
             self.record_backward(stream, branching, &minibatch.observations, &sums)
         })?;
-        // Slot 2s holds the actor's squared norm, 2s + 1 the critic's; clipped together, both
-        // add into 2s (and 2s + 1 stays 0). One after the other in either mode: clipped
-        // together they add into one value, in this order.
-        let actor_slot = 2 * slot;
-        let critic_slot = if self.separate_grad_clipping {
-            actor_slot + 1
-        } else {
-            actor_slot
-        };
+        // One after the other in either mode: clipped together the norms add into one value,
+        // in this order.
         stages.stage(gpu, stream, UpdateStage::Clipping, |s| {
-            record_schedule(
-                k,
-                s,
-                &sums,
-                &self.schedule,
-                &self.log_std_grad,
-                &self.learning_rate,
-                &self.adam_step,
-            )?;
-            let norms = &self.grad_norm_sq;
-            record_sum_of_squares(k, s, &self.actor_grads.flat, norms, actor_slot)?;
-            record_sum_of_squares(k, s, &self.critic_grads.flat, norms, critic_slot)?;
+            self.record_schedule_of(s, &sums)?;
+            self.record_norm_of(s, Network::Actor, slot)?;
+            self.record_norm_of(s, Network::Critic, slot)?;
             if let Some(replicas) = &self.replicas {
-                let norms = [norms.view(actor_slot, [2])?.collective()?];
+                let norms = [self.grad_norm_sq.view(2 * slot, [2])?.collective()?];
                 replicas.all_reduce(s, &norms, ReduceOp::Max)?;
             }
             Ok::<(), PpoError>(())
         })?;
-        let adam_step = |s: &Stream, params, grads: &MlpGradients, moments: &AdamMoments, slot| {
-            moments.record_step(
-                k,
-                s,
-                params,
-                &grads.flat,
-                &self.learning_rate,
-                &self.adam_step,
-                &self.grad_norm_sq,
-                slot,
-                &self.adam,
-            )
-        };
         stages.stage(gpu, stream, UpdateStage::Adam, |stream| {
             record_branches(
                 stream,
                 branching,
-                |s| {
-                    adam_step(
-                        s,
-                        &self.actor_params,
-                        &self.actor_grads,
-                        &self.actor_moments,
-                        actor_slot,
-                    )?;
-                    if let Some(floor) = self.min_log_std {
-                        k.log_std_floor(s, self.action_size, &self.log_std, floor)?;
-                    }
-                    Ok(())
-                },
-                |s| {
-                    let (params, grads) = (&self.critic_params, &self.critic_grads);
-                    adam_step(s, params, grads, &self.critic_moments, critic_slot)
-                },
+                |s| self.record_adam_of(s, Network::Actor, slot),
+                |s| self.record_adam_of(s, Network::Critic, slot),
             )
         })
-    }
-
-    /// The loss gradients of `minibatch` after both forward passes over it.
-    fn record_loss(&self, stream: &Stream, minibatch: &Minibatch) -> Result<(), PpoError> {
-        self.loss.record(
-            &self.kernels,
-            stream,
-            minibatch,
-            self.actor.output(),
-            &self.log_std,
-            &self.old_log_std,
-            self.critic.output(),
-            &self.loss_params,
-        )?;
-        Ok(())
     }
 
     /// The actor's and the critic's backward passes of the minibatch step whose loss sums are
@@ -619,42 +557,11 @@ impl PpoUpdate {
         obs: &DeviceArray2<f32>,
         sums: &DeviceArray<f32>,
     ) -> Result<(), PpoError> {
-        let k = &*self.kernels;
-        let blocks = self.target_blocks;
-        let critic_scratch = self
-            .critic_input_gradient_scratch
-            .as_ref()
-            .or(self.input_gradient_scratch.as_ref());
         record_branches(
             stream,
             branching,
-            |s| {
-                let scratch = self.input_gradient_scratch.as_ref();
-                record_mlp_backward(
-                    k,
-                    s,
-                    &self.actor,
-                    obs,
-                    &self.loss.d_mean,
-                    &self.actor_grads,
-                    blocks,
-                    scratch,
-                )
-            },
-            |s| {
-                let d_value = &self.loss.d_value;
-                let grads = &self.critic_grads;
-                record_mlp_backward(
-                    k,
-                    s,
-                    &self.critic,
-                    obs,
-                    d_value,
-                    grads,
-                    blocks,
-                    critic_scratch,
-                )
-            },
+            |s| self.record_backward_of(s, Network::Actor, obs),
+            |s| self.record_backward_of(s, Network::Critic, obs),
         )?;
         if let Some(replicas) = &self.replicas {
             // Before anything reads them: the schedule (KL, log std), the norm and Adam.

@@ -17,11 +17,9 @@
 use crate::cuda::{CaptureNodes, Stream};
 
 use super::super::batch::{Minibatch, PpoBatch, record_shuffle};
-use super::super::reduce::{record_clear, record_column_sums, record_sum_of_squares};
-use super::{PpoError, PpoUpdate, Stages};
-use crate::ppo::adam::record_schedule;
-use crate::ppo::backward::record_mlp_backward;
-use crate::ppo::loss::LOSS_TERMS;
+use super::super::loss::LOSS_TERMS;
+use super::super::reduce::record_column_sums;
+use super::{Network, PpoError, PpoUpdate, Stages};
 
 impl PpoUpdate {
     /// Whether [`PpoUpdate::record_pipelined_epochs`] records the epochs: concurrent networks,
@@ -113,134 +111,71 @@ impl PpoUpdate {
     /// Step `slot` (its minibatch gathered) as a graph; returns the frontier after its
     /// backward passes, and leaves the capture's frontier after both Adam steps.
     fn record_step_graph(&self, stream: &Stream, slot: usize) -> Result<CaptureNodes, PpoError> {
-        let k = &*self.kernels;
         let minibatch = self.minibatch_of(slot);
         let obs = &minibatch.observations;
-        // Four branches: each network's forward pass, and each network's gradient clear (no
-        // forward pass reads the gradients; the previous step's Adam is done).
-        let start = stream.capture_frontier()?;
-        let mut forward = CaptureNodes::default();
-        for record in [
-            &|s: &Stream| self.actor.record(k, s, obs).map_err(PpoError::from),
-            &|s: &Stream| record_clear(s, &self.actor_grads.flat),
-            &|s: &Stream| self.critic.record(k, s, obs).map_err(PpoError::from),
-            &|s: &Stream| record_clear(s, &self.critic_grads.flat),
-        ] as [&dyn Fn(&Stream) -> Result<(), PpoError>; 4]
-        {
-            stream.set_capture_frontier(&start)?;
+        let branch = |from: &CaptureNodes,
+                      record: &dyn Fn(&Stream) -> Result<(), PpoError>|
+         -> Result<CaptureNodes, PpoError> {
+            stream.set_capture_frontier(from)?;
             record(stream)?;
-            forward.extend(&stream.capture_frontier()?);
-        }
-        stream.set_capture_frontier(&forward)?;
-
-        self.record_loss(stream, minibatch)?;
-        let loss = stream.capture_frontier()?;
-
-        let width = LOSS_TERMS + self.action_size;
-        let sums = self.loss_sums.view(slot * width, [width])?;
-        record_column_sums(k, stream, &self.loss.terms, &sums)?;
-        record_schedule(
-            k,
-            stream,
-            &sums,
-            &self.schedule,
-            &self.log_std_grad,
-            &self.learning_rate,
-            &self.adam_step,
-        )?;
-        let scheduled = stream.capture_frontier()?;
-
-        let blocks = self.target_blocks;
-        stream.set_capture_frontier(&loss)?;
-        record_mlp_backward(
-            k,
-            stream,
-            &self.actor,
-            obs,
-            &self.loss.d_mean,
-            &self.actor_grads,
-            blocks,
-            self.input_gradient_scratch.as_ref(),
-        )?;
-        let actor_done = stream.capture_frontier()?;
-        stream.set_capture_frontier(&loss)?;
-        record_mlp_backward(
-            k,
-            stream,
-            &self.critic,
-            obs,
-            &self.loss.d_value,
-            &self.critic_grads,
-            blocks,
-            self.critic_input_gradient_scratch.as_ref(),
-        )?;
-        let critic_done = stream.capture_frontier()?;
-        let mut read = actor_done.clone();
-        read.extend(&critic_done);
-
-        let norms = &self.grad_norm_sq;
-        let actor_slot = 2 * slot;
-        let joined = |nodes: &[&CaptureNodes]| -> Result<(), PpoError> {
+            Ok(stream.capture_frontier()?)
+        };
+        let joined = |nodes: &[&CaptureNodes]| {
             let mut all = CaptureNodes::default();
             for n in nodes {
                 all.extend(n);
             }
-            stream.set_capture_frontier(&all)?;
-            Ok(())
-        };
-        let (actor_ready, critic_ready) = if self.separate_grad_clipping {
-            // The actor's norm covers the log-std gradient, which the schedule writes.
-            joined(&[&actor_done, &scheduled])?;
-            record_sum_of_squares(k, stream, &self.actor_grads.flat, norms, actor_slot)?;
-            let actor_ready = stream.capture_frontier()?;
-            stream.set_capture_frontier(&critic_done)?;
-            record_sum_of_squares(k, stream, &self.critic_grads.flat, norms, actor_slot + 1)?;
-            let mut critic_ready = stream.capture_frontier()?;
-            critic_ready.extend(&scheduled);
-            (actor_ready, critic_ready)
-        } else {
-            // One norm over both: its additions in the chain's order.
-            joined(&[&read, &scheduled])?;
-            record_sum_of_squares(k, stream, &self.actor_grads.flat, norms, actor_slot)?;
-            record_sum_of_squares(k, stream, &self.critic_grads.flat, norms, actor_slot)?;
-            let ready = stream.capture_frontier()?;
-            (ready.clone(), ready)
-        };
-        let critic_slot = if self.separate_grad_clipping {
-            actor_slot + 1
-        } else {
-            actor_slot
+            all
         };
 
-        stream.set_capture_frontier(&actor_ready)?;
-        self.actor_moments.record_step(
-            k,
-            stream,
-            &self.actor_params,
-            &self.actor_grads.flat,
-            &self.learning_rate,
-            &self.adam_step,
-            norms,
-            actor_slot,
-            &self.adam,
-        )?;
-        if let Some(floor) = self.min_log_std {
-            k.log_std_floor(stream, self.action_size, &self.log_std, floor)?;
+        // Four branches: each network's forward pass, and each network's gradient clear (no
+        // forward pass reads the gradients; the previous step's Adam is done).
+        let start = stream.capture_frontier()?;
+        let mut forward = CaptureNodes::default();
+        for network in [Network::Actor, Network::Critic] {
+            forward.extend(&branch(&start, &|s| {
+                self.record_forward_of(s, network, obs)
+            })?);
+            forward.extend(&branch(&start, &|s| self.record_clear_of(s, network))?);
         }
-        let actor_stepped = stream.capture_frontier()?;
-        stream.set_capture_frontier(&critic_ready)?;
-        self.critic_moments.record_step(
-            k,
-            stream,
-            &self.critic_params,
-            &self.critic_grads.flat,
-            &self.learning_rate,
-            &self.adam_step,
-            norms,
-            critic_slot,
-            &self.adam,
-        )?;
-        joined(&[&actor_stepped, &stream.capture_frontier()?])?;
+        let loss = branch(&forward, &|s| self.record_loss(s, minibatch))?;
+
+        let width = LOSS_TERMS + self.action_size;
+        let sums = self.loss_sums.view(slot * width, [width])?;
+        let scheduled = branch(&loss, &|s| {
+            record_column_sums(&self.kernels, s, &self.loss.terms, &sums)?;
+            self.record_schedule_of(s, &sums)
+        })?;
+
+        let actor_done = branch(&loss, &|s| self.record_backward_of(s, Network::Actor, obs))?;
+        let critic_done = branch(&loss, &|s| self.record_backward_of(s, Network::Critic, obs))?;
+        let read = joined(&[&actor_done, &critic_done]);
+
+        let (actor_ready, critic_ready) = if self.separate_grad_clipping {
+            // The actor's norm covers the log-std gradient, which the schedule writes.
+            let actor_ready = branch(&joined(&[&actor_done, &scheduled]), &|s| {
+                self.record_norm_of(s, Network::Actor, slot)
+            })?;
+            let critic_ready = branch(&critic_done, &|s| {
+                self.record_norm_of(s, Network::Critic, slot)
+            })?;
+            (actor_ready, joined(&[&critic_ready, &scheduled]))
+        } else {
+            // One norm over both: its additions in the chain's order.
+            let ready = branch(&joined(&[&read, &scheduled]), &|s| {
+                self.record_norm_of(s, Network::Actor, slot)?;
+                self.record_norm_of(s, Network::Critic, slot)
+            })?;
+            (ready.clone(), ready)
+        };
+
+        let actor_stepped = branch(&actor_ready, &|s| {
+            self.record_adam_of(s, Network::Actor, slot)
+        })?;
+        let critic_stepped = branch(&critic_ready, &|s| {
+            self.record_adam_of(s, Network::Critic, slot)
+        })?;
+        stream.set_capture_frontier(&joined(&[&actor_stepped, &critic_stepped]))?;
         Ok(read)
     }
 }
