@@ -7,16 +7,8 @@
 SESSION_S=${SESSION_S:-540}
 KEEP=${KEEP:-}
 FULL='full --motion backflip --envs 4096'
-UPDATE_KERNELS='regex:gemm|xmma|cutlass|splitK|Kernel|column_sums|elu|bias|ppo|adam|gather|minibatch|sum_of|sum_and|shuffle|gae|schedule|value|log_std|statistic|bootstrap|policy|sample'
-kernels() {
-  local ncu; ncu=$(command -v ncu || ls /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | tail -1)
-  [ -n "$ncu" ] || { note "kernels: no ncu"; return; }
-  local t0; t0=$(date +%s)
-  CUDA_VISIBLE_DEVICES=$GPU timeout 200 "$ncu" --clock-control none --metrics gpu__time_duration.sum \
-    --kernel-name "$UPDATE_KERNELS" --launch-count 2500 --csv --page raw \
-    "$BIN/instantmimic" bench $FULL --iterations 2 --warmup 1 --rounds 1 > "$OUT/runs/ncu.csv" 2> "$OUT/runs/ncu.err"
-  note "kernels (rc $?, $(( $(date +%s) - t0 )) s): $(wc -l < "$OUT/runs/ncu.csv") lines"
-}
+# shellcheck source=tests/device/ncu_update_kernels.sh
+. "$(dirname "${BASH_SOURCE[0]}")/../ncu_update_kernels.sh"
 three() {
   local name=$1; shift
   local seed
