@@ -260,6 +260,10 @@ fn a_second_sigint_ends_the_search_at_once() {
     // 143).
     let (mut child, _) = spawn_search(tmp.path(), &out, 5000);
     wait_for_cycles(&out, 1);
+    // `history.jsonl` is the first file a commit writes; the rest of the commit and the next
+    // cycle's planning come before its first trial. A CI run once sent SIGTERM in that gap, so
+    // the search stopped cleanly (143) before the SIGINT: give the next trial 1.5 s to start.
+    std::thread::sleep(Duration::from_millis(1500));
     send(&child, "-TERM");
     // Two signals pending at once would be delivered as one.
     std::thread::sleep(Duration::from_millis(200));
