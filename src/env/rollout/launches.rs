@@ -156,9 +156,11 @@ impl Rollout {
     /// ([`Rollout::record_kinematics`] after a reset).
     pub(super) fn record_reset(&self, s: &Stream, t: i32) -> Result<(), RolloutError> {
         let (p, st) = (&self.physics, &self.state);
+        // One thread per env and lane: a lane per qpos and per qvel entry, and one for the rest.
+        let lanes = p.qpos.shape()[1] + p.qvel.shape()[1] + 1;
         self.kernels.reset_masked(
             s,
-            self.num_envs,
+            self.num_envs * lanes,
             &st.done,
             self.table.table(),
             self.table.clip_offsets(),
