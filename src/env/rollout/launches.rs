@@ -10,7 +10,7 @@ use super::super::storage::RolloutStorage;
 use super::super::task::Task;
 use super::{Rollout, RolloutError};
 use crate::env::config::ActionMode;
-use crate::env::layout::OBSERVE_SLOTS;
+use crate::env::layout::{OBSERVE_SLOTS, TRACKING_LANES};
 
 impl Rollout {
     pub(super) fn record_scores(
@@ -122,18 +122,33 @@ impl Rollout {
                 return Ok(());
             }
         };
+        self.kernels.tracking_error_sums(
+            s,
+            self.num_envs * TRACKING_LANES,
+            &p.qpos,
+            &p.qvel,
+            &p.xpos,
+            &p.xquat,
+            self.table.table(),
+            self.table.clip_offsets(),
+            &self.joints.kind,
+            &self.joints.qpos,
+            &self.joints.end_effectors,
+            tracking,
+            &st.clip_id,
+            &st.ref_time,
+            &st.error_sums,
+        )?;
         self.kernels.reward_termination(
             s,
             self.num_envs,
             &p.qpos,
             &p.qvel,
-            &p.xpos,
-            &p.xquat,
             &p.subtree_com,
+            &st.error_sums,
             self.table.table(),
             self.table.clip_offsets(),
             &self.joints.kind,
-            &self.joints.qpos,
             &self.joints.end_effectors,
             tracking,
             t,
