@@ -1,6 +1,7 @@
-# Issue 20 on one H100, two calls: the branch's three kernel changes (reset_masked one thread
+# Issue 20 on one H100, two calls: the branch's four kernel changes (reset_masked one thread
 # per env and lane; the reward's squared errors in 8 lanes per env, `tracking_error_sums`; Adam's
-# per-step factors once per step), each checked on Warp's CPU device but not yet on a GPU, and
+# per-step factors once per step; observation_moments four rows a pass), each checked on Warp's
+# CPU device but not yet on a GPU (`bench full`'s stages tell their effects apart), and
 # `policy.cublas_api = "lt"` (cuBLASLt without split-K reduction kernels).
 # Call 1 (PART=1): gpu_env_kernels, gpu_ppo and gpu_blas (the new kernels and cuBLASLt against
 # f64), then `bench full` of the older build (main) and of this one, alternating, twice, this one
