@@ -443,6 +443,8 @@ impl Drop for Blas {
             // SAFETY: the handle was created in `open` and is destroyed once, here, before the
             // workspace it uses is freed (fields drop after this).
             let _ = unsafe { result::destroy_handle(handle) };
+            // The cuBLASLt handle too, while the context is current.
+            drop(self.lt.take());
         }
     }
 }
