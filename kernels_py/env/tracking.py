@@ -304,13 +304,14 @@ def reward_termination(
 # Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
 # above a kernel would change its PTX.
 LAUNCH = {
+    # `error_sums` has TRACKING_LANES lanes an env (its extent 1; the kernel's lane count).
     "tracking_error_sums": (
-        "dim == len(clip_id) * 8",
-        "dim <= extent(qpos, 0) * 8",
-        "dim <= extent(qvel, 0) * 8",
-        "dim <= extent(xpos, 0) * 8",
-        "dim <= extent(xquat, 0) * 8",
-        "dim <= len(ref_time) * 8",
+        "dim == len(clip_id) * extent(error_sums, 1)",
+        "dim <= extent(qpos, 0) * extent(error_sums, 1)",
+        "dim <= extent(qvel, 0) * extent(error_sums, 1)",
+        "dim <= extent(xpos, 0) * extent(error_sums, 1)",
+        "dim <= extent(xquat, 0) * extent(error_sums, 1)",
+        "dim <= len(ref_time) * extent(error_sums, 1)",
         "dim <= extent(error_sums, 0) * extent(error_sums, 1)",
     ),
     "reward_termination": (
