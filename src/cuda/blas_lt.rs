@@ -130,41 +130,53 @@ fn layout(rows: u64, cols: u64, ld: i64) -> Result<Owned<sys::cublasLtMatrixLayo
     })
 }
 
-/// Sets attribute `attr` of `desc` to `value`.
+/// The C signature of cuBLASLt's descriptor setters (`cublasLtMatmulDescSetAttribute`,
+/// `cublasLtMatmulPreferenceSetAttribute`), as cudarc binds them.
+type Setter<D, A> = unsafe fn(D, A, *const c_void, usize) -> Result<(), result::CublasError>;
+
+/// Sets attribute `attr` of the live descriptor `raw` to `value` through `setter`.
+fn set_attribute<D: Copy, A, V>(
+    raw: &Owned<D>,
+    setter: Setter<D, A>,
+    operation: &'static str,
+    attr: A,
+    value: &V,
+) -> Result<(), CudaError> {
+    // SAFETY: `raw` is live (owned); `value` is a live `V` of `size_of::<V>()` bytes, the
+    // attribute's type for every call in this module.
+    unsafe {
+        setter(
+            raw.raw,
+            attr,
+            (value as *const V).cast::<c_void>(),
+            std::mem::size_of::<V>(),
+        )
+    }
+    .map_err(lt_error(operation))
+}
+
 fn set_desc<V>(
     desc: &Owned<sys::cublasLtMatmulDesc_t>,
     attr: sys::cublasLtMatmulDescAttributes_t,
     value: &V,
 ) -> Result<(), CudaError> {
-    // SAFETY: `desc` is live (owned); `value` is a live `V` of `size_of::<V>()` bytes, the
-    // attribute's type for every call in this module.
-    unsafe {
-        result::set_matmul_desc_attribute(
-            desc.raw,
-            attr,
-            (value as *const V).cast::<c_void>(),
-            std::mem::size_of::<V>(),
-        )
-    }
-    .map_err(lt_error("cublasLtMatmulDescSetAttribute"))
+    let setter: Setter<_, _> = result::set_matmul_desc_attribute;
+    set_attribute(desc, setter, "cublasLtMatmulDescSetAttribute", attr, value)
 }
 
-/// Sets attribute `attr` of `pref` to `value`.
 fn set_pref<V>(
     pref: &Owned<sys::cublasLtMatmulPreference_t>,
     attr: sys::cublasLtMatmulPreferenceAttributes_t,
     value: &V,
 ) -> Result<(), CudaError> {
-    // SAFETY: as in `set_desc`, for a live preference descriptor.
-    unsafe {
-        result::set_matmul_pref_attribute(
-            pref.raw,
-            attr,
-            (value as *const V).cast::<c_void>(),
-            std::mem::size_of::<V>(),
-        )
-    }
-    .map_err(lt_error("cublasLtMatmulPreferenceSetAttribute"))
+    let setter: Setter<_, _> = result::set_matmul_pref_attribute;
+    set_attribute(
+        pref,
+        setter,
+        "cublasLtMatmulPreferenceSetAttribute",
+        attr,
+        value,
+    )
 }
 
 /// The TRANSA / TRANSB attribute: a `cublasOperation_t` (an `int32_t` in the descriptor),
@@ -265,7 +277,18 @@ pub(super) fn matmul(
             pref.raw,
         )
     }
-    .map_err(lt_error("cublasLtMatmulAlgoGetHeuristic"))?;
+    .map_err(|e| match e.0 {
+        // No algorithm of the allowed kinds for these operands: say how to get one.
+        sys::cublasStatus_t::CUBLAS_STATUS_NOT_SUPPORTED => CudaError::InvalidArgument {
+            operation: "cublasLtMatmulAlgoGetHeuristic",
+            reason: format!(
+                "cuBLASLt has no algorithm without a split-K reduction kernel for a {} x {} x {} \
+                 product; set policy.cublas_api = \"gemm_ex\"",
+                p.m, p.n, p.k
+            ),
+        },
+        _ => lt_error("cublasLtMatmulAlgoGetHeuristic")(e),
+    })?;
     let alpha = 1.0f32;
     // SAFETY: as above; alpha and beta are host scalars read during the call (cuBLASLt's
     // default host pointer mode); the algorithm came from the heuristic for these descriptors
