@@ -26,7 +26,7 @@ use std::sync::Arc;
 use instantmimic::cuda::Gpu;
 use instantmimic::kernels::ScheduleParams;
 use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels, PpoLossParams};
-use instantmimic::ppo::adam::{AdamMoments, AdamSchedule, adam_params, record_schedule};
+use instantmimic::ppo::adam::{AdamMoments, AdamStep, adam_params, record_schedule};
 use instantmimic::ppo::backward::{
     record_linear_backward_input_elu, record_linear_backward_weight,
 };
@@ -372,7 +372,7 @@ fn adam_steps_with_clipping_match_the_float64_reference() {
     let params = DeviceArray::from_slice(&gpu, [size], &p0).unwrap();
     let grads = DeviceArray::zeros(&gpu, [size]).unwrap();
     let moments = AdamMoments::zeros(&gpu, size).unwrap();
-    let adam = AdamSchedule::new(&gpu, 5e-4).unwrap();
+    let adam = AdamStep::new(&gpu, 5e-4).unwrap();
     let norm_sq = DeviceArray::zeros(&gpu, [3]).unwrap();
     let a = 4;
     // KL between the bounds: the schedule only counts the step.
@@ -448,7 +448,7 @@ fn adam_steps_with_clipping_match_the_float64_reference() {
             &v,
         );
         p = gpu_p;
-        assert_eq!(adam.step.download().unwrap(), vec![t as i32]);
+        assert_eq!(adam.count.download().unwrap(), vec![t as i32]);
         assert_eq!(adam.learning_rate.download().unwrap(), vec![5e-4f32]);
         // The step's factors, computed once, against float64.
         check(

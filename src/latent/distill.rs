@@ -22,7 +22,7 @@ use std::sync::Arc;
 use crate::cuda::{Gpu, Stream};
 use crate::env::RolloutStorage;
 use crate::kernels::{AdamParams, DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
-use crate::ppo::adam::{AdamMoments, AdamSchedule, adam_params, record_advance};
+use crate::ppo::adam::{AdamMoments, AdamStep, adam_params, record_advance};
 use crate::ppo::backward::{MlpGradients, input_gradient_scratch_len};
 use crate::ppo::batch::{minibatch_rows, record_shuffle};
 use crate::ppo::policy::Mlp;
@@ -138,7 +138,7 @@ pub struct DistillationUpdate {
     loss_sums: DeviceArray2<f32>,
     grad_norm_sq: DeviceArray<f64>,
     /// The learning rate, Adam's step count and the step's factors.
-    adam_schedule: AdamSchedule,
+    adam_step: AdamStep,
     update_counter: DeviceArray<i32>,
 }
 
@@ -196,7 +196,7 @@ impl DistillationUpdate {
             permutation: DeviceArray::zeros(gpu, [samples])?,
             loss_sums: DeviceArray::zeros(gpu, [steps, LOSS_TERMS])?,
             grad_norm_sq: DeviceArray::zeros(gpu, [steps])?,
-            adam_schedule: AdamSchedule::new(gpu, config.learning_rate)?,
+            adam_step: AdamStep::new(gpu, config.learning_rate)?,
             update_counter: DeviceArray::zeros(gpu, [1])?,
             gpu: gpu.clone(),
             kernels,
@@ -357,7 +357,7 @@ impl DistillationUpdate {
         )?;
         let sums = self.loss_sums.view(slot * LOSS_TERMS, [LOSS_TERMS])?;
         record_column_sums(k, stream, &self.terms, &sums)?;
-        record_advance(k, stream, &self.adam, &self.adam_schedule)?;
+        record_advance(k, stream, &self.adam, &self.adam_step)?;
         for trained in [&self.encoder, &self.decoder, &self.prior] {
             record_sum_of_squares(k, stream, &trained.grads.flat, &self.grad_norm_sq, slot)?;
         }
@@ -367,7 +367,7 @@ impl DistillationUpdate {
                 stream,
                 &trained.net.params,
                 &trained.grads.flat,
-                &self.adam_schedule.factors,
+                &self.adam_step.factors,
                 &self.grad_norm_sq,
                 slot,
                 &self.adam,
@@ -388,7 +388,7 @@ impl DistillationUpdate {
             self.minibatches,
             rows,
             f64::from(self.kl_weight),
-            f64::from(self.adam_schedule.learning_rate.download()?[0]),
+            f64::from(self.adam_step.learning_rate.download()?[0]),
         ))
     }
 
@@ -424,7 +424,7 @@ impl DistillationUpdate {
         }
         Ok(DistillationOptimizerState {
             moments,
-            adam_step: self.adam_schedule.step.download()?[0],
+            adam_step: self.adam_step.count.download()?[0],
             update_counter: self.update_counter.download()?[0],
         })
     }
@@ -443,14 +443,14 @@ impl DistillationUpdate {
             t.moments.moment1.upload(m1)?;
             t.moments.moment2.upload(m2)?;
         }
-        self.adam_schedule.step.upload(&[state.adam_step])?;
+        self.adam_step.count.upload(&[state.adam_step])?;
         self.update_counter.upload(&[state.update_counter])?;
         Ok(())
     }
 
     /// The learning rate `[1]` (device; constant unless a divergence restore halves it).
     pub fn learning_rate(&self) -> &DeviceArray<f32> {
-        &self.adam_schedule.learning_rate
+        &self.adam_step.learning_rate
     }
 }
 

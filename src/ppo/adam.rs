@@ -91,20 +91,21 @@ pub fn adam_params(max_grad_norm: f32) -> AdamParams {
 /// and `sqrt(1 - b2^t)`, computed once per step instead of once per parameter.
 pub const ADAM_FACTORS: usize = 2;
 
-/// Adam's step count, rate and per-step factors, in device memory.
-pub struct AdamSchedule {
+/// Adam's step: its rate, the steps taken and the current step's factors, in device memory.
+pub struct AdamStep {
     pub learning_rate: DeviceArray<f32>,
-    pub step: DeviceArray<i32>,
+    /// Steps taken (the `t` of the bias corrections).
+    pub count: DeviceArray<i32>,
     /// `[ADAM_FACTORS]` of the current step.
     pub factors: DeviceArray<f32>,
 }
 
-impl AdamSchedule {
+impl AdamStep {
     /// Step 0 at rate `learning_rate`.
-    pub fn new(gpu: &Gpu, learning_rate: f32) -> Result<AdamSchedule, PpoError> {
-        Ok(AdamSchedule {
+    pub fn new(gpu: &Gpu, learning_rate: f32) -> Result<AdamStep, PpoError> {
+        Ok(AdamStep {
             learning_rate: DeviceArray::from_slice(gpu, [1], &[learning_rate])?,
-            step: DeviceArray::zeros(gpu, [1])?,
+            count: DeviceArray::zeros(gpu, [1])?,
             factors: DeviceArray::zeros(gpu, [ADAM_FACTORS])?,
         })
     }
@@ -112,7 +113,7 @@ impl AdamSchedule {
 
 /// Queues the per-minibatch bookkeeping before the step: `log_std_grad = sums[LOSS_TERMS..] -
 /// entropy_coef`, the learning rate adapted to the minibatch's KL `sums[TERM_KL]` (when
-/// `params.adaptive`), `adam.step += 1` and the step's factors. One thread.
+/// `params.adaptive`), `adam.count += 1` and the step's factors. One thread.
 pub fn record_schedule(
     kernels: &EnvKernels,
     stream: &Stream,
@@ -120,7 +121,7 @@ pub fn record_schedule(
     params: &ScheduleParams,
     hp: &AdamParams,
     log_std_grad: &DeviceArray<f32>,
-    adam: &AdamSchedule,
+    adam: &AdamStep,
 ) -> Result<(), PpoError> {
     if sums.len() != super::loss::LOSS_TERMS + log_std_grad.len() {
         return Err(PpoError::Shape(format!(
@@ -137,26 +138,26 @@ pub fn record_schedule(
         hp,
         log_std_grad,
         &adam.learning_rate,
-        &adam.step,
+        &adam.count,
         &adam.factors,
     )?;
     Ok(())
 }
 
-/// Queues `adam.step += 1` and the step's factors at the current rate, for optimizers without
+/// Queues `adam.count += 1` and the step's factors at the current rate, for optimizers without
 /// the PPO schedule. One thread.
 pub fn record_advance(
     kernels: &EnvKernels,
     stream: &Stream,
     hp: &AdamParams,
-    adam: &AdamSchedule,
+    adam: &AdamStep,
 ) -> Result<(), PpoError> {
     kernels.adam_advance(
         stream,
         1,
         &adam.learning_rate,
         hp,
-        &adam.step,
+        &adam.count,
         &adam.factors,
     )?;
     Ok(())

@@ -83,7 +83,7 @@ impl PpoUpdate {
             &self.schedule,
             &self.adam,
             &self.log_std_grad,
-            &self.adam_schedule,
+            &self.adam_step,
         )
     }
 
@@ -124,7 +124,7 @@ impl PpoUpdate {
             stream,
             params,
             &self.grads_of(network).flat,
-            &self.adam_schedule.factors,
+            &self.adam_step.factors,
             &self.grad_norm_sq,
             self.norm_slot(network, slot),
             &self.adam,
