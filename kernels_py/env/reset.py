@@ -131,7 +131,8 @@ def reset_masked(
     nq + k writes qvel[n, k] and its warm start, the last lane the rest. One thread per env wrote
     them in a loop of about 40 us a launch (likely each store waiting for its table read: the
     compiler may not move a read of `table` above a store to `qpos`). Every lane draws u and v and
-    locates t0 itself, then skips to its own normals ([`skip_normals`]), so the values are those
+    locates t0 itself (rather than a per-env kernel before it: one launch fewer, and an env's
+    lanes read the same addresses), then skips to its own normals ([`skip_normals`]), so the values are those
     of the serial loop, whose later writes win where two would write one entry (joints over the
     root orientation over the root position over the plain reference value)."""
     tid = wp.tid()

@@ -110,7 +110,9 @@ def tracking_error_sums(
     the reward: against the reference of clip `clip_id[n]` at `ref_time[n] + dt`, lane l sums the
     squared errors of every TRACKING_LANES-th item from item l: joints (pose), non-root dofs
     (velocity), end effectors (position, orientation), and over bodies the largest and the summed
-    distance to the reference, into `error_sums[n, l, 0..6]` (ERROR_* slots). One thread per env
+    distance to the reference, into `error_sums[n, l, 0..6]` (ERROR_* slots). Each lane locates
+    the reference time itself, as `reward_termination` does again: a few reads of the same
+    addresses instead of a launch, or a store and a load, to share them. One thread per env
     walked all ~60 items one after the other (the reward stage, this and the episode statistics,
     took about 58 us a control step for 4096 envs on the H100)."""
     tid = wp.tid()
