@@ -171,28 +171,20 @@ def observation_moments(
     batch_sum_sq: wp.array(dtype=wp.float64),
 ):
     """Thread (chunk c, dimension d) of a 1-D launch of ceil(N / 64) * D threads: adds the sums of
-    `obs[n, d]` and of its square over envs 64c .. 64c + 63 to the batch sums, in float64. Four
-    rows a pass into four pairs of sums, so that four reads are in flight at once instead of
-    each waiting for the last one's sum."""
+    `obs[n, d]` and of its square over envs 64c .. 64c + 63 to the batch sums, in float64."""
     tid = wp.tid()
     dims = obs.shape[1]
     c = tid // dims
     d = tid - c * dims
-    s = wp.vec4d()
-    s2 = wp.vec4d()
-    start = c * MOMENT_CHUNK
-    end = wp.min(start + MOMENT_CHUNK, obs.shape[0])
-    full = start + (end - start) // 4 * 4
-    for n in range(start, full, 4):
-        x = wp.vec4d(wp.float64(obs[n, d]), wp.float64(obs[n + 1, d]), wp.float64(obs[n + 2, d]), wp.float64(obs[n + 3, d]))
-        s = s + x
-        s2 = s2 + wp.cw_mul(x, x)
-    for n in range(full, end):
-        y = wp.float64(obs[n, d])
-        s[0] += y
-        s2[0] += y * y
-    wp.atomic_add(batch_sum, d, (s[0] + s[1]) + (s[2] + s[3]))
-    wp.atomic_add(batch_sum_sq, d, (s2[0] + s2[1]) + (s2[2] + s2[3]))
+    s = wp.float64(0.0)
+    s2 = wp.float64(0.0)
+    end = wp.min((c + 1) * MOMENT_CHUNK, obs.shape[0])
+    for n in range(c * MOMENT_CHUNK, end):
+        x = wp.float64(obs[n, d])
+        s += x
+        s2 += x * x
+    wp.atomic_add(batch_sum, d, s)
+    wp.atomic_add(batch_sum_sq, d, s2)
 
 
 @wp.kernel
