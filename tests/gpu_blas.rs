@@ -25,10 +25,10 @@ mod skip_support;
 use std::sync::Arc;
 
 use instantmimic::bench::bench_gemm;
-use instantmimic::cuda::{Blas, BlasApi, BlasMatrix, GemmMath, GemmOperand, Gpu};
+use instantmimic::cuda::{Blas, BlasMatrix, GemmMath, GemmOperand, Gpu};
 use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels};
 use instantmimic::ppo::reduce::record_clear;
-use instantmimic::ppo::{CublasApi, GaussianPolicy, GemmPath, PolicyGemm, PpoUpdate, mlp_layout};
+use instantmimic::ppo::{GaussianPolicy, GemmPath, PolicyGemm, PpoUpdate, mlp_layout};
 use instantmimic::train::{GemmSetting, TrainConfig};
 use ppo_support::{RolloutStorage, mlp_backward, mlp_forward, normal, relative_error, to_f64};
 use rand::SeedableRng;
@@ -70,38 +70,30 @@ fn operand(x: &DeviceArray2<f32>, transposed: bool) -> GemmOperand<'_> {
     }
 }
 
-/// A handle of each entry point that opens: `cublasGemmEx`, and cuBLASLt without split-K
-/// reduction kernels.
-fn open_blas(gpu: &Gpu) -> Vec<Arc<Blas>> {
-    let mut handles = Vec::new();
-    for api in [BlasApi::GemmEx, BlasApi::Lt] {
-        match Blas::open_with(gpu, api) {
-            Ok(blas) => {
-                println!("cuBLAS {}, {api:?}", blas.version());
-                handles.push(blas);
-            }
-            Err(e) => skip_support::skip(&format!("cuBLAS {api:?}: {e}")),
+fn open_blas(gpu: &Gpu) -> Option<Arc<Blas>> {
+    match Blas::open(gpu) {
+        Ok(blas) => {
+            println!("cuBLAS {}", blas.version());
+            Some(blas)
+        }
+        Err(e) => {
+            skip_support::skip(&format!("cuBLAS: {e}"));
+            None
         }
     }
-    handles
 }
 
 #[test]
 fn cublas_gemm_with_transposes_views_and_beta_matches_f64() {
     let gpu = Gpu::open(0).expect("a GPU");
-    for blas in open_blas(&gpu) {
-        gemm_with_transposes_views_and_beta(&gpu, &blas);
-    }
-}
-
-fn gemm_with_transposes_views_and_beta(gpu: &Gpu, blas: &Blas) {
+    let Some(blas) = open_blas(&gpu) else { return };
     let mut rng = StdRng::seed_from_u64(3);
     // Odd sizes: no dimension a multiple of a tile.
     let (m, k, n) = (37, 29, 23);
     // a, b and c live in one flat buffer, at offsets that are not multiples of anything.
     let (a_at, b_at, c_at) = (5, 5 + m * k + 3, 5 + m * k + 3 + k * n + 7);
     let len = c_at + m * n + 2;
-    let flat = DeviceArray::<f32>::zeros(gpu, [len]).unwrap();
+    let flat = DeviceArray::<f32>::zeros(&gpu, [len]).unwrap();
     let stream = gpu.stream();
     for (ta, tb) in [(false, false), (true, false), (false, true), (true, true)] {
         for (beta, math, limit) in [
@@ -204,12 +196,7 @@ fn gemm_with_transposes_views_and_beta(gpu: &Gpu, blas: &Blas) {
 #[test]
 fn cublas_reads_the_columns_of_padded_rows() {
     let gpu = Gpu::open(0).expect("a GPU");
-    for blas in open_blas(&gpu) {
-        reads_the_columns_of_padded_rows(&gpu, &blas);
-    }
-}
-
-fn reads_the_columns_of_padded_rows(gpu: &Gpu, blas: &Blas) {
+    let Some(blas) = open_blas(&gpu) else { return };
     let mut rng = StdRng::seed_from_u64(5);
     let (m, k, n, padded) = (41, 362, 19, 364);
     let x_values = normal(&mut rng, m * k, 0.0, 1.0);
@@ -217,10 +204,10 @@ fn reads_the_columns_of_padded_rows(gpu: &Gpu, blas: &Blas) {
     for i in 0..m {
         stored[i * padded..i * padded + k].copy_from_slice(&x_values[i * k..(i + 1) * k]);
     }
-    let x = DeviceArray2::<f32>::from_slice(gpu, [m, padded], &stored).unwrap();
+    let x = DeviceArray2::<f32>::from_slice(&gpu, [m, padded], &stored).unwrap();
     let w_values = normal(&mut rng, k * n, 0.0, 0.1);
-    let w = DeviceArray2::<f32>::from_slice(gpu, [k, n], &w_values).unwrap();
-    let y = DeviceArray2::<f32>::zeros(gpu, [m, n]).unwrap();
+    let w = DeviceArray2::<f32>::from_slice(&gpu, [k, n], &w_values).unwrap();
+    let y = DeviceArray2::<f32>::zeros(&gpu, [m, n]).unwrap();
     let stream = gpu.stream();
     let xm = x.blas_columns(k).unwrap();
     blas.gemm(
@@ -241,8 +228,8 @@ fn reads_the_columns_of_padded_rows(gpu: &Gpu, blas: &Blas) {
     );
     // The weight gradient's form: x^T dz into [k, n].
     let dz_values = normal(&mut rng, m * n, 0.0, 1.0);
-    let dz = DeviceArray2::<f32>::from_slice(gpu, [m, n], &dz_values).unwrap();
-    let dw = DeviceArray2::<f32>::zeros(gpu, [k, n]).unwrap();
+    let dz = DeviceArray2::<f32>::from_slice(&gpu, [m, n], &dz_values).unwrap();
+    let dw = DeviceArray2::<f32>::zeros(&gpu, [k, n]).unwrap();
     blas.gemm(
         stream,
         xm.transposed(),
@@ -270,15 +257,13 @@ fn reads_the_columns_of_padded_rows(gpu: &Gpu, blas: &Blas) {
 /// The paths to test: Warp tiles always, the cuBLAS ones when libcublas opens.
 fn gemm_paths(gpu: &Gpu) -> Vec<(PolicyGemm, f64)> {
     let mut paths = vec![(PolicyGemm::warp_tiles(), F32_LIMIT)];
-    for api in [CublasApi::GemmEx, CublasApi::Lt] {
-        for (setting, limit) in [
-            (GemmSetting::Cublas, F32_LIMIT),
-            (GemmSetting::CublasTf32, TF32_LIMIT),
-        ] {
-            match PolicyGemm::open(gpu, setting, api) {
-                Ok(gemm) => paths.push((gemm, limit)),
-                Err(e) => skip_support::skip(&format!("{setting:?} {api:?}: {e}")),
-            }
+    for (setting, limit) in [
+        (GemmSetting::Cublas, F32_LIMIT),
+        (GemmSetting::CublasTf32, TF32_LIMIT),
+    ] {
+        match PolicyGemm::open(gpu, setting) {
+            Ok(gemm) => paths.push((gemm, limit)),
+            Err(e) => skip_support::skip(&format!("{setting:?}: {e}")),
         }
     }
     paths
@@ -440,13 +425,12 @@ fn ppo_update_and_rollout_forward_with_cublas_match_warp_tiles() {
     config.ppo.values_in_update = false;
     config.policy.gemm = GemmSetting::Warp;
     config.validate("test").expect("valid config");
-    let build = |setting: GemmSetting, api: CublasApi| {
+    let build = |setting: GemmSetting| {
         let mut c = config.clone();
         c.policy.gemm = setting;
-        c.policy.cublas_api = api;
         GaussianPolicy::new(&gpu, &c.policy, d, a, n, 9)
     };
-    let warp_policy = build(GemmSetting::Warp, CublasApi::GemmEx).expect("policy");
+    let warp_policy = build(GemmSetting::Warp).expect("policy");
     let batch = RolloutStorage::sampled(
         &gpu,
         &kernels,
@@ -491,13 +475,11 @@ fn ppo_update_and_rollout_forward_with_cublas_match_warp_tiles() {
         )
     };
     let warp = step(&warp_policy);
-    for (setting, api, limit) in [
-        (GemmSetting::Cublas, CublasApi::GemmEx, F32_LIMIT),
-        (GemmSetting::CublasTf32, CublasApi::GemmEx, TF32_LIMIT),
-        (GemmSetting::Cublas, CublasApi::Lt, F32_LIMIT),
-        (GemmSetting::CublasTf32, CublasApi::Lt, TF32_LIMIT),
+    for (setting, limit) in [
+        (GemmSetting::Cublas, F32_LIMIT),
+        (GemmSetting::CublasTf32, TF32_LIMIT),
     ] {
-        let policy = match build(setting, api) {
+        let policy = match build(setting) {
             Ok(policy) => policy,
             Err(e) => {
                 skip_support::skip(&format!("{setting:?}: {e}"));

@@ -22,7 +22,7 @@ use instantmimic::latent::networks::distillation_loss_f64;
 use instantmimic::latent::{
     DistillationBatch, DistillationUpdate, LatentConfig, LatentShapes, LatentStudent,
 };
-use instantmimic::ppo::{CublasApi, GemmSetting, PolicyGemm};
+use instantmimic::ppo::{GemmSetting, PolicyGemm};
 use instantmimic::train::latent_trainer::load_frozen_decoder;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
@@ -62,7 +62,7 @@ fn small_config(epochs: u32, minibatches: u32) -> LatentConfig {
 /// The GEMM paths this machine has: Warp tiles, and cuBLAS when libcublas opens.
 fn gemm_paths(gpu: &Gpu) -> Vec<PolicyGemm> {
     let mut paths = vec![PolicyGemm::warp_tiles()];
-    match PolicyGemm::open(gpu, GemmSetting::Cublas, CublasApi::GemmEx) {
+    match PolicyGemm::open(gpu, GemmSetting::Cublas) {
         Ok(cublas) => paths.push(cublas),
         Err(e) => println!("cuBLAS path not checked: {e}"),
     }

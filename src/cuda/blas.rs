@@ -13,7 +13,6 @@ use std::sync::{Arc, Mutex};
 
 use cudarc::cublas::{result, sys};
 
-use super::blas_lt::{self, LtHandle, LtProduct};
 use super::{CudaError, DeviceMemory, Gpu, Stream};
 
 /// Bytes of a handle's workspace: what cuBLAS recommends for Hopper (32 MiB; 4 MiB suffices
@@ -41,17 +40,6 @@ pub enum GemmMath {
     /// f32 in and out, TF32 tensor-core products (`CUBLAS_COMPUTE_32F_FAST_TF32`): about 1e-3
     /// relative error instead of 1e-6.
     Tf32,
-}
-
-/// Which cuBLAS entry point computes the products (config `policy.cublas_api`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum BlasApi {
-    /// `cublasGemmEx` with cuBLAS's own choice of algorithm.
-    #[default]
-    GemmEx,
-    /// `cublasLtMatmul`, restricted to algorithms without a separate split-K reduction kernel
-    /// (src/cuda/blas_lt.rs).
-    Lt,
 }
 
 /// A row-major `rows x cols` f32 matrix in a device allocation from value `offset` on (e.g. one
@@ -199,8 +187,6 @@ unsafe impl Send for Handle {}
 /// the GPU's stream.
 pub struct Blas {
     handle: Mutex<Handle>,
-    /// With [`BlasApi::Lt`], the cuBLASLt handle that computes every product instead.
-    lt: Option<Mutex<LtHandle>>,
     workspace: Arc<DeviceMemory>,
     /// The GPU's main stream, for binding the context (and checking streams belong to it).
     stream: Stream,
@@ -218,12 +204,6 @@ impl Blas {
     /// Opens libcublas (from the library path), creates a handle in `gpu`'s context with a
     /// [`BLAS_WORKSPACE_BYTES`] workspace and host pointer mode. Not inside a capture.
     pub fn open(gpu: &Gpu) -> Result<Arc<Blas>, CudaError> {
-        Blas::open_with(gpu, BlasApi::GemmEx)
-    }
-
-    /// [`Blas::open`] whose products go through `api` (with [`BlasApi::Lt`] libcublasLt must
-    /// open too).
-    pub fn open_with(gpu: &Gpu, api: BlasApi) -> Result<Arc<Blas>, CudaError> {
         // SAFETY: only tries to dlopen the library's candidate names; no CUDA state involved.
         if !unsafe { sys::is_culib_present() } {
             return Err(CudaError::BlasUnavailable {
@@ -263,26 +243,12 @@ impl Blas {
         }
         .result()
         .map_err(blas_error("cublasSetPointerMode"))?;
-        let lt = match api {
-            BlasApi::GemmEx => None,
-            BlasApi::Lt => Some(Mutex::new(LtHandle::open()?)),
-        };
         Ok(Arc::new(Blas {
             handle: Mutex::new(handle),
-            lt,
             workspace,
             stream,
             version,
         }))
-    }
-
-    /// The entry point the products go through.
-    pub fn api(&self) -> BlasApi {
-        if self.lt.is_some() {
-            BlasApi::Lt
-        } else {
-            BlasApi::GemmEx
-        }
     }
 
     /// The library's version, e.g. "12.8.4".
@@ -347,39 +313,6 @@ impl Blas {
             .handle
             .lock()
             .map_err(|_| invalid("a thread panicked while using the handle".to_owned()))?;
-        if let Some(lt) = &self.lt {
-            // Row-major X [r, c] is column-major X^T with leading dimension c: c^T = op(b)^T
-            // op(a)^T, b first, as for cublasGemmEx below.
-            let product = LtProduct {
-                transa: b.transposed,
-                transb: a.transposed,
-                m: n as u64,
-                n: m as u64,
-                k: k as u64,
-                a: b.matrix.device_ptr(),
-                lda: i64::from(ldb),
-                b: a.matrix.device_ptr(),
-                ldb: i64::from(lda),
-                d: c.device_ptr(),
-                ldd: i64::from(ldc),
-                beta,
-                tf32: math == GemmMath::Tf32,
-            };
-            let lt = lt
-                .lock()
-                .map_err(|_| invalid("a thread panicked while using the handle".to_owned()))?;
-            blas_lt::matmul(
-                &lt,
-                &product,
-                self.workspace.device_ptr(),
-                self.workspace.len(),
-                stream.cu_stream() as cudarc::cublaslt::sys::cudaStream_t,
-            )?;
-            for memory in [a.matrix.memory, b.matrix.memory, c.memory, &self.workspace] {
-                stream.remember_allocation(memory);
-            }
-            return Ok(());
-        }
         // SAFETY: the handle is live (created in `open`, destroyed in `drop`) and locked; the
         // stream belongs to its context (checked above) and outlives the call.
         unsafe { result::set_stream(handle.0, stream.cu_stream() as sys::cudaStream_t) }
@@ -443,8 +376,6 @@ impl Drop for Blas {
             // SAFETY: the handle was created in `open` and is destroyed once, here, before the
             // workspace it uses is freed (fields drop after this).
             let _ = unsafe { result::destroy_handle(handle) };
-            // The cuBLASLt handle too, while the context is current.
-            drop(self.lt.take());
         }
     }
 }

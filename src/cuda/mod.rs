@@ -20,7 +20,6 @@
 
 mod args;
 mod blas;
-mod blas_lt;
 mod conditional;
 mod context;
 mod error;
@@ -37,7 +36,7 @@ mod readback;
 mod stream;
 
 pub use args::{ArgLayout, KernelArgs};
-pub use blas::{BLAS_WORKSPACE_BYTES, Blas, BlasApi, BlasMatrix, GemmMath, GemmOperand};
+pub use blas::{BLAS_WORKSPACE_BYTES, Blas, BlasMatrix, GemmMath, GemmOperand};
 pub use conditional::{
     Branch, GRAPH_CONDITIONAL_ENTRIES, GRAPH_CONDITIONAL_MODULE, GRAPH_CONDITIONAL_PTX,
     SET_FROM_NEGATION_ENTRY, SET_FROM_VALUE_ENTRY, SET_PAIR_ENTRY,

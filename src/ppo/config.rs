@@ -19,8 +19,6 @@ pub struct PolicyConfig {
     pub init_output_gain: f32,
     /// What computes the layers' GEMMs (forward in the rollout and the update, backward).
     pub gemm: GemmSetting,
-    /// Which cuBLAS entry point the cuBLAS paths call (no effect on Warp tiles).
-    pub cublas_api: CublasApi,
 }
 
 impl Default for PolicyConfig {
@@ -32,7 +30,6 @@ impl Default for PolicyConfig {
             init_hidden_gain: std::f32::consts::SQRT_2,
             init_output_gain: 0.01,
             gemm: GemmSetting::Auto,
-            cublas_api: CublasApi::GemmEx,
         }
     }
 }
@@ -54,19 +51,6 @@ pub enum GemmSetting {
     Cublas,
     /// cuBLAS with TF32 tensor-core products (about 1e-3 relative error); as `cublas`.
     CublasTf32,
-}
-
-/// `policy.cublas_api` (docs/ppo.md, "GEMMs"): the cuBLAS entry point of the cuBLAS paths.
-#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum CublasApi {
-    /// `cublasGemmEx`, cuBLAS's own choice of algorithm (its split-K products sum their parts
-    /// in a reduction kernel of their own).
-    #[default]
-    GemmEx,
-    /// `cublasLtMatmul` with only the algorithms that split K not at all or reduce inside the
-    /// GEMM kernel: no separate reduction launches in the update's weight gradients.
-    Lt,
 }
 
 /// `[ppo]`: the update (issue 5).

@@ -14,8 +14,8 @@
 
 use std::sync::Arc;
 
-use super::config::{CublasApi, GemmSetting};
-use crate::cuda::{Blas, BlasApi, CudaError, GemmMath, Gpu, Stream};
+use super::config::GemmSetting;
+use crate::cuda::{Blas, CudaError, GemmMath, Gpu, Stream};
 use crate::kernels::{DeviceArray, DeviceArray2, EnvError, EnvKernels};
 
 use super::PpoError;
@@ -77,19 +77,14 @@ impl PolicyGemm {
     /// The path `setting` asks for on `gpu`: `auto` (`auto_tf32`) is cuBLAS with f32 (TF32)
     /// products when libcublas opens, else Warp tiles; `cublas` and `cublas_tf32` are a
     /// [`CudaError::BlasUnavailable`] when it does not. Not inside a capture (cuBLAS allocates its workspace here).
-    /// `api` picks cuBLAS's entry point on the cuBLAS paths.
-    pub fn open(gpu: &Gpu, setting: GemmSetting, api: CublasApi) -> Result<PolicyGemm, CudaError> {
+    pub fn open(gpu: &Gpu, setting: GemmSetting) -> Result<PolicyGemm, CudaError> {
         let math = match setting {
             GemmSetting::Warp => return Ok(PolicyGemm::warp_tiles()),
             GemmSetting::Auto | GemmSetting::Cublas => GemmMath::F32,
             GemmSetting::AutoTf32 | GemmSetting::CublasTf32 => GemmMath::Tf32,
         };
         let falls_back = matches!(setting, GemmSetting::Auto | GemmSetting::AutoTf32);
-        let api = match api {
-            CublasApi::GemmEx => BlasApi::GemmEx,
-            CublasApi::Lt => BlasApi::Lt,
-        };
-        match Blas::open_with(gpu, api) {
+        match Blas::open(gpu) {
             Ok(blas) => Ok(PolicyGemm {
                 setting,
                 path: GemmPath::Cublas(math),
@@ -117,10 +112,7 @@ impl PolicyGemm {
         match self.path {
             GemmPath::WarpTiles => Ok(self.clone()),
             GemmPath::Cublas(_) => Ok(PolicyGemm {
-                blas: Some(Blas::open_with(
-                    gpu,
-                    self.blas.as_ref().map_or(BlasApi::GemmEx, |b| b.api()),
-                )?),
+                blas: Some(Blas::open(gpu)?),
                 ..self.clone()
             }),
         }
@@ -146,12 +138,8 @@ impl PolicyGemm {
         };
         let path = match (&self.path, &self.blas) {
             (GemmPath::Cublas(math), Some(blas)) => format!(
-                "cuBLAS {}{}, {} products",
+                "cuBLAS {}, {} products",
                 blas.version(),
-                match blas.api() {
-                    BlasApi::GemmEx => "",
-                    BlasApi::Lt => " (cuBLASLt, no split-K reduction kernels)",
-                },
                 match math {
                     GemmMath::F32 => "f32",
                     GemmMath::Tf32 => "TF32",

@@ -27,7 +27,7 @@ mod update;
 mod update_stages;
 
 pub use batch::PpoBatch;
-pub use config::{CublasApi, GemmSetting, KlMeasure, PolicyConfig, PpoConfig};
+pub use config::{GemmSetting, KlMeasure, PolicyConfig, PpoConfig};
 pub use flops::UpdateFlops;
 pub use gemm::{GemmPath, PolicyGemm};
 pub use loss::PpoStatistics;

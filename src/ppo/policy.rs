@@ -204,7 +204,7 @@ impl GaussianPolicy {
         let actor_params = DeviceArray::from_slice(gpu, [actor_values.len()], &actor_values)?;
         let critic_params = DeviceArray::from_slice(gpu, [critic_values.len()], &critic_values)?;
         let log_std = actor_params.view(log_std_offset, [action_size])?;
-        let gemm = PolicyGemm::open(gpu, config.gemm, config.cublas_api).map_err(EnvError::from)?;
+        let gemm = PolicyGemm::open(gpu, config.gemm).map_err(EnvError::from)?;
         Ok(GaussianPolicy {
             actor: Mlp::new(gpu, &actor_shapes, actor_params, batch, gemm.clone())?,
             critic: Mlp::new(gpu, &critic_shapes, critic_params, batch, gemm.clone())?,

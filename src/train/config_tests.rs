@@ -3,7 +3,7 @@
 
 use super::*;
 use crate::env::{ActionMode, EndEffectorFrame};
-use crate::ppo::{CublasApi, GemmSetting, KlMeasure};
+use crate::ppo::{GemmSetting, KlMeasure};
 
 #[test]
 fn defaults_are_the_paper_baseline_and_valid() {
@@ -88,30 +88,6 @@ fn gemm_is_auto_unless_the_config_names_a_path() {
     }
     let err = parse("\"tf32\"").unwrap_err().to_string();
     assert!(err.contains("gemm") && err.contains("cublas_tf32"), "{err}");
-}
-
-#[test]
-fn cublas_api_is_gemm_ex_unless_the_config_asks_for_lt() {
-    assert_eq!(
-        TrainConfig::with_motion("w").policy.cublas_api,
-        CublasApi::GemmEx
-    );
-    let parse = |v: &str| {
-        TrainConfig::from_toml(
-            &format!("motion = \"w\"\n[policy]\ncublas_api = {v}"),
-            "c.toml",
-        )
-    };
-    assert_eq!(parse("\"lt\"").unwrap().policy.cublas_api, CublasApi::Lt);
-    assert_eq!(
-        parse("\"gemm_ex\"").unwrap().policy.cublas_api,
-        CublasApi::GemmEx
-    );
-    let err = parse("\"cublaslt\"").unwrap_err().to_string();
-    assert!(
-        err.contains("cublas_api") && err.contains("gemm_ex"),
-        "{err}"
-    );
 }
 
 #[test]

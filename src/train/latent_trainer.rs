@@ -99,7 +99,7 @@ impl LatentTrainer {
             f64::from(config.policy.init_output_gain),
             config.seed,
         );
-        let gemm = PolicyGemm::open(gpu, config.policy.gemm, config.policy.cublas_api)?;
+        let gemm = PolicyGemm::open(gpu, config.policy.gemm)?;
         let student = LatentStudent::new(
             gpu,
             &shapes,

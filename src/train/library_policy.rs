@@ -319,7 +319,7 @@ impl LibraryPolicyEvaluator {
                         checkpoint.get::<f32>(names::PRIOR, &[p])?,
                     ),
                     None,
-                    PolicyGemm::open(gpu, config.policy.gemm, config.policy.cublas_api)?,
+                    PolicyGemm::open(gpu, config.policy.gemm)?,
                     evaluation.num_envs(),
                     config.seed,
                 )?;
