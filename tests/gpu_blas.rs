@@ -270,7 +270,7 @@ fn gemm_paths(gpu: &Gpu) -> Vec<(PolicyGemm, f64)> {
 }
 
 /// An actor-sized MLP (362 -> 400 -> 200 -> 100 -> 28, layers as views of one flat parameter
-/// buffer) over 1000 rows (on the cuBLAS paths in rows padded to 364 values): forward, loss gradient, backward (gradients cleared, then added),
+/// buffer) over 1000 rows: forward, loss gradient, backward (gradients cleared, then added),
 /// recorded into one graph per path and replayed twice; each replay against f64
 /// backpropagation, and cuBLAS f32 against Warp tiles.
 #[test]
@@ -304,14 +304,6 @@ fn mlp_forward_and_backward_of_every_gemm_path_match_f64_under_capture() {
 
     let params_d = DeviceArray::from_slice(&gpu, [len], &params).unwrap();
     let x_d = DeviceArray::from_slice(&gpu, [rows, 362], &x).unwrap();
-    // The cuBLAS paths read the observations as the update's minibatch holds them: rows padded
-    // to 364 values (NaN, never read), so that the product takes 360 inputs and the epilogue
-    // the last 2 (`gemm.rs`'s `gemm_inputs`).
-    let mut stored = vec![f32::NAN; rows * 364];
-    for i in 0..rows {
-        stored[i * 364..i * 364 + 362].copy_from_slice(&x[i * 362..(i + 1) * 362]);
-    }
-    let x_padded = DeviceArray::from_slice(&gpu, [rows, 364], &stored).unwrap();
     let d_out_d = DeviceArray::from_slice(&gpu, [rows, 28], &d_out).unwrap();
     let grads = DeviceArray::<f32>::zeros(&gpu, [len]).unwrap();
     let scratch = DeviceArray::<f32>::zeros(&gpu, [rows * 400]).unwrap();
@@ -336,12 +328,11 @@ fn mlp_forward_and_backward_of_every_gemm_path_match_f64_under_capture() {
     let mut results: Vec<(GemmPath, Vec<f64>, Vec<f64>)> = Vec::new();
     for (gemm, limit) in gemm_paths(&gpu) {
         let path = gemm.path();
-        let x_d = if gemm.uses_cublas() { &x_padded } else { &x_d };
         let graph = gpu
             .stream()
             .capture(|s| {
                 record_clear(s, &grads)?;
-                let mut input = x_d;
+                let mut input = &x_d;
                 for (l, ((w, b), y)) in weights.iter().zip(&activations).enumerate() {
                     gemm.record_linear(&kernels, s, input, w, b, y, l != last)?;
                     input = y;
@@ -350,7 +341,7 @@ fn mlp_forward_and_backward_of_every_gemm_path_match_f64_under_capture() {
                 // input gradient overwrites it.
                 for l in (0..=last).rev() {
                     let dz = if l == last { &d_out_d } else { &activations[l] };
-                    let below = if l == 0 { x_d } else { &activations[l - 1] };
+                    let below = if l == 0 { &x_d } else { &activations[l - 1] };
                     let (dw, db) = &grad_views[l];
                     let db = (l == last || !gemm.bias_with_input_gradient()).then_some(db);
                     gemm.record_weight_gradient(&kernels, s, below, dz, dw, db, target_blocks)?;

@@ -338,24 +338,8 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             kernels.linear_elu(s, dim, &a.array(0), &a.array(1), &a.array(2), &a.array(3))
         }
         "linear" => kernels.linear(s, dim, &a.array(0), &a.array(1), &a.array(2), &a.array(3)),
-        "bias_elu" => kernels.bias_elu(
-            s,
-            dim,
-            &a.array(0),
-            &a.array(1),
-            &a.array(2),
-            a.i32(3),
-            &a.array(4),
-        ),
-        "bias_add" => kernels.bias_add(
-            s,
-            dim,
-            &a.array(0),
-            &a.array(1),
-            &a.array(2),
-            a.i32(3),
-            &a.array(4),
-        ),
+        "bias_elu" => kernels.bias_elu(s, dim, &a.array(0), &a.array(1)),
+        "bias_add" => kernels.bias_add(s, dim, &a.array(0), &a.array(1)),
         "elu_input_gradient" => {
             kernels.elu_input_gradient(s, dim, &a.array(0), a.i32(1), &a.array(2), &a.array(3))
         }

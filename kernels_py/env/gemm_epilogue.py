@@ -8,10 +8,6 @@ modules):
 
 - `bias_elu`: `y <- elu(y + b)`, the hidden layers' forward after `y = x @ w`;
 - `bias_add`: `y <- y + b`, the output layer's;
-- both first add the products of the last `K % 4` inputs when the GEMM left them out
-  (`tail_begin < K`): cuBLAS runs its slow `align1` kernels when K, the length of the rows it
-  reads, is not a multiple of 4 (the observations' 362), so src/ppo/gemm.rs gives it the first
-  `K - K % 4` and these kernels the rest, at most 3 products an element;
 - `elu_input_gradient`: `y <- g * elu'(y)`, where `y` is the ELU output of the layer below
   (this layer's input) and `g = dz @ w^T` (cuBLAS into a scratch buffer):
   `elu'(z) = 1 if z > 0 else exp(z) = y + 1`. Like the tile kernel, the gradient of the
@@ -43,49 +39,24 @@ GRADIENT_ROWS = wp.constant(16)
 gradient_rows = wp.types.vector(length=GRADIENT_ROWS, dtype=wp.float32)
 
 
-@wp.func
-def product_tail(x: wp.array2d(dtype=wp.float32), w: wp.array2d(dtype=wp.float32), tail_begin: wp.int32, i: wp.int32, j: wp.int32):
-    """The sum over c in [tail_begin, K) of x[i, c] w[c, j], K = w.shape[0]: the products the
-    GEMM left out (none when tail_begin == K)."""
-    acc = float(0.0)
-    for c in range(tail_begin, w.shape[0]):
-        acc += x[i, c] * w[c, j]
-    return acc
-
-
 @wp.kernel
-def bias_elu(
-    bias: wp.array(dtype=wp.float32),
-    x: wp.array2d(dtype=wp.float32),
-    w: wp.array2d(dtype=wp.float32),
-    tail_begin: wp.int32,
-    y: wp.array2d(dtype=wp.float32),
-):
-    """y[i, j] <- elu(y[i, j] + tail + bias[j]), in place, tail the sum over c in
-    [tail_begin, K) of x[i, c] w[c, j]; y [M, N], bias [N], x [M, >= K], w [K, N]. Launch M * N
-    threads."""
+def bias_elu(bias: wp.array(dtype=wp.float32), y: wp.array2d(dtype=wp.float32)):
+    """y[i, j] <- elu(y[i, j] + bias[j]), in place; y [M, N], bias [N]. Launch M * N threads."""
     tid = wp.tid()
     n = y.shape[1]
     i = tid // n
     j = tid - i * n
-    y[i, j] = elu(y[i, j] + product_tail(x, w, tail_begin, i, j) + bias[j])
+    y[i, j] = elu(y[i, j] + bias[j])
 
 
 @wp.kernel
-def bias_add(
-    bias: wp.array(dtype=wp.float32),
-    x: wp.array2d(dtype=wp.float32),
-    w: wp.array2d(dtype=wp.float32),
-    tail_begin: wp.int32,
-    y: wp.array2d(dtype=wp.float32),
-):
-    """y[i, j] <- y[i, j] + tail + bias[j], in place, tail as in `bias_elu`. Launch M * N
-    threads."""
+def bias_add(bias: wp.array(dtype=wp.float32), y: wp.array2d(dtype=wp.float32)):
+    """y[i, j] <- y[i, j] + bias[j], in place; y [M, N], bias [N]. Launch M * N threads."""
     tid = wp.tid()
     n = y.shape[1]
     i = tid // n
     j = tid - i * n
-    y[i, j] = y[i, j] + product_tail(x, w, tail_begin, i, j) + bias[j]
+    y[i, j] = y[i, j] + bias[j]
 
 
 @wp.kernel
@@ -129,13 +100,9 @@ def elu_input_gradient(
 LAUNCH = {
     "bias_elu": (
         "dim == len(y)",
-        "dim <= extent(x, 0) * extent(w, 1)",
-        "dim <= extent(y, 0) * extent(w, 1)",
     ),
     "bias_add": (
         "dim == len(y)",
-        "dim <= extent(x, 0) * extent(w, 1)",
-        "dim <= extent(y, 0) * extent(w, 1)",
     ),
     "elu_input_gradient": (
         "dim <= len(y)",

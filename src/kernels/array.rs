@@ -324,13 +324,6 @@ impl DeviceArray<f32, 2> {
         Ok(BlasMatrix::new(&self.memory, self.offset, rows, cols)?)
     }
 
-    /// Whether every row starts at a multiple of `values` values from its allocation's start
-    /// (allocations themselves start 256-byte aligned): the row stride and the view's offset
-    /// are both multiples.
-    pub fn rows_aligned_to(&self, values: usize) -> bool {
-        values > 0 && self.offset % values == 0 && self.shape[1] % values == 0
-    }
-
     /// The first `cols` columns of this matrix as cuBLAS reads them: the rest of each row is
     /// padding that keeps the rows aligned. An error if the matrix has fewer columns.
     pub fn blas_columns(&self, cols: usize) -> Result<BlasMatrix<'_>, EnvError> {

@@ -38,20 +38,6 @@ pub fn padded_input_width(gemm: &PolicyGemm, k: usize) -> usize {
     }
 }
 
-/// How many of a layer's `k` inputs the cuBLAS product of [`PolicyGemm::record_linear`] takes:
-/// `k` rounded down to a multiple of 4 where `x`'s rows are 16-byte aligned and `k` is not a
-/// multiple of 4 (the epilogue adds the other 1-3 products), else `k`. cuBLAS picks its `align1`
-/// kernels when the length of the rows it reads along the product is not a multiple of 4,
-/// even in aligned rows (the first layer's forward stayed at 22-25 us in rows padded to 364
-/// values, Nsight Compute, H100, 2026-11-27); unaligned rows get them whatever the length.
-fn gemm_inputs(x: &DeviceArray2<f32>, k: usize) -> usize {
-    if k % 4 != 0 && k > 4 && x.rows_aligned_to(4) {
-        k - k % 4
-    } else {
-        k
-    }
-}
-
 /// The resolved path of the GEMMs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GemmPath {
@@ -209,20 +195,13 @@ impl PolicyGemm {
             return Ok(());
         }
         let (blas, math) = self.blas()?;
-        let tail_begin = gemm_inputs(x, k);
-        let w_head = w.view(0, [tail_begin, n])?;
-        let (xm, wm, ym) = (
-            x.blas_columns(tail_begin)?,
-            w_head.blas_matrix()?,
-            y.blas_matrix()?,
-        );
+        let (xm, wm, ym) = (x.blas_columns(k)?, w.blas_matrix()?, y.blas_matrix()?);
         blas.gemm(stream, xm.plain(), wm.plain(), ym, 0.0, math)
             .map_err(EnvError::from)?;
-        let tail_begin = tail_begin as i32;
         if elu {
-            kernels.bias_elu(stream, m * n, b, x, w, tail_begin, y)?;
+            kernels.bias_elu(stream, m * n, b, y)?;
         } else {
-            kernels.bias_add(stream, m * n, b, x, w, tail_begin, y)?;
+            kernels.bias_add(stream, m * n, b, y)?;
         }
         Ok(())
     }
