@@ -2,6 +2,7 @@
 # One device call, one lane per GPU: LANE0, LANE1, ... are shell snippets, each run in the
 # background on its GPU ($GPU inside the snippet), with these helpers:
 #   train NAME WALL_S ARGS...      instantmimic train --out $OUT/runs/NAME --overwrite ARGS
+#   train_before NAME WALL_S ARGS...  the same with the older build in $BEFORE/instantmimic.xz
 #   resume NAME FROM WALL_S ARGS...  copies the run directory FROM (carried from an earlier
 #                                  call) to $OUT/runs/NAME and continues it (train --resume)
 #   gpu_test NAME...               the staged GPU test binaries, one after another
@@ -60,13 +61,21 @@ report_run() {
   note "$name (rc $rc, wall $(( $(date +%s) - t0 )) s): $(grep -E 'stopped after|^error|received' "$log" | tail -1)"
   note "    last: $(grep -E '^iteration|^eval' "$log" | tail -1)"
 }
-train() {
-  local name=$1 wall=$2; shift 2
+# train_with BINARY NAME WALL_S ARGS...: `train` with that build.
+train_with() {
+  local exe=$1 name=$2 wall=$3; shift 3
   if [ "$(left)" -lt 40 ]; then note "$name: skipped (session time)"; return; fi
   local t0; t0=$(date +%s)
-  run_bounded "$wall" "$OUT/runs/$name.log" "$BIN/instantmimic" train --out "$OUT/runs/$name" --overwrite \
+  run_bounded "$wall" "$OUT/runs/$name.log" "$exe" train --out "$OUT/runs/$name" --overwrite \
     --progress lines $replay_flag "$@"
   report_run "$name" $? "$t0"
+}
+train() { train_with "$BIN/instantmimic" "$@"; }
+# train_before NAME WALL_S ARGS...: `train` with the older build of $BEFORE, for time to
+# success before and after on the same GPU.
+train_before() {
+  [ -x /tmp/instantmimic-before/instantmimic ] || unpack_before
+  train_with /tmp/instantmimic-before/instantmimic "$@"
 }
 resume() {
   local name=$1 from=$2 wall=$3; shift 3
