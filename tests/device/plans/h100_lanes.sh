@@ -3,6 +3,8 @@
 # per-step factors once per step; observation_moments four rows a pass), each checked on Warp's
 # CPU device but not yet on a GPU (`bench full`'s stages tell their effects apart), and
 # `policy.cublas_api = "lt"` (cuBLASLt without split-K reduction kernels).
+# (policy.cublas_api was removed after this plan ran, 2026-11-27: its full_lt step now stops at
+# the unknown key; BENCHMARKS.md keeps what it measured.)
 # Call 1 (PART=1): gpu_env_kernels, gpu_ppo and gpu_blas (the new kernels and cuBLASLt against
 # f64), then `bench full` of the older build (main) and of this one, alternating, twice, this one
 # with cuBLASLt, and the backflip's seed 0.
