@@ -24,7 +24,7 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 46] = [
+const EXPECTED_KERNELS: [(&str, &str); 48] = [
     ("control", "pd_control"),
     ("control", "pd_targets"),
     ("evaluate", "evaluation_accumulate"),
@@ -55,6 +55,7 @@ const EXPECTED_KERNELS: [(&str, &str); 46] = [
     ("observe", "observation_moments_merge"),
     ("observe", "observation_normalize"),
     ("optimizer", "ppo_minibatch_schedule"),
+    ("optimizer", "adam_advance"),
     ("optimizer", "adam_update"),
     ("optimizer", "log_std_floor"),
     ("policy", "linear_elu"),
@@ -70,6 +71,7 @@ const EXPECTED_KERNELS: [(&str, &str); 46] = [
     ("reset", "phase_statistics_update"),
     ("statistics", "episode_statistics"),
     ("statistics", "rollout_statistics"),
+    ("tracking", "tracking_error_sums"),
     ("tracking", "reward_termination"),
 ];
 

@@ -26,7 +26,7 @@ use std::sync::Arc;
 use instantmimic::cuda::Gpu;
 use instantmimic::kernels::ScheduleParams;
 use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels, PpoLossParams};
-use instantmimic::ppo::adam::{AdamMoments, adam_params, record_schedule};
+use instantmimic::ppo::adam::{AdamMoments, AdamStep, adam_params, record_schedule};
 use instantmimic::ppo::backward::{
     record_linear_backward_input_elu, record_linear_backward_weight,
 };
@@ -372,8 +372,7 @@ fn adam_steps_with_clipping_match_the_float64_reference() {
     let params = DeviceArray::from_slice(&gpu, [size], &p0).unwrap();
     let grads = DeviceArray::zeros(&gpu, [size]).unwrap();
     let moments = AdamMoments::zeros(&gpu, size).unwrap();
-    let lr = DeviceArray::from_slice(&gpu, [1], &[5e-4f32]).unwrap();
-    let step = DeviceArray::zeros(&gpu, [1]).unwrap();
+    let adam = AdamStep::new(&gpu, 5e-4).unwrap();
     let norm_sq = DeviceArray::zeros(&gpu, [3]).unwrap();
     let a = 4;
     // KL between the bounds: the schedule only counts the step.
@@ -401,7 +400,7 @@ fn adam_steps_with_clipping_match_the_float64_reference() {
         let g = normal(&mut rng, size, 0.0, if t == 2 { 1e-4 } else { 0.01 });
         grads.upload(&g).unwrap();
         let s = gpu.stream();
-        record_schedule(&kernels, s, &sums, &schedule, &log_std_grad, &lr, &step).unwrap();
+        record_schedule(&kernels, s, &sums, &schedule, &hp, &log_std_grad, &adam).unwrap();
         record_sum_of_squares(&kernels, s, &grads, &norm_sq, t - 1).unwrap();
         moments
             .record_step(
@@ -409,8 +408,7 @@ fn adam_steps_with_clipping_match_the_float64_reference() {
                 s,
                 &params,
                 &grads,
-                &lr,
-                &step,
+                &adam.factors,
                 &norm_sq,
                 t - 1,
                 &hp,
@@ -450,8 +448,17 @@ fn adam_steps_with_clipping_match_the_float64_reference() {
             &v,
         );
         p = gpu_p;
-        assert_eq!(step.download().unwrap(), vec![t as i32]);
-        assert_eq!(lr.download().unwrap(), vec![5e-4f32]);
+        assert_eq!(adam.count.download().unwrap(), vec![t as i32]);
+        assert_eq!(adam.learning_rate.download().unwrap(), vec![5e-4f32]);
+        // The step's factors, computed once, against float64.
+        check(
+            &format!("step {t}: Adam's step size and sqrt(1 - b2^t)"),
+            &to_f64(&adam.factors.download().unwrap()),
+            &[
+                lr64 / (1.0 - b1.powi(t as i32)),
+                (1.0 - b2.powi(t as i32)).sqrt(),
+            ],
+        );
     }
 }
 

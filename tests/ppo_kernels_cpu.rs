@@ -149,6 +149,16 @@ fn rust_and_kernels_agree_on_shared_constants() {
         ),
         instantmimic::env::body_model::MAX_CHAIN_DEPTH
     );
+    let tracking_py = kernel_source("tracking.py");
+    assert_eq!(
+        python_constant(&tracking_py, "tracking.py", "TRACKING_LANES"),
+        layout::TRACKING_LANES
+    );
+    assert_eq!(
+        python_constant(&tracking_py, "tracking.py", "ERROR_DISTANCES") + 1,
+        layout::ERROR_SUMS,
+        "the last slot of a lane's error sums"
+    );
     let observe_py = kernel_source("observe.py");
     for (name, rust) in [
         ("NUM_BODIES", layout::OBSERVED_BODIES),

@@ -2,10 +2,12 @@
 (env/ppo_statistics.py) on Warp's CPU device against float64 references.
 
 - `ppo_minibatch_schedule`: the log-std gradient, rsl_rl's KL rule in every case (above twice
-  the target, below half of it, zero KL, in between, at both clamps, adaptation off) and the
-  step count.
+  the target, below half of it, zero KL, in between, at both clamps, adaptation off), the
+  step count and the step's Adam factors (step size, `sqrt(1 - b2^t)`).
+- `adam_advance`: the step count and the factors at the current rate.
 - `adam_update`: torch's Adam with global-norm clipping (a norm above the threshold and one
-  below), at steps 1 and 7, several steps in a row against the reference's own trajectory.
+  below), at steps 1 and 7, several steps in a row against the reference's own trajectory,
+  with the factors the schedule writes.
 - `log_std_floor`: values below the floor raised to it exactly, the others untouched bit for
   bit (a floor of -inf changes nothing).
 - `ppo_update_statistics`: means over minibatch slots, the learning rate, advantage moments,
@@ -52,15 +54,35 @@ def check_schedule(v: Verdict, rng):
         grad = zeros(a)
         lr = array(np.array([lr0]))
         step = array(np.array([6]))
-        wp.launch(optimizer.ppo_minibatch_schedule, dim=1, inputs=[array(sums), schedule_params(target, 0.01), grad, lr, step], device="cpu")
+        factors = zeros(2)
+        wp.launch(optimizer.ppo_minibatch_schedule, dim=1, inputs=[array(sums), schedule_params(target, 0.01), ADAM, grad, lr, step, factors], device="cpu")
         v.error(f"schedule, {what}: learning rate", lr.numpy(), [float(np.float32(lr_ref))], limit=1e-6)
         v.error(f"schedule, {what}: log-std gradient", grad.numpy(), sums[TERMS:] - float(np.float32(0.01)), limit=1e-6)
         v.check(f"schedule, {what}: Adam step advanced", step.numpy()[0] == 7, f"step {step.numpy()[0]}")
+        v.error(f"schedule, {what}: Adam factors at step 7", factors.numpy(), adam_factors(float(lr.numpy()[0]), 7), limit=1e-6)
     sums = np.zeros(TERMS + a)
     sums[TERM_KL] = 1.0
     lr = array(np.array([5e-4]))
-    wp.launch(optimizer.ppo_minibatch_schedule, dim=1, inputs=[array(sums), schedule_params(target, 0.0, adaptive=False), zeros(a), lr, zeros(1, dtype=wp.int32)], device="cpu")
+    factors = zeros(2)
+    wp.launch(optimizer.ppo_minibatch_schedule, dim=1, inputs=[array(sums), schedule_params(target, 0.0, adaptive=False), ADAM, zeros(a), lr, zeros(1, dtype=wp.int32), factors], device="cpu")
     v.error("schedule, adaptation off: learning rate unchanged", lr.numpy(), [float(np.float32(5e-4))], limit=0.0)
+    v.error("schedule, adaptation off: Adam factors at step 1", factors.numpy(), adam_factors(float(np.float32(5e-4)), 1), limit=1e-6)
+
+
+def adam_factors(lr, t, b1=0.9, b2=0.999):
+    """The step size lr / (1 - b1^t) and sqrt(1 - b2^t) in float64, with float32 betas."""
+    b1, b2 = float(np.float32(b1)), float(np.float32(b2))
+    return [lr / (1.0 - b1**t), np.sqrt(1.0 - b2**t)]
+
+
+def check_advance(v: Verdict):
+    lr = array(np.array([3e-4]))
+    step = array(np.array([41]))
+    factors = zeros(2)
+    for t in [42, 43]:
+        wp.launch(optimizer.adam_advance, dim=3, inputs=[lr, ADAM, step, factors], device="cpu")
+        v.check(f"adam_advance: step {t}", step.numpy()[0] == t, f"step {step.numpy()[0]}")
+        v.error(f"adam_advance: factors at step {t}", factors.numpy(), adam_factors(float(np.float32(3e-4)), t), limit=1e-6)
 
 
 def adam_params(beta1, beta2, eps, max_norm):
@@ -70,6 +92,14 @@ def adam_params(beta1, beta2, eps, max_norm):
     p.epsilon = eps
     p.max_grad_norm = max_norm
     return p
+
+
+ADAM = adam_params(0.9, 0.999, 1e-8, 1.0)
+
+
+def factors_of(lr, t, b1, b2):
+    """What the schedule writes for step t: both factors rounded to float32 once."""
+    return array(f32(np.array(adam_factors(lr, t, b1, b2))))
 
 
 def adam_reference(p, g, m, v, lr, t, norm, b1, b2, eps, max_norm):
@@ -97,7 +127,7 @@ def check_adam(v: Verdict, rng):
         wp.launch(
             optimizer.adam_update,
             dim=size,
-            inputs=[pd, array(g), md, vd, array(np.array([lr])), array(np.array([t])), array(norm_sq, dtype=wp.float64), 1, adam_params(b1, b2, eps, max_norm)],
+            inputs=[pd, array(g), md, vd, factors_of(float(lr), t, b1, b2), array(norm_sq, dtype=wp.float64), 1, adam_params(b1, b2, eps, max_norm)],
             device="cpu",
         )
         ref_p, ref_m, ref_v = adam_reference(p, g, m, vv, lr, t, norm, b1_32, b2_32, eps32, float(np.float32(max_norm)))
@@ -116,7 +146,7 @@ def check_adam(v: Verdict, rng):
         wp.launch(
             optimizer.adam_update,
             dim=size,
-            inputs=[pd, array(g), md, vd, array(np.array([1e-3])), array(np.array([t])), array(np.array([norm * norm]), dtype=wp.float64), 0, adam_params(b1, b2, eps, 1.0)],
+            inputs=[pd, array(g), md, vd, factors_of(float(np.float32(1e-3)), t, b1, b2), array(np.array([norm * norm]), dtype=wp.float64), 0, adam_params(b1, b2, eps, 1.0)],
             device="cpu",
         )
         ref = adam_reference(ref[0], g, ref[1], ref[2], float(np.float32(1e-3)), t, norm, b1_32, b2_32, eps32, 1.0)
@@ -175,6 +205,7 @@ def main() -> int:
     rng = np.random.default_rng(13)
     v = Verdict("ppo_optimizer")
     check_schedule(v, rng)
+    check_advance(v)
     check_adam(v, rng)
     check_log_std_floor(v, rng)
     check_statistics(v, rng)

@@ -7,13 +7,15 @@ Per minibatch, in this order on the stream:
    ppo_loss.py's terms, minus `entropy_coef`), adapts the learning rate to the minibatch's
    approximate KL as rsl_rl does (before the step, so the step already uses it):
    `kl > 2 target -> lr / 1.5`, `0 < kl < target / 2 -> lr * 1.5`, clamped to
-   `[lr_min, lr_max]`, and advances Adam's step count.
+   `[lr_min, lr_max]`, advances Adam's step count and writes the step's Adam factors (step size
+   and `sqrt(1 - b2^t)`, once instead of per parameter).
 2. reduce.py `sum_of_squares` over every gradient (actor and critic) into the minibatch's slot:
    the squared global norm.
 3. `adam_update`, one thread per parameter (one launch per parameter buffer): the gradient is
    scaled by `min(1, max_grad_norm / (norm + 1e-6))` (torch's `clip_grad_norm_`), then Adam as
    torch computes it: `m = b1 m + (1 - b1) g`, `v = b2 v + (1 - b2) g^2`,
-   `p -= lr / (1 - b1^t) * m / (sqrt(v) / sqrt(1 - b2^t) + eps)` (bias corrections in float64).
+   `p -= lr / (1 - b1^t) * m / (sqrt(v) / sqrt(1 - b2^t) + eps)` (bias corrections in float64,
+   from the schedule's factors).
 4. `log_std_floor` (one thread per action; only with `ppo.min_log_std`): the actor's log std
    clamped from below.
 """
@@ -53,30 +55,68 @@ class ScheduleParams:
     entropy_coef: wp.float32
 
 
+@wp.func
+def adam_step_factors(learning_rate: wp.float32, step: wp.int32, beta1: wp.float32, beta2: wp.float32) -> wp.vec2:
+    """Adam's per-step scalars at step `step` (>= 1): the step size `lr / (1 - b1^t)` and
+    `sqrt(1 - b2^t)`, both from float64 and rounded to float32 once. Computed once per step by
+    one thread instead of by every parameter's: two float64 `pow` a parameter cost about 4 us a
+    launch on the H100, and GPUs with slow float64 much more."""
+    t = wp.float64(step)
+    bias1 = wp.float64(1.0) - wp.pow(wp.float64(beta1), t)
+    bias2 = wp.float64(1.0) - wp.pow(wp.float64(beta2), t)
+    return wp.vec2(wp.float32(wp.float64(learning_rate) / bias1), wp.float32(wp.sqrt(bias2)))
+
+
 @wp.kernel
 def ppo_minibatch_schedule(
     sums: wp.array(dtype=wp.float32),
     params: ScheduleParams,
+    adam: AdamParams,
     log_std_grad: wp.array(dtype=wp.float32),
     learning_rate: wp.array(dtype=wp.float32),
     adam_step: wp.array(dtype=wp.int32),
+    adam_factors: wp.array(dtype=wp.float32),
 ):
     """One thread. `sums` [LOSS_TERMS + A]: the minibatch's column sums of the loss terms;
     writes `log_std_grad` [A] (the actor's log-std gradient), adapts `learning_rate[0]` to the
-    KL `sums[TERM_KL]`, and adds 1 to `adam_step[0]`."""
+    KL `sums[TERM_KL]`, adds 1 to `adam_step[0]` and writes the step's [`adam_step_factors`]
+    into `adam_factors` [2]."""
     if wp.tid() != 0:
         return
     for j in range(log_std_grad.shape[0]):
         log_std_grad[j] = sums[LOSS_TERMS + j] - params.entropy_coef
+    lr = learning_rate[0]
     if params.adaptive != 0:
         kl = sums[TERM_KL]
-        lr = learning_rate[0]
         if kl > 2.0 * params.kl_target:
             lr = wp.max(lr / LR_FACTOR, params.lr_min)
         elif kl < 0.5 * params.kl_target and kl > 0.0:
             lr = wp.min(lr * LR_FACTOR, params.lr_max)
         learning_rate[0] = lr
-    adam_step[0] = adam_step[0] + 1
+    step = adam_step[0] + 1
+    adam_step[0] = step
+    factors = adam_step_factors(lr, step, adam.beta1, adam.beta2)
+    adam_factors[0] = factors[0]
+    adam_factors[1] = factors[1]
+
+
+@wp.kernel
+def adam_advance(
+    learning_rate: wp.array(dtype=wp.float32),
+    adam: AdamParams,
+    adam_step: wp.array(dtype=wp.int32),
+    adam_factors: wp.array(dtype=wp.float32),
+):
+    """One thread, for optimizers without the PPO schedule (the latent controller's): adds 1
+    to `adam_step[0]` and writes the step's [`adam_step_factors`] at rate `learning_rate[0]`
+    into `adam_factors` [2]."""
+    if wp.tid() != 0:
+        return
+    step = adam_step[0] + 1
+    adam_step[0] = step
+    factors = adam_step_factors(learning_rate[0], step, adam.beta1, adam.beta2)
+    adam_factors[0] = factors[0]
+    adam_factors[1] = factors[1]
 
 
 @wp.kernel
@@ -85,15 +125,14 @@ def adam_update(
     grads: wp.array(dtype=wp.float32),
     moment1: wp.array(dtype=wp.float32),
     moment2: wp.array(dtype=wp.float32),
-    learning_rate: wp.array(dtype=wp.float32),
-    adam_step: wp.array(dtype=wp.int32),
+    adam_factors: wp.array(dtype=wp.float32),
     grad_norm_sq: wp.array(dtype=wp.float64),
     slot: wp.int32,
     hp: AdamParams,
 ):
     """One thread per parameter: the clipped gradient (global norm sqrt(grad_norm_sq[slot]))
-    and Adam's update of `params`, `moment1`, `moment2` at step `adam_step[0]` (>= 1) with rate
-    `learning_rate[0]`."""
+    and Adam's update of `params`, `moment1`, `moment2` with the step's `adam_factors` (step
+    size, `sqrt(1 - b2^t)`; [`adam_step_factors`], written by the schedule)."""
     i = wp.tid()
     norm = wp.sqrt(grad_norm_sq[slot])
     scale = wp.min(wp.float64(1.0), wp.float64(hp.max_grad_norm) / (norm + wp.float64(GRAD_NORM_EPSILON)))
@@ -102,12 +141,8 @@ def adam_update(
     v = hp.beta2 * moment2[i] + (1.0 - hp.beta2) * g * g
     moment1[i] = m
     moment2[i] = v
-    t = wp.float64(adam_step[0])
-    bias1 = wp.float64(1.0) - wp.pow(wp.float64(hp.beta1), t)
-    bias2 = wp.float64(1.0) - wp.pow(wp.float64(hp.beta2), t)
-    step_size = wp.float32(wp.float64(learning_rate[0]) / bias1)
-    denom = wp.sqrt(v) / wp.float32(wp.sqrt(bias2)) + hp.epsilon
-    params[i] = params[i] - step_size * m / denom
+    denom = wp.sqrt(v) / adam_factors[1] + hp.epsilon
+    params[i] = params[i] - adam_factors[0] * m / denom
 
 
 @wp.kernel
@@ -127,6 +162,9 @@ def log_std_floor(log_std: wp.array(dtype=wp.float32), floor: wp.float32):
 # above a kernel would change its PTX.
 LAUNCH = {
     "ppo_minibatch_schedule": (
+        "dim >= 1",
+    ),
+    "adam_advance": (
         "dim >= 1",
     ),
     "adam_update": (

@@ -84,6 +84,16 @@ def start_in_bin(
     return (wp.float32(b) + v) / wp.float32(bins) * span
 
 
+@wp.func
+def skip_normals(state: wp.uint32, count: wp.int32) -> wp.uint32:
+    """The stream `state` after `count` draws of `wp.randn` (two uniform draws each): where a
+    lane of `reset_masked` finds its own normals among those the serial reset drew in order."""
+    s = state
+    for _ in range(2 * count):
+        wp.randu(s)
+    return s
+
+
 @wp.kernel
 def reset_masked(
     done: wp.array(dtype=wp.int32),
@@ -113,8 +123,24 @@ def reset_masked(
     clip's reference qpos at t0 with noise (root orientation and ball joints
     `q * qexp(sigma g)`, hinges `theta + sigma g`, root position exact), qvel = reference qvel +
     10 sigma g, ctrl, warm start and last action zeroed, clip_id = c, ref_time = t0,
-    episode_step = 0. Random stream: seed, offset `(iteration[0] * horizon + t) * N + n`."""
-    n = wp.tid()
+    episode_step = 0. Random stream: seed, offset `(iteration[0] * horizon + t) * N + n`: u and
+    v, then the normals in the order root orientation (3), joint after joint (3 a ball, 1 a
+    hinge), qvel entry after entry.
+
+    One thread per env and lane, `nq + nv + 1` lanes an env: lane i < nq writes qpos[n, i], lane
+    nq + k writes qvel[n, k] and its warm start, the last lane the rest. One thread per env wrote
+    them in a loop of about 40 us a launch (likely each store waiting for its table read: the
+    compiler may not move a read of `table` above a store to `qpos`). Every lane draws u and v and
+    locates t0 itself (rather than a per-env kernel before it: one launch fewer, and an env's
+    lanes read the same addresses), then skips to its own normals ([`skip_normals`]), so the values are those
+    of the serial loop, whose later writes win where two would write one entry (joints over the
+    root orientation over the root position over the plain reference value)."""
+    tid = wp.tid()
+    nq = qpos.shape[1]
+    nv = qvel.shape[1]
+    lanes = nq + nv + 1
+    n = tid // lanes
+    lane = tid - n * lanes
     if done[n] == 0:
         return
     num_envs = done.shape[0]
@@ -134,36 +160,56 @@ def reset_masked(
         bins = phase_cdf.shape[1]
         clip = cell // bins
         t0 = start_in_bin(cell - clip * bins, v, bins, table, clip_base(clip_offsets, clip), params.dt)
+    if lane == nq + nv:
+        for m in range(ctrl.shape[1]):
+            ctrl[n, m] = 0.0
+        for m in range(actions.shape[1]):
+            actions[n, m] = 0.0
+        clip_id[n] = clip
+        ref_time[n] = t0
+        episode_step[n] = 0
+        return
     at = reference_locate(table, clip_base(clip_offsets, clip), t0)
     sigma = params.noise_std
 
-    for i in range(qpos.shape[1]):
-        qpos[n, i] = reference_value(table, at, i)
-    p = reference_position(table, at, 0)
-    for c in range(3):
-        qpos[n, c] = p[c]
-    q = qmul(reference_quat_wxyz(table, at, root_quat), qexp(sigma * wp.vec3(wp.randn(state), wp.randn(state), wp.randn(state))))
-    for c in range(4):
-        qpos[n, root_quat + c] = q[c]
+    # The normals drawn before joint j (the root orientation's 3 first), and the last joint
+    # whose qpos entries hold lane i.
+    drawn = int(3)
+    joint = int(-1)
+    joint_drawn = int(0)
     for j in range(joint_kind.shape[0]):
         a = joint_qpos[j]
+        width = int(1)
+        draws = int(1)
         if joint_kind[j] == BALL:
-            g = wp.vec3(wp.randn(state), wp.randn(state), wp.randn(state))
-            q = qmul(reference_quat_wxyz(table, at, a), qexp(sigma * g))
-            for c in range(4):
-                qpos[n, a + c] = q[c]
-        else:
-            qpos[n, a] = reference_value(table, at, a) + sigma * wp.randn(state)
-    for k in range(qvel.shape[1]):
+            width = 4
+            draws = 3
+        if lane >= a and lane < a + width:
+            joint = j
+            joint_drawn = drawn
+        drawn += draws
+    if lane >= nq:
+        k = lane - nq
+        state = skip_normals(state, drawn + k)
         qvel[n, k] = reference_value(table, at, REF_QVEL + k) + VELOCITY_NOISE_FACTOR * sigma * wp.randn(state)
         qacc_warmstart[n, k] = 0.0
-    for m in range(ctrl.shape[1]):
-        ctrl[n, m] = 0.0
-    for m in range(actions.shape[1]):
-        actions[n, m] = 0.0
-    clip_id[n] = clip
-    ref_time[n] = t0
-    episode_step[n] = 0
+    elif joint >= 0:
+        a = joint_qpos[joint]
+        state = skip_normals(state, joint_drawn)
+        if joint_kind[joint] == BALL:
+            g = wp.vec3(wp.randn(state), wp.randn(state), wp.randn(state))
+            q = qmul(reference_quat_wxyz(table, at, a), qexp(sigma * g))
+            qpos[n, lane] = q[lane - a]
+        else:
+            qpos[n, lane] = reference_value(table, at, a) + sigma * wp.randn(state)
+    elif lane >= root_quat and lane < root_quat + 4:
+        q = qmul(reference_quat_wxyz(table, at, root_quat), qexp(sigma * wp.vec3(wp.randn(state), wp.randn(state), wp.randn(state))))
+        qpos[n, lane] = q[lane - root_quat]
+    elif lane < 3:
+        p = reference_position(table, at, 0)
+        qpos[n, lane] = p[lane]
+    else:
+        qpos[n, lane] = reference_value(table, at, lane)
 
 
 @wp.func
@@ -367,15 +413,15 @@ def phase_statistics_update(
 # above a kernel would change its PTX.
 LAUNCH = {
     "reset_masked": (
-        "dim == len(done)",
-        "dim <= extent(qpos, 0)",
-        "dim <= extent(qvel, 0)",
-        "dim <= extent(ctrl, 0)",
-        "dim <= extent(qacc_warmstart, 0)",
-        "dim <= len(clip_id)",
-        "dim <= len(ref_time)",
-        "dim <= len(episode_step)",
-        "dim <= extent(actions, 0)",
+        "dim == len(done) * (extent(qpos, 1) + extent(qvel, 1) + 1)",
+        "dim <= extent(qpos, 0) * (extent(qpos, 1) + extent(qvel, 1) + 1)",
+        "dim <= extent(qvel, 0) * (extent(qpos, 1) + extent(qvel, 1) + 1)",
+        "dim <= extent(ctrl, 0) * (extent(qpos, 1) + extent(qvel, 1) + 1)",
+        "dim <= extent(qacc_warmstart, 0) * (extent(qpos, 1) + extent(qvel, 1) + 1)",
+        "dim <= len(clip_id) * (extent(qpos, 1) + extent(qvel, 1) + 1)",
+        "dim <= len(ref_time) * (extent(qpos, 1) + extent(qvel, 1) + 1)",
+        "dim <= len(episode_step) * (extent(qpos, 1) + extent(qvel, 1) + 1)",
+        "dim <= extent(actions, 0) * (extent(qpos, 1) + extent(qvel, 1) + 1)",
     ),
     "phase_statistics_update": (
         "dim >= 1",

@@ -27,6 +27,25 @@ pub struct GemmCase {
     /// Largest |cuBLAS - Warp| over the largest |Warp| output (the bias is 0).
     pub cublas_f32_difference: Option<f64>,
     pub cublas_tf32_difference: Option<f64>,
+    /// The layer's three products in TF32 with the weights stored `[inputs, outputs]` (as the
+    /// policy stores them) and `[outputs, inputs]` (PyTorch's `nn.Linear`), the inputs in rows
+    /// padded to a multiple of 4 values as the update's minibatch holds them; `None` without
+    /// cuBLAS.
+    pub layouts: Option<LayoutTimes>,
+}
+
+/// Milliseconds per product of one layer, TF32 cuBLAS, for both weight layouts: `w [in, out]`
+/// (forward `x w`, input gradient `dz w^T`, weight gradient `x^T dz`) and `w [out, in]`
+/// (forward `x w^T`, input gradient `dz w`, weight gradient `dz^T x`). Which operand is
+/// contiguous along the summed dimension decides which kernels cuBLAS can run.
+#[derive(Clone, Debug, Serialize)]
+pub struct LayoutTimes {
+    pub forward_in_out_ms: f64,
+    pub forward_out_in_ms: f64,
+    pub input_gradient_in_out_ms: f64,
+    pub input_gradient_out_in_ms: f64,
+    pub weight_gradient_in_out_ms: f64,
+    pub weight_gradient_out_in_ms: f64,
 }
 
 impl GemmCase {
@@ -108,6 +127,10 @@ pub fn bench_gemm(
             };
             let f32_result = timed(GemmMath::F32)?;
             let tf32_result = timed(GemmMath::Tf32)?;
+            let layouts = match &blas {
+                Ok(blas) => Some(time_layouts(gpu, blas, [m, k, n], reps)?),
+                Err(_) => None,
+            };
             cases.push(GemmCase {
                 rows: m,
                 inputs: k,
@@ -117,6 +140,7 @@ pub fn bench_gemm(
                 cublas_tf32_ms: tf32_result.map(|r| r.0),
                 cublas_f32_difference: f32_result.map(|r| r.1),
                 cublas_tf32_difference: tf32_result.map(|r| r.1),
+                layouts,
             });
         }
     }
@@ -126,5 +150,53 @@ pub fn bench_gemm(
         cublas_unavailable: blas.err().map(|e| e.to_string()),
         cases,
         seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// [`LayoutTimes`] of a layer of `k` inputs and `n` outputs over `m` rows (values 0: the
+/// timing of a product does not depend on them).
+fn time_layouts(
+    gpu: &Gpu,
+    blas: &Blas,
+    [m, k, n]: [usize; 3],
+    reps: u32,
+) -> Result<LayoutTimes, EnvError> {
+    let padded = |cols: usize| cols.next_multiple_of(4);
+    let x = DeviceArray::<f32, 2>::zeros(gpu, [m, padded(k)])?;
+    let dz = DeviceArray::<f32, 2>::zeros(gpu, [m, n])?;
+    let y = DeviceArray::<f32, 2>::zeros(gpu, [m, n])?;
+    let g = DeviceArray::<f32, 2>::zeros(gpu, [m, k])?;
+    let w_in_out = DeviceArray::<f32, 2>::zeros(gpu, [k, n])?;
+    let w_out_in = DeviceArray::<f32, 2>::zeros(gpu, [n, padded(k)])?;
+    let stream = gpu.stream();
+    let tf32 = GemmMath::Tf32;
+    let time = |product: &dyn Fn() -> Result<(), EnvError>| time_ms(gpu, reps, product);
+    let xm = || x.blas_columns(k);
+    let w_oi = || w_out_in.blas_columns(k);
+    Ok(LayoutTimes {
+        forward_in_out_ms: time(&|| {
+            let (xm, wm, ym) = (xm()?, w_in_out.blas_matrix()?, y.blas_matrix()?);
+            Ok(blas.gemm(stream, xm.plain(), wm.plain(), ym, 0.0, tf32)?)
+        })?,
+        forward_out_in_ms: time(&|| {
+            let (xm, wm, ym) = (xm()?, w_oi()?, y.blas_matrix()?);
+            Ok(blas.gemm(stream, xm.plain(), wm.transposed(), ym, 0.0, tf32)?)
+        })?,
+        input_gradient_in_out_ms: time(&|| {
+            let (dzm, wm, gm) = (dz.blas_matrix()?, w_in_out.blas_matrix()?, g.blas_matrix()?);
+            Ok(blas.gemm(stream, dzm.plain(), wm.transposed(), gm, 0.0, tf32)?)
+        })?,
+        input_gradient_out_in_ms: time(&|| {
+            let (dzm, wm, gm) = (dz.blas_matrix()?, w_oi()?, g.blas_matrix()?);
+            Ok(blas.gemm(stream, dzm.plain(), wm.plain(), gm, 0.0, tf32)?)
+        })?,
+        weight_gradient_in_out_ms: time(&|| {
+            let (xm, dzm, wm) = (xm()?, dz.blas_matrix()?, w_in_out.blas_matrix()?);
+            Ok(blas.gemm(stream, xm.transposed(), dzm.plain(), wm, 1.0, tf32)?)
+        })?,
+        weight_gradient_out_in_ms: time(&|| {
+            let (xm, dzm, wm) = (xm()?, dz.blas_matrix()?, w_oi()?);
+            Ok(blas.gemm(stream, dzm.transposed(), xm.plain(), wm, 1.0, tf32)?)
+        })?,
     })
 }

@@ -435,6 +435,29 @@ fn gemm_report(r: &GemmBench) -> String {
             diff(c.cublas_tf32_difference),
         );
     }
+    if r.cases.iter().any(|c| c.layouts.is_some()) {
+        let _ = writeln!(
+            out,
+            "\nTF32 products by weight layout, ms: w [in, out] (the policy's) / w [out, in]\n| rows | in | out | forward | input gradient | weight gradient |\n|---|---|---|---|---|---|"
+        );
+        for c in &r.cases {
+            if let Some(l) = &c.layouts {
+                let _ = writeln!(
+                    out,
+                    "| {} | {} | {} | {:.4} / {:.4} | {:.4} / {:.4} | {:.4} / {:.4} |",
+                    c.rows,
+                    c.inputs,
+                    c.outputs,
+                    l.forward_in_out_ms,
+                    l.forward_out_in_ms,
+                    l.input_gradient_in_out_ms,
+                    l.input_gradient_out_in_ms,
+                    l.weight_gradient_in_out_ms,
+                    l.weight_gradient_out_in_ms,
+                );
+            }
+        }
+    }
     out
 }
 

@@ -178,6 +178,13 @@ pub const OBSERVED_BODIES: usize = 15;
 /// the root and the rest of the row.
 pub const OBSERVE_SLOTS: usize = OBSERVED_BODIES + 1;
 
+/// Threads of `tracking_error_sums` per env (tracking.py `TRACKING_LANES`), each summing the
+/// reward's squared errors over every 8th joint, dof, end effector and body.
+pub const TRACKING_LANES: usize = 8;
+/// Sums per lane of `tracking_error_sums` (tracking.py `ERROR_*` slots): pose, velocity,
+/// end-effector position and rotation, the farthest body and the bodies' summed distance.
+pub const ERROR_SUMS: usize = 6;
+
 /// The observation size for `obs` (docs/env.md table) with `motors` actions and `effectors` end
 /// effectors.
 pub fn observation_size(obs: &ObsConfig, motors: usize, effectors: usize) -> usize {

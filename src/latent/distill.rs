@@ -22,7 +22,7 @@ use std::sync::Arc;
 use crate::cuda::{Gpu, Stream};
 use crate::env::RolloutStorage;
 use crate::kernels::{AdamParams, DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
-use crate::ppo::adam::{AdamMoments, adam_params};
+use crate::ppo::adam::{AdamMoments, AdamStep, adam_params, record_advance};
 use crate::ppo::backward::{MlpGradients, input_gradient_scratch_len};
 use crate::ppo::batch::{minibatch_rows, record_shuffle};
 use crate::ppo::policy::Mlp;
@@ -137,8 +137,8 @@ pub struct DistillationUpdate {
     /// `[steps, LOSS_TERMS]` column sums of the terms; `[steps]` squared gradient norms.
     loss_sums: DeviceArray2<f32>,
     grad_norm_sq: DeviceArray<f64>,
-    learning_rate: DeviceArray<f32>,
-    adam_step: DeviceArray<i32>,
+    /// The learning rate, Adam's step count and the step's factors.
+    adam_step: AdamStep,
     update_counter: DeviceArray<i32>,
 }
 
@@ -196,8 +196,7 @@ impl DistillationUpdate {
             permutation: DeviceArray::zeros(gpu, [samples])?,
             loss_sums: DeviceArray::zeros(gpu, [steps, LOSS_TERMS])?,
             grad_norm_sq: DeviceArray::zeros(gpu, [steps])?,
-            learning_rate: DeviceArray::from_slice(gpu, [1], &[config.learning_rate])?,
-            adam_step: DeviceArray::zeros(gpu, [1])?,
+            adam_step: AdamStep::new(gpu, config.learning_rate)?,
             update_counter: DeviceArray::zeros(gpu, [1])?,
             gpu: gpu.clone(),
             kernels,
@@ -358,7 +357,7 @@ impl DistillationUpdate {
         )?;
         let sums = self.loss_sums.view(slot * LOSS_TERMS, [LOSS_TERMS])?;
         record_column_sums(k, stream, &self.terms, &sums)?;
-        k.latent_advance_counter(stream, 1, &self.adam_step)?;
+        record_advance(k, stream, &self.adam, &self.adam_step)?;
         for trained in [&self.encoder, &self.decoder, &self.prior] {
             record_sum_of_squares(k, stream, &trained.grads.flat, &self.grad_norm_sq, slot)?;
         }
@@ -368,8 +367,7 @@ impl DistillationUpdate {
                 stream,
                 &trained.net.params,
                 &trained.grads.flat,
-                &self.learning_rate,
-                &self.adam_step,
+                &self.adam_step.factors,
                 &self.grad_norm_sq,
                 slot,
                 &self.adam,
@@ -390,7 +388,7 @@ impl DistillationUpdate {
             self.minibatches,
             rows,
             f64::from(self.kl_weight),
-            f64::from(self.learning_rate.download()?[0]),
+            f64::from(self.adam_step.learning_rate.download()?[0]),
         ))
     }
 
@@ -426,7 +424,7 @@ impl DistillationUpdate {
         }
         Ok(DistillationOptimizerState {
             moments,
-            adam_step: self.adam_step.download()?[0],
+            adam_step: self.adam_step.count.download()?[0],
             update_counter: self.update_counter.download()?[0],
         })
     }
@@ -445,14 +443,14 @@ impl DistillationUpdate {
             t.moments.moment1.upload(m1)?;
             t.moments.moment2.upload(m2)?;
         }
-        self.adam_step.upload(&[state.adam_step])?;
+        self.adam_step.count.upload(&[state.adam_step])?;
         self.update_counter.upload(&[state.update_counter])?;
         Ok(())
     }
 
     /// The learning rate `[1]` (device; constant unless a divergence restore halves it).
     pub fn learning_rate(&self) -> &DeviceArray<f32> {
-        &self.learning_rate
+        &self.adam_step.learning_rate
     }
 }
 

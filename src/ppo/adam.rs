@@ -29,8 +29,9 @@ impl AdamMoments {
     }
 
     /// Queues one Adam step of `params` with `grads` scaled by
-    /// `min(1, max_grad_norm / (sqrt(grad_norm_sq[slot]) + 1e-6))`, at step `adam_step[0]` (>= 1,
-    /// advanced by [`record_schedule`]) and rate `learning_rate[0]`.
+    /// `min(1, max_grad_norm / (sqrt(grad_norm_sq[slot]) + 1e-6))`, with the step's factors
+    /// (`[ADAM_FACTORS]`: the step size and `sqrt(1 - b2^t)`, written by [`record_schedule`] or
+    /// [`record_advance`] for the step).
     #[allow(clippy::too_many_arguments)]
     pub fn record_step(
         &self,
@@ -38,8 +39,7 @@ impl AdamMoments {
         stream: &Stream,
         params: &DeviceArray<f32>,
         grads: &DeviceArray<f32>,
-        learning_rate: &DeviceArray<f32>,
-        adam_step: &DeviceArray<i32>,
+        adam_factors: &DeviceArray<f32>,
         grad_norm_sq: &DeviceArray<f64>,
         slot: usize,
         hp: &AdamParams,
@@ -54,10 +54,11 @@ impl AdamMoments {
                 self.moment2.len()
             )));
         }
-        if slot >= grad_norm_sq.len() || learning_rate.is_empty() || adam_step.is_empty() {
+        if slot >= grad_norm_sq.len() || adam_factors.len() != ADAM_FACTORS {
             return Err(PpoError::Shape(format!(
-                "Adam step reads slot {slot} of {} gradient norms",
-                grad_norm_sq.len()
+                "Adam step reads slot {slot} of {} gradient norms and {} factors",
+                grad_norm_sq.len(),
+                adam_factors.len()
             )));
         }
         kernels.adam_update(
@@ -67,8 +68,7 @@ impl AdamMoments {
             grads,
             &self.moment1,
             &self.moment2,
-            learning_rate,
-            adam_step,
+            adam_factors,
             grad_norm_sq,
             slot as i32,
             hp,
@@ -87,22 +87,43 @@ pub fn adam_params(max_grad_norm: f32) -> AdamParams {
     }
 }
 
+/// Adam's per-step factors (optimizer.py `adam_step_factors`): the step size `lr / (1 - b1^t)`
+/// and `sqrt(1 - b2^t)`, computed once per step instead of once per parameter.
+pub const ADAM_FACTORS: usize = 2;
+
+/// Adam's step: its rate, the steps taken and the current step's factors, in device memory.
+pub struct AdamStep {
+    pub learning_rate: DeviceArray<f32>,
+    /// Steps taken (the `t` of the bias corrections).
+    pub count: DeviceArray<i32>,
+    /// `[ADAM_FACTORS]` of the current step.
+    pub factors: DeviceArray<f32>,
+}
+
+impl AdamStep {
+    /// Step 0 at rate `learning_rate`.
+    pub fn new(gpu: &Gpu, learning_rate: f32) -> Result<AdamStep, PpoError> {
+        Ok(AdamStep {
+            learning_rate: DeviceArray::from_slice(gpu, [1], &[learning_rate])?,
+            count: DeviceArray::zeros(gpu, [1])?,
+            factors: DeviceArray::zeros(gpu, [ADAM_FACTORS])?,
+        })
+    }
+}
+
 /// Queues the per-minibatch bookkeeping before the step: `log_std_grad = sums[LOSS_TERMS..] -
 /// entropy_coef`, the learning rate adapted to the minibatch's KL `sums[TERM_KL]` (when
-/// `params.adaptive`), and `adam_step[0] += 1`. One thread.
+/// `params.adaptive`), `adam.count += 1` and the step's factors. One thread.
 pub fn record_schedule(
     kernels: &EnvKernels,
     stream: &Stream,
     sums: &DeviceArray<f32>,
     params: &ScheduleParams,
+    hp: &AdamParams,
     log_std_grad: &DeviceArray<f32>,
-    learning_rate: &DeviceArray<f32>,
-    adam_step: &DeviceArray<i32>,
+    adam: &AdamStep,
 ) -> Result<(), PpoError> {
-    if sums.len() != super::loss::LOSS_TERMS + log_std_grad.len()
-        || learning_rate.is_empty()
-        || adam_step.is_empty()
-    {
+    if sums.len() != super::loss::LOSS_TERMS + log_std_grad.len() {
         return Err(PpoError::Shape(format!(
             "schedule: {} loss sums for {} actions",
             sums.len(),
@@ -114,9 +135,30 @@ pub fn record_schedule(
         1,
         sums,
         params,
+        hp,
         log_std_grad,
-        learning_rate,
-        adam_step,
+        &adam.learning_rate,
+        &adam.count,
+        &adam.factors,
+    )?;
+    Ok(())
+}
+
+/// Queues `adam.count += 1` and the step's factors at the current rate, for optimizers without
+/// the PPO schedule. One thread.
+pub fn record_advance(
+    kernels: &EnvKernels,
+    stream: &Stream,
+    hp: &AdamParams,
+    adam: &AdamStep,
+) -> Result<(), PpoError> {
+    kernels.adam_advance(
+        stream,
+        1,
+        &adam.learning_rate,
+        hp,
+        &adam.count,
+        &adam.factors,
     )?;
     Ok(())
 }

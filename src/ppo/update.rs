@@ -47,7 +47,7 @@ use crate::kernels::{
     AdamParams, DeviceArray, DeviceArray2, EnvError, EnvKernels, PpoLossParams, ScheduleParams,
 };
 
-use super::adam::{AdamMoments, LEARNING_RATE_MAX, LEARNING_RATE_MIN, adam_params};
+use super::adam::{AdamMoments, AdamStep, LEARNING_RATE_MAX, LEARNING_RATE_MIN, adam_params};
 use super::backward::{MlpGradients, input_gradient_scratch_len};
 use super::batch::{Advantages, Minibatch, PpoBatch, ValueNormalization, minibatch_rows};
 use super::config::{KlMeasure, PpoConfig};
@@ -157,8 +157,8 @@ pub struct PpoUpdate {
     loss_sums: DeviceArray2<f32>,
     grad_norm_sq: DeviceArray<f64>,
     advantage_moments: DeviceArray<f64>,
-    learning_rate: DeviceArray<f32>,
-    adam_step: DeviceArray<i32>,
+    /// The learning rate, Adam's step count and the step's factors.
+    adam_step: AdamStep,
     update_counter: DeviceArray<i32>,
     statistics: DeviceArray<f32>,
     /// The other GPUs' replicas the update averages over (none: this GPU only).
@@ -308,8 +308,7 @@ impl PpoUpdate {
             loss_sums: DeviceArray::zeros(gpu, [steps, LOSS_TERMS + a])?,
             grad_norm_sq: DeviceArray::zeros(gpu, [2 * steps])?,
             advantage_moments: DeviceArray::zeros(gpu, [2])?,
-            learning_rate: DeviceArray::from_slice(gpu, [1], &[q.learning_rate])?,
-            adam_step: DeviceArray::zeros(gpu, [1])?,
+            adam_step: AdamStep::new(gpu, q.learning_rate)?,
             update_counter: DeviceArray::zeros(gpu, [1])?,
             statistics: DeviceArray::zeros(gpu, [PpoStatistics::LEN])?,
             kernels,
@@ -407,7 +406,7 @@ impl PpoUpdate {
                 &self.grad_norm_sq,
                 &self.advantage_moments,
                 (t * n) as i32,
-                &self.learning_rate,
+                &self.adam_step.learning_rate,
                 &self.update_counter,
                 &self.statistics,
             )
@@ -588,7 +587,7 @@ impl PpoUpdate {
 
     /// The current learning rate `[1]` (device; the schedule adapts it).
     pub fn learning_rate(&self) -> &DeviceArray<f32> {
-        &self.learning_rate
+        &self.adam_step.learning_rate
     }
 
     /// The running return statistics `[count, mean, M2]` (value normalization; zeros when
@@ -631,8 +630,8 @@ impl PpoUpdate {
     pub fn download_state(&self) -> Result<PpoOptimizerState, PpoError> {
         self.gpu.synchronize()?;
         Ok(PpoOptimizerState {
-            learning_rate: self.learning_rate.download()?[0],
-            adam_step: self.adam_step.download()?[0],
+            learning_rate: self.adam_step.learning_rate.download()?[0],
+            adam_step: self.adam_step.count.download()?[0],
             update_counter: self.update_counter.download()?[0],
             actor_moment1: self.actor_moments.moment1.download()?,
             actor_moment2: self.actor_moments.moment2.download()?,
@@ -644,8 +643,10 @@ impl PpoUpdate {
     /// Restores a state from [`PpoUpdate::download_state`] (resume).
     pub fn upload_state(&self, state: &PpoOptimizerState) -> Result<(), PpoError> {
         self.gpu.synchronize()?;
-        self.learning_rate.upload(&[state.learning_rate])?;
-        self.adam_step.upload(&[state.adam_step])?;
+        self.adam_step
+            .learning_rate
+            .upload(&[state.learning_rate])?;
+        self.adam_step.count.upload(&[state.adam_step])?;
         self.update_counter.upload(&[state.update_counter])?;
         self.actor_moments.moment1.upload(&state.actor_moment1)?;
         self.actor_moments.moment2.upload(&state.actor_moment2)?;

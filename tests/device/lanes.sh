@@ -2,11 +2,13 @@
 # One device call, one lane per GPU: LANE0, LANE1, ... are shell snippets, each run in the
 # background on its GPU ($GPU inside the snippet), with these helpers:
 #   train NAME WALL_S ARGS...      instantmimic train --out $OUT/runs/NAME --overwrite ARGS
+#   train_before NAME WALL_S ARGS...  the same with the older build in $BEFORE/instantmimic.xz
 #   resume NAME FROM WALL_S ARGS...  copies the run directory FROM (carried from an earlier
 #                                  call) to $OUT/runs/NAME and continues it (train --resume)
 #   gpu_test NAME...               the staged GPU test binaries, one after another
 #   bench NAME WALL_S ARGS...      instantmimic bench ARGS > $OUT/runs/NAME.log (its last lines
 #                                  go to the summary)
+#   bench_before NAME WALL_S ARGS...  the same with the older build in $BEFORE/instantmimic.xz
 #   library_eval NAME CHECKPOINT LIBRARY   eval --library LIBRARY --out $OUT/runs/NAME.tsv
 #   newest_checkpoint NAME         the newest checkpoint of $OUT/runs/NAME
 #   wait_for FILE_GLOB SECONDS     waits until another lane has written it
@@ -59,13 +61,21 @@ report_run() {
   note "$name (rc $rc, wall $(( $(date +%s) - t0 )) s): $(grep -E 'stopped after|^error|received' "$log" | tail -1)"
   note "    last: $(grep -E '^iteration|^eval' "$log" | tail -1)"
 }
-train() {
-  local name=$1 wall=$2; shift 2
+# train_with BINARY NAME WALL_S ARGS...: `train` with that build.
+train_with() {
+  local exe=$1 name=$2 wall=$3; shift 3
   if [ "$(left)" -lt 40 ]; then note "$name: skipped (session time)"; return; fi
   local t0; t0=$(date +%s)
-  run_bounded "$wall" "$OUT/runs/$name.log" "$BIN/instantmimic" train --out "$OUT/runs/$name" --overwrite \
+  run_bounded "$wall" "$OUT/runs/$name.log" "$exe" train --out "$OUT/runs/$name" --overwrite \
     --progress lines $replay_flag "$@"
   report_run "$name" $? "$t0"
+}
+train() { train_with "$BIN/instantmimic" "$@"; }
+# train_before NAME WALL_S ARGS...: `train` with the older build of $BEFORE, for time to
+# success before and after on the same GPU.
+train_before() {
+  [ -x /tmp/instantmimic-before/instantmimic ] || unpack_before
+  train_with /tmp/instantmimic-before/instantmimic "$@"
 }
 resume() {
   local name=$1 from=$2 wall=$3; shift 3
@@ -89,13 +99,20 @@ gpu_test() {
     [ "$s" = FAIL ] && grep -E "panicked|FAILED|^error" "$OUT/test_$t.log" | head -4 | tee -a "$summary"
   done
 }
-bench() {
-  local name=$1 wall=$2; shift 2
+bench_with() {
+  local binary=$1 name=$2 wall=$3; shift 3
   if [ "$(left)" -lt 40 ]; then note "$name: skipped (session time)"; return; fi
   local t0; t0=$(date +%s)
-  run_bounded "$wall" "$OUT/runs/$name.log" "$BIN/instantmimic" bench "$@"
+  run_bounded "$wall" "$OUT/runs/$name.log" "$binary" bench "$@"
   note "$name (rc $?, $(( $(date +%s) - t0 )) s): bench $*"
   tail -n 22 "$OUT/runs/$name.log" | sed 's/^/    /' | tee -a "$summary" > /dev/null
+}
+bench() { bench_with "$BIN/instantmimic" "$@"; }
+# bench_before NAME WALL_S ARGS...: `bench` with the older build of $BEFORE (common.sh's
+# unpack_before), for a before/after comparison on the same warm GPU.
+bench_before() {
+  [ -x /tmp/instantmimic-before/instantmimic ] || unpack_before
+  bench_with /tmp/instantmimic-before/instantmimic "$@"
 }
 newest_checkpoint() { ls "$OUT/runs/$1"/checkpoints/*.safetensors 2>/dev/null | sort | tail -1; }
 library_eval() {

@@ -13,7 +13,7 @@
 
 use instantmimic::env::layout::{JointLayout, without_failures};
 use instantmimic::env::{EvalStart, EvaluationProtocol, clip_evaluation};
-use instantmimic::kernels::{EVALUATION_ACCUMULATE, REWARD_TERMINATION, TrackingParams};
+use instantmimic::kernels::{EVALUATION_ACCUMULATE, TrackingParams};
 use instantmimic::motion::{Character, LoopMode, MotionLibraryBuilder, SyntheticMotion};
 use instantmimic::train::{
     EnvEvaluation, TrainConfig, clamped_clip_steps, evaluation_steps, summarize, yardstick,
@@ -141,6 +141,7 @@ fn program(
     p.i32("done", &[envs], vec![POISON_I32; envs]);
     p.i32("failure", &[envs], vec![POISON_I32; envs]);
     p.f32("errors", &[envs, 5], vec![f32::NAN; envs * 5]);
+    super::tracking::add_error_sums(&mut p, envs);
     p.f32(
         "phase_visits",
         &[clip.clips(), 4],
@@ -162,39 +163,7 @@ fn program(
             p.copy(&format!("{name}_by_step"), k * count, name, 0, count);
         }
         let step = Arg::Scalar(Scalar::I32(k as i32));
-        let tracking_args = [
-            "qpos",
-            "qvel",
-            "xpos",
-            "xquat",
-            "subtree_com",
-            "table",
-            "clip_offsets",
-            "joint_kind",
-            "joint_qpos",
-            "end_effectors",
-        ]
-        .map(buffer)
-        .into_iter()
-        .chain([Arg::Struct(StructArg::Tracking(params)), step.clone()])
-        .chain(
-            [
-                "clip_id",
-                "ref_time",
-                "episode_step",
-                "rewards",
-                "terminated",
-                "truncated",
-                "done",
-                "failure",
-                "errors",
-                "phase_visits",
-                "phase_failures",
-            ]
-            .map(buffer),
-        )
-        .collect();
-        p.launch(&REWARD_TERMINATION, envs, tracking_args);
+        super::tracking::launch_reward(&mut p, envs, params, k as i32);
         let scoring_args = [
             "qpos",
             "xpos",

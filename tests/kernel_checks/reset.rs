@@ -289,7 +289,8 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         p.i32("episode_step", &[n], steps),
         p.f32("actions", &[n, NU], actions),
     ];
-    p.launch(&RESET_MASKED, n, args);
+    // One thread per env and lane (a lane per qpos and qvel entry, one for the rest).
+    p.launch(&RESET_MASKED, n * (NQ + NV + 1), args);
 
     Check::new(p, move |p, out| {
         let mut r = Report::new(&p.name);

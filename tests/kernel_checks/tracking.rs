@@ -14,7 +14,8 @@
 //! and several at once, inside and after the grace steps, and to cross thresholds that are off.
 
 use instantmimic::env::layout::{BALL, JointLayout};
-use instantmimic::kernels::{REWARD_TERMINATION, TrackingParams};
+use instantmimic::env::layout::{ERROR_SUMS, TRACKING_LANES};
+use instantmimic::kernels::{REWARD_TERMINATION, TRACKING_ERROR_SUMS, TrackingParams};
 use instantmimic::motion::table::{
     HEADER_DURATION, HEADER_WRAP, HUMANOID_END_EFFECTORS, HUMANOID_LAYOUT,
 };
@@ -434,40 +435,37 @@ fn case(
         params.mean_tracking_distance,
         params.ee_relative
     ));
-    let args = vec![
-        p.f32("qpos", &[n, NQ], physics.qpos.clone()),
-        p.f32("qvel", &[n, NV], physics.qvel.clone()),
-        p.f32("xpos", &[n, NBODY, 3], physics.xpos.clone()),
-        p.f32("xquat", &[n, NBODY, 4], physics.xquat.clone()),
-        p.f32("subtree_com", &[n, NBODY, 3], physics.subtree_com.clone()),
-        p.f32("table", &[clip.data().len()], clip.data()),
-        p.i32("clip_offsets", &[clips], clip.offsets()),
-        p.i32("joint_kind", &[j], layout.kind.clone()),
-        p.i32("joint_qpos", &[j], layout.qpos.clone()),
-        p.i32("end_effectors", &[ee.len()], ee),
-        Arg::Struct(StructArg::Tracking(params)),
-        Arg::Scalar(Scalar::I32(ROW as i32)),
-        p.i32("clip_id", &[n], clip_id.clone()),
-        p.f32("ref_time", &[n], ref_time.clone()),
-        p.i32("episode_step", &[n], episode_step.clone()),
-        p.f32("rewards", &[STORAGE_ROWS, n], nan_f32(STORAGE_ROWS * n)),
-        p.i32(
-            "terminated",
-            &[STORAGE_ROWS, n],
-            vec![POISON_I32; STORAGE_ROWS * n],
-        ),
-        p.i32(
-            "truncated",
-            &[STORAGE_ROWS, n],
-            vec![POISON_I32; STORAGE_ROWS * n],
-        ),
-        p.i32("done", &[n], vec![POISON_I32; n]),
-        p.i32("failure", &[n], vec![POISON_I32; n]),
-        p.f32("errors", &[n, 5], nan_f32(n * 5)),
-        p.f32("phase_visits", &[clips, bins], visits.clone()),
-        p.f32("phase_failures", &[clips, bins], failures.clone()),
-    ];
-    p.launch(&REWARD_TERMINATION, n, args);
+    p.f32("qpos", &[n, NQ], physics.qpos.clone());
+    p.f32("qvel", &[n, NV], physics.qvel.clone());
+    p.f32("xpos", &[n, NBODY, 3], physics.xpos.clone());
+    p.f32("xquat", &[n, NBODY, 4], physics.xquat.clone());
+    p.f32("subtree_com", &[n, NBODY, 3], physics.subtree_com.clone());
+    p.f32("table", &[clip.data().len()], clip.data());
+    p.i32("clip_offsets", &[clips], clip.offsets());
+    p.i32("joint_kind", &[j], layout.kind.clone());
+    p.i32("joint_qpos", &[j], layout.qpos.clone());
+    p.i32("end_effectors", &[ee.len()], ee);
+    p.i32("clip_id", &[n], clip_id.clone());
+    p.f32("ref_time", &[n], ref_time.clone());
+    p.i32("episode_step", &[n], episode_step.clone());
+    p.f32("rewards", &[STORAGE_ROWS, n], nan_f32(STORAGE_ROWS * n));
+    p.i32(
+        "terminated",
+        &[STORAGE_ROWS, n],
+        vec![POISON_I32; STORAGE_ROWS * n],
+    );
+    p.i32(
+        "truncated",
+        &[STORAGE_ROWS, n],
+        vec![POISON_I32; STORAGE_ROWS * n],
+    );
+    p.i32("done", &[n], vec![POISON_I32; n]);
+    p.i32("failure", &[n], vec![POISON_I32; n]);
+    p.f32("errors", &[n, 5], nan_f32(n * 5));
+    p.f32("phase_visits", &[clips, bins], visits.clone());
+    p.f32("phase_failures", &[clips, bins], failures.clone());
+    add_error_sums(&mut p, n);
+    launch_reward(&mut p, n, params, ROW as i32);
 
     let clip = clip.clone();
     // Whether any env tracks a clamped clip (the clip end must be covered) or a wrapped one.
@@ -696,6 +694,66 @@ pub fn default_params() -> TrackingParams {
         max_episode_steps: 300,
         ee_relative: 0,
     }
+}
+
+/// The buffer `error_sums` of [`launch_reward`] for `envs` envs, poisoned: the reward must read
+/// only what `tracking_error_sums` wrote.
+pub fn add_error_sums(p: &mut Program, envs: usize) {
+    let len = envs * TRACKING_LANES * ERROR_SUMS;
+    p.f32(
+        "error_sums",
+        &[envs, TRACKING_LANES, ERROR_SUMS],
+        nan_f32(len),
+    );
+}
+
+/// The reward of control step `t` as the rollout launches it, over `p`'s buffers of the names
+/// of the kernels' parameters: `tracking_error_sums` into `error_sums` ([`add_error_sums`]),
+/// then `reward_termination`.
+pub fn launch_reward(p: &mut Program, envs: usize, params: TrackingParams, t: i32) {
+    let buffers = |names: &[&str]| -> Vec<Arg> {
+        names.iter().map(|n| Arg::Buffer((*n).to_owned())).collect()
+    };
+    let tracking = Arg::Struct(StructArg::Tracking(params));
+    let mut sums = buffers(&[
+        "qpos",
+        "qvel",
+        "xpos",
+        "xquat",
+        "table",
+        "clip_offsets",
+        "joint_kind",
+        "joint_qpos",
+        "end_effectors",
+    ]);
+    sums.push(tracking.clone());
+    sums.extend(buffers(&["clip_id", "ref_time", "error_sums"]));
+    p.launch(&TRACKING_ERROR_SUMS, envs * TRACKING_LANES, sums);
+    let mut reward = buffers(&[
+        "qpos",
+        "qvel",
+        "subtree_com",
+        "error_sums",
+        "table",
+        "clip_offsets",
+        "joint_kind",
+        "end_effectors",
+    ]);
+    reward.extend([tracking, Arg::Scalar(Scalar::I32(t))]);
+    reward.extend(buffers(&[
+        "clip_id",
+        "ref_time",
+        "episode_step",
+        "rewards",
+        "terminated",
+        "truncated",
+        "done",
+        "failure",
+        "errors",
+        "phase_visits",
+        "phase_failures",
+    ]));
+    p.launch(&REWARD_TERMINATION, envs, reward);
 }
 
 pub fn checks(fx: &Fixture) -> Vec<Check> {

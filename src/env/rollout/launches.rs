@@ -10,7 +10,7 @@ use super::super::storage::RolloutStorage;
 use super::super::task::Task;
 use super::{Rollout, RolloutError};
 use crate::env::config::ActionMode;
-use crate::env::layout::OBSERVE_SLOTS;
+use crate::env::layout::{OBSERVE_SLOTS, TRACKING_LANES};
 
 impl Rollout {
     pub(super) fn record_scores(
@@ -122,18 +122,33 @@ impl Rollout {
                 return Ok(());
             }
         };
+        self.kernels.tracking_error_sums(
+            s,
+            self.num_envs * TRACKING_LANES,
+            &p.qpos,
+            &p.qvel,
+            &p.xpos,
+            &p.xquat,
+            self.table.table(),
+            self.table.clip_offsets(),
+            &self.joints.kind,
+            &self.joints.qpos,
+            &self.joints.end_effectors,
+            tracking,
+            &st.clip_id,
+            &st.ref_time,
+            &st.error_sums,
+        )?;
         self.kernels.reward_termination(
             s,
             self.num_envs,
             &p.qpos,
             &p.qvel,
-            &p.xpos,
-            &p.xquat,
             &p.subtree_com,
+            &st.error_sums,
             self.table.table(),
             self.table.clip_offsets(),
             &self.joints.kind,
-            &self.joints.qpos,
             &self.joints.end_effectors,
             tracking,
             t,
@@ -156,9 +171,11 @@ impl Rollout {
     /// ([`Rollout::record_kinematics`] after a reset).
     pub(super) fn record_reset(&self, s: &Stream, t: i32) -> Result<(), RolloutError> {
         let (p, st) = (&self.physics, &self.state);
+        // One thread per env and lane: a lane per qpos and per qvel entry, and one for the rest.
+        let lanes = p.qpos.shape()[1] + p.qvel.shape()[1] + 1;
         self.kernels.reset_masked(
             s,
-            self.num_envs,
+            self.num_envs * lanes,
             &st.done,
             self.table.table(),
             self.table.clip_offsets(),

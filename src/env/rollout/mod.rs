@@ -27,8 +27,8 @@ use super::config::{ActionMode, BodyKinematics, RolloutConfig, TaskConfig};
 use super::evaluation::{ClipEvaluation, EpisodeScores, clip_evaluation, yardstick};
 use super::goal_counters::GoalTally;
 use super::layout::{
-    DeviceJointLayout, JointLayout, observation_params, observation_size, reset_params,
-    tracking_params, without_failures,
+    DeviceJointLayout, ERROR_SUMS, JointLayout, TRACKING_LANES, observation_params,
+    observation_size, reset_params, tracking_params, without_failures,
 };
 use super::normalizer::ObservationNormalizer;
 use super::phases::PhaseStatistics;
@@ -83,6 +83,9 @@ pub struct EpisodeState {
     /// The five tracking errors of the last step `[N, 5]` (metrics; the reward's terms: means
     /// per joint, non-root dof or end effector, docs/env.md "Reward").
     pub errors: DeviceArray2<f32>,
+    /// Per env and lane of `tracking_error_sums`, its sums of the reward's squared errors
+    /// `[N, TRACKING_LANES, ERROR_SUMS]` (tracking.py), which `reward_termination` adds up.
+    pub error_sums: DeviceArray3<f32>,
 }
 
 /// Everything one rollout graph needs but the policy, built once; [`Rollout::capture`] records
@@ -334,6 +337,7 @@ impl Rollout {
             actions: DeviceArray::zeros(gpu, [n, NU])?,
             pd_targets: DeviceArray::zeros(gpu, [n, joints.num_joints, 4])?,
             errors: DeviceArray::zeros(gpu, [n, 5])?,
+            error_sums: DeviceArray::zeros(gpu, [n, TRACKING_LANES, ERROR_SUMS])?,
         };
         let storage = RolloutStorage::zeros(gpu, horizon, n, obs_size, NU)?;
         let task = match goal {

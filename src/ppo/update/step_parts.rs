@@ -81,8 +81,8 @@ impl PpoUpdate {
             stream,
             sums,
             &self.schedule,
+            &self.adam,
             &self.log_std_grad,
-            &self.learning_rate,
             &self.adam_step,
         )
     }
@@ -124,8 +124,7 @@ impl PpoUpdate {
             stream,
             params,
             &self.grads_of(network).flat,
-            &self.learning_rate,
-            &self.adam_step,
+            &self.adam_step.factors,
             &self.grad_norm_sq,
             self.norm_slot(network, slot),
             &self.adam,
