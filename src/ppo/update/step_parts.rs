@@ -8,6 +8,7 @@ use crate::kernels::{DeviceArray, DeviceArray2};
 use super::super::adam::record_schedule;
 use super::super::backward::{MlpGradients, record_mlp_backward};
 use super::super::batch::Minibatch;
+use super::super::policy::Mlp;
 use super::super::reduce::{record_clear, record_sum_of_squares};
 use super::{PpoError, PpoUpdate};
 
@@ -45,12 +46,15 @@ impl PpoUpdate {
         network: Network,
         obs: &DeviceArray2<f32>,
     ) -> Result<(), PpoError> {
-        let mlp = match network {
+        self.mlp_of(network).record(&self.kernels, stream, obs)?;
+        Ok(())
+    }
+
+    fn mlp_of(&self, network: Network) -> &Mlp {
+        match network {
             Network::Actor => &self.actor,
             Network::Critic => &self.critic,
-        };
-        mlp.record(&self.kernels, stream, obs)?;
-        Ok(())
+        }
     }
 
     /// Queues the clear of `network`'s gradients (its backward pass adds into some of them).
@@ -70,7 +74,7 @@ impl PpoUpdate {
     }
 
     /// Queues the schedule of the step whose loss sums are `sums`: the log-std gradient, the
-    /// adapted learning rate and Adam's step count.
+    /// adapted learning rate, Adam's step count and the step's Adam factors.
     pub(super) fn record_schedule_of(
         &self,
         stream: &Stream,
@@ -143,15 +147,10 @@ impl PpoUpdate {
         network: Network,
         obs: &DeviceArray2<f32>,
     ) -> Result<(), PpoError> {
-        let (mlp, d_output, scratch) = match network {
-            Network::Actor => (
-                &self.actor,
-                &self.loss.d_mean,
-                self.input_gradient_scratch.as_ref(),
-            ),
+        let (d_output, scratch) = match network {
+            Network::Actor => (&self.loss.d_mean, self.input_gradient_scratch.as_ref()),
             // Its own scratch when the two run side by side, else the shared one.
             Network::Critic => (
-                &self.critic,
                 &self.loss.d_value,
                 self.critic_input_gradient_scratch
                     .as_ref()
@@ -161,7 +160,7 @@ impl PpoUpdate {
         record_mlp_backward(
             &self.kernels,
             stream,
-            mlp,
+            self.mlp_of(network),
             obs,
             d_output,
             self.grads_of(network),
