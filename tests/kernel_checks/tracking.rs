@@ -13,8 +13,7 @@
 //! its end, the (clip, phase bin) counts, the advanced clocks. Envs are built to hit every cause alone
 //! and several at once, inside and after the grace steps, and to cross thresholds that are off.
 
-use instantmimic::env::layout::{BALL, JointLayout};
-use instantmimic::env::layout::{ERROR_SUMS, TRACKING_LANES};
+use instantmimic::env::layout::{BALL, ERROR_SUMS, JointLayout, TRACKING_LANES};
 use instantmimic::kernels::{REWARD_TERMINATION, TRACKING_ERROR_SUMS, TrackingParams};
 use instantmimic::motion::table::{
     HEADER_DURATION, HEADER_WRAP, HUMANOID_END_EFFECTORS, HUMANOID_LAYOUT,
