@@ -61,6 +61,9 @@ report_run() {
   note "$name (rc $rc, wall $(( $(date +%s) - t0 )) s): $(grep -E 'stopped after|^error|received' "$log" | tail -1)"
   note "    last: $(grep -E '^iteration|^eval' "$log" | tail -1)"
 }
+# The older build of $BEFORE, unpacked once (common.sh's unpack_before), for before/after
+# comparisons on the same GPU.
+unpack_before_once() { [ -x "$(binary before)" ] || unpack_before; }
 # train_with BINARY NAME WALL_S ARGS...: `train` with that build.
 train_with() {
   local exe=$1 name=$2 wall=$3; shift 3
@@ -73,10 +76,7 @@ train_with() {
 train() { train_with "$BIN/instantmimic" "$@"; }
 # train_before NAME WALL_S ARGS...: `train` with the older build of $BEFORE, for time to
 # success before and after on the same GPU.
-train_before() {
-  [ -x /tmp/instantmimic-before/instantmimic ] || unpack_before
-  train_with /tmp/instantmimic-before/instantmimic "$@"
-}
+train_before() { unpack_before_once; train_with "$(binary before)" "$@"; }
 resume() {
   local name=$1 from=$2 wall=$3; shift 3
   if [ ! -d "$from" ]; then note "$name: no run directory $from to resume"; return; fi
@@ -110,10 +110,7 @@ bench_with() {
 bench() { bench_with "$BIN/instantmimic" "$@"; }
 # bench_before NAME WALL_S ARGS...: `bench` with the older build of $BEFORE (common.sh's
 # unpack_before), for a before/after comparison on the same warm GPU.
-bench_before() {
-  [ -x /tmp/instantmimic-before/instantmimic ] || unpack_before
-  bench_with /tmp/instantmimic-before/instantmimic "$@"
-}
+bench_before() { unpack_before_once; bench_with "$(binary before)" "$@"; }
 newest_checkpoint() { ls "$OUT/runs/$1"/checkpoints/*.safetensors 2>/dev/null | sort | tail -1; }
 library_eval() {
   local name=$1 checkpoint=$2 library=$3
