@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 use zerocopy::{FromBytes, IntoBytes};
 
+use super::character::CharacterRecord;
 use super::config::TrainConfig;
 use crate::files::tagged::{FORMAT_KEY, TaggedFileError, open_tagged};
 use crate::files::{is_temporary, write_bytes_atomically};
@@ -108,6 +109,10 @@ pub struct CheckpointMeta {
     pub config_toml: String,
     /// `instantmimic` version that wrote the file.
     pub crate_version: String,
+    /// The character trained (a run's checkpoints record it; absent in older checkpoints,
+    /// whose character is the one `config_toml` names, the default when it names none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub character: Option<CharacterRecord>,
 }
 
 impl CheckpointMeta {
@@ -129,6 +134,7 @@ impl CheckpointMeta {
                 .to_toml()
                 .map_err(|e| CheckpointError::Encode(e.to_string()))?,
             crate_version: env!("CARGO_PKG_VERSION").to_string(),
+            character: None,
         })
     }
 
