@@ -174,8 +174,17 @@ pub fn simulated_model(character: &Character) -> SimulatedModel {
 
 /// Checks that `store`'s plans (its manifest) simulate `character`.
 pub fn check_plan_model(store: &PlanStore, character: &Character) -> Result<(), TrainError> {
-    let found = store.model()?;
-    check_model(&store.describe(), &found, character)
+    let found = store.model().map_err(|e| {
+        TrainError::Setup(format!(
+            "the plans of character `{}`: {e} (give --assets with a directory of its plans, or capture them with kernels_py/capture.py)",
+            character.name()
+        ))
+    })?;
+    let plans = match store.source() {
+        PlanSource::Directory(dir) => format!("the plans in {}", dir.display()),
+        PlanSource::Embedded { .. } => store.describe(),
+    };
+    check_model(&plans, &found, character)
 }
 
 /// Checks that `found`, the model that `plans` (for messages) record, is `character`'s.

@@ -103,10 +103,20 @@ pub struct Preflight {
 }
 
 /// Loads the motion named by `config.motion` (a file, a name in `motions_dir`, or a built-in
-/// clip's name) for the character `config.character` names; a configuration of a motion library is refused in one line (its clips load
-/// with `library::preflight_training`).
+/// clip's name) for the character `config.character` names; a configuration of a motion
+/// library is refused in one line (its clips load with `library::preflight_training`).
 pub fn load_motion(
     config: &TrainConfig,
+    motions_dir: Option<&Path>,
+) -> Result<(ResolvedMotion, ReferenceMotion), TrainError> {
+    let character = ChosenCharacter::of_config(config)?.into_character();
+    load_motion_of(config, character, motions_dir)
+}
+
+/// [`load_motion`] for `character`.
+fn load_motion_of(
+    config: &TrainConfig,
+    character: Character,
     motions_dir: Option<&Path>,
 ) -> Result<(ResolvedMotion, ReferenceMotion), TrainError> {
     if config.motion_library.is_some() {
@@ -114,7 +124,6 @@ pub fn load_motion(
             "motion_library: this takes a configuration of one clip (`motion`) for now; a motion library trains with `train` (docs/library.md)".to_owned(),
         ));
     }
-    let character = ChosenCharacter::of_config(config)?.into_character();
     let resolved = resolve_motion(&config.motion, motions_dir)?;
     let motion = resolved.load(&character)?;
     Ok((resolved, motion))
@@ -181,8 +190,11 @@ pub fn preflight(
     motions_dir: Option<&Path>,
     store: &PlanStore,
 ) -> Result<(Preflight, ReferenceMotion), TrainError> {
-    let (resolved, motion) = load_motion(config, motions_dir)?;
-    let (plans, physics_dt, control_dt) = physics_checks(config, store, motion.character())?;
+    let character = ChosenCharacter::of_config(config)?.into_character();
+    // The plans first: plans of another character are the mistake to report, whatever the
+    // motion.
+    let (plans, physics_dt, control_dt) = physics_checks(config, store, &character)?;
+    let (resolved, motion) = load_motion_of(config, character, motions_dir)?;
     let table = ReferenceTable::build(&motion, control_dt)?;
     let clip = motion.clip();
     let checks = Preflight {
