@@ -77,12 +77,35 @@ fn an_unknown_character_names_the_built_in_ones_on_every_command() {
     let glb = glb.to_str().unwrap();
     let commands: [&[&str]; 8] = [
         &["motion", "inspect", "walk", "--character", "no_such"],
-        &["motion", "fk", "walk", "--frame", "0", "--character", "no_such"],
-        &["motion", "view", "walk", "--out", page, "--character", "no_such"],
+        &[
+            "motion",
+            "fk",
+            "walk",
+            "--frame",
+            "0",
+            "--character",
+            "no_such",
+        ],
+        &[
+            "motion",
+            "view",
+            "walk",
+            "--out",
+            page,
+            "--character",
+            "no_such",
+        ],
         &["motion", "list", "--character", "no_such"],
         &["bench", "physics", "--character", "no_such"],
         &["bench", "gemm", "--character", "no_such"],
-        &["bench", "rollout", "--motion", "walk", "--character", "no_such"],
+        &[
+            "bench",
+            "rollout",
+            "--motion",
+            "walk",
+            "--character",
+            "no_such",
+        ],
         &[
             "export",
             "--format",
@@ -147,7 +170,9 @@ fn a_character_directory_brings_its_description_and_plans() {
     train.extend(["--character", "./my_humanoid"]);
     let text = succeeded(&run(&train, Some(&motions), ws.path()));
     assert!(
-        text.contains("character     humanoid (./my_humanoid/character.json; plans: ./my_humanoid)"),
+        text.contains(
+            "character     humanoid (./my_humanoid/character.json; plans: ./my_humanoid)"
+        ),
         "{text}"
     );
     assert!(
@@ -160,7 +185,15 @@ fn a_character_directory_brings_its_description_and_plans() {
     let err = one_line_error(&run(&train, Some(&motions), ws.path()));
     assert!(err.contains("my_humanoid/mjwarp/"), "{err}");
     // The motion commands read its description.
-    let fk = ["motion", "fk", "walk", "--frame", "0", "--character", "./my_humanoid"];
+    let fk = [
+        "motion",
+        "fk",
+        "walk",
+        "--frame",
+        "0",
+        "--character",
+        "./my_humanoid",
+    ];
     let text = succeeded(&run(&fk, None, ws.path()));
     assert!(text.contains("pelvis"), "{text}");
 }
@@ -177,7 +210,13 @@ fn a_checkpoint_runs_with_its_own_character_and_refuses_another() {
     let onnx = ws.path().join("policy.onnx");
     let commands: [&[&str]; 3] = [
         &["eval", "--checkpoint", path],
-        &["replay", "--checkpoint", path, "--out", page.to_str().unwrap()],
+        &[
+            "replay",
+            "--checkpoint",
+            path,
+            "--out",
+            page.to_str().unwrap(),
+        ],
         &[
             "export",
             "--format",

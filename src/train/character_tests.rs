@@ -83,14 +83,26 @@ fn built_in_characters_read_their_embedded_plans() {
         store.source(),
         &PlanSource::Directory(Path::new("somewhere").to_path_buf())
     );
-    // The G1's store reads under characters/g1/ (its plans may not be built in yet).
-    match g1.plan_store(None).model() {
-        Ok(model) => assert_eq!(model, simulated_model(g1.character())),
-        Err(e) => assert!(
-            e.to_string().contains("characters/g1/plans/manifest.json"),
-            "{e}"
-        ),
-    }
+}
+
+#[test]
+fn the_embedded_g1_plans_are_the_g1s_and_refuse_the_humanoid() {
+    let store = ChosenCharacter::resolve("g1").expect("g1").plan_store(None);
+    assert_eq!(
+        store.model().expect("characters/g1/plans/manifest.json"),
+        simulated_model(&g1())
+    );
+    check_plan_model(&store, &g1()).expect("the G1's own plans");
+    // Each plan file records the model too, and agrees.
+    let checks = super::super::preflight::check_plans(&store, &g1(), 32).expect("G1 plans");
+    assert_eq!(checks.len(), 2);
+    let err = check_plan_model(&store, &humanoid()).expect_err("another character");
+    let message = err.to_string();
+    assert!(
+        message.contains("the plans built into this binary under characters/g1/ simulate configs/characters/g1.xml")
+            && message.contains("character `humanoid` is configs/characters/humanoid.xml"),
+        "{message}"
+    );
 }
 
 #[test]

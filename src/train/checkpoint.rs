@@ -1,7 +1,7 @@
 //! Checkpoints: a safetensors file of named f32/f64/i32 tensors (actor and critic parameters,
 //! Adam moments, normalizer moments, start-phase statistics, counters: the trainer chooses the
 //! names) with JSON metadata: format version, iteration, active seconds, frames, motion, seed,
-//! the resolved configuration and the crate version, plus a CRC-32 of every tensor (safetensors
+//! the resolved configuration, the crate version and the character trained, plus a CRC-32 of every tensor (safetensors
 //! itself checks offsets and sizes, not contents). Files are written atomically
 //! ([`write_atomically`]); [`CheckpointDir`] keeps the last K and finds the newest good one.
 
