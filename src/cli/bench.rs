@@ -674,3 +674,18 @@ fn rollout_report(r: &RolloutBench) -> String {
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_gemm_layers_are_the_characters_actor() {
+        // The committed configs' actor on the humanoid: observation 362, action 28.
+        assert_eq!(
+            default_actor_layers("humanoid").unwrap(),
+            [362, 400, 200, 100, 28]
+        );
+        assert!(default_actor_layers("no_such").is_err());
+    }
+}

@@ -226,7 +226,6 @@ fn a_checkpoint_without_a_record_is_the_humanoids() {
         trained_character(&old).expect("the default"),
         CharacterRecord::of(&humanoid())
     );
-    let mut old = old;
     let chosen = checkpoint_character(&mut old, None).expect("the humanoid");
     assert_eq!(chosen.character().name(), "humanoid");
 }
