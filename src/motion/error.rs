@@ -149,6 +149,42 @@ pub enum MotionError {
     },
     #[error("the motions directory {dir}: {problem} (--motions-dir or {env})", env = super::find::MOTIONS_ENV)]
     MotionsDir { dir: String, problem: String },
+    // The format-neutral clip (`MotionClip::from_file_frames`).
+    #[error("{file}: {len} qpos values are not whole frames of the character's nq = {nq} values")]
+    QposRows { file: String, len: usize, nq: usize },
+    #[error("{file}: the frame rate {value} must be a positive finite number of frames per second")]
+    FrameRate { file: String, value: f64 },
+    #[error("{file}: frame {frame}: {problem}; frame times start at 0 s and strictly increase")]
+    FrameTimes {
+        file: String,
+        frame: usize,
+        problem: String,
+    },
+    #[error(
+        "{file}: frame {frame}, {table} column {column} ({field}): the value {value} is not finite"
+    )]
+    NonFiniteValue {
+        file: String,
+        frame: usize,
+        table: String,
+        column: usize,
+        field: String,
+        value: f64,
+    },
+    #[error(
+        "{file}: frame {frame}, {table} columns from {column} ({field}): the quaternion has \
+         length {norm}, which is not a rotation (any finite quaternion of length {min} or more \
+         is renormalized)"
+    )]
+    RotationNorm {
+        file: String,
+        frame: usize,
+        table: String,
+        column: usize,
+        field: String,
+        norm: f64,
+        min: f64,
+    },
 }
 
 /// A problem with a motion library: its configuration, one of its clips, or the table built from
