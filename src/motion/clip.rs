@@ -14,6 +14,7 @@ use nalgebra::Vector3;
 use super::character::Character;
 use super::deepmimic::{self, DeepMimicFrame, QposMapping};
 use super::error::MotionError;
+use super::format::{self, MotionFormat, ReadOptions};
 use super::rotation::blend;
 use super::source_columns::{NamedColumns, SourceColumns};
 
@@ -173,15 +174,30 @@ pub struct MotionClip {
 }
 
 impl MotionClip {
-    /// Reads a DeepMimic motion file and converts it to `character`'s qpos.
+    /// Reads a motion file and converts it to `character`'s qpos; the format follows the
+    /// extension (`super::format`), with the default [`ReadOptions`].
     pub fn load(path: &Path, character: &Character) -> Result<MotionClip, MotionError> {
-        let file = deepmimic::read_file(path)?;
-        MotionClip::from_deepmimic_frames(
-            &path.display().to_string(),
-            &file.frames,
-            file.loop_mode,
-            character,
-        )
+        MotionClip::load_with(path, character, &ReadOptions::default())
+    }
+
+    /// [`Self::load`] with `options` (the frame rate of mjlab's CSV files, which do not say it).
+    pub fn load_with(
+        path: &Path,
+        character: &Character,
+        options: &ReadOptions,
+    ) -> Result<MotionClip, MotionError> {
+        match MotionFormat::of_path(path) {
+            MotionFormat::DeepMimic => {
+                let file = deepmimic::read_file(path)?;
+                MotionClip::from_deepmimic_frames(
+                    &path.display().to_string(),
+                    &file.frames,
+                    file.loop_mode,
+                    character,
+                )
+            }
+            other => format::load_robot_clip(other, path, character, options),
+        }
     }
 
     /// Parses the text of a DeepMimic motion file (e.g. a clip built into the binary) and

@@ -138,7 +138,8 @@ pub enum MotionError {
     },
     #[error(
         "no motion {name:?}: not a built-in clip ({built_in}) and no such file (looked for: \
-         {tried}); pass a path to a DeepMimic motion file, or a clip's name (e.g. `walk` for \
+         {tried}); pass a path to a motion file (DeepMimic .txt or .json, holosoma's or mjlab's \
+         .npz, mjlab's .csv), or a clip's name (e.g. `walk` for \
          humanoid3d_walk.txt) in the directory given by --motions-dir or {env}",
         env = super::find::MOTIONS_ENV
     )]
@@ -184,6 +185,88 @@ pub enum MotionError {
         field: String,
         norm: f64,
         min: f64,
+    },
+    // The robot formats (`super::format`): holosoma's and mjlab's NPZ, mjlab's CSV.
+    #[error(
+        "{file}: not a readable NumPy .npz archive ({problem}); a robot motion file is the zip \
+         that NumPy's savez writes"
+    )]
+    NpzArchive { file: String, problem: String },
+    #[error("{file}: the array {key:?}: {problem}")]
+    NpzArray {
+        file: String,
+        key: String,
+        problem: String,
+    },
+    #[error("{file}: the array {key:?} is missing ({needs}); the file has: {keys}")]
+    NpzMissingKey {
+        file: String,
+        key: String,
+        needs: &'static str,
+        keys: String,
+    },
+    #[error(
+        "{file}: neither holosoma's motion NPZ (joint_names, joint_pos, fps) nor mjlab's \
+         (body_pos_w, body_quat_w, joint_pos, fps); the file has: {keys}"
+    )]
+    NpzFormat { file: String, keys: String },
+    #[error(
+        "{file}: the character {character} cannot take a robot motion: {problem} (robot motion \
+         files hold a free root's pose and one angle per joint)"
+    )]
+    RobotCharacter {
+        file: String,
+        character: String,
+        problem: String,
+    },
+    #[error(
+        "{file}: the motion is for another character: its joint {joint:?} is not a joint of \
+         {character}; load it with the character it was made for"
+    )]
+    OtherCharacter {
+        file: String,
+        joint: String,
+        character: String,
+    },
+    #[error(
+        "{file}: the motion has no angle for the joint {joint:?} of {character}; a motion must \
+         give every joint of its character"
+    )]
+    MissingJoint {
+        file: String,
+        joint: String,
+        character: String,
+    },
+    #[error("{file}: the joint {joint:?} is named twice")]
+    DuplicateJoint { file: String, joint: String },
+    #[error(
+        "{file}: {what}: {found} joint angles per frame, expected {expected}: the joints of \
+         {character} other than its root, in MJCF order ({names})"
+    )]
+    JointCount {
+        file: String,
+        what: String,
+        found: usize,
+        expected: usize,
+        character: String,
+        names: String,
+    },
+    #[error("{file}: line {line}, column {column}: {text:?} is not a finite number")]
+    CsvValue {
+        file: String,
+        line: usize,
+        column: usize,
+        text: String,
+    },
+    #[error(
+        "{file}: line {line} has {len} values, expected {expected} (as the first line: root \
+         position, root quaternion x y z w, then the joint angles)"
+    )]
+    CsvRowLength {
+        file: String,
+        line: usize,
+        len: usize,
+        expected: usize,
     },
 }
 
