@@ -13,6 +13,14 @@ use super::error::CharacterError;
 
 /// The humanoid's compiled description, embedded so that a run needs no file beside the binary.
 pub const HUMANOID_JSON: &str = include_str!("../../configs/characters/humanoid.json");
+/// The Unitree G1's compiled description (configs/characters/g1.toml).
+pub const G1_JSON: &str = include_str!("../../configs/characters/g1.json");
+
+/// The characters built into the binary, by name; the first is the default.
+pub const BUILT_IN: [(&str, &str); 2] = [("humanoid", HUMANOID_JSON), ("g1", G1_JSON)];
+
+/// The name of the default character.
+pub const DEFAULT_CHARACTER: &str = BUILT_IN[0].0;
 
 /// A MuJoCo joint type. Slide joints are not supported (the humanoid has none).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -168,17 +176,44 @@ pub struct Actuator {
     pub ctrlrange: [f64; 2],
 }
 
+/// How the policy drives one actuated (ball or hinge) joint: a PD toward
+/// `action_center + action_scale * action` (radians; a ball joint's action is a rotation vector),
+/// with the torque clamped at `effort_limit`. Written per joint by the build step from the
+/// character file (configs/characters/*.toml), so no gain is looked up by name at run time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointControl {
+    /// The joint's id.
+    pub joint: usize,
+    /// Proportional gain (N m / rad).
+    pub kp: f64,
+    /// Derivative gain (N m s / rad): the model's joint damping, applied implicitly by MuJoCo.
+    pub kd: f64,
+    /// Reflected rotor inertia added to the joint's dofs (kg m^2), part of the model.
+    pub armature: f64,
+    /// Largest torque the PD may apply (N m).
+    pub effort_limit: f64,
+    /// Radians per unit action.
+    pub action_scale: f64,
+    /// Hinge target at action 0 (radians; 0 for ball joints).
+    pub action_center: f64,
+}
+
 /// A character: MuJoCo's compiled body tree with everything the reference pipeline needs.
 #[derive(Debug, Clone)]
 pub struct Character {
+    name: String,
     source_name: String,
     nq: usize,
     nv: usize,
     qpos0: Vec<f64>,
+    default_qpos: Vec<f64>,
     bodies: Vec<Body>,
     joints: Vec<Joint>,
     geoms: Vec<Geom>,
     actuators: Vec<Actuator>,
+    control: Vec<JointControl>,
+    anchor: usize,
+    tracked_bodies: Vec<usize>,
     end_effectors: Vec<usize>,
     feet: Vec<usize>,
     total_mass: f64,
@@ -186,15 +221,31 @@ pub struct Character {
 
 #[derive(Deserialize)]
 struct CharacterFile {
+    name: String,
     nq: usize,
     nv: usize,
     qpos0: Vec<f64>,
+    default_qpos: Vec<f64>,
     bodies: Vec<BodyFile>,
     joints: Vec<JointFile>,
     geoms: Vec<GeomFile>,
     actuators: Vec<ActuatorFile>,
+    control: Vec<ControlFile>,
+    anchor: String,
+    tracked_bodies: Vec<String>,
     end_effectors: Vec<String>,
     feet: Vec<String>,
+}
+
+#[derive(Deserialize)]
+struct ControlFile {
+    joint: String,
+    kp: f64,
+    kd: f64,
+    armature: f64,
+    effort_limit: f64,
+    action_scale: f64,
+    action_center: f64,
 }
 
 #[derive(Deserialize)]
@@ -255,6 +306,32 @@ impl Character {
         Character::from_json(HUMANOID_JSON, "configs/characters/humanoid.json (embedded)")
     }
 
+    /// The built-in character called `name`, or `None` if there is none.
+    pub fn built_in(name: &str) -> Option<Result<Character, CharacterError>> {
+        BUILT_IN.iter().find(|(n, _)| *n == name).map(|(n, json)| {
+            Character::from_json(json, &format!("configs/characters/{n}.json (embedded)"))
+        })
+    }
+
+    /// A character by a built-in name or the path of a description JSON.
+    pub fn find(name_or_path: &str) -> Result<Character, CharacterError> {
+        if let Some(character) = Character::built_in(name_or_path) {
+            return character;
+        }
+        let path = Path::new(name_or_path);
+        if path.extension().is_some_and(|e| e == "json") || path.exists() {
+            return Character::load(path);
+        }
+        Err(CharacterError::Unknown {
+            name: name_or_path.to_string(),
+            built_in: BUILT_IN
+                .iter()
+                .map(|(n, _)| *n)
+                .collect::<Vec<_>>()
+                .join(", "),
+        })
+    }
+
     /// Reads a character description written by `kernels_py/export_character.py`.
     pub fn load(path: &Path) -> Result<Character, CharacterError> {
         let text = std::fs::read_to_string(path).map_err(|source| CharacterError::Read {
@@ -278,6 +355,11 @@ impl Character {
         build(file, source_name).map_err(invalid)
     }
 
+    /// The character's name (the character file's stem, e.g. "humanoid").
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
     /// Where the description came from (a path, or the embedded file).
     pub fn source_name(&self) -> &str {
         &self.source_name
@@ -296,6 +378,33 @@ impl Character {
     /// MuJoCo's `qpos0` (the reference configuration: hinge angles are measured from it).
     pub fn qpos0(&self) -> &[f64] {
         &self.qpos0
+    }
+
+    /// The default pose (nq values): where a robot stands when every action is 0, and the
+    /// pose a policy is deployed from.
+    pub fn default_qpos(&self) -> &[f64] {
+        &self.default_qpos
+    }
+
+    /// How each actuated joint is driven, one entry per ball or hinge joint in joint order.
+    pub fn control(&self) -> &[JointControl] {
+        &self.control
+    }
+
+    /// The control of joint `joint`, if it is actuated.
+    pub fn joint_control(&self, joint: usize) -> Option<&JointControl> {
+        self.control.iter().find(|c| c.joint == joint)
+    }
+
+    /// The body whose pose anchors the tracking (the root's or, for a robot, e.g. the torso).
+    pub fn anchor_body(&self) -> usize {
+        self.anchor
+    }
+
+    /// Body ids of the bodies that the reward, the observation, the termination and the success
+    /// yardstick follow, in the description's order.
+    pub fn tracked_bodies(&self) -> &[usize] {
+        &self.tracked_bodies
     }
 
     /// All bodies by MuJoCo id; body 0 is the world.
@@ -557,24 +666,100 @@ fn build(file: CharacterFile, source_name: &str) -> Result<Character, String> {
     };
     let end_effectors = body_ids("end effector", &file.end_effectors)?;
     let feet = body_ids("foot", &file.feet)?;
+    let anchor = body_ids("anchor", std::slice::from_ref(&file.anchor))?[0];
+    let tracked_bodies = body_ids("tracked body", &file.tracked_bodies)?;
+    if tracked_bodies.is_empty() {
+        return Err("tracked_bodies is empty: the tracking needs at least one body".into());
+    }
+    for (i, id) in tracked_bodies.iter().enumerate() {
+        if tracked_bodies[..i].contains(id) {
+            return Err(format!(
+                "tracked body {:?} is listed twice",
+                bodies[*id].name
+            ));
+        }
+    }
+    if file.default_qpos.len() != file.nq {
+        return Err(format!(
+            "default_qpos has {} values but nq is {}",
+            file.default_qpos.len(),
+            file.nq
+        ));
+    }
+    finite("default_qpos", &file.default_qpos)?;
+    let control = joint_control(file.control, &joints)?;
     let total_mass = bodies.iter().map(|b| b.mass).sum::<f64>();
     if total_mass <= 0.0 {
         return Err("the bodies have no mass".into());
     }
 
     Ok(Character {
+        name: file.name,
         source_name: source_name.to_string(),
         nq: file.nq,
         nv: file.nv,
         qpos0: file.qpos0,
+        default_qpos: file.default_qpos,
         bodies,
         joints,
         geoms,
         actuators,
+        control,
+        anchor,
+        tracked_bodies,
         end_effectors,
         feet,
         total_mass,
     })
+}
+
+/// Checks the control entries: exactly one per ball or hinge joint, in joint order, with finite
+/// gains, a positive effort limit and action scale.
+fn joint_control(entries: Vec<ControlFile>, joints: &[Joint]) -> Result<Vec<JointControl>, String> {
+    let actuated: Vec<usize> = (0..joints.len())
+        .filter(|&j| joints[j].kind != JointType::Free)
+        .collect();
+    if entries.len() != actuated.len() {
+        return Err(format!(
+            "control has {} entries but the character has {} ball or hinge joints (one entry each, in joint order)",
+            entries.len(),
+            actuated.len()
+        ));
+    }
+    entries
+        .into_iter()
+        .zip(actuated)
+        .map(|(c, joint)| {
+            let expected = &joints[joint].name;
+            if &c.joint != expected {
+                return Err(format!(
+                    "control entry for {:?} where joint {expected:?} was expected (one entry per joint, in joint order)",
+                    c.joint
+                ));
+            }
+            let values = [c.kp, c.kd, c.armature, c.effort_limit, c.action_scale, c.action_center];
+            if values.iter().any(|v| !v.is_finite()) {
+                return Err(format!("control of joint {expected} has a non-finite value"));
+            }
+            if c.kp < 0.0 || c.kd < 0.0 || c.armature < 0.0 {
+                return Err(format!("control of joint {expected} has a negative gain or armature"));
+            }
+            if c.effort_limit <= 0.0 || c.action_scale <= 0.0 {
+                return Err(format!(
+                    "control of joint {expected} needs a positive effort_limit and action_scale"
+                ));
+            }
+            Ok(JointControl {
+                joint,
+                kp: c.kp,
+                kd: c.kd,
+                armature: c.armature,
+                effort_limit: c.effort_limit,
+                action_scale: c.action_scale,
+                action_center: c.action_center,
+            })
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -604,6 +789,67 @@ mod tests {
         );
         assert_eq!(c.feet().len(), 2);
         assert_eq!(c.root_joint().map(|j| j.name.as_str()), Some("root"));
+    }
+
+    #[test]
+    fn embedded_g1_has_the_documented_shape() {
+        let c = Character::find("g1").expect("embedded g1 parses");
+        assert_eq!(c.name(), "g1");
+        assert_eq!(
+            (c.nq(), c.nv(), c.bodies().len(), c.actuators().len()),
+            (36, 35, 31, 29)
+        );
+        assert_eq!(c.control().len(), 29);
+        assert_eq!(c.tracked_bodies().len(), 14);
+        assert_eq!(c.bodies()[c.anchor_body()].name, "torso_link");
+        // Every hinge has a motor with the torque limit of its control entry.
+        for control in c.control() {
+            let motor = c.actuators().iter().find(|a| a.joint == control.joint);
+            assert_eq!(motor.map(|a| a.ctrlrange[1]), Some(control.effort_limit));
+            assert!(control.kp > 0.0 && control.kd > 0.0 && control.armature > 0.0);
+        }
+        // The default pose stands the root at mjlab's height.
+        assert!((c.default_qpos()[2] - 0.76).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_humanoid_tracks_every_body_with_deepmimic_gains() {
+        let c = Character::humanoid().expect("embedded humanoid parses");
+        assert_eq!(c.name(), "humanoid");
+        assert_eq!(c.tracked_bodies(), (1..16).collect::<Vec<_>>());
+        assert_eq!(c.anchor_body(), 1);
+        let kp = |joint: &str| {
+            c.joint_id(joint)
+                .and_then(|j| c.joint_control(j))
+                .map(|control| control.kp)
+        };
+        assert_eq!(kp("chest"), Some(1000.0));
+        assert_eq!(kp("left_knee"), Some(500.0));
+        let knee = c.joint_id("left_knee").and_then(|j| c.joint_control(j));
+        // Hinges: half the range per unit action around its middle.
+        assert_eq!(
+            knee.map(|k| (k.action_scale, k.action_center)),
+            Some((1.57, 1.57))
+        );
+    }
+
+    #[test]
+    fn an_unknown_character_names_the_built_in_ones() {
+        let err = Character::find("no_such_robot").expect_err("unknown");
+        let msg = err.to_string();
+        assert!(msg.contains("humanoid") && msg.contains("g1"), "{msg}");
+    }
+
+    #[test]
+    fn rejects_control_out_of_joint_order() {
+        let text = HUMANOID_JSON.replacen(
+            "\"joint\": \"chest\",\n      \"kd\"",
+            "\"joint\": \"neck\",\n      \"kd\"",
+            1,
+        );
+        assert_ne!(text, HUMANOID_JSON, "the edit must hit the control entry");
+        let err = Character::from_json(&text, "edited.json").expect_err("bad order must fail");
+        assert!(err.to_string().contains("joint order"), "{err}");
     }
 
     #[test]

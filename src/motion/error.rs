@@ -25,6 +25,11 @@ pub enum CharacterError {
         source_name: String,
         problem: String,
     },
+    #[error(
+        "no character {name:?}: give a built-in one ({built_in}) or the path of a description \
+         that `python kernels_py/export_character.py --character <file.toml>` wrote (docs/characters.md)"
+    )]
+    Unknown { name: String, built_in: String },
 }
 
 /// A problem with a motion clip, a motion file, or a table built from a clip.
