@@ -226,7 +226,7 @@ pub enum MotionError {
     },
     #[error(
         "{file}: the motion is for another character: its joint {joint:?} is not a joint of \
-         {character}; load it with the character it was made for"
+         the character {character}; load it with the character it was made for"
     )]
     OtherCharacter {
         file: String,
@@ -234,8 +234,8 @@ pub enum MotionError {
         character: String,
     },
     #[error(
-        "{file}: the motion has no angle for the joint {joint:?} of {character}; a motion must \
-         give every joint of its character"
+        "{file}: the motion has no angle for the joint {joint:?} of the character {character}; a \
+         motion must give every joint of its character"
     )]
     MissingJoint {
         file: String,
@@ -246,7 +246,7 @@ pub enum MotionError {
     DuplicateJoint { file: String, joint: String },
     #[error(
         "{file}: {what}: {found} joint angles per frame, expected {expected}: the joints of \
-         {character} other than its root, in MJCF order ({names})"
+         the character {character} other than its root, in MJCF order ({names})"
     )]
     JointCount {
         file: String,

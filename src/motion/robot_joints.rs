@@ -19,9 +19,9 @@ pub struct RobotLayout {
     joints: Vec<usize>,
 }
 
-/// How errors name the character: its description's source.
+/// How errors name the character: its name (`g1`), as `--character` takes it.
 fn character_label(character: &Character) -> String {
-    character.source_name().to_string()
+    character.name().to_string()
 }
 
 /// The character's free root joint, and its other joints, which must hold one value each.
