@@ -7,8 +7,10 @@ mod train_cli_support;
 
 use std::path::{Path, PathBuf};
 
+use instantmimic::motion::Character;
 use instantmimic::motion::character::HUMANOID_JSON;
-use instantmimic::train::TrainConfig;
+use instantmimic::train::preflight::physics_checks;
+use instantmimic::train::{ChosenCharacter, TrainConfig, load_motion};
 use train_cli_support::{make_run, one_line_error, resolved_config, run, succeeded, workspace};
 
 fn committed_ptx() -> PathBuf {
@@ -251,4 +253,50 @@ fn a_checkpoint_runs_with_its_own_character_and_refuses_another() {
         let err = one_line_error(&run(&eval, None, ws.path()));
         assert!(err.contains("needs an NVIDIA GPU"), "{err}");
     }
+}
+
+/// A G1 motion as mjlab's CSV (root position, root quaternion x y z w, the 29 joint angles per
+/// line, 50 fps): the G1 standing in its default pose for 10 frames.
+fn g1_standing_csv(path: &Path) {
+    let g1 = Character::find("g1").unwrap();
+    let q = g1.default_qpos();
+    let mut row: Vec<f64> = q[..3].to_vec();
+    row.extend([q[4], q[5], q[6], q[3]]);
+    row.extend(&q[7..]);
+    let line = row
+        .iter()
+        .map(|v| v.to_string())
+        .collect::<Vec<_>>()
+        .join(",");
+    std::fs::write(path, format!("{line}\n").repeat(10)).unwrap();
+}
+
+/// The G1 chosen by its name: its built-in plans and its motion pass the checks the dry run
+/// makes of them (the G1's observation layout lands with the env's run-time sizes).
+#[test]
+fn the_g1_reads_its_built_in_plans_and_its_motion() {
+    let ws = workspace();
+    let csv = ws.path().join("stand.csv");
+    g1_standing_csv(&csv);
+    let mut config = TrainConfig::with_motion(csv.to_str().unwrap());
+    config.character = "g1".to_owned();
+    config.env.num_envs = 32;
+    let chosen = ChosenCharacter::of_config(&config).unwrap();
+    let store = chosen.plan_store(None);
+    let (plans, physics_dt, _) = physics_checks(&config, &store, chosen.character()).unwrap();
+    assert_eq!(plans.len(), 2);
+    assert_eq!(physics_dt, 0.005);
+    let (_, motion) = load_motion(&config, None).unwrap();
+    assert_eq!(motion.character().name(), "g1");
+    assert_eq!(motion.clip().num_frames(), 10);
+    // The motion commands take it by name.
+    let args = [
+        "motion",
+        "inspect",
+        csv.to_str().unwrap(),
+        "--character",
+        "g1",
+    ];
+    let text = succeeded(&run(&args, None, ws.path()));
+    assert!(text.contains("frames               10"), "{text}");
 }
