@@ -12,11 +12,14 @@ use crate::bench::{
     bench_train_gpus, default_counts,
 };
 use crate::cuda::Gpu;
+use crate::motion::ReferenceMotion;
+use crate::motion::character::DEFAULT_CHARACTER;
 use crate::motion::find::{motions_dir_from_env, resolve_motion};
-use crate::motion::{Character, ReferenceMotion};
 use crate::plan::{PlanStore, ReplayOrder};
 use crate::train::library::single_clip_only;
-use crate::train::{GemmSetting, TrainConfig, preflight};
+use crate::train::{
+    ChosenCharacter, GemmSetting, PolicyShapes, TrainConfig, check_plan_model, preflight,
+};
 
 /// Where a GPU benchmark of one clip finds its motion and plans, where it runs, and how it
 /// prints (`bench rollout`, `bench full`).
@@ -26,9 +29,14 @@ pub(super) struct BenchRunArgs {
     /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
     pub(super) motions_dir: Option<PathBuf>,
-    /// A directory laid out like ptx/ instead of the plans built into the binary.
+    /// A directory laid out like ptx/ instead of the character's plans.
     #[arg(long)]
     pub(super) assets: Option<PathBuf>,
+    /// The character, overriding the configuration's `character`: a built-in name (`humanoid`,
+    /// `g1`), a description JSON or a character directory (`<dir>/character.json`, `plans/`,
+    /// `mjwarp/`).
+    #[arg(long)]
+    pub(super) character: Option<String>,
     /// CUDA device ordinal.
     #[arg(long, default_value_t = 0)]
     pub(super) device: usize,
@@ -54,6 +62,15 @@ pub(super) struct LoopShapeArgs {
     /// toolkit and is found through the library path).
     #[arg(long, value_enum)]
     gemm: Option<GemmArg>,
+}
+
+impl BenchRunArgs {
+    /// Writes --character into `config`.
+    pub(super) fn apply(&self, config: &mut TrainConfig) {
+        if let Some(character) = &self.character {
+            config.character = character.clone();
+        }
+    }
 }
 
 impl LoopShapeArgs {
@@ -109,7 +126,7 @@ pub(super) fn print_result<T: serde::Serialize>(
     Ok(())
 }
 
-/// The plans (`--assets`, else the built-in ones) and the motion a benchmark of `config` runs,
+/// The plans (`--assets`, else the character's) and the motion a benchmark of `config` runs,
 /// checked as `train --dry-run` checks them (the motion's notices on stderr); `motions_dir`
 /// else `$INSTANTMIMIC_MOTIONS`.
 pub(super) fn benchmark_inputs(
@@ -117,7 +134,7 @@ pub(super) fn benchmark_inputs(
     motions_dir: Option<&Path>,
     assets: Option<&Path>,
 ) -> Result<(PlanStore, ReferenceMotion)> {
-    let store = PlanStore::new(assets);
+    let store = ChosenCharacter::of_config(config)?.plan_store(assets);
     let motions_dir = motions_dir
         .map(Path::to_path_buf)
         .or_else(motions_dir_from_env);
@@ -225,9 +242,14 @@ struct TrainGpusArgs {
     /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
     motions_dir: Option<PathBuf>,
-    /// A directory laid out like ptx/ instead of the plans built into the binary.
+    /// A directory laid out like ptx/ instead of the character's plans.
     #[arg(long)]
     assets: Option<PathBuf>,
+    /// The character, overriding the configuration's `character`: a built-in name (`humanoid`,
+    /// `g1`), a description JSON or a character directory (`<dir>/character.json`, `plans/`,
+    /// `mjwarp/`).
+    #[arg(long)]
+    character: Option<String>,
     /// Print the result as JSON.
     #[arg(long)]
     json: bool,
@@ -239,9 +261,14 @@ struct GemmArgs {
     /// num_envs x horizon / minibatches (32768 for the baseline, 4096 for the committed configs).
     #[arg(long, value_delimiter = ',', default_values_t = [4096usize, 8192, 32768])]
     rows: Vec<usize>,
-    /// Layer sizes of the policy, observation first (default: the committed configs' actor).
-    #[arg(long, value_delimiter = ',', default_values_t = [362usize, 400, 200, 100, 28])]
-    layers: Vec<usize>,
+    /// Layer sizes of the policy, observation first (default: the actor of
+    /// configs/train/default.toml for --character).
+    #[arg(long, value_delimiter = ',')]
+    layers: Option<Vec<usize>>,
+    /// The character whose actor gives the default --layers: a built-in name (`humanoid`, the
+    /// default, or `g1`), a description JSON or a character directory.
+    #[arg(long, conflicts_with = "layers")]
+    character: Option<String>,
     /// Timed GEMMs per measurement.
     #[arg(long, default_value_t = 200)]
     reps: u32,
@@ -289,9 +316,14 @@ struct PhysicsArgs {
     #[arg(long, default_value_t = 200)]
     warmup: u32,
     /// A directory laid out like ptx/ (plans/manifest.json, plans/*.wrp[.zst], mjwarp/*.ptx)
-    /// instead of the plans built into the binary.
+    /// instead of the character's plans.
     #[arg(long)]
     assets: Option<PathBuf>,
+    /// The character whose step plan is timed: a built-in name (`humanoid`, the default, or
+    /// `g1`), a description JSON or a character directory (`<dir>/character.json`, `plans/`,
+    /// `mjwarp/`).
+    #[arg(long)]
+    character: Option<String>,
     /// CUDA device ordinal.
     #[arg(long, default_value_t = 0)]
     device: usize,
@@ -333,6 +365,9 @@ fn train_gpus(args: TrainGpusArgs) -> Result<()> {
         config.env.num_envs = envs;
     }
     config.run.gpus = args.gpus.iter().map(|&d| d as u32).collect();
+    if let Some(character) = &args.character {
+        config.character = character.clone();
+    }
     if args.nccl_in_graph {
         config.run.nccl_in_graph = true;
     }
@@ -394,13 +429,36 @@ fn gemm(args: GemmArgs) -> Result<()> {
     if args.reps == 0 {
         bail!("--reps must be at least 1");
     }
-    if args.layers.len() < 2 || args.layers.contains(&0) || args.rows.contains(&0) {
+    let layers = match &args.layers {
+        Some(layers) => layers.clone(),
+        None => default_actor_layers(args.character.as_deref().unwrap_or(DEFAULT_CHARACTER))?,
+    };
+    if layers.len() < 2 || layers.contains(&0) || args.rows.contains(&0) {
         bail!("--layers needs at least two sizes and --rows and --layers must be positive");
     }
-    let shapes: Vec<(usize, usize)> = args.layers.windows(2).map(|w| (w[0], w[1])).collect();
+    let shapes: Vec<(usize, usize)> = layers.windows(2).map(|w| (w[0], w[1])).collect();
     let gpu = Gpu::open(args.device)?;
     let result = bench_gemm(&gpu, &shapes, &args.rows, args.reps).context("GEMM benchmark")?;
     print_result(&result, args.json, gemm_report)
+}
+
+/// The layer sizes of the actor that configs/train/default.toml builds for the character
+/// `spec` names: observation, hidden layers, action.
+fn default_actor_layers(spec: &str) -> Result<Vec<usize>> {
+    let character = ChosenCharacter::resolve(spec)?.into_character();
+    let (label, config) = TrainConfig::general_default("gemm");
+    let config = config.with_context(|| label.clone())?;
+    let shapes = PolicyShapes::new(&config, &character)?;
+    let mut layers = vec![shapes.observation_size];
+    layers.extend(
+        config
+            .policy
+            .actor_hidden
+            .iter()
+            .map(|&width| width as usize),
+    );
+    layers.push(shapes.action_size);
+    Ok(layers)
 }
 
 fn gemm_report(r: &GemmBench) -> String {
@@ -465,8 +523,10 @@ fn physics(args: PhysicsArgs) -> Result<()> {
     if args.envs == 0 || args.steps == 0 {
         bail!("--envs and --steps must be at least 1");
     }
+    let chosen = ChosenCharacter::resolve(args.character.as_deref().unwrap_or(DEFAULT_CHARACTER))?;
+    let store = chosen.plan_store(args.assets.as_deref());
+    check_plan_model(&store, chosen.character())?;
     let gpu = Gpu::open(args.device)?;
-    let store = PlanStore::new(args.assets.as_deref());
     let order = match args.order {
         Order::Dag => ReplayOrder::Dag,
         Order::Linear => ReplayOrder::Linear,
@@ -513,13 +573,17 @@ fn rollout(args: RolloutArgs) -> Result<()> {
     single_clip_only(&config, "bench rollout")?;
     config.motion = args.motion.clone();
     args.shape.apply(&mut config);
+    args.run.apply(&mut config);
     let name = args.config.as_ref().map_or_else(
         || "the command line".to_owned(),
         |p| p.display().to_string(),
     );
     config.validate(&name)?;
 
-    let character = Character::humanoid()?;
+    let chosen = ChosenCharacter::of_config(&config)?;
+    let store = chosen.plan_store(args.run.assets.as_deref());
+    let character = chosen.into_character();
+    check_plan_model(&store, &character)?;
     let dir = args.run.motions_dir.clone().or_else(motions_dir_from_env);
     let resolved = resolve_motion(&config.motion, dir.as_deref())?;
     let motion = resolved.load(&character)?;
@@ -527,7 +591,6 @@ fn rollout(args: RolloutArgs) -> Result<()> {
         eprintln!("{line}");
     }
     let gpu = Gpu::open(args.run.device)?;
-    let store = PlanStore::new(args.run.assets.as_deref());
     let result = bench_rollout(
         &gpu,
         &store,
@@ -610,4 +673,19 @@ fn rollout_report(r: &RolloutBench) -> String {
         );
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_gemm_layers_are_the_characters_actor() {
+        // The committed configs' actor on the humanoid: observation 362, action 28.
+        assert_eq!(
+            default_actor_layers("humanoid").unwrap(),
+            [362, 400, 200, 100, 28]
+        );
+        assert!(default_actor_layers("no_such").is_err());
+    }
 }

@@ -14,8 +14,7 @@ use crate::bench::{FullBench, LoopCase, bench_full};
 use crate::cuda::Gpu;
 use crate::env::Stage;
 use crate::motion::find::motions_dir_from_env;
-use crate::plan::PlanStore;
-use crate::train::preflight_training;
+use crate::train::{ChosenCharacter, preflight_training};
 
 #[derive(Args, Debug)]
 pub(super) struct FullArgs {
@@ -65,12 +64,13 @@ pub(super) fn run(args: FullArgs) -> Result<()> {
     }
     let mut config = config.with_overrides(&args.set, &label)?;
     args.shape.apply(&mut config);
+    args.run.apply(&mut config);
     // One GPU, --device; both settings of the overlap are measured.
     config.run.gpus.clear();
     config.ppo.overlap_update = false;
     config.ppo.concurrent_networks = false;
     config.validate(&label)?;
-    let store = PlanStore::new(args.run.assets.as_deref());
+    let store = ChosenCharacter::of_config(&config)?.plan_store(args.run.assets.as_deref());
     let motions_dir = args.run.motions_dir.clone().or_else(motions_dir_from_env);
     let (checks, motion) = preflight_training(&config, motions_dir.as_deref(), &store)?;
     for line in &checks.motion_notices {

@@ -10,10 +10,10 @@ use clap::Args;
 
 use super::library_eval::LibraryEvalJob;
 use crate::motion::find::motions_dir_from_env;
-use crate::plan::PlanStore;
 use crate::train::library_policy::LibraryPolicyKind;
 use crate::train::{
-    Checkpoint, evaluate_on_gpu, evaluation_steps, format_evaluation_report, preflight,
+    Checkpoint, checkpoint_character, evaluate_on_gpu, evaluation_steps, format_evaluation_report,
+    preflight,
 };
 
 #[derive(Args, Debug)]
@@ -28,9 +28,15 @@ pub struct EvalArgs {
     /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
     motions_dir: Option<PathBuf>,
-    /// A directory laid out like ptx/ instead of the plans built into the binary.
+    /// A directory laid out like ptx/ instead of the character's plans.
     #[arg(long)]
     assets: Option<PathBuf>,
+    /// The character the checkpoint was trained on, found another way than its configuration
+    /// names it: a built-in name, a description JSON or a character directory
+    /// (`<dir>/character.json`, `plans/`, `mjwarp/`). Default: the checkpoint's; another
+    /// character is refused.
+    #[arg(long)]
+    character: Option<String>,
     /// Print the result as JSON.
     #[arg(long)]
     json: bool,
@@ -71,10 +77,11 @@ pub fn run(args: EvalArgs) -> Result<()> {
     if args.episodes == 0 {
         bail!("--episodes must be at least 1");
     }
-    let checkpoint = Checkpoint::load(&args.checkpoint)?;
+    let mut checkpoint = Checkpoint::load(&args.checkpoint)?;
+    let chosen = checkpoint_character(&mut checkpoint, args.character.as_deref())?;
     let config = checkpoint.meta.config(checkpoint.source())?;
     let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
-    let store = PlanStore::new(args.assets.as_deref());
+    let store = chosen.plan_store(args.assets.as_deref());
     if config.goal.is_some() {
         if args.library.is_some() || args.out.is_some() {
             bail!(

@@ -15,10 +15,10 @@ use crate::export::onnx::export_policy;
 use crate::export::onnx::latent::export_latent_controller;
 use crate::files::write_bytes_atomically;
 use crate::motion::Character;
+use crate::motion::character::DEFAULT_CHARACTER;
 use crate::motion::find::{motions_dir_from_env, resolve_motion};
-use crate::plan::PlanStore;
 use crate::recording::{ClipRecordingSpec, Recording};
-use crate::train::{Checkpoint, check_plans};
+use crate::train::{Checkpoint, ChosenCharacter, check_plans, checkpoint_character};
 
 use super::output::check_output_path;
 
@@ -50,10 +50,15 @@ pub struct ExportArgs {
     /// Directory of your own DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
     motions_dir: Option<PathBuf>,
-    /// With --format onnx: a directory laid out like ptx/ instead of the plans built into the
-    /// binary (the contract's physics timestep is the plans').
+    /// With --format onnx: a directory laid out like ptx/ instead of the character's plans (the
+    /// contract's physics timestep is the plans').
     #[arg(long)]
     assets: Option<PathBuf>,
+    /// The character: a built-in name (`humanoid`, the default, `g1`), a description JSON or a
+    /// character directory (`<dir>/character.json`, `plans/`, `mjwarp/`). With --format onnx,
+    /// default: the checkpoint's (another is refused).
+    #[arg(long)]
+    character: Option<String>,
 }
 
 /// The recording named by `--recording` or built from `--motion`.
@@ -92,7 +97,7 @@ fn source_recording(args: &ExportArgs, character: &Character) -> Result<Recordin
 
 /// The policy of the checkpoint at `path` as ONNX bytes, with its contract written beside
 /// `args.out` as JSON (`policy.onnx` -> `policy.json`).
-fn onnx_export(path: &Path, args: &ExportArgs, character: &Character) -> Result<(Vec<u8>, String)> {
+fn onnx_export(path: &Path, args: &ExportArgs) -> Result<(Vec<u8>, String)> {
     let sidecar = args.out.with_extension("json");
     if sidecar == args.out {
         bail!(
@@ -100,12 +105,14 @@ fn onnx_export(path: &Path, args: &ExportArgs, character: &Character) -> Result<
             args.out.display()
         );
     }
-    let checkpoint = Checkpoint::load(path)?;
+    let mut checkpoint = Checkpoint::load(path)?;
+    let chosen = checkpoint_character(&mut checkpoint, args.character.as_deref())?;
+    let character = chosen.character();
     let config = checkpoint.meta.config(checkpoint.source())?;
     // The physics timestep is the plans' (the contract states it); the evaluation's plans are
     // the smallest.
-    let store = PlanStore::new(args.assets.as_deref());
-    let physics_dt = check_plans(&store, config.run.eval_envs)?
+    let store = chosen.plan_store(args.assets.as_deref());
+    let physics_dt = check_plans(&store, character, config.run.eval_envs)?
         .first()
         .map(|p| p.physics_dt)
         .ok_or_else(|| anyhow!("no plans for {} worlds", config.run.eval_envs))?;
@@ -175,7 +182,6 @@ fn latent_export(
 pub fn run(args: ExportArgs) -> Result<()> {
     let format: Format = args.format.parse().map_err(|e: String| anyhow!(e))?;
     check_output_path(&args.out)?;
-    let character = Character::humanoid()?;
     let (bytes, what) = if format == Format::Onnx {
         if args.recording.is_some() || args.motion.is_some() {
             bail!(
@@ -186,13 +192,15 @@ pub fn run(args: ExportArgs) -> Result<()> {
             .checkpoint
             .as_ref()
             .ok_or_else(|| anyhow!("--format onnx: give --checkpoint <file>"))?;
-        onnx_export(path, &args, &character)?
+        onnx_export(path, &args)?
     } else {
         if args.checkpoint.is_some() {
             bail!(
                 "--checkpoint goes with --format onnx; --format {format} exports a recording or a motion"
             );
         }
+        let spec = args.character.as_deref().unwrap_or(DEFAULT_CHARACTER);
+        let character = ChosenCharacter::resolve(spec)?.into_character();
         let recording = source_recording(&args, &character)?;
         let frames = recording.episode_rows(args.episode)?.len();
         match format {

@@ -6,10 +6,12 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use clap::{Args, Subcommand};
 
+use crate::motion::character::DEFAULT_CHARACTER;
 use crate::motion::find::{MOTIONS_ENV, ResolvedMotion, motions_dir_from_env, resolve_motion};
 use crate::motion::summary::JointRange;
 use crate::motion::{Character, ClipSummary, ReferenceMotion};
 use crate::recording::{ClipRecordingSpec, Recording};
+use crate::train::ChosenCharacter;
 use crate::viewer::save_page;
 
 #[derive(Args, Debug)]
@@ -26,6 +28,10 @@ enum MotionCommand {
         /// Directory of your own DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
         #[arg(long)]
         motions_dir: Option<PathBuf>,
+        /// The character the clips are loaded for: a built-in name (`humanoid`, the default,
+        /// or `g1`), a description JSON or a character directory (`<dir>/character.json`).
+        #[arg(long)]
+        character: Option<String>,
     },
     /// Print frames, fps, duration, loop mode, per-cycle root displacement, joint ranges and the
     /// lowest foot point of a clip; or, with --library, each clip of a motion library and the
@@ -47,10 +53,11 @@ enum MotionCommand {
         /// clips (default: $INSTANTMIMIC_MOTIONS).
         #[arg(long)]
         motions_dir: Option<PathBuf>,
-        /// Character description written by kernels_py/export_character.py (default: the
-        /// humanoid).
+        /// The character: a built-in name (`humanoid`, the default, or `g1`), a description
+        /// JSON (kernels_py/export_character.py) or a character directory
+        /// (`<dir>/character.json`).
         #[arg(long)]
-        character: Option<PathBuf>,
+        character: Option<String>,
     },
     /// Print the body positions and orientations of one key frame.
     Fk {
@@ -91,9 +98,10 @@ struct ClipArgs {
     /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
     motions_dir: Option<PathBuf>,
-    /// Character description written by kernels_py/export_character.py (default: the humanoid).
+    /// The character: a built-in name (`humanoid`, the default, or `g1`), a description JSON
+    /// (kernels_py/export_character.py) or a character directory (`<dir>/character.json`).
     #[arg(long)]
-    character: Option<PathBuf>,
+    character: Option<String>,
 }
 
 impl ClipArgs {
@@ -115,24 +123,27 @@ impl ClipArgs {
     }
 }
 
-/// The character at `path`, or the humanoid.
-fn load_character(path: Option<&std::path::Path>) -> Result<Character> {
-    Ok(match path {
-        Some(path) => Character::load(path)?,
-        None => Character::humanoid()?,
-    })
+/// The character `--character` names (a built-in name, a description JSON or a character
+/// directory), or the default one.
+fn load_character(spec: Option<&str>) -> Result<Character> {
+    let spec = spec.unwrap_or(DEFAULT_CHARACTER);
+    Ok(ChosenCharacter::resolve(spec)?.into_character())
 }
 
 /// Runs `motion <subcommand>`.
 pub fn run(args: MotionArgs) -> Result<()> {
     match args.command {
-        MotionCommand::List { motions_dir } => {
+        MotionCommand::List {
+            motions_dir,
+            character,
+        } => {
             let dir = match motions_dir {
                 Some(dir) => Some((dir, "--motions-dir")),
                 None => motions_dir_from_env().map(|dir| (dir, MOTIONS_ENV)),
             };
             let dir = dir.as_ref().map(|(dir, from)| (dir.as_path(), *from));
-            print!("{}", super::motion_list::list_report(dir)?);
+            let character = load_character(character.as_deref())?;
+            print!("{}", super::motion_list::list_report(dir, &character)?);
         }
         MotionCommand::Inspect {
             motion,

@@ -70,15 +70,15 @@ fn write_rows(out: &mut String, rows: &[ListRow]) {
     }
 }
 
-/// The report: built-in clips, then those in `dir` (with the flag or variable that named it).
-pub fn list_report(dir: Option<(&Path, &str)>) -> Result<String> {
-    let character = Character::humanoid()?;
+/// The report: built-in clips, then those in `dir` (with the flag or variable that named it),
+/// each loaded for `character`.
+pub fn list_report(dir: Option<(&Path, &str)>, character: &Character) -> Result<String> {
     let mut out = String::new();
     let built_in: Vec<ListRow> = BUILT_IN_CLIPS
         .iter()
         .map(|clip| {
             let source = MotionSource::BuiltIn(clip);
-            let mut row = ListRow::load(clip.name.to_string(), &source, &character);
+            let mut row = ListRow::load(clip.name.to_string(), &source, character);
             row.file = Some(clip.file_name.to_string());
             row
         })
@@ -117,7 +117,7 @@ pub fn list_report(dir: Option<(&Path, &str)>) -> Result<String> {
                     .into_iter()
                     .map(|clip| {
                         let source = MotionSource::File(clip.path.clone());
-                        let mut row = ListRow::load(clip.name, &source, &character);
+                        let mut row = ListRow::load(clip.name, &source, character);
                         let file_name = clip.path.file_name().map_or_else(
                             || clip.path.display().to_string(),
                             |n| n.to_string_lossy().into_owned(),

@@ -15,7 +15,9 @@ use crate::plan::PlanStore;
 use crate::recording::{Outcome, Recording};
 use crate::replay::{DEFAULT_EPISODES, Replay, ReplayInput, chosen_envs, record_replay};
 use crate::train::library_policy::LibraryPolicyKind;
-use crate::train::{Checkpoint, EvalStart, format_evaluation_report, preflight};
+use crate::train::{
+    Checkpoint, EvalStart, checkpoint_character, format_evaluation_report, preflight,
+};
 use crate::viewer::save_page;
 
 /// The longest episode `replay --steps` records.
@@ -63,9 +65,15 @@ pub struct ReplayArgs {
     /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
     motions_dir: Option<PathBuf>,
-    /// A directory laid out like ptx/ instead of the plans built into the binary.
+    /// A directory laid out like ptx/ instead of the character's plans.
     #[arg(long)]
     assets: Option<PathBuf>,
+    /// The character the checkpoint was trained on, found another way than its configuration
+    /// names it: a built-in name, a description JSON or a character directory
+    /// (`<dir>/character.json`, `plans/`, `mjwarp/`). Default: the checkpoint's; another
+    /// character is refused.
+    #[arg(long)]
+    character: Option<String>,
     /// CUDA device ordinal.
     #[arg(long, default_value_t = 0)]
     device: usize,
@@ -99,6 +107,8 @@ pub(super) struct ReplayJob<'a> {
     pub motion_notices: bool,
     /// A goal checkpoint's decoder, replacing the one its configuration names.
     pub decoder: Option<&'a Path>,
+    /// `--character`: the checkpoint's character found another way (`checkpoint_character`).
+    pub character: Option<&'a str>,
 }
 
 /// Checks everything that needs no GPU (the output paths, the checkpoint and its policy's
@@ -109,7 +119,8 @@ pub(super) fn write_replay(job: &ReplayJob<'_>) -> Result<String> {
     if let Some(path) = job.recording {
         super::output::check_output_path(path)?;
     }
-    let checkpoint = Checkpoint::load(job.checkpoint)?;
+    let mut checkpoint = Checkpoint::load(job.checkpoint)?;
+    checkpoint_character(&mut checkpoint, job.character)?;
     let mut config = checkpoint.meta.config(checkpoint.source())?;
     if config.goal.is_some() {
         // The goals and the goals reached (src/cli/goal_checkpoint.rs).
@@ -250,8 +261,12 @@ fn episodes_report(replay: &Replay, envs: &[usize], steps: u32, threshold: f64) 
 /// Runs `replay`.
 pub fn run(args: ReplayArgs) -> Result<()> {
     let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
-    let store = PlanStore::new(args.assets.as_deref());
-    if let Some(report) = replay_library_checkpoint(&args, motions_dir.as_deref(), &store)? {
+    let mut checkpoint = Checkpoint::load(&args.checkpoint)?;
+    let chosen = checkpoint_character(&mut checkpoint, args.character.as_deref())?;
+    let store = chosen.plan_store(args.assets.as_deref());
+    if let Some(report) =
+        replay_library_checkpoint(&args, &checkpoint, motions_dir.as_deref(), &store)?
+    {
         print!("{report}");
         return Ok(());
     }
@@ -270,6 +285,7 @@ pub fn run(args: ReplayArgs) -> Result<()> {
         device: args.device,
         motion_notices: true,
         decoder: args.decoder.as_deref(),
+        character: args.character.as_deref(),
     })?;
     print!("{report}");
     Ok(())
@@ -279,10 +295,10 @@ pub fn run(args: ReplayArgs) -> Result<()> {
 /// None for a single clip's checkpoint, on which `--clip` is refused.
 fn replay_library_checkpoint(
     args: &ReplayArgs,
+    checkpoint: &Checkpoint,
     motions_dir: Option<&Path>,
     store: &PlanStore,
 ) -> Result<Option<String>> {
-    let checkpoint = Checkpoint::load(&args.checkpoint)?;
     let config = checkpoint.meta.config(checkpoint.source())?;
     if LibraryPolicyKind::of(&config).is_none() {
         let flag = match (&args.clip, &args.library, args.all_clips) {
@@ -316,7 +332,7 @@ fn replay_library_checkpoint(
     }
     let label = args.checkpoint.display().to_string();
     let report = super::library_eval::replay_library(&super::library_eval::LibraryReplayJob {
-        checkpoint: &checkpoint,
+        checkpoint,
         label: &label,
         clip: args.clip.as_deref(),
         all_clips: args.all_clips,

@@ -25,9 +25,9 @@ use crate::train::goal_latent::load_goal_decoder;
 use crate::train::latent_trainer::{latent_shapes, load_teacher};
 use crate::train::run_dir::{CHECKPOINTS_DIR, REPLAY_DIR, REPLAY_FILE};
 use crate::train::{
-    Checkpoint, CheckpointDir, ProgressMode, RunDir, RunStart, RunSummary, StopFlag, StopReason,
-    StopSignal, TrainConfig, TrainSetup, check_same_gpu_count, default_run_dir, preflight_training,
-    train_on_gpu,
+    Checkpoint, CheckpointDir, ChosenCharacter, ProgressMode, RunDir, RunStart, RunSummary,
+    StopFlag, StopReason, StopSignal, TrainConfig, TrainSetup, check_same_gpu_count,
+    check_trained_character, default_run_dir, preflight_training, train_on_gpu,
 };
 
 /// `--progress`.
@@ -100,9 +100,15 @@ pub struct TrainArgs {
     /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
     motions_dir: Option<PathBuf>,
-    /// A directory laid out like ptx/ instead of the plans built into the binary.
+    /// A directory laid out like ptx/ instead of the character's plans.
     #[arg(long)]
     assets: Option<PathBuf>,
+    /// The character, overriding `character`: a built-in name (`humanoid`, the default, or
+    /// `g1`), a description JSON, or a character directory (`<dir>/character.json` with its
+    /// plans in `<dir>/plans/` and their PTX in `<dir>/mjwarp/`). With --resume: the run's
+    /// character found another way (another is refused).
+    #[arg(long)]
+    character: Option<String>,
     /// How progress is shown.
     #[arg(long, value_enum, default_value_t = ProgressArg::Auto)]
     progress: ProgressArg,
@@ -214,6 +220,10 @@ fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
         args.motion.as_deref(),
         args.library.as_deref(),
     )?;
+    if let Some(character) = &args.character {
+        config.character = character.clone();
+        flags.push("--character");
+    }
     if let Some(seed) = args.seed {
         config.seed = seed;
         flags.push("--seed");
@@ -270,7 +280,6 @@ pub(super) fn parse_override(text: &str) -> Result<(String, String), String> {
 /// Runs `train`.
 pub fn run(args: TrainArgs) -> Result<()> {
     let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
-    let store = PlanStore::new(args.assets.as_deref());
     let progress = match args.progress {
         ProgressArg::Auto => ProgressMode::for_stdout(),
         ProgressArg::Bar => ProgressMode::Bar,
@@ -286,6 +295,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
             }
             let mut config = resumed.config.clone();
             let mut flags = Vec::new();
+            if let Some(character) = &args.character {
+                config.character = character.clone();
+                flags.push("--character");
+            }
             args.apply_run_overrides(&mut config, &mut flags);
             let mut label = resumed.dir.config_path().display().to_string();
             if !flags.is_empty() {
@@ -328,6 +341,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
             (config, label, start, line, None)
         }
     };
+    // The plans follow the character (--assets replaces them).
+    let store = ChosenCharacter::of_config(&config)?.plan_store(args.assets.as_deref());
     let (mut checks, motion) = preflight_training(&config, motions_dir.as_deref(), &store)?;
     for line in &checks.motion_notices {
         eprintln!("{line}");
@@ -341,6 +356,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         }
     }
     if let Some(checkpoint) = &resume_checkpoint {
+        check_trained_character(checkpoint, motion.tracked().character())?;
         // The checkpoint must hold the policy this configuration builds (a latent
         // controller's networks are checked when they are restored).
         if config.latent.is_none() {
@@ -538,6 +554,7 @@ fn replay_final_policy(
         device,
         motion_notices: false,
         decoder: None,
+        character: None,
     })?;
     Ok(format!("{heading}\n{report}"))
 }

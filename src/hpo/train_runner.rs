@@ -17,7 +17,8 @@ use crate::motion::ReferenceMotion;
 use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
 use crate::train::{
-    ProgressMode, RunStart, StopFlag, StopReason, TrainConfig, load_motion, train_with,
+    ChosenCharacter, ProgressMode, RunStart, StopFlag, StopReason, TrainConfig, check_plan_model,
+    load_motion, train_with,
 };
 
 /// Distinguishes the scratch directories of the trials of one process.
@@ -27,9 +28,11 @@ static TRIAL_COUNTER: AtomicU64 = AtomicU64::new(0);
 pub struct TrainRunner {
     gpu: Gpu,
     spec: TrialSpec,
-    store: PlanStore,
-    /// Motions by name, loaded once.
-    motions: HashMap<String, ReferenceMotion>,
+    /// The plans of each character the trials train (`character`), checked against it and
+    /// kept decoded from trial to trial.
+    stores: HashMap<String, PlanStore>,
+    /// Motions by character and name, loaded once.
+    motions: HashMap<(String, String), ReferenceMotion>,
     /// Stops a trial after its current iteration (the search's SIGINT/SIGTERM).
     stop: StopFlag,
 }
@@ -44,7 +47,7 @@ impl TrainRunner {
         Ok(TrainRunner {
             gpu,
             spec,
-            store: PlanStore::new(None).keeping_decoded(),
+            stores: HashMap::new(),
             motions: HashMap::new(),
             stop: StopFlag::new(),
         })
@@ -88,18 +91,27 @@ impl TrialRunner for TrainRunner {
     fn run(&mut self, table: &toml::Table, seed: u64) -> Result<TrialOutcome, HpoError> {
         let config = TrainRunner::trial_config(table, seed, self.spec)?;
         let problem = |p: String| HpoError::Trial { seed, problem: p };
-        if !self.motions.contains_key(&config.motion) {
+        let key = (config.character.clone(), config.motion.clone());
+        if !self.motions.contains_key(&key) {
             let (_, motion) = load_motion(&config, motions_dir_from_env().as_deref())
                 .map_err(|e| problem(e.to_string()))?;
-            self.motions.insert(config.motion.clone(), motion);
+            self.motions.insert(key.clone(), motion);
         }
-        let motion = &self.motions[&config.motion];
+        let motion = &self.motions[&key];
+        if !self.stores.contains_key(&config.character) {
+            let store = ChosenCharacter::of_config(&config)
+                .map(|chosen| chosen.plan_store(None).keeping_decoded())
+                .map_err(|e| problem(e.to_string()))?;
+            check_plan_model(&store, motion.character()).map_err(|e| problem(e.to_string()))?;
+            self.stores.insert(config.character.clone(), store);
+        }
+        let store = &self.stores[&config.character];
         let root = scratch_dir();
         let result = train_with(
             &self.gpu,
             &config,
             motion,
-            &self.store,
+            store,
             &RunStart::New {
                 root: root.clone(),
                 overwrite: true,

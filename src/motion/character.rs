@@ -203,6 +203,7 @@ pub struct JointControl {
 pub struct Character {
     name: String,
     source_name: String,
+    simulation_mjcf: String,
     nq: usize,
     nv: usize,
     qpos0: Vec<f64>,
@@ -222,6 +223,8 @@ pub struct Character {
 #[derive(Deserialize)]
 struct CharacterFile {
     name: String,
+    /// The MJCF the description was compiled from (and the plans are captured from).
+    source: String,
     nq: usize,
     nv: usize,
     qpos0: Vec<f64>,
@@ -363,6 +366,12 @@ impl Character {
     /// Where the description came from (a path, or the embedded file).
     pub fn source_name(&self) -> &str {
         &self.source_name
+    }
+
+    /// The simulation MJCF the description was compiled from, as the build step names it
+    /// (e.g. `configs/characters/g1.xml`): the model a plan set must be captured from.
+    pub fn simulation_mjcf(&self) -> &str {
+        &self.simulation_mjcf
     }
 
     /// Number of generalized coordinates.
@@ -696,6 +705,7 @@ fn build(file: CharacterFile, source_name: &str) -> Result<Character, String> {
     Ok(Character {
         name: file.name,
         source_name: source_name.to_string(),
+        simulation_mjcf: file.source,
         nq: file.nq,
         nv: file.nv,
         qpos0: file.qpos0,
@@ -789,12 +799,14 @@ mod tests {
         );
         assert_eq!(c.feet().len(), 2);
         assert_eq!(c.root_joint().map(|j| j.name.as_str()), Some("root"));
+        assert_eq!(c.simulation_mjcf(), "configs/characters/humanoid.xml");
     }
 
     #[test]
     fn embedded_g1_has_the_documented_shape() {
         let c = Character::find("g1").expect("embedded g1 parses");
         assert_eq!(c.name(), "g1");
+        assert_eq!(c.simulation_mjcf(), "configs/characters/g1.xml");
         assert_eq!(
             (c.nq(), c.nv(), c.bodies().len(), c.actuators().len()),
             (36, 35, 31, 29)

@@ -52,6 +52,7 @@ pub use reader::MAX_NESTING_DEPTH;
 pub use replay::ReplayOrder;
 pub use simulation::{Buffer, Simulation, SimulationError};
 pub use store::{
-    MANIFEST_PATH, MJWARP_PTX_DIR, PlanEntry, PlanManifest, PlanSource, PlanStore, ptx_file_name,
+    EMBEDDED_CHARACTERS_DIR, MANIFEST_PATH, MJWARP_PTX_DIR, PLANS_DIR, PlanEntry, PlanManifest,
+    PlanSource, PlanStore, SimulatedModel, ptx_file_name,
 };
 pub use summary::{BindingSummary, PlanSummary};

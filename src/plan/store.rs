@@ -1,12 +1,18 @@
 //! Where plans and their PTX come from: the copies embedded in the binary at build time, or a
 //! directory with the same layout as the repository's `ptx/` (for plans captured by a user, e.g.
-//! for another world count):
+//! for another world count or another character):
 //!
 //! ```text
 //! plans/manifest.json      the captured plans: name, world count, file, modules
 //! plans/<name>_<N>.wrp.zst a packed plan (a raw .wrp is accepted too)
 //! mjwarp/<module>.ptx      the PTX of each MuJoCo Warp module, named as the plan records it
 //! ```
+//!
+//! The embedded files hold one such layout per built-in character: the default character's at
+//! the root of `ptx/`, every other one's under `ptx/characters/<name>/` ([`PlanStore::embedded`]
+//! takes that root). A plan set simulates one model: its manifest records the MJCF it was
+//! captured from and the model's sizes ([`SimulatedModel`]), which a run compares with its
+//! character before it loads a plan.
 
 use std::borrow::Cow;
 use std::collections::HashMap;
@@ -21,6 +27,11 @@ use super::pack::load_plan;
 
 /// Directory of MuJoCo Warp module PTX, relative to the store's root.
 pub const MJWARP_PTX_DIR: &str = "mjwarp";
+/// Directory of the plans, relative to the store's root.
+pub const PLANS_DIR: &str = "plans";
+/// Where the embedded plans of the built-in characters other than the default are, relative to
+/// `ptx/`: `characters/<name>/plans/...`, `characters/<name>/mjwarp/...`.
+pub const EMBEDDED_CHARACTERS_DIR: &str = "characters";
 /// The plan manifest, relative to the store's root.
 pub const MANIFEST_PATH: &str = "plans/manifest.json";
 
@@ -35,6 +46,54 @@ pub struct PlanManifest {
     pub plans: Vec<PlanEntry>,
 }
 
+/// The model a plan set simulates, as its manifest's `physics` records it (`config.character`,
+/// the simulation MJCF, and the compiled sizes), or as a character's description states it.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, Deserialize)]
+pub struct SimulatedModel {
+    /// The simulation MJCF, as the build step names it (e.g. `configs/characters/g1.xml`).
+    pub mjcf: String,
+    pub nq: usize,
+    pub nv: usize,
+    /// Actuators.
+    pub nu: usize,
+    /// Bodies, the world included.
+    pub nbody: usize,
+}
+
+impl SimulatedModel {
+    /// The model recorded by a manifest's (or a packed plan's) `physics` object; `None` when
+    /// a field is missing (plans captured before the manifest recorded them).
+    pub fn from_physics(
+        physics: &serde_json::Map<String, serde_json::Value>,
+    ) -> Option<SimulatedModel> {
+        let size = |key: &str| {
+            physics
+                .get(key)
+                .and_then(serde_json::Value::as_u64)
+                .and_then(|n| usize::try_from(n).ok())
+        };
+        Some(SimulatedModel {
+            mjcf: physics
+                .get("config")
+                .and_then(|c| c.get("character"))
+                .and_then(serde_json::Value::as_str)?
+                .to_string(),
+            nq: size("nq")?,
+            nv: size("nv")?,
+            nu: size("nu")?,
+            nbody: size("nbody")?,
+        })
+    }
+
+    /// `configs/characters/g1.xml (nq 36, nv 35, nu 29, nbody 31)`.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} (nq {}, nv {}, nu {}, nbody {})",
+            self.mjcf, self.nq, self.nv, self.nu, self.nbody
+        )
+    }
+}
+
 /// One captured plan.
 #[derive(Clone, Debug, Deserialize)]
 pub struct PlanEntry {
@@ -47,7 +106,10 @@ pub struct PlanEntry {
 /// Where a store's files come from.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum PlanSource {
-    Embedded,
+    /// The files built into the binary under `root` (relative to `ptx/`; empty: its top, the
+    /// default character's plans; else e.g. `characters/g1`).
+    Embedded { root: String },
+    /// A directory laid out like `ptx/` (`--assets`, a character directory).
     Directory(PathBuf),
 }
 
@@ -66,13 +128,26 @@ pub struct PlanStore {
 type DecodedPlans = HashMap<(String, u32), Plan>;
 
 impl PlanStore {
-    /// The embedded assets, or `dir` when given.
+    /// The default character's embedded plans, or `dir` when given.
     pub fn new(dir: Option<&Path>) -> PlanStore {
+        match dir {
+            Some(dir) => PlanStore::from_source(PlanSource::Directory(dir.to_path_buf())),
+            None => PlanStore::embedded(""),
+        }
+    }
+
+    /// The plans built into the binary under `root` (relative to `ptx/`, e.g. `characters/g1`;
+    /// empty: the default character's).
+    pub fn embedded(root: &str) -> PlanStore {
+        PlanStore::from_source(PlanSource::Embedded {
+            root: root.trim_matches('/').to_string(),
+        })
+    }
+
+    /// The plans of `source`.
+    pub fn from_source(source: PlanSource) -> PlanStore {
         PlanStore {
-            source: match dir {
-                Some(dir) => PlanSource::Directory(dir.to_path_buf()),
-                None => PlanSource::Embedded,
-            },
+            source,
             decoded: None,
         }
     }
@@ -89,9 +164,16 @@ impl PlanStore {
         &self.source
     }
 
-    fn describe(&self) -> String {
+    /// Where the plans are, for messages: `the plans built into this binary` (`... under
+    /// characters/g1`), or the directory.
+    pub fn describe(&self) -> String {
         match &self.source {
-            PlanSource::Embedded => "the plans built into this binary".to_string(),
+            PlanSource::Embedded { root } if root.is_empty() => {
+                "the plans built into this binary".to_string()
+            }
+            PlanSource::Embedded { root } => {
+                format!("the plans built into this binary under {root}/")
+            }
             PlanSource::Directory(dir) => dir.display().to_string(),
         }
     }
@@ -99,9 +181,16 @@ impl PlanStore {
     /// A file by its path relative to the store's root.
     pub fn read(&self, rel: &str) -> Result<Cow<'static, [u8]>, PlanError> {
         match &self.source {
-            PlanSource::Embedded => crate::assets::get(rel)
-                .map(Cow::Borrowed)
-                .ok_or_else(|| PlanError::Asset(format!("{rel} is not built into this binary"))),
+            PlanSource::Embedded { root } => {
+                let path = if root.is_empty() {
+                    rel.to_string()
+                } else {
+                    format!("{root}/{rel}")
+                };
+                crate::assets::get(&path).map(Cow::Borrowed).ok_or_else(|| {
+                    PlanError::Asset(format!("{path} is not built into this binary"))
+                })
+            }
             PlanSource::Directory(dir) => {
                 let path = dir.join(rel);
                 std::fs::read(&path)
@@ -117,6 +206,18 @@ impl PlanStore {
         serde_json::from_slice(&bytes).map_err(|e| {
             PlanError::Asset(format!(
                 "{MANIFEST_PATH} in {}: not a plan manifest: {e}",
+                self.describe()
+            ))
+        })
+    }
+
+    /// The model the store's plans simulate, as its manifest records it.
+    pub fn model(&self) -> Result<SimulatedModel, PlanError> {
+        let manifest = self.manifest()?;
+        let physics = manifest.physics.as_object();
+        physics.and_then(SimulatedModel::from_physics).ok_or_else(|| {
+            PlanError::Asset(format!(
+                "{MANIFEST_PATH} in {} records no model (physics.config.character, nq, nv, nu, nbody): recapture the plans with kernels_py/capture.py",
                 self.describe()
             ))
         })
@@ -171,7 +272,7 @@ impl PlanStore {
                 entry.file
             )));
         }
-        let rel = format!("plans/{}", entry.file);
+        let rel = format!("{PLANS_DIR}/{}", entry.file);
         let bytes = self.read(&rel)?;
         load_plan(&bytes).map_err(|e| PlanError::Asset(format!("{rel}: {e}")))
     }

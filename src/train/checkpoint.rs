@@ -1,7 +1,7 @@
 //! Checkpoints: a safetensors file of named f32/f64/i32 tensors (actor and critic parameters,
 //! Adam moments, normalizer moments, start-phase statistics, counters: the trainer chooses the
 //! names) with JSON metadata: format version, iteration, active seconds, frames, motion, seed,
-//! the resolved configuration and the crate version, plus a CRC-32 of every tensor (safetensors
+//! the resolved configuration, the crate version and the character trained, plus a CRC-32 of every tensor (safetensors
 //! itself checks offsets and sizes, not contents). Files are written atomically
 //! ([`write_atomically`]); [`CheckpointDir`] keeps the last K and finds the newest good one.
 
@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 use zerocopy::{FromBytes, IntoBytes};
 
+use super::character::CharacterRecord;
 use super::config::TrainConfig;
 use crate::files::tagged::{FORMAT_KEY, TaggedFileError, open_tagged};
 use crate::files::{is_temporary, write_bytes_atomically};
@@ -108,6 +109,10 @@ pub struct CheckpointMeta {
     pub config_toml: String,
     /// `instantmimic` version that wrote the file.
     pub crate_version: String,
+    /// The character trained (a run's checkpoints record it; absent in older checkpoints,
+    /// whose character is the one `config_toml` names, the default when it names none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub character: Option<CharacterRecord>,
 }
 
 impl CheckpointMeta {
@@ -129,6 +134,7 @@ impl CheckpointMeta {
                 .to_toml()
                 .map_err(|e| CheckpointError::Encode(e.to_string()))?,
             crate_version: env!("CARGO_PKG_VERSION").to_string(),
+            character: None,
         })
     }
 

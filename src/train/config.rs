@@ -21,6 +21,7 @@ use crate::env::{
     RewardConfig, RolloutConfig, TaskConfig,
 };
 use crate::latent::LatentConfig;
+use crate::motion::character::DEFAULT_CHARACTER;
 use crate::motion::{LibraryConfig, MotionLibraryError};
 use crate::ppo::{PolicyConfig, PpoConfig};
 
@@ -58,6 +59,11 @@ pub struct TrainConfig {
     /// `motion_library` gives the clips.
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub motion: String,
+    /// The character trained (`--character` overrides it): a built-in name (`humanoid`, the
+    /// default, or `g1`), a description JSON (`*.json`) or a character directory (a path with a
+    /// `/`); src/train/character.rs says where each finds its plans.
+    #[serde(default = "default_character")]
+    pub character: String,
     /// `[motion_library]`: one policy trained on many clips (docs/library.md), instead of
     /// `motion`. Paths in it are relative to the working directory once loaded
     /// ([`TrainConfig::load`] rebases those written relative to the file).
@@ -85,6 +91,10 @@ pub struct TrainConfig {
     /// (or library) gives the reset's start states.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub goal: Option<GoalConfig>,
+}
+
+fn default_character() -> String {
+    DEFAULT_CHARACTER.to_string()
 }
 
 /// `[run]`: evaluation, stopping, checkpoints (the paper's protocol; docs/train.md).
@@ -246,6 +256,7 @@ impl TrainConfig {
     pub fn with_motion(motion: &str) -> TrainConfig {
         TrainConfig {
             motion: motion.to_owned(),
+            character: default_character(),
             motion_library: None,
             seed: 0,
             env: EnvConfig::default(),
@@ -310,6 +321,9 @@ impl TrainConfig {
             };
         }
         super::goal::validate_goal(self, name)?;
+        if let Err(reason) = super::character::check_character_name(&self.character) {
+            return Err(bad("character", format!("{:?}", self.character), &reason));
+        }
         let (e, r, o, p, q) = (&self.env, &self.reward, &self.obs, &self.policy, &self.ppo);
         let run = &self.run;
         match &self.motion_library {

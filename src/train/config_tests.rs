@@ -626,3 +626,38 @@ fn clip_base_share_is_unset_by_default_written_only_when_set_and_kept_in_zero_to
         );
     }
 }
+
+#[test]
+fn character_defaults_to_the_humanoid_and_round_trips() {
+    let c = TrainConfig::from_toml("motion = \"walk\"", "t").unwrap();
+    assert_eq!(c.character, "humanoid");
+    let g1 = TrainConfig::from_toml("character = \"g1\"\nmotion = \"walk\"", "t").unwrap();
+    assert_eq!(g1.character, "g1");
+    let text = g1.to_toml().unwrap();
+    assert!(text.contains("character = \"g1\""), "{text}");
+    assert_eq!(TrainConfig::from_toml(&text, "again").unwrap(), g1);
+    let dir = TrainConfig::from_toml("character = \"robots/mine\"\nmotion = \"walk\"", "t");
+    assert_eq!(dir.unwrap().character, "robots/mine");
+    // `--set character=...` reaches it as every other key.
+    let set = c
+        .with_overrides(&[("character".to_owned(), "g1".to_owned())], "--set")
+        .unwrap();
+    assert_eq!(set.character, "g1");
+}
+
+#[test]
+fn an_unknown_character_is_refused_naming_the_key_and_the_built_in_ones() {
+    let err = TrainConfig::from_toml("character = \"no_such\"\nmotion = \"walk\"", "c.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("c.toml")
+            && err.contains("`character` = \"no_such\"")
+            && err.contains("humanoid, g1"),
+        "{err}"
+    );
+    let err = TrainConfig::from_toml("character = \"\"\nmotion = \"walk\"", "c.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("`character`"), "{err}");
+}

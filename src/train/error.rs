@@ -62,6 +62,31 @@ pub enum TrainError {
     /// The run's settings are inconsistent with the plans, the motion or a checkpoint.
     #[error("{0}")]
     Setup(String),
+    /// `character` (or `--character`) names no built-in character and no path.
+    #[error(
+        "no character {name:?}: give a built-in one ({built_in}), a description JSON (*.json) or a character directory (a path with a `/`, e.g. ./{name}, holding character.json, plans/ and mjwarp/)"
+    )]
+    UnknownCharacter { name: String, built_in: String },
+    /// The plans a run would load simulate another model than its character's.
+    #[error(
+        "{plans} simulate {found}, but character `{name}` is {expected}: pass --character with the character of those plans, --assets with a directory of {name}'s plans, or capture them with kernels_py/capture.py (docs/characters.md)"
+    )]
+    PlansOfAnotherCharacter {
+        plans: String,
+        found: String,
+        name: String,
+        expected: String,
+    },
+    /// A checkpoint run with another character than the one it was trained on.
+    #[error(
+        "{path} was trained on character {trained}, not {chosen}: leave out --character to take the checkpoint's, or pass --character with `{name}`'s name, description or directory"
+    )]
+    CheckpointOfAnotherCharacter {
+        path: String,
+        name: String,
+        trained: String,
+        chosen: String,
+    },
     #[error(transparent)]
     Cuda(#[from] crate::cuda::CudaError),
     #[error(transparent)]

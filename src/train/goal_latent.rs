@@ -7,6 +7,7 @@ use std::path::Path;
 
 use zerocopy::IntoBytes;
 
+use super::character::check_trained_character;
 use super::checkpoint::Checkpoint;
 use super::config::TrainConfig;
 use super::error::TrainError;
@@ -66,6 +67,8 @@ pub fn load_goal_decoder(
     let source = path.display().to_string();
     // Name the key: the path may have come from the config file or from --decoder.
     let checkpoint = Checkpoint::load(path)
+        .map_err(|e| TrainError::Setup(format!("goal.decoder (train --decoder): {e}")))?;
+    check_trained_character(&checkpoint, character)
         .map_err(|e| TrainError::Setup(format!("goal.decoder (train --decoder): {e}")))?;
     let trained = checkpoint.meta.config(&source)?;
     let frozen = frozen_decoder_of(&checkpoint, &source)?;

@@ -7,6 +7,7 @@
 
 use std::path::PathBuf;
 
+use super::character::{CharacterRecord, check_trained_character};
 use super::checkpoint::Checkpoint;
 use super::clip_sampling::ClipSampling;
 use super::config::TrainConfig;
@@ -29,7 +30,7 @@ use super::summary::RunSummary;
 use super::trainer::Trainer;
 use crate::cuda::Gpu;
 use crate::env::{Rollout, TrackedMotion};
-use crate::motion::ReferenceMotion;
+use crate::motion::{Character, ReferenceMotion};
 use crate::plan::{PhysicsOverflow, PlanStore};
 
 /// Where a run writes: a new directory, or one to continue.
@@ -218,7 +219,7 @@ pub fn train_with<'a>(
     stop: &StopFlag,
 ) -> Result<RunSummary, TrainError> {
     let motion = motion.into();
-    let (session, checkpoint) = open_session(config, start, progress, stop)?;
+    let (session, checkpoint) = open_session(config, motion.character(), start, progress, stop)?;
     let setup = std::time::Instant::now();
     let mut trainer = Trainer::new(gpu, store, motion, session.config())?;
     let scorer = Scorer::new(trainer.evaluation_rollout().0, motion, session.config())?;
@@ -254,8 +255,13 @@ fn train_latent_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
         .map_or(setup.device, |&d| d as usize);
     let gpu = Gpu::open(device)?;
     let motion = setup.motion.tracked();
-    let (session, checkpoint) =
-        open_session(&setup.config, &setup.start, setup.progress, &setup.stop)?;
+    let (session, checkpoint) = open_session(
+        &setup.config,
+        motion.character(),
+        &setup.start,
+        setup.progress,
+        &setup.stop,
+    )?;
     let started = std::time::Instant::now();
     let mut trainer = LatentTrainer::new(&gpu, &setup.store, motion, session.config(), &teacher)?;
     let scorer = Scorer::new(trainer.evaluation_rollout(), motion, session.config())?;
@@ -370,7 +376,8 @@ pub fn train_on_gpus<'a>(
     progress: ProgressMode,
     stop: &StopFlag,
 ) -> Result<RunSummary, TrainError> {
-    let (session, checkpoint) = open_session(config, start, progress, stop)?;
+    let motion = motion.into();
+    let (session, checkpoint) = open_session(config, motion.character(), start, progress, stop)?;
     let devices: Vec<usize> = session
         .config()
         .run
@@ -378,7 +385,6 @@ pub fn train_on_gpus<'a>(
         .iter()
         .map(|&d| d as usize)
         .collect();
-    let motion = motion.into();
     let setup = std::time::Instant::now();
     let mut replicas = Replicas::start(&devices, session.config(), motion, store)?;
     let mut notes = vec![format!("GEMMs: {} (every GPU)", replicas.gemm())];
@@ -395,10 +401,12 @@ pub fn train_on_gpus<'a>(
     run_loop(session, &mut replicas, checkpoint, &scorer, setup, notes)
 }
 
-/// Opens the run directory (new or resumed), connects the stop request and prints the
-/// resume's warnings.
+/// Opens the run directory (new or resumed), connects the stop request, records `character`
+/// in the checkpoints (a resumed run's checkpoint must be of it) and prints the resume's
+/// warnings.
 fn open_session(
     config: &TrainConfig,
+    character: &Character,
     start: &RunStart,
     progress: ProgressMode,
     stop: &StopFlag,
@@ -414,6 +422,10 @@ fn open_session(
             RunSession::resume(root, |c| c.run = run, progress)?
         }
     };
+    if let Some(checkpoint) = &checkpoint {
+        check_trained_character(checkpoint, character)?;
+    }
+    session.record_character(CharacterRecord::of(character));
     session.stop_on(stop.clone());
     for warning in &warnings {
         session.progress().note(&format!("warning: {warning}"));

@@ -9,6 +9,7 @@ use std::path::Path;
 
 use zerocopy::IntoBytes;
 
+use super::character::{ChosenCharacter, check_trained_character};
 use super::checkpoint::{Checkpoint, tensor_names};
 use super::config::TrainConfig;
 use super::device_report::read_totals;
@@ -379,6 +380,10 @@ pub fn load_teacher(
     let checkpoint = Checkpoint::load(path)
         .map_err(|e| TrainError::Setup(format!("latent.teacher (train --teacher): {e}")))?;
     let source = path.display().to_string();
+    // The student learns the teacher's actions: they are joint targets of one character.
+    let character = ChosenCharacter::of_config(config)?;
+    check_trained_character(&checkpoint, character.character())
+        .map_err(|e| TrainError::Setup(format!("latent.teacher (train --teacher): {e}")))?;
     let teacher_config = checkpoint.meta.config(&source)?;
     if teacher_config.latent.is_some() {
         return Err(TrainError::Setup(format!(

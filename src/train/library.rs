@@ -4,10 +4,11 @@
 
 use std::path::Path;
 
+use super::character::ChosenCharacter;
 use super::config::TrainConfig;
 use super::error::TrainError;
 use super::library_evaluation::LibraryPlan;
-use super::preflight::{PolicyShapes, Preflight, physics_checks};
+use super::preflight::{PolicyShapes, Preflight, character_line, physics_checks};
 use crate::env::{TrackedMotion, clip_evaluation};
 use crate::motion::library_config::load_library;
 use crate::motion::{Character, LibraryConfig, MotionLibrary, ReferenceMotion};
@@ -80,8 +81,8 @@ fn preflight_library(
     motions_dir: Option<&Path>,
     store: &PlanStore,
 ) -> Result<(Preflight, TrainMotion), TrainError> {
-    let character = Character::humanoid().map_err(crate::motion::MotionError::from)?;
-    let (plans, physics_dt, control_dt) = physics_checks(config, store)?;
+    let character = ChosenCharacter::of_config(config)?.into_character();
+    let (plans, physics_dt, control_dt) = physics_checks(config, store, &character)?;
     let origin = "[motion_library]";
     // The configuration's paths are relative to the working directory (TrainConfig::load).
     let entries = library_config
@@ -123,6 +124,7 @@ fn preflight_library(
         ));
     }
     let preflight = Preflight {
+        character: character_line(&character, store),
         motion_source: config.motion_label(),
         motion_notices: notices,
         clip_frames: totals.frames,

@@ -6,6 +6,7 @@
 //! trains on one clip or on a motion library ([`TrainMotion`]; its per-clip evaluation is
 //! [`library_evaluation`]).
 
+pub mod character;
 pub mod checkpoint;
 pub mod clip_sampling;
 pub mod clips_chart;
@@ -47,6 +48,10 @@ pub use config::{COMMITTED_CONFIGS, ConfigError, MAX_GPUS, RunConfig, TrainConfi
 // consume them).
 pub use crate::env::{ActionMode, EndEffectorFrame, EnvConfig, EvalStart, ObsConfig, RewardConfig};
 pub use crate::ppo::{GemmSetting, KlMeasure, PolicyConfig, PpoConfig};
+pub use character::{
+    CharacterRecord, ChosenCharacter, check_plan_model, check_trained_character,
+    checkpoint_character,
+};
 pub use divergence::{DivergenceEvent, DivergenceGuard};
 pub use error::TrainError;
 pub use evaluation::{

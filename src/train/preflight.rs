@@ -1,11 +1,13 @@
 //! Everything a run needs that can be checked without a GPU (`train --dry-run`, and the first
-//! thing a real run does): the motion file and its reference table at the control rate, the
-//! step and kinematics plans for the training and evaluation world counts with the PTX of every
-//! module they launch, and the sizes of the policy a checkpoint must hold.
+//! thing a real run does): the character, the motion file and its reference table at the
+//! control rate, the step and kinematics plans for the training and evaluation world counts
+//! (captured from the character's model) with the PTX of every module they launch, and the
+//! sizes of the policy a checkpoint must hold.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
+use super::character::{ChosenCharacter, check_model, check_plan_model};
 use super::checkpoint::tensor_names;
 use super::config::TrainConfig;
 use super::error::TrainError;
@@ -14,7 +16,7 @@ use crate::env::goal_observation_size;
 use crate::env::layout::{JointLayout, observation_size};
 use crate::motion::find::{ResolvedMotion, resolve_motion};
 use crate::motion::{Character, LoopMode, ReferenceMotion, ReferenceTable};
-use crate::plan::PlanStore;
+use crate::plan::{PlanStore, SimulatedModel};
 use crate::ppo::mlp_layout;
 
 /// The plans a run replays: physics steps, and the kinematics a reset needs.
@@ -77,6 +79,8 @@ pub struct PlanCheck {
 /// What the checks found.
 #[derive(Clone, Debug)]
 pub struct Preflight {
+    /// The character and where its description and plans come from.
+    pub character: String,
     /// The clip's path, or `assets/motions/<file> (built in)`; a library's description.
     pub motion_source: String,
     /// Lines for stderr about the clip (`ResolvedMotion::notices`; a library's clips').
@@ -99,10 +103,20 @@ pub struct Preflight {
 }
 
 /// Loads the motion named by `config.motion` (a file, a name in `motions_dir`, or a built-in
-/// clip's name); a configuration of a motion library is refused in one line (its clips load
-/// with `library::preflight_training`).
+/// clip's name) for the character `config.character` names; a configuration of a motion
+/// library is refused in one line (its clips load with `library::preflight_training`).
 pub fn load_motion(
     config: &TrainConfig,
+    motions_dir: Option<&Path>,
+) -> Result<(ResolvedMotion, ReferenceMotion), TrainError> {
+    let character = ChosenCharacter::of_config(config)?.into_character();
+    load_motion_of(config, character, motions_dir)
+}
+
+/// [`load_motion`] for `character`.
+fn load_motion_of(
+    config: &TrainConfig,
+    character: Character,
     motions_dir: Option<&Path>,
 ) -> Result<(ResolvedMotion, ReferenceMotion), TrainError> {
     if config.motion_library.is_some() {
@@ -110,14 +124,19 @@ pub fn load_motion(
             "motion_library: this takes a configuration of one clip (`motion`) for now; a motion library trains with `train` (docs/library.md)".to_owned(),
         ));
     }
-    let character = Character::humanoid().map_err(crate::motion::MotionError::from)?;
     let resolved = resolve_motion(&config.motion, motions_dir)?;
     let motion = resolved.load(&character)?;
     Ok((resolved, motion))
 }
 
-/// Checks that `store` has the run's plans for `nworld` worlds and the PTX of their modules.
-pub fn check_plans(store: &PlanStore, nworld: u32) -> Result<Vec<PlanCheck>, TrainError> {
+/// Checks that `store` has the run's plans for `nworld` worlds, captured from `character`'s
+/// model (its manifest and each plan say so), and the PTX of their modules.
+pub fn check_plans(
+    store: &PlanStore,
+    character: &Character,
+    nworld: u32,
+) -> Result<Vec<PlanCheck>, TrainError> {
+    check_plan_model(store, character)?;
     let mut checks = Vec::new();
     for name in RUN_PLANS {
         let plan = store.plan(name, nworld)?;
@@ -126,6 +145,14 @@ pub fn check_plans(store: &PlanStore, nworld: u32) -> Result<Vec<PlanCheck>, Tra
                 "the `{name}` plan for {nworld} worlds has no plan-info section (pack it with `instantmimic plan pack`)"
             ))
         })?;
+        // A plan file that records its model must agree with the manifest's character too.
+        if let Some(model) = SimulatedModel::from_physics(&info.physics) {
+            let plans = format!(
+                "the `{name}` plan for {nworld} worlds in {}",
+                store.describe()
+            );
+            check_model(&plans, &model, character)?;
+        }
         if info.nworld != nworld {
             return Err(TrainError::Setup(format!(
                 "the `{name}` plan listed for {nworld} worlds was captured for {}",
@@ -163,11 +190,15 @@ pub fn preflight(
     motions_dir: Option<&Path>,
     store: &PlanStore,
 ) -> Result<(Preflight, ReferenceMotion), TrainError> {
-    let (resolved, motion) = load_motion(config, motions_dir)?;
-    let (plans, physics_dt, control_dt) = physics_checks(config, store)?;
+    let character = ChosenCharacter::of_config(config)?.into_character();
+    // The plans first: plans of another character are the mistake to report, whatever the
+    // motion.
+    let (plans, physics_dt, control_dt) = physics_checks(config, store, &character)?;
+    let (resolved, motion) = load_motion_of(config, character, motions_dir)?;
     let table = ReferenceTable::build(&motion, control_dt)?;
     let clip = motion.clip();
     let checks = Preflight {
+        character: character_line(motion.character(), store),
         motion_source: resolved.source.label(),
         motion_notices: resolved.notices(clip),
         clip_frames: clip.num_frames(),
@@ -184,15 +215,16 @@ pub fn preflight(
     Ok((checks, motion))
 }
 
-/// The plans of the training and evaluation world counts, and the physics and control
-/// timesteps they fix (s).
+/// The plans of `character` for the training and evaluation world counts, and the physics and
+/// control timesteps they fix (s).
 pub fn physics_checks(
     config: &TrainConfig,
     store: &PlanStore,
+    character: &Character,
 ) -> Result<(Vec<PlanCheck>, f64, f64), TrainError> {
-    let mut plans = check_plans(store, config.env.num_envs)?;
+    let mut plans = check_plans(store, character, config.env.num_envs)?;
     if config.run.eval_envs != config.env.num_envs {
-        plans.extend(check_plans(store, config.run.eval_envs)?);
+        plans.extend(check_plans(store, character, config.run.eval_envs)?);
     }
     let physics_dt = plans.first().map_or(0.0, |p| p.physics_dt);
     if let Some(other) = plans.iter().find(|p| p.physics_dt != physics_dt) {
@@ -205,10 +237,21 @@ pub fn physics_checks(
     Ok((plans, physics_dt, control_dt))
 }
 
+/// The report's description of `character` and its plans.
+pub fn character_line(character: &Character, store: &PlanStore) -> String {
+    format!(
+        "{} ({}; plans: {})",
+        character.name(),
+        character.source_name(),
+        store.describe()
+    )
+}
+
 impl Preflight {
     /// The lines `train --dry-run` prints.
     pub fn report(&self, config: &TrainConfig) -> String {
         let mut out = String::new();
+        let _ = writeln!(out, "character     {}", self.character);
         match &self.library {
             None => {
                 let _ = writeln!(

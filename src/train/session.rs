@@ -25,6 +25,7 @@
 
 use std::path::Path;
 
+use super::character::CharacterRecord;
 use super::checkpoint::{Checkpoint, CheckpointDir, CheckpointMeta};
 use super::clock::{ActiveClock, Milestones, StopReason, StopRule};
 use super::config::TrainConfig;
@@ -107,6 +108,9 @@ pub struct RunSession {
     reached: Milestones,
     /// A request to stop after the current iteration (a signal's).
     stop: StopFlag,
+    /// The character trained, recorded in every checkpoint (None: the checkpoints record none,
+    /// and their readers take the configuration's).
+    character: Option<CharacterRecord>,
 }
 
 /// A run resumes on as many GPUs as it trained on (which devices may change): the checkpoint
@@ -235,6 +239,7 @@ impl RunSession {
             curve_drawn: None,
             reached,
             stop: StopFlag::new(),
+            character: None,
         }
     }
 
@@ -242,6 +247,11 @@ impl RunSession {
     /// documentation); a new session has a flag of its own that nothing sets.
     pub fn stop_on(&mut self, flag: StopFlag) {
         self.stop = flag;
+    }
+
+    /// Records `character` in the run's checkpoints.
+    pub fn record_character(&mut self, character: CharacterRecord) {
+        self.character = Some(character);
     }
 
     pub fn config(&self) -> &TrainConfig {
@@ -359,12 +369,14 @@ impl RunSession {
     /// An empty checkpoint of the current iteration with its metadata filled in; the loop
     /// adds the tensors.
     pub fn new_checkpoint(&self) -> Result<Checkpoint, TrainError> {
-        Ok(Checkpoint::new(CheckpointMeta::new(
+        let mut meta = CheckpointMeta::new(
             &self.config,
             self.iteration,
             self.clock.seconds(),
             self.frames,
-        )?))
+        )?;
+        meta.character = self.character.clone();
+        Ok(Checkpoint::new(meta))
     }
 
     /// Writes a checkpoint (the clock is paused: checkpointing is not active time).
