@@ -57,8 +57,12 @@ pub(super) fn run(args: FullArgs) -> Result<()> {
         (None, None, None) => Some("backflip"),
         (motion, _, _) => motion.as_deref(),
     };
-    let (config, mut label, flags) =
-        motion_or_library_config(args.config.as_deref(), motion, args.library.as_deref())?;
+    let (config, mut label, flags) = motion_or_library_config(
+        args.config.as_deref(),
+        motion,
+        args.library.as_deref(),
+        args.run.character.as_deref(),
+    )?;
     if !flags.is_empty() {
         label = format!("{label} with {}", flags.join(", "));
     }

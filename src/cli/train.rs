@@ -181,11 +181,16 @@ pub(super) fn motion_or_library_config(
     config: Option<&Path>,
     motion: Option<&str>,
     library: Option<&Path>,
+    character: Option<&str>,
 ) -> Result<(TrainConfig, String, Vec<&'static str>)> {
     let (mut resolved, label) = match (config, motion, library) {
         (Some(path), _, _) => (TrainConfig::load(path)?, path.display().to_string()),
         (None, Some(motion), _) => {
-            let (label, config) = TrainConfig::committed(motion)
+            // A character with a built-in default of its own trains with it; the default
+            // character with its clip's committed configuration or the general default.
+            let (label, config) = character
+                .and_then(|c| TrainConfig::character_default(c, motion))
+                .or_else(|| TrainConfig::committed(motion))
                 .unwrap_or_else(|| TrainConfig::general_default(motion));
             (config?, label)
         }
@@ -219,6 +224,7 @@ fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
         args.config.as_deref(),
         args.motion.as_deref(),
         args.library.as_deref(),
+        args.character.as_deref(),
     )?;
     if let Some(character) = &args.character {
         config.character = character.clone();

@@ -210,6 +210,11 @@ pub const COMMITTED_CONFIGS: [(&str, &str); 5] = [
 /// built in): the backflip's tuned configuration.
 pub const DEFAULT_CONFIG: &str = include_str!("../../configs/train/default.toml");
 
+/// The built-in default configurations of the built-in characters other than the default one,
+/// by character name: what `train --character <name> --motion <clip>` uses without --config.
+pub const CHARACTER_CONFIGS: [(&str, &str); 1] =
+    [("g1", include_str!("../../configs/train/g1.toml"))];
+
 /// The built-in library configuration for `train --library` without --config
 /// (`configs/train/library_shipped.toml`): the general default's keys plus the library's (the
 /// log-std floor and the reset sampler's shares of frames; docs/library.md).
@@ -241,6 +246,24 @@ impl TrainConfig {
             c
         });
         (label.to_owned(), config)
+    }
+
+    /// The built-in default of a built-in character other than the default one (`None` for the
+    /// default character and for characters without one), with `motion` as its motion, and
+    /// its label.
+    pub fn character_default(
+        character: &str,
+        motion: &str,
+    ) -> Option<(String, Result<TrainConfig, ConfigError>)> {
+        let (name, text) = CHARACTER_CONFIGS
+            .iter()
+            .find(|(name, _)| *name == character)?;
+        let label = format!("configs/train/{name}.toml (built in; the character's default)");
+        let config = TrainConfig::from_toml(text, &label).map(|mut c| {
+            c.motion = motion.to_owned();
+            c
+        });
+        Some((label, config))
     }
 
     /// The committed configuration of a motion name (`None` for other names), and the label
