@@ -13,31 +13,20 @@ use crate::kernels::{DeviceArray, EnvError, ObservationParams, ResetParams, Trac
 pub const BALL: i32 = 0;
 pub const HINGE: i32 = 1;
 
-/// DeepMimic's proportional gains (`humanoid3d_ctrl.txt`, Kp), by joint name suffix (both sides
-/// share a gain). Kd is the joint damping in the MJCF (`configs/characters/humanoid.xml`).
-const DEEPMIMIC_KP: [(&str, f32); 7] = [
-    ("chest", 1000.0),
-    ("neck", 100.0),
-    ("shoulder", 400.0),
-    ("elbow", 300.0),
-    ("hip", 500.0),
-    ("knee", 500.0),
-    ("ankle", 400.0),
-];
-
-/// The actuated joints, in dof order (motor `dof - 6` drives `qvel[dof]`), and the body indices
-/// of the end effectors (MuJoCo body id - 1).
+/// The actuated joints, in dof order (motor `dof - 6` drives `qvel[dof]`), with their PD
+/// control (`Character::control`), and the body indices of the end effectors (MuJoCo body
+/// id - 1).
 #[derive(Clone, Debug, PartialEq)]
 pub struct JointLayout {
     pub kind: Vec<i32>,
     pub qpos: Vec<i32>,
     pub dof: Vec<i32>,
     pub kp: Vec<f32>,
-    /// Torque limit (the actuator's ctrlrange).
+    /// Torque limit (`JointControl::effort_limit`).
     pub limit: Vec<f32>,
-    /// Radians per unit action: 1 for ball joints, half the range for hinges.
+    /// Radians per unit action (`JointControl::action_scale`).
     pub scale: Vec<f32>,
-    /// Hinge target at action 0: the middle of the range (0 for ball joints).
+    /// Hinge target at action 0 (`JointControl::action_center`; 0 for ball joints).
     pub center: Vec<f32>,
     pub end_effectors: Vec<i32>,
     /// qpos address of the root quaternion.
@@ -56,11 +45,12 @@ pub(super) fn setup_error(reason: String) -> EnvError {
 
 impl JointLayout {
     /// The layout of `character`: every ball or hinge joint with one motor per dof (gear 1, in
-    /// dof order), Kp from DeepMimic's table.
+    /// dof order) and its control from the description (`Character::joint_control`).
     pub fn for_character(character: &Character) -> Result<JointLayout, EnvError> {
-        let root = character.root_joint().ok_or_else(|| {
-            setup_error(format!("{}: no free root joint", character.source_name()))
-        })?;
+        let source = character.source_name();
+        let root = character
+            .root_joint()
+            .ok_or_else(|| setup_error(format!("{source}: no free root joint")))?;
         let mut layout = JointLayout {
             kind: Vec::new(),
             qpos: Vec::new(),
@@ -85,16 +75,12 @@ impl JointLayout {
                     )));
                 }
             };
-            let kp = DEEPMIMIC_KP
-                .iter()
-                .find(|(suffix, _)| joint.name.ends_with(suffix))
-                .map(|(_, kp)| *kp)
-                .ok_or_else(|| {
-                    setup_error(format!(
-                        "joint {}: no DeepMimic Kp for this joint",
-                        joint.name
-                    ))
-                })?;
+            let control = character.joint_control(id).ok_or_else(|| {
+                setup_error(format!(
+                    "{source}: joint {} has no control entry (kp, effort limit, action scale)",
+                    joint.name
+                ))
+            })?;
             let motors: Vec<usize> = character
                 .actuators()
                 .iter()
@@ -109,19 +95,13 @@ impl JointLayout {
                     joint.name
                 )));
             }
-            let ctrlrange = character.actuators()[first].ctrlrange;
-            let (scale, center) = match (kind, joint.range) {
-                (HINGE, Some([lo, hi])) if hi > lo => (0.5 * (hi - lo), 0.5 * (hi + lo)),
-                (HINGE, _) => (1.0, 0.0),
-                _ => (1.0, 0.0),
-            };
             layout.kind.push(kind);
             layout.qpos.push(joint.qposadr as i32);
             layout.dof.push(joint.dofadr as i32);
-            layout.kp.push(kp);
-            layout.limit.push(ctrlrange[1].abs() as f32);
-            layout.scale.push(scale as f32);
-            layout.center.push(center as f32);
+            layout.kp.push(control.kp as f32);
+            layout.limit.push(control.effort_limit as f32);
+            layout.scale.push(control.action_scale as f32);
+            layout.center.push(control.action_center as f32);
         }
         layout.end_effectors = character
             .end_effectors()
@@ -424,6 +404,76 @@ mod seed_tests {
                 policy_seed,
                 "seed {seed}"
             );
+        }
+    }
+}
+
+#[cfg(test)]
+mod character_tests {
+    use super::*;
+
+    fn humanoid() -> Character {
+        Character::humanoid().expect("the embedded humanoid")
+    }
+
+    fn g1() -> Character {
+        Character::built_in("g1")
+            .expect("the G1 is built in")
+            .expect("the embedded G1")
+    }
+
+    /// What the layout held before the description carried the control: DeepMimic's Kp by
+    /// joint name suffix, the actuator's ctrlrange as the limit, half the range and the middle
+    /// of it for hinges, 1 and 0 for ball joints.
+    #[test]
+    fn the_humanoid_keeps_deepmimics_gains_limits_and_action_scales() {
+        const DEEPMIMIC_KP: [(&str, f32); 7] = [
+            ("chest", 1000.0),
+            ("neck", 100.0),
+            ("shoulder", 400.0),
+            ("elbow", 300.0),
+            ("hip", 500.0),
+            ("knee", 500.0),
+            ("ankle", 400.0),
+        ];
+        let character = humanoid();
+        let layout = JointLayout::for_character(&character).expect("the humanoid's layout");
+        let actuated = character
+            .joints()
+            .iter()
+            .filter(|j| j.kind != JointType::Free);
+        let mut motor = 0;
+        for (j, joint) in actuated.enumerate() {
+            let kp = DEEPMIMIC_KP
+                .iter()
+                .find(|(suffix, _)| joint.name.ends_with(suffix))
+                .map(|(_, kp)| *kp);
+            let (scale, center) = match (joint.kind, joint.range) {
+                (JointType::Hinge, Some([lo, hi])) if hi > lo => (0.5 * (hi - lo), 0.5 * (hi + lo)),
+                _ => (1.0, 0.0),
+            };
+            let limit = character.actuators()[motor].ctrlrange[1].abs() as f32;
+            assert_eq!(Some(layout.kp[j]), kp, "kp of {}", joint.name);
+            assert_eq!(layout.limit[j], limit, "limit of {}", joint.name);
+            assert_eq!(layout.scale[j], scale as f32, "scale of {}", joint.name);
+            assert_eq!(layout.center[j], center as f32, "center of {}", joint.name);
+            motor += joint.kind.nv();
+        }
+        assert_eq!((layout.num_joints(), motor), (12, 28));
+        assert_eq!(layout.end_effectors, [2, 5, 8, 11, 14]);
+    }
+
+    #[test]
+    fn the_g1_layout_follows_its_description() {
+        let g1 = g1();
+        let layout = JointLayout::for_character(&g1).expect("the G1's layout");
+        assert_eq!((layout.num_joints(), layout.num_motors), (29, 29));
+        assert!(layout.kind.iter().all(|&k| k == HINGE));
+        for (j, control) in g1.control().iter().enumerate() {
+            assert_eq!(layout.kp[j], control.kp as f32);
+            assert_eq!(layout.limit[j], control.effort_limit as f32);
+            assert_eq!(layout.scale[j], control.action_scale as f32);
+            assert_eq!(layout.center[j], control.action_center as f32);
         }
     }
 }
