@@ -19,6 +19,7 @@ use thiserror::Error;
 
 use crate::cuda::{Communicator, CudaError, Gpu, Graph, Stream};
 use crate::motion::MotionLibrary;
+use crate::motion::table::TableLayout;
 use crate::plan::{PlanStore, Simulation, SimulationError};
 
 use super::DeviceReferenceTable;
@@ -208,6 +209,18 @@ impl Rollout {
             Source::Training(motion) => {
                 let character = motion.character();
                 let library = motion.library(control_dt)?;
+                let expected = TableLayout::for_character(character);
+                if library.layout() != expected {
+                    return Err(RolloutError::Setup(format!(
+                        "the motion library {} has rows of {} values for {} bodies; {} needs {} values for {} bodies (build the library for this character)",
+                        library.origin(),
+                        library.layout().stride,
+                        library.layout().nbody,
+                        character.name(),
+                        expected.stride,
+                        expected.nbody
+                    )));
+                }
                 let table = DeviceReferenceTable::from_library(gpu, &library)?;
                 let layout = JointLayout::for_character(character)?;
                 let bodies = BodyModel::for_character(character)?;
@@ -238,16 +251,16 @@ impl Rollout {
         physics.widen_control_range()?;
 
         let joints = DeviceJointLayout::upload(gpu, &layout)?;
-        let effectors = layout.end_effectors.len();
+        let counts = layout.observation_counts();
         // The goal task observes the character's own state (the same `observe` launch with no
         // reference blocks), then its goal.
         let (obs_size, observation) = match &config.task {
             TaskConfig::Tracking => (
-                observation_size(&config.obs, layout.num_motors, effectors),
+                observation_size(&config.obs, counts),
                 observation_params(&config.obs, control_dt),
             ),
             TaskConfig::Goal(_) => (
-                goal_observation_size(&config.obs, layout.num_motors, effectors),
+                goal_observation_size(&config.obs, counts),
                 observation_params(&goal_observation_config(&config.obs), control_dt),
             ),
         };
