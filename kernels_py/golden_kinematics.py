@@ -1,6 +1,8 @@
-"""Golden kinematics of the humanoid from MuJoCo, for the Rust reference-motion tests.
+"""Golden kinematics of each character from MuJoCo, for the Rust reference-motion tests.
 
-Writes `tests/fixtures/kinematics_golden.json` with three seeded sets of cases:
+For every character description `configs/characters/<name>.json` (its simulation MJCF is the
+description's `source`), writes `tests/fixtures/kinematics_golden_<name>.json` with three seeded
+sets of cases:
 
 - `poses` (100): random qpos (root position in a box, uniformly random unit root and ball
   quaternions, hinge angles inside their ranges) with MuJoCo's body positions `xpos`, body
@@ -16,13 +18,14 @@ Every input is rounded to the printed precision before MuJoCo sees it, so the fi
 exact inputs of the stored outputs. Bodies are MuJoCo bodies 1..nbody-1 (the world is left out),
 flattened (x, y, z per body; w, x, y, z per quaternion).
 
-    python kernels_py/golden_kinematics.py           # (re)write the fixture, print nothing
-    python kernels_py/golden_kinematics.py --check   # exit 1 if the committed fixture differs
+    python kernels_py/golden_kinematics.py           # (re)write the fixtures, print nothing
+    python kernels_py/golden_kinematics.py --check   # exit 1 if a committed fixture differs
 
 Needs the `mujoco` Python package (4.0.0 was used) and numpy.
 """
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -30,8 +33,8 @@ import mujoco
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-XML = ROOT / "configs" / "characters" / "humanoid.xml"
-OUT = ROOT / "tests" / "fixtures" / "kinematics_golden.json"
+CHARACTERS = ROOT / "configs" / "characters"
+FIXTURES = ROOT / "tests" / "fixtures"
 SEED = 20260522
 NUM_POSES = 100
 NUM_VELOCITIES = 50
@@ -68,7 +71,7 @@ def random_qpos(m, rng):
             lo, hi = m.jnt_range[j] if m.jnt_limited[j] else (-np.pi, np.pi)
             qpos[adr] = rng.uniform(lo, hi)
         else:
-            raise SystemExit(f"joint {j}: slide joints are not part of the humanoid")
+            raise SystemExit(f"joint {j}: slide joints are not supported by the reference kinematics")
     return rounded(qpos)
 
 
@@ -165,12 +168,12 @@ def emit_case(case, digits=None):
     return "    {" + ", ".join(fields) + "}"
 
 
-def emit(m, poses, velocities, differences):
+def emit(m, xml, poses, velocities, differences):
     lines = [
         "{",
         '  "generator": "kernels_py/golden_kinematics.py",',
         f'  "mujoco_version": "{mujoco.__version__}",',
-        f'  "character": "{XML.relative_to(ROOT)}",',
+        f'  "character": "{xml}",',
         f'  "seed": {SEED},',
         f'  "nq": {m.nq}, "nv": {m.nv}, "nbody": {m.nbody},',
     ]
@@ -188,24 +191,29 @@ def emit(m, poses, velocities, differences):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--check", action="store_true", help="compare with the committed fixture")
+    parser.add_argument("--check", action="store_true", help="compare with the committed fixtures")
     args = parser.parse_args()
 
-    m = mujoco.MjModel.from_xml_path(str(XML))
-    text = emit(m, *make_cases(m))
-    if args.check:
+    failed = False
+    for description in sorted(CHARACTERS.glob("*.json")):
+        xml = json.loads(description.read_text())["source"]
+        out = FIXTURES / f"kinematics_golden_{description.stem}.json"
+        m = mujoco.MjModel.from_xml_path(str(ROOT / xml))
+        text = emit(m, xml, *make_cases(m))
+        if not args.check:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_text(text)
+            continue
         try:
-            current = OUT.read_text()
+            current = out.read_text()
         except OSError as err:
-            print(f"{OUT}: cannot read it ({err})", file=sys.stderr)
-            return 1
+            print(f"{out}: cannot read it ({err})", file=sys.stderr)
+            failed = True
+            continue
         if current != text:
-            print(f"{OUT} differs from what {Path(__file__).name} computes now", file=sys.stderr)
-            return 1
-        return 0
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(text)
-    return 0
+            print(f"{out} differs from what {Path(__file__).name} computes now", file=sys.stderr)
+            failed = True
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 //! The generated files under version control regenerate from `kernels_py/` byte for byte: the
 //! PTX of MuJoCo Warp's modules and of our own kernels (`compile.py --check`, for the default
-//! physics and for the deterministic variant in `ptx/deterministic/`), the character
+//! physics, for the deterministic variant in `ptx/deterministic/` and for the G1's plans in
+//! `ptx/characters/g1/`), the character
 //! facts (`export_character.py --check`) and the kinematics fixture
 //! (`golden_kinematics.py --check`). Runs when `INSTANTMIMIC_BUILD_PYTHON` names a Python with
 //! `kernels_py/requirements.txt` installed (tests/run.sh sets one up); otherwise it skips.
@@ -17,24 +18,35 @@ fn generated_files_regenerate_byte_for_byte() {
         return;
     };
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    // The deterministic physics variant (ptx/deterministic/) has its own plans and PTX.
-    let deterministic: &[&str] = &[
-        "--only",
-        "mjwarp",
-        "--manifest",
-        "ptx/deterministic/plans/manifest.json",
-        "--out",
-        "ptx/deterministic",
-    ];
-    for (script, args) in [
-        ("kernels_py/compile.py", &[][..]),
-        ("kernels_py/compile.py", deterministic),
-        ("kernels_py/export_character.py", &[]),
-        ("kernels_py/golden_kinematics.py", &[]),
-    ] {
+    // The deterministic physics variant (ptx/deterministic/) and each other character's plan
+    // set (ptx/characters/<name>/) have their own plans and PTX.
+    let mut plan_sets = vec!["ptx/deterministic".to_string()];
+    if let Ok(entries) = std::fs::read_dir(root.join("ptx/characters")) {
+        let mut characters: Vec<String> = entries
+            .filter_map(Result::ok)
+            .map(|e| format!("ptx/characters/{}", e.file_name().to_string_lossy()))
+            .collect();
+        characters.sort();
+        plan_sets.extend(characters);
+    }
+    let mut runs: Vec<(&str, Vec<String>)> = vec![("kernels_py/compile.py", Vec::new())];
+    for dir in &plan_sets {
+        let mut args: Vec<String> = ["--only", "mjwarp", "--manifest"]
+            .map(String::from)
+            .to_vec();
+        args.extend([
+            format!("{dir}/plans/manifest.json"),
+            "--out".into(),
+            dir.clone(),
+        ]);
+        runs.push(("kernels_py/compile.py", args));
+    }
+    runs.push(("kernels_py/export_character.py", Vec::new()));
+    runs.push(("kernels_py/golden_kinematics.py", Vec::new()));
+    for (script, args) in runs {
         let out = Command::new(&python)
             .arg(root.join(script))
-            .args(args)
+            .args(&args)
             .arg("--check")
             .current_dir(root)
             .output()

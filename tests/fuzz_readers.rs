@@ -1,6 +1,6 @@
 //! Every reader of outside input, fuzzed (issue 17): plans (raw and packed), DeepMimic motion
-//! files, training and search configurations, checkpoints, recordings and a search's state
-//! files. Each gets `INSTANTMIMIC_FUZZ_INPUTS` (default 100 000) mutations of valid inputs
+//! files, robot motion files (holosoma's and mjlab's NPZ, mjlab's CSV; issue 35), training and
+//! search configurations, checkpoints, recordings and a search's state files. Each gets `INSTANTMIMIC_FUZZ_INPUTS` (default 100 000) mutations of valid inputs
 //! (tests/fuzz_support) and must return an error or a value, never panic.
 
 mod fuzz_support;
@@ -14,7 +14,9 @@ use instantmimic::hpo::backend::offline::OfflineProposer;
 use instantmimic::hpo::state::RunDir;
 use instantmimic::hpo::trial::build_runners;
 use instantmimic::hpo::{HpoConfig, RunnerPool, Search};
-use instantmimic::motion::{Character, MotionClip};
+use instantmimic::motion::character::JointType;
+use instantmimic::motion::npy::{self, NpyValues};
+use instantmimic::motion::{Character, MotionClip, format, mjlab, npz};
 use instantmimic::plan::{Plan, load_plan_with_limit, pack};
 use instantmimic::recording::{Recording, synthetic};
 use instantmimic::train::{Checkpoint, CheckpointMeta, TrainConfig};
@@ -75,6 +77,128 @@ fn motion_reader_never_panics() {
     ];
     campaign("motion", &seeds, Kind::Text, |b| {
         MotionClip::parse(&text(b), "fuzz", &character).is_ok()
+    });
+}
+
+fn g1() -> Character {
+    Character::load(&repo("configs/characters/g1.json")).expect("the G1's description")
+}
+
+/// A short G1 motion (4 frames): the root pose (position, quaternion w x y z) and the hinge
+/// angles in MJCF order, with their names.
+fn g1_motion(character: &Character) -> (Vec<[f64; 7]>, Vec<Vec<f64>>, Vec<String>) {
+    let hinges: Vec<String> = character
+        .joints()
+        .iter()
+        .filter(|j| j.kind == JointType::Hinge)
+        .map(|j| j.name.clone())
+        .collect();
+    let frames = 4;
+    let roots = (0..frames)
+        .map(|f| {
+            let a = 0.1 * f as f64;
+            [0.02 * f as f64, 0.0, 0.75, a.cos(), 0.0, 0.0, a.sin()]
+        })
+        .collect();
+    let angles = (0..frames)
+        .map(|f| (0..hinges.len()).map(|i| 0.01 * (f * i) as f64).collect())
+        .collect();
+    (roots, angles, hinges)
+}
+
+fn npz_seed(arrays: &[(&str, Vec<usize>, NpyValues)], compressed: bool) -> Vec<u8> {
+    npz::to_bytes(arrays, compressed).expect("an archive")
+}
+
+#[test]
+fn holosoma_reader_never_panics() {
+    let character = g1();
+    let (roots, angles, names) = g1_motion(&character);
+    let joint_pos: Vec<f64> = roots
+        .iter()
+        .zip(&angles)
+        .flat_map(|(root, a)| root.iter().chain(a).copied().collect::<Vec<_>>())
+        .collect();
+    let arrays = [
+        ("fps", vec![1], NpyValues::Int(vec![50])),
+        (
+            "joint_pos",
+            vec![roots.len(), 7 + names.len()],
+            NpyValues::Float(joint_pos),
+        ),
+        ("joint_names", vec![names.len()], NpyValues::Unicode(names)),
+    ];
+    let seeds = vec![npz_seed(&arrays, false), npz_seed(&arrays, true)];
+    campaign("holosoma_npz", &seeds, Kind::Binary, |b| {
+        format::parse_npz(b, "fuzz.npz", &character).is_ok()
+    });
+}
+
+#[test]
+fn mjlab_npz_reader_never_panics() {
+    let character = g1();
+    let (roots, angles, names) = g1_motion(&character);
+    let frames = roots.len();
+    let arrays = [
+        ("fps", vec![1], NpyValues::Float(vec![50.0])),
+        (
+            "joint_pos",
+            vec![frames, names.len()],
+            NpyValues::Float(angles.concat()),
+        ),
+        (
+            "body_pos_w",
+            vec![frames, 1, 3],
+            NpyValues::Float(roots.iter().flat_map(|r| r[..3].to_vec()).collect()),
+        ),
+        (
+            "body_quat_w",
+            vec![frames, 1, 4],
+            NpyValues::Float(roots.iter().flat_map(|r| r[3..].to_vec()).collect()),
+        ),
+    ];
+    let seeds = vec![npz_seed(&arrays, false), npz_seed(&arrays, true)];
+    campaign("mjlab_npz", &seeds, Kind::Binary, |b| {
+        format::parse_npz(b, "fuzz.npz", &character).is_ok()
+    });
+}
+
+/// The `.npy` parser alone: inside an archive, most mutations only meet the zip's checksum.
+#[test]
+fn npy_reader_never_panics() {
+    let seeds = vec![
+        npy::to_bytes(
+            &[2, 3],
+            &NpyValues::Float(vec![0.5, -1.0, 2.0, 0.0, 1e-3, 7.0]),
+        ),
+        npy::to_bytes(&[1], &NpyValues::Int(vec![50])),
+        npy::to_bytes(
+            &[2],
+            &NpyValues::Unicode(vec!["left_knee_joint".into(), "waist_yaw_joint".into()]),
+        ),
+    ];
+    campaign("npy", &seeds, Kind::Binary, |b| npy::parse(b).is_ok());
+}
+
+#[test]
+fn mjlab_csv_reader_never_panics() {
+    let character = g1();
+    let (roots, angles, _) = g1_motion(&character);
+    let csv: String = roots
+        .iter()
+        .zip(&angles)
+        .map(|(r, a)| {
+            // Position, then the quaternion as x y z w.
+            let row: Vec<String> = [r[0], r[1], r[2], r[4], r[5], r[6], r[3]]
+                .iter()
+                .chain(a)
+                .map(|v| format!("{v:?}"))
+                .collect();
+            row.join(",") + "\n"
+        })
+        .collect();
+    campaign("mjlab_csv", &[csv.into_bytes()], Kind::Text, |b| {
+        mjlab::parse_csv(&text(b), "fuzz.csv", 30.0, &character).is_ok()
     });
 }
 

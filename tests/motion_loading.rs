@@ -443,3 +443,83 @@ fn missing_file_is_an_error_naming_it() {
     assert!(matches!(err, MotionError::Read { .. }));
     assert!(err.to_string().contains("/nonexistent/humanoid3d_walk.txt"));
 }
+
+/// DeepMimic frames converted as the reader did before the format-neutral clip (issue 35):
+/// every quaternion normalized in the file's order (w, x, y, z), then mapped to qpos.
+fn qpos_as_before(frames: &[DeepMimicFrame], character: &Character) -> Vec<Vec<f64>> {
+    let joint =
+        |name: &str| &character.joints()[character.joint_id(name).expect("a humanoid joint")];
+    frames
+        .iter()
+        .map(|frame| {
+            let mut row = *frame;
+            for (column, _) in deepmimic::ROTATION_COLUMNS {
+                let q = &mut row[column..column + 4];
+                let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+                q.iter_mut().for_each(|v| *v /= norm);
+            }
+            let mut qpos = character.qpos0().to_vec();
+            let root = joint("root").qposadr;
+            qpos[root..root + 3].copy_from_slice(&[row[1], -row[3], row[2]]);
+            for (column, name) in deepmimic::ROTATION_COLUMNS {
+                let adr = if name == "root" {
+                    root + 3
+                } else {
+                    joint(name).qposadr
+                };
+                let (w, x, y, z) = (
+                    row[column],
+                    row[column + 1],
+                    row[column + 2],
+                    row[column + 3],
+                );
+                qpos[adr..adr + 4].copy_from_slice(&[w, x, -z, y]);
+            }
+            for (column, name) in deepmimic::ANGLE_COLUMNS {
+                let hinge = joint(name);
+                qpos[hinge.qposadr] = (-hinge.axis.y).signum() * row[column];
+            }
+            qpos
+        })
+        .collect()
+}
+
+/// Issue 35 put a format-neutral clip under the DeepMimic reader: the humanoid's clips (the
+/// built-in ones, and DeepMimic's long clips where $INSTANTMIMIC_MOTIONS has them) keep every
+/// number bit for bit.
+#[test]
+fn deepmimic_clips_keep_their_exact_numbers() {
+    let character = humanoid();
+    let mut texts: Vec<(String, String)> = instantmimic::motion::built_in::BUILT_IN_CLIPS
+        .iter()
+        .map(|clip| (clip.name.to_string(), clip.text.to_string()))
+        .collect();
+    if let Some(long) = std::env::var_os("INSTANTMIMIC_MOTIONS")
+        .map(|dir| Path::new(&dir).join("long"))
+        .filter(|long| long.is_dir())
+    {
+        for entry in std::fs::read_dir(&long).expect("the long clips") {
+            let path = entry.expect("an entry").path();
+            let text = std::fs::read_to_string(&path).expect("a long clip");
+            texts.push((path.display().to_string(), text));
+        }
+    }
+    for (name, text) in texts {
+        let file = deepmimic::parse(&text, &name).expect("the clip parses");
+        let clip =
+            MotionClip::from_deepmimic_frames(&name, &file.frames, file.loop_mode, &character)
+                .expect("the clip loads");
+        let mut t = 0.0;
+        for (f, want) in qpos_as_before(&file.frames, &character).iter().enumerate() {
+            let got = clip.frame_qpos(f).expect("the frame");
+            let bits = |q: &[f64]| q.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(got), bits(want), "{name}, frame {f}");
+            assert_eq!(
+                clip.frame_times()[f].to_bits(),
+                f64::to_bits(t),
+                "{name}, frame {f}"
+            );
+            t += file.frames[f][0];
+        }
+    }
+}

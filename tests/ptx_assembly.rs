@@ -40,54 +40,80 @@ fn ptx_in(dir: &str) -> Vec<PathBuf> {
     files
 }
 
+/// The `mjwarp/` directories of the other characters' plan sets (`ptx/characters/<name>/`).
+fn character_mjwarp_dirs() -> Vec<String> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("ptx/characters");
+    let mut dirs: Vec<String> = std::fs::read_dir(&root)
+        .map(|entries| {
+            entries
+                .filter_map(Result::ok)
+                .map(|e| format!("ptx/characters/{}/mjwarp", e.file_name().to_string_lossy()))
+                .collect()
+        })
+        .unwrap_or_default();
+    dirs.sort();
+    dirs
+}
+
 /// Every PTX file the repository ships, each module once: the deterministic physics variant
-/// (ptx/deterministic/mjwarp) shares most modules with ptx/mjwarp, under the same names (a
-/// module's name carries its content hash; `shared_modules_are_identical` checks the bytes).
+/// (ptx/deterministic/mjwarp) and the other characters' plan sets (ptx/characters/*/mjwarp)
+/// share many modules with ptx/mjwarp, under the same names (a module's name carries its
+/// content hash; `shared_modules_are_identical` checks the bytes).
 fn shipped_ptx() -> Vec<PathBuf> {
     let mut files: Vec<PathBuf> = ["ptx/mjwarp", "ptx/env", "src/cuda"]
         .iter()
         .flat_map(|dir| ptx_in(dir))
         .collect();
-    let names: std::collections::HashSet<_> = files
+    let mut names: std::collections::HashSet<_> = files
         .iter()
         .filter_map(|p| p.file_name().map(|n| n.to_owned()))
         .collect();
-    files.extend(
-        ptx_in("ptx/deterministic/mjwarp")
-            .into_iter()
-            .filter(|p| p.file_name().is_some_and(|n| !names.contains(n))),
-    );
+    let others =
+        std::iter::once("ptx/deterministic/mjwarp".to_string()).chain(character_mjwarp_dirs());
+    for dir in others {
+        for path in ptx_in(&dir) {
+            if path.file_name().is_some_and(|n| names.insert(n.to_owned())) {
+                files.push(path);
+            }
+        }
+    }
     files.sort();
     files
 }
 
 #[test]
 fn shared_modules_are_identical() {
-    let variant = ptx_in("ptx/deterministic/mjwarp");
-    assert!(
-        variant.len() > 40,
-        "expected the deterministic variant's PTX, found {} files",
-        variant.len()
-    );
-    let mut shared = 0;
-    for file in variant {
-        let default = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("ptx/mjwarp")
-            .join(file.file_name().unwrap());
-        if default.is_file() {
-            shared += 1;
-            assert!(
-                std::fs::read(&default).unwrap() == std::fs::read(&file).unwrap(),
-                "{} and {} have the same module name but differ",
-                file.display(),
-                default.display()
-            );
+    let variants =
+        std::iter::once("ptx/deterministic/mjwarp".to_string()).chain(character_mjwarp_dirs());
+    for dir in variants {
+        let variant = ptx_in(&dir);
+        assert!(
+            variant.len() > 40,
+            "expected {dir} to hold a step's PTX, found {} files",
+            variant.len()
+        );
+        let mut shared = 0;
+        for file in variant {
+            let default = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("ptx/mjwarp")
+                .join(file.file_name().unwrap());
+            if default.is_file() {
+                shared += 1;
+                assert!(
+                    std::fs::read(&default).unwrap() == std::fs::read(&file).unwrap(),
+                    "{} and {} have the same module name but differ",
+                    file.display(),
+                    default.display()
+                );
+            }
         }
+        // Most of a step's modules do not depend on the model: a variant sharing none would
+        // mean a different Warp or MuJoCo Warp build.
+        assert!(
+            shared > 30,
+            "expected most modules of {dir} shared with ptx/mjwarp, found {shared}"
+        );
     }
-    assert!(
-        shared > 30,
-        "expected most modules shared with ptx/mjwarp, found {shared}"
-    );
 }
 
 #[test]

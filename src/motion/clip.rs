@@ -12,12 +12,31 @@ use std::path::Path;
 use nalgebra::Vector3;
 
 use super::character::Character;
-use super::deepmimic::{
-    self, COLUMN_NAMES, DeepMimicFrame, MIN_QUATERNION_NORM, QUATERNION_WARNING_DEVIATION,
-    QposMapping,
-};
+use super::deepmimic::{self, DeepMimicFrame, QposMapping};
 use super::error::MotionError;
+use super::format::{self, MotionFormat, ReadOptions};
 use super::rotation::blend;
+use super::source_columns::{NamedColumns, SourceColumns};
+
+/// The shortest quaternion that is renormalized into a rotation; a shorter one is an error.
+/// DeepMimic's reader normalizes every quaternion it reads, and its released humanoid clips
+/// rely on it: joint quaternions range from 0.58 (the kick) to 1.12 (the sideflip) in length.
+/// Below this length the direction is rounding noise, not a rotation.
+pub const MIN_QUATERNION_NORM: f64 = 1e-3;
+
+/// A quaternion further than this from unit length counts in the once-per-file warning
+/// (`QuaternionNorms::beyond_one_percent`).
+pub const QUATERNION_WARNING_DEVIATION: f64 = 0.01;
+
+/// When a clip's key frames are.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FrameTiming {
+    /// Evenly spaced at this many frames per second (the robot formats).
+    Rate(f64),
+    /// The time of each frame (s): 0 first, then strictly increasing (DeepMimic's frame
+    /// durations, summed).
+    Times(Vec<f64>),
+}
 
 /// What happens past the end of a clip.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -155,15 +174,30 @@ pub struct MotionClip {
 }
 
 impl MotionClip {
-    /// Reads a DeepMimic motion file and converts it to `character`'s qpos.
+    /// Reads a motion file and converts it to `character`'s qpos; the format follows the
+    /// extension (`super::format`), with the default [`ReadOptions`].
     pub fn load(path: &Path, character: &Character) -> Result<MotionClip, MotionError> {
-        let file = deepmimic::read_file(path)?;
-        MotionClip::from_deepmimic_frames(
-            &path.display().to_string(),
-            &file.frames,
-            file.loop_mode,
-            character,
-        )
+        MotionClip::load_with(path, character, &ReadOptions::default())
+    }
+
+    /// [`Self::load`] with `options` (the frame rate of mjlab's CSV files, which do not say it).
+    pub fn load_with(
+        path: &Path,
+        character: &Character,
+        options: &ReadOptions,
+    ) -> Result<MotionClip, MotionError> {
+        match MotionFormat::of_path(path) {
+            MotionFormat::DeepMimic => {
+                let file = deepmimic::read_file(path)?;
+                MotionClip::from_deepmimic_frames(
+                    &path.display().to_string(),
+                    &file.frames,
+                    file.loop_mode,
+                    character,
+                )
+            }
+            other => format::load_robot_clip(other, path, character, options),
+        }
     }
 
     /// Parses the text of a DeepMimic motion file (e.g. a clip built into the binary) and
@@ -176,92 +210,123 @@ impl MotionClip {
     /// Checks DeepMimic frames and converts them to `character`'s qpos; `name` names the clip in
     /// errors (a path, or e.g. `synthetic`).
     ///
-    /// Checks: at least two frames and a positive duration, finite values, a positive duration
-    /// for every frame but the last (whose duration is ignored), quaternions of length at least
-    /// [`MIN_QUATERNION_NORM`]. Every quaternion is then renormalized, as DeepMimic's reader does.
+    /// Checks, in DeepMimic's columns: at least two frames and a positive duration, finite
+    /// values, a positive duration for every frame but the last (whose duration is ignored).
+    /// The clip is then built by [`Self::from_file_frames`], which refuses quaternions shorter
+    /// than [`MIN_QUATERNION_NORM`] and renormalizes every other one, as DeepMimic's reader does.
     pub fn from_deepmimic_frames(
         name: &str,
         frames: &[DeepMimicFrame],
         loop_mode: LoopMode,
         character: &Character,
     ) -> Result<MotionClip, MotionError> {
-        let file = || name.to_string();
-        if frames.is_empty() {
-            return Err(MotionError::Empty { file: file() });
-        }
-        for (frame, row) in frames.iter().enumerate() {
-            if let Some((column, &value)) = row.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-                return Err(MotionError::NonFinite {
-                    file: file(),
-                    frame,
-                    column,
-                    field: COLUMN_NAMES[column],
-                    value,
-                });
-            }
-        }
-        let last = frames.len() - 1;
-        let total: f64 = frames[..last].iter().map(|row| row[0]).sum();
-        if frames.len() < 2 || total == 0.0 {
-            return Err(MotionError::ZeroDuration {
-                file: file(),
-                frames: frames.len(),
-            });
-        }
-        for (frame, row) in frames.iter().enumerate() {
-            let dt = row[0];
-            if dt < 0.0 || (dt == 0.0 && frame < last) {
-                return Err(MotionError::FrameDuration {
-                    file: file(),
-                    frame,
-                    value: dt,
-                });
-            }
-        }
-
+        deepmimic::check_frames(frames, name)?;
         let mapping = QposMapping::new(character, name)?;
-        let mut norms = QuaternionNorms::new();
         let nq = character.nq();
         let mut qpos = Vec::with_capacity(frames.len() * nq);
         let mut times = Vec::with_capacity(frames.len());
         let mut t = 0.0;
-        for (frame, row) in frames.iter().enumerate() {
-            let mut row = *row;
-            for (column, joint) in mapping.rotation_columns() {
-                let q = &mut row[column..column + 4];
-                let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
-                // Finite values can still square to infinity (components near 1e155 and up).
-                if !(norm >= MIN_QUATERNION_NORM && norm.is_finite()) {
-                    return Err(MotionError::QuaternionNorm {
-                        file: file(),
-                        frame,
-                        column,
-                        joint,
-                        norm,
-                        min: MIN_QUATERNION_NORM,
-                    });
-                }
-                norms.record(norm, frame, column);
-                q.iter_mut().for_each(|v| *v /= norm);
-            }
+        for row in frames {
             let start = qpos.len();
             qpos.extend_from_slice(character.qpos0());
-            mapping.convert(&row, &mut qpos[start..]);
+            mapping.convert(row, &mut qpos[start..]);
             times.push(t);
             t += row[0];
         }
+        MotionClip::from_file_frames(
+            name,
+            character,
+            FrameTiming::Times(times),
+            qpos,
+            loop_mode,
+            &mapping,
+        )
+    }
+
+    /// A clip from qpos key frames of `character`: `qpos` holds `nq` values per frame, frame
+    /// after frame, quaternions of any length of at least [`MIN_QUATERNION_NORM`] (each is
+    /// renormalized). Errors name the values by qpos address (`qpos column 9 (chest rotation
+    /// y)`); a reader of a file uses [`Self::from_file_frames`] to name the file's columns.
+    pub fn from_qpos_frames(
+        name: &str,
+        character: &Character,
+        timing: FrameTiming,
+        qpos: Vec<f64>,
+        loop_mode: LoopMode,
+    ) -> Result<MotionClip, MotionError> {
+        let columns = NamedColumns::qpos(character);
+        MotionClip::from_file_frames(name, character, timing, qpos, loop_mode, &columns)
+    }
+
+    /// The format-neutral clip every reader builds: checks `qpos` (`nq` values per frame) and
+    /// the frame timing, renormalizes the quaternions and records how far they were from unit
+    /// length; `columns` says where each value was in the file `name`, for the errors.
+    ///
+    /// Checks: at least one frame and whole frames; finite values; at least two frames, a
+    /// positive finite rate or frame times that start at 0 and strictly increase; quaternions of
+    /// length at least [`MIN_QUATERNION_NORM`] (and not overflowing). Within a frame, values
+    /// and quaternions are checked in the order of their file columns, so the first bad one in
+    /// the file is the one reported.
+    pub fn from_file_frames(
+        name: &str,
+        character: &Character,
+        timing: FrameTiming,
+        mut qpos: Vec<f64>,
+        loop_mode: LoopMode,
+        columns: &dyn SourceColumns,
+    ) -> Result<MotionClip, MotionError> {
+        let file = || name.to_string();
+        let nq = character.nq();
+        if nq == 0 || !qpos.len().is_multiple_of(nq) {
+            return Err(MotionError::QposRows {
+                file: file(),
+                len: qpos.len(),
+                nq,
+            });
+        }
+        let num_frames = qpos.len() / nq;
+        if num_frames == 0 {
+            return Err(MotionError::Empty { file: file() });
+        }
+        let mut in_file_order: Vec<usize> = (0..nq).collect();
+        in_file_order.sort_by_key(|&adr| columns.column(adr));
+        for (frame, row) in qpos.chunks_exact(nq).enumerate() {
+            if let Some(&adr) = in_file_order.iter().find(|&&a| !row[a].is_finite()) {
+                return Err(columns.non_finite(name, frame, adr, row[adr]));
+            }
+        }
+        let times = frame_times(name, timing, num_frames)?;
+
+        let mut quaternion_addresses = character.quaternion_qpos_addresses();
+        quaternion_addresses.retain(|&adr| adr + 4 <= nq);
+        let mut quaternions_in_file_order = quaternion_addresses.clone();
+        quaternions_in_file_order.sort_by_key(|&adr| columns.quaternion_column(adr));
+        let mut norms = QuaternionNorms::new();
+        for (frame, row) in qpos.chunks_exact_mut(nq).enumerate() {
+            for &adr in &quaternions_in_file_order {
+                let q = &mut row[adr..adr + 4];
+                let norm = columns.quaternion_norm(q);
+                // Finite values can still square to infinity (components near 1e155 and up).
+                if !(norm >= MIN_QUATERNION_NORM && norm.is_finite()) {
+                    return Err(columns.not_a_rotation(name, frame, adr, norm));
+                }
+                norms.record(norm, frame, columns.quaternion_column(adr));
+                q.iter_mut().for_each(|v| *v /= norm);
+            }
+        }
 
         let root_position = character.root_joint().map_or(0, |j| j.qposadr);
+        let last = num_frames - 1;
         let root_at = |frame: usize| {
-            let p = &qpos[frame * nq + root_position..frame * nq + root_position + 3];
-            Vector3::new(p[0], p[1], p[2])
+            let p = qpos.get(frame * nq + root_position..frame * nq + root_position + 3);
+            p.map_or_else(Vector3::zeros, |p| Vector3::new(p[0], p[1], p[2]))
         };
         let mut cycle_displacement = root_at(last) - root_at(0);
         cycle_displacement.z = 0.0;
         Ok(MotionClip {
             name: name.to_string(),
             nq,
-            quaternion_addresses: character.quaternion_qpos_addresses(),
+            quaternion_addresses,
             root_position,
             times,
             qpos,
@@ -388,4 +453,57 @@ impl MotionClip {
     pub fn sample_qpos(&self, t: f64) -> Vec<f64> {
         self.qpos_at(self.locate(t))
     }
+}
+
+/// The time of each of `num_frames` frames: checked, from a rate or as given.
+fn frame_times(
+    file: &str,
+    timing: FrameTiming,
+    num_frames: usize,
+) -> Result<Vec<f64>, MotionError> {
+    let times = match timing {
+        FrameTiming::Rate(rate) => {
+            if !(rate.is_finite() && rate > 0.0) {
+                return Err(MotionError::FrameRate {
+                    file: file.to_string(),
+                    value: rate,
+                });
+            }
+            (0..num_frames).map(|i| i as f64 / rate).collect()
+        }
+        FrameTiming::Times(times) => {
+            if times.len() != num_frames {
+                return Err(MotionError::FrameTimes {
+                    file: file.to_string(),
+                    frame: times.len().min(num_frames),
+                    problem: format!("{} times for {num_frames} frames", times.len()),
+                });
+            }
+            times
+        }
+    };
+    if num_frames < 2 {
+        return Err(MotionError::ZeroDuration {
+            file: file.to_string(),
+            frames: num_frames,
+        });
+    }
+    let mut previous = None;
+    for (frame, &t) in times.iter().enumerate() {
+        let problem = match previous {
+            _ if !t.is_finite() => format!("the time {t} s is not finite"),
+            None if t != 0.0 => format!("the first frame is at {t} s, not 0"),
+            Some(p) if t <= p => format!("the time {t} s is not after the previous frame's {p} s"),
+            _ => {
+                previous = Some(t);
+                continue;
+            }
+        };
+        return Err(MotionError::FrameTimes {
+            file: file.to_string(),
+            frame,
+            problem,
+        });
+    }
+    Ok(times)
 }

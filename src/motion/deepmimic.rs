@@ -15,20 +15,12 @@ use serde_json::value::RawValue;
 
 use super::character::{Character, JointType};
 use super::clip::LoopMode;
+pub use super::clip::{MIN_QUATERNION_NORM, QUATERNION_WARNING_DEVIATION};
 use super::error::MotionError;
+use super::source_columns::SourceColumns;
 
 /// Columns of a DeepMimic humanoid frame.
 pub const FRAME_LEN: usize = 44;
-
-/// The shortest quaternion that is renormalized into a rotation; a shorter one is an error.
-/// DeepMimic's reader normalizes every quaternion it reads, and its released humanoid clips
-/// rely on it: joint quaternions range from 0.58 (the kick) to 1.12 (the sideflip) in length.
-/// Below this length the direction is rounding noise, not a rotation.
-pub const MIN_QUATERNION_NORM: f64 = 1e-3;
-
-/// A quaternion further than this from unit length counts in the once-per-file warning
-/// (`QuaternionNorms::beyond_one_percent`).
-pub const QUATERNION_WARNING_DEVIATION: f64 = 0.01;
 
 /// One DeepMimic humanoid frame, columns as in the file.
 pub type DeepMimicFrame = [f64; FRAME_LEN];
@@ -195,6 +187,46 @@ pub fn parse(text: &str, file: &str) -> Result<DeepMimicFile, MotionError> {
     Ok(DeepMimicFile { loop_mode, frames })
 }
 
+/// Checks DeepMimic frames in the file's own columns: at least one frame, finite values (the
+/// first non-finite one in file order is reported), a positive duration (at least two frames),
+/// and a positive duration for every frame but the last (whose duration is ignored).
+pub fn check_frames(frames: &[DeepMimicFrame], file: &str) -> Result<(), MotionError> {
+    let file = || file.to_string();
+    if frames.is_empty() {
+        return Err(MotionError::Empty { file: file() });
+    }
+    for (frame, row) in frames.iter().enumerate() {
+        if let Some((column, &value)) = row.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(MotionError::NonFinite {
+                file: file(),
+                frame,
+                column,
+                field: COLUMN_NAMES[column],
+                value,
+            });
+        }
+    }
+    let last = frames.len() - 1;
+    let total: f64 = frames[..last].iter().map(|row| row[0]).sum();
+    if frames.len() < 2 || total == 0.0 {
+        return Err(MotionError::ZeroDuration {
+            file: file(),
+            frames: frames.len(),
+        });
+    }
+    for (frame, row) in frames.iter().enumerate() {
+        let dt = row[0];
+        if dt < 0.0 || (dt == 0.0 && frame < last) {
+            return Err(MotionError::FrameDuration {
+                file: file(),
+                frame,
+                value: dt,
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Where each DeepMimic field goes in the character's qpos.
 #[derive(Debug, Clone)]
 pub(crate) struct QposMapping {
@@ -203,6 +235,8 @@ pub(crate) struct QposMapping {
     rotations: Vec<(usize, usize, &'static str)>,
     /// (DeepMimic column, qpos address, sign).
     angles: Vec<(usize, usize, f64)>,
+    /// The DeepMimic column of each qpos address (for errors and reports).
+    columns: Vec<usize>,
 }
 
 impl QposMapping {
@@ -256,21 +290,34 @@ impl QposMapping {
                 character.joints().len()
             )));
         }
+        // MuJoCo (x, y, z) is DeepMimic (x, -z, y): qpos value i of a position or quaternion
+        // comes from the file's column `first + [0, 2, 1]` or `first + [0, 1, 3, 2]`.
+        let mut columns = vec![0; character.nq()];
+        let mut place = |adr: usize, column: usize| {
+            if let Some(c) = columns.get_mut(adr) {
+                *c = column;
+            }
+        };
+        for (i, offset) in [0, 2, 1].into_iter().enumerate() {
+            place(root.qposadr + i, ROOT_POSITION_COLUMN + offset);
+        }
+        for &(column, adr, _) in &rotations {
+            for (i, offset) in [0, 1, 3, 2].into_iter().enumerate() {
+                place(adr + i, column + offset);
+            }
+        }
+        for &(column, adr, _) in &angles {
+            place(adr, column);
+        }
         Ok(QposMapping {
             root_position: root.qposadr,
             rotations,
             angles,
+            columns,
         })
     }
 
-    /// The first column of every quaternion in a frame, with its joint's name.
-    pub(crate) fn rotation_columns(&self) -> impl Iterator<Item = (usize, &'static str)> + '_ {
-        self.rotations
-            .iter()
-            .map(|&(column, _, name)| (column, name))
-    }
-
-    /// Writes the qpos of `frame` (quaternions already normalized in the frame) into `qpos`.
+    /// Writes the qpos of `frame` into `qpos` (quaternions as they are in the file).
     pub(crate) fn convert(&self, frame: &DeepMimicFrame, qpos: &mut [f64]) {
         let p = ROOT_POSITION_COLUMN;
         let (x, y, z) = (frame[p], frame[p + 1], frame[p + 2]);
@@ -293,6 +340,50 @@ impl QposMapping {
                 *dst = sign * frame[column];
             }
         }
+    }
+}
+
+/// The clip's checks name DeepMimic's frame, column and joint.
+impl SourceColumns for QposMapping {
+    fn column(&self, adr: usize) -> usize {
+        self.columns.get(adr).copied().unwrap_or(0)
+    }
+
+    fn non_finite(&self, file: &str, frame: usize, adr: usize, value: f64) -> MotionError {
+        let column = self.column(adr);
+        MotionError::NonFinite {
+            file: file.to_string(),
+            frame,
+            column,
+            field: COLUMN_NAMES.get(column).copied().unwrap_or("?"),
+            value,
+        }
+    }
+
+    fn not_a_rotation(&self, file: &str, frame: usize, adr: usize, norm: f64) -> MotionError {
+        let joint = self
+            .rotations
+            .iter()
+            .find(|&&(_, a, _)| a == adr)
+            .map_or("?", |&(_, _, name)| name);
+        MotionError::QuaternionNorm {
+            file: file.to_string(),
+            frame,
+            column: self.column(adr),
+            joint,
+            norm,
+            min: MIN_QUATERNION_NORM,
+        }
+    }
+
+    /// Summed in the file's order (w, x, y, z), which is qpos (w, x, -z, y): the humanoid's clips
+    /// keep the numbers they had when the reader normalized before converting.
+    fn quaternion_norm(&self, q: &[f64]) -> f64 {
+        [q[0], q[1], q[3], q[2]]
+            .iter()
+            .map(|v| v * v)
+            .sum::<f64>()
+            .sqrt()
     }
 }
 

@@ -143,7 +143,8 @@ pub enum MotionError {
     },
     #[error(
         "no motion {name:?}: not a built-in clip ({built_in}) and no such file (looked for: \
-         {tried}); pass a path to a DeepMimic motion file, or a clip's name (e.g. `walk` for \
+         {tried}); pass a path to a motion file (DeepMimic .txt or .json, holosoma's or mjlab's \
+         .npz, mjlab's .csv), or a clip's name (e.g. `walk` for \
          humanoid3d_walk.txt) in the directory given by --motions-dir or {env}",
         env = super::find::MOTIONS_ENV
     )]
@@ -154,6 +155,124 @@ pub enum MotionError {
     },
     #[error("the motions directory {dir}: {problem} (--motions-dir or {env})", env = super::find::MOTIONS_ENV)]
     MotionsDir { dir: String, problem: String },
+    // The format-neutral clip (`MotionClip::from_file_frames`).
+    #[error("{file}: {len} qpos values are not whole frames of the character's nq = {nq} values")]
+    QposRows { file: String, len: usize, nq: usize },
+    #[error("{file}: the frame rate {value} must be a positive finite number of frames per second")]
+    FrameRate { file: String, value: f64 },
+    #[error("{file}: frame {frame}: {problem}; frame times start at 0 s and strictly increase")]
+    FrameTimes {
+        file: String,
+        frame: usize,
+        problem: String,
+    },
+    #[error(
+        "{file}: frame {frame}, {table} column {column} ({field}): the value {value} is not finite"
+    )]
+    NonFiniteValue {
+        file: String,
+        frame: usize,
+        table: String,
+        column: usize,
+        field: String,
+        value: f64,
+    },
+    #[error(
+        "{file}: frame {frame}, {table} columns from {column} ({field}): the quaternion has \
+         length {norm}, which is not a rotation (any finite quaternion of length {min} or more \
+         is renormalized)"
+    )]
+    RotationNorm {
+        file: String,
+        frame: usize,
+        table: String,
+        column: usize,
+        field: String,
+        norm: f64,
+        min: f64,
+    },
+    // The robot formats (`super::format`): holosoma's and mjlab's NPZ, mjlab's CSV.
+    #[error(
+        "{file}: not a readable NumPy .npz archive ({problem}); a robot motion file is the zip \
+         that NumPy's savez writes"
+    )]
+    NpzArchive { file: String, problem: String },
+    #[error("{file}: the array {key:?}: {problem}")]
+    NpzArray {
+        file: String,
+        key: String,
+        problem: String,
+    },
+    #[error("{file}: the array {key:?} is missing ({needs}); the file has: {keys}")]
+    NpzMissingKey {
+        file: String,
+        key: String,
+        needs: &'static str,
+        keys: String,
+    },
+    #[error(
+        "{file}: neither holosoma's motion NPZ (joint_names, joint_pos, fps) nor mjlab's \
+         (body_pos_w, body_quat_w, joint_pos, fps); the file has: {keys}"
+    )]
+    NpzFormat { file: String, keys: String },
+    #[error(
+        "{file}: the character {character} cannot take a robot motion: {problem} (robot motion \
+         files hold a free root's pose and one angle per joint)"
+    )]
+    RobotCharacter {
+        file: String,
+        character: String,
+        problem: String,
+    },
+    #[error(
+        "{file}: the motion is for another character: its joint {joint:?} is not a joint of \
+         the character {character}; load it with the character it was made for"
+    )]
+    OtherCharacter {
+        file: String,
+        joint: String,
+        character: String,
+    },
+    #[error(
+        "{file}: the motion has no angle for the joint {joint:?} of the character {character}; a \
+         motion must give every joint of its character"
+    )]
+    MissingJoint {
+        file: String,
+        joint: String,
+        character: String,
+    },
+    #[error("{file}: the joint {joint:?} is named twice")]
+    DuplicateJoint { file: String, joint: String },
+    #[error(
+        "{file}: {what}: {found} joint angles per frame, expected {expected}: the joints of \
+         the character {character} other than its root, in MJCF order ({names})"
+    )]
+    JointCount {
+        file: String,
+        what: String,
+        found: usize,
+        expected: usize,
+        character: String,
+        names: String,
+    },
+    #[error("{file}: line {line}, column {column}: {text:?} is not a finite number")]
+    CsvValue {
+        file: String,
+        line: usize,
+        column: usize,
+        text: String,
+    },
+    #[error(
+        "{file}: line {line} has {len} values, expected {expected} (as the first line: root \
+         position, root quaternion x y z w, then the joint angles)"
+    )]
+    CsvRowLength {
+        file: String,
+        line: usize,
+        len: usize,
+        expected: usize,
+    },
 }
 
 /// A problem with a motion library: its configuration, one of its clips, or the table built from

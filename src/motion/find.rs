@@ -1,8 +1,9 @@
 //! Finding motion clips (`motion::find`; a motion library, many clips in one table, is
-//! `super::motion_library`). A command takes a path to a DeepMimic motion file, or a name: looked up
-//! first in the user's motions directory (`--motions-dir` or the environment variable
-//! [`MOTIONS_ENV`]), then among the clips built into the binary ([`super::built_in`]). A user's
-//! clip with a built-in clip's name replaces it, and the run says so.
+//! `super::motion_library`). A command takes a path to a motion file (DeepMimic's, or a robot
+//! format's: `super::format`), or a name: looked up first in the user's motions directory
+//! (`--motions-dir` or the environment variable [`MOTIONS_ENV`]), then among the clips built into
+//! the binary ([`super::built_in`]). A user's clip with a built-in clip's name replaces it, and
+//! the run says so.
 
 use std::path::{Path, PathBuf};
 
@@ -10,9 +11,10 @@ use super::built_in::{BuiltInClip, built_in_names, find_built_in};
 use super::character::Character;
 use super::clip::MotionClip;
 use super::error::MotionError;
+use super::format::{MOTION_EXTENSIONS, is_motion_file, strip_motion_extension};
 use super::reference::ReferenceMotion;
 
-/// The environment variable naming the directory of the user's DeepMimic motion files.
+/// The environment variable naming the directory of the user's motion files.
 pub const MOTIONS_ENV: &str = "INSTANTMIMIC_MOTIONS";
 
 /// The DeepMimic clips with committed training configs, by short name (`walk` is
@@ -96,13 +98,14 @@ impl ResolvedMotion {
 }
 
 /// The file a name stands for in `dir`: the first existing of `<name>`, `humanoid3d_<name>.txt`
-/// and `<name>.txt`. Every path tried goes into `tried`.
+/// (DeepMimic's humanoid clips), then `<name>.<ext>` for each motion extension (`txt`, `json`,
+/// `npz`, `csv`). Every path tried goes into `tried`.
 fn find_in_dir(motion: &str, dir: &Path, tried: &mut Vec<String>) -> Option<PathBuf> {
-    for candidate in [
-        motion.to_string(),
-        format!("humanoid3d_{motion}.txt"),
-        format!("{motion}.txt"),
-    ] {
+    let with_extensions = MOTION_EXTENSIONS
+        .iter()
+        .map(|ext| format!("{motion}.{ext}"));
+    let candidates = [motion.to_string(), format!("humanoid3d_{motion}.txt")];
+    for candidate in candidates.into_iter().chain(with_extensions) {
         let path = dir.join(candidate);
         if path.is_file() {
             return Some(path);
@@ -162,12 +165,14 @@ pub fn resolve_motion(
 /// A clip file in a motions directory, with the name that resolves to it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DirectoryClip {
-    /// `x` for `humanoid3d_x.txt` or `x.txt`; the file name where `x` resolves to another file.
+    /// `x` for `humanoid3d_x.txt`, `x.txt`, `x.npz`, ...; the file name where `x` resolves to
+    /// another file.
     pub name: String,
     pub path: PathBuf,
 }
 
-/// The clip files (`*.txt`) in a motions directory, by file name, not recursing.
+/// The clip files in a motions directory (`*.txt`, `*.json`, `*.npz`, `*.csv`), by file name,
+/// not recursing.
 pub fn directory_clips(dir: &Path) -> Result<Vec<DirectoryClip>, MotionError> {
     check_dir(dir)?;
     let unreadable = |source: std::io::Error| MotionError::MotionsDir {
@@ -177,7 +182,7 @@ pub fn directory_clips(dir: &Path) -> Result<Vec<DirectoryClip>, MotionError> {
     let mut files = Vec::new();
     for entry in std::fs::read_dir(dir).map_err(unreadable)? {
         let path = entry.map_err(unreadable)?.path();
-        let is_clip = path.extension().is_some_and(|e| e == "txt") && path.is_file();
+        let is_clip = is_motion_file(&path) && path.is_file();
         if let (true, Some(file_name)) = (is_clip, path.file_name().and_then(|n| n.to_str())) {
             files.push((file_name.to_string(), path));
         }
@@ -186,7 +191,7 @@ pub fn directory_clips(dir: &Path) -> Result<Vec<DirectoryClip>, MotionError> {
     Ok(files
         .into_iter()
         .map(|(file_name, path)| {
-            let base = file_name.trim_end_matches(".txt");
+            let base = strip_motion_extension(&file_name);
             let short = base.strip_prefix("humanoid3d_").unwrap_or(base);
             let resolves_here = !short.is_empty()
                 && find_in_dir(short, dir, &mut Vec::new()).as_ref() == Some(&path);

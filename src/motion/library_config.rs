@@ -4,7 +4,8 @@
 //! ```toml
 //! [motion_library]
 //! clips = ["walk", "run", "path/to/humanoid3d_kick.txt"]  # names or paths, as `--motion` takes
-//! # or: dir = "path/to/motions"       every `*.txt` DeepMimic file in it, by file name
+//! # or: dir = "path/to/motions"       every motion file in it (`*.txt`, `*.json`, `*.npz`,
+//! #                                    `*.csv`), by file name
 //! # or: manifest = "path/to/clips.toml"  `[[clip]]` entries with per-clip weights
 //! ```
 //!
@@ -20,6 +21,7 @@ use serde::{Deserialize, Serialize};
 use super::character::Character;
 use super::error::{MotionError, MotionLibraryError};
 use super::find::{MotionSource, ResolvedMotion, directory_clips, resolve_motion};
+use super::format::strip_motion_extension;
 use super::motion_library::{MotionLibrary, MotionLibraryBuilder};
 
 /// The `[motion_library]` section: exactly one of the three keys.
@@ -29,7 +31,8 @@ pub struct LibraryConfig {
     /// Clips by name or path, in this order, weight 1 each.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub clips: Option<Vec<String>>,
-    /// A directory: every `*.txt` file in it (not recursing), sorted by file name, weight 1 each.
+    /// A directory: every motion file in it (`*.txt`, `*.json`, `*.npz`, `*.csv`; not
+    /// recursing), sorted by file name, weight 1 each.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dir: Option<PathBuf>,
     /// A manifest file: `[[clip]]` entries with `motion`, and optionally `weight` and `name`.
@@ -86,13 +89,14 @@ pub struct LibraryEntry {
 /// What a library's loading tells the user besides the library (one line each).
 pub type Notices = Vec<String>;
 
-/// The name a clip file gets in a library: its file name without `.txt` and `humanoid3d_`
-/// (`long/humanoid3d_long_walk1.txt` is `long_walk1`), as `motion list` names directory clips.
+/// The name a clip file gets in a library: its file name without its motion extension (`.txt`,
+/// `.json`, `.npz`, `.csv`) and `humanoid3d_` (`long/humanoid3d_long_walk1.txt` is
+/// `long_walk1`), as `motion list` names directory clips.
 pub fn clip_name_of_file(path: &Path) -> String {
     let file = path
         .file_name()
         .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-    let base = file.strip_suffix(".txt").unwrap_or(&file);
+    let base = strip_motion_extension(&file);
     let short = base.strip_prefix("humanoid3d_").unwrap_or(base);
     if short.is_empty() {
         file
@@ -319,7 +323,7 @@ impl LibraryConfig {
     }
 }
 
-/// Every `*.txt` file of `dir`, sorted by file name.
+/// Every motion file of `dir` (`*.txt`, `*.json`, `*.npz`, `*.csv`), sorted by file name.
 fn dir_entries(origin: &str, dir: &Path) -> Result<Vec<LibraryEntry>, MotionLibraryError> {
     let dir_error = |problem: String| MotionLibraryError::Dir {
         origin: origin.to_string(),
@@ -331,7 +335,9 @@ fn dir_entries(origin: &str, dir: &Path) -> Result<Vec<LibraryEntry>, MotionLibr
         other => dir_error(other.to_string()),
     })?;
     if clips.is_empty() {
-        return Err(dir_error("it holds no `*.txt` files".to_string()));
+        return Err(dir_error(
+            "it holds no `*.txt` files (nor `*.json`, `*.npz` or `*.csv` motion files)".to_string(),
+        ));
     }
     Ok(clips
         .into_iter()

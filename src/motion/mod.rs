@@ -1,9 +1,15 @@
-//! Reference motions: DeepMimic clips, their conversion to the humanoid's qpos, and kinematics.
+//! Reference motions: DeepMimic clips and robot motion files, their conversion to a character's
+//! qpos, and kinematics.
 //!
 //! The pipeline, file by file:
 //! - [`character`]: the simulated character as MuJoCo compiles it (from `configs/characters/*.json`).
 //! - [`deepmimic`]: the DeepMimic motion file reader and the frame-to-qpos conversion.
-//! - [`clip`]: a clip as qpos key frames; looping and sampling at any time.
+//! - [`clip`]: the format-neutral clip every reader builds: qpos key frames of a character, their
+//!   times and loop mode, checked ([`source_columns`]: how a file names each value); looping
+//!   and sampling at any time.
+//! - [`format`]: motion file formats by extension; the robot formats: [`holosoma`]'s and
+//!   [`mjlab`]'s NPZ (a zip of [`npy`] arrays, [`npz`]) and mjlab's CSV, matched to the
+//!   character's joints by [`robot_joints`].
 //! - [`kinematics`], [`velocity`]: body frames, center of mass, `mj_differentiatePos`, body
 //!   velocities, as MuJoCo computes them.
 //! - [`reference`]: a clip with its velocities and full reference state at any time.
@@ -23,19 +29,27 @@ pub mod clip;
 pub mod deepmimic;
 pub mod error;
 pub mod find;
+pub mod format;
+pub mod holosoma;
 pub mod kinematics;
 pub mod library_config;
+pub mod mjlab;
 pub mod motion_library;
+pub mod npy;
+pub mod npz;
 pub mod reference;
+pub mod robot_joints;
 pub mod rotation;
+pub mod source_columns;
 pub mod summary;
 pub mod synthetic;
 pub mod table;
 pub mod velocity;
 
 pub use character::Character;
-pub use clip::{ClipTime, LoopMode, MotionClip};
+pub use clip::{ClipTime, FrameTiming, LoopMode, MotionClip};
 pub use error::{CharacterError, MotionError, MotionLibraryError};
+pub use format::{MotionFormat, ReadOptions};
 pub use kinematics::{BodyKinematics, forward_kinematics};
 pub use library_config::{LibraryConfig, LibraryEntry};
 pub use motion_library::{ClipEntry, LibraryTotals, MotionLibrary, MotionLibraryBuilder};

@@ -1,6 +1,6 @@
 //! `body_frames` then `body_velocities` (kernels_py/env/kinematics.py, the fused body kinematics) against the f64
 //! kinematics of `instantmimic::motion` (`forward_kinematics`, `body_velocities`: MuJoCo's, as
-//! `tests/fixtures/kinematics_golden.json` checks), from the kernel's f32 inputs.
+//! `tests/fixtures/kinematics_golden_*.json` checks), from the kernel's f32 inputs.
 //!
 //! Outputs: `xpos` and `xquat` of bodies 1.., the center of mass in `subtree_com[n, 0]` and
 //! `[n, 1]`, and `cvel` of bodies 1.. in MuJoCo's com-based form (angular velocity; the linear

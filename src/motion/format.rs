@@ -1,0 +1,125 @@
+//! Motion file formats, told apart by extension: DeepMimic's JSON (`.txt`, `.json`, and any
+//! other extension, as before robot formats were read), and the robot formats, `.npz`
+//! (holosoma's or mjlab's, told apart by their keys) and `.csv` (mjlab's). `docs/motions.md`
+//! describes each.
+
+use std::path::Path;
+
+use super::character::Character;
+use super::clip::MotionClip;
+use super::error::MotionError;
+use super::npz::Npz;
+use super::{holosoma, mjlab};
+
+/// The extensions of motion files, as a motions directory is listed.
+pub const MOTION_EXTENSIONS: [&str; 4] = ["txt", "json", "npz", "csv"];
+
+/// mjlab's default frame rate for its CSV files (`csv_to_npz.py --input_fps`), which do not
+/// carry one.
+pub const MJLAB_CSV_FRAME_RATE: f64 = 30.0;
+
+/// A motion file's format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MotionFormat {
+    /// DeepMimic's JSON (`"Loop"`, `"Frames"`).
+    DeepMimic,
+    /// A NumPy archive: holosoma's or mjlab's motion file.
+    Npz,
+    /// mjlab's CSV: root position, root quaternion (x, y, z, w), joint angles.
+    MjlabCsv,
+}
+
+impl MotionFormat {
+    /// The format of the file at `path`, by its extension (any case); DeepMimic's for any
+    /// extension but `.npz` and `.csv`.
+    pub fn of_path(path: &Path) -> MotionFormat {
+        match extension(path).as_deref() {
+            Some("npz") => MotionFormat::Npz,
+            Some("csv") => MotionFormat::MjlabCsv,
+            _ => MotionFormat::DeepMimic,
+        }
+    }
+}
+
+/// The extension of `path` in lower case.
+fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+}
+
+/// Whether `path` has a motion file's extension ([`MOTION_EXTENSIONS`]).
+pub fn is_motion_file(path: &Path) -> bool {
+    extension(path).is_some_and(|e| MOTION_EXTENSIONS.contains(&e.as_str()))
+}
+
+/// `file_name` without its motion extension (`walk.npz` is `walk`), or as it is.
+pub fn strip_motion_extension(file_name: &str) -> &str {
+    match file_name.rsplit_once('.') {
+        Some((stem, ext)) if MOTION_EXTENSIONS.contains(&ext.to_ascii_lowercase().as_str()) => stem,
+        _ => file_name,
+    }
+}
+
+/// How motion files are read where the file does not say.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReadOptions {
+    /// The frame rate of mjlab's CSV files (frames per second); [`MJLAB_CSV_FRAME_RATE`] by
+    /// default.
+    pub csv_frame_rate: f64,
+}
+
+impl Default for ReadOptions {
+    fn default() -> ReadOptions {
+        ReadOptions {
+            csv_frame_rate: MJLAB_CSV_FRAME_RATE,
+        }
+    }
+}
+
+/// Reads a robot motion file (`format` is not DeepMimic's) for `character`.
+pub(crate) fn load_robot_clip(
+    format: MotionFormat,
+    path: &Path,
+    character: &Character,
+    options: &ReadOptions,
+) -> Result<MotionClip, MotionError> {
+    let file = path.display().to_string();
+    match format {
+        MotionFormat::MjlabCsv => {
+            let text = std::fs::read_to_string(path).map_err(|source| MotionError::Read {
+                file: file.clone(),
+                source,
+            })?;
+            mjlab::parse_csv(&text, &file, options.csv_frame_rate, character)
+        }
+        MotionFormat::Npz | MotionFormat::DeepMimic => read_npz(&mut Npz::open(path)?, character),
+    }
+}
+
+/// Reads holosoma's or mjlab's NPZ, told apart by their keys: holosoma's names its joints
+/// (`joint_names`), mjlab's has none and takes the root from `body_pos_w`.
+pub fn read_npz<R: std::io::Read + std::io::Seek>(
+    npz: &mut Npz<R>,
+    character: &Character,
+) -> Result<MotionClip, MotionError> {
+    if npz.has(holosoma::JOINT_NAMES) {
+        holosoma::read(npz, character)
+    } else if npz.has(mjlab::BODY_POS) {
+        mjlab::read_npz(npz, character)
+    } else {
+        Err(MotionError::NpzFormat {
+            file: npz.file().to_string(),
+            keys: npz.keys().join(", "),
+        })
+    }
+}
+
+/// Reads an NPZ motion held in memory (e.g. a fuzzed one); `file` names it in errors.
+pub fn parse_npz(
+    bytes: &[u8],
+    file: &str,
+    character: &Character,
+) -> Result<MotionClip, MotionError> {
+    read_npz(&mut Npz::from_bytes(bytes, file)?, character)
+}
