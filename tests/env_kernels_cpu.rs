@@ -13,10 +13,20 @@ use kernel_checks::program::Step;
 use kernel_checks::{Check, Fixture, cpu, run_checks};
 
 fn run_on_cpu(kernel: &str, checks: impl FnOnce(&Fixture) -> Vec<Check>) {
+    run_on_cpu_with(Fixture::load, kernel, checks);
+}
+
+/// The checks of `checks` on the fixture `fixture` makes (the humanoid's, or another
+/// character's).
+fn run_on_cpu_with(
+    fixture: impl FnOnce() -> Fixture,
+    kernel: &str,
+    checks: impl FnOnce(&Fixture) -> Vec<Check>,
+) {
     let Some(python) = cpu::build_python() else {
         return;
     };
-    let fixture = Fixture::load();
+    let fixture = fixture();
     run_checks(kernel, checks(&fixture), |programs| {
         cpu::run(&python, kernel, programs)
     });
@@ -65,14 +75,15 @@ const PPO_MODULES: [&str; 8] = [
     "reduce",
 ];
 
-/// Runs without Python: every case fits its kernel's generated ABI, and every env kernel but
-/// the reference lookup (checked against `ReferenceTable::lookup` by gpu_reference_table.rs) has
-/// a check.
+/// Runs without Python: every case fits its kernel's generated ABI (the second character's
+/// too), and every env kernel but the reference lookup (checked against
+/// `ReferenceTable::lookup` by gpu_reference_table.rs) has a check.
 #[test]
 fn every_case_fits_its_kernel_and_every_kernel_is_checked() {
     let fixture = Fixture::load();
     let mut launched = BTreeSet::new();
-    for check in all_checks(&fixture) {
+    let second = kernel_checks::character_checks(&Fixture::g1());
+    for check in all_checks(&fixture).into_iter().chain(second) {
         let p = &check.program;
         p.validate().unwrap_or_else(|e| panic!("{e}"));
         for step in &p.steps {
@@ -193,4 +204,41 @@ fn goal_observe_matches_the_f64_reference() {
 #[test]
 fn body_kinematics_matches_the_f64_reference() {
     run_on_cpu("body_kinematics", kernel_checks::kinematics::checks);
+}
+
+/// The G1: 29 hinges, no ball joint, 30 bodies of which 14 tracked, another row layout; the
+/// same PTX as the humanoid's.
+#[test]
+fn the_reward_observation_evaluation_and_reset_match_the_f64_reference_on_the_g1() {
+    run_on_cpu_with(
+        Fixture::g1,
+        "the G1: reward_termination, observe, evaluation_accumulate, reset_masked",
+        kernel_checks::character_checks,
+    );
+}
+
+/// The G1 with its tracked bodies in another order (the root still first): the kernels follow
+/// the array, not body ids.
+#[test]
+fn the_reward_observation_and_evaluation_follow_the_tracked_bodies_order() {
+    let reordered = || {
+        let mut fixture = Fixture::g1();
+        fixture.layout.tracked_bodies[1..].reverse();
+        fixture
+    };
+    run_on_cpu_with(
+        reordered,
+        "the G1, tracked bodies reordered: reward_termination, observe, evaluation_accumulate",
+        |fx| {
+            use kernel_checks::{evaluate, observe, tracking};
+            [
+                tracking::checks(fx),
+                observe::checks(fx),
+                evaluate::checks(fx),
+            ]
+            .into_iter()
+            .flatten()
+            .collect()
+        },
+    );
 }

@@ -11,8 +11,8 @@ use std::collections::BTreeMap;
 
 use instantmimic::cuda::{DeviceRange, Gpu, Stream};
 use instantmimic::kernels::{
-    DeviceArray, Element, EnvKernels, GoalParams, ObservationParams, ResetParams, TrackingParams,
-    Yardstick,
+    DeviceArray, Element, EnvKernels, GoalParams, ObservationParams, ReferenceLayout, ResetParams,
+    TrackingParams, Yardstick,
 };
 use kernel_checks::program::{Arg, HostData, Outputs, Program, Scalar, Step, StructArg};
 use kernel_checks::{Check, Fixture, run_checks};
@@ -176,6 +176,13 @@ impl Args<'_> {
             other => panic!("argument {i} is {other:?}"),
         }
     }
+
+    fn table_layout(&self, i: usize) -> ReferenceLayout {
+        match &self.args[i] {
+            Arg::Struct(StructArg::TableLayout(l)) => *l,
+            other => panic!("argument {i} is {other:?}"),
+        }
+    }
 }
 
 /// One launch through the kernel's generated launcher.
@@ -221,14 +228,16 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             &a.array(2),
             &a.array(3),
             &a.array(4),
-            &a.array(5),
+            &a.table_layout(5),
             &a.array(6),
             &a.array(7),
             &a.array(8),
-            &a.tracking(9),
+            &a.array(9),
             &a.array(10),
-            &a.array(11),
+            &a.tracking(11),
             &a.array(12),
+            &a.array(13),
+            &a.array(14),
         ),
         "reward_termination" => kernels.reward_termination(
             s,
@@ -238,13 +247,13 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             &a.array(2),
             &a.array(3),
             &a.array(4),
-            &a.array(5),
+            &a.table_layout(5),
             &a.array(6),
             &a.array(7),
-            &a.tracking(8),
-            a.i32(9),
-            &a.array(10),
-            &a.array(11),
+            &a.array(8),
+            &a.array(9),
+            &a.tracking(10),
+            a.i32(11),
             &a.array(12),
             &a.array(13),
             &a.array(14),
@@ -254,22 +263,24 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             &a.array(18),
             &a.array(19),
             &a.array(20),
+            &a.array(21),
+            &a.array(22),
         ),
         "reset_masked" => kernels.reset_masked(
             s,
             dim,
             &a.array(0),
             &a.array(1),
-            &a.array(2),
-            a.i32(3),
-            &a.array(4),
+            &a.table_layout(2),
+            &a.array(3),
+            a.i32(4),
             &a.array(5),
             &a.array(6),
             &a.array(7),
             &a.array(8),
-            a.i32(9),
-            &a.reset(10),
-            &a.array(11),
+            &a.array(9),
+            a.i32(10),
+            &a.reset(11),
             &a.array(12),
             &a.array(13),
             &a.array(14),
@@ -277,6 +288,7 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             &a.array(16),
             &a.array(17),
             &a.array(18),
+            &a.array(19),
         ),
         "phase_statistics_update" => kernels.phase_statistics_update(
             s,
@@ -301,13 +313,15 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             &a.array(4),
             &a.array(5),
             &a.array(6),
-            &a.array(7),
+            &a.table_layout(7),
             &a.array(8),
             &a.array(9),
             &a.array(10),
             &a.array(11),
-            &a.observation(12),
+            &a.array(12),
             &a.array(13),
+            &a.observation(14),
+            &a.array(15),
         ),
         "observation_moments" => {
             kernels.observation_moments(s, dim, &a.array(0), &a.array(1), &a.array(2))
@@ -367,19 +381,21 @@ fn launch(kernels: &EnvKernels, s: &Stream, kernel: &str, dim: usize, a: &Args) 
             &a.array(1),
             &a.array(2),
             &a.array(3),
-            &a.array(4),
+            &a.table_layout(4),
             &a.array(5),
             &a.array(6),
             &a.array(7),
-            a.i32(8),
+            &a.array(8),
             &a.array(9),
-            &a.array(10),
+            a.i32(10),
             &a.array(11),
-            &a.yardstick(12),
+            &a.array(12),
             &a.array(13),
-            &a.array(14),
+            &a.yardstick(14),
             &a.array(15),
             &a.array(16),
+            &a.array(17),
+            &a.array(18),
         ),
         "episode_statistics" => kernels.episode_statistics(
             s,
@@ -520,6 +536,16 @@ fn execute(programs: &[Program]) -> Vec<Outputs> {
 fn run_on_gpu(kernel: &str, checks: impl FnOnce(&Fixture) -> Vec<Check>) {
     let fixture = Fixture::load();
     run_checks(kernel, checks(&fixture), execute);
+}
+
+#[test]
+fn gpu_the_reward_observation_evaluation_and_reset_match_the_f64_reference_on_the_g1() {
+    let fixture = Fixture::g1();
+    run_checks(
+        "the G1: reward_termination, observe, evaluation_accumulate, reset_masked",
+        kernel_checks::character_checks(&fixture),
+        execute,
+    );
 }
 
 #[test]

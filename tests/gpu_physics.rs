@@ -23,7 +23,9 @@ mod skip_support;
 use std::path::{Path, PathBuf};
 
 use instantmimic::cuda::Gpu;
-use instantmimic::env::{BodyModel, DeviceBodyModel, PhysicsState};
+use instantmimic::env::{
+    BodyModel, DeviceBodyModel, PhysicsSizes, PhysicsState, PhysicsStateError,
+};
 use instantmimic::kernels::{DeviceArray, EnvKernels};
 use instantmimic::motion::Character;
 use instantmimic::plan::{PhysicsOverflow, PlanStore, ReplayOrder, Simulation};
@@ -268,6 +270,44 @@ fn kinematics_plan_reads_the_state_the_step_plan_writes() {
     println!("kinematics plan moved all {checked} bodies by the root offset");
 }
 
+/// The humanoid's plans serve the humanoid and refuse the G1, naming both characters' sizes:
+/// a character and the plans of another cannot be mixed.
+#[test]
+fn the_humanoids_plans_refuse_another_characters_state() {
+    let assets = std::env::var_os("INSTANTMIMIC_ASSETS").map(PathBuf::from);
+    let store = PlanStore::new(assets.as_deref());
+    let Ok(manifest) = store.manifest() else {
+        skip_support::skip("no plan manifest in the store");
+        return;
+    };
+    let Some(nworld) = manifest.plans.iter().map(|p| p.nworld).min() else {
+        skip_support::skip("the manifest lists no plans");
+        return;
+    };
+    let gpu = Gpu::open(0).expect("a GPU");
+    let sim = Simulation::load(&gpu, &store, nworld, &["step", "kinematics"]).expect("plans load");
+    let humanoid = Character::humanoid().expect("the humanoid");
+    let sizes = PhysicsSizes::of(&humanoid);
+    let physics = PhysicsState::view(&sim, sizes, humanoid.name()).expect("the humanoid's state");
+    assert_eq!(physics.qpos.shape(), [nworld as usize, sizes.nq]);
+    let g1 = Character::built_in("g1")
+        .expect("the G1 is built in")
+        .expect("the G1 loads");
+    match PhysicsState::view(&sim, PhysicsSizes::of(&g1), g1.name()) {
+        Err(e @ PhysicsStateError::OtherCharacter { .. }) => {
+            let message = e.to_string();
+            assert!(
+                message.contains(&sizes.to_string())
+                    && message.contains(&PhysicsSizes::of(&g1).to_string())
+                    && message.contains("capture plans for g1"),
+                "{message}"
+            );
+        }
+        Err(e) => panic!("another error than the character's: {e}"),
+        Ok(_) => panic!("the humanoid's plans served the G1"),
+    }
+}
+
 /// `||a - b|| / ||b||` over the elements `keep` selects (indices into both).
 fn relative_over(a: &[f32], b: &[f32], keep: impl Fn(usize) -> bool) -> f64 {
     let (mut diff, mut norm) = (0.0f64, 0.0f64);
@@ -310,7 +350,8 @@ fn body_kinematics_kernel_matches_the_kinematics_plan() {
         let fields = ["d.xpos", "d.xquat", "d.subtree_com", "d.cvel"];
         let read = |name: &str| sim.buffer::<f32>(name).unwrap().read().unwrap();
         let plan: Vec<Vec<f32>> = fields.iter().map(|f| read(f)).collect();
-        let physics = PhysicsState::view(&sim).expect("the state buffers");
+        let physics = PhysicsState::view(&sim, PhysicsSizes::of(&character), character.name())
+            .expect("the state buffers");
         // Even envs were reset (only_done): odd ones must keep what they hold (NaN here).
         let flags: Vec<i32> = (0..n).map(|e| i32::from(e % 2 == 0)).collect();
         let done = DeviceArray::from_slice(&gpu, [n], &flags).unwrap();

@@ -16,14 +16,17 @@ so that a change to the training termination cannot change what counts as succes
 
 import warp as wp
 
-from env.reference import clip_base, reference_locate, reference_position, reference_quat_wxyz, reference_value
+from env.reference import (
+    ReferenceLayout,
+    clip_base,
+    reference_locate,
+    reference_position,
+    reference_quat_wxyz,
+    reference_value,
+)
 from env.rotation import qdiff_angle
 
 wp.set_module_options({"enable_backward": False})
-
-REF_BODY_POS = wp.constant(77)
-REF_BODY_QUAT = wp.constant(122)
-NUM_BODIES = wp.constant(15)
 
 RUNNING = wp.constant(0)
 COMPLETED = wp.constant(1)
@@ -41,7 +44,7 @@ SUM_REWARD = wp.constant(4)
 class Yardstick:
     """Per-step failures of an evaluation episode (src/env/evaluation.rs: SUCCESS_*)."""
 
-    # A body farther than this from its reference (m).
+    # A tracked body farther than this from its reference (m).
     max_body_distance: wp.float32
     # The root more than this below the reference root (m).
     max_root_drop: wp.float32
@@ -53,8 +56,10 @@ def evaluation_accumulate(
     xpos: wp.array3d(dtype=wp.float32),
     xquat: wp.array3d(dtype=wp.float32),
     table: wp.array(dtype=wp.float32),
+    table_layout: ReferenceLayout,
     clip_offsets: wp.array(dtype=wp.int32),
     end_effectors: wp.array(dtype=wp.int32),
+    tracked_bodies: wp.array(dtype=wp.int32),
     clip_id: wp.array(dtype=wp.int32),
     ref_time: wp.array(dtype=wp.float32),
     t: wp.int32,
@@ -68,11 +73,12 @@ def evaluation_accumulate(
     sums: wp.array2d(dtype=wp.float32),
 ):
     """One thread per env n whose status is RUNNING: adds, for the state after step t against the
-    reference of the env's clip `clip_id[n]` at `ref_time[n]`, the mean root-relative body
-    position error (average pose error, m), the mean world body position error (global MPJPE,
-    m), the mean end-effector position error (m) and orientation error (rad) over the 5 end
-    effectors, and the step's reward to `sums[n]`, counts the step, then sets the status to FAILED if the step fails the yardstick
-    (a body farther than `max_body_distance` from its reference, or the root more than
+    reference of the env's clip `clip_id[n]` at `ref_time[n]`, the mean root-relative position
+    error of the tracked bodies (average pose error, m; `tracked_bodies` holds body indices,
+    MuJoCo id - 1), their mean world position error (global MPJPE, m), the mean end-effector
+    position error (m) and orientation error (rad) over the end effectors, and the step's reward
+    to `sums[n]`, counts the step, then sets the status to FAILED if the step fails the yardstick
+    (a tracked body farther than `max_body_distance` from its reference, or the root more than
     `max_root_drop` below the reference root) or `terminated[t, n]`, else COMPLETED if
     `truncated[t, n]` or the env has scored its clip's `clip_steps[clip_id[n]]` steps (a
     library's clips have episodes of their own lengths in one evaluation rollout)."""
@@ -82,13 +88,15 @@ def evaluation_accumulate(
     clip = clip_id[n]
     at = reference_locate(table, clip_base(clip_offsets, clip), ref_time[n])
     root = wp.vec3(xpos[n, 1, 0], xpos[n, 1, 1], xpos[n, 1, 2])
-    root_ref = reference_position(table, at, REF_BODY_POS)
+    root_ref = reference_position(table, at, table_layout.body_pos)
     pose = float(0.0)
     mpjpe = float(0.0)
     far = float(0.0)
-    for b in range(NUM_BODIES):
+    bodies = tracked_bodies.shape[0]
+    for i in range(bodies):
+        b = tracked_bodies[i]
         p = wp.vec3(xpos[n, b + 1, 0], xpos[n, b + 1, 1], xpos[n, b + 1, 2])
-        p_ref = reference_position(table, at, REF_BODY_POS + 3 * b)
+        p_ref = reference_position(table, at, table_layout.body_pos + 3 * b)
         distance = wp.length(p - p_ref)
         far = wp.max(far, distance)
         mpjpe += distance
@@ -99,12 +107,12 @@ def evaluation_accumulate(
     for k in range(effectors):
         b = end_effectors[k]
         p = wp.vec3(xpos[n, b + 1, 0], xpos[n, b + 1, 1], xpos[n, b + 1, 2])
-        ee_pos += wp.length(p - reference_position(table, at, REF_BODY_POS + 3 * b))
+        ee_pos += wp.length(p - reference_position(table, at, table_layout.body_pos + 3 * b))
         q = wp.vec4(xquat[n, b + 1, 0], xquat[n, b + 1, 1], xquat[n, b + 1, 2], xquat[n, b + 1, 3])
-        ee_rot += qdiff_angle(q, reference_quat_wxyz(table, at, REF_BODY_QUAT + 4 * b))
-    bodies = wp.float32(NUM_BODIES)
-    sums[n, SUM_POSE] = sums[n, SUM_POSE] + pose / bodies
-    sums[n, SUM_MPJPE] = sums[n, SUM_MPJPE] + mpjpe / bodies
+        ee_rot += qdiff_angle(q, reference_quat_wxyz(table, at, table_layout.body_quat + 4 * b))
+    body_count = wp.float32(wp.max(bodies, 1))
+    sums[n, SUM_POSE] = sums[n, SUM_POSE] + pose / body_count
+    sums[n, SUM_MPJPE] = sums[n, SUM_MPJPE] + mpjpe / body_count
     sums[n, SUM_EE_POS] = sums[n, SUM_EE_POS] + ee_pos / wp.float32(effectors)
     sums[n, SUM_EE_ROT] = sums[n, SUM_EE_ROT] + ee_rot / wp.float32(effectors)
     sums[n, SUM_REWARD] = sums[n, SUM_REWARD] + rewards[t, n]

@@ -1,10 +1,11 @@
 """The PHC-style observation and its running normalization (docs/env.md, "Observation").
 
-`observe` writes one raw row per env (16 threads to a row): everything in the heading frame of
-the simulated root, positions relative to the root, rotations as 6D (the first two columns of
-the rotation matrix). Which optional blocks are present and how many future frames are read are
-run-time arguments, so the observation size follows the config with no rebuild (`src/env/layout.rs:
-observation_size` computes it).
+`observe` writes one raw row per env (a thread per tracked body and one more to a row):
+everything in the heading frame of the simulated root, positions relative to the root, rotations
+as 6D (the first two columns of the rotation matrix). The tracked bodies, which optional blocks
+are present and how many future frames are read are run-time arguments, so the observation size
+follows the character and the config with no rebuild (`src/env/layout.rs: observation_size`
+computes it).
 
 Normalization keeps per-dimension running moments on the GPU in float64:
 `observation_moments` adds the batch's sums (a 2-D launch over env chunks x dimensions, so that
@@ -16,16 +17,11 @@ rollout storage row `row`.
 
 import warp as wp
 
-from env.reference import clip_base, reference_locate, reference_position, reference_quat_wxyz
+from env.reference import ReferenceLayout, clip_base, reference_locate, reference_position, reference_quat_wxyz
 from env.rotation import heading_inverse, qconj, qmul, qrotate, tan_norm
 
 wp.set_module_options({"enable_backward": False})
 
-REF_BODY_POS = wp.constant(77)
-REF_BODY_QUAT = wp.constant(122)
-NUM_BODIES = wp.constant(15)
-# Threads of `observe` per env: one per body and one for the root and the rest.
-OBSERVE_SLOTS = wp.constant(16)
 # Envs summed by one thread of observation_moments.
 MOMENT_CHUNK = wp.constant(64)
 VARIANCE_EPSILON = wp.constant(1.0e-8)
@@ -41,7 +37,7 @@ class ObservationParams:
     dt: wp.float32
     prev_action: wp.int32
     root_target: wp.int32
-    # 1: every body's reference at `ref_time + dt` relative to the simulated body (PHC's
+    # 1: every tracked body's reference at `ref_time + dt` relative to the simulated body (PHC's
     # difference observation), 9 values per body.
     reference_bodies: wp.int32
 
@@ -80,39 +76,43 @@ def observe(
     cvel: wp.array3d(dtype=wp.float32),
     subtree_com: wp.array3d(dtype=wp.float32),
     table: wp.array(dtype=wp.float32),
+    table_layout: ReferenceLayout,
     clip_offsets: wp.array(dtype=wp.int32),
     end_effectors: wp.array(dtype=wp.int32),
+    tracked_bodies: wp.array(dtype=wp.int32),
     clip_id: wp.array(dtype=wp.int32),
     ref_time: wp.array(dtype=wp.float32),
     actions: wp.array2d(dtype=wp.float32),
     params: ObservationParams,
     obs: wp.array2d(dtype=wp.float32),
 ):
-    """OBSERVE_SLOTS threads per env (thread `n * OBSERVE_SLOTS + slot`): the raw observation
-    row (docs/env.md table), in order: root height; root orientation (6D); root linear and
-    angular velocity; positions of bodies 1..14 relative to the root; orientations (6D), linear
-    and angular velocities of the 15 bodies; for each future frame k = 1..K of the env's clip
-    `clip_id[n]` at `ref_time + k * spacing * dt`, each end effector's reference position
-    relative to the root and orientation (6D); the last action (if `prev_action`); the reference
-    root at `ref_time + dt` relative to the root, position and orientation (if `root_target`);
-    for each of the 15 bodies, the reference at `ref_time + dt` against the simulated body: the
-    position difference (reference minus simulated) in the heading frame and the rotation from
-    the simulated to the reference orientation, `conj(q) q_ref` in the body's frame, as 6D (if
-    `reference_bodies`). Slot b < 15 writes body b's values, slot 15 the root's, the future
-    frames, the action and the root target: one thread per env wrote all ~360 values one after
-    the other, with 32 blocks on a 132-SM GPU."""
+    """B + 1 threads per env for B tracked bodies (thread `n * (B + 1) + slot`; `tracked_bodies`
+    holds body indices, MuJoCo id - 1, the root's first): the raw observation row (docs/env.md
+    table), in order: root height; root orientation (6D); root linear and angular velocity;
+    positions of the tracked bodies but the first relative to the root; orientations (6D),
+    linear and angular velocities of the B tracked bodies; for each future frame k = 1..K of the
+    env's clip `clip_id[n]` at `ref_time + k * spacing * dt`, each end effector's reference
+    position relative to the root and orientation (6D); the last action (if `prev_action`); the
+    reference root at `ref_time + dt` relative to the root, position and orientation (if
+    `root_target`); for each tracked body, the reference at `ref_time + dt` against the
+    simulated body: the position difference (reference minus simulated) in the heading frame
+    and the rotation from the simulated to the reference orientation, `conj(q) q_ref` in the
+    body's frame, as 6D (if `reference_bodies`). Slot i < B writes tracked body i's values, slot
+    B the root's, the future frames, the action and the root target: one thread per env wrote
+    all ~360 values one after the other, with 32 blocks on a 132-SM GPU."""
     t = wp.tid()
-    n = t // OBSERVE_SLOTS
-    slot = t - n * OBSERVE_SLOTS
+    bodies = tracked_bodies.shape[0]
+    n = t // (bodies + 1)
+    slot = t - n * (bodies + 1)
     root_q = wp.vec4(qpos[n, 3], qpos[n, 4], qpos[n, 5], qpos[n, 6])
     root_p = body_vec3(xpos, n, 1, 0)
     h = heading_inverse(root_q)
     # Where each block starts (the order above).
     positions = 13
-    orientations = positions + 3 * (NUM_BODIES - 1)
-    linear = orientations + 6 * NUM_BODIES
-    angular = linear + 3 * NUM_BODIES
-    future = angular + 3 * NUM_BODIES
+    orientations = positions + 3 * (bodies - 1)
+    linear = orientations + 6 * bodies
+    angular = linear + 3 * bodies
+    future = angular + 3 * bodies
     k = future + params.future_frames * end_effectors.shape[0] * 9
     if params.prev_action != 0:
         k += actions.shape[1]
@@ -120,24 +120,24 @@ def observe(
         k += 9
     reference = k
 
-    if slot < NUM_BODIES:
-        b = slot
+    if slot < bodies:
+        b = tracked_bodies[slot]
         p = body_vec3(xpos, n, b + 1, 0)
-        if b > 0:
-            put3(obs, n, positions + 3 * (b - 1), qrotate(h, p - root_p))
-        put6(obs, n, orientations + 6 * b, qmul(h, body_quat(xquat, n, b + 1)))
+        if slot > 0:
+            put3(obs, n, positions + 3 * (slot - 1), qrotate(h, p - root_p))
+        put6(obs, n, orientations + 6 * slot, qmul(h, body_quat(xquat, n, b + 1)))
         w = body_vec3(cvel, n, b + 1, 0)
         com = body_vec3(subtree_com, n, 1, 0)
         v = body_vec3(cvel, n, b + 1, 3) + wp.cross(w, p - com)
-        put3(obs, n, linear + 3 * b, qrotate(h, v))
-        put3(obs, n, angular + 3 * b, qrotate(h, w))
+        put3(obs, n, linear + 3 * slot, qrotate(h, v))
+        put3(obs, n, angular + 3 * slot, qrotate(h, w))
         if params.reference_bodies != 0:
             base = clip_base(clip_offsets, clip_id[n])
             at = reference_locate(table, base, ref_time[n] + params.dt)
-            k = reference + 9 * b
-            p_ref = reference_position(table, at, REF_BODY_POS + 3 * b)
+            k = reference + 9 * slot
+            p_ref = reference_position(table, at, table_layout.body_pos + 3 * b)
             k = put3(obs, n, k, qrotate(h, p_ref - p))
-            q_ref = reference_quat_wxyz(table, at, REF_BODY_QUAT + 4 * b)
+            q_ref = reference_quat_wxyz(table, at, table_layout.body_quat + 4 * b)
             put6(obs, n, k, qmul(qconj(body_quat(xquat, n, b + 1)), q_ref))
     else:
         base = clip_base(clip_offsets, clip_id[n])
@@ -152,8 +152,8 @@ def observe(
             at = reference_locate(table, base, ref_time[n] + wp.float32(f * params.future_spacing) * params.dt)
             for e in range(end_effectors.shape[0]):
                 b = end_effectors[e]
-                k = put3(obs, n, k, qrotate(h, reference_position(table, at, REF_BODY_POS + 3 * b) - root_p))
-                k = put6(obs, n, k, qmul(h, reference_quat_wxyz(table, at, REF_BODY_QUAT + 4 * b)))
+                k = put3(obs, n, k, qrotate(h, reference_position(table, at, table_layout.body_pos + 3 * b) - root_p))
+                k = put6(obs, n, k, qmul(h, reference_quat_wxyz(table, at, table_layout.body_quat + 4 * b)))
         if params.prev_action != 0:
             for m in range(actions.shape[1]):
                 obs[n, k] = actions[n, m]
@@ -250,17 +250,18 @@ def observation_normalize(
 # Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
 # above a kernel would change its PTX.
 LAUNCH = {
+    # A thread per tracked body and one more per env.
     "observe": (
-        "dim == extent(obs, 0) * 16",
-        "dim <= extent(qpos, 0) * 16",
-        "dim <= extent(qvel, 0) * 16",
-        "dim <= extent(xpos, 0) * 16",
-        "dim <= extent(xquat, 0) * 16",
-        "dim <= extent(cvel, 0) * 16",
-        "dim <= extent(subtree_com, 0) * 16",
-        "dim <= len(clip_id) * 16",
-        "dim <= len(ref_time) * 16",
-        "dim <= extent(actions, 0) * 16",
+        "dim == extent(obs, 0) * (len(tracked_bodies) + 1)",
+        "dim <= extent(qpos, 0) * (len(tracked_bodies) + 1)",
+        "dim <= extent(qvel, 0) * (len(tracked_bodies) + 1)",
+        "dim <= extent(xpos, 0) * (len(tracked_bodies) + 1)",
+        "dim <= extent(xquat, 0) * (len(tracked_bodies) + 1)",
+        "dim <= extent(cvel, 0) * (len(tracked_bodies) + 1)",
+        "dim <= extent(subtree_com, 0) * (len(tracked_bodies) + 1)",
+        "dim <= len(clip_id) * (len(tracked_bodies) + 1)",
+        "dim <= len(ref_time) * (len(tracked_bodies) + 1)",
+        "dim <= extent(actions, 0) * (len(tracked_bodies) + 1)",
     ),
     "observation_moments": (
         "dim == cdiv(extent(obs, 0), 64) * extent(obs, 1)",

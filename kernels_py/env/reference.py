@@ -255,6 +255,29 @@ def lookup_reference(
             for c in range(3):
                 out[i, o + c] = p[c]
 
+
+@wp.struct
+class ReferenceLayout:
+    """Where a row of the table keeps each field, in values from the row's start, and how many
+    bodies it describes: the character's `TableLayout` (src/motion/table.rs), filled by Rust
+    (`env::layout::reference_layout`) so that one PTX serves every character. qpos is the row's
+    first field (`TableLayout::new` puts it at 0, which `reference_layout` checks), so a qpos
+    address is also its row offset. Defined below the kernels: Warp's generated CUDA quotes
+    source line numbers, and lines added above the functions would change every module's PTX."""
+
+    qvel: wp.int32
+    body_pos: wp.int32
+    body_quat: wp.int32
+    body_linvel: wp.int32
+    body_angvel: wp.int32
+    com_pos: wp.int32
+    com_vel: wp.int32
+    heading: wp.int32
+    # Values per row.
+    stride: wp.int32
+    # Bodies in a row, the world excluded (body index = MuJoCo body id - 1).
+    bodies: wp.int32
+
 # Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
 # dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
 # writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.

@@ -16,6 +16,7 @@ import warp as wp
 from env.reference import (
     HEADER_DURATION,
     HEADER_WRAP,
+    ReferenceLayout,
     clip_base,
     clip_header,
     reference_locate,
@@ -29,7 +30,6 @@ from env.rotation import qexp, qmul
 # of dependent math, so 4096 of them in 256-thread blocks sat on 16 of an H100's 132 SMs.
 wp.set_module_options({"enable_backward": False, "block_dim": 64})
 
-REF_QVEL = wp.constant(43)
 BALL = wp.constant(0)
 # Velocity noise is this times the angle noise (velocities are ~10x angles at 30 Hz control).
 VELOCITY_NOISE_FACTOR = wp.constant(10.0)
@@ -98,6 +98,7 @@ def skip_normals(state: wp.uint32, count: wp.int32) -> wp.uint32:
 def reset_masked(
     done: wp.array(dtype=wp.int32),
     table: wp.array(dtype=wp.float32),
+    table_layout: ReferenceLayout,
     clip_offsets: wp.array(dtype=wp.int32),
     root_quat: wp.int32,
     joint_kind: wp.array(dtype=wp.int32),
@@ -191,7 +192,7 @@ def reset_masked(
     if lane >= nq:
         k = lane - nq
         state = skip_normals(state, drawn + k)
-        qvel[n, k] = reference_value(table, at, REF_QVEL + k) + VELOCITY_NOISE_FACTOR * sigma * wp.randn(state)
+        qvel[n, k] = reference_value(table, at, table_layout.qvel + k) + VELOCITY_NOISE_FACTOR * sigma * wp.randn(state)
         qacc_warmstart[n, k] = 0.0
     elif joint >= 0:
         a = joint_qpos[joint]

@@ -13,6 +13,7 @@ import warp as wp
 from env.reference import (
     HEADER_DURATION,
     HEADER_WRAP,
+    ReferenceLayout,
     clip_base,
     clip_header,
     reference_locate,
@@ -26,12 +27,6 @@ from env.rotation import qdiff_angle
 # of dependent math, so 4096 of them in 256-thread blocks sat on 16 of an H100's 132 SMs.
 wp.set_module_options({"enable_backward": False, "block_dim": 64})
 
-# Reference row layout (docs/reference_table.md).
-REF_QVEL = wp.constant(43)
-REF_BODY_POS = wp.constant(77)
-REF_BODY_QUAT = wp.constant(122)
-REF_COM_POS = wp.constant(272)
-NUM_BODIES = wp.constant(15)
 BALL = wp.constant(0)
 ROOT_DOFS = wp.constant(6)
 # Threads of `tracking_error_sums` per env (src/env/layout.rs: TRACKING_LANES), and the slots of
@@ -97,10 +92,12 @@ def tracking_error_sums(
     xpos: wp.array3d(dtype=wp.float32),
     xquat: wp.array3d(dtype=wp.float32),
     table: wp.array(dtype=wp.float32),
+    table_layout: ReferenceLayout,
     clip_offsets: wp.array(dtype=wp.int32),
     joint_kind: wp.array(dtype=wp.int32),
     joint_qpos: wp.array(dtype=wp.int32),
     end_effectors: wp.array(dtype=wp.int32),
+    tracked_bodies: wp.array(dtype=wp.int32),
     params: TrackingParams,
     clip_id: wp.array(dtype=wp.int32),
     ref_time: wp.array(dtype=wp.float32),
@@ -109,8 +106,9 @@ def tracking_error_sums(
     """TRACKING_LANES threads per env n (thread `n * TRACKING_LANES + lane`), the first half of
     the reward: against the reference of clip `clip_id[n]` at `ref_time[n] + dt`, lane l sums the
     squared errors of every TRACKING_LANES-th item from item l: joints (pose), non-root dofs
-    (velocity), end effectors (position, orientation), and over bodies the largest and the summed
-    distance to the reference, into `error_sums[n, l, 0..6]` (ERROR_* slots). Each lane locates
+    (velocity), end effectors (position, orientation), and over the tracked bodies (body indices,
+    MuJoCo id - 1) the largest and the summed distance to the reference, into
+    `error_sums[n, l, 0..6]` (ERROR_* slots). Each lane locates
     the reference time itself, as `reward_termination` does again: a few reads of the same
     addresses instead of a launch, or a store and a load, to share them. One thread per env
     walked all ~60 items one after the other (the reward stage, this and the episode statistics,
@@ -134,7 +132,7 @@ def tracking_error_sums(
 
     e_vel = float(0.0)
     for k in range(ROOT_DOFS + lane, qvel.shape[1], TRACKING_LANES):
-        d = qvel[n, k] - reference_value(table, at, REF_QVEL + k)
+        d = qvel[n, k] - reference_value(table, at, table_layout.qvel + k)
         e_vel += d * d
 
     # The root-relative error subtracts each root (the root's own error is not an end
@@ -143,24 +141,25 @@ def tracking_error_sums(
     root_offset = wp.vec3(0.0)
     if params.ee_relative != 0:
         root_offset = wp.vec3(xpos[n, 1, 0], xpos[n, 1, 1], xpos[n, 1, 2]) - reference_position(
-            table, at, REF_BODY_POS
+            table, at, table_layout.body_pos
         )
     e_eep = float(0.0)
     e_eer = float(0.0)
     for k in range(lane, end_effectors.shape[0], TRACKING_LANES):
         b = end_effectors[k]
         p = wp.vec3(xpos[n, b + 1, 0], xpos[n, b + 1, 1], xpos[n, b + 1, 2])
-        dp = p - reference_position(table, at, REF_BODY_POS + 3 * b) - root_offset
+        dp = p - reference_position(table, at, table_layout.body_pos + 3 * b) - root_offset
         e_eep += wp.dot(dp, dp)
         q = wp.vec4(xquat[n, b + 1, 0], xquat[n, b + 1, 1], xquat[n, b + 1, 2], xquat[n, b + 1, 3])
-        d = qdiff_angle(q, reference_quat_wxyz(table, at, REF_BODY_QUAT + 4 * b))
+        d = qdiff_angle(q, reference_quat_wxyz(table, at, table_layout.body_quat + 4 * b))
         e_eer += d * d
 
     far = float(0.0)
     distances = float(0.0)
-    for b in range(lane, NUM_BODIES, TRACKING_LANES):
+    for i in range(lane, tracked_bodies.shape[0], TRACKING_LANES):
+        b = tracked_bodies[i]
         p = wp.vec3(xpos[n, b + 1, 0], xpos[n, b + 1, 1], xpos[n, b + 1, 2])
-        distance = wp.length(p - reference_position(table, at, REF_BODY_POS + 3 * b))
+        distance = wp.length(p - reference_position(table, at, table_layout.body_pos + 3 * b))
         far = wp.max(far, distance)
         distances += distance
 
@@ -179,9 +178,11 @@ def reward_termination(
     subtree_com: wp.array3d(dtype=wp.float32),
     error_sums: wp.array3d(dtype=wp.float32),
     table: wp.array(dtype=wp.float32),
+    table_layout: ReferenceLayout,
     clip_offsets: wp.array(dtype=wp.int32),
     joint_kind: wp.array(dtype=wp.int32),
     end_effectors: wp.array(dtype=wp.int32),
+    tracked_bodies: wp.array(dtype=wp.int32),
     params: TrackingParams,
     t: wp.int32,
     clip_id: wp.array(dtype=wp.int32),
@@ -201,10 +202,10 @@ def reward_termination(
     position and orientation errors against the reference of the env's clip `clip_id[n]` at
     `ref_time[n] + dt`; failure (not
     within `grace_steps` of a reset) when the root is more than `termination_height` below the
-    reference root (FELL), a body is farther than `tracking_distance` from its reference (LOST),
-    and, each only when its threshold is positive, the root is below `min_root_height` (LOW_ROOT),
-    the reward is below `min_reward` (LOW_REWARD), or the mean body distance to the reference
-    exceeds `mean_tracking_distance` (DRIFT); truncation at `max_episode_steps` or the end of a
+    reference root (FELL), a tracked body is farther than `tracking_distance` from its reference
+    (LOST), and, each only when its threshold is positive, the root is below `min_root_height`
+    (LOW_ROOT), the reward is below `min_reward` (LOW_REWARD), or the mean distance of the tracked
+    bodies to their references exceeds `mean_tracking_distance` (DRIFT); truncation at `max_episode_steps` or the end of a
     clamped clip. Writes `rewards/terminated/truncated[t, n]`, `done[n]`, `failure[n]` (the
     bits of every cause that held, 0 when the step did not fail), `errors[n, 0..5]` (the five
     error terms, as used in the reward), advances `ref_time[n]` by dt and `episode_step[n]` by 1,
@@ -242,10 +243,10 @@ def reward_termination(
     ee_count = float(wp.max(end_effectors.shape[0], 1))
     e_eep = e_eep / ee_count
     e_eer = e_eer / ee_count
-    mean_distance = mean_distance / float(NUM_BODIES)
+    mean_distance = mean_distance / float(wp.max(tracked_bodies.shape[0], 1))
 
     com = wp.vec3(subtree_com[n, 1, 0], subtree_com[n, 1, 1], subtree_com[n, 1, 2])
-    dc = com - reference_position(table, at, REF_COM_POS)
+    dc = com - reference_position(table, at, table_layout.com_pos)
     e_com = wp.dot(dc, dc)
 
     reward = wp.exp(

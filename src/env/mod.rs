@@ -41,7 +41,7 @@ pub use evaluation::{
     clip_evaluation, evaluation_env, evaluation_episode_steps, evaluation_start_time, yardstick,
 };
 pub use goal_counters::{GoalCounter, GoalTally};
-pub use physics_state::PhysicsState;
+pub use physics_state::{PhysicsSizes, PhysicsState, PhysicsStateError};
 pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;
 pub use rollout::{EpisodeState, Rollout, RolloutError};

@@ -4,20 +4,24 @@
 //! kernels have one code path (docs/library.md, "One code path in the kernels").
 
 use crate::cuda::{Gpu, Stream};
+use crate::motion::table::TableLayout;
 use crate::motion::{MotionLibrary, ReferenceTable};
 
-use crate::kernels::{DeviceArray, DeviceArray2, EnvError, EnvKernels};
+use super::layout::reference_layout;
+use crate::kernels::{DeviceArray, DeviceArray2, EnvError, EnvKernels, ReferenceLayout};
 
 /// [`MotionLibrary::data`] (or a [`ReferenceTable::data`], the library of one) on the device,
-/// with the clips' header offsets and the quaternion and position offsets of a row. Env kernels
-/// read [`DeviceReferenceTable::table`] at `clip_offsets[clip_id[n]]` with the `@wp.func`s of
-/// `kernels_py/env/reference.py`.
+/// with the clips' header offsets, the quaternion and position offsets of a row and the row's
+/// layout. Env kernels read [`DeviceReferenceTable::table`] at `clip_offsets[clip_id[n]]` with
+/// the `@wp.func`s of `kernels_py/env/reference.py`, at the offsets of
+/// [`DeviceReferenceTable::layout`].
 #[derive(Debug)]
 pub struct DeviceReferenceTable {
     table: DeviceArray<f32>,
     clip_offsets: DeviceArray<i32>,
     quaternion_offsets: DeviceArray<i32>,
     position_offsets: DeviceArray<i32>,
+    layout: ReferenceLayout,
     stride: usize,
 }
 
@@ -42,7 +46,7 @@ impl DeviceReferenceTable {
             &[0],
             table.quaternion_offsets(),
             table.position_offsets(),
-            table.layout().stride,
+            &table.layout(),
         )
     }
 
@@ -57,7 +61,7 @@ impl DeviceReferenceTable {
             &library.header_offsets(),
             library.quaternion_offsets(),
             library.position_offsets(),
-            library.layout().stride,
+            &library.layout(),
         )
     }
 
@@ -67,7 +71,7 @@ impl DeviceReferenceTable {
         header_offsets: &[usize],
         quaternion_offsets: &[usize],
         position_offsets: &[usize],
-        stride: usize,
+        layout: &TableLayout,
     ) -> Result<DeviceReferenceTable, EnvError> {
         if header_offsets.is_empty() {
             return Err(EnvError::ArrayShape {
@@ -90,8 +94,14 @@ impl DeviceReferenceTable {
             clip_offsets: DeviceArray::from_slice(gpu, [clips.len()], &clips)?,
             quaternion_offsets: DeviceArray::from_slice(gpu, [quaternions.len()], &quaternions)?,
             position_offsets: DeviceArray::from_slice(gpu, [positions.len()], &positions)?,
-            stride,
+            layout: reference_layout(layout)?,
+            stride: layout.stride,
         })
+    }
+
+    /// Where a row keeps each field, as the kernels take it.
+    pub fn layout(&self) -> &ReferenceLayout {
+        &self.layout
     }
 
     /// Values per row.

@@ -14,7 +14,7 @@ use crate::kernels::{DeviceArray, DeviceArray2, EnvError, GoalParams, TrackingPa
 
 use super::config::{GoalConfig, ObsConfig, RolloutConfig};
 use super::goal_counters::{GoalCounter, GoalTally};
-use super::layout::observation_size;
+use super::layout::{ObservationCounts, observation_size};
 
 /// The goal block of the observation: the goal's x and y in the heading frame, and its
 /// horizontal distance (goal.py: `goal_observe`).
@@ -86,8 +86,8 @@ pub fn goal_observation_config(obs: &ObsConfig) -> ObsConfig {
 }
 
 /// The goal task's observation size: the character's own state, then the goal block.
-pub fn goal_observation_size(obs: &ObsConfig, motors: usize, effectors: usize) -> usize {
-    observation_size(&goal_observation_config(obs), motors, effectors) + GOAL_OBSERVATION
+pub fn goal_observation_size(obs: &ObsConfig, counts: ObservationCounts) -> usize {
+    observation_size(&goal_observation_config(obs), counts) + GOAL_OBSERVATION
 }
 
 /// Control steps of a goal episode of `episode_s` seconds (at least 1).
@@ -120,15 +120,20 @@ mod tests {
     #[test]
     fn the_goal_observation_is_the_character_state_and_three_goal_values() {
         let obs = ObsConfig::default();
+        let humanoid = ObservationCounts {
+            actions: 28,
+            end_effectors: 5,
+            tracked_bodies: 15,
+        };
         // 235 values of the character's state, 28 of the previous action, 3 of the goal.
-        assert_eq!(goal_observation_size(&obs, 28, 5), 235 + 28 + 3);
+        assert_eq!(goal_observation_size(&obs, humanoid), 235 + 28 + 3);
         let without = ObsConfig {
             prev_action: false,
             root_target: true,
             reference_bodies: true,
             ..ObsConfig::default()
         };
-        assert_eq!(goal_observation_size(&without, 28, 5), 235 + 3);
+        assert_eq!(goal_observation_size(&without, humanoid), 235 + 3);
     }
 
     #[test]

@@ -14,7 +14,7 @@
 //!   the env's actions. Everything is queued on the stream: it records into the rollout's graph.
 
 use crate::cuda::{Gpu, Stream};
-use crate::env::layout::{ObservationBlock, observation_blocks};
+use crate::env::layout::{ObservationBlock, ObservationCounts, observation_blocks};
 use crate::env::{
     ActStorage, GOAL_OBSERVATION, ObsConfig, RolloutError, RolloutPolicy, goal_observation_config,
 };
@@ -34,6 +34,8 @@ pub struct GoalDecoding {
     pub proprio_columns: Vec<i32>,
     /// The goal observation's size.
     pub observation_size: usize,
+    /// The character's counts the observations are sized by.
+    pub counts: ObservationCounts,
     /// Frozen statistics `count [2]`, `mean [D]`, `m2 [D]` of the goal observation: the latent
     /// checkpoint's on the columns the decoder reads (so that they are normalized exactly as
     /// in its training); mean 0 and variance 1 on the others (the goal block, in metres).
@@ -43,8 +45,8 @@ pub struct GoalDecoding {
 }
 
 /// The observation blocks of the character's own state (not the reference's).
-fn state_blocks(obs: &ObsConfig, motors: usize, effectors: usize) -> Vec<ObservationBlock> {
-    observation_blocks(obs, motors, effectors)
+fn state_blocks(obs: &ObsConfig, counts: ObservationCounts) -> Vec<ObservationBlock> {
+    observation_blocks(obs, counts)
         .into_iter()
         .filter(|b| !REFERENCE_BLOCKS.contains(&b.name.as_str()))
         .collect()
@@ -52,24 +54,24 @@ fn state_blocks(obs: &ObsConfig, motors: usize, effectors: usize) -> Vec<Observa
 
 impl FrozenDecoder {
     /// How a goal task whose `[obs]` is `goal_obs` feeds this decoder, trained on observations
-    /// of `trained_obs` (the latent checkpoint's `[obs]`), for a character of `motors` motors
-    /// and `effectors` end effectors. Refuses (one line naming the file) a decoder whose
+    /// of `trained_obs` (the latent checkpoint's `[obs]`), for a character of `counts` (motors,
+    /// end effectors, tracked bodies). Refuses (one line naming the file) a decoder whose
     /// recorded columns do not match its `[obs]`, a block of the character's state that the
     /// goal observation lacks or sizes differently, another `obs.clip`, or another character.
     pub fn goal_decoding(
         &self,
         trained_obs: &ObsConfig,
         goal_obs: &ObsConfig,
-        motors: usize,
-        effectors: usize,
+        counts: ObservationCounts,
     ) -> Result<GoalDecoding, LatentError> {
+        let motors = counts.actions;
         let bad = |reason: String| LatentError::Incompatible {
             path: self.source.clone(),
             reason,
         };
-        let trained = observation_blocks(trained_obs, motors, effectors);
+        let trained = observation_blocks(trained_obs, counts);
         let trained_size: usize = trained.iter().map(|b| b.size).sum();
-        let trained_columns: Vec<i32> = state_blocks(trained_obs, motors, effectors)
+        let trained_columns: Vec<i32> = state_blocks(trained_obs, counts)
             .iter()
             .flat_map(|b| (b.offset..b.offset + b.size).map(|c| c as i32))
             .collect();
@@ -93,10 +95,10 @@ impl FrozenDecoder {
                 trained_obs.clip, goal_obs.clip, trained_obs.clip
             )));
         }
-        let goal = state_blocks(&goal_observation_config(goal_obs), motors, effectors);
+        let goal = state_blocks(&goal_observation_config(goal_obs), counts);
         let goal_size = goal.iter().map(|b| b.size).sum::<usize>() + GOAL_OBSERVATION;
         let mut columns = Vec::with_capacity(trained_columns.len());
-        for block in state_blocks(trained_obs, motors, effectors) {
+        for block in state_blocks(trained_obs, counts) {
             let Some(g) = goal.iter().find(|g| g.name == block.name) else {
                 return Err(bad(format!(
                     "the decoder reads the {} block ({} columns), which this goal task's observation lacks (its [obs] section: obs.prev_action = {})",
@@ -124,6 +126,7 @@ impl FrozenDecoder {
         Ok(GoalDecoding {
             proprio_columns: columns,
             observation_size: goal_size,
+            counts,
             obs_count: count,
             obs_mean: mean,
             obs_m2: m2,
@@ -344,7 +347,11 @@ mod tests {
     use crate::latent::networks::proprio_columns;
 
     const MOTORS: usize = 28;
-    const EFFECTORS: usize = 5;
+    const HUMANOID: ObservationCounts = ObservationCounts {
+        actions: MOTORS,
+        end_effectors: 5,
+        tracked_bodies: 15,
+    };
 
     fn tracking_obs() -> ObsConfig {
         ObsConfig {
@@ -356,8 +363,8 @@ mod tests {
     /// A frozen decoder of zero parameters trained on `obs`, with statistics that
     /// number each column (mean = column, m2 = 2 x column).
     fn frozen_on(obs: &ObsConfig) -> FrozenDecoder {
-        let columns = proprio_columns(obs, MOTORS, EFFECTORS);
-        let d = crate::env::layout::observation_size(obs, MOTORS, EFFECTORS);
+        let columns = proprio_columns(obs, HUMANOID);
+        let d = crate::env::layout::observation_size(obs, HUMANOID);
         let (p, l) = (columns.len(), 4);
         let decoder = vec![0.0f32; (p + l) * 8 + 8 + 8 * MOTORS + MOTORS];
         let prior = vec![0.0f32; p * 8 + 8 + 8 * 2 * l + 2 * l];
@@ -391,7 +398,7 @@ mod tests {
             ..ObsConfig::default()
         };
         let decoding = frozen
-            .goal_decoding(&trained, &goal_obs, MOTORS, EFFECTORS)
+            .goal_decoding(&trained, &goal_obs, HUMANOID)
             .expect("fits");
         // The goal observation is the character's state (235 + 28 previous actions) then the
         // goal block: the decoder's 263 columns are its first 263, in order.
@@ -430,7 +437,7 @@ mod tests {
             ..goal_obs.clone()
         };
         refused(
-            frozen.goal_decoding(&trained, &without_action, MOTORS, EFFECTORS),
+            frozen.goal_decoding(&trained, &without_action, HUMANOID),
             "prev_action",
         );
         let clipped = ObsConfig {
@@ -438,16 +445,23 @@ mod tests {
             ..goal_obs.clone()
         };
         refused(
-            frozen.goal_decoding(&trained, &clipped, MOTORS, EFFECTORS),
+            frozen.goal_decoding(&trained, &clipped, HUMANOID),
             "obs.clip",
         );
         refused(
-            frozen.goal_decoding(&trained, &goal_obs, 27, EFFECTORS),
+            frozen.goal_decoding(
+                &trained,
+                &goal_obs,
+                ObservationCounts {
+                    actions: 27,
+                    ..HUMANOID
+                },
+            ),
             "another character",
         );
         // Its [obs] section does not give the columns it records.
         refused(
-            frozen.goal_decoding(&ObsConfig::default(), &goal_obs, MOTORS, EFFECTORS),
+            frozen.goal_decoding(&ObsConfig::default(), &goal_obs, HUMANOID),
             "records",
         );
     }

@@ -7,7 +7,7 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 
 use crate::env::ObsConfig;
-use crate::env::layout::observation_blocks;
+use crate::env::layout::{ObservationCounts, observation_blocks};
 use crate::ppo::{LayerShape, initial_parameters, mlp_layout};
 
 use super::LatentError;
@@ -20,8 +20,8 @@ pub const REFERENCE_BLOCKS: [&str; 3] = ["future_end_effectors", "root_target", 
 /// The columns of the observation row that hold the character's own state (every block of
 /// `env::observation_blocks` but the [`REFERENCE_BLOCKS`], the previous action included), in
 /// order.
-pub fn proprio_columns(obs: &ObsConfig, motors: usize, effectors: usize) -> Vec<i32> {
-    observation_blocks(obs, motors, effectors)
+pub fn proprio_columns(obs: &ObsConfig, counts: ObservationCounts) -> Vec<i32> {
+    observation_blocks(obs, counts)
         .iter()
         .filter(|b| !REFERENCE_BLOCKS.contains(&b.name.as_str()))
         .flat_map(|b| (b.offset..b.offset + b.size).map(|c| c as i32))
@@ -205,9 +205,13 @@ mod tests {
     #[test]
     fn the_proprio_columns_are_the_characters_state_and_previous_action() {
         let obs = ObsConfig::default();
-        let (motors, effectors) = (28, 4);
-        let blocks = observation_blocks(&obs, motors, effectors);
-        let columns = proprio_columns(&obs, motors, effectors);
+        let counts = ObservationCounts {
+            actions: 28,
+            end_effectors: 4,
+            tracked_bodies: 15,
+        };
+        let blocks = observation_blocks(&obs, counts);
+        let columns = proprio_columns(&obs, counts);
         let reference: usize = blocks
             .iter()
             .filter(|b| REFERENCE_BLOCKS.contains(&b.name.as_str()))

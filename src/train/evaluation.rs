@@ -14,10 +14,10 @@
 //!
 //! Error metrics are means over every evaluated control step of every env (a failed env
 //! contributes its steps up to the failure), so an env that falls early weighs less:
-//! - average pose error: mean distance of the 15 bodies to the reference, both taken
-//!   relative to their root (m);
+//! - average pose error: mean distance of the tracked bodies (the humanoid's 15) to the
+//!   reference, both taken relative to their root (m);
 //! - global MPJPE: the same in world coordinates, roots included (m);
-//! - end-effector position error: mean distance of the 5 end effectors to the reference
+//! - end-effector position error: mean distance of the end effectors to the reference
 //!   (world, m), and orientation error: their mean rotation angle to the reference (rad).
 
 use std::fmt::Write as _;
@@ -34,7 +34,7 @@ pub use crate::env::{
 };
 use crate::motion::LoopMode;
 
-/// Largest global MPJPE (m, mean over the episode's steps and the 15 bodies) of a successful
+/// Largest global MPJPE (m, mean over the episode's steps and the tracked bodies) of a successful
 /// episode: a completed backflip drifting off the reference's path measured 0.28-0.31 m; tuned
 /// policies that track it measure 0.09-0.11 m.
 pub const SUCCESS_MAX_MEAN_MPJPE_M: f64 = 0.2;

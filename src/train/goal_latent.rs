@@ -92,12 +92,7 @@ pub fn load_goal_decoder(
         ));
     }
     let layout = JointLayout::for_character(character)?;
-    let decoding = frozen.goal_decoding(
-        &trained.obs,
-        &config.obs,
-        layout.num_motors,
-        layout.end_effectors.len(),
-    )?;
+    let decoding = frozen.goal_decoding(&trained.obs, &config.obs, layout.observation_counts())?;
     let digest = decoder_digest(
         &frozen.decoder,
         &frozen.prior,
@@ -120,6 +115,7 @@ impl GoalDecoder {
         let end = |layers: Vec<LayerShape>| layers.last().map_or(0, LayerShape::end);
         PolicyShapes {
             observation_size: d,
+            observation_counts: self.decoding.counts,
             action_size: l,
             actor_params: end(mlp_layout(d, &config.policy.actor_hidden, l)) + l,
             critic_params: end(mlp_layout(d, &config.policy.critic_hidden, 1)),

@@ -88,7 +88,7 @@ impl LatentTrainer {
         let rollout_config = config.rollout_config();
         let mut rollout = Rollout::new(gpu, store, motion, &rollout_config)?;
         rollout.freeze_normalization(&teacher.obs_count, &teacher.obs_mean, &teacher.obs_m2)?;
-        let columns = proprio_columns(&config.obs, layout.num_motors, layout.end_effectors.len());
+        let columns = proprio_columns(&config.obs, layout.observation_counts());
         let shapes = LatentShapes::new(
             latent,
             rollout.observation_size(),
@@ -412,11 +412,10 @@ pub fn load_teacher(
     };
     // The teacher's observation with this run's character (another character's actor does
     // not fit the action count or the parameter count).
-    let effectors = end_effectors(shapes, &config.obs);
     let values = TeacherValues {
         actor_hidden: &teacher_config.policy.actor_hidden,
         obs: &teacher_config.obs,
-        observation_size: observation_size(&teacher_config.obs, shapes.action_size, effectors),
+        observation_size: observation_size(&teacher_config.obs, shapes.observation_counts),
         action_size: shapes.action_size,
         actor: f32s(tensor_names::ACTOR)?,
         obs_count: f64s(tensor_names::OBS_COUNT)?,
@@ -429,14 +428,6 @@ pub fn load_teacher(
         obs: &config.obs,
     };
     Ok(TeacherCheckpoint::new(&source, values, student)?)
-}
-
-/// The end effectors behind `shapes.observation_size` for `obs` (the observation grows by a
-/// fixed count per end effector).
-fn end_effectors(shapes: &PolicyShapes, obs: &crate::env::ObsConfig) -> usize {
-    (0..64)
-        .find(|&e| observation_size(obs, shapes.action_size, e) == shapes.observation_size)
-        .unwrap_or(0)
 }
 
 /// The decoder and prior of the latent checkpoint at `path`, with the observation statistics:
@@ -493,11 +484,7 @@ pub fn latent_shapes(
     shapes: &PolicyShapes,
 ) -> Result<LatentShapes, TrainError> {
     let latent = latent_section(config)?;
-    let columns = proprio_columns(
-        &config.obs,
-        shapes.action_size,
-        end_effectors(shapes, &config.obs),
-    );
+    let columns = proprio_columns(&config.obs, shapes.observation_counts);
     Ok(LatentShapes::new(
         latent,
         shapes.observation_size,

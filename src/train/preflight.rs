@@ -13,7 +13,7 @@ use super::config::TrainConfig;
 use super::error::TrainError;
 use super::evaluation::evaluation_steps;
 use crate::env::goal_observation_size;
-use crate::env::layout::{JointLayout, observation_size};
+use crate::env::layout::{JointLayout, ObservationCounts, observation_size};
 use crate::motion::find::{ResolvedMotion, resolve_motion};
 use crate::motion::{Character, LoopMode, ReferenceMotion, ReferenceTable};
 use crate::plan::{PlanStore, SimulatedModel};
@@ -26,6 +26,8 @@ pub const RUN_PLANS: [&str; 2] = ["step", "kinematics"];
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PolicyShapes {
     pub observation_size: usize,
+    /// The character's counts the observation is sized by.
+    pub observation_counts: ObservationCounts,
     pub action_size: usize,
     /// Actor parameters, `log_std` included.
     pub actor_params: usize,
@@ -37,14 +39,15 @@ impl PolicyShapes {
         let layout =
             JointLayout::for_character(character).map_err(|e| TrainError::Setup(e.to_string()))?;
         let actions = layout.num_motors;
-        let effectors = layout.end_effectors.len();
+        let counts = layout.observation_counts();
         let observation = match &config.goal {
-            None => observation_size(&config.obs, actions, effectors),
-            Some(_) => goal_observation_size(&config.obs, actions, effectors),
+            None => observation_size(&config.obs, counts),
+            Some(_) => goal_observation_size(&config.obs, counts),
         };
         let end = |layers: Vec<crate::ppo::LayerShape>| layers.last().map_or(0, |l| l.end());
         Ok(PolicyShapes {
             observation_size: observation,
+            observation_counts: counts,
             action_size: actions,
             actor_params: end(mlp_layout(
                 observation,

@@ -9,32 +9,31 @@
 //! `theta_ref + s a`. Half the envs are near their targets and slow (below the torque limit),
 //! half far and fast (clamped).
 
-use instantmimic::env::layout::{BALL, JointLayout};
-use instantmimic::kernels::{PD_CONTROL, PD_TARGETS};
-use instantmimic::motion::table::HUMANOID_LAYOUT;
-
 use super::compare::{Report, wide};
-use super::physics::{NQ, NU, NV};
+use super::physics::Shape;
 use super::program::{Arg, Program, Scalar};
 use super::quat::{Quat, qexp, qlog, quat, quat_at, quat_at64, wxyz};
 use super::rng::Sampler;
 use super::{Check, Clip, Fixture, nan_f32};
+use instantmimic::env::layout::{BALL, JointLayout};
+use instantmimic::kernels::{PD_CONTROL, PD_TARGETS};
 
 /// The control step of the residual cases (s): targets are the reference at `ref_time + DT`.
 const DT: f32 = 1.0 / 30.0;
 
 /// What env `e`'s targets are offsets from: the zero pose and the hinge centers (`None`), or the
-/// reference rows at each env's `ref_time + DT`.
+/// reference rows at each env's `ref_time + DT` (qpos is a row's first field: a qpos address is
+/// its row offset, as the kernel reads it).
 fn base_ball(rows: Option<&[Vec<f64>]>, e: usize, qpos_addr: usize) -> Quat {
     match rows {
-        Some(rows) => quat_at64(&rows[e], HUMANOID_LAYOUT.qpos + qpos_addr),
+        Some(rows) => quat_at64(&rows[e], qpos_addr),
         None => Quat::identity(),
     }
 }
 
 fn base_hinge(rows: Option<&[Vec<f64>]>, layout: &JointLayout, e: usize, j: usize) -> f64 {
     match rows {
-        Some(rows) => rows[e][HUMANOID_LAYOUT.qpos + layout.qpos[j] as usize],
+        Some(rows) => rows[e][layout.qpos[j] as usize],
         None => f64::from(layout.center[j]),
     }
 }
@@ -43,8 +42,10 @@ fn base_hinge(rows: Option<&[Vec<f64>]>, layout: &JointLayout, e: usize, j: usiz
 /// where the shorter rotation flips sign (f32 and f64 could pick different sides).
 const MAX_ERROR_ANGLE: f64 = 3.0;
 
-/// The f64 torques of every env, `[n, 28]`, and how many ball / hinge values are clamped.
+/// The f64 torques of every env, `[n, nu]`, and how many ball / hinge values are clamped.
+#[allow(clippy::too_many_arguments)]
 pub fn reference(
+    shape: &Shape,
     layout: &JointLayout,
     rows: Option<&[Vec<f64>]>,
     actions: &[f32],
@@ -53,21 +54,22 @@ pub fn reference(
     damping: &[f32],
     action_scale: f32,
 ) -> (Vec<f64>, [usize; 4]) {
-    let n = actions.len() / NU;
-    let mut ctrl = vec![0.0; n * NU];
+    let (nq, nv, nu) = (shape.nq(), shape.nv(), shape.nu());
+    let n = actions.len() / nu;
+    let mut ctrl = vec![0.0; n * nu];
     // [ball clamped, ball free, hinge clamped, hinge free]
     let mut counts = [0usize; 4];
     for e in 0..n {
-        let a = |m: usize| f64::from(actions[e * NU + m]);
+        let a = |m: usize| f64::from(actions[e * nu + m]);
         for j in 0..layout.num_joints() {
             let m = layout.dof[j] as usize - 6;
-            let addr = e * NQ + layout.qpos[j] as usize;
+            let addr = e * nq + layout.qpos[j] as usize;
             let s = f64::from(action_scale) * f64::from(layout.scale[j]);
             let (kp, limit) = (f64::from(layout.kp[j]), f64::from(layout.limit[j]));
             let d = layout.dof[j] as usize;
             // The motor adds back the passive damping it clamps against (control.py).
             let pd = |p: f64, dof: usize, counts: &mut [usize; 4], base: usize| {
-                let damping = f64::from(damping[dof]) * f64::from(qvel[e * NV + dof]);
+                let damping = f64::from(damping[dof]) * f64::from(qvel[e * nv + dof]);
                 let v = p - damping;
                 if v.abs() > limit {
                     counts[base] += 1;
@@ -87,11 +89,11 @@ pub fn reference(
                     e_vec.norm()
                 );
                 for i in 0..3 {
-                    ctrl[e * NU + m + i] = pd(kp * e_vec[i], d + i, &mut counts, 0);
+                    ctrl[e * nu + m + i] = pd(kp * e_vec[i], d + i, &mut counts, 0);
                 }
             } else {
                 let target = base_hinge(rows, layout, e, j) + s * a(m);
-                ctrl[e * NU + m] = pd(kp * (target - f64::from(qpos[addr])), d, &mut counts, 2);
+                ctrl[e * nu + m] = pd(kp * (target - f64::from(qpos[addr])), d, &mut counts, 2);
             }
         }
     }
@@ -101,18 +103,20 @@ pub fn reference(
 /// Random actions, joint positions and velocities for `n` envs; even envs near their targets
 /// and slow (0.1 rad/s), odd ones far and fast (10 rad/s).
 fn inputs(
+    shape: &Shape,
     layout: &JointLayout,
     rows: Option<&[Vec<f64>]>,
     n: usize,
     action_scale: f32,
     rng: &mut Sampler,
 ) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
-    let mut actions = vec![0.0f32; n * NU];
-    let mut qpos = vec![0.0f32; n * NQ];
-    let mut qvel = vec![0.0f32; n * NV];
+    let (nq, nv, nu) = (shape.nq(), shape.nv(), shape.nu());
+    let mut actions = vec![0.0f32; n * nu];
+    let mut qpos = vec![0.0f32; n * nq];
+    let mut qvel = vec![0.0f32; n * nv];
     for e in 0..n {
         let speed = if e % 2 == 0 { 0.1 } else { 10.0 };
-        for v in &mut qvel[e * NV..(e + 1) * NV] {
+        for v in &mut qvel[e * nv..(e + 1) * nv] {
             *v = (speed * rng.normal()) as f32;
         }
     }
@@ -121,21 +125,21 @@ fn inputs(
     let amax = 0.7 / f64::from(action_scale);
     for e in 0..n {
         let near = e % 2 == 0;
-        for v in &mut qpos[e * NQ..e * NQ + 3] {
+        for v in &mut qpos[e * nq..e * nq + 3] {
             *v = rng.uniform(-2.0, 2.0) as f32;
         }
         let root = quat([rng.normal(), rng.normal(), rng.normal(), rng.normal()]);
         for (c, v) in wxyz(&root).iter().enumerate() {
-            qpos[e * NQ + 3 + c] = *v as f32;
+            qpos[e * nq + 3 + c] = *v as f32;
         }
         for j in 0..layout.num_joints() {
             let m = layout.dof[j] as usize - 6;
-            let addr = e * NQ + layout.qpos[j] as usize;
+            let addr = e * nq + layout.qpos[j] as usize;
             let s = f64::from(action_scale) * f64::from(layout.scale[j]);
             if layout.kind[j] == BALL {
                 let a = [0, 1, 2].map(|_| rng.uniform(-amax, amax));
                 for i in 0..3 {
-                    actions[e * NU + m + i] = a[i] as f32;
+                    actions[e * nu + m + i] = a[i] as f32;
                 }
                 let base = base_ball(rows, e, layout.qpos[j] as usize);
                 let target = base * qexp(a.map(|x| s * (x as f32) as f64));
@@ -152,7 +156,7 @@ fn inputs(
                 }
             } else {
                 let a = rng.uniform(-1.2, 1.2);
-                actions[e * NU + m] = a as f32;
+                actions[e * nu + m] = a as f32;
                 let center = base_hinge(rows, layout, e, j);
                 let half = f64::from(layout.scale[j]);
                 let theta = if near {
@@ -187,9 +191,11 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, residual: Option<&Clip>, seed
             .map(|(&t, &c)| clip.lookup(c as usize, f64::from(t + DT)))
             .collect()
     });
-    let (actions, qpos, qvel) = inputs(&layout, rows.as_deref(), n, action_scale, &mut rng);
+    let shape = fx.shape.clone();
+    let (nq, nv, nu) = (shape.nq(), shape.nv(), shape.nu());
+    let (actions, qpos, qvel) = inputs(&shape, &layout, rows.as_deref(), n, action_scale, &mut rng);
     // DeepMimic's Kd range (10 to 100), random per dof; the root's six dofs undamped.
-    let damping: Vec<f32> = (0..NV)
+    let damping: Vec<f32> = (0..nv)
         .map(|k| {
             if k < 6 {
                 0.0
@@ -213,7 +219,7 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, residual: Option<&Clip>, seed
     let joint_dof = p.i32("joint_dof", &[j], layout.dof.clone());
     let targets = p.f32("pd_targets", &[n, j, 4], nan_f32(n * j * 4));
     let target_args = vec![
-        p.f32("actions", &[n, NU], actions),
+        p.f32("actions", &[n, nu], actions),
         joint_kind.clone(),
         joint_qpos.clone(),
         joint_dof.clone(),
@@ -231,15 +237,15 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, residual: Option<&Clip>, seed
     p.launch(&PD_TARGETS, n * j, target_args);
     let control_args = vec![
         targets,
-        p.f32("qpos", &[n, NQ], qpos),
-        p.f32("qvel", &[n, NV], qvel),
-        p.f32("dof_damping", &[NV], damping),
+        p.f32("qpos", &[n, nq], qpos),
+        p.f32("qvel", &[n, nv], qvel),
+        p.f32("dof_damping", &[nv], damping),
         joint_kind,
         joint_qpos,
         joint_dof,
         p.f32("joint_kp", &[j], layout.kp.clone()),
         p.f32("joint_limit", &[j], layout.limit.clone()),
-        p.f32("ctrl", &[n, NU], nan_f32(n * NU)),
+        p.f32("ctrl", &[n, nu], nan_f32(n * nu)),
     ];
     // Twice, as before two substeps: the targets hold, the torques are the same.
     p.launch(&PD_CONTROL, n * j, control_args.clone());
@@ -247,6 +253,7 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, residual: Option<&Clip>, seed
     Check::new(p, move |p, out| {
         let mut r = Report::new(&p.name);
         let (expected, counts) = reference(
+            &shape,
             &layout,
             rows.as_deref(),
             p.input_f32("actions"),
@@ -273,8 +280,8 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, residual: Option<&Clip>, seed
             ("ctrl (hinges)", &hinge_motors),
         ] {
             let pick = |v: &[f64]| -> Vec<f64> {
-                (0..v.len() / NU)
-                    .flat_map(|e| motors.iter().map(move |&m| v[e * NU + m]))
+                (0..v.len() / nu)
+                    .flat_map(|e| motors.iter().map(move |&m| v[e * nu + m]))
                     .collect()
             };
             r.relative(label, &pick(&got), &pick(&expected));

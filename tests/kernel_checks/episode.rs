@@ -20,7 +20,7 @@ use instantmimic::train::{
 };
 
 use super::compare::Report;
-use super::physics::{NBODY, NQ, NV, PhysicsBatch};
+use super::physics::{PhysicsBatch, Shape};
 use super::program::{Arg, Program, Scalar, StructArg};
 use super::rng::Sampler;
 use super::tracking::default_params;
@@ -33,14 +33,18 @@ const ENVS: usize = 3;
 /// Steps run past the expected end: the episode must not go on.
 const EXTRA_STEPS: usize = 3;
 
-/// The physics buffers, one block per step, copied into the kernels' buffers before each step.
-const STATE_BUFFERS: [(&str, usize); 5] = [
-    ("qpos", NQ),
-    ("qvel", NV),
-    ("xpos", NBODY * 3),
-    ("xquat", NBODY * 4),
-    ("subtree_com", NBODY * 3),
-];
+/// The physics buffers, one block per step, copied into the kernels' buffers before each step:
+/// name, shape of one env's block.
+fn state_buffers(shape: &Shape) -> [(&'static str, Vec<usize>); 5] {
+    let nbody = shape.nbody();
+    [
+        ("qpos", vec![shape.nq()]),
+        ("qvel", vec![shape.nv()]),
+        ("xpos", vec![nbody, 3]),
+        ("xquat", vec![nbody, 4]),
+        ("subtree_com", vec![nbody, 3]),
+    ]
+}
 
 fn state_block<'a>(physics: &'a PhysicsBatch, name: &str) -> &'a [f32] {
     match name {
@@ -69,14 +73,16 @@ fn synthetic(
     .expect("synthetic frames are valid")
 }
 
-/// The episode program: `envs` envs from t = 0, env e on clip `clip_id[e]`, for `rows` steps
-/// of `dt` with `max_steps` the episode limit and `clip_steps` each clip's episode length.
+/// The episode program: `envs` envs of a character of `shape` from t = 0, env e on clip
+/// `clip_id[e]`, for `rows` steps of `dt` with `max_steps` the episode limit and `clip_steps`
+/// each clip's episode length.
 #[allow(clippy::too_many_arguments)]
 fn program(
     name: String,
     clip: &Clip,
     clip_id: &[i32],
     layout: &JointLayout,
+    shape: &Shape,
     dt: f64,
     max_steps: usize,
     clip_steps: &[i32],
@@ -97,7 +103,7 @@ fn program(
     let mut clock = 0.0f32;
     for _ in 0..rows {
         clock += dt as f32;
-        let mut physics = PhysicsBatch::new(envs);
+        let mut physics = PhysicsBatch::new(shape, envs);
         for (e, &c) in clip_id.iter().enumerate() {
             let c = c as usize;
             let t = if clip.wraps(c) {
@@ -111,27 +117,26 @@ fn program(
     }
 
     let mut p = Program::new(name);
-    for (name, width) in STATE_BUFFERS {
+    let buffers = state_buffers(shape);
+    for (name, block) in &buffers {
+        let width: usize = block.iter().product();
         let all: Vec<f32> = states
             .iter()
             .flat_map(|s| state_block(s, name).to_vec())
             .collect();
         p.f32(&format!("{name}_by_step"), &[rows, envs * width], all);
-    }
-    let shape = |width: usize| match width {
-        w if w == NQ || w == NV => vec![envs, w],
-        w => vec![envs, NBODY, w / NBODY],
-    };
-    for (name, width) in STATE_BUFFERS {
-        p.f32(name, &shape(width), vec![f32::NAN; envs * width]);
+        let dims: Vec<usize> = std::iter::once(envs).chain(block.iter().copied()).collect();
+        p.f32(name, &dims, vec![f32::NAN; envs * width]);
     }
     let j = layout.num_joints();
     let ee = layout.end_effectors.clone();
+    let tracked = layout.tracked_bodies.clone();
     p.f32("table", &[clip.data().len()], clip.data());
     p.i32("clip_offsets", &[clip.clips()], clip.offsets());
     p.i32("joint_kind", &[j], layout.kind.clone());
     p.i32("joint_qpos", &[j], layout.qpos.clone());
     p.i32("end_effectors", &[ee.len()], ee);
+    p.i32("tracked_bodies", &[tracked.len()], tracked);
     p.i32("clip_id", &[envs], clip_id.to_vec());
     p.f32("ref_time", &[envs], vec![0.0; envs]);
     p.i32("episode_step", &[envs], vec![0; envs]);
@@ -157,30 +162,33 @@ fn program(
     p.i32("steps", &[envs], vec![0; envs]);
     p.f32("sums", &[envs, 5], vec![0.0; envs * 5]);
     let buffer = |name: &str| Arg::Buffer(name.to_owned());
+    let row = shape.reference_layout();
     for k in 0..rows {
-        for (name, width) in STATE_BUFFERS {
-            let count = envs * width;
+        for (name, block) in &buffers {
+            let count = envs * block.iter().product::<usize>();
             p.copy(&format!("{name}_by_step"), k * count, name, 0, count);
         }
         let step = Arg::Scalar(Scalar::I32(k as i32));
-        super::tracking::launch_reward(&mut p, envs, params, k as i32);
-        let scoring_args = [
-            "qpos",
-            "xpos",
-            "xquat",
-            "table",
-            "clip_offsets",
-            "end_effectors",
-            "clip_id",
-            "ref_time",
-        ]
-        .map(buffer)
-        .into_iter()
-        .chain([step])
-        .chain(["rewards", "terminated", "truncated"].map(buffer))
-        .chain([Arg::Struct(StructArg::Yardstick(yardstick()))])
-        .chain(["clip_steps", "status", "steps", "sums"].map(buffer))
-        .collect();
+        super::tracking::launch_reward(&mut p, envs, row, params, k as i32);
+        let scoring_args = ["qpos", "xpos", "xquat", "table"]
+            .map(buffer)
+            .into_iter()
+            .chain([Arg::Struct(StructArg::TableLayout(row))])
+            .chain(
+                [
+                    "clip_offsets",
+                    "end_effectors",
+                    "tracked_bodies",
+                    "clip_id",
+                    "ref_time",
+                ]
+                .map(buffer),
+            )
+            .chain([step])
+            .chain(["rewards", "terminated", "truncated"].map(buffer))
+            .chain([Arg::Struct(StructArg::Yardstick(yardstick()))])
+            .chain(["clip_steps", "status", "steps", "sums"].map(buffer))
+            .collect();
         p.launch(&EVALUATION_ACCUMULATE, envs, scoring_args);
     }
     p
@@ -201,8 +209,8 @@ fn episode(out: &super::program::Outputs, e: usize) -> EnvEvaluation {
 
 /// A case: a synthetic clamped clip of `frames` frames at `fps`, evaluated at control step `dt`
 /// (the library of one).
-fn case(character: &Character, layout: &JointLayout, frames: usize, fps: f64, dt: f64) -> Check {
-    let motion = synthetic(character, frames, fps, LoopMode::Clamp);
+fn case(fx: &Fixture, frames: usize, fps: f64, dt: f64) -> Check {
+    let motion = synthetic(&fx.character, frames, fps, LoopMode::Clamp);
     let clip = Clip::single(
         &format!("clamped synthetic, {frames} frames at {fps} fps"),
         &motion,
@@ -219,7 +227,8 @@ fn case(character: &Character, layout: &JointLayout, frames: usize, fps: f64, dt
         ),
         &clip,
         &[0; ENVS],
-        layout,
+        &fx.layout,
+        &fx.shape,
         dt,
         steps,
         // What the rollout passes: the episode's steps, where the truncation falls too.
@@ -272,7 +281,7 @@ fn case(character: &Character, layout: &JointLayout, frames: usize, fps: f64, dt
 
 /// A library's evaluation in one rollout at control step `dt`: three clamped clips of
 /// different lengths and rates and a looping one, two envs per clip (env e on clip e mod 4).
-fn library_case(character: &Character, layout: &JointLayout, dt: f64) -> Check {
+fn library_case(fx: &Fixture, dt: f64) -> Check {
     let clips = [
         (17, 16.0, LoopMode::Clamp),
         (65, 30.0, LoopMode::Clamp),
@@ -281,15 +290,15 @@ fn library_case(character: &Character, layout: &JointLayout, dt: f64) -> Check {
     ];
     let mut builder = MotionLibraryBuilder::new("episode library", dt);
     for (i, &(frames, fps, mode)) in clips.iter().enumerate() {
-        let motion = synthetic(character, frames, fps, mode);
+        let motion = synthetic(&fx.character, frames, fps, mode);
         builder
             .push(&format!("clip {i}"), "synthetic", &motion, 1.0)
             .expect("the clip joins the library");
     }
-    let clip = Clip {
-        name: "a library of 3 clamped clips and a looping one".to_owned(),
-        library: builder.finish().expect("the library has clips"),
-    };
+    let clip = Clip::of_library(
+        "a library of 3 clamped clips and a looping one",
+        &builder.finish().expect("the library has clips"),
+    );
     let protocol = EvaluationProtocol {
         envs: 8,
         steps: None,
@@ -312,7 +321,8 @@ fn library_case(character: &Character, layout: &JointLayout, dt: f64) -> Check {
         ),
         &clip,
         &clip_id,
-        layout,
+        &fx.layout,
+        &fx.shape,
         dt,
         horizon,
         &plan,
@@ -351,11 +361,11 @@ pub fn checks(fx: &Fixture) -> Vec<Check> {
     let mut checks = Vec::new();
     for (frames, fps) in [(17, 16.0), (49, 24.0), (65, 30.0), (61, 60.0), (121, 120.0)] {
         for dt in [1.0 / 30.0, 1.0 / 60.0] {
-            checks.push(case(&fx.character, &fx.layout, frames, fps, dt));
+            checks.push(case(fx, frames, fps, dt));
         }
     }
     for dt in [1.0 / 30.0, 1.0 / 60.0] {
-        checks.push(library_case(&fx.character, &fx.layout, dt));
+        checks.push(library_case(fx, dt));
     }
     checks
 }

@@ -2,10 +2,10 @@
 //!
 //! Reference: for each env still RUNNING, the state against the reference of its clip at
 //! `ref_time` (`MotionLibrary::lookup`; a single clip is the library of one): mean
-//! over the 15 bodies of the root-relative position error (average pose error) and of the world
-//! position error (global MPJPE), means over the end effectors of the position error and the
-//! orientation angle, added to the sums with the step's reward; the step count advanced; the
-//! status set to FAILED when the step fails the yardstick (a body farther than
+//! over the tracked bodies of the root-relative position error (average pose error) and of the
+//! world position error (global MPJPE), means over the end effectors of the position error and
+//! the orientation angle, added to the sums with the step's reward; the step count advanced; the
+//! status set to FAILED when the step fails the yardstick (a tracked body farther than
 //! `max_body_distance` from its reference, or the root more than `max_root_drop` below the
 //! reference root) or `terminated[t]`, else COMPLETED on `truncated[t]` or when the env has
 //! scored its clip's `clip_steps` (a library's episodes of different lengths). Running envs are
@@ -14,10 +14,9 @@
 
 use instantmimic::env::layout::JointLayout;
 use instantmimic::kernels::{EVALUATION_ACCUMULATE, Yardstick};
-use instantmimic::motion::table::HUMANOID_LAYOUT;
 
 use super::compare::Report;
-use super::physics::{BODIES, NBODY, NQ, PhysicsBatch};
+use super::physics::PhysicsBatch;
 use super::program::{Arg, Program, Scalar, StructArg};
 use super::quat::{angle, quat_at, quat_at64, vec3, vec3_64};
 use super::rng::Sampler;
@@ -29,7 +28,7 @@ const COMPLETED: i32 = 1;
 const FAILED: i32 = 2;
 
 /// The f64 per-step means [pose, mpjpe, ee position, ee rotation] of env `e` at time `t` of
-/// clip `clip.1` of `clip.0`, and the largest body distance.
+/// clip `clip.1` of `clip.0`, and the largest tracked body's distance.
 fn step_errors(
     clip: (&Clip, usize),
     layout: &JointLayout,
@@ -37,13 +36,15 @@ fn step_errors(
     e: usize,
     t: f64,
 ) -> ([f64; 4], f64) {
-    let l = HUMANOID_LAYOUT;
+    let l = physics.shape.table;
+    let nbody = physics.shape.nbody();
     let row = clip.0.lookup(clip.1, t);
-    let body = |b: usize| (e * NBODY + b + 1) * 3;
+    let body = |b: usize| (e * nbody + b + 1) * 3;
     let root = vec3(&physics.xpos, body(0));
     let root_ref = vec3_64(&row, l.body_pos);
     let (mut pose, mut mpjpe, mut far) = (0.0, 0.0, 0.0f64);
-    for b in 0..BODIES {
+    for &b in &layout.tracked_bodies {
+        let b = b as usize;
         let p = vec3(&physics.xpos, body(b));
         let p_ref = vec3_64(&row, l.body_pos + 3 * b);
         mpjpe += (p - p_ref).norm();
@@ -54,16 +55,12 @@ fn step_errors(
     for &b in &layout.end_effectors {
         let b = b as usize;
         ee_pos += (vec3(&physics.xpos, body(b)) - vec3_64(&row, l.body_pos + 3 * b)).norm();
-        let q = quat_at(&physics.xquat, (e * NBODY + b + 1) * 4);
+        let q = quat_at(&physics.xquat, (e * nbody + b + 1) * 4);
         ee_rot += angle(&q, &quat_at64(&row, l.body_quat + 4 * b));
     }
     let k = layout.end_effectors.len() as f64;
-    let means = [
-        pose / BODIES as f64,
-        mpjpe / BODIES as f64,
-        ee_pos / k,
-        ee_rot / k,
-    ];
+    let bodies = layout.tracked_bodies.len() as f64;
+    let means = [pose / bodies, mpjpe / bodies, ee_pos / k, ee_rot / k];
     (means, far)
 }
 
@@ -71,7 +68,7 @@ fn step_errors(
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Kind {
     Near,
-    /// One body near `max_body_distance` from its reference, mostly past it.
+    /// One tracked body near `max_body_distance` from its reference, mostly past it.
     FarBody,
     /// The root near `max_root_drop` below the reference root, mostly past it.
     Dropped,
@@ -87,8 +84,8 @@ fn yardstick_failures(
     e: usize,
     t: f64,
 ) -> (bool, bool, f64) {
-    let ref_z = clip.0.lookup(clip.1, t)[HUMANOID_LAYOUT.qpos + 2];
-    let drop = ref_z - f64::from(physics.qpos[e * NQ + 2]);
+    let ref_z = clip.0.lookup(clip.1, t)[physics.shape.table.qpos + 2];
+    let drop = ref_z - f64::from(physics.qpos[e * physics.shape.nq() + 2]);
     let (max_far, max_drop) = (
         f64::from(yardstick.max_body_distance),
         f64::from(yardstick.max_root_drop),
@@ -125,7 +122,9 @@ fn case(
     let layout = fx.layout.clone();
     let mut rng = Sampler::new(seed);
     let clip_id = clip.clip_ids(n, &mut rng);
-    let mut physics = PhysicsBatch::new(n);
+    let shape = fx.shape.clone();
+    let (nq, nbody, l) = (shape.nq(), shape.nbody(), shape.table);
+    let mut physics = PhysicsBatch::new(&shape, n);
     let ref_time: Vec<f32> = clip_id
         .iter()
         .map(|&c| rng.uniform(0.0, clip.duration(c as usize)) as f32)
@@ -152,21 +151,22 @@ fn case(
             // Within 2 cm of the threshold, on either side: closer than the reference moves
             // in a step, so that the time it is looked up at matters.
             Kind::FarBody => {
-                let b = rng.index(0, BODIES);
+                let tracked = &layout.tracked_bodies;
+                let b = tracked[rng.index(0, tracked.len())] as usize;
                 let dir = rng.normal3(1.0);
                 let len = dir.iter().map(|x| x * x).sum::<f64>().sqrt();
                 let distance = f64::from(yardstick.max_body_distance) + near_threshold(&mut rng);
                 let p_ref = clip.lookup(c, time);
-                let at = (e * NBODY + b + 1) * 3;
+                let at = (e * nbody + b + 1) * 3;
                 for (c, x) in dir.iter().enumerate() {
-                    let p = p_ref[HUMANOID_LAYOUT.body_pos + 3 * b + c] + distance * x / len;
+                    let p = p_ref[l.body_pos + 3 * b + c] + distance * x / len;
                     physics.xpos[at + c] = p as f32;
                 }
             }
             Kind::Dropped => {
-                let ref_z = clip.lookup(c, time)[HUMANOID_LAYOUT.qpos + 2];
+                let ref_z = clip.lookup(c, time)[l.qpos + 2];
                 let drop = f64::from(yardstick.max_root_drop) + near_threshold(&mut rng);
-                physics.qpos[e * NQ + 2] = (ref_z - drop) as f32;
+                physics.qpos[e * nq + 2] = (ref_z - drop) as f32;
             }
         }
     }
@@ -192,17 +192,22 @@ fn case(
     };
 
     let ee = layout.end_effectors.clone();
+    let tracked = layout.tracked_bodies.clone();
     let mut p = Program::new(format!(
-        "evaluation_accumulate: {clip_name}, {n} envs, step {t} of {horizon}, max body distance {}, max root drop {}",
-        yardstick.max_body_distance, yardstick.max_root_drop
+        "evaluation_accumulate: {clip_name}, {n} envs, {} tracked bodies, step {t} of {horizon}, max body distance {}, max root drop {}",
+        tracked.len(),
+        yardstick.max_body_distance,
+        yardstick.max_root_drop
     ));
     let args = vec![
-        p.f32("qpos", &[n, NQ], physics.qpos.clone()),
-        p.f32("xpos", &[n, NBODY, 3], physics.xpos.clone()),
-        p.f32("xquat", &[n, NBODY, 4], physics.xquat.clone()),
+        p.f32("qpos", &[n, nq], physics.qpos.clone()),
+        p.f32("xpos", &[n, nbody, 3], physics.xpos.clone()),
+        p.f32("xquat", &[n, nbody, 4], physics.xquat.clone()),
         p.f32("table", &[clip.data().len()], clip.data()),
+        Arg::Struct(StructArg::TableLayout(shape.reference_layout())),
         p.i32("clip_offsets", &[clip.clips()], clip.offsets()),
         p.i32("end_effectors", &[ee.len()], ee),
+        p.i32("tracked_bodies", &[tracked.len()], tracked),
         p.i32("clip_id", &[n], clip_id.clone()),
         p.f32("ref_time", &[n], ref_time.clone()),
         Arg::Scalar(Scalar::I32(t as i32)),

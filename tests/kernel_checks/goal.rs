@@ -14,6 +14,7 @@ use instantmimic::kernels::{GOAL_OBSERVE, GOAL_RESET, GOAL_REWARD_TERMINATION, G
 use nalgebra::Vector3;
 
 use super::compare::{Report, wide};
+use super::physics::Shape;
 use super::program::{Arg, Program, Scalar, StructArg};
 use super::quat::{heading_inverse, qexp, quat, wxyz};
 use super::rng::{RandnOrder, Sampler, WarpRandom, stream_offset};
@@ -23,8 +24,6 @@ use super::{Check, Fixture, POISON_I32};
 const COUNTERS: usize = GoalCounter::ALL.len();
 /// The fall bit (tracking.py's LOW_ROOT, shared meaning).
 const CAUSE_LOW_ROOT: i32 = 4;
-const NQ: usize = 43;
-const NV: usize = 34;
 
 fn params(seed: i32, horizon: i32, max_episode_steps: i32) -> GoalParams {
     GoalParams {
@@ -43,10 +42,10 @@ fn params(seed: i32, horizon: i32, max_episode_steps: i32) -> GoalParams {
 /// Random root states: position x, y in [-5, 5], height in [0.2, 1.4] away from the fall
 /// height by at least 1 cm (no case on the f32 edge), a random orientation (tilted, any
 /// heading); the other coordinates random too (the kernels must not read them into results).
-fn random_qpos(rng: &mut Sampler, n: usize, fall_height: f32) -> Vec<f32> {
-    let mut qpos = vec![0.0f32; n * NQ];
+fn random_qpos(rng: &mut Sampler, nq: usize, n: usize, fall_height: f32) -> Vec<f32> {
+    let mut qpos = vec![0.0f32; n * nq];
     for e in 0..n {
-        let row = &mut qpos[e * NQ..(e + 1) * NQ];
+        let row = &mut qpos[e * nq..(e + 1) * nq];
         for v in row.iter_mut() {
             *v = rng.uniform(-1.0, 1.0) as f32;
         }
@@ -79,12 +78,13 @@ fn drawn_goal(p: &GoalParams, seed: i32, offset: i32, root: [f32; 2]) -> ([f64; 
     )
 }
 
-fn reward_case(n: usize, seed: u64) -> Check {
+fn reward_case(shape: &Shape, n: usize, seed: u64) -> Check {
+    let nq = shape.nq();
     let mut rng = Sampler::new(seed);
     let (horizon, t, iteration) = (4usize, 2usize, rng.index(0, 50) as i32);
     let max_steps = 300;
     let gp = params(1000 + seed as i32, horizon as i32, max_steps);
-    let qpos = random_qpos(&mut rng, n, gp.fall_height);
+    let qpos = random_qpos(&mut rng, nq, n, gp.fall_height);
     // Goals: about a third within the reach radius (by at least 5 cm), the others beyond it.
     let mut goal = vec![0.0f32; n * 2];
     for e in 0..n {
@@ -94,8 +94,8 @@ fn reward_case(n: usize, seed: u64) -> Check {
             rng.uniform(0.55, 3.5)
         };
         let a = rng.uniform(0.0, std::f64::consts::TAU);
-        goal[2 * e] = (f64::from(qpos[e * NQ]) + r * a.cos()) as f32;
-        goal[2 * e + 1] = (f64::from(qpos[e * NQ + 1]) + r * a.sin()) as f32;
+        goal[2 * e] = (f64::from(qpos[e * nq]) + r * a.cos()) as f32;
+        goal[2 * e + 1] = (f64::from(qpos[e * nq + 1]) + r * a.sin()) as f32;
     }
     let previous: Vec<f32> = (0..n).map(|_| rng.uniform(0.0, 3.5) as f32).collect();
     let episode_step: Vec<i32> = (0..n)
@@ -132,7 +132,7 @@ fn reward_case(n: usize, seed: u64) -> Check {
         "goal_reward_termination: {n} envs, step {t}, iteration {iteration}"
     ));
     let args = vec![
-        p.f32("qpos", &[n, NQ], qpos.clone()),
+        p.f32("qpos", &[n, nq], qpos.clone()),
         Arg::Struct(StructArg::Goal(gp)),
         Arg::Scalar(Scalar::I32(t as i32)),
         p.i32("iteration", &[1], vec![iteration]),
@@ -158,7 +158,7 @@ fn reward_case(n: usize, seed: u64) -> Check {
         let mut expected_counters = counters.clone();
         let mut reached_count = 0;
         for e in 0..n {
-            let root = [qpos[e * NQ], qpos[e * NQ + 1]];
+            let root = [qpos[e * nq], qpos[e * nq + 1]];
             let dx = f64::from(goal[2 * e]) - f64::from(root[0]);
             let dy = f64::from(goal[2 * e + 1]) - f64::from(root[1]);
             let mut d = dx.hypot(dy);
@@ -172,7 +172,7 @@ fn reward_case(n: usize, seed: u64) -> Check {
                 let offset = stream_offset(iteration, horizon as i32, t as i32, n as i32, e as i32);
                 (g, d) = drawn_goal(&gp, gp.seed, offset, root);
             }
-            let fell = qpos[e * NQ + 2] < gp.fall_height;
+            let fell = qpos[e * nq + 2] < gp.fall_height;
             let ended = episode_step[e] + 1 >= gp.max_episode_steps;
             rewards.push(reward);
             goals.extend(g);
@@ -241,13 +241,14 @@ fn reward_case(n: usize, seed: u64) -> Check {
     })
 }
 
-fn reset_case(n: usize, seed: u64) -> Check {
+fn reset_case(shape: &Shape, n: usize, seed: u64) -> Check {
+    let (nq, nv) = (shape.nq(), shape.nv());
     let mut rng = Sampler::new(seed);
     let (horizon, t, iteration) = (8usize, 5usize, rng.index(0, 50) as i32);
     let gp = params(2000 + seed as i32, horizon as i32, 300);
-    let qpos = random_qpos(&mut rng, n, gp.fall_height);
+    let qpos = random_qpos(&mut rng, nq, n, gp.fall_height);
     let done: Vec<i32> = (0..n).map(|_| i32::from(rng.chance(0.4))).collect();
-    let qvel: Vec<f32> = (0..n * NV).map(|_| rng.uniform(-3.0, 3.0) as f32).collect();
+    let qvel: Vec<f32> = (0..n * nv).map(|_| rng.uniform(-3.0, 3.0) as f32).collect();
     let goal: Vec<f32> = (0..n * 2).map(|_| rng.uniform(-5.0, 5.0) as f32).collect();
     let distance: Vec<f32> = (0..n).map(|_| rng.uniform(0.0, 3.0) as f32).collect();
     let counters: Vec<i32> = (0..n * COUNTERS).map(|_| rng.index(1, 6) as i32).collect();
@@ -258,8 +259,8 @@ fn reset_case(n: usize, seed: u64) -> Check {
         Arg::Struct(StructArg::Goal(gp)),
         Arg::Scalar(Scalar::I32(t as i32)),
         p.i32("iteration", &[1], vec![iteration]),
-        p.f32("qpos", &[n, NQ], qpos.clone()),
-        p.f32("qvel", &[n, NV], qvel.clone()),
+        p.f32("qpos", &[n, nq], qpos.clone()),
+        p.f32("qvel", &[n, nv], qvel.clone()),
         p.f32("goal", &[n, 2], goal.clone()),
         p.f32("goal_distance", &[n], distance.clone()),
         p.i32("goal_counters", &[n, COUNTERS], counters.clone()),
@@ -273,9 +274,9 @@ fn reset_case(n: usize, seed: u64) -> Check {
         let mut expected_distance: Vec<f64> = wide(&distance);
         let mut expected_counters = counters.clone();
         for e in (0..n).filter(|&e| done[e] != 0) {
-            expected_qvel[e * NV..(e + 1) * NV].fill(0.0);
+            expected_qvel[e * nv..(e + 1) * nv].fill(0.0);
             let offset = stream_offset(iteration, horizon as i32, t as i32, n as i32, e as i32);
-            let root = [qpos[e * NQ], qpos[e * NQ + 1]];
+            let root = [qpos[e * nq], qpos[e * nq + 1]];
             let (g, d) = drawn_goal(&gp, gp.seed + 1, offset, root);
             expected_goal[2 * e..2 * e + 2].copy_from_slice(&g);
             expected_distance[e] = d;
@@ -311,9 +312,10 @@ fn reset_case(n: usize, seed: u64) -> Check {
     })
 }
 
-fn observe_case(n: usize, width: usize, column: usize, seed: u64) -> Check {
+fn observe_case(shape: &Shape, n: usize, width: usize, column: usize, seed: u64) -> Check {
+    let nq = shape.nq();
     let mut rng = Sampler::new(seed);
-    let qpos = random_qpos(&mut rng, n, 0.6);
+    let qpos = random_qpos(&mut rng, nq, n, 0.6);
     let goal: Vec<f32> = (0..n * 2).map(|_| rng.uniform(-8.0, 8.0) as f32).collect();
     let mut obs: Vec<f32> = (0..n * width)
         .map(|_| rng.uniform(-1.0, 1.0) as f32)
@@ -326,7 +328,7 @@ fn observe_case(n: usize, width: usize, column: usize, seed: u64) -> Check {
         column + 3
     ));
     let args = vec![
-        p.f32("qpos", &[n, NQ], qpos.clone()),
+        p.f32("qpos", &[n, nq], qpos.clone()),
         p.f32("goal", &[n, 2], goal.clone()),
         Arg::Scalar(Scalar::I32(column as i32)),
         p.f32("obs", &[n, width], obs.clone()),
@@ -343,10 +345,10 @@ fn observe_case(n: usize, width: usize, column: usize, seed: u64) -> Check {
         for e in 0..n {
             let row = e * width;
             block.extend(wide(&got[row + column..row + column + 3]));
-            let q = quat([3, 4, 5, 6].map(|c| f64::from(qpos[e * NQ + c])));
+            let q = quat([3, 4, 5, 6].map(|c| f64::from(qpos[e * nq + c])));
             let rel = Vector3::new(
-                f64::from(goal[2 * e]) - f64::from(qpos[e * NQ]),
-                f64::from(goal[2 * e + 1]) - f64::from(qpos[e * NQ + 1]),
+                f64::from(goal[2 * e]) - f64::from(qpos[e * nq]),
+                f64::from(goal[2 * e + 1]) - f64::from(qpos[e * nq + 1]),
                 0.0,
             );
             let local = heading_inverse(&q) * rel;
@@ -362,17 +364,23 @@ fn observe_case(n: usize, width: usize, column: usize, seed: u64) -> Check {
     })
 }
 
-pub fn reward_checks(_fx: &Fixture) -> Vec<Check> {
-    vec![reward_case(64, 71), reward_case(333, 72)]
+pub fn reward_checks(fx: &Fixture) -> Vec<Check> {
+    let shape = &fx.shape;
+    vec![reward_case(shape, 64, 71), reward_case(shape, 333, 72)]
 }
 
-pub fn reset_checks(_fx: &Fixture) -> Vec<Check> {
-    vec![reset_case(64, 81), reset_case(257, 82)]
+pub fn reset_checks(fx: &Fixture) -> Vec<Check> {
+    let shape = &fx.shape;
+    vec![reset_case(shape, 64, 81), reset_case(shape, 257, 82)]
 }
 
-pub fn observe_checks(_fx: &Fixture) -> Vec<Check> {
+pub fn observe_checks(fx: &Fixture) -> Vec<Check> {
     // The columns after a proprioceptive block of 235 (no previous action) and a narrow row.
-    vec![observe_case(64, 238, 235, 91), observe_case(129, 7, 2, 92)]
+    let shape = &fx.shape;
+    vec![
+        observe_case(shape, 64, 238, 235, 91),
+        observe_case(shape, 129, 7, 2, 92),
+    ]
 }
 
 /// The goal kernels' checks, for the list of every check.

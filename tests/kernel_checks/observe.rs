@@ -4,21 +4,23 @@
 //! simulated root (`H` = minus the yaw of the root's forward axis), positions relative to the root
 //! body's origin, rotations as the first two columns of the rotation matrix, body velocities at
 //! the body origins (`cvel` is COM-based), future reference end effectors and the root target
-//! of the env's clip from `MotionLibrary::lookup` (a single clip: the library of one); with
-//! `reference_bodies`, each body's reference at
+//! of the env's clip from `MotionLibrary::lookup` (a single clip: the library of one), over the
+//! character's tracked bodies (the first, the root, left out of the positions); with
+//! `reference_bodies`, each tracked body's reference at
 //! `ref_time + dt` against the simulated body (position difference in the heading frame, the
 //! rotation `conj(q) q_ref` in the body's frame, 6D). Each block is compared on its own; the row
 //! is as wide as `layout::observation_size` says, and padding columns after it must stay
 //! untouched.
 
-use instantmimic::env::layout::{JointLayout, OBSERVE_SLOTS, observation_params, observation_size};
+use instantmimic::env::layout::{
+    JointLayout, observation_params, observation_size, observe_threads_per_env,
+};
 use instantmimic::kernels::{OBSERVE, ObservationParams};
-use instantmimic::motion::table::HUMANOID_LAYOUT;
 use instantmimic::train::ObsConfig;
 use nalgebra::Vector3;
 
 use super::compare::{Report, wide};
-use super::physics::{BODIES, NBODY, NQ, NU, NV, PhysicsBatch};
+use super::physics::PhysicsBatch;
 use super::program::{Arg, Program, StructArg};
 use super::quat::{Quat, heading_inverse, qexp, quat_at, quat_at64, tan_norm, vec3, vec3_64, wxyz};
 use super::rng::Sampler;
@@ -62,10 +64,13 @@ pub fn reference_blocks(
     ref_time: f32,
     e: usize,
 ) -> Vec<Block> {
-    let l = HUMANOID_LAYOUT;
-    let qpos = &physics.qpos[e * NQ..(e + 1) * NQ];
-    let qvel = &physics.qvel[e * NV..(e + 1) * NV];
-    let body = |b: usize| e * NBODY + b + 1;
+    let shape = &physics.shape;
+    let l = shape.table;
+    let (nq, nv, nu, nbody) = (shape.nq(), shape.nv(), shape.nu(), shape.nbody());
+    let qpos = &physics.qpos[e * nq..(e + 1) * nq];
+    let qvel = &physics.qvel[e * nv..(e + 1) * nv];
+    let body = |b: usize| e * nbody + b + 1;
+    let tracked: Vec<usize> = layout.tracked_bodies.iter().map(|&b| b as usize).collect();
     let root_q = quat_at(qpos, 3);
     let root_p = vec3(&physics.xpos, body(0) * 3);
     let h = heading_inverse(&root_q);
@@ -91,22 +96,25 @@ pub fn reference_blocks(
     add(
         &mut blocks,
         "body positions".into(),
-        (1..BODIES)
-            .flat_map(|b| rotated(&h, vec3(&physics.xpos, body(b) * 3) - root_p))
+        tracked[1..]
+            .iter()
+            .flat_map(|&b| rotated(&h, vec3(&physics.xpos, body(b) * 3) - root_p))
             .collect(),
     );
     add(
         &mut blocks,
         "body rotations 6D".into(),
-        (0..BODIES)
-            .flat_map(|b| tan_norm(&(h * quat_at(&physics.xquat, body(b) * 4))))
+        tracked
+            .iter()
+            .flat_map(|&b| tan_norm(&(h * quat_at(&physics.xquat, body(b) * 4))))
             .collect(),
     );
     add(
         &mut blocks,
         "body linear velocities".into(),
-        (0..BODIES)
-            .flat_map(|b| {
+        tracked
+            .iter()
+            .flat_map(|&b| {
                 let w = vec3(&physics.cvel, body(b) * 6);
                 let v = vec3(&physics.cvel, body(b) * 6 + 3)
                     + w.cross(&(vec3(&physics.xpos, body(b) * 3) - com));
@@ -117,8 +125,9 @@ pub fn reference_blocks(
     add(
         &mut blocks,
         "body angular velocities".into(),
-        (0..BODIES)
-            .flat_map(|b| rotated(&h, vec3(&physics.cvel, body(b) * 6)))
+        tracked
+            .iter()
+            .flat_map(|&b| rotated(&h, vec3(&physics.cvel, body(b) * 6)))
             .collect(),
     );
     for f in 1..=params.future_frames {
@@ -162,7 +171,7 @@ pub fn reference_blocks(
         add(
             &mut blocks,
             "previous action".into(),
-            wide(&actions[e * NU..(e + 1) * NU]),
+            wide(&actions[e * nu..(e + 1) * nu]),
         );
     }
     if params.root_target != 0 {
@@ -180,8 +189,9 @@ pub fn reference_blocks(
     }
     if params.reference_bodies != 0 {
         let row = clip.0.lookup(clip.1, f64::from(ref_time + params.dt));
-        let values: Vec<f64> = (0..BODIES)
-            .flat_map(|b| {
+        let values: Vec<f64> = tracked
+            .iter()
+            .flat_map(|&b| {
                 let p = vec3(&physics.xpos, body(b) * 3);
                 let q = quat_at(&physics.xquat, body(b) * 4);
                 let position = rotated(&h, vec3_64(&row, l.body_pos + 3 * b) - p);
@@ -190,8 +200,8 @@ pub fn reference_blocks(
             })
             .collect();
         let columns = |offset: usize, count: usize| -> Vec<usize> {
-            (0..BODIES)
-                .flat_map(|b| (0..count).map(move |c| 9 * b + offset + c))
+            (0..tracked.len())
+                .flat_map(|i| (0..count).map(move |c| 9 * i + offset + c))
                 .collect()
         };
         blocks.push(Block {
@@ -211,11 +221,13 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, obs: ObsConfig, seed: u64) ->
     let clip_name = clip.name.clone();
     let layout = fx.layout.clone();
     let params = observation_params(&obs, CONTROL_DT);
-    let width = observation_size(&obs, NU, layout.end_effectors.len());
+    let width = observation_size(&obs, layout.observation_counts());
     let stride = width + PADDING;
+    let shape = fx.shape.clone();
+    let (nq, nv, nu, nbody) = (shape.nq(), shape.nv(), shape.nu(), shape.nbody());
     let mut rng = Sampler::new(seed);
     let clip_id = clip.clip_ids(n, &mut rng);
-    let mut physics = PhysicsBatch::new(n);
+    let mut physics = PhysicsBatch::new(&shape, n);
     let mut ref_time = vec![0.0f32; n];
     for (e, time) in ref_time.iter_mut().enumerate() {
         let c = clip_id[e] as usize;
@@ -237,22 +249,24 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, obs: ObsConfig, seed: u64) ->
             );
             // Half the envs turned about +z: other headings than the clip's.
             if e % 2 == 1 {
-                let at = e * NQ + 3;
+                let at = e * nq + 3;
                 let q = qexp([0.0, 0.0, rng.uniform(-3.1, 3.1)]) * quat_at(&physics.qpos, at);
                 for (c, v) in wxyz(&q).iter().enumerate() {
                     physics.qpos[at + c] = *v as f32;
                 }
             }
-            let forward = quat_at(&physics.qpos, e * NQ + 3) * Vector3::x();
+            let forward = quat_at(&physics.qpos, e * nq + 3) * Vector3::x();
             if forward.xy().norm() > MIN_FORWARD_XY {
                 break;
             }
         }
     }
-    let actions: Vec<f32> = (0..n * NU).map(|_| rng.uniform(-1.5, 1.5) as f32).collect();
+    let actions: Vec<f32> = (0..n * nu).map(|_| rng.uniform(-1.5, 1.5) as f32).collect();
 
+    let tracked = layout.tracked_bodies.clone();
     let mut p = Program::new(format!(
-        "observe: {clip_name}, {n} envs, {} future frames every {} steps, prev action {}, root target {}, reference bodies {} ({width} values)",
+        "observe: {clip_name}, {n} envs, {} tracked bodies, {} future frames every {} steps, prev action {}, root target {}, reference bodies {} ({width} values)",
+        tracked.len(),
         obs.future_frames,
         obs.future_spacing,
         obs.prev_action,
@@ -260,23 +274,26 @@ fn case(fx: &Fixture, clip_index: usize, n: usize, obs: ObsConfig, seed: u64) ->
         obs.reference_bodies
     ));
     let ee = layout.end_effectors.clone();
+    let threads = n * observe_threads_per_env(tracked.len());
     let args = vec![
-        p.f32("qpos", &[n, NQ], physics.qpos.clone()),
-        p.f32("qvel", &[n, NV], physics.qvel.clone()),
-        p.f32("xpos", &[n, NBODY, 3], physics.xpos.clone()),
-        p.f32("xquat", &[n, NBODY, 4], physics.xquat.clone()),
-        p.f32("cvel", &[n, NBODY, 6], physics.cvel.clone()),
-        p.f32("subtree_com", &[n, NBODY, 3], physics.subtree_com.clone()),
+        p.f32("qpos", &[n, nq], physics.qpos.clone()),
+        p.f32("qvel", &[n, nv], physics.qvel.clone()),
+        p.f32("xpos", &[n, nbody, 3], physics.xpos.clone()),
+        p.f32("xquat", &[n, nbody, 4], physics.xquat.clone()),
+        p.f32("cvel", &[n, nbody, 6], physics.cvel.clone()),
+        p.f32("subtree_com", &[n, nbody, 3], physics.subtree_com.clone()),
         p.f32("table", &[clip.data().len()], clip.data()),
+        Arg::Struct(StructArg::TableLayout(shape.reference_layout())),
         p.i32("clip_offsets", &[clip.clips()], clip.offsets()),
         p.i32("end_effectors", &[ee.len()], ee),
+        p.i32("tracked_bodies", &[tracked.len()], tracked),
         p.i32("clip_id", &[n], clip_id.clone()),
         p.f32("ref_time", &[n], ref_time.clone()),
-        p.f32("actions", &[n, NU], actions.clone()),
+        p.f32("actions", &[n, nu], actions.clone()),
         Arg::Struct(StructArg::Observation(params)),
         p.f32("obs", &[n, stride], nan_f32(n * stride)),
     ];
-    p.launch(&OBSERVE, n * OBSERVE_SLOTS, args);
+    p.launch(&OBSERVE, threads, args);
 
     Check::new(p, move |p, out| {
         let mut r = Report::new(&p.name);

@@ -7,8 +7,8 @@ use std::collections::BTreeMap;
 
 use instantmimic::kernels::manifest::{EnvManifest, SlotType};
 use instantmimic::kernels::{
-    GoalParams, KernelAbi, MANIFEST_ASSET, ObservationParams, ParamKind, ResetParams, ScalarType,
-    TrackingParams, Yardstick,
+    GoalParams, KernelAbi, MANIFEST_ASSET, ObservationParams, ParamKind, ReferenceLayout,
+    ResetParams, ScalarType, TrackingParams, Yardstick,
 };
 
 /// Values of a buffer, row-major.
@@ -131,6 +131,8 @@ pub enum StructArg {
     Observation(ObservationParams),
     Yardstick(Yardstick),
     Goal(GoalParams),
+    /// The reference table's row layout (`ReferenceLayout`).
+    TableLayout(ReferenceLayout),
 }
 
 impl StructArg {
@@ -141,6 +143,7 @@ impl StructArg {
             StructArg::Observation(_) => "ObservationParams",
             StructArg::Yardstick(_) => "Yardstick",
             StructArg::Goal(_) => "GoalParams",
+            StructArg::TableLayout(_) => "ReferenceLayout",
         }
     }
 
@@ -193,6 +196,18 @@ impl StructArg {
                 ("bonus_weight", F32(p.bonus_weight)),
                 ("fall_height", F32(p.fall_height)),
                 ("max_episode_steps", I32(p.max_episode_steps)),
+            ],
+            StructArg::TableLayout(l) => vec![
+                ("qvel", I32(l.qvel)),
+                ("body_pos", I32(l.body_pos)),
+                ("body_quat", I32(l.body_quat)),
+                ("body_linvel", I32(l.body_linvel)),
+                ("body_angvel", I32(l.body_angvel)),
+                ("com_pos", I32(l.com_pos)),
+                ("com_vel", I32(l.com_vel)),
+                ("heading", I32(l.heading)),
+                ("stride", I32(l.stride)),
+                ("bodies", I32(l.bodies)),
             ],
         }
     }

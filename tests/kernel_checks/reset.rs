@@ -16,10 +16,10 @@
 
 use instantmimic::env::layout::{BALL, JointLayout};
 use instantmimic::kernels::{PHASE_STATISTICS_UPDATE, RESET_MASKED, ResetParams};
-use instantmimic::motion::table::{HEADER_DURATION, HEADER_WRAP, HUMANOID_LAYOUT};
+use instantmimic::motion::table::{HEADER_DURATION, HEADER_WRAP};
 
 use super::compare::{Report, wide};
-use super::physics::{NQ, NU, NV};
+use super::physics::Shape;
 use super::program::{Arg, Program, Scalar, StructArg};
 use super::quat::{qexp, qlog, quat_at, quat_at64, wxyz};
 use super::rng::{RandnOrder, Sampler, WarpRandom, stream_offset};
@@ -66,6 +66,7 @@ pub struct ResetState {
 #[allow(clippy::too_many_arguments)]
 pub fn reference_reset(
     clip: &Clip,
+    shape: &Shape,
     layout: &JointLayout,
     cdf: &[f32],
     bins: usize,
@@ -74,7 +75,7 @@ pub fn reference_reset(
     env: (usize, usize),
     rng: &mut WarpRandom,
 ) -> ResetState {
-    let l = HUMANOID_LAYOUT;
+    let l = shape.table;
     let u = rng.randf();
     let v = rng.randf();
     let (mut c, bin, mut t0) = start_time(clip, cdf, bins, params.dt, u, v);
@@ -90,7 +91,7 @@ pub fn reference_reset(
     }
     let row = clip.lookup(c, f64::from(t0));
     let sigma = f64::from(params.noise_std);
-    let mut qpos = row[l.qpos..l.qpos + NQ].to_vec();
+    let mut qpos = row[l.qpos..l.qpos + shape.nq()].to_vec();
     let rotate = |qpos: &mut Vec<f64>, a: usize, rng: &mut WarpRandom| {
         let g = [rng.randn(), rng.randn(), rng.randn()];
         let q = quat_at64(&row, l.qpos + a) * qexp(g.map(|x| sigma * x));
@@ -105,7 +106,7 @@ pub fn reference_reset(
             qpos[a] = row[l.qpos + a] + sigma * rng.randn();
         }
     }
-    let qvel = (0..NV)
+    let qvel = (0..shape.nv())
         .map(|k| row[l.qvel + k] + VELOCITY_NOISE_FACTOR * sigma * rng.randn())
         .collect();
     ResetState {
@@ -170,6 +171,8 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
     let clips = clip.clips();
     let cells = clips * c.bins;
     let layout = fx.layout.clone();
+    let shape = fx.shape.clone();
+    let (nq, nv, nu) = (shape.nq(), shape.nv(), shape.nu());
     let n = c.n;
     let mut rng = Sampler::new(c.seed);
     let done: Vec<i32> = (0..n)
@@ -222,11 +225,11 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
             })
             .collect()
     };
-    let qpos = fill(NQ, &mut rng);
-    let qvel = fill(NV, &mut rng);
-    let ctrl = fill(NU, &mut rng);
-    let warm = fill(NV, &mut rng);
-    let actions = fill(NU, &mut rng);
+    let qpos = fill(nq, &mut rng);
+    let qvel = fill(nv, &mut rng);
+    let ctrl = fill(nu, &mut rng);
+    let warm = fill(nv, &mut rng);
+    let actions = fill(nu, &mut rng);
     let ref_time = fill(1, &mut rng);
     let steps: Vec<i32> = done
         .iter()
@@ -271,6 +274,7 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
     let args = vec![
         p.i32("done", &[n], done.clone()),
         p.f32("table", &[clip.data().len()], clip.data()),
+        Arg::Struct(StructArg::TableLayout(shape.reference_layout())),
         p.i32("clip_offsets", &[clips], clip.offsets()),
         Arg::Scalar(Scalar::I32(ROOT_QUAT as i32)),
         p.i32("joint_kind", &[j], layout.kind.clone()),
@@ -280,28 +284,28 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         p.i32("iteration", &[1], vec![c.iteration]),
         Arg::Scalar(Scalar::I32(c.t)),
         Arg::Struct(StructArg::Reset(params)),
-        p.f32("qpos", &[n, NQ], qpos),
-        p.f32("qvel", &[n, NV], qvel),
-        p.f32("ctrl", &[n, NU], ctrl),
-        p.f32("qacc_warmstart", &[n, NV], warm),
+        p.f32("qpos", &[n, nq], qpos),
+        p.f32("qvel", &[n, nv], qvel),
+        p.f32("ctrl", &[n, nu], ctrl),
+        p.f32("qacc_warmstart", &[n, nv], warm),
         p.i32("clip_id", &[n], clip_id),
         p.f32("ref_time", &[n], ref_time),
         p.i32("episode_step", &[n], steps),
-        p.f32("actions", &[n, NU], actions),
+        p.f32("actions", &[n, nu], actions),
     ];
     // One thread per env and lane (a lane per qpos and qvel entry, one for the rest).
-    p.launch(&RESET_MASKED, n * (NQ + NV + 1), args);
+    p.launch(&RESET_MASKED, n * (nq + nv + 1), args);
 
     Check::new(p, move |p, out| {
         let mut r = Report::new(&p.name);
         let reset: Vec<usize> = (0..n).filter(|&e| done[e] != 0).collect();
         let kept: Vec<usize> = (0..n).filter(|&e| done[e] == 0).collect();
         for (name, width) in [
-            ("qpos", NQ),
-            ("qvel", NV),
-            ("ctrl", NU),
-            ("qacc_warmstart", NV),
-            ("actions", NU),
+            ("qpos", nq),
+            ("qvel", nv),
+            ("ctrl", nu),
+            ("qacc_warmstart", nv),
+            ("actions", nu),
             ("ref_time", 1),
         ] {
             r.bitwise_f32(
@@ -316,7 +320,7 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
             .map(|&e| p.input_i32("episode_step")[e])
             .collect();
         r.exact("episode_step of envs not done", &kept_steps, &kept_in);
-        for (name, width) in [("ctrl", NU), ("qacc_warmstart", NV), ("actions", NU)] {
+        for (name, width) in [("ctrl", nu), ("qacc_warmstart", nv), ("actions", nu)] {
             r.bitwise_f32(
                 &format!("{name} of reset envs = 0"),
                 &rows_of(out.f32(name), width, &reset),
@@ -352,6 +356,7 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
                         stream_offset(c.iteration, params.horizon, c.t, n as i32, e as i32);
                     reference_reset(
                         &clip,
+                        &shape,
                         &layout,
                         &cdf,
                         c.bins,
@@ -363,8 +368,8 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
                 })
                 .collect()
         };
-        let got_qpos = wide(&rows_of(out.f32("qpos"), NQ, &reset));
-        let got_qvel = wide(&rows_of(out.f32("qvel"), NV, &reset));
+        let got_qpos = wide(&rows_of(out.f32("qpos"), nq, &reset));
+        let got_qvel = wide(&rows_of(out.f32("qvel"), nv, &reset));
         let candidates = [RandnOrder::RadiusFirst, RandnOrder::AngleFirst].map(|o| {
             let states = expected(o);
             let qvel: Vec<f64> = states.iter().flat_map(|s| s.qvel.iter().copied()).collect();
@@ -465,7 +470,7 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
                     .map(move |a| (e, a))
             })
             .map(|(e, a)| {
-                let q = &out.f32("qpos")[e * NQ + a..e * NQ + a + 4];
+                let q = &out.f32("qpos")[e * nq + a..e * nq + a + 4];
                 (q.iter().map(|&x| f64::from(x).powi(2)).sum::<f64>().sqrt() - 1.0).abs()
             })
             .fold(0.0, f64::max);
@@ -473,7 +478,7 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
             norms_off < 1e-6,
             format!("quaternions of reset envs unit: max | |q| - 1 | = {norms_off:.1e}"),
         );
-        let l = HUMANOID_LAYOUT;
+        let l = shape.table;
         let mut root_off = 0.0f64;
         let mut state_off = 0.0f64;
         let mut recovered: Vec<f64> = Vec::new();
@@ -481,8 +486,8 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         let sigma = f64::from(params.noise_std);
         for (i, &e) in reset.iter().enumerate() {
             let row = clip.lookup(got_clip[i] as usize, f64::from(got_t0[i]));
-            let q = &out.f32("qpos")[e * NQ..(e + 1) * NQ];
-            let v = &out.f32("qvel")[e * NV..(e + 1) * NV];
+            let q = &out.f32("qpos")[e * nq..(e + 1) * nq];
+            let v = &out.f32("qvel")[e * nv..(e + 1) * nv];
             for c in 0..3 {
                 root_off = root_off.max(
                     (f64::from(q[c]) - row[l.qpos + c]).abs() / row[l.qpos + c].abs().max(1.0),
@@ -501,7 +506,7 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
                     recovered.push(g / sigma.max(1e-30));
                 }
             }
-            for k in 0..NV {
+            for k in 0..nv {
                 let g = f64::from(v[k]) - row[l.qvel + k];
                 state_off = state_off.max(g.abs() / row[l.qvel + k].abs().max(1.0));
                 recovered_velocity.push(g / (VELOCITY_NOISE_FACTOR * sigma).max(1e-30));

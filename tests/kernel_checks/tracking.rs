@@ -5,22 +5,22 @@
 //! five tracking errors (means over the joints, the non-root dofs and the end effectors; the
 //! COM's one point; end-effector positions in the world or, with `ee_relative`, each relative to
 //! its own root), `r = exp(-w . e)`, the failure causes (FELL: root fallen more than
-//! `termination_height` below the reference root; LOST: a body farther than
+//! `termination_height` below the reference root; LOST: a tracked body farther than
 //! `tracking_distance` from its reference; and, each only with a positive threshold, LOW_ROOT:
-//! root below `min_root_height`; LOW_REWARD: reward below `min_reward`; DRIFT: mean body
-//! distance above `mean_tracking_distance`) as the bitmask `failure`, from `grace_steps` on,
+//! root below `min_root_height`; LOW_REWARD: reward below `min_reward`; DRIFT: mean tracked
+//! body distance above `mean_tracking_distance`) as the bitmask `failure`, from `grace_steps` on,
 //! truncation at `max_episode_steps` or when a clamped clip's next reference time would pass
 //! its end, the (clip, phase bin) counts, the advanced clocks. Envs are built to hit every cause alone
 //! and several at once, inside and after the grace steps, and to cross thresholds that are off.
 
 use instantmimic::env::layout::{BALL, ERROR_SUMS, JointLayout, TRACKING_LANES};
-use instantmimic::kernels::{REWARD_TERMINATION, TRACKING_ERROR_SUMS, TrackingParams};
-use instantmimic::motion::table::{
-    HEADER_DURATION, HEADER_WRAP, HUMANOID_END_EFFECTORS, HUMANOID_LAYOUT,
+use instantmimic::kernels::{
+    REWARD_TERMINATION, ReferenceLayout, TRACKING_ERROR_SUMS, TrackingParams,
 };
+use instantmimic::motion::table::{HEADER_DURATION, HEADER_WRAP};
 
 use super::compare::{Report, wide};
-use super::physics::{BODIES, NBODY, NQ, NV, PhysicsBatch};
+use super::physics::PhysicsBatch;
 use super::program::{Arg, Program, Scalar, StructArg};
 use super::quat::{angle, quat_at, quat_at64, vec3, vec3_64};
 use super::rng::Sampler;
@@ -110,13 +110,18 @@ pub fn reference_env(
     episode_step: i32,
     bins: usize,
 ) -> EnvOutcome {
-    let l = HUMANOID_LAYOUT;
+    let l = physics.shape.table;
+    let (nq, nv, nbody) = (
+        physics.shape.nq(),
+        physics.shape.nv(),
+        physics.shape.nbody(),
+    );
     let data = clip.header(c);
     let t_ref = ref_time + params.dt;
     let row = clip.lookup(c, f64::from(t_ref));
-    let qpos = &physics.qpos[e * NQ..(e + 1) * NQ];
-    let qvel = &physics.qvel[e * NV..(e + 1) * NV];
-    let body = |b: usize| (e * NBODY + b + 1) * 3;
+    let qpos = &physics.qpos[e * nq..(e + 1) * nq];
+    let qvel = &physics.qvel[e * nv..(e + 1) * nv];
+    let body = |b: usize| (e * nbody + b + 1) * 3;
 
     let mut errors = [0.0; 5];
     for j in 0..layout.num_joints() {
@@ -129,27 +134,28 @@ pub fn reference_env(
         errors[0] += d * d;
     }
     errors[0] /= layout.num_joints().max(1) as f64;
-    for k in 6..NV {
+    for k in 6..nv {
         let d = f64::from(qvel[k]) - row[l.qvel + k];
         errors[1] += d * d;
     }
-    errors[1] /= (NV - 6).max(1) as f64;
-    let com = vec3(&physics.subtree_com, (e * NBODY + 1) * 3);
+    errors[1] /= (nv - 6).max(1) as f64;
+    let com = vec3(&physics.subtree_com, (e * nbody + 1) * 3);
     errors[2] = (com - vec3_64(&row, l.com_pos)).norm_squared();
     // Root-relative: each position relative to its own root (body index 0).
     let root = vec3(&physics.xpos, body(0));
     let root_ref = vec3_64(&row, l.body_pos);
     let (mut ee_world, mut ee_relative) = (0.0, 0.0);
-    for &b in &HUMANOID_END_EFFECTORS {
+    for &b in &layout.end_effectors {
+        let b = b as usize;
         let p = vec3(&physics.xpos, body(b));
         let p_ref = vec3_64(&row, l.body_pos + 3 * b);
         ee_world += (p - p_ref).norm_squared();
         ee_relative += ((p - root) - (p_ref - root_ref)).norm_squared();
-        let q = quat_at(&physics.xquat, (e * NBODY + b + 1) * 4);
+        let q = quat_at(&physics.xquat, (e * nbody + b + 1) * 4);
         let d = angle(&q, &quat_at64(&row, l.body_quat + 4 * b));
         errors[4] += d * d;
     }
-    let ee_count = HUMANOID_END_EFFECTORS.len().max(1) as f64;
+    let ee_count = layout.end_effectors.len().max(1) as f64;
     let (ee_world, ee_relative) = (ee_world / ee_count, ee_relative / ee_count);
     let ee_pos_other_frame;
     (errors[3], ee_pos_other_frame) = if params.ee_relative != 0 {
@@ -158,11 +164,17 @@ pub fn reference_env(
         (ee_world, ee_relative)
     };
     errors[4] /= ee_count;
-    let distances: Vec<f64> = (0..BODIES)
-        .map(|b| (vec3(&physics.xpos, body(b)) - vec3_64(&row, l.body_pos + 3 * b)).norm())
+    // Over the tracked bodies only.
+    let distances: Vec<f64> = layout
+        .tracked_bodies
+        .iter()
+        .map(|&b| {
+            let b = b as usize;
+            (vec3(&physics.xpos, body(b)) - vec3_64(&row, l.body_pos + 3 * b)).norm()
+        })
         .collect();
     let far = distances.iter().copied().fold(0.0, f64::max);
-    let mean_distance = distances.iter().sum::<f64>() / BODIES as f64;
+    let mean_distance = distances.iter().sum::<f64>() / distances.len().max(1) as f64;
     let weights = [
         params.pose_weight,
         params.velocity_weight,
@@ -279,27 +291,34 @@ const KINDS: [Kind; 11] = [
 /// The mean body distance of the drift envs when `mean_tracking_distance` is off.
 const DRIFT_WHEN_OFF: f64 = 0.25;
 
-/// Moves env `e` of `physics` (near the reference `row`) to the failure `kind` stands for.
+/// Moves env `e` of `physics` (near the reference `row`) to the failure `kind` stands for;
+/// `tracked`: the tracked bodies (body indices).
 fn make_kind(
     kind: Kind,
     physics: &mut PhysicsBatch,
     e: usize,
     row: &[f64],
     params: &TrackingParams,
+    tracked: &[i32],
     rng: &mut Sampler,
 ) {
-    let ref_z = row[HUMANOID_LAYOUT.qpos + 2];
+    let (nq, nv, nbody) = (
+        physics.shape.nq(),
+        physics.shape.nv(),
+        physics.shape.nbody(),
+    );
+    let ref_z = row[physics.shape.table.qpos + 2];
     let height = f64::from(params.termination_height);
     match kind {
         Kind::Fallen | Kind::LastStepFallen => {
             let drop = height + rng.uniform(0.1, 0.5);
-            physics.qpos[e * NQ + 2] = (ref_z - drop) as f32;
+            physics.qpos[e * nq + 2] = (ref_z - drop) as f32;
         }
         Kind::Lost => {
-            let b = rng.index(0, BODIES);
+            let b = tracked[rng.index(0, tracked.len())] as usize;
             let dir = rng.normal3(1.0);
             let len = dir.iter().map(|x| x * x).sum::<f64>().sqrt();
-            let at = (e * NBODY + b + 1) * 3;
+            let at = (e * nbody + b + 1) * 3;
             // Not so far that the mean distance drifts too.
             let push = f64::from(params.tracking_distance) + rng.uniform(0.2, 0.6);
             for (c, x) in dir.iter().enumerate() {
@@ -317,14 +336,14 @@ fn make_kind(
                 // Below an off threshold: only the guard keeps the cause off.
                 threshold.min(0.0) - rng.uniform(0.05, 0.3)
             };
-            physics.qpos[e * NQ + 2] = z as f32;
+            physics.qpos[e * nq + 2] = z as f32;
         }
         Kind::LowReward => {
             // velocity_weight * e_vel >= 20: a reward below 2e-9 times the rest.
             let off = (20.0 / f64::from(params.velocity_weight).max(1e-3)).sqrt();
-            for k in 6..NV {
+            for k in 6..nv {
                 let sign = if rng.chance(0.5) { 1.0 } else { -1.0 };
-                physics.qvel[e * NV + k] += (sign * off) as f32;
+                physics.qvel[e * nv + k] += (sign * off) as f32;
             }
         }
         Kind::Drift => {
@@ -336,8 +355,8 @@ fn make_kind(
             let length = rng.uniform(m + 0.08, hi);
             let dir = rng.normal3(1.0);
             let len = dir.iter().map(|x| x * x).sum::<f64>().sqrt();
-            for b in 0..BODIES {
-                let at = (e * NBODY + b + 1) * 3;
+            for b in 0..nbody - 1 {
+                let at = (e * nbody + b + 1) * 3;
                 for (c, x) in dir.iter().enumerate() {
                     physics.xpos[at + c] += (length * x / len) as f32;
                 }
@@ -362,7 +381,9 @@ fn case(
     let mut rng = Sampler::new(seed);
     let clip_id = clip.clip_ids(n, &mut rng);
     let dt = f64::from(params.dt);
-    let mut physics = PhysicsBatch::new(n);
+    let shape = fx.shape.clone();
+    let (nq, nv, nbody) = (shape.nq(), shape.nv(), shape.nbody());
+    let mut physics = PhysicsBatch::new(&shape, n);
     let mut ref_time = vec![0.0f32; n];
     let mut episode_step = vec![0i32; n];
     for e in 0..n {
@@ -403,7 +424,15 @@ fn case(
         };
         physics.set_near_reference(e, (clip, c), t_ref, scale, &mut rng);
         let row = clip.lookup(c, t_ref);
-        make_kind(kind, &mut physics, e, &row, &params, &mut rng);
+        make_kind(
+            kind,
+            &mut physics,
+            e,
+            &row,
+            &params,
+            &layout.tracked_bodies,
+            &mut rng,
+        );
     }
     let clips = clip.clips();
     let cells = clips * bins;
@@ -415,13 +444,10 @@ fn case(
 
     let j = layout.num_joints();
     let ee = layout.end_effectors.clone();
-    assert_eq!(
-        ee,
-        HUMANOID_END_EFFECTORS.map(|b| b as i32),
-        "the character's end effectors"
-    );
+    let tracked = layout.tracked_bodies.clone();
     let mut p = Program::new(format!(
-        "reward_termination: {clip_name}, {n} envs, weights [{}, {}, {}, {}, {}], grace {}, max steps {}, min root height {}, min reward {}, mean distance {}, ee relative {}",
+        "reward_termination: {clip_name}, {n} envs, {} tracked bodies, weights [{}, {}, {}, {}, {}], grace {}, max steps {}, min root height {}, min reward {}, mean distance {}, ee relative {}",
+        layout.tracked_bodies.len(),
         params.pose_weight,
         params.velocity_weight,
         params.com_weight,
@@ -434,16 +460,17 @@ fn case(
         params.mean_tracking_distance,
         params.ee_relative
     ));
-    p.f32("qpos", &[n, NQ], physics.qpos.clone());
-    p.f32("qvel", &[n, NV], physics.qvel.clone());
-    p.f32("xpos", &[n, NBODY, 3], physics.xpos.clone());
-    p.f32("xquat", &[n, NBODY, 4], physics.xquat.clone());
-    p.f32("subtree_com", &[n, NBODY, 3], physics.subtree_com.clone());
+    p.f32("qpos", &[n, nq], physics.qpos.clone());
+    p.f32("qvel", &[n, nv], physics.qvel.clone());
+    p.f32("xpos", &[n, nbody, 3], physics.xpos.clone());
+    p.f32("xquat", &[n, nbody, 4], physics.xquat.clone());
+    p.f32("subtree_com", &[n, nbody, 3], physics.subtree_com.clone());
     p.f32("table", &[clip.data().len()], clip.data());
     p.i32("clip_offsets", &[clips], clip.offsets());
     p.i32("joint_kind", &[j], layout.kind.clone());
     p.i32("joint_qpos", &[j], layout.qpos.clone());
     p.i32("end_effectors", &[ee.len()], ee);
+    p.i32("tracked_bodies", &[tracked.len()], tracked);
     p.i32("clip_id", &[n], clip_id.clone());
     p.f32("ref_time", &[n], ref_time.clone());
     p.i32("episode_step", &[n], episode_step.clone());
@@ -464,7 +491,7 @@ fn case(
     p.f32("phase_visits", &[clips, bins], visits.clone());
     p.f32("phase_failures", &[clips, bins], failures.clone());
     add_error_sums(&mut p, n);
-    launch_reward(&mut p, n, params, ROW as i32);
+    launch_reward(&mut p, n, shape.reference_layout(), params, ROW as i32);
 
     let clip = clip.clone();
     // Whether any env tracks a clamped clip (the clip end must be covered) or a wrapped one.
@@ -707,37 +734,40 @@ pub fn add_error_sums(p: &mut Program, envs: usize) {
 }
 
 /// The reward of control step `t` as the rollout launches it, over `p`'s buffers of the names
-/// of the kernels' parameters: `tracking_error_sums` into `error_sums` ([`add_error_sums`]),
-/// then `reward_termination`.
-pub fn launch_reward(p: &mut Program, envs: usize, params: TrackingParams, t: i32) {
+/// of the kernels' parameters, with the table's row `table_layout`: `tracking_error_sums` into
+/// `error_sums` ([`add_error_sums`]), then `reward_termination`.
+pub fn launch_reward(
+    p: &mut Program,
+    envs: usize,
+    table_layout: ReferenceLayout,
+    params: TrackingParams,
+    t: i32,
+) {
     let buffers = |names: &[&str]| -> Vec<Arg> {
         names.iter().map(|n| Arg::Buffer((*n).to_owned())).collect()
     };
     let tracking = Arg::Struct(StructArg::Tracking(params));
-    let mut sums = buffers(&[
-        "qpos",
-        "qvel",
-        "xpos",
-        "xquat",
-        "table",
+    let row = Arg::Struct(StructArg::TableLayout(table_layout));
+    let mut sums = buffers(&["qpos", "qvel", "xpos", "xquat", "table"]);
+    sums.push(row.clone());
+    sums.extend(buffers(&[
         "clip_offsets",
         "joint_kind",
         "joint_qpos",
         "end_effectors",
-    ]);
+        "tracked_bodies",
+    ]));
     sums.push(tracking.clone());
     sums.extend(buffers(&["clip_id", "ref_time", "error_sums"]));
     p.launch(&TRACKING_ERROR_SUMS, envs * TRACKING_LANES, sums);
-    let mut reward = buffers(&[
-        "qpos",
-        "qvel",
-        "subtree_com",
-        "error_sums",
-        "table",
+    let mut reward = buffers(&["qpos", "qvel", "subtree_com", "error_sums", "table"]);
+    reward.push(row);
+    reward.extend(buffers(&[
         "clip_offsets",
         "joint_kind",
         "end_effectors",
-    ]);
+        "tracked_bodies",
+    ]));
     reward.extend([tracking, Arg::Scalar(Scalar::I32(t))]);
     reward.extend(buffers(&[
         "clip_id",

@@ -10,7 +10,7 @@ use super::super::storage::RolloutStorage;
 use super::super::task::Task;
 use super::{Rollout, RolloutError};
 use crate::env::config::ActionMode;
-use crate::env::layout::{OBSERVE_SLOTS, TRACKING_LANES};
+use crate::env::layout::{TRACKING_LANES, observe_threads_per_env};
 
 impl Rollout {
     pub(super) fn record_scores(
@@ -29,8 +29,10 @@ impl Rollout {
             &p.xpos,
             &p.xquat,
             self.table.table(),
+            self.table.layout(),
             self.table.clip_offsets(),
             &self.joints.end_effectors,
+            &self.joints.tracked_bodies,
             &self.state.clip_id,
             &self.state.ref_time,
             t,
@@ -130,10 +132,12 @@ impl Rollout {
             &p.xpos,
             &p.xquat,
             self.table.table(),
+            self.table.layout(),
             self.table.clip_offsets(),
             &self.joints.kind,
             &self.joints.qpos,
             &self.joints.end_effectors,
+            &self.joints.tracked_bodies,
             tracking,
             &st.clip_id,
             &st.ref_time,
@@ -147,9 +151,11 @@ impl Rollout {
             &p.subtree_com,
             &st.error_sums,
             self.table.table(),
+            self.table.layout(),
             self.table.clip_offsets(),
             &self.joints.kind,
             &self.joints.end_effectors,
+            &self.joints.tracked_bodies,
             tracking,
             t,
             &st.clip_id,
@@ -178,6 +184,7 @@ impl Rollout {
             self.num_envs * lanes,
             &st.done,
             self.table.table(),
+            self.table.layout(),
             self.table.clip_offsets(),
             self.joints.root_quat,
             &self.joints.kind,
@@ -249,9 +256,10 @@ impl Rollout {
     ) -> Result<(), RolloutError> {
         let p = &self.physics;
         let norm = &self.normalizer;
+        let tracked = &self.joints.tracked_bodies;
         self.kernels.observe(
             s,
-            self.num_envs * OBSERVE_SLOTS,
+            self.num_envs * observe_threads_per_env(tracked.len()),
             &p.qpos,
             &p.qvel,
             &p.xpos,
@@ -259,8 +267,10 @@ impl Rollout {
             &p.cvel,
             &p.subtree_com,
             self.table.table(),
+            self.table.layout(),
             self.table.clip_offsets(),
             &self.joints.end_effectors,
+            tracked,
             &self.state.clip_id,
             &self.state.ref_time,
             &self.state.actions,

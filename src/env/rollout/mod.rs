@@ -19,6 +19,7 @@ use thiserror::Error;
 
 use crate::cuda::{Communicator, CudaError, Gpu, Graph, Stream};
 use crate::motion::MotionLibrary;
+use crate::motion::table::TableLayout;
 use crate::plan::{PlanStore, Simulation, SimulationError};
 
 use super::DeviceReferenceTable;
@@ -32,7 +33,7 @@ use super::layout::{
 };
 use super::normalizer::ObservationNormalizer;
 use super::phases::PhaseStatistics;
-use super::physics_state::{NQ, NU, NV, PhysicsState};
+use super::physics_state::{PhysicsSizes, PhysicsState, PhysicsStateError};
 use super::policy::RolloutPolicy;
 use super::stages::{RolloutStage, StageEvents, StageRecorder};
 use super::statistics::RolloutStatistics;
@@ -54,6 +55,8 @@ pub enum RolloutError {
     Simulation(#[from] SimulationError),
     #[error(transparent)]
     Env(#[from] EnvError),
+    #[error(transparent)]
+    Physics(#[from] PhysicsStateError),
     /// What the policy's implementation reports (`ppo::PolicyError` for PPO's policy).
     #[error(transparent)]
     Policy(Box<dyn std::error::Error + Send + Sync>),
@@ -98,6 +101,8 @@ pub struct Rollout {
     /// evaluation rollout shares both with its training rollout.
     library: Arc<MotionLibrary>,
     table: Arc<DeviceReferenceTable>,
+    /// The character's name, for errors.
+    character: String,
     /// The character's joints as the kernels read them, on the host and the device.
     layout: JointLayout,
     /// The character's bodies as `body_frames` and `body_velocities` read them, and on the device with
@@ -200,30 +205,41 @@ impl Rollout {
         let sim = Simulation::load(gpu, store, config.env.num_envs, &["step", "kinematics"])?;
         let physics_dt = physics_timestep(&sim)?;
         let control_dt = physics_dt * f64::from(config.env.substeps);
-        let (library, table, layout, bodies) = match source {
+        let (library, table, character, layout, bodies, sizes) = match source {
             Source::Training(motion) => {
                 let character = motion.character();
-                if character.nq() != NQ || character.nv() != NV || character.actuators().len() != NU
-                {
+                let library = motion.library(control_dt)?;
+                let expected = TableLayout::for_character(character);
+                if library.layout() != expected {
                     return Err(RolloutError::Setup(format!(
-                        "the rollout is built for the humanoid (nq {NQ}, nv {NV}, nu {NU}); {} has nq {}, nv {}, nu {}",
-                        character.source_name(),
-                        character.nq(),
-                        character.nv(),
-                        character.actuators().len()
+                        "the motion library {} has rows of {} values for {} bodies; {} needs {} values for {} bodies (build the library for this character)",
+                        library.origin(),
+                        library.layout().stride,
+                        library.layout().nbody,
+                        character.name(),
+                        expected.stride,
+                        expected.nbody
                     )));
                 }
-                let library = motion.library(control_dt)?;
                 let table = DeviceReferenceTable::from_library(gpu, &library)?;
                 let layout = JointLayout::for_character(character)?;
                 let bodies = BodyModel::for_character(character)?;
-                (Arc::new(library), Arc::new(table), layout, bodies)
+                (
+                    Arc::new(library),
+                    Arc::new(table),
+                    character.name().to_owned(),
+                    layout,
+                    bodies,
+                    PhysicsSizes::of(character),
+                )
             }
             Source::Evaluation(training) => (
                 Arc::clone(&training.library),
                 Arc::clone(&training.table),
+                training.character.clone(),
                 training.layout.clone(),
                 training.bodies.clone(),
+                training.physics.sizes,
             ),
         };
         let body_kinematics = match config.env.body_kinematics {
@@ -231,20 +247,20 @@ impl Rollout {
             BodyKinematics::Fused => Some(DeviceBodyModel::upload(gpu, &bodies)?),
         };
         let clips = library.num_clips();
-        let physics = PhysicsState::view(&sim)?;
+        let physics = PhysicsState::view(&sim, sizes, &character)?;
         physics.widen_control_range()?;
 
         let joints = DeviceJointLayout::upload(gpu, &layout)?;
-        let effectors = layout.end_effectors.len();
+        let counts = layout.observation_counts();
         // The goal task observes the character's own state (the same `observe` launch with no
         // reference blocks), then its goal.
         let (obs_size, observation) = match &config.task {
             TaskConfig::Tracking => (
-                observation_size(&config.obs, NU, effectors),
+                observation_size(&config.obs, counts),
                 observation_params(&config.obs, control_dt),
             ),
             TaskConfig::Goal(_) => (
-                goal_observation_size(&config.obs, NU, effectors),
+                goal_observation_size(&config.obs, counts),
                 observation_params(&goal_observation_config(&config.obs), control_dt),
             ),
         };
@@ -334,12 +350,12 @@ impl Rollout {
             episode_step: DeviceArray::zeros(gpu, [n])?,
             done: DeviceArray::from_slice(gpu, [n], &vec![1; n])?,
             failure: DeviceArray::zeros(gpu, [n])?,
-            actions: DeviceArray::zeros(gpu, [n, NU])?,
+            actions: DeviceArray::zeros(gpu, [n, layout.num_motors])?,
             pd_targets: DeviceArray::zeros(gpu, [n, joints.num_joints, 4])?,
             errors: DeviceArray::zeros(gpu, [n, 5])?,
             error_sums: DeviceArray::zeros(gpu, [n, TRACKING_LANES, ERROR_SUMS])?,
         };
-        let storage = RolloutStorage::zeros(gpu, horizon, n, obs_size, NU)?;
+        let storage = RolloutStorage::zeros(gpu, horizon, n, obs_size, layout.num_motors)?;
         let task = match goal {
             Some(mut params) => {
                 params.horizon = reset.horizon;
@@ -358,6 +374,7 @@ impl Rollout {
             kernels,
             library,
             table,
+            character,
             layout,
             bodies,
             body_kinematics,
@@ -454,7 +471,7 @@ impl Rollout {
 
     /// Actions per env: one PD target per actuator.
     pub fn action_size(&self) -> usize {
-        NU
+        self.layout.num_motors
     }
 
     pub fn simulation(&self) -> &Simulation {
@@ -654,7 +671,7 @@ impl Rollout {
         trajectory: Option<&Trajectory>,
     ) -> Result<(), RolloutError> {
         let gpu = &self.gpu;
-        let wanted = (self.num_envs, self.observation_size(), NU);
+        let wanted = (self.num_envs, self.observation_size(), self.action_size());
         let lent = (
             policy.batch(),
             policy.observation_size(),

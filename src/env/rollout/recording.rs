@@ -3,7 +3,6 @@
 
 use super::{Rollout, RolloutError};
 use crate::cuda::{Graph, Stream};
-use crate::env::physics_state::{NBODY, NQ};
 use crate::env::policy::RolloutPolicy;
 use crate::env::stages::StageRecorder;
 use crate::env::task::Task;
@@ -14,7 +13,14 @@ impl Rollout {
     /// An empty record of every env's state for each of this rollout's frames: the state it
     /// starts from and the one after each control step.
     pub fn new_trajectory(&self) -> Result<Trajectory, RolloutError> {
-        let trajectory = Trajectory::zeros(&self.gpu, self.horizon + 1, self.num_envs, NQ, NBODY)?;
+        let sizes = self.physics.sizes;
+        let trajectory = Trajectory::zeros(
+            &self.gpu,
+            self.horizon + 1,
+            self.num_envs,
+            sizes.nq,
+            sizes.nbody,
+        )?;
         // The goal task's record keeps each frame's goal and goals reached too.
         Ok(match &self.task {
             Task::Goal(goal) => trajectory.with_goals(&self.gpu, goal.counters.shape()[1])?,

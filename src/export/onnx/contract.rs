@@ -169,7 +169,7 @@ impl PolicyContract {
             },
             observation: ObservationContract {
                 size: observation_size,
-                blocks: observation_blocks(&config.obs, actions, end_effectors.len()),
+                blocks: observation_blocks(&config.obs, layout.observation_counts()),
                 normalization_clip: config.obs.clip,
                 normalization_epsilon: VARIANCE_EPSILON,
             },

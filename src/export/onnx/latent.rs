@@ -203,12 +203,11 @@ pub fn export_latent_controller(
         PolicyContract::new(&checkpoint.meta, &config, character, &layout, d, physics_dt);
     policy_contract.output.description =
         "the decoder's action (the latent controller's mean action)".to_string();
-    let proprio_blocks =
-        observation_blocks(&config.obs, layout.num_motors, layout.end_effectors.len())
-            .into_iter()
-            .filter(|b| !REFERENCE_BLOCKS.contains(&b.name.as_str()))
-            .map(|b| b.name)
-            .collect();
+    let proprio_blocks = observation_blocks(&config.obs, layout.observation_counts())
+        .into_iter()
+        .filter(|b| !REFERENCE_BLOCKS.contains(&b.name.as_str()))
+        .map(|b| b.name)
+        .collect();
     let contract = LatentContract {
         format: LATENT_FORMAT_NAME.to_string(),
         proprio_columns: frozen.proprio_columns.clone(),

@@ -17,7 +17,7 @@ pub mod proto;
 
 use prost::Message as _;
 
-use crate::env::layout::{JointLayout, ObservationBlock, observation_blocks};
+use crate::env::layout::{JointLayout, ObservationBlock, ObservationCounts, observation_blocks};
 use crate::env::{GOAL_OBSERVATION, ObsConfig, goal_observation_config};
 use crate::motion::Character;
 use crate::ppo::{LayerShape, mlp_layout};
@@ -156,7 +156,7 @@ pub fn export_policy(
         PolicyContract::new(&checkpoint.meta, &config, character, &layout, d, physics_dt);
     if config.goal.is_some() {
         contract.observation.blocks =
-            goal_observation_blocks(&config.obs, layout.num_motors, layout.end_effectors.len());
+            goal_observation_blocks(&config.obs, layout.observation_counts());
     }
     let mut metadata = contract
         .metadata()
@@ -185,12 +185,11 @@ pub fn export_policy(
 /// the goal (docs/goal.md).
 pub fn goal_observation_blocks(
     obs: &ObsConfig,
-    motors: usize,
-    effectors: usize,
+    counts: ObservationCounts,
 ) -> Vec<ObservationBlock> {
     // The reference blocks the goal task turns off are there with size 0; they are left out.
     let mut blocks: Vec<ObservationBlock> =
-        observation_blocks(&goal_observation_config(obs), motors, effectors)
+        observation_blocks(&goal_observation_config(obs), counts)
             .into_iter()
             .filter(|b| b.size > 0)
             .collect();
