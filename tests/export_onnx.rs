@@ -42,7 +42,7 @@ fn config() -> TrainConfig {
 /// with an output gain of 1 (so that actions are O(1) and an error shows), random biases (the
 /// trainer starts them at 0, which would hide a misplaced bias) and random normalizer moments.
 fn seeded_checkpoint(config: &TrainConfig, seed: u64) -> Checkpoint {
-    let character = humanoid();
+    let character = Character::find(&config.character).expect("the configuration's character");
     let shapes = PolicyShapes::new(config, &character).expect("shapes");
     let mut rng = StdRng::seed_from_u64(seed);
     let layers = actor_layers(config, &shapes);
@@ -87,7 +87,8 @@ fn seeded_checkpoint(config: &TrainConfig, seed: u64) -> Checkpoint {
 /// The f64 forward of the checkpoint's actor: the normalizer as the GPU applies it, then the
 /// MLP with ELU between layers.
 fn forward_f64(checkpoint: &Checkpoint, config: &TrainConfig, obs: &[f32]) -> Vec<f64> {
-    let shapes = PolicyShapes::new(config, &humanoid()).expect("shapes");
+    let character = Character::find(&config.character).expect("the configuration's character");
+    let shapes = PolicyShapes::new(config, &character).expect("shapes");
     let d = shapes.observation_size;
     let get = |name: &str, n: usize| checkpoint.get::<f64>(name, &[n]).expect("tensor").to_vec();
     let (mean, inv_std) = normalizer(
@@ -298,6 +299,86 @@ fn the_onnx_policy_matches_the_checkpoint_and_carries_its_contract() {
             "{key}"
         );
     }
+}
+
+/// The G1's default configuration, as `train --character g1` takes it.
+fn g1_config() -> TrainConfig {
+    let (_, config) = TrainConfig::character_default("g1", "clip.npz").expect("the G1's default");
+    config.expect("valid config")
+}
+
+#[test]
+fn a_g1_policy_exports_with_the_g1s_contract_and_matches_the_checkpoint() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let config = g1_config();
+    let character = Character::find("g1").expect("the G1");
+    let checkpoint = seeded_checkpoint(&config, 5);
+    let checkpoint_path = dir.path().join("iter_00000042.safetensors");
+    checkpoint
+        .save(&checkpoint_path)
+        .expect("the checkpoint writer");
+    let onnx = dir.path().join("policy.onnx");
+    let out = export(&checkpoint_path, &onnx);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let shapes = PolicyShapes::new(&config, &character).expect("shapes");
+    let sidecar: PolicyContract = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("policy.json")).expect("sidecar"),
+    )
+    .expect("sidecar JSON");
+    // The contract states the robot's joints with the description's gains, one action each.
+    assert_eq!(sidecar.joints.len(), character.control().len());
+    for (joint, control) in sidecar.joints.iter().zip(character.control()) {
+        assert_eq!(joint.name, character.joints()[control.joint].name);
+        assert_eq!(
+            (joint.kp, joint.kd, joint.actions),
+            (control.kp, control.kd, 1)
+        );
+    }
+    assert!(
+        (sidecar.control_dt - 0.02).abs() < 1e-12 && (sidecar.physics_dt - 0.005).abs() < 1e-12
+    );
+    let Some(python) = python() else {
+        skip_support::skip(
+            "INSTANTMIMIC_BUILD_PYTHON is not set (tests/run.sh sets it): onnxruntime not run",
+        );
+        return;
+    };
+    let rows = random_observations(&checkpoint, 16, 13);
+    let rows_path = dir.path().join("obs.json");
+    std::fs::write(&rows_path, serde_json::to_string(&rows).expect("json")).expect("write");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/tools/run_onnx.py");
+    let out = Command::new(python)
+        .arg(script)
+        .arg(&onnx)
+        .arg(&rows_path)
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "onnxruntime: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let result: Value = serde_json::from_slice(&out.stdout).expect("JSON from run_onnx.py");
+    assert_eq!(
+        result["output"],
+        serde_json::json!(["actions", ["batch", shapes.action_size], "tensor(float)"])
+    );
+    let mut worst = 0.0f64;
+    for (r, obs) in rows.iter().enumerate() {
+        for (a, e) in forward_f64(&checkpoint, &config, obs).iter().enumerate() {
+            let got = result["actions"][r][a].as_f64().expect("a number");
+            worst = worst.max((got - e).abs());
+        }
+    }
+    eprintln!("G1: max |onnx - f64| = {worst:.2e}");
+    assert!(
+        worst < 1e-5,
+        "onnxruntime differs from the f64 forward by {worst}"
+    );
 }
 
 #[test]

@@ -125,6 +125,12 @@ impl PolicyContract {
                     .find(|jt| jt.qposadr as i32 == layout.qpos[j]);
                 let ball = layout.kind[j] == BALL;
                 let root_dofs = character.root_joint().map_or(0, |r| r.dofadr + 6);
+                // The description's values, exact (the layout holds the kernels' f32 copies).
+                let control = character
+                    .joints()
+                    .iter()
+                    .position(|jt| jt.qposadr as i32 == layout.qpos[j])
+                    .and_then(|id| character.joint_control(id));
                 JointContract {
                     name: joint.map_or_else(String::new, |jt| jt.name.clone()),
                     kind: if ball { "ball" } else { "hinge" }.to_string(),
@@ -132,11 +138,11 @@ impl PolicyContract {
                     dof_address: layout.dof[j] as usize,
                     first_action: layout.dof[j] as usize - root_dofs,
                     actions: if ball { 3 } else { 1 },
-                    kp: f64::from(layout.kp[j]),
+                    kp: control.map_or(f64::from(layout.kp[j]), |c| c.kp),
                     kd: joint.map_or(0.0, |jt| jt.damping),
-                    torque_limit: f64::from(layout.limit[j]),
-                    action_radians: f64::from(layout.scale[j]),
-                    center: f64::from(layout.center[j]),
+                    torque_limit: control.map_or(f64::from(layout.limit[j]), |c| c.effort_limit),
+                    action_radians: control.map_or(f64::from(layout.scale[j]), |c| c.action_scale),
+                    center: control.map_or(f64::from(layout.center[j]), |c| c.action_center),
                 }
             })
             .collect();
