@@ -12,6 +12,12 @@ failure or truncation freezes it. The host reads the sums once, after the rollou
 Failure here is the evaluation's own fixed yardstick (`Yardstick`, docs/train.md "Success"), not
 the training termination: the evaluation rollout runs `reward_termination` with its failures off,
 so that a change to the training termination cannot change what counts as success.
+
+Beside it, the robotics peers' rule (mjlab's and BeyondMimic's tracking terminations; docs/train.md
+"Success"): `robotics_terminated[n]` is set when a scored step of the env's first episode would
+have ended a peer's episode: the anchor body's height error, the anchor's tilt (the difference of
+the z components of the reference's and the character's gravity in the anchor frame) or any end
+effector's height error over the `Yardstick`'s `robotics_*` bounds.
 """
 
 import warp as wp
@@ -48,6 +54,19 @@ class Yardstick:
     max_body_distance: wp.float32
     # The root more than this below the reference root (m).
     max_root_drop: wp.float32
+    # The robotics peers' terminations (src/env/evaluation.rs: ROBOTICS_*), recorded beside the
+    # yardstick: the anchor's height error (m), the anchor's tilt (difference of the z components
+    # of the projected gravity) and any end effector's height error (m) over these.
+    robotics_max_anchor_height: wp.float32
+    robotics_max_anchor_tilt: wp.float32
+    robotics_max_end_effector_height: wp.float32
+
+
+@wp.func
+def gravity_z_in_body(q: wp.vec4) -> wp.float32:
+    """The z component of the world's unit gravity (0, 0, -1) in the frame of the unit quaternion
+    q (w, x, y, z): minus the world z of the body's z axis."""
+    return -(1.0 - 2.0 * (q[1] * q[1] + q[2] * q[2]))
 
 
 @wp.kernel
@@ -60,6 +79,7 @@ def evaluation_accumulate(
     clip_offsets: wp.array(dtype=wp.int32),
     end_effectors: wp.array(dtype=wp.int32),
     tracked_bodies: wp.array(dtype=wp.int32),
+    anchor: wp.int32,
     clip_id: wp.array(dtype=wp.int32),
     ref_time: wp.array(dtype=wp.float32),
     t: wp.int32,
@@ -71,6 +91,7 @@ def evaluation_accumulate(
     status: wp.array(dtype=wp.int32),
     steps: wp.array(dtype=wp.int32),
     sums: wp.array2d(dtype=wp.float32),
+    robotics_terminated: wp.array(dtype=wp.int32),
 ):
     """One thread per env n whose status is RUNNING: adds, for the state after step t against the
     reference of the env's clip `clip_id[n]` at `ref_time[n]`, the mean root-relative position
@@ -81,7 +102,12 @@ def evaluation_accumulate(
     (a tracked body farther than `max_body_distance` from its reference, or the root more than
     `max_root_drop` below the reference root) or `terminated[t, n]`, else COMPLETED if
     `truncated[t, n]` or the env has scored its clip's `clip_steps[clip_id[n]]` steps (a
-    library's clips have episodes of their own lengths in one evaluation rollout)."""
+    library's clips have episodes of their own lengths in one evaluation rollout). Sets
+    `robotics_terminated[n]` to 1 if the step breaks the peers' rule: the height of body `anchor`
+    (a body index) or of an end effector more than the yardstick's `robotics_max_anchor_height` or
+    `robotics_max_end_effector_height` off its reference's, or the z components of the world
+    gravity in the anchor's frame and in the reference anchor's differing by more than
+    `robotics_max_anchor_tilt`."""
     n = wp.tid()
     if status[n] != RUNNING:
         return
@@ -103,11 +129,14 @@ def evaluation_accumulate(
         pose += wp.length((p - root) - (p_ref - root_ref))
     ee_pos = float(0.0)
     ee_rot = float(0.0)
+    ee_height = float(0.0)
     effectors = end_effectors.shape[0]
     for k in range(effectors):
         b = end_effectors[k]
         p = wp.vec3(xpos[n, b + 1, 0], xpos[n, b + 1, 1], xpos[n, b + 1, 2])
-        ee_pos += wp.length(p - reference_position(table, at, table_layout.body_pos + 3 * b))
+        p_ref = reference_position(table, at, table_layout.body_pos + 3 * b)
+        ee_pos += wp.length(p - p_ref)
+        ee_height = wp.max(ee_height, wp.abs(p[2] - p_ref[2]))
         q = wp.vec4(xquat[n, b + 1, 0], xquat[n, b + 1, 1], xquat[n, b + 1, 2], xquat[n, b + 1, 3])
         ee_rot += qdiff_angle(q, reference_quat_wxyz(table, at, table_layout.body_quat + 4 * b))
     body_count = wp.float32(wp.max(bodies, 1))
@@ -119,6 +148,18 @@ def evaluation_accumulate(
     scored = steps[n] + 1
     steps[n] = scored
     dropped = reference_value(table, at, 2) - qpos[n, 2] > yardstick.max_root_drop
+    a = anchor
+    anchor_ref = reference_position(table, at, table_layout.body_pos + 3 * a)
+    anchor_height = wp.abs(xpos[n, a + 1, 2] - anchor_ref[2])
+    q_anchor = wp.vec4(xquat[n, a + 1, 0], xquat[n, a + 1, 1], xquat[n, a + 1, 2], xquat[n, a + 1, 3])
+    q_anchor_ref = reference_quat_wxyz(table, at, table_layout.body_quat + 4 * a)
+    anchor_tilt = wp.abs(gravity_z_in_body(q_anchor_ref) - gravity_z_in_body(q_anchor))
+    if (
+        anchor_height > yardstick.robotics_max_anchor_height
+        or anchor_tilt > yardstick.robotics_max_anchor_tilt
+        or ee_height > yardstick.robotics_max_end_effector_height
+    ):
+        robotics_terminated[n] = 1
     window_done = False
     if clip >= 0 and clip < clip_steps.shape[0]:
         window_done = scored >= clip_steps[clip]
@@ -136,6 +177,7 @@ LAUNCH = {
     "evaluation_accumulate": (
         "dim == len(status)",
         "dim <= len(steps)",
+        "dim <= len(robotics_terminated)",
         "dim <= extent(sums, 0)",
         "dim <= extent(qpos, 0)",
         "dim <= extent(xpos, 0)",

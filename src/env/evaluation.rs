@@ -18,11 +18,27 @@ pub const SUCCESS_MAX_BODY_DISTANCE_M: f32 = 1.0;
 /// backflip's termination height (the stricter of the committed 0.6 and the baseline's 0.8).
 pub const SUCCESS_MAX_ROOT_DROP_M: f32 = 0.6;
 
-/// The per-step part of the yardstick, as `evaluation_accumulate` reads it.
+/// The robotics peers' terminations, reported beside the yardstick (docs/train.md, "Beside it:
+/// the robotics peers' rule"):
+/// mjlab's tracking task (`bad_anchor_pos_z_only`, `bad_anchor_ori`,
+/// `bad_motion_body_pos_z_only`; BeyondMimic's are the same) ends an episode when the anchor
+/// body's height is more than this off its reference's (m)...
+pub const ROBOTICS_MAX_ANCHOR_HEIGHT_ERROR_M: f32 = 0.25;
+/// ... when the z components of the world's unit gravity in the anchor's frame and in the
+/// reference anchor's frame differ by more than this...
+pub const ROBOTICS_MAX_ANCHOR_TILT: f32 = 0.8;
+/// ... or when any end effector's height is more than this off its reference's (m).
+pub const ROBOTICS_MAX_END_EFFECTOR_HEIGHT_ERROR_M: f32 = 0.25;
+
+/// The per-step part of the yardstick, and the robotics peers' terminations, as
+/// `evaluation_accumulate` reads them.
 pub fn yardstick() -> Yardstick {
     Yardstick {
         max_body_distance: SUCCESS_MAX_BODY_DISTANCE_M,
         max_root_drop: SUCCESS_MAX_ROOT_DROP_M,
+        robotics_max_anchor_height: ROBOTICS_MAX_ANCHOR_HEIGHT_ERROR_M,
+        robotics_max_anchor_tilt: ROBOTICS_MAX_ANCHOR_TILT,
+        robotics_max_end_effector_height: ROBOTICS_MAX_END_EFFECTOR_HEIGHT_ERROR_M,
     }
 }
 
@@ -44,6 +60,8 @@ pub struct EpisodeScores {
     /// Control steps of each clip's episode (`[clips]`): an env completes when it has scored
     /// its clip's (or when the episode is truncated).
     pub(super) clip_steps: DeviceArray<i32>,
+    /// 1 where a scored step broke the robotics peers' rule (`[N]`).
+    pub(super) robotics_terminated: DeviceArray<i32>,
 }
 
 impl EpisodeScores {
@@ -57,6 +75,7 @@ impl EpisodeScores {
             steps: DeviceArray::zeros(gpu, [n])?,
             sums: DeviceArray::zeros(gpu, [n, SUMS])?,
             clip_steps: DeviceArray::from_slice(gpu, [clip_steps.len()], clip_steps)?,
+            robotics_terminated: DeviceArray::zeros(gpu, [n])?,
         })
     }
 
@@ -66,6 +85,7 @@ impl EpisodeScores {
         self.status.upload(&vec![RUNNING; n])?;
         self.steps.upload(&vec![0; n])?;
         self.sums.upload(&vec![0.0; n * SUMS])?;
+        self.robotics_terminated.upload(&vec![0; n])?;
         Ok(())
     }
 
@@ -74,13 +94,16 @@ impl EpisodeScores {
         let status = self.status.download()?;
         let steps = self.steps.download()?;
         let sums = self.sums.download()?;
+        let robotics_terminated = self.robotics_terminated.download()?;
         Ok(status
             .iter()
             .zip(&steps)
             .zip(sums.chunks_exact(SUMS))
-            .map(|((&status, &steps), s)| EpisodeScore {
+            .zip(&robotics_terminated)
+            .map(|(((&status, &steps), s), &robotics)| EpisodeScore {
                 completed: status == COMPLETED,
                 failed: status == FAILED,
+                robotics_terminated: robotics != 0,
                 steps: steps.max(0) as u32,
                 pose_error_sum: f64::from(s[0]),
                 mpjpe_sum: f64::from(s[1]),
@@ -99,6 +122,9 @@ pub struct EpisodeScore {
     pub completed: bool,
     /// Terminated early (fell or lost track of the reference).
     pub failed: bool,
+    /// A scored step would have ended a robotics peer's episode ([`ROBOTICS_MAX_ANCHOR_TILT`]
+    /// and its neighbours).
+    pub robotics_terminated: bool,
     /// Control steps scored.
     pub steps: u32,
     /// Sums over the scored steps of the per-step means: root-relative body position error

@@ -36,6 +36,8 @@ pub struct JointLayout {
     /// The bodies the reward, the observation, the termination and the success yardstick
     /// follow (`Character::tracked_bodies`, in its order), the root's first.
     pub tracked_bodies: Vec<i32>,
+    /// The anchor body (`Character::anchor_body`) as a body index.
+    pub anchor: i32,
     /// qpos address of the root quaternion.
     pub root_quat: i32,
     /// Number of motors.
@@ -91,6 +93,7 @@ impl JointLayout {
             center: Vec::new(),
             end_effectors: body_indices(character.end_effectors(), "end effector")?,
             tracked_bodies,
+            anchor: body_indices(&[character.anchor_body()], "anchor body")?[0],
             root_quat: (root.qposadr + 3) as i32,
             num_motors: character.actuators().len(),
         };
@@ -210,6 +213,7 @@ pub struct DeviceJointLayout {
     pub center: DeviceArray<f32>,
     pub end_effectors: DeviceArray<i32>,
     pub tracked_bodies: DeviceArray<i32>,
+    pub anchor: i32,
     pub root_quat: i32,
     pub num_joints: usize,
 }
@@ -235,6 +239,7 @@ impl DeviceJointLayout {
                 [layout.tracked_bodies.len()],
                 &layout.tracked_bodies,
             )?,
+            anchor: layout.anchor,
             root_quat: layout.root_quat,
             num_joints: j,
         })

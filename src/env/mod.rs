@@ -37,8 +37,10 @@ pub use config::{
 };
 pub use evaluation::{
     COMPLETED, ClipEvaluation, EpisodeScore, EpisodeScores, FAILED, LIBRARY_EVALUATION_WINDOW_S,
-    RUNNING, SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps,
-    clip_evaluation, evaluation_env, evaluation_episode_steps, evaluation_start_time, yardstick,
+    ROBOTICS_MAX_ANCHOR_HEIGHT_ERROR_M, ROBOTICS_MAX_ANCHOR_TILT,
+    ROBOTICS_MAX_END_EFFECTOR_HEIGHT_ERROR_M, RUNNING, SUCCESS_MAX_BODY_DISTANCE_M,
+    SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps, clip_evaluation, evaluation_env,
+    evaluation_episode_steps, evaluation_start_time, yardstick,
 };
 pub use goal_counters::{GoalCounter, GoalTally};
 pub use physics_state::{PhysicsSizes, PhysicsState, PhysicsStateError};

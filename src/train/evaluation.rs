@@ -12,6 +12,12 @@
 //! (checked here), so that a character that completes the motion while drifting away from the
 //! reference's path does not count.
 //!
+//! Beside it, the robotics peers' rule (mjlab's and BeyondMimic's terminations, checked per step
+//! on the GPU with thresholds [`ROBOTICS_MAX_ANCHOR_HEIGHT_ERROR_M`], [`ROBOTICS_MAX_ANCHOR_TILT`]
+//! and [`ROBOTICS_MAX_END_EFFECTOR_HEIGHT_ERROR_M`]): an env passes it when its episode runs to
+//! its time-out with no step that would have ended a peer's episode. It is scored over the steps
+//! the yardstick scores, so an episode the yardstick ends early does not pass it either.
+//!
 //! Error metrics are means over every evaluated control step of every env (a failed env
 //! contributes its steps up to the failure), so an env that falls early weighs less:
 //! - average pose error: mean distance of the tracked bodies (the humanoid's 15) to the
@@ -29,8 +35,9 @@ use super::library_evaluation::LibraryEvaluation;
 use super::metrics::nan_from_null;
 use crate::env::{EpisodeScore, EvalStart};
 pub use crate::env::{
-    SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps,
-    evaluation_episode_steps, yardstick,
+    ROBOTICS_MAX_ANCHOR_HEIGHT_ERROR_M, ROBOTICS_MAX_ANCHOR_TILT,
+    ROBOTICS_MAX_END_EFFECTOR_HEIGHT_ERROR_M, SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M,
+    clamped_clip_steps, evaluation_episode_steps, yardstick,
 };
 use crate::motion::LoopMode;
 
@@ -43,10 +50,11 @@ pub const POSE_ERROR_TARGET_M: f64 = 0.06;
 
 /// One env's evaluation episode, as the GPU evaluation reports it: whether it ran all
 /// `steps` control steps without failing the per-step yardstick, how many it ran, and per-step
-/// error means summed over those steps.
+/// error means summed over those steps; and whether a step broke the robotics peers' rule.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct EnvEvaluation {
     pub completed: bool,
+    pub robotics_terminated: bool,
     pub steps: u32,
     pub pose_error_sum: f64,
     pub global_position_error_sum: f64,
@@ -66,6 +74,7 @@ impl From<&EpisodeScore> for EnvEvaluation {
     fn from(score: &EpisodeScore) -> EnvEvaluation {
         EnvEvaluation {
             completed: score.completed,
+            robotics_terminated: score.robotics_terminated,
             steps: score.steps,
             pose_error_sum: score.pose_error_sum,
             global_position_error_sum: score.mpjpe_sum,
@@ -81,6 +90,12 @@ impl EnvEvaluation {
         self.completed
             && self.global_position_error_sum
                 <= SUCCESS_MAX_MEAN_MPJPE_M * f64::from(self.steps.max(1))
+    }
+
+    /// The robotics peers' rule: the episode ran to its time-out (completed) with no step that
+    /// would have ended a peer's episode.
+    pub fn passes_robotics_rule(&self) -> bool {
+        self.completed && !self.robotics_terminated
     }
 }
 
@@ -102,6 +117,15 @@ pub struct EvaluationSummary {
     /// variation), measured in the same evaluation.
     #[serde(default)]
     pub clip_start_success: bool,
+    /// Env episodes that passed the robotics peers' rule ([`EnvEvaluation::passes_robotics_rule`]),
+    /// and their share of `episodes`.
+    #[serde(default)]
+    pub robotics_rule_passed: u32,
+    #[serde(default)]
+    pub robotics_rule_rate: f64,
+    /// Whether env 0's episode, from the clip's beginning, passed the robotics peers' rule.
+    #[serde(default)]
+    pub clip_start_robotics_rule: bool,
     /// Control steps of a complete episode.
     pub episode_steps: u32,
     #[serde(deserialize_with = "nan_from_null")]
@@ -212,6 +236,7 @@ pub fn summarize(
     }
     let mut completed = 0u32;
     let mut succeeded = 0u32;
+    let mut robotics_rule_passed = 0u32;
     let mut steps = 0u64;
     let mut sums = [0.0f64; 4];
     for (env, e) in episodes.iter().enumerate() {
@@ -244,6 +269,7 @@ pub fn summarize(
         }
         completed += u32::from(e.completed);
         succeeded += u32::from(e.succeeded());
+        robotics_rule_passed += u32::from(e.passes_robotics_rule());
         steps += u64::from(e.steps);
     }
     let n = episodes.len() as f64;
@@ -263,6 +289,9 @@ pub fn summarize(
         success_rate,
         success: success_rate >= success_threshold,
         clip_start_success: episodes[0].succeeded(),
+        robotics_rule_passed,
+        robotics_rule_rate: f64::from(robotics_rule_passed) / n,
+        clip_start_robotics_rule: episodes[0].passes_robotics_rule(),
         episode_steps,
         mean_episode_steps: steps as f64 / n,
         pose_error_m: per_step(sums[0]),
@@ -334,6 +363,18 @@ pub fn format_evaluation_report(summary: &EvaluationSummary, threshold: f64) -> 
     );
     let _ = writeln!(
         out,
+        "robotics rule        {}/{} episodes pass = {:.3}; from the clip start {} (time-out, no mjlab termination)",
+        summary.robotics_rule_passed,
+        summary.episodes,
+        summary.robotics_rule_rate,
+        if summary.clip_start_robotics_rule {
+            "passes"
+        } else {
+            "fails"
+        }
+    );
+    let _ = writeln!(
+        out,
         "episode length       {:.1} of {} control steps (mean)",
         summary.mean_episode_steps, summary.episode_steps
     );
@@ -357,6 +398,7 @@ mod tests {
         let s = f64::from(steps);
         EnvEvaluation {
             completed,
+            robotics_terminated: false,
             steps,
             pose_error_sum: per_step[0] * s,
             global_position_error_sum: per_step[1] * s,
@@ -382,6 +424,44 @@ mod tests {
         let mut ten = vec![env(true, 5, [0.0; 4]); 9];
         ten.push(env(false, 1, [0.0; 4]));
         assert!(summarize(&ten, 5, 0.9).unwrap().success);
+    }
+
+    #[test]
+    fn the_robotics_rule_needs_a_complete_episode_without_a_peer_termination() {
+        // 30 of 32 complete; env 0 and env 7 broke the peers' rule (env 0 still succeeds by
+        // the yardstick); a failed episode without a peer termination does not pass either.
+        let mut envs = vec![env(true, 53, [0.05, 0.1, 0.08, 0.2]); 30];
+        envs.extend(vec![env(false, 20, [0.05, 0.1, 0.08, 0.2]); 2]);
+        envs[0].robotics_terminated = true;
+        envs[7].robotics_terminated = true;
+        let s = summarize(&envs, 53, 0.9).unwrap();
+        assert_eq!((s.succeeded, s.robotics_rule_passed), (30, 28));
+        assert_eq!(s.robotics_rule_rate, 28.0 / 32.0);
+        assert!(s.clip_start_success && !s.clip_start_robotics_rule);
+        envs[0].robotics_terminated = false;
+        let s = summarize(&envs, 53, 0.9).unwrap();
+        assert!(s.clip_start_robotics_rule);
+        let report = format_evaluation_report(&s, 0.9);
+        assert!(
+            report.contains(
+                "robotics rule        29/32 episodes pass = 0.906; from the clip start passes"
+            ),
+            "{report}"
+        );
+        // A metrics record written before the rule existed reads back without it.
+        let mut old = serde_json::to_value(&s).unwrap();
+        for key in [
+            "robotics_rule_passed",
+            "robotics_rule_rate",
+            "clip_start_robotics_rule",
+        ] {
+            old.as_object_mut().unwrap().remove(key);
+        }
+        let back: EvaluationSummary = serde_json::from_value(old).unwrap();
+        assert_eq!(
+            (back.robotics_rule_passed, back.clip_start_robotics_rule),
+            (0, false)
+        );
     }
 
     #[test]

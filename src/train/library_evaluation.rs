@@ -211,6 +211,10 @@ impl LibraryPlan {
         total.success = episodes_pass && all_clips_pass;
         // Every clip's first env starts at its clip's beginning.
         total.clip_start_success = episodes.iter().take(clips).all(EnvEvaluation::succeeded);
+        total.clip_start_robotics_rule = episodes
+            .iter()
+            .take(clips)
+            .all(EnvEvaluation::passes_robotics_rule);
         total.episode_steps = self.longest_steps();
         total.library = Some(LibraryEvaluation {
             clips: scores,
@@ -245,6 +249,7 @@ fn summarize_mixed(episodes: &[EnvEvaluation]) -> EvaluationSummary {
         }
     };
     let succeeded = episodes.iter().filter(|e| e.succeeded()).count() as u32;
+    let robotics_rule_passed = episodes.iter().filter(|e| e.passes_robotics_rule()).count() as u32;
     EvaluationSummary {
         episodes: episodes.len() as u32,
         completed: episodes.iter().filter(|e| e.completed).count() as u32,
@@ -252,6 +257,9 @@ fn summarize_mixed(episodes: &[EnvEvaluation]) -> EvaluationSummary {
         success_rate: f64::from(succeeded) / n,
         success: false,
         clip_start_success: false,
+        robotics_rule_passed,
+        robotics_rule_rate: f64::from(robotics_rule_passed) / n,
+        clip_start_robotics_rule: false,
         episode_steps: 0,
         mean_episode_steps: steps as f64 / n,
         pose_error_m: mean(&|e| e.pose_error_sum),

@@ -50,6 +50,7 @@ fn env(completed: bool, steps: u32, mpjpe: f64) -> EnvEvaluation {
     let s = f64::from(steps);
     EnvEvaluation {
         completed,
+        robotics_terminated: false,
         steps,
         pose_error_sum: 0.05 * s,
         global_position_error_sum: mpjpe * s,

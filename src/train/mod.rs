@@ -56,9 +56,10 @@ pub use divergence::{DivergenceEvent, DivergenceGuard};
 pub use error::TrainError;
 pub use evaluation::{
     EnvEvaluation, EvaluationError, EvaluationSummary, POSE_ERROR_TARGET_M,
-    SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_MEAN_MPJPE_M, SUCCESS_MAX_ROOT_DROP_M,
-    clamped_clip_steps, evaluation_start_times, evaluation_steps, format_evaluation_report,
-    summarize, yardstick,
+    ROBOTICS_MAX_ANCHOR_HEIGHT_ERROR_M, ROBOTICS_MAX_ANCHOR_TILT,
+    ROBOTICS_MAX_END_EFFECTOR_HEIGHT_ERROR_M, SUCCESS_MAX_BODY_DISTANCE_M,
+    SUCCESS_MAX_MEAN_MPJPE_M, SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps, evaluation_start_times,
+    evaluation_steps, format_evaluation_report, summarize, yardstick,
 };
 pub use goal::{GoalRates, GoalRecord};
 pub use gpu_loop::{

@@ -35,6 +35,10 @@ pub struct RunSummary {
     /// succeeded (the `clip_start` protocol, beside the `spread` headline).
     #[serde(default)]
     pub time_to_clip_start_success_s: Option<f64>,
+    /// Active seconds at the first evaluation in which env 0's episode, from the clip's
+    /// beginning, passed the robotics peers' rule (time-out, no mjlab termination).
+    #[serde(default)]
+    pub time_to_robotics_rule_success_s: Option<f64>,
     pub last_evaluation: Option<EvaluationSummary>,
     /// A motion library's times to its two criteria (absent for one clip).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -74,6 +78,7 @@ impl RunSummary {
         };
         let pose = first(&EvaluationSummary::meets_pose_error_target);
         let clip_start = first(&|e| e.clip_start_success);
+        let robotics_rule = first(&|e| e.clip_start_robotics_rule);
         let library = records
             .iter()
             .any(|r| r.evaluation.as_ref().is_some_and(|e| e.library.is_some()))
@@ -106,6 +111,7 @@ impl RunSummary {
             frames_to_success: first_success.map(|r| r.frames),
             time_to_pose_error_s: pose.map(|r| r.active_time_s),
             time_to_clip_start_success_s: clip_start.map(|r| r.active_time_s),
+            time_to_robotics_rule_success_s: robotics_rule.map(|r| r.active_time_s),
             last_evaluation: records.iter().rev().find_map(|r| r.evaluation.clone()),
             library,
             goal_evaluation: super::goal::last_goal_evaluation(records),
@@ -137,9 +143,10 @@ impl RunSummary {
         let at = |t: Option<f64>| t.map_or("not reached".to_string(), |t| format!("{t:.3} s"));
         let _ = writeln!(
             out,
-            "time to pose error <= {POSE_ERROR_TARGET_M} m {}; from the clip start (env 0) {}",
+            "time to pose error <= {POSE_ERROR_TARGET_M} m {}; from the clip start (env 0) {}; robotics rule from the clip start {}",
             at(self.time_to_pose_error_s),
-            at(self.time_to_clip_start_success_s)
+            at(self.time_to_clip_start_success_s),
+            at(self.time_to_robotics_rule_success_s)
         );
         if let Some(times) = &self.library {
             let _ = writeln!(
@@ -211,6 +218,9 @@ pub(crate) mod test_records {
                 success_rate: if s { 30.0 / 32.0 } else { 3.0 / 32.0 },
                 success: s,
                 clip_start_success: s,
+                robotics_rule_passed: if s { 28 } else { 2 },
+                robotics_rule_rate: if s { 28.0 / 32.0 } else { 2.0 / 32.0 },
+                clip_start_robotics_rule: s,
                 episode_steps: 53,
                 mean_episode_steps: 50.0,
                 pose_error_m: 0.05,
@@ -305,5 +315,39 @@ mod tests {
             none.report()
                 .contains("not reached; from the clip start (env 0) not reached")
         );
+    }
+
+    #[test]
+    fn the_robotics_rule_time_is_env_0s_first_pass() {
+        let mut records = records(20, 15);
+        // Env 0 passes the peers' rule from iteration 10, before the spread success at 15; at
+        // iteration 5 it succeeds by the yardstick but breaks the rule.
+        let eval = |r: &mut IterationRecord| r.evaluation.as_mut().unwrap().clone();
+        records[4].evaluation.as_mut().unwrap().clip_start_success = true;
+        let mut e = eval(&mut records[9]);
+        e.clip_start_robotics_rule = true;
+        records[9].evaluation = Some(e);
+        let s = RunSummary::from_records("backflip", 0, &records, StopReason::Success);
+        assert_eq!(s.time_to_clip_start_success_s, Some(1.25));
+        assert_eq!(s.time_to_robotics_rule_success_s, Some(2.5));
+        let text = s.report();
+        assert!(
+            text.contains(
+                "from the clip start (env 0) 1.250 s; robotics rule from the clip start 2.500 s"
+            ),
+            "{text}"
+        );
+        // summary.json carries it beside the clip start's time, and a summary written before
+        // the field existed reads back without it.
+        let json = serde_json::to_value(&s).unwrap();
+        assert_eq!(json["time_to_robotics_rule_success_s"], 2.5);
+        let mut old = json.clone();
+        old.as_object_mut()
+            .unwrap()
+            .remove("time_to_robotics_rule_success_s");
+        let back: RunSummary = serde_json::from_value(old).unwrap();
+        assert_eq!(back.time_to_robotics_rule_success_s, None);
+        let none = RunSummary::from_records("backflip", 0, &records[..8], StopReason::Success);
+        assert_eq!(none.time_to_robotics_rule_success_s, None);
     }
 }

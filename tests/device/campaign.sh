@@ -25,7 +25,7 @@ deadline=$(( $(date +%s) + ${SESSION_S:-540} ))
 replay_flag=--no-replay
 [ "${REPLAY:-0}" = 1 ] && replay_flag=
 tsv="$OUT/campaign.tsv"
-[ -f "$tsv" ] || printf 'name\tmotion\tseed\tsuccess\ttime_s\tframes_M\tpose_time_s\tclip_start_time_s\tactive_s\tfps_M\tlast_rate\tlast_mpjpe\tlast_ape\twall_s\tstop\tgpu\n' > "$tsv"
+[ -f "$tsv" ] || printf 'name\tmotion\tseed\tsuccess\ttime_s\tframes_M\tpose_time_s\tclip_start_time_s\trobotics_rule_time_s\tactive_s\tfps_M\tlast_rate\tlast_mpjpe\tlast_ape\twall_s\tstop\tgpu\n' > "$tsv"
 nvidia-smi --query-gpu=index,name,driver_version,clocks.sm,clocks.max.sm --format=csv,noheader | tee "$OUT/gpu.txt"
 GPUS=${GPUS:-$(nvidia-smi --query-gpu=index --format=csv,noheader | tr '\n' ' ')}
 # Check every plan before the first trial: a malformed line fails the call at once, in one line.
@@ -85,14 +85,14 @@ wall = float(wall_ms) / 1000
 try:
     s = json.load(open(path))
 except Exception:
-    print("\t".join([name, motion, seed, "error", "", "", "", "", "", "", "", "", "", f"{float(wall):.1f}", f"rc {rc}", gpu]))
+    print("\t".join([name, motion, seed, "error", "", "", "", "", "", "", "", "", "", "", f"{float(wall):.1f}", f"rc {rc}", gpu]))
     sys.exit()
 e = s.get("last_evaluation") or {}
 f = lambda x, d=3: "" if x is None else f"{x:.{d}f}"
 frames = s.get("frames_to_success")
 print("\t".join([name, motion, seed, str(s["time_to_success_s"] is not None).lower(),
     f(s["time_to_success_s"]), f(frames / 1e6 if frames else None, 2), f(s.get("time_to_pose_error_s")),
-    f(s.get("time_to_clip_start_success_s")), f(s["active_time_s"], 2), f(s["frames_per_s"] / 1e6),
+    f(s.get("time_to_clip_start_success_s")), f(s.get("time_to_robotics_rule_success_s")), f(s["active_time_s"], 2), f(s["frames_per_s"] / 1e6),
     f(e.get("success_rate")), f(e.get("global_mpjpe_m")), f(e.get("pose_error_m")), f"{float(wall):.1f}", s["stop_reason"], gpu]))
 PY
 )
@@ -121,7 +121,7 @@ for line in open(sys.argv[2]):
     name, motion = line.split("|")[:2]
     if (name, motion) not in order:
         order.append((name, motion))
-print(f"{'variant':34} {'motion':10} {'ok':>5} {'median s':>9} {'seeds s':>22} {'M frames':>9} {'pose s':>7} {'clip0 s':>7} {'Mf/s':>5} {'wall':>6}")
+print(f"{'variant':34} {'motion':10} {'ok':>5} {'median s':>9} {'seeds s':>22} {'M frames':>9} {'pose s':>7} {'clip0 s':>7} {'rule0 s':>7} {'Mf/s':>5} {'wall':>6}")
 for name, motion in order:
     rs = sorted((r for r in rows if r["name"] == name and r["motion"] == motion), key=lambda r: int(r["seed"]))
     if not rs:
@@ -133,9 +133,10 @@ for name, motion in order:
     frames = [float(r["frames_M"]) for r in ok]
     pose = [float(r["pose_time_s"]) for r in rs if r["pose_time_s"]]
     clip0 = [float(r["clip_start_time_s"]) for r in rs if r["clip_start_time_s"]]
+    rule0 = [float(r["robotics_rule_time_s"]) for r in rs if r.get("robotics_rule_time_s")]
     fps = [float(r["fps_M"]) for r in rs if r["fps_M"]]
     seeds = " ".join((r["time_s"] if r["success"] == "true" else f">{float(r['active_s'] or 0):.0f}") for r in rs)
     m = lambda xs: f"{statistics.median(xs):.2f}" if xs else "-"
-    print(f"{name:34} {motion:10} {len(ok)}/{len(rs):<3} {med:9.2f} {seeds:>22} {m(frames):>9} {m(pose):>7} {m(clip0):>7} {m(fps):>5} {sum(float(r['wall_s']) for r in rs):6.0f}")
+    print(f"{name:34} {motion:10} {len(ok)}/{len(rs):<3} {med:9.2f} {seeds:>22} {m(frames):>9} {m(pose):>7} {m(clip0):>7} {m(rule0):>7} {m(fps):>5} {sum(float(r['wall_s']) for r in rs):6.0f}")
 PY
 tar czf /tmp/campaign.tgz -C "$OUT" --exclude='*.safetensors' --exclude='curve.png' --exclude='replay.html' . && rm -rf "${OUT:?}"/* && mv /tmp/campaign.tgz "$OUT/campaign.tgz"

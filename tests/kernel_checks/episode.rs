@@ -161,6 +161,8 @@ fn program(
     p.i32("status", &[envs], vec![0; envs]);
     p.i32("steps", &[envs], vec![0; envs]);
     p.f32("sums", &[envs, 5], vec![0.0; envs * 5]);
+    p.i32("robotics_terminated", &[envs], vec![0; envs]);
+    let anchor = Arg::Scalar(Scalar::I32(layout.anchor));
     let buffer = |name: &str| Arg::Buffer(name.to_owned());
     let row = shape.reference_layout();
     for k in 0..rows {
@@ -174,20 +176,22 @@ fn program(
             .map(buffer)
             .into_iter()
             .chain([Arg::Struct(StructArg::TableLayout(row))])
-            .chain(
-                [
-                    "clip_offsets",
-                    "end_effectors",
-                    "tracked_bodies",
-                    "clip_id",
-                    "ref_time",
-                ]
-                .map(buffer),
-            )
+            .chain(["clip_offsets", "end_effectors", "tracked_bodies"].map(buffer))
+            .chain([anchor.clone()])
+            .chain(["clip_id", "ref_time"].map(buffer))
             .chain([step])
             .chain(["rewards", "terminated", "truncated"].map(buffer))
             .chain([Arg::Struct(StructArg::Yardstick(yardstick()))])
-            .chain(["clip_steps", "status", "steps", "sums"].map(buffer))
+            .chain(
+                [
+                    "clip_steps",
+                    "status",
+                    "steps",
+                    "sums",
+                    "robotics_terminated",
+                ]
+                .map(buffer),
+            )
             .collect();
         p.launch(&EVALUATION_ACCUMULATE, envs, scoring_args);
     }
@@ -199,6 +203,7 @@ fn episode(out: &super::program::Outputs, e: usize) -> EnvEvaluation {
     let sums = out.f32("sums");
     EnvEvaluation {
         completed: out.i32("status")[e] == COMPLETED,
+        robotics_terminated: out.i32("robotics_terminated")[e] != 0,
         steps: out.i32("steps")[e].max(0) as u32,
         pose_error_sum: f64::from(sums[e * 5]),
         global_position_error_sum: f64::from(sums[e * 5 + 1]),

@@ -11,6 +11,11 @@
 //! scored its clip's `clip_steps` (a library's episodes of different lengths). Running envs are
 //! built to fail each way alone and with a truncation. Envs already COMPLETED or FAILED are
 //! untouched, bit for bit.
+//!
+//! Beside it, the robotics peers' rule: a running env's `robotics_terminated` flag is set (and
+//! never cleared) when the anchor body's height error, the anchor's tilt (|z of the world gravity
+//! in the reference anchor's frame - z of it in the anchor's frame|) or any end effector's height
+//! error is over the yardstick's `robotics_*` bounds. Running envs are built near each bound.
 
 use instantmimic::env::layout::JointLayout;
 use instantmimic::kernels::{EVALUATION_ACCUMULATE, Yardstick};
@@ -18,9 +23,10 @@ use instantmimic::kernels::{EVALUATION_ACCUMULATE, Yardstick};
 use super::compare::Report;
 use super::physics::PhysicsBatch;
 use super::program::{Arg, Program, Scalar, StructArg};
-use super::quat::{angle, quat_at, quat_at64, vec3, vec3_64};
+use super::quat::{Quat, angle, quat_at, quat_at64, vec3, vec3_64, wxyz};
 use super::rng::Sampler;
 use super::{Check, Clip, Fixture};
+use nalgebra::{UnitQuaternion, Vector3};
 
 const SUMS: usize = 5;
 const RUNNING: i32 = 0;
@@ -62,6 +68,49 @@ fn step_errors(
     let bodies = layout.tracked_bodies.len() as f64;
     let means = [pose / bodies, mpjpe / bodies, ee_pos / k, ee_rot / k];
     (means, far)
+}
+
+/// The z component of the world's unit gravity (0, 0, -1) in the frame of `q`.
+fn gravity_z(q: &Quat) -> f64 {
+    q.inverse_transform_vector(&Vector3::new(0.0, 0.0, -1.0)).z
+}
+
+/// The peers' rule's quantities for env `e` at time `t`: the anchor's height error, the
+/// anchor's tilt, the largest end-effector height error.
+fn robotics_errors(
+    clip: (&Clip, usize),
+    layout: &JointLayout,
+    physics: &PhysicsBatch,
+    e: usize,
+    t: f64,
+) -> [f64; 3] {
+    let l = physics.shape.table;
+    let nbody = physics.shape.nbody();
+    let row = clip.0.lookup(clip.1, t);
+    let height = |b: usize| {
+        (f64::from(physics.xpos[(e * nbody + b + 1) * 3 + 2]) - row[l.body_pos + 3 * b + 2]).abs()
+    };
+    let a = layout.anchor as usize;
+    let q = quat_at(&physics.xquat, (e * nbody + a + 1) * 4);
+    let q_ref = quat_at64(&row, l.body_quat + 4 * a);
+    let ee = layout
+        .end_effectors
+        .iter()
+        .map(|&b| height(b as usize))
+        .fold(0.0, f64::max);
+    [height(a), (gravity_z(&q_ref) - gravity_z(&q)).abs(), ee]
+}
+
+/// How a running env's state relates to the peers' rule.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum RuleKind {
+    Near,
+    /// The anchor's height error near its bound, mostly past it.
+    AnchorHeight,
+    /// The anchor's tilt near its bound, mostly past it.
+    AnchorTilt,
+    /// One end effector's height error near its bound, mostly past it.
+    EffectorHeight,
 }
 
 /// How a running env's state relates to the yardstick.
@@ -170,6 +219,57 @@ fn case(
             }
         }
     }
+    // The peers' rule's kinds cycle with a period prime to the status's, so that every kind
+    // meets running envs.
+    let rule_kinds: Vec<RuleKind> = (0..n)
+        .map(|e| {
+            [
+                RuleKind::Near,
+                RuleKind::AnchorHeight,
+                RuleKind::AnchorTilt,
+                RuleKind::EffectorHeight,
+            ][e % 4]
+        })
+        .collect();
+    let max_height = f64::from(yardstick.robotics_max_anchor_height);
+    let max_tilt = f64::from(yardstick.robotics_max_anchor_tilt);
+    let max_ee_height = f64::from(yardstick.robotics_max_end_effector_height);
+    for (e, &time) in ref_time.iter().enumerate() {
+        let row = clip.lookup(clip_id[e] as usize, f64::from(time));
+        let sign = if rng.chance(0.5) { 1.0 } else { -1.0 };
+        let mut set_height = |b: usize, error: f64| {
+            let z = row[l.body_pos + 3 * b + 2] + sign * error;
+            physics.xpos[(e * nbody + b + 1) * 3 + 2] = z as f32;
+        };
+        let a = layout.anchor as usize;
+        match rule_kinds[e] {
+            RuleKind::Near => {}
+            RuleKind::AnchorHeight => set_height(a, max_height + near_threshold(&mut rng)),
+            RuleKind::EffectorHeight => {
+                let ee = &layout.end_effectors;
+                let b = ee[rng.index(0, ee.len())] as usize;
+                set_height(b, max_ee_height + near_threshold(&mut rng));
+            }
+            RuleKind::AnchorTilt => {
+                // A yaw and a tilt about x whose gravity z is the reference's plus or minus the
+                // bound (the side that stays in [-1, 1]).
+                let g_ref = gravity_z(&quat_at64(&row, l.body_quat + 4 * a));
+                let tilt = max_tilt + near_threshold(&mut rng);
+                let g = if g_ref + tilt <= 1.0 {
+                    g_ref + tilt
+                } else {
+                    g_ref - tilt
+                };
+                let q = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rng.uniform(-3.0, 3.0))
+                    * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), (-g).acos());
+                let at = (e * nbody + a + 1) * 4;
+                for (c, v) in wxyz(&q).iter().enumerate() {
+                    physics.xquat[at + c] = *v as f32;
+                }
+            }
+        }
+    }
+    let robotics_terminated: Vec<i32> = (0..n).map(|_| i32::from(rng.chance(0.2))).collect();
     let flags = |rng: &mut Sampler, p: f64| -> Vec<i32> {
         (0..horizon * n).map(|_| i32::from(rng.chance(p))).collect()
     };
@@ -208,6 +308,7 @@ fn case(
         p.i32("clip_offsets", &[clip.clips()], clip.offsets()),
         p.i32("end_effectors", &[ee.len()], ee),
         p.i32("tracked_bodies", &[tracked.len()], tracked),
+        Arg::Scalar(Scalar::I32(layout.anchor)),
         p.i32("clip_id", &[n], clip_id.clone()),
         p.f32("ref_time", &[n], ref_time.clone()),
         Arg::Scalar(Scalar::I32(t as i32)),
@@ -219,6 +320,7 @@ fn case(
         p.i32("status", &[n], status.clone()),
         p.i32("steps", &[n], steps.clone()),
         p.f32("sums", &[n, SUMS], sums.clone()),
+        p.i32("robotics_terminated", &[n], robotics_terminated.clone()),
     ];
     p.launch(&EVALUATION_ACCUMULATE, n, args);
 
@@ -232,6 +334,27 @@ fn case(
         let mut expected_steps = Vec::new();
         let mut reasons: Vec<Reasons> = Vec::new();
         let mut margin = f64::INFINITY;
+        let mut expected_robotics = Vec::new();
+        // Per running env: which of the rule's bounds the step breaks.
+        let mut rule_reasons: Vec<[bool; 3]> = Vec::new();
+        let bounds = [max_height, max_tilt, max_ee_height];
+        for &e in &running {
+            let errors = robotics_errors(
+                (&clip, clip_id[e] as usize),
+                &layout,
+                &physics,
+                e,
+                f64::from(ref_time[e]),
+            );
+            let broken = [0, 1, 2].map(|k| errors[k] > bounds[k]);
+            for k in 0..3 {
+                margin = margin.min((errors[k] - bounds[k]).abs());
+            }
+            expected_robotics.push(i32::from(
+                robotics_terminated[e] != 0 || broken.contains(&true),
+            ));
+            rule_reasons.push(broken);
+        }
         for &e in &running {
             let time = f64::from(ref_time[e]);
             let tracked = (&clip, clip_id[e] as usize);
@@ -290,10 +413,39 @@ fn case(
                 .collect()
         };
         r.bitwise_f32("sums of scored envs", &rows(out.f32("sums")), &rows(&sums));
+        r.exact(
+            "robotics_terminated of running envs",
+            &pick(out.i32("robotics_terminated"), &running),
+            &expected_robotics,
+        );
+        r.exact(
+            "robotics_terminated of scored envs",
+            &pick(out.i32("robotics_terminated"), &scored),
+            &pick(&robotics_terminated, &scored),
+        );
+        // Each bound broken alone by an env not flagged before, and an unflagged env that
+        // breaks none.
+        let fresh = |want: [bool; 3]| {
+            running
+                .iter()
+                .zip(&rule_reasons)
+                .filter(|(e, x)| robotics_terminated[**e] == 0 && **x == want)
+                .count()
+        };
+        let rule_coverage = [
+            ("within the peers' rule", fresh([false; 3])),
+            ("anchor height alone", fresh([true, false, false])),
+            ("anchor tilt alone", fresh([false, true, false])),
+            ("end effector height alone", fresh([false, false, true])),
+        ];
+        r.check(
+            rule_coverage.iter().all(|(_, c)| *c > 0),
+            format!("peers' rule coverage: {rule_coverage:?}"),
+        );
         r.check(
             margin > 1e-4,
             format!(
-                "every yardstick decision clear of its threshold: smallest margin {margin:.2e}"
+                "every yardstick and peers' rule decision clear of its threshold: smallest margin {margin:.2e}"
             ),
         );
         if clip_steps.len() > 1 {
@@ -348,6 +500,9 @@ pub fn checks(fx: &Fixture) -> Vec<Check> {
     let stricter = Yardstick {
         max_body_distance: 0.5,
         max_root_drop: 0.3,
+        robotics_max_anchor_height: 0.2,
+        robotics_max_anchor_tilt: 0.5,
+        robotics_max_end_effector_height: 0.15,
     };
     vec![
         case(fx, 0, 96, 8, 3, instantmimic::train::yardstick(), 51),

@@ -185,6 +185,15 @@ impl StructArg {
             StructArg::Yardstick(p) => vec![
                 ("max_body_distance", F32(p.max_body_distance)),
                 ("max_root_drop", F32(p.max_root_drop)),
+                (
+                    "robotics_max_anchor_height",
+                    F32(p.robotics_max_anchor_height),
+                ),
+                ("robotics_max_anchor_tilt", F32(p.robotics_max_anchor_tilt)),
+                (
+                    "robotics_max_end_effector_height",
+                    F32(p.robotics_max_end_effector_height),
+                ),
             ],
             StructArg::Goal(p) => vec![
                 ("seed", I32(p.seed)),

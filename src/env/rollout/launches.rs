@@ -33,6 +33,7 @@ impl Rollout {
             self.table.clip_offsets(),
             &self.joints.end_effectors,
             &self.joints.tracked_bodies,
+            self.joints.anchor,
             &self.state.clip_id,
             &self.state.ref_time,
             t,
@@ -44,6 +45,7 @@ impl Rollout {
             &scores.status,
             &scores.steps,
             &scores.sums,
+            &scores.robotics_terminated,
         )?;
         Ok(())
     }
