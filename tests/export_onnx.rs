@@ -151,6 +151,25 @@ fn random_observations(checkpoint: &Checkpoint, rows: usize, seed: u64) -> Vec<V
         .collect()
 }
 
+/// `onnx` run by onnxruntime (tests/tools/run_onnx.py) on `rows`: its JSON report.
+fn run_onnxruntime(python: &Path, onnx: &Path, rows: &[Vec<f32>], dir: &Path) -> Value {
+    let rows_path = dir.join("obs.json");
+    std::fs::write(&rows_path, serde_json::to_string(rows).expect("json")).expect("write");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/tools/run_onnx.py");
+    let out = Command::new(python)
+        .arg(script)
+        .arg(onnx)
+        .arg(&rows_path)
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "onnxruntime: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("JSON from run_onnx.py")
+}
+
 #[test]
 fn the_onnx_policy_matches_the_checkpoint_and_carries_its_contract() {
     let dir = tempfile::tempdir().expect("temporary directory");
@@ -248,21 +267,7 @@ fn the_onnx_policy_matches_the_checkpoint_and_carries_its_contract() {
         return;
     };
     let rows = random_observations(&checkpoint, 16, 11);
-    let rows_path = dir.path().join("obs.json");
-    std::fs::write(&rows_path, serde_json::to_string(&rows).expect("json")).expect("write");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/tools/run_onnx.py");
-    let out = Command::new(python)
-        .arg(script)
-        .arg(&onnx)
-        .arg(&rows_path)
-        .output()
-        .expect("python runs");
-    assert!(
-        out.status.success(),
-        "onnxruntime: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let result: Value = serde_json::from_slice(&out.stdout).expect("JSON from run_onnx.py");
+    let result = run_onnxruntime(&python, &onnx, &rows, dir.path());
     assert_eq!(
         result["input"],
         serde_json::json!(["obs", ["batch", 362], "tensor(float)"])
@@ -348,21 +353,7 @@ fn a_g1_policy_exports_with_the_g1s_contract_and_matches_the_checkpoint() {
         return;
     };
     let rows = random_observations(&checkpoint, 16, 13);
-    let rows_path = dir.path().join("obs.json");
-    std::fs::write(&rows_path, serde_json::to_string(&rows).expect("json")).expect("write");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/tools/run_onnx.py");
-    let out = Command::new(python)
-        .arg(script)
-        .arg(&onnx)
-        .arg(&rows_path)
-        .output()
-        .expect("python runs");
-    assert!(
-        out.status.success(),
-        "onnxruntime: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let result: Value = serde_json::from_slice(&out.stdout).expect("JSON from run_onnx.py");
+    let result = run_onnxruntime(&python, &onnx, &rows, dir.path());
     assert_eq!(
         result["output"],
         serde_json::json!(["actions", ["batch", shapes.action_size], "tensor(float)"])

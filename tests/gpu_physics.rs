@@ -225,20 +225,29 @@ fn model_arrays_unchanged(gpu: &Gpu, r: &Reference) {
     assert_eq!((overflow.constraint_rows, overflow.contacts), (0, 0));
 }
 
-#[test]
-fn kinematics_plan_reads_the_state_the_step_plan_writes() {
+/// The step and kinematics plans of the store's smallest world count (`INSTANTMIMIC_ASSETS`, else
+/// the embedded ones), loaded on GPU 0; `None` (after a skip note) when the store has none.
+fn smallest_step_and_kinematics() -> Option<(Simulation, u32)> {
     let assets = std::env::var_os("INSTANTMIMIC_ASSETS").map(PathBuf::from);
     let store = PlanStore::new(assets.as_deref());
     let Ok(manifest) = store.manifest() else {
         skip_support::skip("no plan manifest in the store");
-        return;
+        return None;
     };
     let Some(nworld) = manifest.plans.iter().map(|p| p.nworld).min() else {
         skip_support::skip("the manifest lists no plans");
-        return;
+        return None;
     };
     let gpu = Gpu::open(0).expect("a GPU");
     let sim = Simulation::load(&gpu, &store, nworld, &["step", "kinematics"]).expect("plans load");
+    Some((sim, nworld))
+}
+
+#[test]
+fn kinematics_plan_reads_the_state_the_step_plan_writes() {
+    let Some((sim, nworld)) = smallest_step_and_kinematics() else {
+        return;
+    };
     // Raise every world's root by 1 m: after the kinematics plan, every body is 1 m higher.
     let qpos = sim.buffer::<f32>("d.qpos").unwrap();
     let before = {
@@ -274,18 +283,9 @@ fn kinematics_plan_reads_the_state_the_step_plan_writes() {
 /// a character and the plans of another cannot be mixed.
 #[test]
 fn the_humanoids_plans_refuse_another_characters_state() {
-    let assets = std::env::var_os("INSTANTMIMIC_ASSETS").map(PathBuf::from);
-    let store = PlanStore::new(assets.as_deref());
-    let Ok(manifest) = store.manifest() else {
-        skip_support::skip("no plan manifest in the store");
+    let Some((sim, nworld)) = smallest_step_and_kinematics() else {
         return;
     };
-    let Some(nworld) = manifest.plans.iter().map(|p| p.nworld).min() else {
-        skip_support::skip("the manifest lists no plans");
-        return;
-    };
-    let gpu = Gpu::open(0).expect("a GPU");
-    let sim = Simulation::load(&gpu, &store, nworld, &["step", "kinematics"]).expect("plans load");
     let humanoid = Character::humanoid().expect("the humanoid");
     let sizes = PhysicsSizes::of(&humanoid);
     let physics = PhysicsState::view(&sim, sizes, humanoid.name()).expect("the humanoid's state");
