@@ -10,7 +10,7 @@ For each world count and each plan in physics.PLAN_NAMES this writes, under WORK
   manifest.json                       plans, their modules (name, hash, PTX file, block dims) and
                                       the physics they were captured with
 Then `instantmimic plan pack` compresses each plan into ptx/plans/ and `compile.py` regenerates
-the PTX on any machine, no GPU needed (see README, "Rebuilding plans").
+the PTX on any machine, no GPU needed (see docs/development.md, "Rebuilding plans").
 
 A plan snapshots the device memory of every bound array when it is saved. Data is reset
 (mjw.reset_data) right before each capture, so a plan starts from the model's reset state.
