@@ -15,6 +15,8 @@
 //! - [`reference`]: a clip with its velocities and full reference state at any time.
 //! - [`table`]: the reference resampled at the control rate into the GPU table.
 //! - [`summary`]: what `motion inspect` reports.
+//! - [`source_motion`]: a motion of another skeleton (a mocap file's) before retargeting, and
+//!   the body-plan roles a source's joint map and a character meet at.
 //! - [`synthetic`]: generated clips for tests.
 //! - [`built_in`]: the clips built into the binary (`assets/motions/`).
 //! - [`find`]: finding clips by name: the motions directory, then the built-in clips.
@@ -41,6 +43,7 @@ pub mod reference;
 pub mod robot_joints;
 pub mod rotation;
 pub mod source_columns;
+pub mod source_motion;
 pub mod summary;
 pub mod synthetic;
 pub mod table;
