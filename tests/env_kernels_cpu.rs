@@ -206,13 +206,13 @@ fn body_kinematics_matches_the_f64_reference() {
     run_on_cpu("body_kinematics", kernel_checks::kinematics::checks);
 }
 
-/// The G1: 29 hinges, no ball joint, 30 bodies of which 14 tracked, another row layout; the
-/// same PTX as the humanoid's.
+/// The G1: 29 hinges, no ball joint, 30 bodies of which 14 tracked, another row layout and PD
+/// table; the same PTX as the humanoid's.
 #[test]
-fn the_reward_observation_evaluation_and_reset_match_the_f64_reference_on_the_g1() {
+fn every_character_kernel_matches_the_f64_reference_on_the_g1() {
     run_on_cpu_with(
         Fixture::g1,
-        "the G1: reward_termination, observe, evaluation_accumulate, reset_masked",
+        "the G1: pd_targets, pd_control, body_kinematics, reward_termination, observe, evaluation_accumulate, reset_masked",
         kernel_checks::character_checks,
     );
 }

@@ -541,10 +541,10 @@ fn run_on_gpu(kernel: &str, checks: impl FnOnce(&Fixture) -> Vec<Check>) {
 }
 
 #[test]
-fn gpu_the_reward_observation_evaluation_and_reset_match_the_f64_reference_on_the_g1() {
+fn gpu_every_character_kernel_matches_the_f64_reference_on_the_g1() {
     let fixture = Fixture::g1();
     run_checks(
-        "the G1: reward_termination, observe, evaluation_accumulate, reset_masked",
+        "the G1: pd_targets, pd_control, body_kinematics, reward_termination, observe, evaluation_accumulate, reset_masked",
         kernel_checks::character_checks(&fixture),
         execute,
     );

@@ -57,7 +57,7 @@ fn random_state(character: &Character, rng: &mut Sampler) -> (Vec<f32>, Vec<f32>
                 qpos[a] = rng.uniform(-2.5, 2.5) as f32;
                 qvel[v] = rng.uniform(-10.0, 10.0) as f32;
             }
-            JointType::Slide => unreachable!("the humanoid has no slide joint"),
+            JointType::Slide => unreachable!("no built-in character has a slide joint"),
         }
     }
     (qpos, qvel)
@@ -65,7 +65,7 @@ fn random_state(character: &Character, rng: &mut Sampler) -> (Vec<f32>, Vec<f32>
 
 fn case(fx: &Fixture, n: usize, only_done: bool, seed: u64) -> Check {
     let character = fx.character.clone();
-    let model = BodyModel::for_character(&character).expect("the humanoid's tables");
+    let model = BodyModel::for_character(&character).expect("the character's body tables");
     let (nq, nv, nbody) = (character.nq(), character.nv(), model.bodies);
     let mut rng = Sampler::new(seed);
     let mut qpos = Vec::with_capacity(n * nq);

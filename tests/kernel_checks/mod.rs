@@ -473,11 +473,13 @@ impl Fixture {
     }
 }
 
-/// The checks of the kernels that read the character's sizes, tracked bodies and row layout
-/// (the reward, the observation, the evaluation's scoring, the reset), for a second character
-/// ([`Fixture::g1`]).
+/// The checks of the kernels that read the character's sizes, joints, tracked bodies and row
+/// layout (the PD targets and torques, the reward, the observation, the evaluation's scoring,
+/// the reset, the body kinematics), for a second character ([`Fixture::g1`]).
 pub fn character_checks(fx: &Fixture) -> Vec<Check> {
     [
+        control::checks(fx),
+        kinematics::checks(fx),
         tracking::checks(fx),
         observe::checks(fx),
         evaluate::checks(fx),
