@@ -6,9 +6,11 @@
 `exact` builds the simulation exactly as capture.py does before capturing (same model, same
 warm-up, then mjw.reset_data: the state a plan snapshots), sets seeded initial states and
 controls, steps it with MuJoCo Warp and writes the initial state and qpos/qvel after chosen
-step counts as little-endian f32 files with `reference.json`. Cases: `contact` (the humanoid
-touching the floor, perturbed pose and velocities) and `freefall` (high above the floor, no
-contact). tests/gpu_physics.rs replays the committed plan from the same state and compares.
+step counts as little-endian f32 files with `reference.json`. Cases: `contact` (the character
+touching the floor, perturbed pose and velocities: each world's root is put where its lowest
+geom sits 5 mm into the floor) and `freefall` (high above the floor, no contact). Any character:
+the physics configuration names its model. tests/gpu_physics.rs replays the committed plan from
+the same state and compares.
 
 `timing` measures Warp's own replay of one mjw.step (wp.capture_launch of a captured graph),
 in steps per second (worlds x graph launches / seconds), the number the Rust bench is held to:
@@ -45,10 +47,59 @@ def setup(config: dict, nworld: int):
     return mjm, m, d
 
 
+# How deep the lowest geom of a contact case starts in the floor (m): contacts from the first step.
+CONTACT_DEPTH = 0.005
+# The free-fall case's root height (m): no geom of a human-sized character reaches the floor.
+FREEFALL_HEIGHT = 5.0
+
+
+def lowest_geom_z(mjm, mjd) -> float:
+    """The lowest point of the character's geoms (not the world's: the floor) after
+    mj_kinematics, exact for primitives, the bounding sphere for meshes."""
+    import mujoco
+
+    lowest = np.inf
+    for g in range(mjm.ngeom):
+        if mjm.geom_bodyid[g] == 0:
+            continue
+        size = mjm.geom_size[g]
+        z = mjd.geom_xpos[g][2]
+        z_row = mjd.geom_xmat[g].reshape(3, 3)[2]  # each local axis's world z component
+        kind = mjm.geom_type[g]
+        if kind == mujoco.mjtGeom.mjGEOM_SPHERE:
+            extent = size[0]
+        elif kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
+            extent = abs(z_row[2]) * size[1] + size[0]
+        elif kind == mujoco.mjtGeom.mjGEOM_CYLINDER:
+            extent = abs(z_row[2]) * size[1] + size[0] * np.sqrt(max(0.0, 1.0 - z_row[2] ** 2))
+        elif kind == mujoco.mjtGeom.mjGEOM_BOX:
+            extent = float(np.sum(np.abs(z_row) * size))
+        elif kind == mujoco.mjtGeom.mjGEOM_ELLIPSOID:
+            extent = float(np.sqrt(np.sum((z_row * size) ** 2)))
+        else:
+            extent = mjm.geom_rbound[g]
+        lowest = min(lowest, z - extent)
+    return float(lowest)
+
+
+def contact_root_heights(mjm, qpos: np.ndarray) -> np.ndarray:
+    """Per world, the root height at which the pose's lowest geom is CONTACT_DEPTH into the floor
+    (z = 0)."""
+    import mujoco
+
+    mjd = mujoco.MjData(mjm)
+    heights = np.empty(len(qpos))
+    for w, q in enumerate(qpos):
+        mjd.qpos[:] = q
+        mjd.qpos[2] = 0.0
+        mujoco.mj_kinematics(mjm, mjd)
+        heights[w] = -lowest_geom_z(mjm, mjd) - CONTACT_DEPTH
+    return heights
+
+
 def initial_state(mjm, nworld: int, case: str, seed: int):
     rng = np.random.default_rng(seed)
     qpos = np.tile(mjm.qpos0.astype(np.float64), (nworld, 1))
-    qpos[:, 2] = 0.87 if case == "contact" else 5.0
     # Perturb every ball/free quaternion and hinge a little, and renormalize.
     for j in range(mjm.njnt):
         adr = mjm.jnt_qposadr[j]
@@ -59,6 +110,7 @@ def initial_state(mjm, nworld: int, case: str, seed: int):
         else:
             lo, hi = mjm.jnt_range[j]
             qpos[:, adr] = np.clip(qpos[:, adr] + rng.normal(0.0, 0.2, nworld), lo, hi)
+    qpos[:, 2] = contact_root_heights(mjm, qpos) if case == "contact" else FREEFALL_HEIGHT
     qvel = rng.normal(0.0, 0.5, (nworld, mjm.nv))
     ctrl = rng.uniform(-0.3, 0.3, (nworld, mjm.nu)) * mjm.actuator_ctrlrange[:, 1]
     return qpos.astype(np.float32), qvel.astype(np.float32), ctrl.astype(np.float32)
@@ -90,7 +142,14 @@ def step_case(config: dict, nworld: int, case: str, seed: int, checkpoints: list
 
 def run_exact(config: dict, nworld: int, out: pathlib.Path, seed: int) -> dict:
     cases = {"contact": [1, 100], "freefall": [1, 20]}
-    summary = {"nworld": nworld, "seed": seed, "deterministic": config.get("deterministic", False), "cases": []}
+    summary = {
+        "nworld": nworld,
+        "seed": seed,
+        "deterministic": config.get("deterministic", False),
+        # The character's name (its description's stem): the Rust test loads the same one.
+        "character": pathlib.Path(config["character"]).stem,
+        "cases": [],
+    }
     for case, checkpoints in cases.items():
         init, states = step_case(config, nworld, case, seed, checkpoints)
         # MuJoCo Warp against itself: two more runs from fresh simulations. Without the

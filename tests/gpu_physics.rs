@@ -4,8 +4,9 @@
 //! `kernels_py/physics_reference.py exact --nworld 32` (`tests/device/physics_reference.sh`) and
 //! committed under `tests/fixtures/physics_reference/`: seeded initial states and MuJoCo Warp's
 //! qpos/qvel after a few step counts, for the default physics (`default_32`, against the plans
-//! built into the binary) and the deterministic one (`deterministic_32`, written with
-//! configs/physics/deterministic.toml, against `ptx/deterministic`). Tests run from the
+//! built into the binary), the deterministic one (`deterministic_32`, written with
+//! configs/physics/deterministic.toml, against `ptx/deterministic`) and the G1's (`g1_32`, with
+//! configs/physics/g1.toml, against the G1's built-in plans). Tests run from the
 //! repository root (cargo's working directory, and session.sh's on the device).
 //! `INSTANTMIMIC_PHYSICS_REFERENCE=DIR` checks one other reference instead, with the plans of
 //! `INSTANTMIMIC_ASSETS` (a directory laid out like ptx/; default: the built-in plans).
@@ -61,29 +62,32 @@ fn max_abs_diff(a: &[f32], b: &[f32]) -> (f32, usize) {
 
 struct Reference {
     dir: PathBuf,
-    /// The plans to replay (None: the ones built into the binary).
-    assets: Option<PathBuf>,
+    /// The plans to replay.
+    plans: PlanStore,
+    /// The character the reference simulates (its `character` key; the humanoid before the key).
+    character: Character,
     summary: serde_json::Value,
     nworld: u32,
 }
 
 impl Reference {
-    fn load(dir: PathBuf, assets: Option<PathBuf>) -> Reference {
+    fn load(dir: PathBuf, plans: PlanStore) -> Reference {
         let file = dir.join("reference.json");
         let bytes = std::fs::read(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
         let summary: serde_json::Value =
             serde_json::from_slice(&bytes).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
         let nworld = summary["nworld"].as_u64().expect("nworld") as u32;
+        let character = match summary["character"].as_str() {
+            Some(name) => Character::find(name).unwrap_or_else(|e| panic!("{name}: {e}")),
+            None => Character::humanoid().expect("the humanoid"),
+        };
         Reference {
             dir,
-            assets,
+            plans,
+            character,
             summary,
             nworld,
         }
-    }
-
-    fn store(&self) -> PlanStore {
-        PlanStore::new(self.assets.as_deref())
     }
 }
 
@@ -91,23 +95,23 @@ impl Reference {
 fn references() -> Vec<Reference> {
     if let Some(dir) = std::env::var_os("INSTANTMIMIC_PHYSICS_REFERENCE").map(PathBuf::from) {
         let assets = std::env::var_os("INSTANTMIMIC_ASSETS").map(PathBuf::from);
-        return vec![Reference::load(dir, assets)];
+        return vec![Reference::load(dir, PlanStore::new(assets.as_deref()))];
     }
     let fixtures = Path::new("tests/fixtures/physics_reference");
     vec![
-        Reference::load(fixtures.join("default_32"), None),
+        Reference::load(fixtures.join("default_32"), PlanStore::new(None)),
         Reference::load(
             fixtures.join("deterministic_32"),
-            Some(PathBuf::from("ptx/deterministic")),
+            PlanStore::new(Some(Path::new("ptx/deterministic"))),
         ),
+        Reference::load(fixtures.join("g1_32"), PlanStore::embedded("characters/g1")),
     ]
 }
 
 /// A simulation in a reference case's initial state.
 fn load_case(gpu: &Gpu, r: &Reference, case: &serde_json::Value, order: ReplayOrder) -> Simulation {
-    let sim =
-        Simulation::load_with_order(gpu, &r.store(), r.nworld, &["step", "kinematics"], order)
-            .unwrap_or_else(|e| panic!("loading plans: {e}"));
+    let sim = Simulation::load_with_order(gpu, &r.plans, r.nworld, &["step", "kinematics"], order)
+        .unwrap_or_else(|e| panic!("loading plans: {e}"));
     for field in ["qpos", "qvel", "ctrl"] {
         let file = case["files"][format!("init_{field}")]
             .as_str()
@@ -330,18 +334,29 @@ fn relative_over(a: &[f32], b: &[f32], keep: impl Fn(usize) -> bool) -> f64 {
 #[test]
 fn body_kinematics_kernel_matches_the_kinematics_plan() {
     let gpu = Gpu::open(0).expect("a GPU");
-    let r = Reference::load(
-        Path::new("tests/fixtures/physics_reference/default_32").into(),
-        None,
-    );
     let kernels = EnvKernels::load(&gpu).expect("env kernels");
-    let character = Character::humanoid().expect("the humanoid");
-    let model = DeviceBodyModel::upload(&gpu, &BodyModel::for_character(&character).unwrap())
+    let mut checked = 0;
+    // The references of the default physics of each character (the humanoid's, the G1's).
+    for r in references()
+        .into_iter()
+        .filter(|r| !r.summary["deterministic"].as_bool().unwrap_or(false))
+    {
+        checked += body_kinematics_matches(&gpu, &kernels, &r);
+    }
+    assert!(checked > 0, "no case in the references");
+}
+
+/// [`body_kinematics_kernel_matches_the_kinematics_plan`] on one reference: the number of
+/// cases checked.
+fn body_kinematics_matches(gpu: &Gpu, kernels: &EnvKernels, r: &Reference) -> usize {
+    let character = &r.character;
+    let model = DeviceBodyModel::upload(gpu, &BodyModel::for_character(character).unwrap())
         .expect("the body tables");
+    let nbody = character.bodies().len();
     let n = r.nworld as usize;
     let mut checked = 0;
     for case in r.summary["cases"].as_array().expect("cases") {
-        let sim = load_case(&gpu, &r, case, ReplayOrder::Dag);
+        let sim = load_case(gpu, r, case, ReplayOrder::Dag);
         for _ in 0..5 {
             sim.run("step").expect("step");
         }
@@ -354,7 +369,7 @@ fn body_kinematics_kernel_matches_the_kinematics_plan() {
             .expect("the state buffers");
         // Even envs were reset (only_done): odd ones must keep what they hold (NaN here).
         let flags: Vec<i32> = (0..n).map(|e| i32::from(e % 2 == 0)).collect();
-        let done = DeviceArray::from_slice(&gpu, [n], &flags).unwrap();
+        let done = DeviceArray::from_slice(gpu, [n], &flags).unwrap();
         for only_done in [false, true] {
             for (f, values) in fields.iter().zip(&plan) {
                 sim.buffer::<f32>(f)
@@ -363,15 +378,15 @@ fn body_kinematics_kernel_matches_the_kinematics_plan() {
                     .unwrap();
             }
             model
-                .record(&kernels, gpu.stream(), n, &physics, &done, only_done)
+                .record(kernels, gpu.stream(), n, &physics, &done, only_done)
                 .expect("body_kinematics");
             gpu.stream().synchronize().unwrap();
             let name = case["name"].as_str().unwrap_or("?");
             for (f, expected) in fields.iter().zip(&plan) {
                 let got = read(f);
-                let width = expected.len() / n / 16;
+                let width = expected.len() / n / nbody;
                 let written = |i: usize| {
-                    let (e, b) = (i / width / 16, i / width % 16);
+                    let (e, b) = (i / width / nbody, i / width % nbody);
                     let body = if *f == "d.subtree_com" {
                         b == 1
                     } else {
@@ -380,11 +395,14 @@ fn body_kinematics_kernel_matches_the_kinematics_plan() {
                     body && (!only_done || flags[e] != 0)
                 };
                 let error = relative_over(&got, expected, written);
-                println!("{name}, only_done {only_done}: {f} relative error {error:.2e}");
+                println!(
+                    "{}: {name}, only_done {only_done}: {f} relative error {error:.2e}",
+                    character.name()
+                );
                 assert!(error <= 1e-5, "{name}: {f} off the plan by {error:.2e}");
                 if only_done {
                     let untouched = (0..got.len())
-                        .filter(|&i| (i / width / 16) % 2 == 1)
+                        .filter(|&i| (i / width / nbody) % 2 == 1)
                         .all(|i| got[i].is_nan());
                     assert!(
                         untouched,
@@ -395,5 +413,5 @@ fn body_kinematics_kernel_matches_the_kinematics_plan() {
             checked += 1;
         }
     }
-    assert!(checked > 0, "no case in the reference");
+    checked
 }

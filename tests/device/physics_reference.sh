@@ -7,7 +7,7 @@
 # parts, too large beside a 20 MB tree: re-split with `split -b 38000000`), then, carrying
 # .device-py/small:
 #   source .device-py/small/activate.sh && tests/device/physics_reference.sh
-# Writes $OUT/reference.tgz: reference/{default,deterministic}_32 (seeded initial states and
+# Writes $OUT/reference.tgz: reference/{default,deterministic,g1}_32 (seeded initial states and
 # MuJoCo Warp's qpos/qvel after a few step counts, 32 worlds: the committed 32-world plans replay
 # them), one archive because a call brings back only so many files.
 set -euo pipefail
@@ -16,7 +16,7 @@ OUT=${OUT:-/tmp/instantmimic-out}
 work=$(mktemp -d)
 export PYTHONUNBUFFERED=1
 nvidia-smi --query-gpu=name,driver_version --format=csv,noheader | tee "$OUT/gpu.txt"
-for variant in default deterministic; do
+for variant in default deterministic g1; do
   python3 kernels_py/physics_reference.py exact --physics "configs/physics/$variant.toml" \
     --nworld 32 --out "$work/reference/${variant}_32" 2>&1 | grep -v -e '^Module ' -e '^   ' | tail -5
 done
