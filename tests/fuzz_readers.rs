@@ -1,5 +1,6 @@
 //! Every reader of outside input, fuzzed (issue 17): plans (raw and packed), DeepMimic motion
-//! files, robot motion files (holosoma's and mjlab's NPZ, mjlab's CSV; issue 35), training and
+//! files, robot motion files (holosoma's and mjlab's NPZ, mjlab's CSV; issue 35), BVH files with
+//! their conversion and joint-map detection (issue 36), training and
 //! search configurations, checkpoints, recordings and a search's state files. Each gets `INSTANTMIMIC_FUZZ_INPUTS` (default 100 000) mutations of valid inputs
 //! (tests/fuzz_support) and must return an error or a value, never panic.
 
@@ -10,15 +11,19 @@ mod plan_support;
 use std::path::Path;
 
 use fuzz_support::{Kind, campaign};
+use instantmimic::export::bvh::bvh_text;
 use instantmimic::hpo::backend::offline::OfflineProposer;
 use instantmimic::hpo::state::RunDir;
 use instantmimic::hpo::trial::build_runners;
 use instantmimic::hpo::{HpoConfig, RunnerPool, Search};
+use instantmimic::motion::built_in::find_built_in;
+use instantmimic::motion::bvh::{BvhOptions, import_bvh};
 use instantmimic::motion::character::JointType;
 use instantmimic::motion::npy::{self, NpyValues};
-use instantmimic::motion::{Character, MotionClip, format, mjlab, npz};
+use instantmimic::motion::skeleton_maps::detect_skeleton;
+use instantmimic::motion::{Character, MotionClip, ReferenceMotion, format, mjlab, npz};
 use instantmimic::plan::{Plan, load_plan_with_limit, pack};
-use instantmimic::recording::{Recording, synthetic};
+use instantmimic::recording::{ClipRecordingSpec, Recording, synthetic};
 use instantmimic::train::{Checkpoint, CheckpointMeta, TrainConfig};
 
 /// One `mujoco_warp.step` of a 2-link pendulum and a free box, 2 worlds (tests/plan_reader.rs).
@@ -77,6 +82,41 @@ fn motion_reader_never_panics() {
     ];
     campaign("motion", &seeds, Kind::Text, |b| {
         MotionClip::parse(&text(b), "fuzz", &character).is_ok()
+    });
+}
+
+/// A hand-written BVH: LAFAN1's joint names (Ubisoft's offsets are along each bone, so its rest
+/// pose is no T-pose), every rotation order, a position channel on a non-root joint, End Sites,
+/// tabs and a CRLF line; 3 frames.
+const LAFAN1_LIKE_BVH: &str = "HIERARCHY\nROOT Hips\n{\n\tOFFSET 0 0 0\n\tCHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n\tJOINT LeftUpLeg\n\t{\n\t\tOFFSET 0.1 -1.8 10.5\n\t\tCHANNELS 3 Xrotation Yrotation Zrotation\n\t\tJOINT LeftLeg\n\t\t{\n\t\t\tOFFSET 43.5 0 0\n\t\t\tCHANNELS 3 Yrotation Zrotation Xrotation\n\t\t\tJOINT LeftFoot\n\t\t\t{\n\t\t\t\tOFFSET 42.4 0 0\n\t\t\t\tCHANNELS 3 Zrotation Xrotation Yrotation\n\t\t\t\tEnd Site\n\t\t\t\t{\n\t\t\t\t\tOFFSET 17.3 0 0\n\t\t\t\t}\n\t\t\t}\n\t\t}\n\t}\n\tJOINT RightUpLeg\n\t{\n\t\tOFFSET 0.1 -1.8 -10.5\n\t\tCHANNELS 3 Xrotation Zrotation Yrotation\n\t\tJOINT RightLeg\n\t\t{\n\t\t\tOFFSET 43.5 0 0\n\t\t\tCHANNELS 3 Yrotation Xrotation Zrotation\n\t\t\tJOINT RightFoot\n\t\t\t{\n\t\t\t\tOFFSET 42.4 0 0\n\t\t\t\tCHANNELS 3 Zrotation Yrotation Xrotation\n\t\t\t\tEnd Site\n\t\t\t\t{\n\t\t\t\t\tOFFSET 17.3 0 0\n\t\t\t\t}\n\t\t\t}\n\t\t}\n\t}\n\tJOINT Spine\n\t{\n\t\tOFFSET 6.9 -2.6 0\n\t\tCHANNELS 3 Zrotation Yrotation Xrotation\n\t\tJOINT Spine2\n\t\t{\n\t\t\tOFFSET 25 0 0\n\t\t\tCHANNELS 4 Xposition Zrotation Yrotation Xrotation\n\t\t\tJOINT Head\n\t\t\t{\n\t\t\t\tOFFSET 26 0 0\n\t\t\t\tCHANNELS 3 Zrotation Yrotation Xrotation\n\t\t\t\tEnd Site\n\t\t\t\t{\n\t\t\t\t\tOFFSET 18 0 0\n\t\t\t\t}\n\t\t\t}\n\t\t\tJOINT LeftArm\n\t\t\t{\n\t\t\t\tOFFSET 20 3 18\n\t\t\t\tCHANNELS 3 Zrotation Yrotation Xrotation\n\t\t\t\tJOINT LeftForeArm\n\t\t\t\t{\n\t\t\t\t\tOFFSET 28 0 0\n\t\t\t\t\tCHANNELS 3 Zrotation Yrotation Xrotation\n\t\t\t\t\tJOINT LeftHand\n\t\t\t\t\t{\n\t\t\t\t\t\tOFFSET 25 0 0\n\t\t\t\t\t\tCHANNELS 3 Zrotation Yrotation Xrotation\n\t\t\t\t\t\tEnd Site\n\t\t\t\t\t\t{\n\t\t\t\t\t\t\tOFFSET 8 0 0\n\t\t\t\t\t\t}\n\t\t\t\t\t}\n\t\t\t\t}\n\t\t\t}\n\t\t\tJOINT RightArm\n\t\t\t{\n\t\t\t\tOFFSET 20 3 -18\n\t\t\t\tCHANNELS 3 Zrotation Yrotation Xrotation\n\t\t\t\tJOINT RightForeArm\n\t\t\t\t{\n\t\t\t\t\tOFFSET 28 0 0\n\t\t\t\t\tCHANNELS 3 Zrotation Yrotation Xrotation\n\t\t\t\t\tJOINT RightHand\n\t\t\t\t\t{\n\t\t\t\t\t\tOFFSET 25 0 0\n\t\t\t\t\t\tCHANNELS 3 Zrotation Yrotation Xrotation\n\t\t\t\t\t\tEnd Site\n\t\t\t\t\t\t{\n\t\t\t\t\t\t\tOFFSET 8 0 0\n\t\t\t\t\t\t}\n\t\t\t\t\t}\n\t\t\t\t}\n\t\t\t}\n\t\t}\n\t}\n}\nMOTION\nFrames: 3\r\nFrame Time: 0.033333\n0 95 0 90 0 -90 0 0 180 0 0 0 0 0 0 0 180 0 0 0 0 0 0 0 0 0 0 25 0 0 0 0 0 0 0 -90 0 0 0 0 0 0 0 0 90 0 0 0 0 0 0 0\n1 95 0 90 0 -90 10 0 180 5 0 0 0 0 0 -10 180 0 5 0 0 0 0 0 3 0 0 25 0 0 0 0 0 2 0 -80 0 0 0 0 0 0 0 0 90 0 0 -5 0 0 0 0\n2 95 0 90 0 -90 20 0 180 10 0 0 0 0 0 -20 180 0 10 0 0 0 0 0 6 0 0 25 0 0 0 0 0 4 0 -70 0 0 0 0 0 0 0 0 90 0 0 -10 0 0 0 0\n";
+
+/// The BVH reader, its conversion (units and up detected) and the joint-map detection (a
+/// built-in skeleton's or the character's own).
+#[test]
+fn bvh_reader_never_panics() {
+    let character = humanoid();
+    let walk = find_built_in("walk").expect("the built-in walk");
+    let clip = MotionClip::parse(walk.text, walk.name, &character).expect("the walk");
+    let reference = ReferenceMotion::new(clip, &character).expect("kinematics");
+    // Our own export, 4 frames (a short seed mutates deeper).
+    let recording = Recording::from_motion(
+        &reference,
+        &ClipRecordingSpec {
+            motion: "walk",
+            motion_source: "built in",
+            producer: "fuzz",
+            frame_dt: 0.1,
+            duration_s: Some(0.3),
+        },
+    )
+    .expect("a recording");
+    let export = bvh_text(&recording, &character, 0).expect("the BVH export");
+    let seeds = vec![export.into_bytes(), LAFAN1_LIKE_BVH.as_bytes().to_vec()];
+    campaign("bvh", &seeds, Kind::Text, |b| {
+        let Ok(imported) = import_bvh(&text(b), "fuzz.bvh", &BvhOptions::default()) else {
+            return false;
+        };
+        detect_skeleton(&imported.motion.skeleton.names, Some(&character)).is_ok()
     });
 }
 

@@ -4,13 +4,13 @@
 //! `Rz(z) Ry(y) Rx(x)`). Angles stay continuous from frame to frame (the equivalent triple nearest
 //! the previous frame's), so a DCC tool interpolates them the short way.
 //!
-//! No well-kept Rust crate writes BVH; the format is a small text format, written and read here
-//! ([`read_bvh`] parses what DCC tools write too: any channel order, End Sites, tabs).
+//! No well-kept Rust crate writes BVH; the format is a small text format, written here and read
+//! by [`crate::motion::bvh`] (what DCC tools write too: any channel order, End Sites, tabs).
 
 use std::f64::consts::PI;
 use std::fmt::Write as _;
 
-use nalgebra::{Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::motion::Character;
 use crate::motion::character::GeomShape;
@@ -51,22 +51,6 @@ pub fn euler_zyx(q: &UnitQuaternion<f64>, previous: Option<[f64; 3]>) -> [f64; 3
         }
     }
     best
-}
-
-/// The rotation of Euler angles (radians) applied as `channels` says, e.g. `["Zrotation",
-/// "Yrotation", "Xrotation"]` with angles in the same order: `R = R1(a1) R2(a2) R3(a3)`.
-pub fn rotation_from_channels(channels: &[(String, f64)]) -> UnitQuaternion<f64> {
-    let mut q = UnitQuaternion::identity();
-    for (name, angle) in channels {
-        let axis = match name.as_str() {
-            "Xrotation" => Vector3::x_axis(),
-            "Yrotation" => Vector3::y_axis(),
-            "Zrotation" => Vector3::z_axis(),
-            _ => continue,
-        };
-        q *= UnitQuaternion::from_axis_angle(&axis, *angle);
-    }
-    q
 }
 
 fn vec_text(v: &Vector3<f64>) -> String {
@@ -189,195 +173,10 @@ pub fn bvh_text(
     Ok(out)
 }
 
-/// A BVH file as read: joints in file order and the frames' channel values.
-#[derive(Clone, Debug, PartialEq)]
-pub struct BvhFile {
-    pub joints: Vec<BvhJoint>,
-    pub frame_time: f64,
-    /// Per frame, every joint's channel values in file order (degrees for rotations).
-    pub frames: Vec<Vec<f64>>,
-}
-
-#[derive(Clone, Debug, PartialEq)]
-pub struct BvhJoint {
-    pub name: String,
-    pub parent: Option<usize>,
-    pub offset: Vector3<f64>,
-    pub channels: Vec<String>,
-    /// Where this joint's values start in a frame.
-    pub first_value: usize,
-}
-
-impl BvhFile {
-    /// Joint `j`'s rotation at `frame` (its rotation channels, in their order).
-    pub fn rotation(&self, j: usize, frame: usize) -> UnitQuaternion<f64> {
-        let joint = &self.joints[j];
-        let values = &self.frames[frame][joint.first_value..];
-        let channels: Vec<(String, f64)> = joint
-            .channels
-            .iter()
-            .zip(values)
-            .map(|(name, v)| (name.clone(), v.to_radians()))
-            .collect();
-        rotation_from_channels(&channels)
-    }
-
-    /// Joint `j`'s position channels at `frame` (zeros for a joint without them).
-    pub fn translation(&self, j: usize, frame: usize) -> Vector3<f64> {
-        let joint = &self.joints[j];
-        let values = &self.frames[frame][joint.first_value..];
-        let mut t = Vector3::zeros();
-        for (name, v) in joint.channels.iter().zip(values) {
-            match name.as_str() {
-                "Xposition" => t.x = *v,
-                "Yposition" => t.y = *v,
-                "Zposition" => t.z = *v,
-                _ => {}
-            }
-        }
-        t
-    }
-
-    /// World positions and orientations of every joint at `frame` (the file's frame).
-    pub fn world_poses(&self, frame: usize) -> Vec<(Vector3<f64>, UnitQuaternion<f64>)> {
-        let mut poses: Vec<(Vector3<f64>, UnitQuaternion<f64>)> = Vec::new();
-        for (j, joint) in self.joints.iter().enumerate() {
-            let local_t = joint.offset + self.translation(j, frame);
-            let local_r = self.rotation(j, frame);
-            let pose = match joint.parent {
-                Some(p) => {
-                    let (pt, pr) = poses[p];
-                    (pt + pr * local_t, pr * local_r)
-                }
-                None => (local_t, local_r),
-            };
-            poses.push(pose);
-        }
-        poses
-    }
-}
-
-/// Parses BVH text; errors name the line.
-pub fn read_bvh(text: &str) -> Result<BvhFile, String> {
-    let mut tokens = text
-        .lines()
-        .enumerate()
-        .flat_map(|(i, line)| line.split_whitespace().map(move |t| (i + 1, t)))
-        .peekable();
-    let mut next = |what: &str| {
-        tokens
-            .next()
-            .ok_or_else(|| format!("end of file, expected {what}"))
-    };
-    let number = |(line, t): (usize, &str)| -> Result<f64, String> {
-        t.parse::<f64>()
-            .map_err(|_| format!("line {line}: {t:?} is not a number"))
-    };
-    let (line, t) = next("HIERARCHY")?;
-    if t != "HIERARCHY" {
-        return Err(format!("line {line}: expected HIERARCHY, found {t:?}"));
-    }
-    let mut joints: Vec<BvhJoint> = Vec::new();
-    let mut stack: Vec<Option<usize>> = Vec::new();
-    let mut values = 0;
-    loop {
-        let (line, t) = next("a joint or MOTION")?;
-        match t {
-            "ROOT" | "JOINT" => {
-                let (_, name) = next("a joint name")?;
-                let parent = stack.last().copied().flatten();
-                joints.push(BvhJoint {
-                    name: name.to_string(),
-                    parent,
-                    offset: Vector3::zeros(),
-                    channels: Vec::new(),
-                    first_value: values,
-                });
-                let (line, brace) = next("{")?;
-                if brace != "{" {
-                    return Err(format!("line {line}: expected {{ after {name}"));
-                }
-                stack.push(Some(joints.len() - 1));
-            }
-            "End" => {
-                next("Site")?;
-                next("{")?;
-                stack.push(None);
-            }
-            "OFFSET" => {
-                let offset = Vector3::new(
-                    number(next("x")?)?,
-                    number(next("y")?)?,
-                    number(next("z")?)?,
-                );
-                if let Some(Some(j)) = stack.last() {
-                    joints[*j].offset = offset;
-                }
-            }
-            "CHANNELS" => {
-                let (line, count) = next("a channel count")?;
-                let count: usize = count
-                    .parse()
-                    .map_err(|_| format!("line {line}: bad channel count {count:?}"))?;
-                let Some(Some(j)) = stack.last().copied() else {
-                    return Err(format!("line {line}: CHANNELS outside a joint"));
-                };
-                joints[j].first_value = values;
-                for _ in 0..count {
-                    joints[j]
-                        .channels
-                        .push(next("a channel name")?.1.to_string());
-                }
-                values += count;
-            }
-            "}" => {
-                stack
-                    .pop()
-                    .ok_or_else(|| format!("line {line}: unbalanced }}"))?;
-            }
-            "MOTION" => break,
-            other => return Err(format!("line {line}: unexpected {other:?}")),
-        }
-    }
-    let (line, t) = next("Frames:")?;
-    if t != "Frames:" {
-        return Err(format!("line {line}: expected Frames:, found {t:?}"));
-    }
-    let count = number(next("a frame count")?)? as usize;
-    let (line, a) = next("Frame Time:")?;
-    let (_, b) = next("Frame Time:")?;
-    if (a, b) != ("Frame", "Time:") {
-        return Err(format!("line {line}: expected Frame Time:"));
-    }
-    let frame_time = number(next("a frame time")?)?;
-    let mut frames = Vec::with_capacity(count);
-    for _ in 0..count {
-        let mut frame = Vec::with_capacity(values);
-        for _ in 0..values {
-            frame.push(number(next("a channel value")?)?);
-        }
-        frames.push(frame);
-    }
-    if let Some((line, t)) = tokens.next() {
-        return Err(format!("line {line}: {t:?} after the last frame"));
-    }
-    Ok(BvhFile {
-        joints,
-        frame_time,
-        frames,
-    })
-}
-
-/// A rotation matrix from Euler angles as [`euler_zyx`] returns them.
-pub fn from_euler_zyx(angles: [f64; 3]) -> UnitQuaternion<f64> {
-    UnitQuaternion::from_rotation_matrix(&Rotation3::from_euler_angles(
-        angles[2], angles[1], angles[0],
-    ))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::motion::bvh::{Channel, from_euler_zyx, rotation_from_channels};
 
     #[test]
     fn euler_angles_round_trip_and_stay_continuous() {
@@ -385,9 +184,9 @@ mod tests {
         let angles = euler_zyx(&q, None);
         assert!(from_euler_zyx(angles).angle_to(&q) < 1e-12);
         let composed = rotation_from_channels(&[
-            ("Zrotation".into(), angles[0]),
-            ("Yrotation".into(), angles[1]),
-            ("Xrotation".into(), angles[2]),
+            (Channel::Zrotation, angles[0]),
+            (Channel::Yrotation, angles[1]),
+            (Channel::Xrotation, angles[2]),
         ]);
         assert!(composed.angle_to(&q) < 1e-12);
         // Near the previous frame's (z, y, x) + 2 pi: the same rotation, unwrapped.

@@ -215,6 +215,11 @@ pub enum MotionError {
          (body_pos_w, body_quat_w, joint_pos, fps); the file has: {keys}"
     )]
     NpzFormat { file: String, keys: String },
+    /// A mocap file of another skeleton than the character's, read only through an import.
+    #[error(
+        "{file}: BVH needs retargeting: instantmimic motion import {file} --character {character}"
+    )]
+    NeedsRetargeting { file: String, character: String },
     #[error(
         "{file}: the character {character} cannot take a robot motion: {problem} (robot motion \
          files hold a free root's pose and one angle per joint)"

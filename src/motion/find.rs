@@ -99,7 +99,7 @@ impl ResolvedMotion {
 
 /// The file a name stands for in `dir`: the first existing of `<name>`, `humanoid3d_<name>.txt`
 /// (DeepMimic's humanoid clips), then `<name>.<ext>` for each motion extension (`txt`, `json`,
-/// `npz`, `csv`). Every path tried goes into `tried`.
+/// `npz`, `csv`, `bvh`). Every path tried goes into `tried`.
 fn find_in_dir(motion: &str, dir: &Path, tried: &mut Vec<String>) -> Option<PathBuf> {
     let with_extensions = MOTION_EXTENSIONS
         .iter()
@@ -171,7 +171,7 @@ pub struct DirectoryClip {
     pub path: PathBuf,
 }
 
-/// The clip files in a motions directory (`*.txt`, `*.json`, `*.npz`, `*.csv`), by file name,
+/// The clip files in a motions directory (`*.txt`, `*.json`, `*.npz`, `*.csv`, `*.bvh`), by file name,
 /// not recursing.
 pub fn directory_clips(dir: &Path) -> Result<Vec<DirectoryClip>, MotionError> {
     check_dir(dir)?;

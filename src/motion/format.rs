@@ -1,7 +1,8 @@
 //! Motion file formats, told apart by extension: DeepMimic's JSON (`.txt`, `.json`, and any
 //! other extension, as before robot formats were read), and the robot formats, `.npz`
 //! (holosoma's or mjlab's, told apart by their keys) and `.csv` (mjlab's). `docs/motions.md`
-//! describes each.
+//! describes each. BVH (`.bvh`, a mocap skeleton's motion) is told apart too, but becomes a
+//! character's clip only through retargeting.
 
 use std::path::Path;
 
@@ -12,7 +13,7 @@ use super::npz::Npz;
 use super::{holosoma, mjlab};
 
 /// The extensions of motion files, as a motions directory is listed.
-pub const MOTION_EXTENSIONS: [&str; 4] = ["txt", "json", "npz", "csv"];
+pub const MOTION_EXTENSIONS: [&str; 5] = ["txt", "json", "npz", "csv", "bvh"];
 
 /// mjlab's default frame rate for its CSV files (`csv_to_npz.py --input_fps`), which do not
 /// carry one.
@@ -27,15 +28,18 @@ pub enum MotionFormat {
     Npz,
     /// mjlab's CSV: root position, root quaternion (x, y, z, w), joint angles.
     MjlabCsv,
+    /// Biovision hierarchy: a mocap skeleton's motion (`super::bvh`), to be retargeted.
+    Bvh,
 }
 
 impl MotionFormat {
     /// The format of the file at `path`, by its extension (any case); DeepMimic's for any
-    /// extension but `.npz` and `.csv`.
+    /// extension but `.npz`, `.csv` and `.bvh`.
     pub fn of_path(path: &Path) -> MotionFormat {
         match extension(path).as_deref() {
             Some("npz") => MotionFormat::Npz,
             Some("csv") => MotionFormat::MjlabCsv,
+            Some("bvh") => MotionFormat::Bvh,
             _ => MotionFormat::DeepMimic,
         }
     }
@@ -77,7 +81,8 @@ impl Default for ReadOptions {
     }
 }
 
-/// Reads a robot motion file (`format` is not DeepMimic's) for `character`.
+/// Reads a robot motion file (`format` is not DeepMimic's) for `character`; a BVH file is
+/// refused with the command that imports it.
 pub(crate) fn load_robot_clip(
     format: MotionFormat,
     path: &Path,
@@ -94,6 +99,10 @@ pub(crate) fn load_robot_clip(
             mjlab::parse_csv(&text, &file, options.csv_frame_rate, character)
         }
         MotionFormat::Npz | MotionFormat::DeepMimic => read_npz(&mut Npz::open(path)?, character),
+        MotionFormat::Bvh => Err(MotionError::NeedsRetargeting {
+            file,
+            character: character.name().to_string(),
+        }),
     }
 }
 

@@ -5,7 +5,7 @@
 //! [motion_library]
 //! clips = ["walk", "run", "path/to/humanoid3d_kick.txt"]  # names or paths, as `--motion` takes
 //! # or: dir = "path/to/motions"       every motion file in it (`*.txt`, `*.json`, `*.npz`,
-//! #                                    `*.csv`), by file name
+//! #                                    `*.csv`, `*.bvh`), by file name
 //! # or: manifest = "path/to/clips.toml"  `[[clip]]` entries with per-clip weights
 //! ```
 //!
@@ -31,7 +31,7 @@ pub struct LibraryConfig {
     /// Clips by name or path, in this order, weight 1 each.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub clips: Option<Vec<String>>,
-    /// A directory: every motion file in it (`*.txt`, `*.json`, `*.npz`, `*.csv`; not
+    /// A directory: every motion file in it (`*.txt`, `*.json`, `*.npz`, `*.csv`, `*.bvh`; not
     /// recursing), sorted by file name, weight 1 each.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dir: Option<PathBuf>,
@@ -323,7 +323,7 @@ impl LibraryConfig {
     }
 }
 
-/// Every motion file of `dir` (`*.txt`, `*.json`, `*.npz`, `*.csv`), sorted by file name.
+/// Every motion file of `dir` (`*.txt`, `*.json`, `*.npz`, `*.csv`, `*.bvh`), sorted by file name.
 fn dir_entries(origin: &str, dir: &Path) -> Result<Vec<LibraryEntry>, MotionLibraryError> {
     let dir_error = |problem: String| MotionLibraryError::Dir {
         origin: origin.to_string(),

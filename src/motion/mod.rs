@@ -16,7 +16,9 @@
 //! - [`table`]: the reference resampled at the control rate into the GPU table.
 //! - [`summary`]: what `motion inspect` reports.
 //! - [`source_motion`]: a motion of another skeleton (a mocap file's) before retargeting, and
-//!   the body-plan roles a source's joint map and a character meet at.
+//!   the body-plan roles a source's joint map and a character meet at; [`bvh`] reads BVH files
+//!   into one, [`skeleton_maps`] finds which joint plays which role (built-in maps of common
+//!   skeletons, a user's map file).
 //! - [`synthetic`]: generated clips for tests.
 //! - [`built_in`]: the clips built into the binary (`assets/motions/`).
 //! - [`find`]: finding clips by name: the motions directory, then the built-in clips.
@@ -26,6 +28,7 @@
 //! `docs/motions.md` and `docs/reference_table.md` describe the conventions.
 
 pub mod built_in;
+pub mod bvh;
 pub mod character;
 pub mod clip;
 pub mod deepmimic;
@@ -42,6 +45,7 @@ pub mod npz;
 pub mod reference;
 pub mod robot_joints;
 pub mod rotation;
+pub mod skeleton_maps;
 pub mod source_columns;
 pub mod source_motion;
 pub mod summary;

@@ -126,8 +126,8 @@ pub struct SourceMotion {
     pub frame_time: f64,
     /// `[frame][joint]`: the joint's rotation relative to its parent.
     pub local_rotations: Vec<Vec<UnitQuaternion<f64>>>,
-    /// `[frame][joint]`: the joint's origin in its parent's frame (the rest offset plus any
-    /// position channels).
+    /// `[frame][joint]`: the joint's origin in its parent's frame (the rest offset, with the
+    /// components a BVH joint has position channels for taken from those channels).
     pub local_translations: Vec<Vec<Vector3<f64>>>,
 }
 
