@@ -13,7 +13,10 @@ pub enum RetargetError {
     )]
     NoMap { source_name: String, joints: String },
     #[error("{source_name}: {problem}")]
-    Source { source_name: String, problem: String },
+    Source {
+        source_name: String,
+        problem: String,
+    },
     #[error("character {character}: cannot tell which body is the {role}: {problem}")]
     CharacterRole {
         character: String,

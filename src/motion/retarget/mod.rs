@@ -71,7 +71,16 @@ pub fn retarget(
                 positions: targets
                     .targets
                     .iter()
-                    .map(|t| poses[t.source_joint].translation.vector * targets.scale)
+                    .map(|t| {
+                        let sum: nalgebra::Vector3<f64> = t
+                            .position_joints
+                            .iter()
+                            .map(|&j| poses[j].translation.vector)
+                            .sum();
+                        let mean = sum / t.position_joints.len().max(1) as f64;
+                        let orientation = poses[t.source_joint].rotation * t.offset;
+                        mean * targets.scale + orientation * t.position_offset
+                    })
                     .collect(),
                 orientations: targets
                     .targets
@@ -200,7 +209,9 @@ fn check_source(source: &SourceMotion) -> Result<(), RetargetError> {
         return Err(problem("the skeleton has no joints".into()));
     }
     if skeleton.parents.len() != n || skeleton.offsets.len() != n {
-        return Err(problem("the skeleton's names, parents and offsets differ in count".into()));
+        return Err(problem(
+            "the skeleton's names, parents and offsets differ in count".into(),
+        ));
     }
     for (j, parent) in skeleton.parents.iter().enumerate() {
         if parent.is_some_and(|p| p >= j) {
@@ -223,7 +234,9 @@ fn check_source(source: &SourceMotion) -> Result<(), RetargetError> {
         )));
     }
     if source.local_translations.len() != source.num_frames() {
-        return Err(problem("rotations and translations differ in frame count".into()));
+        return Err(problem(
+            "rotations and translations differ in frame count".into(),
+        ));
     }
     for (f, (rotations, translations)) in source
         .local_rotations
@@ -234,7 +247,9 @@ fn check_source(source: &SourceMotion) -> Result<(), RetargetError> {
         if rotations.len() != n || translations.len() != n {
             return Err(problem(format!("frame {f} does not have {n} joints")));
         }
-        let finite = rotations.iter().all(|q| q.coords.iter().all(|v| v.is_finite()))
+        let finite = rotations
+            .iter()
+            .all(|q| q.coords.iter().all(|v| v.is_finite()))
             && translations.iter().all(|t| t.iter().all(|v| v.is_finite()));
         if !finite {
             return Err(problem(format!("frame {f} has a value that is not finite")));

@@ -100,7 +100,9 @@ pub fn target_errors(
         let k = forward_kinematics(character, q)?;
         for (t, target) in targets.iter().enumerate() {
             let d = (k.xpos[target.origin] - goal.positions[t]).norm();
-            let a = k.xquat[target.body].angle_to(&goal.orientations[t]).to_degrees();
+            let a = k.xquat[target.body]
+                .angle_to(&goal.orientations[t])
+                .to_degrees();
             let s = &mut sums[t];
             s.0 += d;
             s.1 = s.1.max(d);

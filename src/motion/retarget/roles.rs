@@ -319,9 +319,8 @@ impl<'a> Tree<'a> {
 
     /// The head: the highest end effector (else leaf) below the chest off the limbs.
     fn head(&self, character: &Character, chest: usize, limbs: &[usize]) -> Option<usize> {
-        let candidate = |b: &usize| {
-            !limbs.contains(b) && *b != chest && self.is_ancestor_or_self(chest, *b)
-        };
+        let candidate =
+            |b: &usize| !limbs.contains(b) && *b != chest && self.is_ancestor_or_self(chest, *b);
         let highest = |bodies: Vec<usize>| {
             bodies
                 .into_iter()
@@ -384,7 +383,10 @@ mod tests {
             find("right_shoulder"),
             Some(("right_upper_arm", "right_upper_arm"))
         );
-        assert_eq!(find("left_elbow"), Some(("left_lower_arm", "left_lower_arm")));
+        assert_eq!(
+            find("left_elbow"),
+            Some(("left_lower_arm", "left_lower_arm"))
+        );
         assert_eq!(find("left_wrist"), Some(("left_hand", "left_hand")));
         assert_eq!(find("spine"), None);
         assert_eq!(find("left_clavicle"), None);
@@ -408,7 +410,10 @@ mod tests {
             find("left_hip"),
             Some(("left_hip_pitch_link", "left_hip_yaw_link"))
         );
-        assert_eq!(find("left_knee"), Some(("left_knee_link", "left_knee_link")));
+        assert_eq!(
+            find("left_knee"),
+            Some(("left_knee_link", "left_knee_link"))
+        );
         assert_eq!(
             find("right_ankle"),
             Some(("right_ankle_pitch_link", "right_ankle_roll_link"))
@@ -417,7 +422,10 @@ mod tests {
             find("left_shoulder"),
             Some(("left_shoulder_pitch_link", "left_shoulder_yaw_link"))
         );
-        assert_eq!(find("left_elbow"), Some(("left_elbow_link", "left_elbow_link")));
+        assert_eq!(
+            find("left_elbow"),
+            Some(("left_elbow_link", "left_elbow_link"))
+        );
         assert_eq!(
             find("right_wrist"),
             Some(("right_wrist_roll_link", "right_wrist_yaw_link"))

@@ -33,6 +33,9 @@ const CARRY_ORIENTATION_TOLERANCE: f64 = 1e-5;
 /// Iterations of Levenberg–Marquardt per frame at most; a warm-started frame takes a handful.
 const MAX_ITERATIONS: usize = 100;
 
+/// The solve stops when a step lowers the cost by less than this fraction of it.
+const RELATIVE_GAIN: f64 = 1e-6;
+
 /// Where one frame's targets are (after scaling), in the order of the targets.
 #[derive(Clone, Debug)]
 pub struct FrameGoal {
@@ -78,11 +81,7 @@ impl<'a> Solver<'a> {
     }
 
     /// Solves one frame from `qpos` (the previous frame's solution, or a start pose), in place.
-    pub fn solve(
-        &self,
-        goal: &FrameGoal,
-        qpos: &mut [f64],
-    ) -> Result<FrameSolve, RetargetError> {
+    pub fn solve(&self, goal: &FrameGoal, qpos: &mut [f64]) -> Result<FrameSolve, RetargetError> {
         let previous = qpos.to_vec();
         self.carry(goal, qpos);
         let mut solve = FrameSolve::default();
@@ -111,7 +110,9 @@ impl<'a> Solver<'a> {
         let mut xquat = vec![UnitQuaternion::identity(); n];
         for b in 1..n {
             let body = &bodies[b];
-            let parent = body.parent.map_or_else(UnitQuaternion::identity, |p| xquat[p]);
+            let parent = body
+                .parent
+                .map_or_else(UnitQuaternion::identity, |p| xquat[p]);
             let frame = parent * body.quat;
             let joint = body.joint.map(|j| &joints[j]);
             if let (Some(joint), Some(want)) = (joint, desired[b]) {
@@ -281,7 +282,7 @@ impl<'a> Solver<'a> {
                     qpos.copy_from_slice(&trial);
                     cost = trial_cost;
                     lambda = (lambda / 3.0).max(1e-9);
-                    improved = gain > 1e-14 * (1.0 + cost) && step.norm() > 1e-10;
+                    improved = gain > RELATIVE_GAIN * cost && step.norm() > 1e-10;
                     break;
                 }
                 lambda *= 4.0;
@@ -454,7 +455,9 @@ mod tests {
         let knee = character
             .joints()
             .iter()
-            .find(|j| j.kind == JointType::Hinge && j.range.is_some_and(|r| r[0] > -0.1 && r[0] < 0.0))
+            .find(|j| {
+                j.kind == JointType::Hinge && j.range.is_some_and(|r| r[0] > -0.1 && r[0] < 0.0)
+            })
             .expect("a knee-like hinge");
         qpos[knee.qposadr] = -1.0;
         clamp_limits(&character, &mut qpos);

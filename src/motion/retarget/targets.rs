@@ -53,10 +53,16 @@ impl std::str::FromStr for RestPose {
 }
 
 /// Weights of the residuals, per metre of position error and per radian of orientation error.
-/// End effectors and the pelvis weigh more: where the feet and the root are decides contacts
-/// and balance, where an elbow is matters less than how the forearm points.
-const POSITION_WEIGHT: f64 = 2.0;
+/// Where the feet, the hands and the root are decides contacts and balance: they weigh most;
+/// knees and elbows next. The torso's and the limbs' roots (spine, chest, neck, head,
+/// clavicles, shoulders, hips) mostly follow their orientations: where a body's origin sits
+/// in the torso differs between skeletons (the G1's torso link starts at its waist, 4 cm above
+/// the pelvis, the humanoid's torso 24 cm above), which a position target would fight.
 const END_POSITION_WEIGHT: f64 = 5.0;
+const MIDDLE_POSITION_WEIGHT: f64 = 2.0;
+const ROOT_POSITION_WEIGHT: f64 = 0.5;
+/// The identity map's weight per metre: the bodies are the source's own, any weight holds.
+const POSITION_WEIGHT: f64 = 2.0;
 const ORIENTATION_WEIGHT: f64 = 1.0;
 
 /// One pair the IK matches: the body's origin to the scaled source joint's position, the body's
@@ -66,6 +72,13 @@ pub struct Target {
     /// The role's name, or the body's for the identity map.
     pub name: String,
     pub source_joint: usize,
+    /// The source joints whose mean position (scaled) the body's origin aims at, plus
+    /// `position_offset`: the joint itself, or for the pelvis the two hips, so that the
+    /// character's pelvis sits above the source's hips as its own does above its hips
+    /// (skeletons put the pelvis joint at different heights over the hips).
+    pub position_joints: Vec<usize>,
+    /// Added to the scaled position, in the body's target frame (m).
+    pub position_offset: Vector3<f64>,
     /// The body whose origin is matched to the joint's position.
     pub origin: usize,
     /// The body whose orientation is matched.
@@ -147,6 +160,8 @@ fn identity(source: &SourceMotion, character: &Character) -> Option<Targets> {
         targets.push(Target {
             name: name.clone(),
             source_joint: joint,
+            position_joints: vec![joint],
+            position_offset: Vector3::zeros(),
             origin: body,
             body,
             offset: UnitQuaternion::identity(),
@@ -216,7 +231,9 @@ fn by_role(
     let zero = forward_kinematics(character, character.qpos0())?;
     let common: Vec<Role> = Role::ALL
         .into_iter()
-        .filter(|&r| roles.get(r).is_some() && map.joint(r).is_some_and(|j| j < source.skeleton.len()))
+        .filter(|&r| {
+            roles.get(r).is_some() && map.joint(r).is_some_and(|j| j < source.skeleton.len())
+        })
         .collect();
     let source_position = |r: Role| map.joint(r).map(|j| source_rest[j].translation.vector);
     let character_position = |r: Role| roles.get(r).map(|b| zero.xpos[b.origin]);
@@ -264,13 +281,17 @@ fn by_role(
             match first_direction(role, &child_roles(role)) {
                 Some((d_source, d_character)) => {
                     let d_posed = parent * d_character;
-                    UnitQuaternion::rotation_between(&d_posed, &d_source)
-                        .unwrap_or_else(|| {
-                            // Opposite directions: a half turn about any perpendicular axis.
-                            let axis = d_posed.cross(&Vector3::x()).try_normalize(1e-9).unwrap_or(Vector3::y());
-                            UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_unchecked(axis), std::f64::consts::PI)
-                        })
-                        * parent
+                    UnitQuaternion::rotation_between(&d_posed, &d_source).unwrap_or_else(|| {
+                        // Opposite directions: a half turn about any perpendicular axis.
+                        let axis = d_posed
+                            .cross(&Vector3::x())
+                            .try_normalize(1e-9)
+                            .unwrap_or(Vector3::y());
+                        UnitQuaternion::from_axis_angle(
+                            &nalgebra::Unit::new_unchecked(axis),
+                            std::f64::consts::PI,
+                        )
+                    }) * parent
                 }
                 None => parent,
             }
@@ -286,11 +307,27 @@ fn by_role(
         let posed = aligned * zero.xquat[body.body];
         let position_weight = match role {
             Role::Pelvis | Role::Ankle(_) | Role::Toe(_) | Role::Wrist(_) => END_POSITION_WEIGHT,
-            _ => POSITION_WEIGHT,
+            Role::Knee(_) | Role::Elbow(_) => MIDDLE_POSITION_WEIGHT,
+            _ => ROOT_POSITION_WEIGHT,
+        };
+        let hips_of = |hips: [Role; 2]| {
+            let source = [map.joint(hips[0])?, map.joint(hips[1])?];
+            let character = [roles.get(hips[0])?.origin, roles.get(hips[1])?.origin];
+            (common.contains(&hips[0]) && common.contains(&hips[1])).then_some((source, character))
+        };
+        let (position_joints, position_offset) = match (role, hips_of(hips)) {
+            (Role::Pelvis, Some((source_hips, character_hips))) => {
+                let middle = 0.5 * (zero.xpos[character_hips[0]] + zero.xpos[character_hips[1]]);
+                let offset = zero.xquat[body.body].inverse() * (zero.xpos[body.origin] - middle);
+                (source_hips.to_vec(), offset)
+            }
+            _ => (vec![joint], Vector3::zeros()),
         };
         targets.push(Target {
             name: role.name(),
             source_joint: joint,
+            position_joints,
+            position_offset,
             origin: body.origin,
             body: body.body,
             offset: source_rest[joint].rotation.inverse() * posed,

@@ -50,9 +50,10 @@ impl ClipFileFormat {
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase);
         match self {
-            ClipFileFormat::DeepMimic => {
-                !matches!(extension.as_deref(), Some("npz") | Some("csv") | Some("bvh"))
-            }
+            ClipFileFormat::DeepMimic => !matches!(
+                extension.as_deref(),
+                Some("npz") | Some("csv") | Some("bvh")
+            ),
             ClipFileFormat::HolosomaNpz => extension.as_deref() == Some("npz"),
         }
     }
