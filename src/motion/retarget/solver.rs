@@ -51,6 +51,26 @@ pub struct FrameSolve {
     pub joints_at_limit: Vec<usize>,
 }
 
+/// How one dof moves the tree: the bodies at and under `body` turn about `angular` through
+/// `anchor` and move along `linear` (world frame, per unit of the dof).
+struct DofAxis {
+    body: usize,
+    linear: Vector3<f64>,
+    angular: Vector3<f64>,
+    anchor: Vector3<f64>,
+}
+
+impl DofAxis {
+    fn new(body: usize, linear: Vector3<f64>, angular: Vector3<f64>, anchor: Vector3<f64>) -> Self {
+        DofAxis {
+            body,
+            linear,
+            angular,
+            anchor,
+        }
+    }
+}
+
 /// The IK over one character's tree.
 pub struct Solver<'a> {
     character: &'a Character,
@@ -68,7 +88,9 @@ impl<'a> Solver<'a> {
         for b in 0..n {
             let mut k = Some(b);
             while let Some(a) = k {
-                below[a][b] = true;
+                if let Some(row) = below.get_mut(a) {
+                    row[b] = true;
+                }
                 k = character.bodies()[a].parent;
             }
         }
@@ -191,7 +213,9 @@ impl<'a> Solver<'a> {
             return Ok((r, None));
         }
         let mut j = DMatrix::zeros(rows, nv);
-        for (dof, (body, linear, angular, anchor)) in self.dof_axes(&k).into_iter().enumerate() {
+        for (dof, axis) in self.dof_axes(&k).into_iter().enumerate() {
+            let (body, linear, angular, anchor) =
+                (axis.body, axis.linear, axis.angular, axis.anchor);
             for (t, target) in self.targets.iter().enumerate() {
                 if self.below[body][target.origin] {
                     let v = linear + angular.cross(&(k.xpos[target.origin] - anchor));
@@ -208,12 +232,8 @@ impl<'a> Solver<'a> {
         Ok((r, Some(j)))
     }
 
-    /// Per dof: the body it moves, its world linear and angular axes, and the point the angular
-    /// axis passes through.
-    fn dof_axes(
-        &self,
-        k: &BodyKinematics,
-    ) -> Vec<(usize, Vector3<f64>, Vector3<f64>, Vector3<f64>)> {
+    /// How each dof moves the tree at `k`.
+    fn dof_axes(&self, k: &BodyKinematics) -> Vec<DofAxis> {
         let mut axes = Vec::with_capacity(self.character.nv());
         for joint in self.character.joints() {
             let b = joint.body;
@@ -222,19 +242,33 @@ impl<'a> Solver<'a> {
             match joint.kind {
                 JointType::Free => {
                     for i in 0..3 {
-                        axes.push((b, Vector3::ith(i, 1.0), zero, anchor));
+                        axes.push(DofAxis::new(b, Vector3::ith(i, 1.0), zero, anchor));
                     }
                     for i in 0..3 {
-                        axes.push((b, zero, k.xquat[b] * Vector3::ith(i, 1.0), anchor));
+                        axes.push(DofAxis::new(
+                            b,
+                            zero,
+                            k.xquat[b] * Vector3::ith(i, 1.0),
+                            anchor,
+                        ));
                     }
                 }
                 JointType::Ball => {
                     for i in 0..3 {
-                        axes.push((b, zero, k.xquat[b] * Vector3::ith(i, 1.0), anchor));
+                        axes.push(DofAxis::new(
+                            b,
+                            zero,
+                            k.xquat[b] * Vector3::ith(i, 1.0),
+                            anchor,
+                        ));
                     }
                 }
-                JointType::Hinge => axes.push((b, zero, k.xquat[b] * joint.axis, anchor)),
-                JointType::Slide => axes.push((b, k.xquat[b] * joint.axis, zero, anchor)),
+                JointType::Hinge => {
+                    axes.push(DofAxis::new(b, zero, k.xquat[b] * joint.axis, anchor))
+                }
+                JointType::Slide => {
+                    axes.push(DofAxis::new(b, k.xquat[b] * joint.axis, zero, anchor))
+                }
             }
         }
         axes
@@ -446,9 +480,11 @@ mod tests {
 
     #[test]
     fn clamping_holds_hinges_in_their_range() {
-        assert_eq!(clamp_to(Some([0.0, 3.14]), -0.2), 0.0);
-        assert_eq!(clamp_to(Some([0.0, 3.14]), 3.5), 3.14);
-        assert_eq!(clamp_to(Some([0.0, 3.14]), 1.0), 1.0);
+        // The humanoid's knee range.
+        let knee = Some([0.0, 3.0]);
+        assert_eq!(clamp_to(knee, -0.2), 0.0);
+        assert_eq!(clamp_to(knee, 3.5), 3.0);
+        assert_eq!(clamp_to(knee, 1.0), 1.0);
         assert_eq!(clamp_to(None, -7.0), -7.0);
         let character = Character::find("g1").expect("g1");
         let mut qpos = character.default_qpos().to_vec();
