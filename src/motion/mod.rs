@@ -19,6 +19,9 @@
 //!   the body-plan roles a source's joint map and a character meet at; [`bvh`] reads BVH files
 //!   into one, [`skeleton_maps`] finds which joint plays which role (built-in maps of common
 //!   skeletons, a user's map file).
+//! - [`retarget`]: a source motion turned into a clip of any character (body-plan roles derived
+//!   from the tree, rest-pose alignment, scaling, inverse kinematics, cleanup, a quality report,
+//!   and the writer of the result).
 //! - [`synthetic`]: generated clips for tests.
 //! - [`built_in`]: the clips built into the binary (`assets/motions/`).
 //! - [`find`]: finding clips by name: the motions directory, then the built-in clips.
@@ -43,6 +46,7 @@ pub mod motion_library;
 pub mod npy;
 pub mod npz;
 pub mod reference;
+pub mod retarget;
 pub mod robot_joints;
 pub mod rotation;
 pub mod skeleton_maps;
