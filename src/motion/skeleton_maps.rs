@@ -164,7 +164,7 @@ pub const BUILT_IN_MAPS: [SkeletonMap; 4] = [
 #[derive(Debug, Error)]
 pub enum JointMapError {
     #[error(
-        "no built-in joint map fits these joints (the nearest, {nearest}, finds no {missing}); write a map file of the roles (`[roles]` `pelvis = \"Hips\"` ..., docs/motions.md) and pass it"
+        "no built-in joint map fits these joints (the nearest, {nearest}, finds no {missing}); write a map file of the roles (`[roles]` `pelvis = \"Hips\"` ..., docs/motions.md) and pass it with --map"
     )]
     UnknownSkeleton {
         nearest: &'static str,
