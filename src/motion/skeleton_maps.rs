@@ -136,8 +136,28 @@ const POSER: [(Role, &str); 20] = [
     (Role::Toe(L), "lToe"),
 ];
 
+/// Our own export of the humanoid (`export --format bvh`, the DeepMimic humanoid's body names):
+/// what takes a humanoid clip onto another character.
+const INSTANTMIMIC_HUMANOID: [(Role, &str); 15] = [
+    (Role::Pelvis, "pelvis"),
+    (Role::Chest, "torso"),
+    (Role::Head, "head"),
+    (Role::Shoulder(L), "left_upper_arm"),
+    (Role::Elbow(L), "left_lower_arm"),
+    (Role::Wrist(L), "left_hand"),
+    (Role::Shoulder(R), "right_upper_arm"),
+    (Role::Elbow(R), "right_lower_arm"),
+    (Role::Wrist(R), "right_hand"),
+    (Role::Hip(L), "left_thigh"),
+    (Role::Knee(L), "left_shin"),
+    (Role::Ankle(L), "left_foot"),
+    (Role::Hip(R), "right_thigh"),
+    (Role::Knee(R), "right_shin"),
+    (Role::Ankle(R), "right_foot"),
+];
+
 /// The built-in maps, in the order ties are broken.
-pub const BUILT_IN_MAPS: [SkeletonMap; 4] = [
+pub const BUILT_IN_MAPS: [SkeletonMap; 5] = [
     SkeletonMap {
         name: "cmu",
         description: "CMU mocap, MotionBuilder-friendly BVH conversion",
@@ -157,6 +177,11 @@ pub const BUILT_IN_MAPS: [SkeletonMap; 4] = [
         name: "poser",
         description: "Poser/DAZ",
         joints: &POSER,
+    },
+    SkeletonMap {
+        name: "instantmimic-humanoid",
+        description: "instantmimic's BVH export of the humanoid",
+        joints: &INSTANTMIMIC_HUMANOID,
     },
 ];
 
