@@ -269,6 +269,27 @@ fn the_cmu_walk_imports_onto_the_humanoid_and_the_g1() {
         let report = &imported.retargeted.report;
         println!("{}", imported.conversion_lines().join("\n"));
         println!("{}(imported in {seconds:.1} s)", report.text());
+        // The scaled source skeleton a viewer draws: a pose per output frame. On the humanoid
+        // it stands on the floor with the character; on the G1 it floats (printed, not held:
+        // the G1's feet reach below the scaled source's, the retargeting's open problem).
+        let source = &imported.retargeted.source;
+        assert_eq!(
+            source.positions.len(),
+            imported.retargeted.clip.num_frames()
+        );
+        let lowest = source
+            .positions
+            .iter()
+            .flatten()
+            .map(|p| p.z)
+            .fold(f64::INFINITY, f64::min);
+        println!("{name}: lowest scaled source joint {lowest:.4} m");
+        if name == "humanoid" {
+            assert!(
+                (-0.05..0.1).contains(&lowest),
+                "lowest source joint {lowest} m"
+            );
+        }
         // 120 Hz in, 60 Hz out; the calibration T-pose of frame 0 left out.
         assert!((report.rate_hz - 60.0).abs() < 0.01, "{}", report.rate_hz);
         assert_eq!(report.source_frames, 343);
