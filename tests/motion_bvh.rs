@@ -255,11 +255,11 @@ fn bvh_of(motion: &SourceMotion, up: UpAxis, units: Units) -> String {
             "{keyword} {}\n{{\nOFFSET {:?} {:?} {:?}\nCHANNELS {channels}",
             s.names[j], o.x, o.y, o.z
         );
-        for (k, end) in ends.iter().filter(|(k, _)| *k == j) {
+        for (_, end) in ends.iter().filter(|(k, _)| *k == j) {
             let e = c * end * scale;
             let _ = writeln!(
                 out,
-                "End Site\n{{\nOFFSET {:?} {:?} {:?}\n}}  # of {k}",
+                "End Site\n{{\nOFFSET {:?} {:?} {:?}\n}}",
                 e.x, e.y, e.z
             );
         }
@@ -305,12 +305,7 @@ fn units_and_up_are_detected_on_a_synthetic_skeleton_scaled_and_turned_y_up() {
     ] {
         let what = format!("named {named}, {up} up, {units}");
         let original = synthetic_motion(named);
-        // The End Site comment is not BVH: take it out (it names the joint for a reader).
-        let text: String = bvh_of(&original, up, units)
-            .lines()
-            .map(|l| l.split("  #").next().unwrap_or(l))
-            .collect::<Vec<_>>()
-            .join("\n");
+        let text = bvh_of(&original, up, units);
         let imported = import_bvh(&text, "synthetic", &BvhOptions::default()).expect(&what);
         let c = &imported.conversion;
         assert_eq!((c.units, c.up), (units, up), "{what}: {c:?}");
@@ -352,7 +347,7 @@ fn units_and_up_are_detected_on_a_synthetic_skeleton_scaled_and_turned_y_up() {
 }
 
 #[test]
-fn a_bvh_file_given_as_a_clip_says_it_needs_retargeting() {
+fn a_bvh_file_given_as_a_clip_is_imported_on_the_fly_and_says_so() {
     let dir = tempfile::tempdir().expect("a scratch directory");
     let path = dir.path().join("walk.BVH");
     std::fs::write(
@@ -360,12 +355,35 @@ fn a_bvh_file_given_as_a_clip_says_it_needs_retargeting() {
         bvh_of(&synthetic_motion(true), UpAxis::Y, Units::Centimetres),
     )
     .expect("write");
-    let e = MotionClip::load(&path, &humanoid()).expect_err("not a clip");
-    assert!(matches!(e, MotionError::NeedsRetargeting { .. }));
+    let clip = MotionClip::load(&path, &humanoid()).expect("imported");
+    assert_eq!(clip.name(), path.display().to_string());
+    let note = clip.import_note().expect("the clip says it was imported");
+    assert!(
+        !note.contains('\n')
+            && note.starts_with(&format!(
+                "motion: imported {} onto humanoid (",
+                path.display()
+            ))
+            && note.contains("units cm detected")
+            && note.contains("to tune, run instantmimic motion import"),
+        "{note}"
+    );
+
+    // A skeleton no built-in map knows: one line naming --map and the import command.
+    let unknown = dir.path().join("unknown.bvh");
+    std::fs::write(
+        &unknown,
+        bvh_of(&synthetic_motion(false), UpAxis::Y, Units::Centimetres),
+    )
+    .expect("write");
+    let e = MotionClip::load(&unknown, &humanoid()).expect_err("no map fits");
+    assert!(matches!(e, MotionError::Import { .. }), "{e}");
     let e = e.to_string();
     assert!(
         !e.contains('\n')
-            && e.contains("BVH needs retargeting: instantmimic motion import")
+            && e.contains("no built-in joint map fits")
+            && e.contains("--map")
+            && e.contains("instantmimic motion import")
             && e.contains("--character humanoid"),
         "{e}"
     );

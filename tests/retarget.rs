@@ -1,20 +1,21 @@
-//! Retargeting (issue 36): our own BVH export of every built-in clip round-trips onto the
-//! humanoid; the humanoid's walk goes onto the G1 within its joint limits with its feet on the
+//! Retargeting: our own BVH export of every built-in clip round-trips onto the humanoid
+//! through the import's path (BVH reader, skeleton detection, retargeting); the humanoid's walk goes onto the G1 within its joint limits with its feet on the
 //! ground; hinge projection and limit clamping; loop detection; an unknown skeleton without a
 //! map. Sources are built from a character's forward kinematics, from `export::bvh`'s text, and
 //! synthetically (a CMU-like skeleton with other proportions and extra joints).
 
 use std::f64::consts::PI;
 
-use instantmimic::export::bvh::{bvh_text, read_bvh};
-use instantmimic::export::z_up_to_y_up;
+use instantmimic::export::bvh::bvh_text;
 use instantmimic::motion::built_in::BUILT_IN_CLIPS;
+use instantmimic::motion::bvh::{BvhOptions, UpAxis, import_bvh};
 use instantmimic::motion::character::JointType;
 use instantmimic::motion::retarget::writer::{ClipFileFormat, write_clip};
 use instantmimic::motion::retarget::{
     CharacterRoles, RestPose, RetargetError, RetargetOptions, retarget,
 };
 use instantmimic::motion::rotation::{angle_between, quat_from_wxyz, read_wxyz};
+use instantmimic::motion::skeleton_maps::{DetectedSkeleton, detect_skeleton};
 use instantmimic::motion::source_motion::{Role, RoleMap, Side, SourceMotion, SourceSkeleton};
 use instantmimic::motion::{Character, LoopMode, MotionClip, ReferenceMotion, forward_kinematics};
 use instantmimic::recording::{ClipRecordingSpec, Recording};
@@ -63,34 +64,6 @@ fn source_from_fk(character: &Character, clip: &MotionClip, fps: f64) -> SourceM
         frame_time: 1.0 / fps,
         local_rotations,
         local_translations,
-    }
-}
-
-/// A source from BVH text written by `export::bvh` (Y up, metres), turned to Z up.
-fn source_from_bvh(text: &str, name: &str) -> SourceMotion {
-    let file = read_bvh(text).expect("our own BVH parses");
-    let to_z_up = z_up_to_y_up().inverse();
-    let skeleton = SourceSkeleton {
-        names: file.joints.iter().map(|j| j.name.clone()).collect(),
-        parents: file.joints.iter().map(|j| j.parent).collect(),
-        offsets: file.joints.iter().map(|j| to_z_up * j.offset).collect(),
-    };
-    let n = file.joints.len();
-    let conjugate = |q: UnitQuaternion<f64>| to_z_up * q * to_z_up.inverse();
-    SourceMotion {
-        name: name.to_string(),
-        frame_time: file.frame_time,
-        local_rotations: (0..file.frames.len())
-            .map(|f| (0..n).map(|j| conjugate(file.rotation(j, f))).collect())
-            .collect(),
-        local_translations: (0..file.frames.len())
-            .map(|f| {
-                (0..n)
-                    .map(|j| to_z_up * (file.joints[j].offset + file.translation(j, f)))
-                    .collect()
-            })
-            .collect(),
-        skeleton,
     }
 }
 
@@ -157,7 +130,24 @@ fn every_built_in_clip_round_trips_through_our_bvh_export() {
         )
         .expect("recording");
         let text = bvh_text(&recording, &character, 0).expect("bvh export");
-        let source = source_from_bvh(&text, built_in.name);
+        // The import's own path: the reader with detection, the skeleton recognized as the
+        // character's own, retargeting through the identity map.
+        let bvh = import_bvh(&text, built_in.name, &BvhOptions::default()).expect("reads");
+        assert_eq!(
+            (bvh.conversion.units.metres(), bvh.conversion.up),
+            (1.0, UpAxis::Y),
+            "{}: {}; {}",
+            built_in.name,
+            bvh.conversion.units_line(),
+            bvh.conversion.up_line()
+        );
+        let source = bvh.motion;
+        assert_eq!(
+            detect_skeleton(&source.skeleton.names, Some(&character)).expect("detected"),
+            DetectedSkeleton::CharactersOwn,
+            "{}",
+            built_in.name
+        );
         let imported = retarget(&source, None, &character, &RetargetOptions::default())
             .expect("our own export imports");
         assert_eq!(

@@ -9,6 +9,7 @@ mod gpu;
 mod hpo;
 mod library_eval;
 mod motion;
+mod motion_import;
 mod motion_library;
 mod motion_list;
 mod output;

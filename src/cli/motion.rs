@@ -86,6 +86,9 @@ enum MotionCommand {
         #[arg(long)]
         save_recording: Option<PathBuf>,
     },
+    /// Retarget a mocap file (BVH) onto a character and write it as a clip, with a quality
+    /// report (see docs/motions.md, "Bring your own motion").
+    Import(super::motion_import::ImportArgs),
 }
 
 /// Which clip, for which character.
@@ -173,6 +176,7 @@ pub fn run(args: MotionArgs) -> Result<()> {
             }
             (None, None) => bail!("give a motion, or a library with --library"),
         },
+        MotionCommand::Import(args) => super::motion_import::run(args)?,
         MotionCommand::Fk { source, frame } => {
             let motion = source.load()?;
             let frames = motion.frames().len();

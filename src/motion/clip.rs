@@ -171,6 +171,8 @@ pub struct MotionClip {
     loop_mode: LoopMode,
     cycle_displacement: Vector3<f64>,
     quaternion_norms: QuaternionNorms,
+    /// What an on-the-fly import of a mocap file did, for the loading command to print.
+    import_note: Option<String>,
 }
 
 impl MotionClip {
@@ -333,6 +335,7 @@ impl MotionClip {
             loop_mode,
             cycle_displacement,
             quaternion_norms: norms,
+            import_note: None,
         })
     }
 
@@ -373,6 +376,18 @@ impl MotionClip {
     /// z = 0): how far each cycle of a wrapped clip is shifted from the previous one.
     pub fn cycle_displacement(&self) -> Vector3<f64> {
         self.cycle_displacement
+    }
+
+    /// The line saying how a mocap file was imported on the fly into this clip, if it was.
+    pub fn import_note(&self) -> Option<&str> {
+        self.import_note.as_deref()
+    }
+
+    /// The clip imported on the fly from the file `name`, with the line saying how.
+    pub(crate) fn imported_as(mut self, name: &str, note: String) -> MotionClip {
+        self.name = name.to_string();
+        self.import_note = Some(note);
+        self
     }
 
     /// How far the file's quaternions were from unit length.

@@ -215,11 +215,16 @@ pub enum MotionError {
          (body_pos_w, body_quat_w, joint_pos, fps); the file has: {keys}"
     )]
     NpzFormat { file: String, keys: String },
-    /// A mocap file of another skeleton than the character's, read only through an import.
+    /// A mocap file that the on-the-fly import with the default settings could not import;
+    /// the import command takes the settings (the import's errors name the file).
     #[error(
-        "{file}: BVH needs retargeting: instantmimic motion import {file} --character {character}"
+        "{error} (imported on the fly with the default settings; to set them: instantmimic motion import {file} --character {character})"
     )]
-    NeedsRetargeting { file: String, character: String },
+    Import {
+        file: String,
+        character: String,
+        error: Box<super::import::ImportError>,
+    },
     #[error(
         "{file}: the character {character} cannot take a robot motion: {problem} (robot motion \
          files hold a free root's pose and one angle per joint)"

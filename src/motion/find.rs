@@ -78,8 +78,8 @@ impl ResolvedMotion {
     }
 
     /// What a command prints on stderr about the clip it loaded, one line each: that a user's
-    /// clip replaces a built-in one, and (once per file) that quaternions more than 1% from unit
-    /// length were renormalized.
+    /// clip replaces a built-in one, that a mocap file was imported on the fly, and (once per
+    /// file) that quaternions more than 1% from unit length were renormalized.
     pub fn notices(&self, clip: &MotionClip) -> Vec<String> {
         let mut lines = Vec::new();
         if let Some(built_in) = self.overrides {
@@ -89,6 +89,9 @@ impl ResolvedMotion {
                 self.source.label(),
                 built_in.file_name
             ));
+        }
+        if let Some(note) = clip.import_note() {
+            lines.push(note.to_string());
         }
         if let Some(warning) = clip.quaternion_norms().warning() {
             lines.push(format!("warning: {}: {warning}", clip.name()));

@@ -1,14 +1,15 @@
 //! Motion file formats, told apart by extension: DeepMimic's JSON (`.txt`, `.json`, and any
 //! other extension, as before robot formats were read), and the robot formats, `.npz`
 //! (holosoma's or mjlab's, told apart by their keys) and `.csv` (mjlab's). `docs/motions.md`
-//! describes each. BVH (`.bvh`, a mocap skeleton's motion) is told apart too, but becomes a
-//! character's clip only through retargeting.
+//! describes each. BVH (`.bvh`, a mocap skeleton's motion) is imported onto the character with
+//! the default settings (`super::import`), and the clip says so.
 
 use std::path::Path;
 
 use super::character::Character;
 use super::clip::MotionClip;
 use super::error::MotionError;
+use super::import::{ImportOptions, import_motion_file};
 use super::npz::Npz;
 use super::{holosoma, mjlab};
 
@@ -82,7 +83,7 @@ impl Default for ReadOptions {
 }
 
 /// Reads a robot motion file (`format` is not DeepMimic's) for `character`; a BVH file is
-/// refused with the command that imports it.
+/// imported onto it with the default settings (its clip carries the line saying so).
 pub(crate) fn load_robot_clip(
     format: MotionFormat,
     path: &Path,
@@ -99,10 +100,17 @@ pub(crate) fn load_robot_clip(
             mjlab::parse_csv(&text, &file, options.csv_frame_rate, character)
         }
         MotionFormat::Npz | MotionFormat::DeepMimic => read_npz(&mut Npz::open(path)?, character),
-        MotionFormat::Bvh => Err(MotionError::NeedsRetargeting {
-            file,
-            character: character.name().to_string(),
-        }),
+        MotionFormat::Bvh => {
+            let imported = import_motion_file(path, character, &ImportOptions::default()).map_err(
+                |error| MotionError::Import {
+                    file: file.clone(),
+                    character: character.name().to_string(),
+                    error: Box::new(error),
+                },
+            )?;
+            let note = imported.on_the_fly_line(&file);
+            Ok(imported.retargeted.clip.imported_as(&file, note))
+        }
     }
 }
 

@@ -22,6 +22,8 @@
 //! - [`retarget`]: a source motion turned into a clip of any character (body-plan roles derived
 //!   from the tree, rest-pose alignment, scaling, inverse kinematics, cleanup, a quality report,
 //!   and the writer of the result).
+//! - [`import`]: a mocap file imported onto a character (read, skeleton detected or mapped,
+//!   retargeted): what `motion import` and a `.bvh` given as a clip both run.
 //! - [`synthetic`]: generated clips for tests.
 //! - [`built_in`]: the clips built into the binary (`assets/motions/`).
 //! - [`find`]: finding clips by name: the motions directory, then the built-in clips.
@@ -39,6 +41,7 @@ pub mod error;
 pub mod find;
 pub mod format;
 pub mod holosoma;
+pub mod import;
 pub mod kinematics;
 pub mod library_config;
 pub mod mjlab;

@@ -136,8 +136,28 @@ const POSER: [(Role, &str); 20] = [
     (Role::Toe(L), "lToe"),
 ];
 
+/// Our own export of the humanoid (`export --format bvh`, the DeepMimic humanoid's body names):
+/// what takes a humanoid clip onto another character.
+const INSTANTMIMIC_HUMANOID: [(Role, &str); 15] = [
+    (Role::Pelvis, "pelvis"),
+    (Role::Chest, "torso"),
+    (Role::Head, "head"),
+    (Role::Shoulder(L), "left_upper_arm"),
+    (Role::Elbow(L), "left_lower_arm"),
+    (Role::Wrist(L), "left_hand"),
+    (Role::Shoulder(R), "right_upper_arm"),
+    (Role::Elbow(R), "right_lower_arm"),
+    (Role::Wrist(R), "right_hand"),
+    (Role::Hip(L), "left_thigh"),
+    (Role::Knee(L), "left_shin"),
+    (Role::Ankle(L), "left_foot"),
+    (Role::Hip(R), "right_thigh"),
+    (Role::Knee(R), "right_shin"),
+    (Role::Ankle(R), "right_foot"),
+];
+
 /// The built-in maps, in the order ties are broken.
-pub const BUILT_IN_MAPS: [SkeletonMap; 4] = [
+pub const BUILT_IN_MAPS: [SkeletonMap; 5] = [
     SkeletonMap {
         name: "cmu",
         description: "CMU mocap, MotionBuilder-friendly BVH conversion",
@@ -158,13 +178,18 @@ pub const BUILT_IN_MAPS: [SkeletonMap; 4] = [
         description: "Poser/DAZ",
         joints: &POSER,
     },
+    SkeletonMap {
+        name: "instantmimic-humanoid",
+        description: "instantmimic's BVH export of the humanoid",
+        joints: &INSTANTMIMIC_HUMANOID,
+    },
 ];
 
 /// A joint map that cannot be found or read.
 #[derive(Debug, Error)]
 pub enum JointMapError {
     #[error(
-        "no built-in joint map fits these joints (the nearest, {nearest}, finds no {missing}); write a map file of the roles (`[roles]` `pelvis = \"Hips\"` ..., docs/motions.md) and pass it"
+        "no built-in joint map fits these joints (the nearest, {nearest}, finds no {missing}); write a map file of the roles (`[roles]` `pelvis = \"Hips\"` ..., docs/motions.md) and pass it with --map"
     )]
     UnknownSkeleton {
         nearest: &'static str,

@@ -73,11 +73,23 @@ pub fn import_bvh(text: &str, name: &str, options: &BvhOptions) -> Result<Import
 /// [`import_bvh`] of the file at `path`; the motion is named after the file's stem.
 pub fn import_bvh_file(path: &Path, options: &BvhOptions) -> Result<ImportedBvh, BvhError> {
     let file = read_bvh_file(path)?;
+    let roles = built_in_roles(&file);
+    convert_bvh_file(&file, path, options, roles.as_ref())
+}
+
+/// Converts `file`, read from `path`, with `options`, detecting what is not given with `roles`
+/// (a built-in map's or a user's map file's); the motion is named after the file's stem and
+/// errors name the path.
+pub fn convert_bvh_file(
+    file: &BvhFile,
+    path: &Path,
+    options: &BvhOptions,
+    roles: Option<&RoleMap>,
+) -> Result<ImportedBvh, BvhError> {
     let stem = path
         .file_stem()
         .map_or_else(|| "bvh".to_string(), |s| s.to_string_lossy().into_owned());
-    let roles = built_in_roles(&file);
-    file.to_source_motion(&stem, options, roles.as_ref())
+    file.to_source_motion(&stem, options, roles)
         .map_err(|e| match e {
             BvhError::Convert { problem, .. } => BvhError::Convert {
                 file: path.display().to_string(),

@@ -14,6 +14,10 @@ use super::error::RetargetError;
 /// mocap file would only double the solving and the file.
 pub const MAX_DEFAULT_RATE: f64 = 60.0;
 
+/// The relative error of a frame rate read from a rounded frame time that still counts as the
+/// round rate (7 decimals of a 120 Hz frame time are 4e-5 off).
+const RATE_ROUNDING: f64 = 1e-4;
+
 /// First and last frames closer than this fraction of the character's height (mean distance of
 /// the bodies, each frame's root moved to the same horizontal place) make a loop. Measured on
 /// DeepMimic's clips sampled at 30 Hz: its looping clips 0.4-8.9% (stealthy walk 0.4, walk 2.6,
@@ -32,7 +36,11 @@ pub fn output_rate(source_rate: f64, requested: Option<f64>) -> Result<f64, Reta
         }
         return Ok(rate);
     }
-    let divisor = (source_rate / MAX_DEFAULT_RATE - 1e-9).ceil().max(1.0);
+    // Frame times are written rounded (CMU's 120 Hz is `0.0083333`, 120.0048 Hz): a rate a
+    // hair above a multiple of the cap is that multiple.
+    let divisor = (source_rate / MAX_DEFAULT_RATE * (1.0 - RATE_ROUNDING))
+        .ceil()
+        .max(1.0);
     Ok(source_rate / divisor)
 }
 

@@ -47,6 +47,20 @@ pub struct RetargetOptions {
 pub struct Retargeted {
     pub clip: MotionClip,
     pub report: ImportReport,
+    /// The source skeleton as the character was fitted to it, at the clip's frames.
+    pub source: ScaledSource,
+}
+
+/// The source skeleton's joints scaled and placed as retargeting placed them (world frame, Z
+/// up, metres, on the character's floor), one pose per output frame: what a viewer draws
+/// beside the character.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ScaledSource {
+    pub names: Vec<String>,
+    /// Each joint's parent (an index into `names`), `None` for a root.
+    pub parents: Vec<Option<usize>>,
+    /// Per output frame, each joint's world position.
+    pub positions: Vec<Vec<nalgebra::Vector3<f64>>>,
 }
 
 /// Retargets `source` onto `character`: through the identity map when the source's joints are
@@ -64,9 +78,17 @@ pub fn retarget(
     let rate = cleanup::output_rate(source_rate, options.fps)?;
     let resampled = cleanup::resample(source, rate);
 
+    let mut source_positions: Vec<Vec<nalgebra::Vector3<f64>>> =
+        Vec::with_capacity(resampled.num_frames());
     let goals: Vec<FrameGoal> = (0..resampled.num_frames())
         .map(|f| {
             let poses = resampled.world_poses(f);
+            source_positions.push(
+                poses
+                    .iter()
+                    .map(|p| p.translation.vector * targets.scale)
+                    .collect(),
+            );
             FrameGoal {
                 positions: targets
                     .targets
@@ -124,6 +146,11 @@ pub fn retarget(
     if let Some(z) = root_height {
         for q in &mut frames {
             q[z] += ground_shift;
+        }
+    }
+    for joints in &mut source_positions {
+        for p in joints {
+            p.z += ground_shift;
         }
     }
     let shifted_goals: Vec<FrameGoal> = goals
@@ -193,7 +220,16 @@ pub fn retarget(
         frames.concat(),
         loop_mode,
     )?;
-    Ok(Retargeted { clip, report })
+    let scaled_source = ScaledSource {
+        names: source.skeleton.names.clone(),
+        parents: source.skeleton.parents.clone(),
+        positions: source_positions,
+    };
+    Ok(Retargeted {
+        clip,
+        report,
+        source: scaled_source,
+    })
 }
 
 /// Checks what a reader should already guarantee, so that a hand-built source fails in one line

@@ -107,11 +107,9 @@ pub fn clip_bytes(
     }
 }
 
-/// Writes `clip` of `character` to `path` in the character's format (see the module's doc);
-/// returns the format written. A path whose extension the format is not read back from is
-/// refused before anything is written.
-pub fn write_clip(
-    clip: &MotionClip,
+/// The format `character`'s clips are written in, if `path`'s extension is one it is read back
+/// from; else the one-line error that says which extension to give. Checked before any work.
+pub fn clip_format_for_path(
     character: &Character,
     path: &Path,
 ) -> Result<ClipFileFormat, RetargetError> {
@@ -137,7 +135,22 @@ pub fn write_clip(
             format.name()
         )));
     }
+    Ok(format)
+}
+
+/// Writes `clip` of `character` to `path` in the character's format (see the module's doc);
+/// returns the format written. A path whose extension the format is not read back from is
+/// refused before anything is written ([`clip_format_for_path`]).
+pub fn write_clip(
+    clip: &MotionClip,
+    character: &Character,
+    path: &Path,
+) -> Result<ClipFileFormat, RetargetError> {
+    let format = clip_format_for_path(character, path)?;
     let bytes = clip_bytes(clip, character, format)?;
-    std::fs::write(path, bytes).map_err(|e| write_error(format!("cannot write it: {e}")))?;
+    std::fs::write(path, bytes).map_err(|e| RetargetError::Write {
+        path: path.display().to_string(),
+        problem: format!("cannot write it: {e}"),
+    })?;
     Ok(format)
 }
