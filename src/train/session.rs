@@ -152,7 +152,7 @@ impl RunSession {
             metrics,
             Vec::new(),
             None,
-            Progress::new(progress, 0, config.run.max_iterations),
+            Progress::new(progress, &config.run),
         ))
     }
 
@@ -196,7 +196,7 @@ impl RunSession {
         let metrics = metrics
             .ok_or_else(|| TrainError::Setup("the resumed metrics log is not open".to_string()))?;
         let start = checkpoint.as_ref().map_or(0, |(_, c)| c.meta.iteration);
-        let progress = Progress::new(progress, start, config.run.max_iterations);
+        let progress = Progress::new(progress, &config.run);
         let session = RunSession::assemble(
             config,
             dir,
