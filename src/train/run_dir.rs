@@ -8,6 +8,8 @@
 //! clips.png        a motion library's per-clip success over time, with curve.png
 //! checkpoints/     iter_<iteration>.safetensors, the last run.keep_checkpoints of them
 //! summary.json     the final report (written when the run stops)
+//! events.out.tfevents.*  TensorBoard's copy of metrics.jsonl (src/train/tensorboard.rs; a
+//!                  resumed run adds a file)
 //! evaluation.json  every env's episode of the last evaluation (written when the run stops)
 //! replay.html      the final policy's replay page (`run.replay`; written by the command line
 //!                  after the run, src/cli/train.rs, since `train` does not import the viewer)
@@ -27,6 +29,7 @@ use super::error::TrainError;
 use super::evaluation::EnvEpisodeRow;
 use super::metrics::{IterationRecord, MetricsLog};
 use super::summary::RunSummary;
+use crate::files::event_file::EVENT_FILE_MARKER;
 use crate::files::write_bytes_atomically;
 
 /// Writes `value` as pretty JSON, atomically.
@@ -64,6 +67,13 @@ const RUN_ENTRIES: [&str; 10] = [
     REPLAY_FILE,
     REPLAY_DIR,
 ];
+
+/// Whether a directory entry's name is one a run writes: [`RUN_ENTRIES`] and TensorBoard's
+/// event files (src/train/tensorboard.rs).
+fn is_run_entry(name: &str) -> bool {
+    RUN_ENTRIES.contains(&name)
+        || (name.starts_with("events.out.") && name.contains(EVENT_FILE_MARKER))
+}
 
 /// The directory of one run.
 #[derive(Clone, Debug)]
@@ -160,11 +170,7 @@ impl RunDir {
         for entry in entries {
             let entry = entry.map_err(|e| TrainError::io(root, e))?;
             any = true;
-            if entry
-                .file_name()
-                .to_str()
-                .is_some_and(|n| RUN_ENTRIES.contains(&n))
-            {
+            if entry.file_name().to_str().is_some_and(is_run_entry) {
                 ours.push(entry.path());
             }
         }
