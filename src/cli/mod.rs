@@ -11,6 +11,7 @@ mod library_eval;
 mod motion;
 mod motion_library;
 mod motion_list;
+mod notices;
 mod output;
 mod plan;
 mod replay;

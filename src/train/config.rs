@@ -308,6 +308,50 @@ impl TrainConfig {
         Ok(config)
     }
 
+    /// The sections that the configuration file `text` leaves out and its run uses (the goal
+    /// task has no tracking reward; a latent controller no PPO): each takes the built-in
+    /// baseline's values, the paper's untuned ones, several times slower to succeed than the
+    /// committed configurations' (configs/train/).
+    pub fn sections_left_out(&self, text: &str) -> Vec<&'static str> {
+        let Ok(table) = text.parse::<toml::Table>() else {
+            return Vec::new();
+        };
+        let used = [
+            ("env", true),
+            ("reward", self.goal.is_none()),
+            ("obs", true),
+            ("policy", true),
+            ("ppo", self.latent.is_none()),
+            ("run", true),
+        ];
+        used.into_iter()
+            .filter(|&(section, used)| used && !table.contains_key(section))
+            .map(|(section, _)| section)
+            .collect()
+    }
+
+    /// A one-line note for a configuration file that leaves out sections its run uses
+    /// ([`TrainConfig::sections_left_out`]): `None` when it has them all.
+    pub fn baseline_note(&self, path: &Path) -> Option<String> {
+        let text = std::fs::read_to_string(path).ok()?;
+        let left_out = self.sections_left_out(&text);
+        if left_out.is_empty() {
+            return None;
+        }
+        let sections: Vec<String> = left_out.iter().map(|s| format!("[{s}]")).collect();
+        let plural = if sections.len() == 1 { "" } else { "s" };
+        let example = if left_out.contains(&"ppo") {
+            format!(" (e.g. ppo.horizon = {})", PpoConfig::default().horizon)
+        } else {
+            String::new()
+        };
+        Some(format!(
+            "note: {} has no {} section{plural}: the built-in baseline's untuned values{example} are used, not the tuned ones of configs/train/default.toml; copy the section{plural} from there to tune, or see every value with --dry-run",
+            path.display(),
+            sections.join(", "),
+        ))
+    }
+
     /// What the run trains on, for labels: the motion, or the library's description.
     pub fn motion_label(&self) -> String {
         match &self.motion_library {
