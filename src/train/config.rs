@@ -51,6 +51,28 @@ pub enum ConfigError {
     },
 }
 
+/// A TOML error as one line: "line 24, column 1 (`num_envz = 12`): unknown field `num_envz`,
+/// expected one of ...", the line quoted (it names the key). toml's own text is a multi-line
+/// snippet with a caret, which one line would squash.
+pub(crate) fn toml_error_line(e: &toml::de::Error, text: &str) -> String {
+    let message = e.message().trim().replace('\n', " ");
+    let Some(before) = e.span().and_then(|span| text.get(..span.start)) else {
+        return message;
+    };
+    let line = before.matches('\n').count() + 1;
+    let start_of_line = before.rfind('\n').map_or(0, |i| i + 1);
+    let column = before[start_of_line..].chars().count() + 1;
+    let quoted: String = text[start_of_line..]
+        .lines()
+        .next()
+        .unwrap_or("")
+        .trim()
+        .chars()
+        .take(60)
+        .collect();
+    format!("line {line}, column {column} (`{quoted}`): {message}")
+}
+
 /// The whole training configuration.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -364,7 +386,7 @@ impl TrainConfig {
     pub fn from_toml(text: &str, name: &str) -> Result<TrainConfig, ConfigError> {
         let config: TrainConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
             path: name.to_string(),
-            message: e.to_string().trim().replace('\n', " "),
+            message: toml_error_line(&e, text),
         })?;
         config.validate(name)?;
         Ok(config)
