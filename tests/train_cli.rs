@@ -826,5 +826,9 @@ fn the_gpu_commands_take_device_and_the_writers_out() {
     assert!(!err.contains("unexpected argument"), "{err}");
     if without_a_gpu() {
         assert!(err.contains("NVIDIA"), "{err}");
+        // `bench rollout` takes the backflip by default, as its siblings do.
+        let out = run(&["bench", "rollout"], None, ws.path());
+        let err = one_line_error(&out);
+        assert!(err.contains("needs an NVIDIA GPU"), "{err}");
     }
 }

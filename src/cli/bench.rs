@@ -278,11 +278,13 @@ struct GemmArgs {
 
 #[derive(Args, Debug)]
 struct RolloutArgs {
-    /// A DeepMimic motion file, or a clip name (e.g. `backflip`; see `motion list`).
-    #[arg(long)]
+    /// A clip name (see `motion list`) or a DeepMimic motion file; backflip, as `bench full`
+    /// and `bench train-gpus`.
+    #[arg(long, default_value = "backflip")]
     motion: String,
     /// Training configuration (TOML); its `motion` key is replaced by --motion. Default: the
-    /// built-in baseline (src/{env,ppo,train}/config.rs).
+    /// paper's untuned baseline (every key's default, horizon 32), the shape the rollout
+    /// figures are measured at; `bench full` measures the committed configuration `train` runs.
     #[arg(long)]
     config: Option<PathBuf>,
     #[command(flatten)]
