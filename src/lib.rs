@@ -16,7 +16,8 @@
 //! - [`hpo`]: hyperparameter search by an agent (plan → propose → experiment).
 //! - [`assets`]: PTX and plans embedded in the binary at build time.
 //! - [`plot`]: PNG charts with an embedded font.
-//! - [`files`]: atomic file replacement and tagged safetensors headers, below every other layer.
+//! - [`files`]: atomic file replacement, tagged safetensors headers and TensorBoard event files,
+//!   below every other layer.
 //! - [`recording`]: body poses per control step (reference and simulated) for the page and the exporters.
 //! - [`viewer`]: the replay page, one self-contained HTML file (three.js inlined).
 //! - [`export`]: recordings to glTF, BVH and DeepMimic files; a checkpoint's policy to ONNX.

@@ -12,8 +12,8 @@ fn main() -> ExitCode {
             // A clean stop on SIGINT/SIGTERM: the command said so already.
             Some(stopped) => ExitCode::from(stopped.exit_code()),
             None => {
-                // `{:#}` prints the whole context chain on one line: "loading plan x: ...".
-                eprintln!("error: {err:#}");
+                // The whole context chain on one line: "loading plan x: ...".
+                eprintln!("error: {}", instantmimic::cli::error_line(&err));
                 ExitCode::FAILURE
             }
         },

@@ -328,8 +328,10 @@ fn a_clip_exports_without_a_recording() {
         &character,
     )
     .expect("walk");
-    // Frame 10 of the export is the walk at 10/30 s.
-    let kin = forward_kinematics(&character, &walk.sample_qpos(10.0 / 30.0)).expect("fk");
+    // Frame 10 of the export is the walk at 10 frame times; a looping clip's frame time is the
+    // one nearest 1/30 s that ends a frame on its cycle's end (a 38th of the 1.267 s walk).
+    let frame_dt = walk.duration() / (walk.duration() * 30.0).round();
+    let kin = forward_kinematics(&character, &walk.sample_qpos(10.0 * frame_dt)).expect("fk");
     let off = (motion.frames()[10].body_pos[5] - kin.xpos[6]).norm();
     assert!(off < 1e-5, "{off}");
     for format in ["glb", "bvh"] {
@@ -409,4 +411,112 @@ fn bad_input_fails_with_one_line() {
     );
     assert!(err.contains("no episode 7"), "{err}");
     assert!(!out_file.exists());
+}
+
+#[test]
+fn a_looping_clip_exports_as_a_looping_deepmimic_file_at_any_rate() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let character = humanoid();
+    let walk = MotionClip::parse(
+        instantmimic::motion::built_in::find_built_in("walk")
+            .expect("walk")
+            .text,
+        "walk",
+        &character,
+    )
+    .expect("walk");
+    for fps in ["30", "24"] {
+        let path = dir.path().join(format!("walk{fps}.txt"));
+        let said = ok(
+            &export("--motion", "walk", "deepmimic", &path, &["--fps", fps]),
+            "export walk",
+        );
+        assert!(said.contains("loop wrap"), "{said}");
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(text.contains("\"Loop\": \"wrap\""), "{}", &text[..80]);
+        // The export is one cycle: it ends on the clip's end, so it loops without a jump.
+        let back = MotionClip::load(&path, &character).expect("reads back");
+        assert_eq!(back.loop_mode(), walk.loop_mode());
+        assert!(
+            (back.duration() - walk.duration()).abs() < 1e-9,
+            "{fps}: {} against {}",
+            back.duration(),
+            walk.duration()
+        );
+        let inspect = ok(
+            &run(&["motion", "inspect", path_str(&path)]),
+            "motion inspect",
+        );
+        assert!(inspect.contains("loop                 wrap"), "{inspect}");
+    }
+    // A recorded episode does not loop.
+    let (recording_path, _) = saved_replay(dir.path());
+    let episode = dir.path().join("episode.txt");
+    ok(
+        &export(
+            "--recording",
+            path_str(&recording_path),
+            "deepmimic",
+            &episode,
+            &[],
+        ),
+        "export an episode",
+    );
+    assert!(
+        std::fs::read_to_string(&episode)
+            .unwrap()
+            .contains("\"Loop\": \"none\"")
+    );
+}
+
+#[test]
+fn a_frame_rate_past_the_cap_is_refused_and_writes_nothing() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let out = dir.path().join("w.glb");
+    let err = one_line_error(
+        &export("--motion", "walk", "glb", &out, &["--fps", "100000"]),
+        "--fps 100000",
+    );
+    assert!(
+        err.contains("--fps 100000: at most 1000 frames per second"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    let err = one_line_error(
+        &export("--motion", "walk", "glb", &out, &["--fps", "-3"]),
+        "--fps -3",
+    );
+    assert!(
+        err.contains("--fps -3: give a positive frame rate"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_recording_given_as_a_checkpoint_is_called_a_recording() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let (recording_path, _) = saved_replay(dir.path());
+    let onnx = dir.path().join("policy.onnx");
+    let err = one_line_error(
+        &run(&[
+            "export",
+            "--checkpoint",
+            path_str(&recording_path),
+            "--format",
+            "onnx",
+            "--out",
+            path_str(&onnx),
+        ]),
+        "a recording as a checkpoint",
+    );
+    assert!(
+        err.contains("not an instantmimic checkpoint but a recording (give it with --recording)")
+            && !err.contains("corrupt"),
+        "{err}"
+    );
+    let err = one_line_error(
+        &run(&["eval", "--checkpoint", path_str(&recording_path)]),
+        "eval of a recording",
+    );
+    assert!(err.contains("but a recording"), "{err}");
 }

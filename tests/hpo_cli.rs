@@ -136,6 +136,13 @@ fn command_line_overrides_shape_a_new_search_only() {
 
     let output = hpo(&["--resume", run_arg, "--seeds", "1"]);
     assert!(!output.status.success());
+    // Nothing to run: what to give, without a file name that is not one.
+    let output = hpo(&[]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(
+        stderr.trim_end(),
+        "error: hyperparameter search: give --config for a new search or --resume for an existing one"
+    );
     let output = hpo(&[
         "--config",
         config,

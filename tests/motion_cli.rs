@@ -78,7 +78,7 @@ fn fk_rejects_a_frame_out_of_range() {
     );
     let err = failed(&out, "motion");
     assert!(
-        err.contains("--frame 31 is out of range") && err.contains("0..=30"),
+        err.contains("--frame 31 is out of range") && err.contains("frames 0 to 30"),
         "{err}"
     );
 }
@@ -108,10 +108,26 @@ fn a_motions_directory_that_does_not_exist_is_an_error() {
         let out = run(args, Some(&missing));
         let err = failed(&out, &format!("{args:?}"));
         assert!(
-            err.contains("missing: it is not a directory") && err.contains(MOTIONS_ENV),
+            err.contains(&format!("missing ({MOTIONS_ENV}) does not exist")),
             "{args:?}: {err}"
         );
+        let mut with_flag = args.to_vec();
+        let missing_arg = missing.to_str().unwrap();
+        with_flag.extend(["--motions-dir", missing_arg]);
+        let err = failed(&run(&with_flag, None), &format!("{with_flag:?}"));
+        assert!(
+            err.contains("missing (--motions-dir) does not exist"),
+            "{with_flag:?}: {err}"
+        );
     }
+    // A file where the directory should be is called what it is.
+    let file = dir.path().join("afile");
+    std::fs::write(&file, "x").unwrap();
+    let err = failed(&run(&["motion", "inspect", "walk"], Some(&file)), "a file");
+    assert!(
+        err.contains("afile: it is not a directory") && err.contains(MOTIONS_ENV),
+        "{err}"
+    );
 }
 
 #[test]
@@ -337,4 +353,108 @@ fn view_writes_a_page_and_refuses_a_missing_directory() {
     let err = failed(&view(&missing, &[]), "motion view into a missing directory");
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(err.contains("does not exist"), "{err}");
+}
+
+#[test]
+fn a_page_of_more_frames_than_fit_is_refused_before_any_work() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let page = dir.path().join("v.html");
+    let page_arg = page.to_str().unwrap();
+    for (extra, expected) in [
+        (
+            &["--duration", "1e9"][..],
+            "--duration 1000000000 s at 30 frames per second is 30000000000 frames; at most 108000",
+        ),
+        (
+            &["--fps", "100000"][..],
+            "--fps 100000: at most 1000 frames per second",
+        ),
+        (
+            &["--duration", "4000", "--fps", "30"][..],
+            "is 120000 frames; at most 108000",
+        ),
+    ] {
+        let mut args = vec!["motion", "view", "walk", "--out", page_arg];
+        args.extend(extra);
+        let started = std::time::Instant::now();
+        let out = run(&args, None);
+        let err = failed(&out, &format!("{args:?}"));
+        assert!(
+            started.elapsed().as_secs() < 30,
+            "{args:?} took {:?}",
+            started.elapsed()
+        );
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(err.contains(expected), "{args:?}: {err}");
+        assert!(!page.exists());
+    }
+    // A minute of walking is well within the cap.
+    let out = run(
+        &[
+            "motion",
+            "view",
+            "walk",
+            "--out",
+            page_arg,
+            "--duration",
+            "60",
+        ],
+        None,
+    );
+    assert!(succeeded(&out, "a minute").contains("1801 frames at 30 Hz"));
+}
+
+#[test]
+fn an_out_under_a_file_says_the_file_is_in_the_way() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let file = dir.path().join("afile");
+    std::fs::write(&file, "x").unwrap();
+    let page = file.join("x.html");
+    let err = failed(
+        &run(
+            &["motion", "view", "walk", "--out", page.to_str().unwrap()],
+            None,
+        ),
+        "under a file",
+    );
+    assert!(
+        err.contains("afile is a file, not a directory") && !err.contains("does not exist"),
+        "{err}"
+    );
+    let page = dir.path().join("nodir/x.html");
+    let err = failed(
+        &run(
+            &["motion", "view", "walk", "--out", page.to_str().unwrap()],
+            None,
+        ),
+        "missing directory",
+    );
+    assert!(err.contains("does not exist (create it first)"), "{err}");
+}
+
+#[test]
+fn a_built_in_clip_loads_without_warnings_and_a_users_copy_warns_once() {
+    // backflip's quaternions are up to a few percent from unit length, as DeepMimic released it.
+    let out = run(&["motion", "inspect", "backflip"], None);
+    succeeded(&out, "inspect backflip");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("warning"), "{err}");
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let copy = dir.path().join("my_backflip.txt");
+    std::fs::write(
+        &copy,
+        instantmimic::motion::built_in::find_built_in("backflip")
+            .expect("backflip")
+            .text,
+    )
+    .unwrap();
+    let out = run(&["motion", "inspect", copy.to_str().unwrap()], None);
+    succeeded(&out, "inspect the copy");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        err.matches("quaternions are more than 1% from unit length")
+            .count(),
+        1,
+        "{err}"
+    );
 }

@@ -130,6 +130,11 @@ fn without_dry_run_and_without_a_gpu_train_says_it_needs_one() {
     let out = run(&["train", "--motion", "synth"], Some(&motions), ws.path());
     let err = one_line_error(&out);
     assert!(err.contains("needs an NVIDIA GPU"), "{err}");
+    // It says what works without one.
+    assert!(
+        err.contains("`train --dry-run` checks everything else"),
+        "{err}"
+    );
     // Nothing was written for a run that did not start.
     assert!(!ws.path().join("runs").exists());
 }
@@ -149,6 +154,11 @@ fn bad_inputs_give_one_clear_line() {
         (
             vec!["train", "--motion", "synth", "--envs", "64", "--dry-run"],
             "no `step` plan for 64 worlds",
+        ),
+        (
+            // The error names the flag that takes a captured plan.
+            vec!["train", "--motion", "synth", "--envs", "64", "--dry-run"],
+            "and pass its directory with --assets",
         ),
         (
             vec!["train", "--motion", "synth", "--envs", "0", "--dry-run"],
@@ -199,12 +209,17 @@ fn bad_inputs_give_one_clear_line() {
             "with --set: `ppo.clip` = 3: must be in (0, 1)",
         ),
         (
+            // A directory of other files is not offered --resume (it is no run).
             vec!["train", "--motion", "synth", "--out", full_arg, "--dry-run"],
-            "is not empty: continue that run with --resume",
+            "is not empty and holds no run (it has no config.toml): choose another --out",
         ),
         (
             vec!["train", "--resume", full_arg, "--dry-run"],
             "not a run directory: it has no config.toml",
+        ),
+        (
+            vec!["train", "--resume", "no-such-run", "--dry-run"],
+            "no-such-run: not a run directory: it does not exist",
         ),
         (
             vec!["eval", "--checkpoint", bad_config_arg],
@@ -596,5 +611,224 @@ fn replay_checks_its_input_then_needs_the_gpu() {
         ]));
         assert!(err.contains("needs an NVIDIA GPU"), "{err}");
         assert!(!page.exists());
+    }
+}
+
+/// A directory the test process cannot create entries in: a read-only one, or (as root, who
+/// writes anywhere) a directory of sysfs, where nobody can.
+fn unwritable_dir(ws: &std::path::Path) -> std::path::PathBuf {
+    use std::os::unix::fs::PermissionsExt;
+    let read_only = ws.join("read-only");
+    std::fs::create_dir(&read_only).unwrap();
+    std::fs::set_permissions(&read_only, std::fs::Permissions::from_mode(0o555)).unwrap();
+    if std::fs::create_dir(read_only.join("probe")).is_err() {
+        return read_only;
+    }
+    std::path::PathBuf::from("/sys/fs")
+}
+
+#[test]
+fn a_dry_run_refuses_an_out_it_cannot_create_or_write() {
+    let ws = workspace();
+    let motions = ws.path().join("motions");
+    let unwritable = unwritable_dir(ws.path());
+    let inside = unwritable.join("instantmimic-run");
+    let err = one_line_error(&run(
+        &[
+            "train",
+            "--motion",
+            "synth",
+            "--out",
+            inside.to_str().unwrap(),
+            "--dry-run",
+        ],
+        Some(&motions),
+        ws.path(),
+    ));
+    assert!(
+        err.contains("cannot write the run directory")
+            && err.contains("cannot be written")
+            && err.contains("choose another --out"),
+        "{err}"
+    );
+    assert!(!inside.exists());
+    // A parent that is a file is named as a file, not as missing.
+    std::fs::write(ws.path().join("afile"), "x").unwrap();
+    let err = one_line_error(&run(
+        &[
+            "train",
+            "--motion",
+            "synth",
+            "--out",
+            "afile/run",
+            "--dry-run",
+        ],
+        Some(&motions),
+        ws.path(),
+    ));
+    assert!(err.contains("afile is a file, not a directory"), "{err}");
+    // A new directory under a writable one passes, and the check leaves nothing behind.
+    let out = run(
+        &[
+            "train",
+            "--motion",
+            "synth",
+            "--out",
+            "new/run",
+            "--dry-run",
+        ],
+        Some(&motions),
+        ws.path(),
+    );
+    assert!(succeeded(&out).contains("run directory new/run (new)"));
+    assert!(!ws.path().join("new").exists());
+    let leftovers: Vec<_> = std::fs::read_dir(ws.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains("write-check"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+#[test]
+fn a_config_without_a_section_says_it_takes_the_untuned_baseline() {
+    let ws = workspace();
+    let motions = ws.path().join("motions");
+    let config = ws.path().join("no_ppo.toml");
+    let full = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/train/default.toml"),
+    )
+    .unwrap();
+    // The committed default without its [ppo] section.
+    let start = full.find("\n[ppo]").unwrap();
+    let end = start + 1 + full[start + 1..].find("\n[").unwrap();
+    std::fs::write(&config, format!("{}{}", &full[..start], &full[end..])).unwrap();
+    let out = run(
+        &[
+            "train",
+            "--config",
+            config.to_str().unwrap(),
+            "--motion",
+            "synth",
+            "--dry-run",
+        ],
+        Some(&motions),
+        ws.path(),
+    );
+    let text = succeeded(&out);
+    assert_eq!(resolved_config(&text).ppo.horizon, 32);
+    let err = String::from_utf8_lossy(&out.stderr);
+    let notes: Vec<&str> = err.lines().filter(|l| l.starts_with("note:")).collect();
+    assert_eq!(notes.len(), 1, "{err}");
+    assert!(
+        notes[0].contains("no_ppo.toml has no [ppo] section")
+            && notes[0].contains("untuned values (e.g. ppo.horizon = 32)")
+            && notes[0].contains("configs/train/default.toml"),
+        "{err}"
+    );
+    // A complete file has no note.
+    let out = run(
+        &[
+            "train",
+            "--config",
+            "configs/train/walk.toml",
+            "--motion",
+            "synth",
+            "--dry-run",
+        ],
+        Some(&motions),
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")),
+    );
+    succeeded(&out);
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("note:"));
+}
+
+#[test]
+fn a_negative_count_is_refused_as_a_value_not_taken_for_a_flag() {
+    let ws = workspace();
+    let motions = ws.path().join("motions");
+    for (flag, value, expected) in [
+        (
+            "--envs",
+            "-5",
+            "-5 is negative: give a whole number (0 or more)",
+        ),
+        ("--horizon", "-1", "-1 is negative"),
+        ("--max-iterations", "many", "many is not a whole number"),
+        ("--envs", "99999999999", "99999999999 is too large"),
+    ] {
+        let out = run(
+            &["train", "--motion", "synth", flag, value, "--dry-run"],
+            Some(&motions),
+            ws.path(),
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(
+            err.starts_with(&format!("error: invalid value '{value}' for '{flag} "))
+                && err.contains(expected),
+            "{err}"
+        );
+        assert!(!err.contains("unexpected argument"), "{err}");
+    }
+}
+
+#[test]
+fn a_cause_is_printed_once() {
+    let ws = workspace();
+    let garbage = ws.path().join("garbage.txt");
+    std::fs::write(&garbage, [0xff, 0xfe, 0x80, 0x00, 0xc3]).unwrap();
+    let err = one_line_error(&run(
+        &["train", "--motion", "garbage.txt", "--dry-run"],
+        None,
+        ws.path(),
+    ));
+    assert_eq!(err.matches("valid UTF-8").count(), 1, "{err}");
+    let err = one_line_error(&run(&["motion", "inspect", "garbage.txt"], None, ws.path()));
+    assert_eq!(err.matches("valid UTF-8").count(), 1, "{err}");
+}
+
+#[test]
+fn the_gpu_commands_take_device_and_the_writers_out() {
+    for (command, flag) in [
+        (&["train", "--help"][..], "--device"),
+        (&["eval", "--help"][..], "--device"),
+        (&["replay", "--help"][..], "--device"),
+        (&["plan", "pack", "--help"][..], "--out <OUTPUT>"),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let help = succeeded(&run(command, None, dir.path()));
+        assert!(help.contains(flag), "{command:?}: {help}");
+    }
+    // The root help lists training first, the developer tools last.
+    let dir = tempfile::tempdir().unwrap();
+    let help = succeeded(&run(&["--help"], None, dir.path()));
+    let position = |name: &str| help.find(&format!("\n  {name} ")).unwrap();
+    assert!(position("train") < position("eval") && position("export") < position("bench"));
+    assert!(help.contains("view it in a page"), "{help}");
+    // eval --device reaches the GPU (here: its absence), past the checks.
+    let ws = workspace();
+    let motions = ws.path().join("motions");
+    make_run(&ws.path().join("run"), &motions, 5, Vec::new());
+    let ckpt = ws.path().join("run/checkpoints/iter_00000005.safetensors");
+    let out = run(
+        &[
+            "eval",
+            "--checkpoint",
+            ckpt.to_str().unwrap(),
+            "--device",
+            "1",
+        ],
+        Some(&motions),
+        ws.path(),
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("unexpected argument"), "{err}");
+    if without_a_gpu() {
+        assert!(err.contains("NVIDIA"), "{err}");
+        // `bench rollout` takes the backflip by default, as its siblings do.
+        let out = run(&["bench", "rollout"], None, ws.path());
+        let err = one_line_error(&out);
+        assert!(err.contains("needs an NVIDIA GPU"), "{err}");
     }
 }

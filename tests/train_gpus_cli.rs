@@ -71,6 +71,8 @@ fn gpus_reach_run_gpus_and_bad_lists_give_one_line() {
         ] {
             assert!(err.contains(needle), "{needle}: {err}");
         }
+        // No one machine's path.
+        assert!(!err.contains("/opt/"), "{err}");
         // Not even without --dry-run does a run directory appear.
         let out = run(
             &[

@@ -1,6 +1,9 @@
 //! The run directory, the metrics log and the learning curve, driven through `RunSession` as
 //! the GPU loop will drive it (with made-up statistics in place of the GPU): a run is killed,
-//! resumed, and its log continues with no gap and no duplicate.
+//! resumed, and its log continues with no gap and no duplicate; TensorBoard's event files beside
+//! it hold the same values (read back by our reader and by TensorBoard's own).
+
+mod skip_support;
 
 use std::io::Write;
 use std::path::Path;
@@ -565,4 +568,248 @@ fn an_iteration_that_filled_the_pipeline_counts_both_rollouts() {
         }
     }
     assert_eq!(frames, [2 * rollout, 3 * rollout, 5 * rollout, 6 * rollout]);
+}
+
+/// Every scalar of the run directory's event files, as (file index, tag, step, value), read with
+/// our reader (which checks both checksums of every record), and the files' restart markers as
+/// (file index, step).
+type Scalars = (Vec<(usize, String, i64, f32)>, Vec<(usize, i64)>);
+
+fn event_scalars(root: &Path) -> Scalars {
+    use instantmimic::files::event_file::{FILE_VERSION, event_files, read_event_file};
+    let mut scalars = Vec::new();
+    let mut starts = Vec::new();
+    for (i, path) in event_files(root).unwrap().iter().enumerate() {
+        let events = read_event_file(path).unwrap();
+        assert_eq!(events[0].file_version.as_deref(), Some(FILE_VERSION));
+        for event in &events[1..] {
+            if event.session_log.is_some() {
+                starts.push((i, event.step));
+            }
+            for value in event.summary.iter().flat_map(|s| &s.value) {
+                let v = value.simple_value.expect("a scalar");
+                scalars.push((i, value.tag.clone(), event.step, v));
+            }
+        }
+    }
+    (scalars, starts)
+}
+
+/// The steps of `tag` in file `file`.
+fn steps_of(scalars: &[(usize, String, i64, f32)], file: usize, tag: &str) -> Vec<i64> {
+    scalars
+        .iter()
+        .filter(|(f, t, ..)| *f == file && t == tag)
+        .map(|(_, _, step, _)| *step)
+        .collect()
+}
+
+#[test]
+fn tensorboard_event_files_hold_every_metric_by_iteration_across_a_resume() {
+    use instantmimic::train::DivergenceEvent;
+    use instantmimic::train::library_evaluation::{ClipScore, LibraryEvaluation};
+    let clip = |name: &str, success_rate: f64| ClipScore {
+        name: name.to_owned(),
+        duration_s: 1.0,
+        loop_mode: "wrap".to_owned(),
+        window_s: None,
+        episode_steps: 30,
+        episodes: 16,
+        succeeded: (success_rate * 16.0) as u32,
+        success_rate,
+        global_mpjpe_m: 0.1,
+        pose_error_m: 0.05,
+        reset_share: None,
+        frame_share: None,
+        failures_per_step: None,
+    };
+    // A library run with the goal task's records on every iteration and a divergence at 7.
+    let run = |session: &mut RunSession, until: u64| {
+        while session.iteration() < until {
+            session.start_iteration();
+            std::thread::sleep(std::time::Duration::from_millis(1));
+            let mut step = session.finish_iteration(stats(session.iteration() + 1));
+            let iteration = step.iteration;
+            step.set_goal(GoalRecord {
+                rollout: GoalRates {
+                    episodes: 4,
+                    goals_per_episode: iteration as f64,
+                    fall_rate: 0.25,
+                },
+                evaluation: step.evaluate.then_some(GoalRates {
+                    episodes: 32,
+                    goals_per_episode: 2.0 * iteration as f64,
+                    fall_rate: 0.5,
+                }),
+            });
+            if iteration == 7 {
+                step.diverged(DivergenceEvent {
+                    cause: "value loss".to_owned(),
+                    restored_iteration: 5,
+                    learning_rate: 2.5e-4,
+                    restores: 1,
+                });
+            }
+            let eval = step.evaluate.then(|| EvaluationSummary {
+                library: Some(LibraryEvaluation {
+                    clips: vec![clip("walk", 1.0), clip("my clips/flip", 0.5)],
+                    clips_at_threshold: 1,
+                    clip_fraction: 0.5,
+                    episodes_pass: false,
+                    all_clips_pass: false,
+                }),
+                ..evaluation(iteration, 1000)
+            });
+            let next = session.record(step, eval).unwrap();
+            if next.checkpoint_due {
+                let mut ckpt = session.new_checkpoint().unwrap();
+                ckpt.insert(tensor_names::ACTOR, &[1], vec![iteration as f32])
+                    .unwrap();
+                session.save_checkpoint(&ckpt).unwrap();
+            }
+        }
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("runs/library-seed0");
+    let mut session =
+        RunSession::start_new(&root, &config(15), false, ProgressMode::Quiet).unwrap();
+    run(&mut session, 12);
+    drop(session); // killed after 12; the checkpoint is at 10
+    let (mut session, _, _) = RunSession::resume(&root, |_| {}, ProgressMode::Quiet).unwrap();
+    run(&mut session, 15);
+    session.finish(StopReason::IterationBudget).unwrap();
+
+    let (scalars, starts) = event_scalars(&root);
+    // The first file has iterations 1-12; the resumed one marks its restart at 11 and has 11-15.
+    assert_eq!(starts, [(1, 11)]);
+    assert_eq!(
+        steps_of(&scalars, 0, "train/return"),
+        (1..=12).collect::<Vec<_>>()
+    );
+    assert_eq!(
+        steps_of(&scalars, 1, "train/return"),
+        (11..=15).collect::<Vec<_>>()
+    );
+    // The evaluations: every 5 iterations and the last.
+    assert_eq!(steps_of(&scalars, 0, "eval/success_rate"), [5, 10]);
+    assert_eq!(steps_of(&scalars, 1, "eval/success_rate"), [15]);
+    let value = |tag: &str, step: i64| -> f32 {
+        scalars
+            .iter()
+            .rev()
+            .find(|(_, t, s, _)| t == tag && *s == step)
+            .map(|(.., v)| *v)
+            .unwrap_or_else(|| panic!("no {tag} at {step}"))
+    };
+    // The values are metrics.jsonl's (as f32).
+    let records = MetricsLog::read(&root.join("metrics.jsonl"))
+        .unwrap()
+        .records;
+    for r in &records {
+        let step = r.iteration as i64;
+        assert_eq!(value("train/return", step), r.mean_return as f32);
+        assert_eq!(value("train/frames", step), r.frames as f32);
+        assert_eq!(
+            value("ppo/learning_rate", step),
+            r.update.learning_rate as f32
+        );
+        assert_eq!(
+            value("episodes/failed/lost", step),
+            r.termination.lost as f32
+        );
+        assert_eq!(
+            value("goal/rollout/goals_per_episode", step),
+            r.iteration as f32
+        );
+    }
+    assert_eq!(value("episodes/failed/lost", 4), 0.3);
+    assert_eq!(value("loss/value", 4), 0.25);
+    assert_eq!(value("eval/pose_error_m", 10), 0.1);
+    assert_eq!(value("eval/completed_rate", 10), 2.0 / 32.0);
+    assert_eq!(value("library/clip_fraction", 15), 0.5);
+    assert_eq!(value("clips/my_clips_flip/success_rate", 15), 0.5);
+    assert_eq!(value("clips/walk/success_rate", 5), 1.0);
+    assert_eq!(value("goal/eval/goals_per_episode", 15), 30.0);
+    assert_eq!(value("divergence/restores", 7), 1.0);
+    // The KL of iteration 3 is NaN in the log (null) and left out of the events.
+    assert!(records[2].update.kl.is_nan());
+    assert!(!steps_of(&scalars, 0, "ppo/kl").contains(&3));
+    assert!(steps_of(&scalars, 0, "ppo/kl").contains(&4));
+    tensorboard_reads_back(&root, &records);
+}
+
+/// TensorBoard's own reader (its `EventAccumulator`, in the build-step Python) reads the run
+/// directory: every iteration once (the resumed file's restart replaces the first file's
+/// iterations 11 and 12), with the values of `metrics.jsonl`.
+fn tensorboard_reads_back(root: &Path, records: &[IterationRecord]) {
+    let Some(python) = std::env::var_os("INSTANTMIMIC_BUILD_PYTHON") else {
+        skip_support::skip("INSTANTMIMIC_BUILD_PYTHON is not set (tests/run.sh sets it)");
+        return;
+    };
+    const READ: &str = r#"
+import json, sys
+try:
+    from tensorboard.backend.event_processing import event_accumulator
+except ImportError as e:
+    print("no tensorboard: " + str(e))
+    sys.exit(3)
+acc = event_accumulator.EventAccumulator(sys.argv[1], size_guidance={event_accumulator.SCALARS: 0})
+acc.Reload()
+tags = acc.Tags()["scalars"]
+print(json.dumps({t: [[e.step, e.value] for e in acc.Scalars(t)] for t in tags}))
+"#;
+    let out = std::process::Command::new(&python)
+        .args(["-c", READ])
+        .arg(root)
+        .output()
+        .expect("the build-step Python runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    if out.status.code() == Some(3) {
+        skip_support::skip(&format!(
+            "{} (kernels_py/requirements.txt has it; tests/run.sh installs it)",
+            stdout.trim()
+        ));
+        return;
+    }
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let read: std::collections::BTreeMap<String, Vec<(i64, f64)>> =
+        serde_json::from_str(stdout.trim()).expect("the reader's JSON");
+    let returns = &read["train/return"];
+    assert_eq!(
+        returns.iter().map(|p| p.0).collect::<Vec<_>>(),
+        (1..=15).collect::<Vec<_>>()
+    );
+    for (r, (_, value)) in records.iter().zip(returns) {
+        assert_eq!(*value, f64::from(r.mean_return as f32));
+    }
+    assert_eq!(
+        read["eval/success_rate"]
+            .iter()
+            .map(|p| p.0)
+            .collect::<Vec<_>>(),
+        [5, 10, 15]
+    );
+    for tag in [
+        "loss/policy",
+        "loss/value",
+        "ppo/kl",
+        "ppo/learning_rate",
+        "train/frames_per_s",
+        "train/episode_length",
+        "episodes/failed/fell",
+        "eval/pose_error_m",
+        "clips/walk/success_rate",
+        "goal/rollout/goals_per_episode",
+        "goal/eval/goals_per_episode",
+    ] {
+        assert!(
+            read.contains_key(tag),
+            "TensorBoard has no {tag}: {:?}",
+            read.keys()
+        );
+    }
 }

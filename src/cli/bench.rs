@@ -14,7 +14,7 @@ use crate::bench::{
 use crate::cuda::Gpu;
 use crate::motion::ReferenceMotion;
 use crate::motion::character::DEFAULT_CHARACTER;
-use crate::motion::find::{motions_dir_from_env, resolve_motion};
+use crate::motion::find::resolve_motion;
 use crate::plan::{PlanStore, ReplayOrder};
 use crate::train::library::single_clip_only;
 use crate::train::{
@@ -135,13 +135,9 @@ pub(super) fn benchmark_inputs(
     assets: Option<&Path>,
 ) -> Result<(PlanStore, ReferenceMotion)> {
     let store = ChosenCharacter::of_config(config)?.plan_store(assets);
-    let motions_dir = motions_dir
-        .map(Path::to_path_buf)
-        .or_else(motions_dir_from_env);
+    let motions_dir = super::output::motions_dir(motions_dir)?;
     let (checks, motion) = preflight(config, motions_dir.as_deref(), &store)?;
-    for line in &checks.motion_notices {
-        eprintln!("{line}");
-    }
+    super::notices::print_notices(&checks.motion_notices);
     Ok((store, motion))
 }
 
@@ -282,11 +278,13 @@ struct GemmArgs {
 
 #[derive(Args, Debug)]
 struct RolloutArgs {
-    /// A DeepMimic motion file, or a clip name (e.g. `backflip`; see `motion list`).
-    #[arg(long)]
+    /// A clip name (see `motion list`) or a DeepMimic motion file; backflip, as `bench full`
+    /// and `bench train-gpus`.
+    #[arg(long, default_value = "backflip")]
     motion: String,
     /// Training configuration (TOML); its `motion` key is replaced by --motion. Default: the
-    /// built-in baseline (src/{env,ppo,train}/config.rs).
+    /// paper's untuned baseline (every key's default, horizon 32), the shape the rollout
+    /// figures are measured at; `bench full` measures the committed configuration `train` runs.
     #[arg(long)]
     config: Option<PathBuf>,
     #[command(flatten)]
@@ -584,12 +582,10 @@ fn rollout(args: RolloutArgs) -> Result<()> {
     let store = chosen.plan_store(args.run.assets.as_deref());
     let character = chosen.into_character();
     check_plan_model(&store, &character)?;
-    let dir = args.run.motions_dir.clone().or_else(motions_dir_from_env);
+    let dir = super::output::motions_dir(args.run.motions_dir.as_deref())?;
     let resolved = resolve_motion(&config.motion, dir.as_deref())?;
     let motion = resolved.load(&character)?;
-    for line in resolved.notices(motion.clip()) {
-        eprintln!("{line}");
-    }
+    super::notices::print_notices(&super::notices::clip_notices(&resolved, motion.clip()));
     let gpu = Gpu::open(args.run.device)?;
     let result = bench_rollout(
         &gpu,

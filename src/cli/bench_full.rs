@@ -13,7 +13,6 @@ use super::train::motion_or_library_config;
 use crate::bench::{FullBench, LoopCase, bench_full};
 use crate::cuda::Gpu;
 use crate::env::Stage;
-use crate::motion::find::motions_dir_from_env;
 use crate::train::{ChosenCharacter, preflight_training};
 
 #[derive(Args, Debug)]
@@ -75,10 +74,11 @@ pub(super) fn run(args: FullArgs) -> Result<()> {
     config.ppo.concurrent_networks = false;
     config.validate(&label)?;
     let store = ChosenCharacter::of_config(&config)?.plan_store(args.run.assets.as_deref());
-    let motions_dir = args.run.motions_dir.clone().or_else(motions_dir_from_env);
+    let motions_dir = super::output::motions_dir(args.run.motions_dir.as_deref())?;
     let (checks, motion) = preflight_training(&config, motions_dir.as_deref(), &store)?;
-    for line in &checks.motion_notices {
-        eprintln!("{line}");
+    super::notices::print_notices(&checks.motion_notices);
+    if let Some(note) = args.config.as_ref().and_then(|p| config.baseline_note(p)) {
+        eprintln!("{note}");
     }
     let gpu = Gpu::open(args.run.device)?;
     let result = bench_full(

@@ -9,7 +9,6 @@ use anyhow::{Result, bail};
 use clap::Args;
 
 use super::library_eval::LibraryEvalJob;
-use crate::motion::find::motions_dir_from_env;
 use crate::train::library_policy::LibraryPolicyKind;
 use crate::train::{
     Checkpoint, checkpoint_character, evaluate_on_gpu, evaluation_steps, format_evaluation_report,
@@ -52,6 +51,9 @@ pub struct EvalArgs {
     /// Write the per-clip table of a library checkpoint's evaluation here (TSV, as clips.tsv).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// CUDA device ordinal.
+    #[arg(long, default_value_t = 0)]
+    device: usize,
 }
 
 /// What the checkpoint says about itself (printed before the evaluation).
@@ -80,7 +82,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let mut checkpoint = Checkpoint::load(&args.checkpoint)?;
     let chosen = checkpoint_character(&mut checkpoint, args.character.as_deref())?;
     let config = checkpoint.meta.config(checkpoint.source())?;
-    let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
+    let motions_dir = super::output::motions_dir(args.motions_dir.as_deref())?;
     let store = chosen.plan_store(args.assets.as_deref());
     if config.goal.is_some() {
         if args.library.is_some() || args.out.is_some() {
@@ -98,6 +100,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
             store: &store,
             json: args.json,
             header: checkpoint_report(&checkpoint),
+            device: args.device,
         });
     }
     if let Some(decoder) = &args.decoder {
@@ -116,6 +119,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
             motions_dir: motions_dir.as_deref(),
             store: &store,
             json: args.json,
+            device: args.device,
         });
     }
     for (flag, given) in [
@@ -131,9 +135,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         }
     }
     let (checks, motion) = preflight(&config, motions_dir.as_deref(), &store)?;
-    for line in &checks.motion_notices {
-        eprintln!("{line}");
-    }
+    super::notices::print_notices(&checks.motion_notices);
     checks.policy.check(&checkpoint)?;
     if !args.json {
         print!("{}", checkpoint_report(&checkpoint));
@@ -150,7 +152,14 @@ pub fn run(args: EvalArgs) -> Result<()> {
             config.run.success_rate
         );
     }
-    let summary = evaluate_on_gpu(&config, &checkpoint, &motion, &store, args.episodes)?;
+    let summary = evaluate_on_gpu(
+        args.device,
+        &config,
+        &checkpoint,
+        &motion,
+        &store,
+        args.episodes,
+    )?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {

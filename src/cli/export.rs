@@ -14,13 +14,13 @@ use crate::export::glb::glb_bytes;
 use crate::export::onnx::export_policy;
 use crate::export::onnx::latent::export_latent_controller;
 use crate::files::write_bytes_atomically;
-use crate::motion::Character;
 use crate::motion::character::DEFAULT_CHARACTER;
-use crate::motion::find::{motions_dir_from_env, resolve_motion};
+use crate::motion::find::resolve_motion;
+use crate::motion::{Character, LoopMode};
 use crate::recording::{ClipRecordingSpec, Recording};
 use crate::train::{Checkpoint, ChosenCharacter, check_plans, checkpoint_character};
 
-use super::output::check_output_path;
+use super::output::{check_clip_frames, check_frame_rate, check_output_path, motions_dir};
 
 #[derive(Args, Debug)]
 pub struct ExportArgs {
@@ -44,8 +44,9 @@ pub struct ExportArgs {
     /// The episode of the recording to write (bvh, deepmimic; glb holds every episode).
     #[arg(long, default_value_t = 0)]
     episode: usize,
-    /// Frames per second when sampling --motion.
-    #[arg(long, default_value_t = 30.0)]
+    /// Frames per second when sampling --motion (at most 1000; a looping clip takes the nearest
+    /// rate that ends a frame on its cycle's end).
+    #[arg(long, default_value_t = 30.0, allow_hyphen_values = true)]
     fps: f64,
     /// Directory of your own DeepMimic motion files (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
@@ -61,31 +62,42 @@ pub struct ExportArgs {
     character: Option<String>,
 }
 
-/// The recording named by `--recording` or built from `--motion`.
-fn source_recording(args: &ExportArgs, character: &Character) -> Result<Recording> {
+/// The recording named by `--recording` or built from `--motion`, and the loop mode of what it
+/// holds: a recorded episode does not loop; a clip keeps its own. A looping clip is sampled at
+/// the rate nearest --fps that ends a frame on the cycle's end, so that its export loops
+/// without a jump.
+fn source_recording(args: &ExportArgs, character: &Character) -> Result<(Recording, LoopMode)> {
     match (&args.recording, &args.motion) {
-        (Some(path), None) => Ok(Recording::load(path, character)?),
+        (Some(path), None) => Ok((Recording::load(path, character)?, LoopMode::Clamp)),
         (None, Some(motion)) => {
-            if !(args.fps.is_finite() && args.fps > 0.0) {
-                bail!("--fps {}: give a positive frame rate", args.fps);
-            }
-            let dir = args.motions_dir.clone().or_else(motions_dir_from_env);
+            check_frame_rate(args.fps)?;
+            let dir = motions_dir(args.motions_dir.as_deref())?;
             let resolved = resolve_motion(motion, dir.as_deref())?;
             let reference = resolved.load(character)?;
-            for line in resolved.notices(reference.clip()) {
-                eprintln!("{line}");
-            }
+            super::notices::print_notices(&super::notices::clip_notices(
+                &resolved,
+                reference.clip(),
+            ));
+            let clip = reference.clip();
+            let duration = clip.duration();
+            check_clip_frames(duration, args.fps, "the clip's duration")?;
+            let loop_mode = clip.loop_mode();
+            let frame_dt = match loop_mode {
+                LoopMode::Wrap => duration / (duration * args.fps).round().max(1.0),
+                LoopMode::Clamp => 1.0 / args.fps,
+            };
             let label = resolved.source.label();
-            Ok(Recording::from_motion(
+            let recording = Recording::from_motion(
                 &reference,
                 &ClipRecordingSpec {
                     motion,
                     motion_source: &label,
                     producer: "export",
-                    frame_dt: 1.0 / args.fps,
+                    frame_dt,
                     duration_s: None,
                 },
-            )?)
+            )?;
+            Ok((recording, loop_mode))
         }
         (Some(_), Some(_)) => bail!("give --recording or --motion, not both"),
         (None, None) => bail!(
@@ -201,7 +213,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
         }
         let spec = args.character.as_deref().unwrap_or(DEFAULT_CHARACTER);
         let character = ChosenCharacter::resolve(spec)?.into_character();
-        let recording = source_recording(&args, &character)?;
+        let (recording, loop_mode) = source_recording(&args, &character)?;
         let frames = recording.episode_rows(args.episode)?.len();
         match format {
             Format::Glb => (
@@ -217,8 +229,12 @@ pub fn run(args: ExportArgs) -> Result<()> {
                 format!("episode {}, {frames} frames", args.episode),
             ),
             Format::DeepMimic | Format::Onnx => (
-                deepmimic_text(&recording, &character, args.episode)?.into_bytes(),
-                format!("episode {}, {frames} frames", args.episode),
+                deepmimic_text(&recording, &character, args.episode, loop_mode)?.into_bytes(),
+                format!(
+                    "episode {}, {frames} frames, loop {}",
+                    args.episode,
+                    loop_mode.deepmimic_name()
+                ),
             ),
         }
     };

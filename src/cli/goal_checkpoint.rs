@@ -27,18 +27,18 @@ pub(super) struct GoalEvalJob<'a> {
     pub json: bool,
     /// What `eval` prints of the checkpoint first.
     pub header: String,
+    /// The CUDA device (`eval --device`).
+    pub device: usize,
 }
 
-/// `eval` of a goal checkpoint: its checks, then `rounds` goal evaluations on GPU 0.
+/// `eval` of a goal checkpoint: its checks, then `rounds` goal evaluations on `job.device`.
 pub(super) fn eval_goal(job: &GoalEvalJob<'_>) -> Result<()> {
     let checked = check_goal_checkpoint(job.checkpoint, job.decoder, job.motions_dir, job.store)?;
-    for line in &checked.checks.motion_notices {
-        eprintln!("{line}");
-    }
+    super::notices::print_notices(&checked.checks.motion_notices);
     if !job.json {
         print!("{}{}", job.header, checked.describe(job.rounds));
     }
-    let gpu = Gpu::open(0)?;
+    let gpu = Gpu::open(job.device)?;
     let report = evaluate_goal_on_gpu(&gpu, &checked, job.checkpoint, job.store, job.rounds)?;
     if job.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -64,9 +64,7 @@ pub(super) fn write_goal_replay(job: &ReplayJob<'_>, checkpoint: &Checkpoint) ->
     }
     let checked = check_goal_checkpoint(checkpoint, job.decoder, job.motions_dir, job.store)?;
     if job.motion_notices {
-        for line in &checked.checks.motion_notices {
-            eprintln!("{line}");
-        }
+        super::notices::print_notices(&checked.checks.motion_notices);
     }
     let gpu = Gpu::open(job.device)?;
     let label = job.checkpoint.display().to_string();

@@ -30,6 +30,8 @@ pub(super) struct LibraryEvalJob<'a> {
     pub motions_dir: Option<&'a Path>,
     pub store: &'a PlanStore,
     pub json: bool,
+    /// The CUDA device (`eval --device`).
+    pub device: usize,
 }
 
 /// `eval --json` of a library checkpoint.
@@ -83,14 +85,12 @@ pub(super) fn eval_library(job: &LibraryEvalJob<'_>) -> Result<()> {
         super::output::check_output_path(path)?;
     }
     let prepared = prepare_library_policy(job.checkpoint, job.library, job.motions_dir, job.store)?;
-    for line in &prepared.preflight.motion_notices {
-        eprintln!("{line}");
-    }
+    super::notices::print_notices(&prepared.preflight.motion_notices);
     if !job.json {
         print!("{}", super::eval::checkpoint_report(job.checkpoint));
         print!("{}", library_lines(&prepared));
     }
-    let gpu = Gpu::open(0)?;
+    let gpu = Gpu::open(job.device)?;
     let evaluator = LibraryPolicyEvaluator::new(&gpu, job.store, &prepared, job.checkpoint)?;
     let episodes = evaluator.evaluate()?;
     let summary = prepared
@@ -155,9 +155,7 @@ pub(super) fn replay_library(job: &LibraryReplayJob<'_>) -> Result<String> {
         super::output::check_output_path(path)?;
     }
     let prepared = prepare_library_policy(job.checkpoint, job.library, job.motions_dir, job.store)?;
-    for line in &prepared.preflight.motion_notices {
-        eprintln!("{line}");
-    }
+    super::notices::print_notices(&prepared.preflight.motion_notices);
     let clip = match job.clip {
         Some(name) => prepared.clip_index(name)?,
         None => 0,
@@ -245,9 +243,7 @@ fn replay_every_clip(job: &LibraryReplayJob<'_>) -> Result<String> {
     let dir = job.page;
     super::output::check_output_dir(dir, "--all-clips")?;
     let prepared = prepare_library_policy(job.checkpoint, job.library, job.motions_dir, job.store)?;
-    for line in &prepared.preflight.motion_notices {
-        eprintln!("{line}");
-    }
+    super::notices::print_notices(&prepared.preflight.motion_notices);
     let clips: Vec<usize> = (0..prepared.plan.clips.len()).collect();
     let episodes = if job.fit_episodes {
         // Env i plays clip i mod C: the last clip has the fewest starts.

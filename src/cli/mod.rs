@@ -12,6 +12,7 @@ mod motion;
 mod motion_import;
 mod motion_library;
 mod motion_list;
+mod notices;
 mod output;
 mod plan;
 mod replay;
@@ -35,17 +36,8 @@ struct Cli {
 }
 
 #[derive(Subcommand, Debug)]
+// In the order a user meets them: train and look at the result first, the developer tools last.
 enum Command {
-    /// Throughput benchmarks on the GPU.
-    Bench(bench::BenchArgs),
-    /// Inspect or pack physics plans (.wrp / .wrp.zst).
-    Plan(plan::PlanArgs),
-    /// Reference motions: list the clips, inspect a clip and its kinematics.
-    Motion(motion::MotionArgs),
-    /// Show the GPU, its driver and the PTX ISA it accepts.
-    Gpu(gpu::GpuArgs),
-    /// Hyperparameter search by an agent: plan, propose, experiment (see docs/hpo.md).
-    Hpo(hpo::HpoArgs),
     /// Train a motion-tracking policy (PPO on the GPU) into a run directory (see docs/train.md).
     Train(train::TrainArgs),
     /// Evaluate a checkpoint by the paper's protocol.
@@ -55,6 +47,34 @@ enum Command {
     Replay(replay::ReplayArgs),
     /// Export a recording or a clip (glb, bvh, deepmimic) or a checkpoint's policy (onnx).
     Export(export::ExportArgs),
+    /// Reference motions: list the clips, inspect a clip and its kinematics, view it in a page.
+    Motion(motion::MotionArgs),
+    /// Hyperparameter search by an agent: plan, propose, experiment (see docs/hpo.md).
+    Hpo(hpo::HpoArgs),
+    /// Throughput benchmarks on the GPU.
+    Bench(bench::BenchArgs),
+    /// Show the GPU, its driver and the PTX ISA it accepts.
+    Gpu(gpu::GpuArgs),
+    /// Inspect or pack physics plans (.wrp / .wrp.zst).
+    Plan(plan::PlanArgs),
+}
+
+/// An error as the one line `instantmimic` prints: the messages of its chain joined by ": ",
+/// leaving out a cause whose text is already in the line (an error that names its cause in its
+/// own message and also carries it as its source would otherwise print it twice).
+pub fn error_line(err: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in err.chain() {
+        let text = cause.to_string();
+        if line.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line
 }
 
 /// Parses the command line and runs the command.

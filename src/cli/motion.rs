@@ -7,7 +7,7 @@ use anyhow::{Result, bail};
 use clap::{Args, Subcommand};
 
 use crate::motion::character::DEFAULT_CHARACTER;
-use crate::motion::find::{MOTIONS_ENV, ResolvedMotion, motions_dir_from_env, resolve_motion};
+use crate::motion::find::{MOTIONS_ENV, ResolvedMotion, resolve_motion};
 use crate::motion::summary::JointRange;
 use crate::motion::{Character, ClipSummary, ReferenceMotion};
 use crate::recording::{ClipRecordingSpec, Recording};
@@ -75,11 +75,12 @@ enum MotionCommand {
         /// The HTML file to write (its directory must exist).
         #[arg(long)]
         out: PathBuf,
-        /// Frames per second of the page (the control rate of the committed configs: 30).
+        /// Frames per second of the page (the control rate of the committed configs: 30; at most
+        /// 1000).
         #[arg(long, default_value_t = 30.0)]
         fps: f64,
         /// Seconds of the clip to show from its start (default: its duration; a looping clip
-        /// goes on into its next cycles).
+        /// goes on into its next cycles). At most an hour's frames at 30 per second (108000).
         #[arg(long)]
         duration: Option<f64>,
         /// Also write the recording the page shows (safetensors; `export --recording` reads it).
@@ -115,13 +116,11 @@ impl ClipArgs {
     /// The clip with where it came from.
     fn load_resolved(&self) -> Result<(ResolvedMotion, ReferenceMotion)> {
         let character = load_character(self.character.as_deref())?;
-        let dir = self.motions_dir.clone().or_else(motions_dir_from_env);
+        let dir = super::output::motions_dir(self.motions_dir.as_deref())?;
         let resolved = resolve_motion(&self.motion, dir.as_deref())?;
         // The error names the file (and frame and column): no context to add.
         let motion = resolved.load(&character)?;
-        for line in resolved.notices(motion.clip()) {
-            eprintln!("{line}");
-        }
+        super::notices::print_notices(&super::notices::clip_notices(&resolved, motion.clip()));
         Ok((resolved, motion))
     }
 }
@@ -140,10 +139,12 @@ pub fn run(args: MotionArgs) -> Result<()> {
             motions_dir,
             character,
         } => {
-            let dir = match motions_dir {
-                Some(dir) => Some((dir, "--motions-dir")),
-                None => motions_dir_from_env().map(|dir| (dir, MOTIONS_ENV)),
+            let from = if motions_dir.is_some() {
+                "--motions-dir"
+            } else {
+                MOTIONS_ENV
             };
+            let dir = super::output::motions_dir(motions_dir.as_deref())?.map(|dir| (dir, from));
             let dir = dir.as_ref().map(|(dir, from)| (dir.as_path(), *from));
             let character = load_character(character.as_deref())?;
             print!("{}", super::motion_list::list_report(dir, &character)?);
@@ -156,7 +157,7 @@ pub fn run(args: MotionArgs) -> Result<()> {
             character,
         } => match (motion, library) {
             (_, Some(library)) => {
-                let dir = motions_dir.or_else(motions_dir_from_env);
+                let dir = super::output::motions_dir(motions_dir.as_deref())?;
                 let character = load_character(character.as_deref())?;
                 let report = super::motion_library::inspect_library(
                     &library,
@@ -182,7 +183,7 @@ pub fn run(args: MotionArgs) -> Result<()> {
             let frames = motion.frames().len();
             let Some(state) = motion.frames().get(frame) else {
                 bail!(
-                    "--frame {frame} is out of range: the clip has frames 0..={}",
+                    "--frame {frame} is out of range: the clip has frames 0 to {}",
                     frames.saturating_sub(1)
                 );
             };
@@ -199,8 +200,9 @@ pub fn run(args: MotionArgs) -> Result<()> {
             if let Some(path) = &save_recording {
                 super::output::check_output_path(path)?;
             }
-            if !(fps.is_finite() && fps > 0.0) {
-                bail!("--fps {fps}: give a positive frame rate");
+            super::output::check_frame_rate(fps)?;
+            if let Some(seconds) = duration {
+                super::output::check_clip_frames(seconds, fps, "--duration")?;
             }
             let (resolved, motion) = source.load_resolved()?;
             let label = resolved.source.label();

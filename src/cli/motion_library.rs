@@ -25,9 +25,7 @@ pub fn inspect_library(
     // The errors name the library's file, the clip and the key: no context to add.
     let (origin, entries) = library_entries_at(path, motions_dir)?;
     let (library, notices) = load_library(&origin, &entries, character, 1.0 / control_rate)?;
-    for line in notices {
-        eprintln!("{line}");
-    }
+    super::notices::print_notices(&notices);
     Ok(library_report(&library, control_rate))
 }
 

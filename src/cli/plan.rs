@@ -29,8 +29,8 @@ enum PlanCommand {
     Pack {
         /// The raw plan captured by `wp.capture_save`.
         raw: PathBuf,
-        /// Where to write the packed plan.
-        #[arg(short, long)]
+        /// Where to write the packed plan (`--output` is kept as an alias).
+        #[arg(short = 'o', long = "out", alias = "output")]
         output: PathBuf,
         /// The plan's role, e.g. "step" or "kinematics".
         #[arg(long)]

@@ -10,7 +10,6 @@ use clap::{Args, ValueEnum};
 
 use crate::cuda::Gpu;
 use crate::motion::Character;
-use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
 use crate::recording::{Outcome, Recording};
 use crate::replay::{DEFAULT_EPISODES, Replay, ReplayInput, chosen_envs, record_replay};
@@ -153,9 +152,7 @@ pub(super) fn write_replay(job: &ReplayJob<'_>) -> Result<String> {
     config.env.num_envs = config.run.eval_envs;
     let (checks, motion) = preflight(&config, job.motions_dir, job.store)?;
     if job.motion_notices {
-        for line in &checks.motion_notices {
-            eprintln!("{line}");
-        }
+        super::notices::print_notices(&checks.motion_notices);
     }
     checks.policy.check(&checkpoint).context(
         "the checkpoint does not hold the policy its stored configuration describes (replay it with the instantmimic build that trained it)",
@@ -260,7 +257,7 @@ fn episodes_report(replay: &Replay, envs: &[usize], steps: u32, threshold: f64) 
 
 /// Runs `replay`.
 pub fn run(args: ReplayArgs) -> Result<()> {
-    let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
+    let motions_dir = super::output::motions_dir(args.motions_dir.as_deref())?;
     let mut checkpoint = Checkpoint::load(&args.checkpoint)?;
     let chosen = checkpoint_character(&mut checkpoint, args.character.as_deref())?;
     let store = chosen.plan_store(args.assets.as_deref());

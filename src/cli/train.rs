@@ -18,7 +18,6 @@ use super::replay::{ReplayJob, write_replay};
 use super::stopped::Stopped;
 use crate::cuda::nccl_version;
 use crate::motion::LibraryConfig;
-use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
 use crate::replay::DEFAULT_EPISODES;
 use crate::train::goal_latent::load_goal_decoder;
@@ -35,8 +34,11 @@ use crate::train::{
 enum ProgressArg {
     /// A bar on a terminal, one line per evaluation otherwise.
     Auto,
+    /// A bar toward the run's budget, with frames/s, return and the last success rate.
     Bar,
+    /// One line per evaluation, ending in the budget spent and the time left.
     Lines,
+    /// Nothing but the final report.
     Quiet,
 }
 
@@ -58,7 +60,7 @@ pub struct TrainArgs {
     #[arg(long, conflicts_with = "motion")]
     library: Option<PathBuf>,
     /// Random seed, overriding `seed`.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = whole_number::<u64>)]
     seed: Option<u64>,
     /// Run directory (default: runs/<motion>-seed<seed>).
     #[arg(long)]
@@ -73,20 +75,21 @@ pub struct TrainArgs {
     /// Check everything that needs no GPU and print the resolved configuration.
     #[arg(long)]
     dry_run: bool,
-    /// Number of training envs, overriding `env.num_envs` (plans must exist for it).
-    #[arg(long)]
+    /// Number of training envs, overriding `env.num_envs` (plans exist for 4096 and 32; others
+    /// need a plan captured for them, passed with --assets).
+    #[arg(long, allow_hyphen_values = true, value_parser = whole_number::<u32>)]
     envs: Option<u32>,
     /// Control steps per env per iteration, overriding `ppo.horizon`.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = whole_number::<u32>)]
     horizon: Option<u32>,
     /// Iteration budget, overriding `run.max_iterations`.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = whole_number::<u64>)]
     max_iterations: Option<u64>,
     /// Active-time budget in seconds, overriding `run.time_budget_s`.
     #[arg(long, allow_hyphen_values = true)]
     time_budget: Option<f64>,
     /// Iterations between evaluations, overriding `run.eval_interval`.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = whole_number::<u32>)]
     eval_interval: Option<u32>,
     /// Write no `replay.html` (a library: no `replay/` pages) at the end of the run (overriding
     /// `run.replay`).
@@ -271,6 +274,19 @@ fn resolve_new(args: &TrainArgs) -> Result<(TrainConfig, String)> {
     Ok((config, label))
 }
 
+/// A count flag's value: a whole number of 0 or more. A negative one is taken as the flag's
+/// value (`allow_hyphen_values`) so that it is refused in these words, not as an unknown flag.
+fn whole_number<T: std::str::FromStr>(text: &str) -> Result<T, String> {
+    text.trim().parse::<T>().map_err(|_| {
+        let what = match text.trim().parse::<i128>() {
+            Ok(n) if n < 0 => "negative",
+            Ok(_) => "too large",
+            Err(_) => "not a whole number",
+        };
+        format!("{text} is {what}: give a whole number (0 or more)")
+    })
+}
+
 /// `--set KEY=VALUE` (also `bench full`'s).
 pub(super) fn parse_override(text: &str) -> Result<(String, String), String> {
     match text.split_once('=') {
@@ -285,7 +301,7 @@ pub(super) fn parse_override(text: &str) -> Result<(String, String), String> {
 
 /// Runs `train`.
 pub fn run(args: TrainArgs) -> Result<()> {
-    let motions_dir = args.motions_dir.clone().or_else(motions_dir_from_env);
+    let motions_dir = super::output::motions_dir(args.motions_dir.as_deref())?;
     let progress = match args.progress {
         ProgressArg::Auto => ProgressMode::for_stdout(),
         ProgressArg::Bar => ProgressMode::Bar,
@@ -350,9 +366,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     // The plans follow the character (--assets replaces them).
     let store = ChosenCharacter::of_config(&config)?.plan_store(args.assets.as_deref());
     let (mut checks, motion) = preflight_training(&config, motions_dir.as_deref(), &store)?;
-    for line in &checks.motion_notices {
-        eprintln!("{line}");
-    }
+    super::notices::print_notices(&checks.motion_notices);
     // A latent goal run's decoder must fit the run; its head acts in the latent space.
     let decoder = load_goal_decoder(&config, motion.tracked().character())?;
     if let Some(d) = &decoder {
@@ -418,6 +432,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
     } else {
         None
     };
+    // A --config file without a section the run uses: said once everything checks out.
+    if let Some(note) = args.config.as_ref().and_then(|p| config.baseline_note(p)) {
+        eprintln!("{note}");
+    }
     if args.dry_run {
         println!("configuration {label}");
         println!("run directory {directory_line}");

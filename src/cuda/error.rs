@@ -8,7 +8,7 @@ use cudarc::driver::sys::CUresult;
 pub enum CudaError {
     /// libcuda could not be loaded: no NVIDIA driver on this machine.
     #[error(
-        "no NVIDIA driver found (libcuda.so could not be loaded): this command needs an NVIDIA GPU and driver"
+        "no NVIDIA driver found (libcuda.so could not be loaded): this command needs an NVIDIA GPU and a driver for CUDA 12.4 or newer (without one, `train --dry-run` checks everything else)"
     )]
     NoDriver,
 

@@ -13,7 +13,22 @@ pub enum TaggedFileError {
     Corrupt(String),
     /// A `format_version` newer than the reader's.
     Newer(u32),
+    /// Another of our tagged formats (a recording given as a checkpoint): what it is and the
+    /// flag that takes it.
+    OtherFormat(String),
 }
+
+/// Our tagged formats, and what a user is told a file of each is.
+const KNOWN_FORMATS: [(&str, &str); 2] = [
+    (
+        "instantmimic-checkpoint",
+        "a training checkpoint (give it with --checkpoint)",
+    ),
+    (
+        "instantmimic-recording",
+        "a recording (give it with --recording)",
+    ),
+];
 
 /// A tagged file's tensors, its whole `__metadata__`, and the text of its metadata entry.
 pub struct TaggedFile<'a> {
@@ -40,7 +55,16 @@ pub fn open_tagged<'a>(
     let (_, header) = SafeTensors::read_metadata(bytes).map_err(|e| corrupt(describe(&e)))?;
     let tensors = SafeTensors::deserialize(bytes).map_err(|e| corrupt(describe(&e)))?;
     let metadata = header.metadata().clone().unwrap_or_default();
-    if metadata.get(FORMAT_KEY).map(String::as_str) != Some(format_name) {
+    let found_format = metadata.get(FORMAT_KEY).map(String::as_str);
+    if let Some((_, what)) = KNOWN_FORMATS
+        .iter()
+        .find(|(name, _)| Some(*name) == found_format && *name != format_name)
+    {
+        return Err(TaggedFileError::OtherFormat(format!(
+            "not {kind} but {what}"
+        )));
+    }
+    if found_format != Some(format_name) {
         return Err(corrupt(format!(
             "a safetensors file, but not {kind} (no `{FORMAT_KEY}` = \"{format_name}\" metadata)"
         )));

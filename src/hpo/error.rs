@@ -16,6 +16,9 @@ pub enum HpoError {
     },
     #[error("{path}: not a valid HPO configuration: {problem}")]
     Config { path: String, problem: String },
+    /// A command-line request that cannot be carried out as given (no file is at fault).
+    #[error("{0}")]
+    Usage(String),
     #[error("trial failed to run (seed {seed}): {problem}")]
     Trial { seed: u64, problem: String },
     #[error("{path}: {action}: {source}")]

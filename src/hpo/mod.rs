@@ -85,20 +85,18 @@ pub fn run(request: &HpoRequest, progress: &mut dyn Write) -> Result<HpoSummary,
     if let Some(s) = request.stop_after_s
         && !(s.is_finite() && s > 0.0)
     {
-        return Err(HpoError::Config {
-            path: "(command line)".to_string(),
-            problem: format!("--stop-after must be a positive number of seconds, not {s}"),
-        });
+        return Err(HpoError::Usage(format!(
+            "--stop-after must be a positive number of seconds, not {s}"
+        )));
     }
     let given = request.config.as_deref().map(HpoConfig::load).transpose()?;
     let mut search = match (&request.resume, given) {
         (Some(_), _) if request.overrides != SearchOverrides::default() => {
-            return Err(HpoError::Config {
-                path: "(command line)".to_string(),
-                problem: "--seeds, --max-candidates and --budget apply to a new search; a \
+            return Err(HpoError::Usage(
+                "--seeds, --max-candidates and --budget apply to a new search; a \
                           resumed search keeps the values it started with"
                     .to_string(),
-            });
+            ));
         }
         (Some(dir), given) => Search::resume(dir, given)?,
         (None, Some(config)) => {
@@ -112,11 +110,9 @@ pub fn run(request: &HpoRequest, progress: &mut dyn Write) -> Result<HpoSummary,
             Search::new(config, &dir)?
         }
         (None, None) => {
-            return Err(HpoError::Config {
-                path: "(command line)".to_string(),
-                problem: "give --config for a new search or --resume for an existing one"
-                    .to_string(),
-            });
+            return Err(HpoError::Usage(
+                "give --config for a new search or --resume for an existing one".to_string(),
+            ));
         }
     };
     let config = search.config().clone();

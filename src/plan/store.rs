@@ -257,7 +257,7 @@ impl PlanStore {
                 have.dedup();
                 PlanError::Asset(format!(
                     "no `{name}` plan for {nworld} worlds in {} (it has {}); capture one with \
-                     kernels_py/capture.py --nworld {nworld} and pass its directory",
+                     kernels_py/capture.py --nworld {nworld} on a GPU and pass its directory with --assets",
                     self.describe(),
                     if have.is_empty() {
                         "none".to_string()

@@ -127,6 +127,10 @@ impl Recording {
         )
         .map_err(|e| match e {
             TaggedFileError::Corrupt(problem) => corrupt(problem),
+            TaggedFileError::OtherFormat(what) => RecordingError::OtherFormat {
+                path: source.to_string(),
+                what,
+            },
             TaggedFileError::Newer(found) => RecordingError::NewerFormat {
                 path: source.to_string(),
                 found,

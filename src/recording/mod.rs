@@ -51,6 +51,9 @@ pub enum RecordingError {
     Io { path: String, error: std::io::Error },
     #[error("{path}: corrupt or truncated recording: {problem}")]
     Corrupt { path: String, problem: String },
+    /// Another of our files (a checkpoint).
+    #[error("{path}: {what}")]
+    OtherFormat { path: String, what: String },
     #[error(
         "{path}: recording format version {found}; this build reads up to {RECORDING_FORMAT_VERSION} (use a newer instantmimic)"
     )]

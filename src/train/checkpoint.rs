@@ -36,6 +36,9 @@ pub enum CheckpointError {
     Io { path: String, error: std::io::Error },
     #[error("{path}: corrupt or truncated checkpoint: {problem}")]
     Corrupt { path: String, problem: String },
+    /// Another of our files (a recording).
+    #[error("{path}: {what}")]
+    OtherFormat { path: String, what: String },
     #[error(
         "{path}: checkpoint format version {found}; this build reads up to {CHECKPOINT_FORMAT_VERSION} (use a newer instantmimic)"
     )]
@@ -412,6 +415,10 @@ impl Checkpoint {
         )
         .map_err(|e| match e {
             TaggedFileError::Corrupt(problem) => corrupt(problem),
+            TaggedFileError::OtherFormat(what) => CheckpointError::OtherFormat {
+                path: source.to_string(),
+                what,
+            },
             TaggedFileError::Newer(found) => CheckpointError::NewerFormat {
                 path: source.to_string(),
                 found,

@@ -51,6 +51,28 @@ pub enum ConfigError {
     },
 }
 
+/// A TOML error as one line: "line 24, column 1 (`num_envz = 12`): unknown field `num_envz`,
+/// expected one of ...", the line quoted (it names the key). toml's own text is a multi-line
+/// snippet with a caret, which one line would squash.
+pub(crate) fn toml_error_line(e: &toml::de::Error, text: &str) -> String {
+    let message = e.message().trim().replace('\n', " ");
+    let Some(before) = e.span().and_then(|span| text.get(..span.start)) else {
+        return message;
+    };
+    let line = before.matches('\n').count() + 1;
+    let start_of_line = before.rfind('\n').map_or(0, |i| i + 1);
+    let column = before[start_of_line..].chars().count() + 1;
+    let quoted: String = text[start_of_line..]
+        .lines()
+        .next()
+        .unwrap_or("")
+        .trim()
+        .chars()
+        .take(60)
+        .collect();
+    format!("line {line}, column {column} (`{quoted}`): {message}")
+}
+
 /// The whole training configuration.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -308,6 +330,50 @@ impl TrainConfig {
         Ok(config)
     }
 
+    /// The sections that the configuration file `text` leaves out and its run uses (the goal
+    /// task has no tracking reward; a latent controller no PPO): each takes the built-in
+    /// baseline's values, the paper's untuned ones, several times slower to succeed than the
+    /// committed configurations' (configs/train/).
+    pub fn sections_left_out(&self, text: &str) -> Vec<&'static str> {
+        let Ok(table) = text.parse::<toml::Table>() else {
+            return Vec::new();
+        };
+        let used = [
+            ("env", true),
+            ("reward", self.goal.is_none()),
+            ("obs", true),
+            ("policy", true),
+            ("ppo", self.latent.is_none()),
+            ("run", true),
+        ];
+        used.into_iter()
+            .filter(|&(section, used)| used && !table.contains_key(section))
+            .map(|(section, _)| section)
+            .collect()
+    }
+
+    /// A one-line note for a configuration file that leaves out sections its run uses
+    /// ([`TrainConfig::sections_left_out`]): `None` when it has them all.
+    pub fn baseline_note(&self, path: &Path) -> Option<String> {
+        let text = std::fs::read_to_string(path).ok()?;
+        let left_out = self.sections_left_out(&text);
+        if left_out.is_empty() {
+            return None;
+        }
+        let sections: Vec<String> = left_out.iter().map(|s| format!("[{s}]")).collect();
+        let plural = if sections.len() == 1 { "" } else { "s" };
+        let example = if left_out.contains(&"ppo") {
+            format!(" (e.g. ppo.horizon = {})", PpoConfig::default().horizon)
+        } else {
+            String::new()
+        };
+        Some(format!(
+            "note: {} has no {} section{plural}: the built-in baseline's untuned values{example} are used, not the tuned ones of configs/train/default.toml; copy the section{plural} from there to tune, or see every value with --dry-run",
+            path.display(),
+            sections.join(", "),
+        ))
+    }
+
     /// What the run trains on, for labels: the motion, or the library's description.
     pub fn motion_label(&self) -> String {
         match &self.motion_library {
@@ -320,7 +386,7 @@ impl TrainConfig {
     pub fn from_toml(text: &str, name: &str) -> Result<TrainConfig, ConfigError> {
         let config: TrainConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
             path: name.to_string(),
-            message: e.to_string().trim().replace('\n', " "),
+            message: toml_error_line(&e, text),
         })?;
         config.validate(name)?;
         Ok(config)

@@ -427,6 +427,24 @@ fn a_motion_library_replaces_the_motion_and_round_trips() {
 }
 
 #[test]
+fn a_toml_error_is_one_line_with_its_line_and_column() {
+    let text = "motion = \"walk\"\n\n[env]\nnum_envz = 12\n";
+    let e = TrainConfig::from_toml(text, "cfg.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with(
+            "cfg.toml: line 4, column 1 (`num_envz = 12`): unknown field `num_envz`, expected one of"
+        ),
+        "{e}"
+    );
+    assert!(
+        !e.contains('|') && !e.contains('^') && !e.contains('\n'),
+        "{e}"
+    );
+}
+
+#[test]
 fn a_library_trains_on_several_gpus_while_latent_and_goal_stay_on_one() {
     let library = TrainConfig::from_toml(
         "[motion_library]\nclips = [\"walk\", \"run\"]\n[run]\ngpus = [0, 1]\n",

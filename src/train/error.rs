@@ -36,6 +36,14 @@ pub enum TrainError {
         "{path} is not empty: continue that run with --resume {path}, replace it with --overwrite, or choose another --out"
     )]
     RunDirNotEmpty { path: String },
+    /// A new run aimed at a directory that holds files but no run (no `config.toml`).
+    #[error(
+        "{path} is not empty and holds no run (it has no config.toml): choose another --out, or pass --overwrite to write the run's files beside what is there"
+    )]
+    NotEmptyNotARun { path: String },
+    /// A new run's directory cannot be created or written.
+    #[error("cannot write the run directory {path}: {problem}; choose another --out")]
+    RunDirNotWritable { path: String, problem: String },
     #[error("{path}: not a run directory: {problem}")]
     NotARunDir { path: String, problem: String },
     /// Training kept producing non-finite values after every restore the run allows.

@@ -653,15 +653,17 @@ pub fn evaluate_episodes_on_gpu(
 }
 
 /// Evaluates a checkpoint's policy on the GPU: `episodes` rounds of `config.run.eval_envs`
-/// deterministic envs ([`evaluate_episodes_on_gpu`]), summarized together.
+/// deterministic envs ([`evaluate_episodes_on_gpu`]) on CUDA device `device`, summarized
+/// together.
 pub fn evaluate_on_gpu(
+    device: usize,
     config: &TrainConfig,
     checkpoint: &Checkpoint,
     motion: &ReferenceMotion,
     store: &PlanStore,
     episodes: u32,
 ) -> Result<EvaluationSummary, TrainError> {
-    let gpu = Gpu::open(0)?;
+    let gpu = Gpu::open(device)?;
     let (all, steps) = evaluate_episodes_on_gpu(&gpu, config, checkpoint, motion, store, episodes)?;
     Ok(summarize(&all, steps, config.run.success_rate)?)
 }

@@ -35,6 +35,7 @@ pub mod run_dir;
 mod session;
 pub mod stop;
 pub(crate) mod summary;
+pub mod tensorboard;
 mod trainer;
 
 pub use crate::files::{is_temporary, write_atomically, write_bytes_atomically};

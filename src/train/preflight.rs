@@ -14,8 +14,8 @@ use super::error::TrainError;
 use super::evaluation::evaluation_steps;
 use crate::env::goal_observation_size;
 use crate::env::layout::{JointLayout, ObservationCounts, observation_size};
-use crate::motion::find::{ResolvedMotion, resolve_motion};
-use crate::motion::{Character, LoopMode, ReferenceMotion, ReferenceTable};
+use crate::motion::find::{MotionSource, ResolvedMotion, resolve_motion};
+use crate::motion::{Character, LoopMode, MotionClip, ReferenceMotion, ReferenceTable};
 use crate::plan::{PlanStore, SimulatedModel};
 use crate::ppo::mlp_layout;
 
@@ -203,7 +203,7 @@ pub fn preflight(
     let checks = Preflight {
         character: character_line(motion.character(), store),
         motion_source: resolved.source.label(),
-        motion_notices: resolved.notices(clip),
+        motion_notices: clip_notices(&resolved, clip),
         clip_frames: clip.num_frames(),
         clip_duration_s: clip.duration(),
         loop_mode: clip.loop_mode(),
@@ -349,5 +349,16 @@ impl Preflight {
             }
         );
         out
+    }
+}
+
+/// What to print about a clip loaded from `resolved`: its notices, less those of a built-in
+/// clip. DeepMimic's released clips (backflip, cartwheel) hold quaternions a few percent from
+/// unit length, which every reader renormalizes; a user can do nothing about it, and every
+/// command that loads them would say so.
+pub fn clip_notices(resolved: &ResolvedMotion, clip: &MotionClip) -> Vec<String> {
+    match resolved.source {
+        MotionSource::BuiltIn(_) => Vec::new(),
+        MotionSource::File(_) => resolved.notices(clip),
     }
 }

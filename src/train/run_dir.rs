@@ -8,6 +8,8 @@
 //! clips.png        a motion library's per-clip success over time, with curve.png
 //! checkpoints/     iter_<iteration>.safetensors, the last run.keep_checkpoints of them
 //! summary.json     the final report (written when the run stops)
+//! events.out.tfevents.*  TensorBoard's copy of metrics.jsonl (src/train/tensorboard.rs; a
+//!                  resumed run adds a file)
 //! evaluation.json  every env's episode of the last evaluation (written when the run stops)
 //! replay.html      the final policy's replay page (`run.replay`; written by the command line
 //!                  after the run, src/cli/train.rs, since `train` does not import the viewer)
@@ -27,6 +29,7 @@ use super::error::TrainError;
 use super::evaluation::EnvEpisodeRow;
 use super::metrics::{IterationRecord, MetricsLog};
 use super::summary::RunSummary;
+use crate::files::event_file::EVENT_FILE_MARKER;
 use crate::files::write_bytes_atomically;
 
 /// Writes `value` as pretty JSON, atomically.
@@ -64,6 +67,50 @@ const RUN_ENTRIES: [&str; 10] = [
     REPLAY_FILE,
     REPLAY_DIR,
 ];
+
+/// Whether a directory entry's name is one a run writes: [`RUN_ENTRIES`] and TensorBoard's
+/// event files (src/train/tensorboard.rs).
+fn is_run_entry(name: &str) -> bool {
+    RUN_ENTRIES.contains(&name)
+        || (name.starts_with("events.out.") && name.contains(EVENT_FILE_MARKER))
+}
+
+/// Fails unless `root` (which does not exist) can be created: its nearest existing ancestor
+/// must be a directory that can be written.
+fn check_creatable(root: &Path) -> Result<(), TrainError> {
+    let existing = root
+        .ancestors()
+        .skip(1)
+        .map(|a| {
+            if a.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                a
+            }
+        })
+        .find(|a| a.exists())
+        .unwrap_or(Path::new("."));
+    if !existing.is_dir() {
+        return Err(TrainError::RunDirNotWritable {
+            path: root.display().to_string(),
+            problem: format!("{} is a file, not a directory", existing.display()),
+        });
+    }
+    probe_writable(root, existing)
+}
+
+/// Fails unless a directory can be made in `dir` (made and removed at once); permission and
+/// read-only file systems are what this finds, before a run or a dry run approves `root`.
+fn probe_writable(root: &Path, dir: &Path) -> Result<(), TrainError> {
+    let probe = dir.join(format!(".instantmimic-write-check-{}", std::process::id()));
+    match std::fs::create_dir(&probe) {
+        Ok(()) => std::fs::remove_dir(&probe).map_err(|e| TrainError::io(&probe, e)),
+        Err(e) => Err(TrainError::RunDirNotWritable {
+            path: root.display().to_string(),
+            problem: format!("{} cannot be written ({e})", dir.display()),
+        }),
+    }
+}
 
 /// The directory of one run.
 #[derive(Clone, Debug)]
@@ -141,17 +188,27 @@ impl RunDir {
         )
     }
 
-    /// Checks, without writing anything, that a new run may use `root`: it does not exist, is
-    /// empty, or `overwrite` is set. Returns the run files `--overwrite` would remove.
+    /// Checks that a new run may use `root`: it does not exist, is empty, or `overwrite` is
+    /// set; and that it can be created and written (a probe directory is made and removed
+    /// again, so that `--dry-run` refuses what the run would fail on). Returns the run files
+    /// `--overwrite` would remove.
     pub fn check_new(root: &Path, overwrite: bool) -> Result<Vec<PathBuf>, TrainError> {
         let entries = match std::fs::read_dir(root) {
             Ok(entries) => entries,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                check_creatable(root)?;
+                return Ok(Vec::new());
+            }
             Err(e) if e.kind() == std::io::ErrorKind::NotADirectory => {
-                return Err(TrainError::NotARunDir {
-                    path: root.display().to_string(),
-                    problem: "it is a file".to_string(),
-                });
+                if root.is_file() {
+                    return Err(TrainError::NotARunDir {
+                        path: root.display().to_string(),
+                        problem: "it is a file".to_string(),
+                    });
+                }
+                // A parent is a file.
+                check_creatable(root)?;
+                return Err(TrainError::io(root, e));
             }
             Err(e) => return Err(TrainError::io(root, e)),
         };
@@ -160,19 +217,19 @@ impl RunDir {
         for entry in entries {
             let entry = entry.map_err(|e| TrainError::io(root, e))?;
             any = true;
-            if entry
-                .file_name()
-                .to_str()
-                .is_some_and(|n| RUN_ENTRIES.contains(&n))
-            {
+            if entry.file_name().to_str().is_some_and(is_run_entry) {
                 ours.push(entry.path());
             }
         }
         if any && !overwrite {
-            return Err(TrainError::RunDirNotEmpty {
-                path: root.display().to_string(),
+            let path = root.display().to_string();
+            return Err(if root.join(CONFIG_FILE).is_file() {
+                TrainError::RunDirNotEmpty { path }
+            } else {
+                TrainError::NotEmptyNotARun { path }
             });
         }
+        probe_writable(root, root)?;
         ours.sort();
         Ok(ours)
     }
@@ -274,6 +331,12 @@ impl RunDir {
             root: root.to_path_buf(),
         };
         let config_path = dir.config_path();
+        if !root.exists() {
+            return Err(TrainError::NotARunDir {
+                path: root.display().to_string(),
+                problem: "it does not exist (give the --out of an earlier run)".to_string(),
+            });
+        }
         if !config_path.is_file() {
             return Err(TrainError::NotARunDir {
                 path: root.display().to_string(),

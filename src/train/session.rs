@@ -7,7 +7,7 @@
 //! /* replay rollout + update graphs, copy the statistics back, synchronize */
 //! let step = session.finish_iteration(stats);     // the clock stops
 //! let eval = step.evaluate.then(|| /* GPU evaluation -> summarize(...) */);
-//! let next = session.record(step, eval)?;          // metrics.jsonl, curve.png, progress
+//! let next = session.record(step, eval)?;          // metrics.jsonl, events, curve.png, progress
 //! if next.checkpoint_due {
 //!     let mut ckpt = session.new_checkpoint()?;     // metadata filled in
 //!     /* ckpt.insert(...) every tensor the trainer keeps */
@@ -38,6 +38,7 @@ use super::progress::{Progress, ProgressMode};
 use super::run_dir::{ResumedRun, RunDir};
 use super::stop::StopFlag;
 use super::summary::RunSummary;
+use super::tensorboard::RunEvents;
 
 /// What the GPU reports about one iteration (the per-iteration statistics copy).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -93,6 +94,8 @@ pub struct RunSession {
     config: TrainConfig,
     dir: RunDir,
     metrics: MetricsLog,
+    /// TensorBoard's copy of the metrics (src/train/tensorboard.rs).
+    events: RunEvents,
     records: Vec<IterationRecord>,
     checkpoints: CheckpointDir,
     rule: StopRule,
@@ -146,13 +149,15 @@ impl RunSession {
     ) -> Result<RunSession, TrainError> {
         config.validate("the run configuration")?;
         let (dir, metrics) = RunDir::create(root, config, overwrite)?;
+        let events = RunEvents::create(dir.root(), None)?;
         Ok(RunSession::assemble(
             config.clone(),
             dir,
             metrics,
+            events,
             Vec::new(),
             None,
-            Progress::new(progress, 0, config.run.max_iterations),
+            Progress::new(progress, &config.run),
         ))
     }
 
@@ -196,11 +201,13 @@ impl RunSession {
         let metrics = metrics
             .ok_or_else(|| TrainError::Setup("the resumed metrics log is not open".to_string()))?;
         let start = checkpoint.as_ref().map_or(0, |(_, c)| c.meta.iteration);
-        let progress = Progress::new(progress, start, config.run.max_iterations);
+        let events = RunEvents::create(dir.root(), Some(start))?;
+        let progress = Progress::new(progress, &config.run);
         let session = RunSession::assemble(
             config,
             dir,
             metrics,
+            events,
             records,
             checkpoint.as_ref().map(|(_, c)| c),
             progress,
@@ -212,6 +219,7 @@ impl RunSession {
         config: TrainConfig,
         dir: RunDir,
         metrics: MetricsLog,
+        events: RunEvents,
         records: Vec<IterationRecord>,
         checkpoint: Option<&Checkpoint>,
         progress: Progress,
@@ -231,6 +239,7 @@ impl RunSession {
             config,
             dir,
             metrics,
+            events,
             records,
             progress,
             iteration,
@@ -332,6 +341,7 @@ impl RunSession {
         let evaluated = evaluation.is_some();
         record.evaluation = evaluation;
         self.metrics.append(&record)?;
+        self.events.append(&record)?;
         self.iteration = record.iteration;
         self.frames = record.frames;
         if let Some(e) = &record.evaluation {

@@ -62,7 +62,7 @@ pub(super) struct NcclLibrary {
 }
 
 /// Where to find NCCL, for the error of a missing or unusable library.
-pub const NCCL_HELP: &str = "multi-GPU training (--gpus with more than one device) needs NCCL's libnccl.so.2 on the library path: `pip install nvidia-nccl-cu12` (or -cu13) and put its site-packages/nvidia/nccl/lib on LD_LIBRARY_PATH; PyTorch's bundled copy works too (e.g. LD_LIBRARY_PATH=/opt/torch/.venv/lib/python3.12/site-packages/nvidia/nccl/lib), as does the distribution's libnccl2; one GPU needs no NCCL";
+pub const NCCL_HELP: &str = "multi-GPU training (--gpus with more than one device) needs NCCL's libnccl.so.2 on the library path: `pip install nvidia-nccl-cu12` (or -cu13) and put its site-packages/nvidia/nccl/lib on LD_LIBRARY_PATH; PyTorch's bundled copy works too (its environment's site-packages/nvidia/nccl/lib), as does the distribution's libnccl2; one GPU needs no NCCL";
 
 /// The names tried, in order: NCCL's soname, the development symlink, then cudarc's candidates.
 fn candidates() -> Vec<String> {
