@@ -352,3 +352,52 @@ fn the_cmu_walk_imports_onto_the_humanoid_and_the_g1() {
         }
     }
 }
+
+/// mjlab's CSV does not record its rate: `motion import --source-fps` reads it at the rate given
+/// and writes the character's clip file, which records it; a rate that is not one is refused.
+#[test]
+fn an_mjlab_csv_converts_at_the_rate_given() {
+    let dir = tempfile::tempdir().expect("a scratch directory");
+    let g1 = Character::built_in("g1").expect("built in").expect("loads");
+    let joints = g1.nq() - 7;
+    let row = |i: usize| {
+        let mut values = vec![0.01 * i as f64, 0.0, 0.79, 0.0, 0.0, 0.0, 1.0];
+        values.extend((0..joints).map(|j| 0.001 * (i + j) as f64));
+        values
+            .iter()
+            .map(|v| format!("{v}"))
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    let csv = dir.path().join("sway.csv");
+    let text: String = (0..40).map(|i| row(i) + "\n").collect();
+    std::fs::write(&csv, text).expect("write the CSV");
+    let npz = dir.path().join("sway.npz");
+    let import = |fps: &str| {
+        run(
+            &[
+                "motion",
+                "import",
+                path_str(&csv),
+                "--character",
+                "g1",
+                "--out",
+                path_str(&npz),
+                "--source-fps",
+                fps,
+            ],
+            None,
+        )
+    };
+    let out = import("50");
+    let said = succeeded(&out, "motion import of a CSV");
+    assert!(said.contains("40 frames at 50.000 Hz"), "{said}");
+    let out = run(
+        &["motion", "inspect", path_str(&npz), "--character", "g1"],
+        None,
+    );
+    let inspected = succeeded(&out, "motion inspect of the converted clip");
+    assert!(inspected.contains("50.000"), "{inspected}");
+    let err = one_line_error(&import("0"), "a zero source rate");
+    assert!(err.contains("--source-fps"), "{err}");
+}

@@ -1,5 +1,6 @@
 //! `instantmimic motion import`: a mocap file (BVH) retargeted onto a character and written as a
-//! clip the other commands read, with its quality report.
+//! clip the other commands read, with its quality report; or a robot motion file of the
+//! character (mjlab's CSV at a given frame rate, an NPZ) rewritten as its clip file.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -8,15 +9,19 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use crate::motion::bvh::{BvhOptions, Units, UpAxis};
+use crate::motion::format::MJLAB_CSV_FRAME_RATE;
 use crate::motion::import::{ImportOptions, import_motion_file};
 use crate::motion::retarget::writer::{clip_format_for_path, write_clip};
 use crate::motion::retarget::{RestPose, RetargetOptions};
+use crate::motion::{MotionClip, MotionFormat, ReadOptions};
 use crate::train::ChosenCharacter;
 
 /// `motion import`'s arguments.
 #[derive(Args, Debug)]
 pub struct ImportArgs {
-    /// The mocap file: a BVH file (any channel order; cm or m, Y or Z up, detected).
+    /// The mocap file: a BVH file (any channel order; cm or m, Y or Z up, detected), or a robot
+    /// motion of the character (mjlab's CSV, which does not record its frame rate: see
+    /// `--source-fps`; mjlab's or holosoma's NPZ), rewritten as the character's clip file.
     file: PathBuf,
     /// The character to retarget onto: a built-in name (`humanoid` or `g1`), a description
     /// JSON or a character directory (`<dir>/character.json`).
@@ -46,6 +51,9 @@ pub struct ImportArgs {
     /// Also write the quality report as JSON.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// The frame rate of an mjlab CSV file (frames per second; the file does not say).
+    #[arg(long, default_value_t = MJLAB_CSV_FRAME_RATE)]
+    source_fps: f64,
 }
 
 fn parse_rest(text: &str) -> Result<RestPose, String> {
@@ -70,6 +78,10 @@ pub fn run(args: ImportArgs) -> Result<()> {
         super::output::check_output_path(path)?;
     }
     clip_format_for_path(&character, &args.out)?;
+    let format = MotionFormat::of_path(&args.file);
+    if format != MotionFormat::Bvh {
+        return convert_robot_motion(&args, &character, format);
+    }
     let options = ImportOptions {
         bvh: BvhOptions {
             units: args.units,
@@ -100,5 +112,38 @@ pub fn run(args: ImportArgs) -> Result<()> {
             .with_context(|| format!("{}: cannot write the report", path.display()))?;
         println!("wrote {}", path.display());
     }
+    Ok(())
+}
+
+/// A robot motion file of `character` read (mjlab's CSV at `--source-fps`) and written as its
+/// clip file, which records the rate: the one way to give a CSV another rate than the default.
+fn convert_robot_motion(
+    args: &ImportArgs,
+    character: &crate::motion::Character,
+    format: MotionFormat,
+) -> Result<()> {
+    if !(args.source_fps.is_finite() && args.source_fps > 0.0 && args.source_fps <= 1000.0) {
+        anyhow::bail!(
+            "--source-fps {}: give the file's frame rate, a number of frames per second in (0, 1000]",
+            args.source_fps
+        );
+    }
+    let options = ReadOptions {
+        csv_frame_rate: args.source_fps,
+    };
+    let clip = MotionClip::load_with(&args.file, character, &options)?;
+    let written = write_clip(&clip, character, &args.out)?;
+    let rate = if format == MotionFormat::MjlabCsv {
+        format!("{:.3} Hz (--source-fps)", args.source_fps)
+    } else {
+        format!("{:.3} Hz (the file's)", clip.frame_rate())
+    };
+    println!(
+        "wrote {} ({}, {} frames at {rate}, {:.3} s)",
+        args.out.display(),
+        written.name(),
+        clip.num_frames(),
+        clip.duration()
+    );
     Ok(())
 }
