@@ -369,7 +369,7 @@ fn body_kinematics_matches(gpu: &Gpu, kernels: &EnvKernels, r: &Reference) -> us
         let fields = ["d.xpos", "d.xquat", "d.subtree_com", "d.cvel"];
         let read = |name: &str| sim.buffer::<f32>(name).unwrap().read().unwrap();
         let plan: Vec<Vec<f32>> = fields.iter().map(|f| read(f)).collect();
-        let physics = PhysicsState::view(&sim, PhysicsSizes::of(&character), character.name())
+        let physics = PhysicsState::view(&sim, PhysicsSizes::of(character), character.name())
             .expect("the state buffers");
         // Even envs were reset (only_done): odd ones must keep what they hold (NaN here).
         let flags: Vec<i32> = (0..n).map(|e| i32::from(e % 2 == 0)).collect();
