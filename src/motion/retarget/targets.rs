@@ -65,6 +65,10 @@ const ROOT_POSITION_WEIGHT: f64 = 0.5;
 const POSITION_WEIGHT: f64 = 2.0;
 const ORIENTATION_WEIGHT: f64 = 1.0;
 
+/// A bone between two roles' joints shorter than this fraction of the leg (hip-knee-ankle) is
+/// too short to align by: its direction is noise, or none at all where the joints coincide.
+const MIN_BONE_FRACTION: f64 = 0.02;
+
 /// One pair the IK matches: the body's origin to the scaled source joint's position, the body's
 /// orientation to the source joint's orientation times `offset`.
 #[derive(Clone, Debug, PartialEq)]
@@ -243,10 +247,32 @@ fn by_role(
             .then(|| (source_position(r), character_position(r)))
             .and_then(|(s, c)| Some((s?, c?)))
     };
+    let leg = |position: &dyn Fn(Role) -> Option<Vector3<f64>>| {
+        let lengths: Vec<f64> = [Side::Left, Side::Right]
+            .into_iter()
+            .filter_map(|s| {
+                let hip = position(Role::Hip(s))?;
+                let ankle = position(Role::Ankle(s))?;
+                Some(match position(Role::Knee(s)) {
+                    Some(knee) => (knee - hip).norm() + (ankle - knee).norm(),
+                    None => (ankle - hip).norm(),
+                })
+            })
+            .collect();
+        (!lengths.is_empty()).then(|| lengths.iter().sum::<f64>() / lengths.len() as f64)
+    };
+    let in_common = |r: Role| common.contains(&r);
+    let source_leg = leg(&|r| source_position(r).filter(|_| in_common(r)));
+    let character_leg = leg(&|r| character_position(r).filter(|_| in_common(r)));
+    // A bone shorter than this on either side gives no direction (the G1's waist yaw link sits
+    // at its pelvis' origin, CMU's LowerBack at the Hips): the next candidate is taken.
+    let shortest = |leg: Option<f64>| leg.map_or(0.0, |l| MIN_BONE_FRACTION * l);
+    let (shortest_source, shortest_character) = (shortest(source_leg), shortest(character_leg));
     let direction = |from: Role, to: Role| {
         let (s0, c0) = both(from)?;
         let (s1, c1) = both(to)?;
-        Some((s1 - s0, c1 - c0))
+        let (s, c) = (s1 - s0, c1 - c0);
+        (s.norm() > shortest_source && c.norm() > shortest_character).then_some((s, c))
     };
     let first_direction = |from: Role, to: &[Role]| to.iter().find_map(|&t| direction(from, t));
     let lateral = |roles: [Role; 2]| direction(roles[1], roles[0]);
@@ -343,23 +369,6 @@ fn by_role(
         });
     }
 
-    let leg = |position: &dyn Fn(Role) -> Option<Vector3<f64>>| {
-        let lengths: Vec<f64> = [Side::Left, Side::Right]
-            .into_iter()
-            .filter_map(|s| {
-                let hip = position(Role::Hip(s))?;
-                let ankle = position(Role::Ankle(s))?;
-                Some(match position(Role::Knee(s)) {
-                    Some(knee) => (knee - hip).norm() + (ankle - knee).norm(),
-                    None => (ankle - hip).norm(),
-                })
-            })
-            .collect();
-        (!lengths.is_empty()).then(|| lengths.iter().sum::<f64>() / lengths.len() as f64)
-    };
-    let in_common = |r: Role| common.contains(&r);
-    let source_leg = leg(&|r| source_position(r).filter(|_| in_common(r)));
-    let character_leg = leg(&|r| character_position(r).filter(|_| in_common(r)));
     let (Some(source_leg), Some(character_leg)) = (source_leg, character_leg) else {
         return Err(RetargetError::Source {
             source_name: source.name.clone(),
