@@ -53,14 +53,21 @@ impl std::str::FromStr for RestPose {
 }
 
 /// Weights of the residuals, per metre of position error and per radian of orientation error.
-/// Where the feet, the hands and the root are decides contacts and balance: they weigh most;
-/// knees and elbows next. The torso's and the limbs' roots (spine, chest, neck, head,
-/// clavicles, shoulders, hips) mostly follow their orientations: where a body's origin sits
-/// in the torso differs between skeletons (the G1's torso link starts at its waist, 4 cm above
-/// the pelvis, the humanoid's torso 24 cm above), which a position target would fight.
+/// Where the feet and the root are decides contacts and balance: they weigh most; knees next.
+/// The scale is the legs', so the legs' targets are reachable; a character's trunk and arms
+/// need not be in proportion with its legs (the G1's shoulders sit 7 cm higher over its hips
+/// than a person's scaled to its legs, its arms are 6 cm shorter), so the upper body's
+/// targets weigh half as much as their lower-body counterparts: hands and elbows that cannot
+/// be reached must not pull the pelvis down and bend the knees (at equal weights the G1 sank
+/// 8 cm). The torso's and the limbs' roots (spine, chest, neck, head, clavicles, shoulders,
+/// hips) mostly follow their orientations: where a body's origin sits in the torso differs
+/// between skeletons (the G1's torso link starts at its waist, 4 cm above the pelvis, the
+/// humanoid's torso 24 cm above), which a position target would fight.
 const END_POSITION_WEIGHT: f64 = 5.0;
 const MIDDLE_POSITION_WEIGHT: f64 = 2.0;
 const ROOT_POSITION_WEIGHT: f64 = 0.5;
+/// The upper body's position weights: its roles' counterparts' times this.
+const UPPER_BODY_POSITION_FACTOR: f64 = 0.5;
 /// The identity map's weight per metre: the bodies are the source's own, any weight holds.
 const POSITION_WEIGHT: f64 = 2.0;
 const ORIENTATION_WEIGHT: f64 = 1.0;
@@ -180,6 +187,15 @@ fn identity(source: &SourceMotion, character: &Character) -> Option<Targets> {
         source_leg_length: None,
         character_leg_length: None,
     })
+}
+
+/// Whether the role is above the pelvis (trunk, head, arms), whose proportions to the legs
+/// differ between skeletons.
+fn is_upper_body(role: Role) -> bool {
+    !matches!(
+        role,
+        Role::Pelvis | Role::Hip(_) | Role::Knee(_) | Role::Ankle(_) | Role::Toe(_)
+    )
 }
 
 /// The role whose bone a role's bone hangs from, for the alignment's order.
@@ -335,6 +351,10 @@ fn by_role(
             Role::Pelvis | Role::Ankle(_) | Role::Toe(_) | Role::Wrist(_) => END_POSITION_WEIGHT,
             Role::Knee(_) | Role::Elbow(_) => MIDDLE_POSITION_WEIGHT,
             _ => ROOT_POSITION_WEIGHT,
+        } * if is_upper_body(*role) {
+            UPPER_BODY_POSITION_FACTOR
+        } else {
+            1.0
         };
         let hips_of = |hips: [Role; 2]| {
             let source = [map.joint(hips[0])?, map.joint(hips[1])?];
