@@ -155,3 +155,56 @@ pub fn detect_loop(
     };
     Ok((mode, fraction))
 }
+
+/// The steepest source floor that is levelled (rise per metre, about 3 degrees): a mocap
+/// stage's floor off the recording's horizontal by a calibration error. A steeper one is taken
+/// for terrain the motion means (a ramp) and left alone.
+pub const MAX_FLOOR_SLOPE: f64 = 0.05;
+
+/// Frames whose lowest foot joint is within this height of the floor fitted so far are kept
+/// for the next fit (m, in the character's size): the stance feet, not the swinging ones.
+const FLOOR_BAND: f64 = 0.02;
+
+/// The tilt of the floor the source's feet stand on, as its rise per metre along x and y (the
+/// character's frame, after scaling): the plane fitted to each frame's lowest foot joint
+/// (`lowest[f]`), refitted on the frames near the plane (the stance feet, not the swinging
+/// ones). `None` when the feet give no usable floor (too few frames, no travel to measure a
+/// tilt along, or steeper than [`MAX_FLOOR_SLOPE`]).
+pub fn floor_slope(lowest: &[Vector3<f64>]) -> Option<nalgebra::Vector2<f64>> {
+    let mut keep: Vec<bool> = vec![true; lowest.len()];
+    let mut slope = nalgebra::Vector2::zeros();
+    for _ in 0..4 {
+        let points: Vec<&Vector3<f64>> = lowest
+            .iter()
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+            .map(|(p, _)| p)
+            .collect();
+        if points.len() < 8 {
+            return None;
+        }
+        let n = points.len() as f64;
+        let mean = points.iter().copied().sum::<Vector3<f64>>() / n;
+        let mut a = nalgebra::Matrix2::zeros();
+        let mut b = nalgebra::Vector2::zeros();
+        for p in &points {
+            let d = *p - mean;
+            let xy = d.xy();
+            a += xy * xy.transpose();
+            b += xy * d.z;
+        }
+        // Without travel along a direction the tilt along it is unknown: a ridge of a 0.25 m
+        // spread keeps it near zero for a motion in place.
+        let ridge = n * 0.25 * 0.25 * 1e-2;
+        a[(0, 0)] += ridge;
+        a[(1, 1)] += ridge;
+        slope = a.try_inverse()? * b;
+        let height = |p: &Vector3<f64>| mean.z + slope.dot(&(p.xy() - mean.xy()));
+        // The lower envelope: frames at or below the plane, or just above it.
+        keep = lowest
+            .iter()
+            .map(|p| p.z - height(p) < FLOOR_BAND)
+            .collect();
+    }
+    (slope.norm() <= MAX_FLOOR_SLOPE && slope.iter().all(|v| v.is_finite())).then_some(slope)
+}
