@@ -155,3 +155,90 @@ pub fn detect_loop(
     };
     Ok((mode, fraction))
 }
+
+/// The steepest source floor that is levelled (rise per metre, about 3 degrees): a mocap
+/// stage's floor off the recording's horizontal by a calibration error. A steeper one is taken
+/// for terrain the motion means (a ramp) and left alone.
+pub const MAX_FLOOR_SLOPE: f64 = 0.05;
+
+/// Frames whose lowest foot joint is within this height of the floor fitted so far are kept
+/// for the next fit (m, in the character's size): the stance feet, not the swinging ones.
+const FLOOR_BAND: f64 = 0.02;
+
+/// The tilt of the floor the source's feet stand on, as its rise per metre along x and y (the
+/// character's frame, after scaling): the plane fitted to each frame's lowest foot joint
+/// (`lowest[f]`), refitted on the frames near the plane (the stance feet, not the swinging
+/// ones). `None` when the feet give no usable floor (too few frames, no travel to measure a
+/// tilt along, or steeper than [`MAX_FLOOR_SLOPE`]).
+pub fn floor_slope(lowest: &[Vector3<f64>]) -> Option<nalgebra::Vector2<f64>> {
+    let mut keep: Vec<bool> = vec![true; lowest.len()];
+    let mut slope = nalgebra::Vector2::zeros();
+    for _ in 0..4 {
+        let points: Vec<&Vector3<f64>> = lowest
+            .iter()
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+            .map(|(p, _)| p)
+            .collect();
+        if points.len() < 8 {
+            return None;
+        }
+        let n = points.len() as f64;
+        let mean = points.iter().copied().sum::<Vector3<f64>>() / n;
+        let mut a = nalgebra::Matrix2::zeros();
+        let mut b = nalgebra::Vector2::zeros();
+        for p in &points {
+            let d = *p - mean;
+            let xy = d.xy();
+            a += xy * xy.transpose();
+            b += xy * d.z;
+        }
+        // Without travel along a direction the tilt along it is unknown: a ridge of a 0.25 m
+        // spread keeps it near zero for a motion in place.
+        let ridge = n * 0.25 * 0.25 * 1e-2;
+        a[(0, 0)] += ridge;
+        a[(1, 1)] += ridge;
+        slope = a.try_inverse()? * b;
+        let height = |p: &Vector3<f64>| mean.z + slope.dot(&(p.xy() - mean.xy()));
+        // The lower envelope: frames at or below the plane, or just above it.
+        keep = lowest
+            .iter()
+            .map(|p| p.z - height(p) < FLOOR_BAND)
+            .collect();
+    }
+    (slope.norm() <= MAX_FLOOR_SLOPE && slope.iter().all(|v| v.is_finite())).then_some(slope)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A walk along x over a floor rising `slope` per metre: each frame's lowest foot joint on
+    /// the floor, 8 cm up, except a swinging frame in three, 5 cm higher.
+    fn walk(slope: f64, travel: f64) -> Vec<Vector3<f64>> {
+        (0..120)
+            .map(|f| {
+                let x = travel * f as f64 / 120.0;
+                let swing = if f % 3 == 0 { 0.05 } else { 0.0 };
+                Vector3::new(x, 0.1 * (f as f64 * 0.3).sin(), 0.08 + slope * x + swing)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_tilted_floor_is_found_under_the_stance_feet() {
+        let slope = floor_slope(&walk(0.02, 3.0)).expect("a slope");
+        assert!((slope.x - 0.02).abs() < 1e-3, "{slope}");
+        assert!(slope.y.abs() < 1e-3, "{slope}");
+        let level = floor_slope(&walk(0.0, 3.0)).expect("a slope");
+        assert!(level.norm() < 1e-3, "{level}");
+    }
+
+    #[test]
+    fn a_ramp_or_a_motion_in_place_is_not_levelled() {
+        assert_eq!(floor_slope(&walk(0.2, 3.0)), None);
+        let in_place = floor_slope(&walk(0.02, 0.0)).expect("a slope");
+        assert!(in_place.norm() < 1e-3, "{in_place}");
+        assert_eq!(floor_slope(&walk(0.02, 3.0)[..5]), None);
+    }
+}

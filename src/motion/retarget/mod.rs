@@ -29,7 +29,7 @@ pub use targets::{Mapping, RestPose, Target, Targets};
 
 use super::character::Character;
 use super::clip::{FrameTiming, MotionClip};
-use super::source_motion::{RoleMap, SourceMotion};
+use super::source_motion::{Role, RoleMap, Side, SourceMotion};
 use solver::{FrameGoal, Solver};
 
 /// How to retarget.
@@ -78,15 +78,26 @@ pub fn retarget(
     let rate = cleanup::output_rate(source_rate, options.fps)?;
     let resampled = cleanup::resample(source, rate);
 
-    let mut source_positions: Vec<Vec<nalgebra::Vector3<f64>>> =
-        Vec::with_capacity(resampled.num_frames());
-    let goals: Vec<FrameGoal> = (0..resampled.num_frames())
-        .map(|f| {
-            let poses = resampled.world_poses(f);
+    let poses: Vec<_> = (0..resampled.num_frames())
+        .map(|f| resampled.world_poses(f))
+        .collect();
+    // A tilted mocap floor levelled: per frame, the whole body lowered by the floor's height
+    // under its root (the constant part is the ground shift's, after the solve).
+    let (level, floor_slope) = if identity {
+        (vec![0.0; poses.len()], None)
+    } else {
+        level_floor(&poses, map, targets.scale)
+    };
+    let mut source_positions: Vec<Vec<nalgebra::Vector3<f64>>> = Vec::with_capacity(poses.len());
+    let goals: Vec<FrameGoal> = poses
+        .iter()
+        .zip(&level)
+        .map(|(poses, &dz)| {
+            let lift = nalgebra::Vector3::new(0.0, 0.0, dz);
             source_positions.push(
                 poses
                     .iter()
-                    .map(|p| p.translation.vector * targets.scale)
+                    .map(|p| p.translation.vector * targets.scale + lift)
                     .collect(),
             );
             FrameGoal {
@@ -101,7 +112,7 @@ pub fn retarget(
                             .sum();
                         let mean = sum / t.position_joints.len().max(1) as f64;
                         let orientation = poses[t.source_joint].rotation * t.offset;
-                        mean * targets.scale + orientation * t.position_offset
+                        mean * targets.scale + orientation * t.position_offset + lift
                     })
                     .collect(),
                 orientations: targets
@@ -211,7 +222,18 @@ pub fn retarget(
         ik_iterations_mean: iterations.iter().sum::<usize>() as f64
             / iterations.len().max(1) as f64,
         ik_iterations_max: iterations.iter().copied().max().unwrap_or(0),
-        notes: Vec::new(),
+        notes: floor_slope
+            .filter(|s| s.norm() >= 1e-3)
+            .map(|s| {
+                format!(
+                    "the source's floor rises {:.1} cm per metre (toward {:.0} degrees): \
+                     levelled under the feet",
+                    100.0 * s.norm(),
+                    s.y.atan2(s.x).to_degrees()
+                )
+            })
+            .into_iter()
+            .collect(),
     };
     let clip = MotionClip::from_qpos_frames(
         &source.name,
@@ -230,6 +252,42 @@ pub fn retarget(
         report,
         source: scaled_source,
     })
+}
+
+/// Per frame, the height to add to the scaled source to level its floor (see
+/// [`cleanup::floor_slope`]): zeros where the feet give no tilt to level.
+fn level_floor(
+    poses: &[Vec<nalgebra::Isometry3<f64>>],
+    map: Option<&RoleMap>,
+    scale: f64,
+) -> (Vec<f64>, Option<nalgebra::Vector2<f64>>) {
+    let zeros = (vec![0.0; poses.len()], None);
+    let Some(map) = map else { return zeros };
+    let feet: Vec<usize> = [Side::Left, Side::Right]
+        .into_iter()
+        .flat_map(|s| [Role::Ankle(s), Role::Toe(s)])
+        .filter_map(|r| map.joint(r))
+        .collect();
+    if feet.is_empty() {
+        return zeros;
+    }
+    let lowest: Vec<nalgebra::Vector3<f64>> = poses
+        .iter()
+        .map(|p| {
+            feet.iter()
+                .map(|&j| p[j].translation.vector * scale)
+                .min_by(|a, b| a.z.total_cmp(&b.z))
+                .unwrap_or_default()
+        })
+        .collect();
+    let Some(slope) = cleanup::floor_slope(&lowest) else {
+        return zeros;
+    };
+    let level = poses
+        .iter()
+        .map(|p| -slope.dot(&(p[0].translation.vector.xy() * scale)))
+        .collect();
+    (level, Some(slope))
 }
 
 /// Checks what a reader should already guarantee, so that a hand-built source fails in one line

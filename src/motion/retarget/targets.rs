@@ -53,17 +53,28 @@ impl std::str::FromStr for RestPose {
 }
 
 /// Weights of the residuals, per metre of position error and per radian of orientation error.
-/// Where the feet, the hands and the root are decides contacts and balance: they weigh most;
-/// knees and elbows next. The torso's and the limbs' roots (spine, chest, neck, head,
-/// clavicles, shoulders, hips) mostly follow their orientations: where a body's origin sits
-/// in the torso differs between skeletons (the G1's torso link starts at its waist, 4 cm above
-/// the pelvis, the humanoid's torso 24 cm above), which a position target would fight.
+/// Where the feet and the root are decides contacts and balance: they weigh most; knees next.
+/// The scale is the legs', so the legs' targets are reachable; a character's trunk and arms
+/// need not be in proportion with its legs (the G1's shoulders sit 7 cm higher over its hips
+/// than a person's scaled to its legs, its arms are 6 cm shorter), so the upper body's
+/// targets weigh half as much as their lower-body counterparts: hands and elbows that cannot
+/// be reached must not pull the pelvis down and bend the knees (at equal weights the G1 sank
+/// 8 cm). The torso's and the limbs' roots (spine, chest, neck, head, clavicles, shoulders,
+/// hips) mostly follow their orientations: where a body's origin sits in the torso differs
+/// between skeletons (the G1's torso link starts at its waist, 4 cm above the pelvis, the
+/// humanoid's torso 24 cm above), which a position target would fight.
 const END_POSITION_WEIGHT: f64 = 5.0;
 const MIDDLE_POSITION_WEIGHT: f64 = 2.0;
 const ROOT_POSITION_WEIGHT: f64 = 0.5;
+/// The upper body's position weights: its roles' counterparts' times this.
+const UPPER_BODY_POSITION_FACTOR: f64 = 0.5;
 /// The identity map's weight per metre: the bodies are the source's own, any weight holds.
 const POSITION_WEIGHT: f64 = 2.0;
 const ORIENTATION_WEIGHT: f64 = 1.0;
+
+/// A bone between two roles' joints shorter than this fraction of the leg (hip-knee-ankle) is
+/// too short to align by: its direction is noise, or none at all where the joints coincide.
+const MIN_BONE_FRACTION: f64 = 0.02;
 
 /// One pair the IK matches: the body's origin to the scaled source joint's position, the body's
 /// orientation to the source joint's orientation times `offset`.
@@ -178,6 +189,15 @@ fn identity(source: &SourceMotion, character: &Character) -> Option<Targets> {
     })
 }
 
+/// Whether the role is above the pelvis (trunk, head, arms), whose proportions to the legs
+/// differ between skeletons.
+fn is_upper_body(role: Role) -> bool {
+    !matches!(
+        role,
+        Role::Pelvis | Role::Hip(_) | Role::Knee(_) | Role::Ankle(_) | Role::Toe(_)
+    )
+}
+
 /// The role whose bone a role's bone hangs from, for the alignment's order.
 fn parent_roles(role: Role) -> Vec<Role> {
     match role {
@@ -243,10 +263,32 @@ fn by_role(
             .then(|| (source_position(r), character_position(r)))
             .and_then(|(s, c)| Some((s?, c?)))
     };
+    let leg = |position: &dyn Fn(Role) -> Option<Vector3<f64>>| {
+        let lengths: Vec<f64> = [Side::Left, Side::Right]
+            .into_iter()
+            .filter_map(|s| {
+                let hip = position(Role::Hip(s))?;
+                let ankle = position(Role::Ankle(s))?;
+                Some(match position(Role::Knee(s)) {
+                    Some(knee) => (knee - hip).norm() + (ankle - knee).norm(),
+                    None => (ankle - hip).norm(),
+                })
+            })
+            .collect();
+        (!lengths.is_empty()).then(|| lengths.iter().sum::<f64>() / lengths.len() as f64)
+    };
+    let in_common = |r: Role| common.contains(&r);
+    let source_leg = leg(&|r| source_position(r).filter(|_| in_common(r)));
+    let character_leg = leg(&|r| character_position(r).filter(|_| in_common(r)));
+    // A bone shorter than this on either side gives no direction (the G1's waist yaw link sits
+    // at its pelvis' origin, CMU's LowerBack at the Hips): the next candidate is taken.
+    let shortest = |leg: Option<f64>| leg.map_or(0.0, |l| MIN_BONE_FRACTION * l);
+    let (shortest_source, shortest_character) = (shortest(source_leg), shortest(character_leg));
     let direction = |from: Role, to: Role| {
         let (s0, c0) = both(from)?;
         let (s1, c1) = both(to)?;
-        Some((s1 - s0, c1 - c0))
+        let (s, c) = (s1 - s0, c1 - c0);
+        (s.norm() > shortest_source && c.norm() > shortest_character).then_some((s, c))
     };
     let first_direction = |from: Role, to: &[Role]| to.iter().find_map(|&t| direction(from, t));
     let lateral = |roles: [Role; 2]| direction(roles[1], roles[0]);
@@ -309,6 +351,10 @@ fn by_role(
             Role::Pelvis | Role::Ankle(_) | Role::Toe(_) | Role::Wrist(_) => END_POSITION_WEIGHT,
             Role::Knee(_) | Role::Elbow(_) => MIDDLE_POSITION_WEIGHT,
             _ => ROOT_POSITION_WEIGHT,
+        } * if is_upper_body(*role) {
+            UPPER_BODY_POSITION_FACTOR
+        } else {
+            1.0
         };
         let hips_of = |hips: [Role; 2]| {
             let source = [map.joint(hips[0])?, map.joint(hips[1])?];
@@ -343,23 +389,6 @@ fn by_role(
         });
     }
 
-    let leg = |position: &dyn Fn(Role) -> Option<Vector3<f64>>| {
-        let lengths: Vec<f64> = [Side::Left, Side::Right]
-            .into_iter()
-            .filter_map(|s| {
-                let hip = position(Role::Hip(s))?;
-                let ankle = position(Role::Ankle(s))?;
-                Some(match position(Role::Knee(s)) {
-                    Some(knee) => (knee - hip).norm() + (ankle - knee).norm(),
-                    None => (ankle - hip).norm(),
-                })
-            })
-            .collect();
-        (!lengths.is_empty()).then(|| lengths.iter().sum::<f64>() / lengths.len() as f64)
-    };
-    let in_common = |r: Role| common.contains(&r);
-    let source_leg = leg(&|r| source_position(r).filter(|_| in_common(r)));
-    let character_leg = leg(&|r| character_position(r).filter(|_| in_common(r)));
     let (Some(source_leg), Some(character_leg)) = (source_leg, character_leg) else {
         return Err(RetargetError::Source {
             source_name: source.name.clone(),
