@@ -4,7 +4,7 @@
 # the Python first: the warp-lang wheel (150 MB) goes in parts small enough to ride beside the
 # working tree under the 64 MiB a call carries (.device-py/qN: four calls, each carrying one part
 # and running `bash .device-py/qN/recv.sh`; ../shared/tools/stage-device-python.sh makes 48 MB
-# parts, too large beside a 20 MB tree: re-split with `split -b 38000000`), then, carrying
+# parts, too large beside the tree: re-split so that a part and the tree (33 MB) stay under 64 MiB, e.g. `split -b 30000000`, five parts), then, carrying
 # .device-py/small:
 #   source .device-py/small/activate.sh && tests/device/physics_reference.sh
 # Writes $OUT/reference.tgz: reference/{default,deterministic,g1}_32 (seeded initial states and
