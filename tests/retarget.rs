@@ -608,3 +608,36 @@ fn a_source_facing_another_way_gives_the_g1_the_same_joint_angles() {
         "knee {bent} rad at 0.8 rad in the source"
     );
 }
+
+/// A rest pose given as a frame: `frame:0` aligns as the first frame does, a later frame aligns
+/// differently, and a frame past the motion's end is one clear line.
+#[test]
+fn a_given_rest_frame_aligns_with_that_frame() {
+    let humanoid = Character::humanoid().expect("humanoid");
+    let g1 = Character::find("g1").expect("g1");
+    let walk = built_in_clip(&humanoid, "walk");
+    let source = source_from_fk(&humanoid, &walk, 30.0);
+    let map = own_role_map(&humanoid, &source);
+    let onto_g1 = |rest: RestPose| {
+        retarget(
+            &source,
+            Some(&map),
+            &g1,
+            &RetargetOptions { rest, fps: None },
+        )
+    };
+    assert_eq!("frame:7".parse::<RestPose>(), Ok(RestPose::Frame(7)));
+    assert!("frame:x".parse::<RestPose>().is_err());
+    let first = onto_g1(RestPose::FirstFrame).expect("first frame");
+    let frame0 = onto_g1(RestPose::Frame(0)).expect("frame 0");
+    assert_eq!(first.clip.frame_qpos(3), frame0.clip.frame_qpos(3));
+    assert_eq!(frame0.report.rest_pose, "frame:0");
+    let later = onto_g1(RestPose::Frame(10)).expect("frame 10");
+    assert_ne!(later.clip.frame_qpos(3), frame0.clip.frame_qpos(3));
+    let frames = source.num_frames();
+    let err = onto_g1(RestPose::Frame(frames)).expect_err("past the end");
+    assert!(
+        err.to_string().contains(&format!("{frames} frames")) && !err.to_string().contains('\n'),
+        "{err}"
+    );
+}

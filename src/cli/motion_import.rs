@@ -32,7 +32,7 @@ pub struct ImportArgs {
     #[arg(long)]
     out: PathBuf,
     /// The source pose the character's zero pose is aligned with: `tpose` (the file's zero
-    /// rotations) or `first-frame`.
+    /// rotations), `first-frame`, or `frame:N` (a pose the take holds at frame N).
     #[arg(long, default_value = "tpose", value_parser = parse_rest)]
     rest: RestPose,
     /// Output frames per second (default: the file's rate, divided down to at most 60).

@@ -202,7 +202,7 @@ pub fn retarget(
         rest_pose: if identity {
             "the character's own frames (identity map)".to_string()
         } else {
-            options.rest.name().to_string()
+            options.rest.name()
         },
         scale: targets.scale,
         source_leg_length_m: targets.source_leg_length,

@@ -27,13 +27,16 @@ pub enum RestPose {
     TPose,
     /// The motion's first frame (for files whose zero rotations are not a usable pose).
     FirstFrame,
+    /// A frame the user gives (0-based), e.g. a calibration pose inside the take.
+    Frame(usize),
 }
 
 impl RestPose {
-    pub fn name(self) -> &'static str {
+    pub fn name(self) -> String {
         match self {
-            RestPose::TPose => "tpose",
-            RestPose::FirstFrame => "first-frame",
+            RestPose::TPose => "tpose".to_string(),
+            RestPose::FirstFrame => "first-frame".to_string(),
+            RestPose::Frame(frame) => format!("frame:{frame}"),
         }
     }
 }
@@ -45,8 +48,12 @@ impl std::str::FromStr for RestPose {
         match text {
             "tpose" | "t-pose" => Ok(RestPose::TPose),
             "first-frame" | "first" => Ok(RestPose::FirstFrame),
+            given if given.starts_with("frame:") => given["frame:".len()..]
+                .parse()
+                .map(RestPose::Frame)
+                .map_err(|_| format!("{given:?}: give the rest frame as frame:N, N a frame index")),
             other => Err(format!(
-                "unknown rest pose {other:?}: expected tpose or first-frame"
+                "unknown rest pose {other:?}: expected tpose, first-frame or frame:N"
             )),
         }
     }
@@ -247,6 +254,14 @@ fn by_role(
     let source_rest = match rest {
         RestPose::TPose => source.rest_poses(),
         RestPose::FirstFrame => source.world_poses(0),
+        RestPose::Frame(frame) if frame < source.num_frames() => source.world_poses(frame),
+        RestPose::Frame(frame) => {
+            return Err(RetargetError::Options(format!(
+                "--rest frame:{frame}: the motion has {} frames (0 to {})",
+                source.num_frames(),
+                source.num_frames().saturating_sub(1)
+            )));
+        }
     };
     let zero = forward_kinematics(character, character.qpos0())?;
     let common: Vec<Role> = Role::ALL
