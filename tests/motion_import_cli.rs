@@ -416,3 +416,80 @@ fn an_mjlab_csv_converts_at_the_rate_given() {
     let err = one_line_error(&import("0"), "a zero source rate");
     assert!(err.contains("--source-fps"), "{err}");
 }
+
+/// The JSON inside a replay page's `<script id="recording-data">`.
+fn page_data(page: &Path) -> (String, serde_json::Value) {
+    let html = std::fs::read_to_string(page).expect("the page");
+    let open = r#"<script type="application/json" id="recording-data">"#;
+    let start = html.find(open).expect("data element") + open.len();
+    let end = start + html[start..].find("</script>").expect("end of data");
+    let data = serde_json::from_str(&html[start..end]).expect("data is JSON");
+    (html, data)
+}
+
+/// How many f32 values a base64 field of the page's data holds.
+fn f32_count(text: &serde_json::Value) -> usize {
+    use base64::Engine as _;
+    base64::engine::general_purpose::STANDARD
+        .decode(text.as_str().expect("base64 text"))
+        .expect("base64")
+        .len()
+        / 4
+}
+
+#[test]
+fn motion_view_of_a_bvh_draws_the_source_skeleton_and_a_built_in_clip_has_none() {
+    let dir = tempfile::tempdir().expect("a scratch directory");
+    let bvh = exported_walk(dir.path());
+    for character in ["humanoid", "g1"] {
+        let loaded = Character::find(character).expect("the character");
+        let imported =
+            import_motion_file(&bvh, &loaded, &ImportOptions::default()).expect("import");
+        let joints = imported.retargeted.source.names.len();
+        assert!(joints > 10, "{joints} source joints");
+        let page = dir.path().join(format!("walk_{character}.html"));
+        let out = run(
+            &[
+                "motion",
+                "view",
+                path_str(&bvh),
+                "--character",
+                character,
+                "--out",
+                path_str(&page),
+            ],
+            None,
+        );
+        let text = succeeded(&out, "motion view walk.bvh");
+        assert!(
+            text.contains(&format!("source skeleton ({joints} joints)")),
+            "{character}: {text}"
+        );
+        let (html, data) = page_data(&page);
+        let source = &data["source_skeleton"];
+        let frames = data["episodes"][0]["frames"].as_u64().expect("frames") as usize;
+        assert!(frames > 30, "{frames} frames");
+        assert_eq!(
+            source["names"],
+            serde_json::json!(imported.retargeted.source.names)
+        );
+        assert_eq!(source["parents"].as_array().map(Vec::len), Some(joints));
+        assert_eq!(
+            f32_count(&source["pos"]),
+            frames * joints * 3,
+            "{character}"
+        );
+        assert!(
+            html.contains(r#"<input id="source" type="checkbox" checked> source skeleton"#),
+            "{character}: no source-skeleton checkbox"
+        );
+    }
+
+    let page = dir.path().join("walk_built_in.html");
+    let out = run(&["motion", "view", "walk", "--out", path_str(&page)], None);
+    let text = succeeded(&out, "motion view walk");
+    assert!(!text.contains("source skeleton"), "{text}");
+    let (html, data) = page_data(&page);
+    assert!(data.get("source_skeleton").is_none());
+    assert!(!html.contains(r#"id="source""#));
+}

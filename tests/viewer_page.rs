@@ -3,7 +3,8 @@
 //! screenshot. Asserted: the canvas is not blank, the character is in view, no error reached the
 //! console, the scrubber moves the pose, and nothing was fetched (the page's own resource list
 //! and Chromium's net log, checked against a page that does fetch). A goal-task replay's page
-//! also draws the goal marker, moves it as goals are reached and counts them in its overlay.
+//! also draws the goal marker, moves it as goals are reached and counts them in its overlay. A
+//! BVH file's page draws the source skeleton, and its checkbox hides it.
 //!
 //! Needs Chromium: `$INSTANTMIMIC_CHROMIUM` or `chromium` on the PATH (tests/run.sh installs
 //! Debian's package when missing); without it the tests print a note and pass.
@@ -190,6 +191,8 @@ fn the_clip_page_works_in_a_browser_and_fetches_nothing() {
         "{result}"
     );
     assert_eq!(result["has_plot"], false);
+    // A built-in clip has no source skeleton to draw.
+    assert!(result["source"].is_null(), "{result}");
     let requests = page_requests(&net_log);
     assert!(network_urls(&requests).is_empty(), "{requests:?}");
 
@@ -347,4 +350,43 @@ fn a_goal_replay_page_draws_the_goal_and_counts_the_goals_reached() {
     assert!(green > 150, "{green} green pixels (the goal marker)");
     keep(&page);
     keep(&shot);
+}
+
+#[test]
+fn a_bvh_page_draws_the_source_skeleton_and_its_checkbox_hides_it() {
+    let Some(chromium) = chromium() else {
+        skip_support::skip("no chromium (set INSTANTMIMIC_CHROMIUM): the page was not opened");
+        return;
+    };
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let bvh = dir.path().join("walk.bvh");
+    let page = dir.path().join("walk_bvh.html");
+    for args in [
+        vec!["export", "--motion", "walk", "--format", "bvh", "--out"],
+        vec!["motion", "view"],
+    ] {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_instantmimic"));
+        command.args(&args).env_remove("INSTANTMIMIC_MOTIONS");
+        if args[0] == "export" {
+            command.arg(&bvh);
+        } else {
+            command.arg(&bvh).arg("--out").arg(&page);
+        }
+        let out = command.output().expect("the binary runs");
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let result = self_test(&chromium, dir.path(), &page, &dir.path().join("net.json"));
+    assert_clean_self_test(&result, "walk.bvh");
+    let source = &result["source"];
+    assert!(source["joints"].as_u64().unwrap_or(0) > 10, "{result}");
+    // Thin bones and small joints over the character: a few hundred pixels at 3.6 m.
+    assert!(source["pixels"].as_f64().unwrap_or(0.0) > 100.0, "{result}");
+    assert_eq!(source["joints_in_view"], true, "{result}");
+    assert_eq!(source["checkbox_hides"], true, "{result}");
+    assert_eq!(source["shown_again"], true, "{result}");
+    keep(&page);
 }

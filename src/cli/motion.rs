@@ -8,11 +8,12 @@ use clap::{Args, Subcommand};
 
 use crate::motion::character::DEFAULT_CHARACTER;
 use crate::motion::find::{MOTIONS_ENV, ResolvedMotion, resolve_motion};
+use crate::motion::retarget::ScaledSource;
 use crate::motion::summary::JointRange;
 use crate::motion::{Character, ClipSummary, ReferenceMotion};
 use crate::recording::{ClipRecordingSpec, Recording};
 use crate::train::ChosenCharacter;
-use crate::viewer::save_page;
+use crate::viewer::{SourceSkeleton, save_page_with_source};
 
 #[derive(Args, Debug)]
 pub struct MotionArgs {
@@ -68,7 +69,8 @@ enum MotionCommand {
         frame: usize,
     },
     /// Write a self-contained HTML page that plays the clip in a browser (three.js inlined, no
-    /// network needed); see docs/replay.md.
+    /// network needed); a mocap file (BVH) given as the clip also draws its source skeleton as
+    /// retargeting scaled and placed it; see docs/replay.md.
     View {
         #[command(flatten)]
         source: ClipArgs,
@@ -122,6 +124,16 @@ impl ClipArgs {
         let motion = resolved.load(&character)?;
         super::notices::print_notices(&super::notices::clip_notices(&resolved, motion.clip()));
         Ok((resolved, motion))
+    }
+
+    /// [`Self::load_resolved`], with the source skeleton of a mocap file imported on the fly.
+    fn load_with_source(&self) -> Result<(ResolvedMotion, ReferenceMotion, Option<ScaledSource>)> {
+        let character = load_character(self.character.as_deref())?;
+        let dir = super::output::motions_dir(self.motions_dir.as_deref())?;
+        let resolved = resolve_motion(&self.motion, dir.as_deref())?;
+        let (motion, source) = resolved.load_with_source(&character)?;
+        super::notices::print_notices(&super::notices::clip_notices(&resolved, motion.clip()));
+        Ok((resolved, motion, source))
     }
 }
 
@@ -204,7 +216,7 @@ pub fn run(args: MotionArgs) -> Result<()> {
             if let Some(seconds) = duration {
                 super::output::check_clip_frames(seconds, fps, "--duration")?;
             }
-            let (resolved, motion) = source.load_resolved()?;
+            let (resolved, motion, skeleton) = source.load_with_source()?;
             let label = resolved.source.label();
             let recording = Recording::from_motion(
                 &motion,
@@ -217,13 +229,28 @@ pub fn run(args: MotionArgs) -> Result<()> {
                 },
             )?;
             let title = format!("{}: reference clip", source.motion);
-            let bytes = save_page(&out, &recording, motion.character(), &title)?;
+            let skeleton = skeleton
+                .map(|s| SourceSkeleton::at_rows(&s, motion.clip(), &recording))
+                .transpose()?;
+            let bytes = save_page_with_source(
+                &out,
+                &recording,
+                motion.character(),
+                &title,
+                skeleton.as_ref(),
+            )?;
             println!(
                 "wrote {} ({:.2} MB, {} frames at {fps} Hz)",
                 out.display(),
                 bytes as f64 / 1e6,
                 recording.meta.total_frames()
             );
+            if let Some(skeleton) = &skeleton {
+                println!(
+                    "the page draws the source skeleton ({} joints) over the character",
+                    skeleton.joints()
+                );
+            }
             if let Some(path) = save_recording {
                 recording.save(&path)?;
                 println!("wrote {}", path.display());

@@ -11,8 +11,11 @@ use super::built_in::{BuiltInClip, built_in_names, find_built_in};
 use super::character::Character;
 use super::clip::MotionClip;
 use super::error::MotionError;
-use super::format::{MOTION_EXTENSIONS, is_motion_file, strip_motion_extension};
+use super::format::{
+    MOTION_EXTENSIONS, MotionFormat, import_on_the_fly, is_motion_file, strip_motion_extension,
+};
 use super::reference::ReferenceMotion;
+use super::retarget::ScaledSource;
 
 /// The environment variable naming the directory of the user's motion files.
 pub const MOTIONS_ENV: &str = "INSTANTMIMIC_MOTIONS";
@@ -59,6 +62,21 @@ impl MotionSource {
     pub fn load(&self, character: &Character) -> Result<ReferenceMotion, MotionError> {
         ReferenceMotion::new(self.load_clip(character)?, character)
     }
+
+    /// [`Self::load`], with the source skeleton when the clip is a mocap file imported on the
+    /// fly (BVH): its joints as retargeting scaled and placed them, one pose per clip frame.
+    pub fn load_with_source(
+        &self,
+        character: &Character,
+    ) -> Result<(ReferenceMotion, Option<ScaledSource>), MotionError> {
+        match self {
+            MotionSource::File(path) if MotionFormat::of_path(path) == MotionFormat::Bvh => {
+                let (clip, source) = import_on_the_fly(path, character)?;
+                Ok((ReferenceMotion::new(clip, character)?, Some(source)))
+            }
+            _ => Ok((self.load(character)?, None)),
+        }
+    }
 }
 
 /// A motion argument resolved to its clip.
@@ -75,6 +93,14 @@ impl ResolvedMotion {
     /// Reads the clip for `character` and computes its kinematics.
     pub fn load(&self, character: &Character) -> Result<ReferenceMotion, MotionError> {
         self.source.load(character)
+    }
+
+    /// [`MotionSource::load_with_source`]: the clip, and the source skeleton of a mocap file.
+    pub fn load_with_source(
+        &self,
+        character: &Character,
+    ) -> Result<(ReferenceMotion, Option<ScaledSource>), MotionError> {
+        self.source.load_with_source(character)
     }
 
     /// What a command prints on stderr about the clip it loaded, one line each: that a user's

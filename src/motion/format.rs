@@ -11,6 +11,7 @@ use super::clip::MotionClip;
 use super::error::MotionError;
 use super::import::{ImportOptions, import_motion_file};
 use super::npz::Npz;
+use super::retarget::ScaledSource;
 use super::{holosoma, mjlab};
 
 /// The extensions of motion files, as a motions directory is listed.
@@ -100,18 +101,29 @@ pub(crate) fn load_robot_clip(
             mjlab::parse_csv(&text, &file, options.csv_frame_rate, character)
         }
         MotionFormat::Npz | MotionFormat::DeepMimic => read_npz(&mut Npz::open(path)?, character),
-        MotionFormat::Bvh => {
-            let imported = import_motion_file(path, character, &ImportOptions::default()).map_err(
-                |error| MotionError::Import {
-                    file: file.clone(),
-                    character: character.name().to_string(),
-                    error: Box::new(error),
-                },
-            )?;
-            let note = imported.on_the_fly_line(&file);
-            Ok(imported.retargeted.clip.imported_as(&file, note))
-        }
+        MotionFormat::Bvh => import_on_the_fly(path, character).map(|(clip, _)| clip),
     }
+}
+
+/// Imports the mocap file at `path` onto `character` with the default settings, as a clip
+/// given on the command line is: the clip (carrying the line saying so) and the source skeleton
+/// as retargeting scaled and placed it, one pose per clip frame (what `motion view` draws).
+pub(crate) fn import_on_the_fly(
+    path: &Path,
+    character: &Character,
+) -> Result<(MotionClip, ScaledSource), MotionError> {
+    let file = path.display().to_string();
+    let imported =
+        import_motion_file(path, character, &ImportOptions::default()).map_err(|error| {
+            MotionError::Import {
+                file: file.clone(),
+                character: character.name().to_string(),
+                error: Box::new(error),
+            }
+        })?;
+    let note = imported.on_the_fly_line(&file);
+    let retargeted = imported.retargeted;
+    Ok((retargeted.clip.imported_as(&file, note), retargeted.source))
 }
 
 /// Reads holosoma's or mjlab's NPZ, told apart by their keys: holosoma's names its joints

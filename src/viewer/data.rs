@@ -10,6 +10,8 @@ use crate::motion::Character;
 use crate::motion::character::GeomShape;
 use crate::recording::{EpisodeInfo, Recording, Track};
 
+use super::source::SourceSkeleton;
+
 /// One geom in its body's frame, as the script builds it.
 #[derive(Clone, Debug, Serialize)]
 pub struct PageGeom {
@@ -48,6 +50,25 @@ pub struct PageGoals {
     pub reached: String,
 }
 
+/// The source skeleton of a mocap file imported on the fly: joint names, parents (-1 for a
+/// root) and base64 f32 `pos [rows * joints * 3]` (world, Z up).
+#[derive(Clone, Debug, Serialize)]
+pub struct PageSourceSkeleton {
+    pub names: Vec<String>,
+    pub parents: Vec<i64>,
+    pub pos: String,
+}
+
+impl PageSourceSkeleton {
+    pub fn new(source: &SourceSkeleton) -> PageSourceSkeleton {
+        PageSourceSkeleton {
+            names: source.names.clone(),
+            parents: source.parents.clone(),
+            pos: base64_f32(&source.positions),
+        }
+    }
+}
+
 /// An episode with its first row.
 #[derive(Clone, Debug, Serialize)]
 pub struct PageEpisode {
@@ -78,6 +99,10 @@ pub struct PageData {
     /// A goal-task replay's goals (the page then draws the goal and counts the goals reached
     /// instead of the ghost and the error plot).
     pub goals: Option<PageGoals>,
+    /// The source skeleton of a mocap file imported on the fly (`motion view walk.bvh`), drawn
+    /// as a stick figure beside the character; absent from the data of every other page.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub source_skeleton: Option<PageSourceSkeleton>,
 }
 
 fn base64_f32(values: &[f32]) -> String {
@@ -166,5 +191,6 @@ pub fn page_data(recording: &Recording, character: &Character, title: &str) -> P
             position: base64_f32(g.positions()),
             reached: base64_f32(g.reached()),
         }),
+        source_skeleton: None,
     }
 }

@@ -10,6 +10,7 @@
 
 mod data;
 mod index;
+mod source;
 
 use std::path::Path;
 
@@ -19,8 +20,9 @@ use crate::files::write_bytes_atomically;
 use crate::motion::Character;
 use crate::recording::Recording;
 
-pub use data::{PageData, page_data};
+pub use data::{PageData, PageSourceSkeleton, page_data};
 pub use index::{ClipPageRow, clip_page_name, index_html, save_index_page};
+pub use source::SourceSkeleton;
 
 /// three.js 0.185.1 from npm (assets/three/README.md).
 pub const THREE_CORE: &str = include_str!("../../assets/three/three.core.min.js");
@@ -52,13 +54,41 @@ fn script_safe(name: &str, text: &str) -> Result<(), ViewerError> {
     Ok(())
 }
 
+/// The page's control for the source skeleton: its checkbox (on) and a sideways shift.
+const SOURCE_CONTROLS: &str = r#"
+    <label title="the mocap file's skeleton, as retargeting scaled and placed it"><input id="source" type="checkbox" checked> source skeleton</label>
+    <label title="shift the source skeleton sideways on the screen (m)">shift <input id="source-shift" type="range" min="-1.5" max="1.5" step="0.05" value="0" aria-label="source skeleton shift"></label>"#;
+
 /// The HTML page of `recording` for `character`, titled `title`.
 pub fn page_html(
     recording: &Recording,
     character: &Character,
     title: &str,
 ) -> Result<String, ViewerError> {
-    let data = page_data(recording, character, title);
+    page_html_with_source(recording, character, title, None)
+}
+
+/// [`page_html`], with the source skeleton of a mocap file imported on the fly drawn beside the
+/// character (a checkbox in the controls shows and hides it, a slider shifts it sideways).
+/// Without one the page is [`page_html`]'s: no source data and no source controls.
+pub fn page_html_with_source(
+    recording: &Recording,
+    character: &Character,
+    title: &str,
+    source: Option<&SourceSkeleton>,
+) -> Result<String, ViewerError> {
+    let mut data = page_data(recording, character, title);
+    if let Some(source) = source {
+        let rows = recording.meta.total_frames();
+        if source.positions.len() != rows * source.joints() * 3 {
+            return Err(ViewerError::Build(format!(
+                "the source skeleton has {} values, not {rows} rows of {} joints",
+                source.positions.len(),
+                source.joints()
+            )));
+        }
+        data.source_skeleton = Some(PageSourceSkeleton::new(source));
+    }
     // JSON allows `\u003c` for `<`: then no `</script` or `<!--` can appear in the element.
     let json = serde_json::to_string(&data)
         .map_err(|e| ViewerError::Build(e.to_string()))?
@@ -76,6 +106,10 @@ pub fn page_html(
         ("{{THREE_LICENSE}}", html_escape(THREE_LICENSE)),
         ("{{THREE_CORE}}", THREE_CORE.to_string()),
         ("{{THREE_MODULE}}", THREE_MODULE.to_string()),
+        (
+            "{{SOURCE_CONTROLS}}",
+            source.map_or(String::new(), |_| SOURCE_CONTROLS.to_string()),
+        ),
         ("{{DATA}}", json),
         ("{{SCRIPT}}", SCRIPT.to_string()),
     ];
@@ -104,7 +138,18 @@ pub fn save_page(
     character: &Character,
     title: &str,
 ) -> Result<usize, ViewerError> {
-    let html = page_html(recording, character, title)?;
+    save_page_with_source(path, recording, character, title, None)
+}
+
+/// [`save_page`] of [`page_html_with_source`].
+pub fn save_page_with_source(
+    path: &Path,
+    recording: &Recording,
+    character: &Character,
+    title: &str,
+    source: Option<&SourceSkeleton>,
+) -> Result<usize, ViewerError> {
+    let html = page_html_with_source(recording, character, title, source)?;
     write_bytes_atomically(path, html.as_bytes()).map_err(|error| ViewerError::Io {
         path: path.display().to_string(),
         error,

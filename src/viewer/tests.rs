@@ -83,3 +83,84 @@ fn vendored_scripts_can_be_inlined() {
     assert!(THREE_MODULE.contains(r#"from"./three.core.min.js""#));
     assert!(THREE_LICENSE.starts_with("The MIT License"));
 }
+
+/// A two-joint source skeleton on `clip`'s key frames: joint 0 at (frame, 0, 1), joint 1 (its
+/// child) 0.5 m above it.
+fn two_joint_source(frames: usize) -> crate::motion::retarget::ScaledSource {
+    use nalgebra::Vector3;
+    crate::motion::retarget::ScaledSource {
+        names: vec!["Hips".to_string(), "Head".to_string()],
+        parents: vec![None, Some(0)],
+        positions: (0..frames)
+            .map(|f| {
+                vec![
+                    Vector3::new(f as f64, 0.0, 1.0),
+                    Vector3::new(f as f64, 0.0, 1.5),
+                ]
+            })
+            .collect(),
+    }
+}
+
+#[test]
+fn a_page_without_a_source_has_no_source_data_or_controls() {
+    let character = humanoid();
+    let recording = lagging_replay(&character, 2, 30).expect("recording");
+    let html = page_html(&recording, &character, "replay").expect("page");
+    assert_eq!(
+        html,
+        page_html_with_source(&recording, &character, "replay", None).expect("page")
+    );
+    let data = embedded_data(&html);
+    assert!(data.get("source_skeleton").is_none(), "{}", data["title"]);
+    assert!(!html.contains(r#"id="source""#) && !html.contains(r#"id="source-shift""#));
+    assert!(!html.contains("{{SOURCE_CONTROLS}}"));
+    // The controls line ends as it did before the source skeleton existed.
+    assert!(html.contains("follow</label>\n    <label>episode"));
+}
+
+#[test]
+fn a_source_skeleton_is_sampled_at_the_page_rows_and_embedded() {
+    let character = humanoid();
+    let motion = SyntheticMotion::default()
+        .reference_motion(&character)
+        .expect("clip");
+    let clip = motion.clip();
+    let dt = clip.frame_times()[1] - clip.frame_times()[0];
+    // Two frames per key frame: the odd rows fall halfway between key frames.
+    let spec = ClipRecordingSpec {
+        motion: "synthetic.bvh",
+        motion_source: "synthetic",
+        producer: "test",
+        frame_dt: dt / 2.0,
+        duration_s: None,
+    };
+    let recording = Recording::from_motion(&motion, &spec).expect("recording");
+    let rows = recording.meta.total_frames();
+    let source = two_joint_source(clip.num_frames());
+    let skeleton = SourceSkeleton::at_rows(&source, clip, &recording).expect("sampled");
+    assert_eq!(skeleton.joints(), 2);
+    assert_eq!(skeleton.parents, vec![-1, 0]);
+    assert_eq!(skeleton.positions.len(), rows * 2 * 3);
+    for row in [0, 1, 2, 7] {
+        let x = skeleton.positions[row * 6];
+        assert!((x - row as f32 / 2.0).abs() < 1e-4, "row {row}: x {x}");
+        assert!((skeleton.positions[row * 6 + 5] - 1.5).abs() < 1e-6);
+    }
+
+    let html = page_html_with_source(&recording, &character, "bvh", Some(&skeleton)).expect("page");
+    assert!(html.contains(r#"<input id="source" type="checkbox" checked> source skeleton"#));
+    assert!(html.contains(r#"id="source-shift""#));
+    let data = embedded_data(&html);
+    let page_source = &data["source_skeleton"];
+    assert_eq!(page_source["names"], serde_json::json!(["Hips", "Head"]));
+    assert_eq!(page_source["parents"], serde_json::json!([-1, 0]));
+    assert_eq!(decode(&page_source["pos"]), skeleton.positions);
+
+    // Poses that do not match the clip's frames, or the recording's rows, are refused.
+    let short = two_joint_source(clip.num_frames() - 1);
+    assert!(SourceSkeleton::at_rows(&short, clip, &recording).is_err());
+    let mut cut = skeleton.clone();
+    cut.positions.truncate(6);
+    assert!(page_html_with_source(&recording, &character, "bvh", Some(&cut)).is_err());
+}

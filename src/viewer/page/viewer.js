@@ -2,6 +2,8 @@
 // recorded bodies with three.js, plays them, and plots the tracking errors under the view. A
 // goal-task replay (data.goals) draws the goal on the ground and counts the goals reached
 // instead: its reference track is its simulated one, and it has no tracking errors to show.
+// A mocap file imported on the fly (data.source_skeleton) also draws the file's skeleton, as
+// retargeting scaled and placed it, as a stick figure over the character (or shifted sideways).
 // World frame: MuJoCo's, Z up. Quaternions in the data are (w, x, y, z); three.js wants x, y, z, w.
 
 const data = JSON.parse(document.getElementById("recording-data").textContent);
@@ -25,11 +27,16 @@ function floats(text) {
   return new Float32Array(bytes.buffer);
 }
 
-const COLORS = { simulated: 0xd9732f, reference: 0x3b7dd8, goal: 0x2e9d57 };
+const COLORS = { simulated: 0xd9732f, reference: 0x3b7dd8, goal: 0x2e9d57, source: 0xc2188b };
 const bodyCount = data.bodies.length;
 const tracks = {
   reference: { pos: floats(data.reference.pos), quat: floats(data.reference.quat) },
   simulated: data.simulated && { pos: floats(data.simulated.pos), quat: floats(data.simulated.quat) },
+};
+const sourceSkeleton = data.source_skeleton && {
+  names: data.source_skeleton.names,
+  parents: data.source_skeleton.parents,
+  pos: floats(data.source_skeleton.pos),
 };
 const goals = data.goals && { position: floats(data.goals.position), reached: floats(data.goals.reached) };
 // A goal replay's errors are against its own poses (all zero): the page shows the goals instead.
@@ -132,6 +139,34 @@ if (goals) {
   scene.add(goalMarker);
 }
 
+// The source skeleton: a sphere per joint and a thin cylinder per bone (joint to parent), drawn
+// over the character (no depth test), in a group shifted sideways along the screen.
+let sourceFigure = null;
+if (sourceSkeleton) {
+  const material = new THREE.MeshBasicMaterial({ color: COLORS.source, depthTest: false, transparent: true, opacity: 0.9 });
+  const group = new THREE.Group();
+  group.name = "source skeleton";
+  group.renderOrder = 10;
+  const jointGeometry = new THREE.SphereGeometry(0.022, 12, 8);
+  // A unit-length cylinder along +Y, stretched from joint to parent each frame.
+  const boneGeometry = new THREE.CylinderGeometry(0.008, 0.008, 1, 8).translate(0, 0.5, 0);
+  const joints = sourceSkeleton.names.map(() => {
+    const mesh = new THREE.Mesh(jointGeometry, material);
+    mesh.renderOrder = 10;
+    group.add(mesh);
+    return mesh;
+  });
+  const bones = sourceSkeleton.parents.map((parent) => {
+    if (parent < 0) return null;
+    const mesh = new THREE.Mesh(boneGeometry, material);
+    mesh.renderOrder = 10;
+    group.add(mesh);
+    return mesh;
+  });
+  scene.add(group);
+  sourceFigure = { group, joints, bones, shift: 0 };
+}
+
 // --- state -------------------------------------------------------------------------------
 const state = {
   episode: Math.min(Math.max(parseInt(params.get("episode") || "0", 10) || 0, 0), data.episodes.length - 1),
@@ -154,6 +189,33 @@ function placeCharacter(groups, track, row) {
   }
 }
 
+const UP_Y = new THREE.Vector3(0, 1, 0);
+function placeSource(row) {
+  const n = sourceSkeleton.names.length;
+  const p = sourceSkeleton.pos;
+  const at = (j) => new THREE.Vector3(p[3 * (row * n + j)], p[3 * (row * n + j) + 1], p[3 * (row * n + j) + 2]);
+  sourceFigure.joints.forEach((mesh, j) => mesh.position.copy(at(j)));
+  sourceFigure.bones.forEach((mesh, j) => {
+    if (!mesh) return;
+    const from = at(j);
+    const to = at(sourceSkeleton.parents[j]);
+    const span = to.clone().sub(from);
+    const length = span.length();
+    mesh.visible = length > 1e-6;
+    if (!mesh.visible) return;
+    mesh.position.copy(from);
+    mesh.quaternion.setFromUnitVectors(UP_Y, span.divideScalar(length));
+    mesh.scale.set(1, length, 1);
+  });
+}
+
+// The source skeleton's sideways shift: along the screen's horizontal, on the ground.
+function shiftSource() {
+  if (!sourceFigure) return;
+  const { azimuth } = state.orbit;
+  sourceFigure.group.position.set(-Math.sin(azimuth), Math.cos(azimuth), 0).multiplyScalar(sourceFigure.shift);
+}
+
 function placeCamera() {
   const { azimuth, elevation, distance } = state.orbit;
   const offset = new THREE.Vector3(
@@ -171,6 +233,7 @@ function requestRender() {
 }
 function render() {
   placeCamera();
+  shiftSource();
   renderer.render(scene, camera);
 }
 
@@ -179,6 +242,7 @@ function showFrame(frame) {
   state.frame = Math.min(Math.max(frame, 0), ep.frames - 1);
   const row = ep.first_row + state.frame;
   for (const [track, groups] of Object.entries(characters)) placeCharacter(groups, track, row);
+  if (sourceFigure) placeSource(row);
   if (state.follow) {
     const root = characters[solidTrack][0].position;
     state.target.set(root.x, root.y, 0.9);
@@ -275,6 +339,10 @@ $("ghost").addEventListener("change", (e) => {
   for (const group of characters.reference) group.visible = e.target.checked;
   render();
 });
+if (sourceFigure) {
+  $("source").addEventListener("change", (e) => { sourceFigure.group.visible = e.target.checked; render(); });
+  $("source-shift").addEventListener("input", (e) => { sourceFigure.shift = parseFloat(e.target.value) || 0; render(); });
+}
 $("follow").addEventListener("change", (e) => { state.follow = e.target.checked; showFrame(state.frame); });
 window.addEventListener("keydown", (e) => {
   if (e.target instanceof HTMLInputElement && e.target.type !== "checkbox" && e.target.type !== "range") return;
@@ -420,11 +488,11 @@ if (errors) {
 
 // --- start -----------------------------------------------------------------------------------
 const swatch = (track, label) => `<span class="swatch" style="background:#${COLORS[track].toString(16)}${track === solidTrack ? "" : "66"}"></span>${label}`;
-$("legend").innerHTML = goals
+$("legend").innerHTML = (goals
   ? swatch("simulated", "simulated") + swatch("goal", "goal")
   : tracks.simulated
     ? swatch("simulated", "simulated") + swatch("reference", "reference (ghost)")
-    : swatch("reference", "reference");
+    : swatch("reference", "reference")) + (sourceFigure ? swatch("source", "source skeleton") : "");
 $("summary").textContent = `${data.motion_source} · ${data.producer}` + (data.checkpoint ? ` · ${data.checkpoint}` : "");
 $("status").textContent = "";
 resize();
@@ -501,6 +569,32 @@ function selfTest() {
     };
     showFrame(middle);
   }
+  // The source skeleton's own pixels at frame 0, its joints in view, and the checkbox hiding it.
+  let source = null;
+  if (sourceFigure) {
+    showFrame(0);
+    const withSource = pixels();
+    sourceFigure.group.visible = false;
+    const without = pixels();
+    sourceFigure.group.visible = true;
+    const checkbox = $("source");
+    checkbox.checked = false;
+    checkbox.dispatchEvent(new Event("change", { bubbles: true }));
+    const hiddenByCheckbox = !sourceFigure.group.visible;
+    checkbox.checked = true;
+    checkbox.dispatchEvent(new Event("change", { bubbles: true }));
+    source = {
+      joints: sourceSkeleton.names.length,
+      pixels: differing(withSource, without),
+      joints_in_view: sourceFigure.joints.every((m) => {
+        const p = m.getWorldPosition(new THREE.Vector3()).project(camera);
+        return Math.abs(p.x) <= 1 && Math.abs(p.y) <= 1;
+      }),
+      checkbox_hides: hiddenByCheckbox,
+      shown_again: sourceFigure.group.visible,
+    };
+    showFrame(middle);
+  }
   const resources = performance.getEntriesByType("resource").map((r) => r.name)
     .filter((name) => !name.startsWith("blob:") && !name.startsWith("data:"));
   const result = {
@@ -516,6 +610,7 @@ function selfTest() {
     episodes: data.episodes.length,
     has_plot: !!errors,
     goal,
+    source,
     resources,
     errors: window.viewerErrors,
   };
