@@ -96,6 +96,56 @@ fn an_unknown_name_lists_the_built_in_clips_and_says_what_to_set() {
     );
 }
 
+/// Newcomer report row 32: a mistyped clip or character name is answered with the nearest
+/// names, built in or in the motions directory; a name near nothing gets no guess.
+#[test]
+fn a_mistyped_name_suggests_the_nearest_clip_or_character() {
+    let dir = synthetic_dir();
+    let cases: [(&[&str], Option<&Path>, &str); 5] = [
+        (
+            &["motion", "inspect", "bakflip"],
+            None,
+            "(did you mean \"backflip\"?)",
+        ),
+        (
+            &["train", "--motion", "wlak", "--dry-run"],
+            None,
+            "(did you mean \"walk\"?)",
+        ),
+        (
+            &["motion", "inspect", "snyth"],
+            Some(dir.path()),
+            "(did you mean \"synth\"?)",
+        ),
+        (
+            &["motion", "inspect", "walk", "--character", "humanod"],
+            None,
+            "(did you mean \"humanoid\"?)",
+        ),
+        (
+            &[
+                "train",
+                "--motion",
+                "walk",
+                "--character",
+                "g2",
+                "--dry-run",
+            ],
+            None,
+            "(did you mean \"g1\"?)",
+        ),
+    ];
+    for (args, motions_dir, hint) in cases {
+        let err = failed(&run(args, motions_dir), &format!("{args:?}"));
+        assert!(
+            err.contains(hint) && err.trim().lines().count() == 1,
+            "{args:?}: {err}"
+        );
+    }
+    let err = failed(&run(&["motion", "inspect", "nosuch"], None), "nosuch");
+    assert!(!err.contains("did you mean"), "{err}");
+}
+
 #[test]
 fn a_motions_directory_that_does_not_exist_is_an_error() {
     let dir = tempfile::tempdir().expect("temporary directory");
@@ -145,6 +195,52 @@ fn a_malformed_file_names_the_file_frame_and_column() {
     let err = failed(&out, "motion");
     assert!(
         err.contains("bad.txt") && err.contains("frame 0, column 0"),
+        "{err}"
+    );
+}
+
+/// Newcomer report row 25: an empty or whitespace-only motion file is called empty in one line
+/// that says what a motion file holds, not "EOF while parsing a value" (twice).
+#[test]
+fn an_empty_motion_file_is_called_empty_and_says_what_a_motion_file_holds() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    for (name, text) in [("empty.txt", ""), ("blank.txt", "  \n\t\n")] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).expect("write clip");
+        let path = path.to_str().expect("utf-8 path");
+        for args in [
+            &["motion", "inspect", path][..],
+            &["train", "--motion", path, "--dry-run"][..],
+        ] {
+            let err = failed(&run(args, None), &format!("{args:?}"));
+            assert!(
+                err.contains(&format!("{name}: the file is empty"))
+                    && err.contains("\"Loop\"")
+                    && err.contains("\"Frames\"")
+                    && !err.contains("EOF")
+                    && err.trim().lines().count() == 1,
+                "{args:?}: {err}"
+            );
+        }
+    }
+}
+
+/// Newcomer report row 30 asked for a hint for a BVH file; a `.bvh` is now imported on the fly
+/// (tests/motion_import_cli.rs). A BVH under a DeepMimic name (`.txt`) is named as BVH, with
+/// the two ways to read it, not "not valid JSON".
+#[test]
+fn a_bvh_file_named_txt_says_it_is_bvh_and_how_to_read_it() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let path = dir.path().join("tiny.txt");
+    std::fs::write(&path, "HIERARCHY\nROOT Hips\n{\n").expect("write clip");
+    let path = path.to_str().expect("utf-8 path");
+    let err = failed(&run(&["motion", "inspect", path], None), "a BVH as .txt");
+    assert!(
+        err.contains("tiny.txt: a BVH file")
+            && err.contains(".bvh")
+            && err.contains("instantmimic motion import")
+            && !err.contains("JSON (")
+            && err.trim().lines().count() == 1,
         "{err}"
     );
 }

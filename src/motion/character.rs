@@ -327,6 +327,10 @@ impl Character {
         }
         Err(CharacterError::Unknown {
             name: name_or_path.to_string(),
+            did_you_mean: super::suggest::did_you_mean(
+                name_or_path,
+                BUILT_IN.iter().map(|(n, _)| *n),
+            ),
             built_in: BUILT_IN
                 .iter()
                 .map(|(n, _)| *n)

@@ -120,6 +120,16 @@ pub fn read_file(path: &Path) -> Result<DeepMimicFile, MotionError> {
 /// Numbers are read from their JSON text, so a number too large for f64 (e.g. `1e999`) is
 /// reported as a non-finite value at its frame and column rather than as a JSON error.
 pub fn parse(text: &str, file: &str) -> Result<DeepMimicFile, MotionError> {
+    if text.trim().is_empty() {
+        return Err(MotionError::EmptyFile {
+            file: file.to_string(),
+        });
+    }
+    if text.trim_start().starts_with("HIERARCHY") {
+        return Err(MotionError::BvhText {
+            file: file.to_string(),
+        });
+    }
     let json_error = |source| MotionError::Json {
         file: file.to_string(),
         source,

@@ -26,10 +26,15 @@ pub enum CharacterError {
         problem: String,
     },
     #[error(
-        "no character {name:?}: give a built-in one ({built_in}) or the path of a description \
+        "no character {name:?}{did_you_mean}: give a built-in one ({built_in}) or the path of a description \
          that `python kernels_py/export_character.py --character <file.toml>` wrote (docs/characters.md)"
     )]
-    Unknown { name: String, built_in: String },
+    Unknown {
+        name: String,
+        /// ` (did you mean "g1"?)` for the nearest built-in names, or empty.
+        did_you_mean: String,
+        built_in: String,
+    },
 }
 
 /// A problem with a motion clip, a motion file, or a table built from a clip.
@@ -50,6 +55,20 @@ pub enum MotionError {
         file: String,
         source: serde_json::Error,
     },
+    /// An empty or whitespace-only DeepMimic file: said plainly, not as JSON's "EOF while parsing".
+    #[error(
+        "{file}: the file is empty; a DeepMimic motion file holds a JSON object with \"Loop\" \
+         (\"wrap\" or \"none\") and \"Frames\", a list of frames of 44 numbers each \
+         (docs/motions.md)"
+    )]
+    EmptyFile { file: String },
+    /// A BVH file under a DeepMimic file's name (`.txt`, `.json`, no extension).
+    #[error(
+        "{file}: a BVH file (it starts with HIERARCHY), read as DeepMimic's JSON for its \
+         extension; give it the extension .bvh to import it on the fly, or convert it with \
+         `instantmimic motion import {file} --out <clip.txt>` (docs/motions.md)"
+    )]
+    BvhText { file: String },
     #[error(
         "{file}: the key \"{key}\" is missing; a DeepMimic motion file needs \"Loop\" and \"Frames\""
     )]
@@ -142,14 +161,16 @@ pub enum MotionError {
         max: usize,
     },
     #[error(
-        "no motion {name:?}: not a built-in clip ({built_in}) and no such file (looked for: \
+        "no motion {name:?}{did_you_mean}: not a built-in clip ({built_in}) and no such file (looked for: \
          {tried}); pass a path to a motion file (DeepMimic .txt or .json, holosoma's or mjlab's \
-         .npz, mjlab's .csv), or a clip's name (e.g. `walk` for \
+         .npz, mjlab's .csv, a mocap .bvh), or a clip's name (e.g. `walk` for \
          humanoid3d_walk.txt) in the directory given by --motions-dir or {env}",
         env = super::find::MOTIONS_ENV
     )]
     NotFound {
         name: String,
+        /// ` (did you mean "walk"?)` for the nearest clip names, or empty.
+        did_you_mean: String,
         tried: String,
         built_in: String,
     },

@@ -7,7 +7,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::built_in::{BuiltInClip, built_in_names, find_built_in};
+use super::built_in::{BUILT_IN_CLIPS, BuiltInClip, built_in_names, find_built_in};
 use super::character::Character;
 use super::clip::MotionClip;
 use super::error::MotionError;
@@ -16,6 +16,7 @@ use super::format::{
 };
 use super::reference::ReferenceMotion;
 use super::retarget::ScaledSource;
+use super::suggest::did_you_mean;
 
 /// The environment variable naming the directory of the user's motion files.
 pub const MOTIONS_ENV: &str = "INSTANTMIMIC_MOTIONS";
@@ -185,10 +186,25 @@ pub fn resolve_motion(
         Some(clip) => Ok(resolved(MotionSource::BuiltIn(clip), None)),
         None => Err(MotionError::NotFound {
             name: motion.to_string(),
+            did_you_mean: did_you_mean_clip(motion, motions_dir),
             tried: tried.join(", "),
             built_in: built_in_names(),
         }),
     }
+}
+
+/// ` (did you mean "walk"?)` for the built-in clips and the motions directory's clips nearest
+/// a name that resolved to nothing; empty when none is close.
+fn did_you_mean_clip(motion: &str, motions_dir: Option<&Path>) -> String {
+    // The directory was checked; a listing that fails only loses its suggestions.
+    let in_dir: Vec<String> = motions_dir
+        .and_then(|dir| directory_clips(dir).ok())
+        .unwrap_or_default()
+        .into_iter()
+        .map(|clip| clip.name)
+        .collect();
+    let built_in = BUILT_IN_CLIPS.iter().map(|clip| clip.name);
+    did_you_mean(motion, in_dir.iter().map(String::as_str).chain(built_in))
 }
 
 /// A clip file in a motions directory, with the name that resolves to it.

@@ -55,6 +55,7 @@ pub mod rotation;
 pub mod skeleton_maps;
 pub mod source_columns;
 pub mod source_motion;
+pub mod suggest;
 pub mod summary;
 pub mod synthetic;
 pub mod table;

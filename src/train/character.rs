@@ -45,6 +45,11 @@ fn built_in_names() -> String {
         .join(", ")
 }
 
+/// ` (did you mean "g1"?)` for the built-in characters nearest `name`, or empty.
+fn character_did_you_mean(name: &str) -> String {
+    crate::motion::suggest::did_you_mean(name, BUILT_IN.iter().map(|(n, _)| *n))
+}
+
 fn is_built_in(name: &str) -> bool {
     BUILT_IN.iter().any(|(built_in, _)| *built_in == name)
 }
@@ -68,7 +73,8 @@ pub fn check_character_name(spec: &str) -> Result<(), String> {
         return Ok(());
     }
     Err(format!(
-        "not a built-in character ({}); a description JSON ends in .json and a character directory is written as a path with a `/` (e.g. ./{spec})",
+        "not a built-in character{} ({}); a description JSON ends in .json and a character directory is written as a path with a `/` (e.g. ./{spec})",
+        character_did_you_mean(spec),
         built_in_names()
     ))
 }
@@ -106,6 +112,7 @@ impl ChosenCharacter {
         if check_character_name(spec).is_err() {
             return Err(TrainError::UnknownCharacter {
                 name: spec.to_string(),
+                did_you_mean: character_did_you_mean(spec),
                 built_in: built_in_names(),
             });
         }

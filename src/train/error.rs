@@ -72,9 +72,14 @@ pub enum TrainError {
     Setup(String),
     /// `character` (or `--character`) names no built-in character and no path.
     #[error(
-        "no character {name:?}: give a built-in one ({built_in}), a description JSON (*.json) or a character directory (a path with a `/`, e.g. ./{name}, holding character.json, plans/ and mjwarp/)"
+        "no character {name:?}{did_you_mean}: give a built-in one ({built_in}), a description JSON (*.json) or a character directory (a path with a `/`, e.g. ./{name}, holding character.json, plans/ and mjwarp/)"
     )]
-    UnknownCharacter { name: String, built_in: String },
+    UnknownCharacter {
+        name: String,
+        /// ` (did you mean "g1"?)` for the nearest built-in names, or empty.
+        did_you_mean: String,
+        built_in: String,
+    },
     /// The plans a run would load simulate another model than its character's.
     #[error(
         "{plans} simulate {found}, but character `{name}` is {expected}: pass --character with the character of those plans, --assets with a directory of {name}'s plans, or capture them with kernels_py/capture.py (docs/characters.md)"
