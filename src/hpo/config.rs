@@ -18,6 +18,7 @@ use crate::hpo::space::{
 };
 use crate::hpo::synthetic::SyntheticSpec;
 use crate::hpo::trial::TrialSpec;
+use crate::train::toml_error_line;
 
 /// A loaded, checked HPO configuration. Everything a search needs is resolved into it (the
 /// base configuration and the prompt templates included), so a run directory's snapshot of it
@@ -133,8 +134,8 @@ impl HpoConfig {
     /// Parses a configuration from text; `origin` names it in errors, `dir` resolves its
     /// relative paths, `stem` is the default name.
     pub fn parse(text: &str, origin: &str, dir: &Path, stem: &str) -> Result<Self, HpoError> {
-        let raw: RawConfig =
-            toml::from_str(text).map_err(|e| HpoError::config(origin, e.to_string()))?;
+        let raw: RawConfig = toml::from_str(text)
+            .map_err(|e| HpoError::config(origin, toml_error_line(&e, text)))?;
         let base = load_base(&raw.base, origin, dir)?;
         let space = SearchSpace {
             params: raw
@@ -304,7 +305,14 @@ fn load_base(raw: &RawBase, origin: &str, dir: &Path) -> Result<toml::Table, Hpo
                 )
             })?;
             toml::from_str(&text).map_err(|e| {
-                HpoError::config(origin, format!("[base] file {}: {e}", path.display()))
+                HpoError::config(
+                    origin,
+                    format!(
+                        "[base] file {}: {}",
+                        path.display(),
+                        toml_error_line(&e, &text)
+                    ),
+                )
             })?
         }
         None => toml::Table::new(),

@@ -679,3 +679,62 @@ fn an_unknown_character_is_refused_naming_the_key_and_the_built_in_ones() {
         .to_string();
     assert!(err.contains("`character`"), "{err}");
 }
+
+/// Newcomer report rows 34-35: a wrong type or a negative count is said in plain words, not
+/// as serde's Rust type names ("expected u32", "expected f32"), in a file and in `--set`.
+#[test]
+fn a_wrong_type_is_said_in_plain_words() {
+    let cases = [
+        (
+            "[env]\nnum_envs = \"lots\"\n",
+            "invalid type: string \"lots\", expected a whole number from 0 to 4294967295",
+        ),
+        (
+            "[env]\nnum_envs = -4096\n",
+            "invalid value: integer `-4096`, expected a whole number from 0 to 4294967295",
+        ),
+        (
+            "[ppo]\nlearning_rate = \"fast\"\n",
+            "invalid type: string \"fast\", expected a number",
+        ),
+    ];
+    for (text, expected) in cases {
+        let e = TrainConfig::from_toml(text, "cfg.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(expected), "{text}: {e}");
+        assert!(!e.contains("u32") && !e.contains("f32"), "{text}: {e}");
+    }
+    let base = TrainConfig::with_motion("walk");
+    let set = |key: &str, value: &str| {
+        base.with_overrides(&[(key.to_string(), value.to_string())], "--set")
+            .unwrap_err()
+            .to_string()
+    };
+    let e = set("ppo.horizon", "lots");
+    assert!(
+        e.contains("expected a whole number from 0 to 4294967295") && !e.contains("u32"),
+        "{e}"
+    );
+    let e = set("ppo.learning_rate", "[1]");
+    assert!(e.contains("expected a number") && !e.contains("f32"), "{e}");
+}
+
+#[test]
+fn plain_type_names_change_only_whole_type_names() {
+    assert_eq!(
+        plain_type_names("expected u32, expected f64; expected usize"),
+        "expected a whole number from 0 to 4294967295, expected a number; expected a whole number ≥ 0"
+    );
+    assert_eq!(plain_type_names("expected a sequence"), "expected a list");
+    // Names that merely start like a type, and other words, stay.
+    for kept in [
+        "expected u32x",
+        "expected f64_thing",
+        "expected one of `num_envs`",
+        "expected a string",
+        "unexpected",
+    ] {
+        assert_eq!(plain_type_names(kept), kept);
+    }
+}

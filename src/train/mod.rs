@@ -44,6 +44,7 @@ pub use checkpoint::{
     CheckpointScan, Tensor, TensorData,
 };
 pub use clock::{ActiveClock, StopReason, StopRule};
+pub(crate) use config::toml_error_line;
 pub use config::{COMMITTED_CONFIGS, ConfigError, MAX_GPUS, RunConfig, TrainConfig};
 // The sections `TrainConfig` composes, at their old paths (they live in the layers that
 // consume them).
