@@ -788,6 +788,46 @@ fn a_cause_is_printed_once() {
     assert_eq!(err.matches("valid UTF-8").count(), 1, "{err}");
 }
 
+/// `train --help` (86 lines, advanced flags between the common ones in the newcomer report)
+/// lists the common flags first, then the rest under headings, the advanced ones last; no flag
+/// is renamed.
+#[test]
+fn train_help_lists_the_common_flags_first_and_groups_the_rest() {
+    let dir = tempfile::tempdir().unwrap();
+    let help = succeeded(&run(&["train", "--help"], None, dir.path()));
+    let at = |text: &str| {
+        help.find(text)
+            .unwrap_or_else(|| panic!("{text} not in: {help}"))
+    };
+    let order = [
+        "--motion <MOTION>",
+        "--config <CONFIG>",
+        "--out <OUT>",
+        "--dry-run",
+        "--resume <RESUME>",
+        "--device <DEVICE>",
+        "Run length:",
+        "--max-iterations <MAX_ITERATIONS>",
+        "--time-budget <TIME_BUDGET>",
+        "Configuration overrides:",
+        "--envs <ENVS>",
+        "--set <KEY=VALUE>",
+        "Motions, characters and plans:",
+        "--motions-dir <MOTIONS_DIR>",
+        "--character <CHARACTER>",
+        "--assets <ASSETS>",
+        "Several GPUs:",
+        "--gpus <GPUS>",
+        "--nccl-in-graph",
+        "Latent and goal policies:",
+        "--teacher <TEACHER>",
+        "--decoder <DECODER>",
+    ];
+    for pair in order.windows(2) {
+        assert!(at(pair[0]) < at(pair[1]), "{pair:?}: {help}");
+    }
+}
+
 #[test]
 fn the_gpu_commands_take_device_and_the_writers_out() {
     for (command, flag) in [

@@ -255,7 +255,7 @@ struct TrainGpusArgs {
 struct GemmArgs {
     /// Row counts (comma-separated): a rollout step is num_envs rows, an update minibatch
     /// num_envs x horizon / minibatches (32768 for the baseline, 4096 for the committed configs).
-    #[arg(long, value_delimiter = ',', default_values_t = [4096usize, 8192, 32768])]
+    #[arg(long, value_delimiter = ',', default_value = "4096,8192,32768")]
     rows: Vec<usize>,
     /// Layer sizes of the policy, observation first (default: the actor of
     /// configs/train/default.toml for --character).
@@ -683,5 +683,22 @@ mod tests {
             [362, 400, 200, 100, 28]
         );
         assert!(default_actor_layers("no_such").is_err());
+    }
+
+    /// `bench gemm --rows` takes its rows comma-separated, and its help shows the default
+    /// the same way (it showed `[default: 4096 8192 32768]`, newcomer report section 2).
+    #[test]
+    fn gemm_rows_default_and_parse_comma_separated() {
+        use clap::{CommandFactory, Parser};
+        #[derive(Parser)]
+        struct Gemm {
+            #[command(flatten)]
+            args: GemmArgs,
+        }
+        let parse = |args: &[&str]| Gemm::try_parse_from(args).expect("parses").args.rows;
+        assert_eq!(parse(&["gemm"]), [4096, 8192, 32768]);
+        assert_eq!(parse(&["gemm", "--rows", "32,64"]), [32, 64]);
+        let help = Gemm::command().render_long_help().to_string();
+        assert!(help.contains("[default: 4096,8192,32768]"), "{help}");
     }
 }

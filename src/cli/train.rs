@@ -45,7 +45,8 @@ enum ProgressArg {
 #[derive(Args, Debug)]
 pub struct TrainArgs {
     /// A motion name (a built-in clip such as `walk` or `backflip`, see `motion list`, or a clip
-    /// in the motions directory) or a DeepMimic motion file. A committed name without --config uses
+    /// in the motions directory) or a motion file (DeepMimic's, a robot .npz or .csv, or a .bvh
+    /// imported on the fly: docs/motions.md). A committed name without --config uses
     /// configs/train/<name>.toml (built in); other motions use configs/train/default.toml (built in).
     #[arg(long)]
     motion: Option<String>,
@@ -59,84 +60,92 @@ pub struct TrainArgs {
     /// libraries (docs/library.md).
     #[arg(long, conflicts_with = "motion")]
     library: Option<PathBuf>,
-    /// Random seed, overriding `seed`.
-    #[arg(long, allow_hyphen_values = true, value_parser = whole_number::<u64>)]
-    seed: Option<u64>,
     /// Run directory (default: runs/<motion>-seed<seed>).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Random seed, overriding `seed`.
+    #[arg(long, allow_hyphen_values = true, value_parser = whole_number::<u64>)]
+    seed: Option<u64>,
+    /// Check everything that needs no GPU and print the resolved configuration.
+    #[arg(long)]
+    dry_run: bool,
+    /// Replace the run files of a non-empty --out directory.
+    #[arg(long)]
+    overwrite: bool,
     /// Continue the run in this directory from its newest good checkpoint (its config.toml;
     /// only budgets and evaluation settings may be overridden).
     #[arg(long, conflicts_with_all = ["motion", "library", "config", "seed", "out", "overwrite", "envs", "horizon", "set"])]
     resume: Option<PathBuf>,
-    /// Replace the run files of a non-empty --out directory.
-    #[arg(long)]
-    overwrite: bool,
-    /// Check everything that needs no GPU and print the resolved configuration.
-    #[arg(long)]
-    dry_run: bool,
-    /// Number of training envs, overriding `env.num_envs` (plans exist for 4096 and 32; others
-    /// need a plan captured for them, passed with --assets).
-    #[arg(long, allow_hyphen_values = true, value_parser = whole_number::<u32>)]
-    envs: Option<u32>,
-    /// Control steps per env per iteration, overriding `ppo.horizon`.
-    #[arg(long, allow_hyphen_values = true, value_parser = whole_number::<u32>)]
-    horizon: Option<u32>,
-    /// Iteration budget, overriding `run.max_iterations`.
-    #[arg(long, allow_hyphen_values = true, value_parser = whole_number::<u64>)]
-    max_iterations: Option<u64>,
-    /// Active-time budget in seconds, overriding `run.time_budget_s`.
-    #[arg(long, allow_hyphen_values = true)]
-    time_budget: Option<f64>,
-    /// Iterations between evaluations, overriding `run.eval_interval`.
-    #[arg(long, allow_hyphen_values = true, value_parser = whole_number::<u32>)]
-    eval_interval: Option<u32>,
-    /// Write no `replay.html` (a library: no `replay/` pages) at the end of the run (overriding
-    /// `run.replay`).
-    #[arg(long)]
-    no_replay: bool,
-    /// Override any configuration key: `--set ppo.clip=0.25 --set reward.ee_frame=root`
-    /// (repeatable; applied after the other flags; values are TOML).
-    #[arg(long = "set", value_name = "KEY=VALUE", value_parser = parse_override)]
-    set: Vec<(String, String)>,
-    /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
-    /// (default: $INSTANTMIMIC_MOTIONS).
-    #[arg(long)]
-    motions_dir: Option<PathBuf>,
-    /// A directory laid out like ptx/ instead of the character's plans.
-    #[arg(long)]
-    assets: Option<PathBuf>,
-    /// The character, overriding `character`: a built-in name (`humanoid`, the default, or
-    /// `g1`), a description JSON, or a character directory (`<dir>/character.json` with its
-    /// plans in `<dir>/plans/` and their PTX in `<dir>/mjwarp/`). With --resume: the run's
-    /// character found another way (another is refused).
-    #[arg(long)]
-    character: Option<String>,
     /// How progress is shown.
     #[arg(long, value_enum, default_value_t = ProgressArg::Auto)]
     progress: ProgressArg,
     /// CUDA device ordinal.
     #[arg(long, default_value_t = 0)]
     device: usize,
+    /// Iteration budget, overriding `run.max_iterations`.
+    #[arg(help_heading = "Run length", long, allow_hyphen_values = true, value_parser = whole_number::<u64>)]
+    max_iterations: Option<u64>,
+    /// Active-time budget in seconds, overriding `run.time_budget_s`.
+    #[arg(help_heading = "Run length", long, allow_hyphen_values = true)]
+    time_budget: Option<f64>,
+    /// Iterations between evaluations, overriding `run.eval_interval`.
+    #[arg(help_heading = "Run length", long, allow_hyphen_values = true, value_parser = whole_number::<u32>)]
+    eval_interval: Option<u32>,
+    /// Write no `replay.html` (a library: no `replay/` pages) at the end of the run (overriding
+    /// `run.replay`).
+    #[arg(help_heading = "Run length", long)]
+    no_replay: bool,
+    /// Number of training envs, overriding `env.num_envs` (plans exist for 4096 and 32; others
+    /// need a plan captured for them, passed with --assets).
+    #[arg(help_heading = "Configuration overrides", long, allow_hyphen_values = true, value_parser = whole_number::<u32>)]
+    envs: Option<u32>,
+    /// Control steps per env per iteration, overriding `ppo.horizon`.
+    #[arg(help_heading = "Configuration overrides", long, allow_hyphen_values = true, value_parser = whole_number::<u32>)]
+    horizon: Option<u32>,
+    /// Override any configuration key: `--set ppo.clip=0.25 --set reward.ee_frame=root`
+    /// (repeatable; applied after the other flags; values are TOML).
+    #[arg(help_heading = "Configuration overrides", long = "set", value_name = "KEY=VALUE", value_parser = parse_override)]
+    set: Vec<(String, String)>,
+    /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
+    /// (default: $INSTANTMIMIC_MOTIONS).
+    #[arg(help_heading = "Motions, characters and plans", long)]
+    motions_dir: Option<PathBuf>,
+    /// The character, overriding `character`: a built-in name (`humanoid`, the default, or
+    /// `g1`), a description JSON, or a character directory (`<dir>/character.json` with its
+    /// plans in `<dir>/plans/` and their PTX in `<dir>/mjwarp/`). With --resume: the run's
+    /// character found another way (another is refused).
+    #[arg(help_heading = "Motions, characters and plans", long)]
+    character: Option<String>,
+    /// A directory laid out like ptx/ instead of the character's plans.
+    #[arg(help_heading = "Motions, characters and plans", long)]
+    assets: Option<PathBuf>,
     /// CUDA devices to train on together, comma-separated (`--gpus 0,1,2,3`), overriding
     /// `run.gpus`: one replica per GPU with `env.num_envs` envs each, gradients averaged through
     /// NCCL (libnccl.so.2 on the library path; see docs/train.md). One device trains on that
     /// GPU alone. A resumed run must use as many GPUs as it trained on.
-    #[arg(long, value_delimiter = ',', num_args = 1.., conflicts_with = "device")]
+    #[arg(help_heading = "Several GPUs", long, value_delimiter = ',', num_args = 1.., conflicts_with = "device")]
     gpus: Option<Vec<u32>>,
     /// With several --gpus: record NCCL's all-reduces into the iteration graph instead of
     /// running them between its parts (`run.nccl_in_graph = true`; NCCL 2.28.9 refuses the
     /// capture on the machines measured, see docs/train.md).
-    #[arg(long)]
+    #[arg(help_heading = "Several GPUs", long)]
     nccl_in_graph: bool,
     /// The library tracker's checkpoint a latent controller is distilled from (overrides
     /// `latent.teacher`; the configuration needs a `[latent]` section, docs/latent.md).
-    #[arg(long, conflicts_with = "resume")]
+    #[arg(
+        help_heading = "Latent and goal policies",
+        long,
+        conflicts_with = "resume"
+    )]
     teacher: Option<PathBuf>,
     /// A latent controller's checkpoint whose frozen decoder the goal policy drives: its action
     /// is then a residual on the prior's mean (overrides `goal.decoder`; the configuration
     /// needs a `[goal]` section, docs/goal.md).
-    #[arg(long, conflicts_with = "resume")]
+    #[arg(
+        help_heading = "Latent and goal policies",
+        long,
+        conflicts_with = "resume"
+    )]
     decoder: Option<PathBuf>,
 }
 
