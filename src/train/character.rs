@@ -73,7 +73,7 @@ pub fn check_character_name(spec: &str) -> Result<(), String> {
         return Ok(());
     }
     Err(format!(
-        "not a built-in character{} ({}); a description JSON ends in .json and a character directory is written as a path with a `/` (e.g. ./{spec})",
+        "not a built-in character{}: the built-in ones are {}; a description JSON ends in .json and a character directory is written as a path with a `/` (e.g. ./{spec})",
         character_did_you_mean(spec),
         built_in_names()
     ))
