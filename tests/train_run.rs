@@ -4,6 +4,7 @@
 //! it hold the same values (read back by our reader and by TensorBoard's own).
 
 mod skip_support;
+mod tensorboard_support;
 
 use std::io::Write;
 use std::path::Path;
@@ -742,42 +743,9 @@ fn tensorboard_event_files_hold_every_metric_by_iteration_across_a_resume() {
 /// directory: every iteration once (the resumed file's restart replaces the first file's
 /// iterations 11 and 12), with the values of `metrics.jsonl`.
 fn tensorboard_reads_back(root: &Path, records: &[IterationRecord]) {
-    let Some(python) = std::env::var_os("INSTANTMIMIC_BUILD_PYTHON") else {
-        skip_support::skip("INSTANTMIMIC_BUILD_PYTHON is not set (tests/run.sh sets it)");
+    let Some(read) = tensorboard_support::tensorboard_scalars(root) else {
         return;
     };
-    const READ: &str = r#"
-import json, sys
-try:
-    from tensorboard.backend.event_processing import event_accumulator
-except ImportError as e:
-    print("no tensorboard: " + str(e))
-    sys.exit(3)
-acc = event_accumulator.EventAccumulator(sys.argv[1], size_guidance={event_accumulator.SCALARS: 0})
-acc.Reload()
-tags = acc.Tags()["scalars"]
-print(json.dumps({t: [[e.step, e.value] for e in acc.Scalars(t)] for t in tags}))
-"#;
-    let out = std::process::Command::new(&python)
-        .args(["-c", READ])
-        .arg(root)
-        .output()
-        .expect("the build-step Python runs");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    if out.status.code() == Some(3) {
-        skip_support::skip(&format!(
-            "{} (kernels_py/requirements.txt has it; tests/run.sh installs it)",
-            stdout.trim()
-        ));
-        return;
-    }
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let read: std::collections::BTreeMap<String, Vec<(i64, f64)>> =
-        serde_json::from_str(stdout.trim()).expect("the reader's JSON");
     let returns = &read["train/return"];
     assert_eq!(
         returns.iter().map(|p| p.0).collect::<Vec<_>>(),
