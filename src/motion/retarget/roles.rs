@@ -363,16 +363,22 @@ mod tests {
             .collect()
     }
 
+    /// The (origin, body) names of `role` among `roles` from [`names`].
+    fn origin_and_body<'a>(
+        roles: &'a [(String, String, String)],
+        role: &str,
+    ) -> Option<(&'a str, &'a str)> {
+        roles
+            .iter()
+            .find(|r| r.0 == role)
+            .map(|r| (r.1.as_str(), r.2.as_str()))
+    }
+
     #[test]
     fn the_humanoid_roles_follow_its_tree() {
         let character = Character::humanoid().expect("humanoid");
         let roles = names(&character);
-        let find = |role: &str| {
-            roles
-                .iter()
-                .find(|r| r.0 == role)
-                .map(|r| (r.1.as_str(), r.2.as_str()))
-        };
+        let find = |role: &str| origin_and_body(&roles, role);
         assert_eq!(find("pelvis"), Some(("pelvis", "pelvis")));
         assert_eq!(find("chest"), Some(("torso", "torso")));
         assert_eq!(find("head"), Some(("head", "head")));
@@ -397,12 +403,7 @@ mod tests {
     fn the_g1_roles_group_its_hinges() {
         let character = Character::find("g1").expect("g1");
         let roles = names(&character);
-        let find = |role: &str| {
-            roles
-                .iter()
-                .find(|r| r.0 == role)
-                .map(|r| (r.1.as_str(), r.2.as_str()))
-        };
+        let find = |role: &str| origin_and_body(&roles, role);
         assert_eq!(find("pelvis"), Some(("pelvis", "pelvis")));
         assert_eq!(find("spine"), Some(("waist_yaw_link", "waist_roll_link")));
         assert_eq!(find("chest"), Some(("torso_link", "torso_link")));
