@@ -7,14 +7,13 @@
 //! ```
 //!
 //! - `one_gpu_*`: a world of one rank through the same NCCL code path (all-reduces between
-//!   graph parts, the default, and in the graph) gives the same update as the single-GPU update
+//!   graph parts) gives the same update as the single-GPU update
 //!   of the same batch from the same parameters (within 4 x two single-GPU updates' own spread,
 //!   their split-K sums adding with atomics, plus 1e-6 of the largest parameter), and a trainer
 //!   of a world of one starts from the single-GPU trainer's state bit for bit.
 //! - `several_gpus_*` (2 or more GPUs): the replicas stay bit-identical (equal checksums of
 //!   their whole state) for 100 iterations while their rollouts differ (all-reduces between
-//!   graph parts); with `run.nccl_in_graph = true` they stay identical or the setup fails with
-//!   NCCL's error (NCCL 2.28.9 refuses that capture); `train --gpus` writes its run, resumes on
+//!   graph parts); `train --gpus` writes its run, resumes on
 //!   as many GPUs and refuses another count; a rank waiting for a peer that never comes is
 //!   released by an abort instead of hanging; `train --gpus` sent SIGTERM stops every GPU after
 //!   the same iteration (the checkpoint's replica checksums agree), exits with 143 and resumes.
@@ -37,8 +36,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use instantmimic::cuda::{
-    CollectiveBuffer, CollectiveElement, CollectivePlacement, Communicator, DeviceRange, Gpu,
-    ReduceOp, nccl_version,
+    CollectiveBuffer, CollectiveElement, Communicator, DeviceRange, Gpu, ReduceOp, nccl_version,
 };
 use instantmimic::env::TrackedMotion;
 use instantmimic::kernels::{DeviceArray, EnvKernels};
@@ -91,15 +89,10 @@ fn values(r: &IterationReport) -> Vec<(&'static str, f64)> {
     named
 }
 
-#[test]
-fn one_gpu_a_world_of_one_rank_updates_as_the_single_gpu_update() {
-    world_of_one_update_against_the_single_gpu_update(CollectivePlacement::InGraph);
-}
-
-/// The default (`run.nccl_in_graph = false`): the update graph split at every all-reduce.
+/// The update graph split at every all-reduce.
 #[test]
 fn one_gpu_a_world_of_one_rank_with_all_reduces_between_graph_parts_updates_the_same() {
-    world_of_one_update_against_the_single_gpu_update(CollectivePlacement::BetweenGraphParts);
+    world_of_one_update_against_the_single_gpu_update();
 }
 
 /// The parameters after one whole recorded update (3 epochs x 4 minibatches, value
@@ -111,11 +104,10 @@ fn one_gpu_a_world_of_one_rank_with_all_reduces_between_graph_parts_updates_the_
 /// at its all-reduces, or holding NCCL's nodes) is scheduled differently, so after a few
 /// control steps their batches differ (measured on the H100: the first iteration's policy loss
 /// 0.8% apart while two single-GPU trainers agreed to 3e-5).
-fn world_of_one_update_against_the_single_gpu_update(placement: CollectivePlacement) {
+fn world_of_one_update_against_the_single_gpu_update() {
     if !nccl_or_skip() {
         return;
     }
-    println!("all-reduces: {placement:?}");
     let gpu = Gpu::open(0).expect("a GPU");
     let kernels = Arc::new(EnvKernels::load(&gpu).expect("env kernels"));
     let (t, n, d, a) = (8usize, 64usize, 24usize, 6usize);
@@ -132,7 +124,7 @@ fn world_of_one_update_against_the_single_gpu_update(placement: CollectivePlacem
     config.policy.critic_hidden = vec![64, 32];
     config.policy.init_log_std = -1.0;
     config.validate("test").expect("valid config");
-    let world = Communicator::create_all(&[0], placement).expect("a world of one rank");
+    let world = Communicator::create_all(&[0]).expect("a world of one rank");
     let updated = |replicas: Option<&Communicator>| {
         let policy = GaussianPolicy::new(&gpu, &config.policy, d, a, n, 5).expect("policy");
         let mut rng = StdRng::seed_from_u64(5);
@@ -218,8 +210,7 @@ fn one_gpu_a_world_of_one_rank_starts_as_the_single_gpu_trainer() {
     let store = PlanStore::new(None);
     let config = small_run_support::small_config("backflip");
     let motion = built_in_motion("backflip");
-    let world = Communicator::create_all(&[0], CollectivePlacement::BetweenGraphParts)
-        .expect("a world of one rank");
+    let world = Communicator::create_all(&[0]).expect("a world of one rank");
     let plain = Trainer::new(&gpu, &store, &motion, &config).expect("trainer");
     let mut replica = Trainer::replica(&gpu, &store, &motion, &config, &world[0]).expect("replica");
     assert_eq!(
@@ -241,39 +232,9 @@ fn several_gpus_replicas_stay_bit_identical_for_100_iterations() {
         return;
     };
     let config = small_run_support::small_config("backflip");
-    assert!(
-        !config.run.nccl_in_graph,
-        "the default: between graph parts"
-    );
     let motion = built_in_motion("backflip");
     let replicas = Replicas::start(&devices, &config, &motion, &PlanStore::new(None));
     replicas_stay_bit_identical(&mut replicas.expect("replicas"), &devices, 100, false);
-}
-
-/// `run.nccl_in_graph = true`: NCCL's all-reduces captured into the iteration graph. On the
-/// H100s measured (NCCL 2.28.9, driver 580, 2026-11-26) NCCL refuses the capture of several
-/// ranks ("dependency created on uncaptured work in another stream"): the setup must then fail
-/// with that error on every rank, not hang or crash; where NCCL takes it, the replicas must stay
-/// bit-identical as above.
-#[test]
-fn several_gpus_with_the_all_reduces_in_the_graph_stay_identical_or_fail_cleanly() {
-    let Some(devices) = several_gpus_or_skip() else {
-        return;
-    };
-    let mut config = small_run_support::small_config("backflip");
-    config.run.nccl_in_graph = true;
-    let motion = built_in_motion("backflip");
-    match Replicas::start(&devices, &config, &motion, &PlanStore::new(None)) {
-        Ok(mut replicas) => replicas_stay_bit_identical(&mut replicas, &devices, 20, true),
-        Err(e) => {
-            let text = e.to_string();
-            println!("the capture was refused: {text}");
-            assert!(
-                text.contains("NCCL") || text.contains("nccl"),
-                "not NCCL's error: {text}"
-            );
-        }
-    }
 }
 
 fn replicas_stay_bit_identical(
@@ -599,8 +560,7 @@ fn several_gpus_an_abort_releases_a_rank_whose_peer_never_comes() {
     let Some(devices) = several_gpus_or_skip() else {
         return;
     };
-    let world = Communicator::create_all(&devices[..2], CollectivePlacement::InGraph)
-        .expect("communicators");
+    let world = Communicator::create_all(&devices[..2]).expect("communicators");
     let (tx, rx) = std::sync::mpsc::channel();
     let lonely = world[0].clone();
     let waiter = std::thread::spawn(move || {

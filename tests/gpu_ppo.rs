@@ -914,7 +914,6 @@ fn concurrent_networks_follow_the_sequential_update_over_30_updates_with_the_tra
                 c.ppo.epochs = 3;
                 c.ppo.minibatches = 4;
                 c.ppo.concurrent_networks = concurrent;
-                c.ppo.overlap_update = false;
                 c.policy.actor_hidden = vec![400, 200, 100];
                 c.policy.critic_hidden = vec![400, 200, 100];
                 c.policy.gemm = gemm;

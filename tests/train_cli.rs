@@ -818,7 +818,6 @@ fn train_help_lists_the_common_flags_first_and_groups_the_rest() {
         "--assets <ASSETS>",
         "Several GPUs:",
         "--gpus <GPUS>",
-        "--nccl-in-graph",
         "Latent and goal policies:",
         "--teacher <TEACHER>",
         "--decoder <DECODER>",

@@ -26,8 +26,6 @@ fn gpus_reach_run_gpus_and_bad_lists_give_one_line() {
     // One device: that GPU alone (no NCCL), recorded in the configuration.
     let text = succeeded(&dry(&["--gpus", "3"]));
     assert_eq!(resolved_config(&text).run.gpus, vec![3]);
-    let text = succeeded(&dry(&["--gpus", "3", "--nccl-in-graph"]));
-    assert!(resolved_config(&text).run.nccl_in_graph);
     assert!(text.contains("with --envs, --gpus"), "{text}");
     assert!(!text.contains("NCCL"), "{text}");
     // No flag: the key is absent from the run's config.toml.
@@ -103,12 +101,6 @@ fn the_gpus_key_is_validated_and_left_out_when_empty() {
     let none = parse("").expect("no key");
     assert_eq!(none.run.replicas(), 1);
     assert!(!none.to_toml().unwrap().contains("gpus"));
-    // The all-reduces' placement: between graph parts unless told (and then written down).
-    assert!(!none.run.nccl_in_graph);
-    assert!(!none.to_toml().unwrap().contains("nccl_in_graph"));
-    let captured = parse("gpus = [0, 1]\nnccl_in_graph = true").expect("in the graph");
-    assert!(captured.run.nccl_in_graph);
-    assert!(captured.to_toml().unwrap().contains("nccl_in_graph = true"));
     let err = |run: &str| parse(run).unwrap_err().to_string();
     let e = err("gpus = [1, 0, 1]");
     assert!(
@@ -221,39 +213,4 @@ fn bench_train_gpus_checks_its_counts_and_devices() {
         let err = one_line_error(&run(&args, None, ws.path()));
         assert!(err.contains(expected), "{args:?}: {err}");
     }
-}
-
-/// `ppo.overlap_update` (issue 20) is built for one GPU: with one device of `--gpus` it goes
-/// through, with several it is refused in one line naming the key, before NCCL is looked for.
-#[test]
-fn overlap_update_takes_one_gpu_and_refuses_several_in_one_line() {
-    let ws = workspace();
-    let motions = ws.path().join("motions");
-    let dry = |extra: &[&str]| {
-        let mut args = vec![
-            "train",
-            "--motion",
-            "synth",
-            "--envs",
-            "32",
-            "--dry-run",
-            "--set",
-            "ppo.overlap_update=true",
-        ];
-        args.extend_from_slice(extra);
-        run(&args, Some(&motions), ws.path())
-    };
-    assert!(resolved_config(&succeeded(&dry(&[]))).ppo.overlap_update);
-    assert!(
-        resolved_config(&succeeded(&dry(&["--gpus", "2"])))
-            .ppo
-            .overlap_update
-    );
-    let err = one_line_error(&dry(&["--gpus", "0,1"]));
-    assert!(
-        err.contains("`ppo.overlap_update` = true: runs on one GPU only")
-            && err.contains("run.gpus names 2 devices")
-            && !err.contains("NCCL"),
-        "{err}"
-    );
 }

@@ -41,7 +41,6 @@ fn stats(iteration: u64) -> IterationStats {
         },
         termination: EpisodeEnds::from_counts(10.0, 4.0, [1.0, 3.0, 0.0, 0.0, 1.0]),
         parameter_squares: [100.0, 50.0],
-        extra_rollouts: 0,
     }
 }
 
@@ -542,33 +541,6 @@ fn the_learning_curve_is_a_png_with_both_series() {
     assert_eq!(count(curve::GOALS_COLOR), 0);
     // No records at all still draws (a run killed before its first iteration).
     assert!(curve::learning_curve_png(&[], "empty", 300.0, threshold).is_ok());
-}
-
-/// The overlapped loop (`ppo.overlap_update`) runs one rollout more where it fills its
-/// pipeline (its first iteration, the first after a restore): those frames count, in `frames`
-/// and in the iteration's frames/s, so frames to success stay what the GPU simulated.
-#[test]
-fn an_iteration_that_filled_the_pipeline_counts_both_rollouts() {
-    let dir = tempfile::tempdir().unwrap();
-    let root = dir.path().join("run");
-    let mut session = RunSession::start_new(&root, &config(4), false, ProgressMode::Quiet).unwrap();
-    let rollout = 64 * 8;
-    let mut frames = Vec::new();
-    for extra in [1, 0, 1, 0] {
-        session.start_iteration();
-        std::thread::sleep(std::time::Duration::from_millis(1));
-        let stats = IterationStats {
-            extra_rollouts: extra,
-            ..stats(session.iteration() + 1)
-        };
-        let step = session.finish_iteration(stats);
-        let next = session.record(step, None).unwrap();
-        frames.push(session.records().last().unwrap().frames);
-        if next.stop.is_some() {
-            break;
-        }
-    }
-    assert_eq!(frames, [2 * rollout, 3 * rollout, 5 * rollout, 6 * rollout]);
 }
 
 /// Every scalar of the run directory's event files, as (file index, tag, step, value), read with

@@ -1,14 +1,11 @@
 //! Whole training iterations against the physics floor (`bench full`, issue 20): frames per
 //! second of the rollout and the update as `train` runs them (the iteration's graph, the
 //! report's readback, the host waiting for it: what the active clock measures), once with the
-//! update after the rollout (the default), once so with the actor's and the critic's work as
-//! concurrent branches of the update (`ppo.concurrent_networks`), and once beside the next
-//! rollout (`ppo.overlap_update`), each against the physics-only floor replayed from the
-//! rollout's states (`bench rollout`'s floor, the same code), with a breakdown of the
-//! sequential iteration: the rollout's stages, the update's parts, and the rest.
-//!
-//! A frame is one control step of one env; an iteration that ran a rollout more (the
-//! overlapped loop filling its pipeline, only in the warm-up unless it is 0) counts its frames.
+//! actor's and the critic's work as concurrent branches of the update
+//! (`ppo.concurrent_networks`, the default) and once one after the other, each against the
+//! physics-only floor replayed from the rollout's states (`bench rollout`'s floor, the same
+//! code), with a breakdown of the sequential iteration: the rollout's stages, the update's
+//! parts, and the rest. A frame is one control step of one env.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -26,8 +23,6 @@ use crate::train::{TrainConfig, TrainError, Trainer};
 /// One way of running the loop, measured.
 #[derive(Clone, Debug, Serialize)]
 pub struct LoopCase {
-    /// `ppo.overlap_update`.
-    pub overlap_update: bool,
     /// `ppo.concurrent_networks`.
     pub concurrent_networks: bool,
     /// Building the trainer (plans, kernels, graphs).
@@ -71,9 +66,6 @@ pub struct FullBench {
     pub concurrent: LoopCase,
     pub concurrent_update_ms: f64,
     pub concurrent_speedup: f64,
-    pub overlapped: LoopCase,
-    /// `overlapped.frames_per_s / sequential.frames_per_s`.
-    pub overlap_speedup: f64,
     /// The sequential iteration, in milliseconds: the rollout graph alone (median round), the
     /// share of each of its stages (from the event-timed rollout graph, scaled to
     /// `rollout_ms`), the update alone (its own graph, event-timed), and the rest of a timed
@@ -86,11 +78,6 @@ pub struct FullBench {
     /// the minibatch steps, scaled to `update_ms`).
     pub update_stage_ms: BTreeMap<UpdateStage, f64>,
     pub rest_ms: f64,
-    /// The update's milliseconds per iteration that the overlap took off the sequential
-    /// iteration (`sequential.iteration_ms - overlapped.iteration_ms`), and that over
-    /// `update_ms` (1: all of it hidden).
-    pub hidden_ms: f64,
-    pub hidden_fraction: f64,
 }
 
 /// The name a report gives `motion`: the clip's, or the library's clip count.
@@ -103,9 +90,8 @@ fn motion_label(motion: TrackedMotion<'_>) -> String {
     }
 }
 
-/// Builds the trainer of `config` on `motion` (a clip, or a motion library) three times: as it
-/// is, with `ppo.concurrent_networks`, and with `ppo.overlap_update` (each with the other off),
-/// and times
+/// Builds the trainer of `config` on `motion` (a clip, or a motion library) twice: with
+/// `ppo.concurrent_networks` off and on, and times
 /// `rounds` x `iterations` whole iterations of each (after `warmup` untimed ones per round);
 /// with the sequential one also the physics-only floor from the rollout's states, the rollout
 /// graph alone, its stages and the update alone. One trainer at a time: the first is dropped
@@ -124,40 +110,34 @@ pub fn bench_full(
     }
     let rounds = rounds.max(1);
     let frames = u64::from(config.env.num_envs) * u64::from(config.ppo.horizon);
-    let variant = |overlap_update: bool, concurrent_networks: bool| {
+    let variant = |concurrent_networks: bool| {
         let mut c = config.clone();
-        c.ppo.overlap_update = overlap_update;
         c.ppo.concurrent_networks = concurrent_networks;
         c.run.gpus.clear();
         c.validate("bench full")?;
         Ok::<TrainConfig, TrainError>(c)
     };
     // Builds the variant's trainer and times its iterations; the trainer is kept for more.
-    let run = |overlap: bool, concurrent: bool| {
+    let run = |concurrent: bool| {
         let started = Instant::now();
-        let mut trainer = Trainer::new(gpu, store, motion, &variant(overlap, concurrent)?)?;
+        let mut trainer = Trainer::new(gpu, store, motion, &variant(concurrent)?)?;
         let setup_seconds = started.elapsed().as_secs_f64();
         let timed = time_rounds(&mut trainer, frames, warmup, iterations, rounds)?;
-        let mut case = timed.case(overlap, setup_seconds, trainer.iteration_graph_nodes()?);
+        let mut case = timed.case(setup_seconds, trainer.iteration_graph_nodes()?);
         case.concurrent_networks = concurrent;
         Ok::<(Trainer, LoopCase), TrainError>((trainer, case))
     };
 
     let range = NvtxRange::push("sequential");
-    let (trainer, sequential) = run(false, false)?;
+    let (trainer, sequential) = run(false)?;
     let gemm = trainer.gemm().describe();
     let parts = time_parts(gpu, &trainer, frames, warmup, iterations, rounds)?;
     drop(trainer);
     drop(range);
 
     let range = NvtxRange::push("concurrent networks");
-    let (trainer, concurrent) = run(false, true)?;
+    let (trainer, concurrent) = run(true)?;
     let concurrent_update_ms = time_update(gpu, &trainer, warmup, iterations)?;
-    drop(trainer);
-    drop(range);
-
-    let range = NvtxRange::push("overlapped");
-    let (trainer, overlapped) = run(true, false)?;
     drop(trainer);
     drop(range);
 
@@ -166,12 +146,7 @@ pub fn bench_full(
         case.ratio_to_floor = case.frames_per_s / floor;
         case
     };
-    let (sequential, concurrent, overlapped) = (
-        with_ratio(sequential),
-        with_ratio(concurrent),
-        with_ratio(overlapped),
-    );
-    let hidden_ms = sequential.iteration_ms - overlapped.iteration_ms;
+    let (sequential, concurrent) = (with_ratio(sequential), with_ratio(concurrent));
     Ok(FullBench {
         gpu: gpu.info().name.clone(),
         motion: motion_label(motion),
@@ -187,15 +162,11 @@ pub fn bench_full(
         floor_frames_per_s: floor,
         rounds_floor_frames_per_s: parts.floor,
         floor_rollout_ms: frames as f64 / floor * 1e3,
-        overlap_speedup: overlapped.frames_per_s / sequential.frames_per_s,
         concurrent_speedup: concurrent.frames_per_s / sequential.frames_per_s,
         concurrent_update_ms,
         concurrent,
         rest_ms: sequential.iteration_ms - parts.rollout_ms - parts.update_ms,
-        hidden_fraction: hidden_ms / parts.update_ms,
-        hidden_ms,
         sequential,
-        overlapped,
         rollout_ms: parts.rollout_ms,
         stage_ms: parts.stage_ms,
         update_ms: parts.update_ms,
@@ -210,12 +181,7 @@ struct TimedRounds {
 }
 
 impl TimedRounds {
-    fn case(
-        &self,
-        overlap_update: bool,
-        setup_seconds: f64,
-        graph_nodes: BTreeMap<String, usize>,
-    ) -> LoopCase {
+    fn case(&self, setup_seconds: f64, graph_nodes: BTreeMap<String, usize>) -> LoopCase {
         let frames_per_s = median(&self.frames_per_s);
         // The iteration time of the round whose frames/s is the median (or the nearest).
         let at = self
@@ -229,7 +195,6 @@ impl TimedRounds {
             })
             .map_or(0, |(i, _)| i);
         LoopCase {
-            overlap_update,
             concurrent_networks: false,
             setup_seconds,
             frames_per_s,
@@ -259,15 +224,14 @@ fn time_rounds(
         for _ in 0..warmup {
             trainer.iterate()?;
         }
-        let mut rollouts = 0u64;
         let started = Instant::now();
         for _ in 0..iterations {
-            rollouts += 1 + u64::from(trainer.iterate()?.extra_rollouts);
+            trainer.iterate()?;
         }
         let seconds = started.elapsed().as_secs_f64();
         timed
             .frames_per_s
-            .push((rollouts * frames_per_rollout) as f64 / seconds);
+            .push((u64::from(iterations) * frames_per_rollout) as f64 / seconds);
         timed.iteration_s.push(seconds / f64::from(iterations));
     }
     Ok(timed)

@@ -39,8 +39,6 @@ pub struct TrainGpusBench {
     pub envs_per_gpu: u32,
     pub horizon: u32,
     pub warmup: u32,
-    /// `run.nccl_in_graph`: the all-reduces inside the iteration graph, or between its parts.
-    pub nccl_in_graph: bool,
     pub cases: Vec<GpuCountCase>,
 }
 
@@ -126,7 +124,6 @@ pub fn bench_train_gpus(
         envs_per_gpu: config.env.num_envs,
         horizon: config.ppo.horizon,
         warmup,
-        nccl_in_graph: config.run.nccl_in_graph,
         cases,
     })
 }

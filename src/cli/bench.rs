@@ -199,9 +199,9 @@ enum BenchCommand {
     /// included) on 1, 2, ... GPUs together, as `train --gpus` runs them (NCCL needed for more
     /// than one).
     TrainGpus(TrainGpusArgs),
-    /// Frames per second of whole training iterations on one GPU as `train` runs them, with
-    /// the update after the rollout and beside the next one (`ppo.overlap_update`), against
-    /// the physics-only floor, with the time of each part.
+    /// Frames per second of whole training iterations on one GPU as `train` runs them, the
+    /// actor's and the critic's update concurrent and one after the other, against the
+    /// physics-only floor, with the time of each part.
     Full(super::bench_full::FullArgs),
 }
 
@@ -230,10 +230,6 @@ struct TrainGpusArgs {
     /// Untimed iterations before timing.
     #[arg(long, default_value_t = 3)]
     warmup: u32,
-    /// Record NCCL's all-reduces into the iteration graph instead of running them between its
-    /// parts (`run.nccl_in_graph = true`).
-    #[arg(long)]
-    nccl_in_graph: bool,
     /// Directory of your own DeepMimic motion files, looked up by name before the built-in clips
     /// (default: $INSTANTMIMIC_MOTIONS).
     #[arg(long)]
@@ -366,9 +362,6 @@ fn train_gpus(args: TrainGpusArgs) -> Result<()> {
     if let Some(character) = &args.character {
         config.character = character.clone();
     }
-    if args.nccl_in_graph {
-        config.run.nccl_in_graph = true;
-    }
     config.validate(&label)?;
     let (store, motion) =
         benchmark_inputs(&config, args.motions_dir.as_deref(), args.assets.as_deref())?;
@@ -389,17 +382,8 @@ fn train_gpus_report(r: &TrainGpusBench) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "GPU: {}; {}: {} envs per GPU, horizon {}; {} untimed iterations before each measurement; all-reduces {}",
-        r.gpu,
-        r.motion,
-        r.envs_per_gpu,
-        r.horizon,
-        r.warmup,
-        if r.nccl_in_graph {
-            "in the iteration graph"
-        } else {
-            "between graph parts"
-        }
+        "GPU: {}; {}: {} envs per GPU, horizon {}; {} untimed iterations before each measurement",
+        r.gpu, r.motion, r.envs_per_gpu, r.horizon, r.warmup,
     );
     let _ = writeln!(
         out,

@@ -1,6 +1,6 @@
-//! `instantmimic bench full`: whole training iterations, with the update after the rollout and
-//! overlapped with the next one (`ppo.overlap_update`), against the physics-only floor, with
-//! the rollout's stages and the update's parts (`crate::bench::bench_full`).
+//! `instantmimic bench full`: whole training iterations, with the actor's and the critic's
+//! update concurrent and one after the other, against the physics-only floor, with the
+//! rollout's stages and the update's parts (`crate::bench::bench_full`).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -26,7 +26,7 @@ pub(super) struct FullArgs {
     #[arg(long, conflicts_with = "motion")]
     library: Option<PathBuf>,
     /// Training configuration (TOML) instead of the motion's committed one (a clip's or a
-    /// library's); --motion or --library replaces what it trains on. Its `ppo.overlap_update`,
+    /// library's); --motion or --library replaces what it trains on. Its
     /// `ppo.concurrent_networks` and `run.gpus` are not read: each loop is measured, on --device.
     #[arg(long)]
     config: Option<PathBuf>,
@@ -68,9 +68,8 @@ pub(super) fn run(args: FullArgs) -> Result<()> {
     let mut config = config.with_overrides(&args.set, &label)?;
     args.shape.apply(&mut config);
     args.run.apply(&mut config);
-    // One GPU, --device; both settings of the overlap are measured.
+    // One GPU, --device; both settings of the concurrent networks are measured.
     config.run.gpus.clear();
-    config.ppo.overlap_update = false;
     config.ppo.concurrent_networks = false;
     config.validate(&label)?;
     let store = ChosenCharacter::of_config(&config)?.plan_store(args.run.assets.as_deref());
@@ -133,7 +132,6 @@ fn report(r: &FullBench) -> String {
     for (name, case) in [
         ("update after the rollout", &r.sequential),
         ("the same, actor and critic concurrent", &r.concurrent),
-        ("update beside the next rollout", &r.overlapped),
     ] {
         let _ = writeln!(out, "{}", row(name, case, &rounds));
     }
@@ -141,14 +139,6 @@ fn report(r: &FullBench) -> String {
         out,
         "concurrent networks: {:.3}x the frames/s; the update alone {:.2} ms against {:.2} ms",
         r.concurrent_speedup, r.concurrent_update_ms, r.update_ms
-    );
-    let _ = writeln!(
-        out,
-        "overlap: {:.3}x the frames/s; {:.2} ms of the update's {:.2} ms hidden per iteration ({:.0}%)",
-        r.overlap_speedup,
-        r.hidden_ms,
-        r.update_ms,
-        100.0 * r.hidden_fraction
     );
     let _ = writeln!(
         out,
@@ -214,9 +204,8 @@ mod tests {
     use crate::ppo::UpdateStage;
     use std::collections::BTreeMap;
 
-    fn case(overlap_update: bool, frames_per_s: f64, iteration_ms: f64) -> LoopCase {
+    fn case(frames_per_s: f64, iteration_ms: f64) -> LoopCase {
         LoopCase {
-            overlap_update,
             concurrent_networks: false,
             setup_seconds: 2.0,
             frames_per_s,
@@ -229,7 +218,7 @@ mod tests {
 
     /// The text report of made-up figures (no GPU): every figure lands in its place.
     #[test]
-    fn the_report_lists_the_three_loops_the_floor_and_the_parts() {
+    fn the_report_lists_both_loops_the_floor_and_the_parts() {
         let stage_ms = BTreeMap::from([(RolloutStage::Physics, 30.0), (RolloutStage::Policy, 1.0)]);
         let r = FullBench {
             gpu: "test GPU".to_owned(),
@@ -246,15 +235,13 @@ mod tests {
             floor_frames_per_s: 1.0e6,
             rounds_floor_frames_per_s: vec![1.0e6; 3],
             floor_rollout_ms: 16.384,
-            sequential: case(false, 0.5e6, 32.768),
+            sequential: case(0.5e6, 32.768),
             concurrent: LoopCase {
                 concurrent_networks: true,
-                ..case(false, 0.55e6, 29.79)
+                ..case(0.55e6, 29.79)
             },
             concurrent_update_ms: 12.0,
             concurrent_speedup: 1.1,
-            overlapped: case(true, 0.8e6, 20.48),
-            overlap_speedup: 1.6,
             rollout_ms: 31.0,
             stage_ms,
             update_ms: 15.0,
@@ -264,8 +251,6 @@ mod tests {
                 (UpdateStage::Adam, 1.2),
             ]),
             rest_ms: -13.232,
-            hidden_ms: 12.288,
-            hidden_fraction: 0.8192,
         };
         let text = report(&r);
         for needle in [
@@ -273,10 +258,8 @@ mod tests {
             "4096 envs, 4 physics substeps per control step, horizon 4",
             "physics floor (from the rollout's states): 1.000 M frames/s",
             "| update after the rollout | 0.500 | 0.500 | 32.77 |",
-            "| update beside the next rollout | 0.800 | 0.800 | 20.48 |",
             "| the same, actor and critic concurrent | 0.550 | 0.550 | 29.79 |",
             "concurrent networks: 1.100x the frames/s; the update alone 12.00 ms against 15.00 ms",
-            "overlap: 1.600x the frames/s; 12.29 ms of the update's 15.00 ms hidden per iteration (82%)",
             "physics",
             "update",
             "backward                       6.000 ms   18.3%  (500.0 us per minibatch step)",
@@ -286,7 +269,6 @@ mod tests {
         }
         // The JSON form carries the same fields.
         let json = serde_json::to_value(&r).expect("json");
-        assert_eq!(json["overlapped"]["overlap_update"], true);
         assert_eq!(json["concurrent"]["concurrent_networks"], true);
         assert_eq!(json["stage_ms"]["physics"], 30.0);
         assert_eq!(json["update_stage_ms"]["forward"], 3.0);

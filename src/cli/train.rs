@@ -125,11 +125,6 @@ pub struct TrainArgs {
     /// GPU alone. A resumed run must use as many GPUs as it trained on.
     #[arg(help_heading = "Several GPUs", long, value_delimiter = ',', num_args = 1.., conflicts_with = "device")]
     gpus: Option<Vec<u32>>,
-    /// With several --gpus: record NCCL's all-reduces into the iteration graph instead of
-    /// running them between its parts (`run.nccl_in_graph = true`; NCCL 2.28.9 refuses the
-    /// capture on the machines measured, see docs/train.md).
-    #[arg(help_heading = "Several GPUs", long)]
-    nccl_in_graph: bool,
     /// The library tracker's checkpoint a latent controller is distilled from (overrides
     /// `latent.teacher`; the configuration needs a `[latent]` section, docs/latent.md).
     #[arg(
@@ -171,10 +166,6 @@ impl TrainArgs {
         if let Some(gpus) = &self.gpus {
             config.run.gpus = gpus.clone();
             flags.push("--gpus");
-        }
-        if self.nccl_in_graph {
-            config.run.nccl_in_graph = true;
-            flags.push("--nccl-in-graph");
         }
     }
 
@@ -428,15 +419,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let nccl = if config.run.data_parallel() {
         let (version, library) = nccl_version()?;
         Some(format!(
-            "GPUs {:?}: {} envs each ({} in all), NCCL {version} ({library}), all-reduces {}",
+            "GPUs {:?}: {} envs each ({} in all), NCCL {version} ({library})",
             config.run.gpus,
             config.env.num_envs,
             u64::from(config.env.num_envs) * config.run.gpus.len() as u64,
-            if config.run.nccl_in_graph {
-                "in the iteration graph"
-            } else {
-                "between graph parts"
-            }
         ))
     } else {
         None

@@ -62,8 +62,7 @@ enum Part {
     /// A captured stretch of work, launched as one CUDA graph (field order: the exec is
     /// destroyed before its graph).
     Graph { exec: OwnedExec, graph: OwnedGraph },
-    /// An all-reduce queued between two captured stretches, when its communicator places
-    /// collectives there (`CollectivePlacement::BetweenGraphParts`).
+    /// An NCCL all-reduce queued between two captured stretches.
     Collective(RecordedCollective),
 }
 
@@ -89,8 +88,7 @@ impl Drop for OwnedGraph {
 /// use: the modules of its kernels, the device allocations its launches, memsets, copies and
 /// conditional nodes address, and the pinned host memory its copies read.
 ///
-/// Usually one CUDA graph; a capture whose NCCL all-reduces run between graph parts
-/// (`CollectivePlacement::BetweenGraphParts`) is several, launched in order with the
+/// Usually one CUDA graph; a capture with NCCL all-reduces is several, launched in order with the
 /// all-reduces queued between them.
 pub struct Graph {
     // Field order is drop order: the parts (execs, then their graphs) go before the modules,

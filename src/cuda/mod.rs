@@ -49,8 +49,8 @@ pub use graph::Graph;
 pub use memory::{DeviceMemory, PinnedHostMemory};
 pub use module::{Function, Module};
 pub use nccl::{
-    CollectiveBuffer, CollectiveElement, CollectivePlacement, Communicator, MIN_NCCL_VERSION,
-    NCCL_HELP, ReduceOp, describe_version as describe_nccl_version, nccl_version,
+    CollectiveBuffer, CollectiveElement, Communicator, MIN_NCCL_VERSION, NCCL_HELP, ReduceOp,
+    describe_version as describe_nccl_version, nccl_version,
 };
 pub use nvtx::NvtxRange;
 pub use ptx::{PtxIsa, lower_ptx_version, prepare_ptx};

@@ -53,10 +53,10 @@ pub struct EnvConfig {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub clip_base_share: Option<f32>,
     /// What computes the body kinematics the reward and observation read, after the physics
-    /// substeps and after a reset: MuJoCo Warp's kinematics plan (default), or one kernel of
-    /// ours for those outputs only, after a reset only for the envs reset (docs/env.md, "Fused
-    /// body kinematics"). Written only when not the default.
-    #[serde(skip_serializing_if = "BodyKinematics::is_plan")]
+    /// substeps and after a reset: one kernel of ours for those outputs only, after a reset
+    /// only for the envs reset (the default; docs/env.md, "Fused body kinematics"), or MuJoCo
+    /// Warp's kinematics plan over every world (for a character with chains deeper than the
+    /// fused kernel composes).
     pub body_kinematics: BodyKinematics,
 }
 
@@ -66,17 +66,11 @@ pub struct EnvConfig {
 pub enum BodyKinematics {
     /// The kinematics plan (MuJoCo Warp's `fwd_kinematics` and `com_vel`) over every world,
     /// after the physics substeps and again after the masked reset.
-    #[default]
     Plan,
     /// `body_frames` and `body_velocities`: `xpos`, `xquat`, the center of mass and `cvel` in two
     /// launches, after a reset only for the envs that were reset.
+    #[default]
     Fused,
-}
-
-impl BodyKinematics {
-    fn is_plan(&self) -> bool {
-        *self == BodyKinematics::Plan
-    }
 }
 
 /// `env.phase_share` (kernels_py/env/reset.py `phase_statistics_update`).
@@ -118,7 +112,7 @@ impl Default for EnvConfig {
             phase_decay: 0.99,
             phase_share: PhaseShare::Resets,
             clip_base_share: None,
-            body_kinematics: BodyKinematics::Plan,
+            body_kinematics: BodyKinematics::Fused,
         }
     }
 }

@@ -29,7 +29,7 @@ impl Default for PolicyConfig {
             init_log_std: -2.0,
             init_hidden_gain: std::f32::consts::SQRT_2,
             init_output_gain: 0.01,
-            gemm: GemmSetting::Auto,
+            gemm: GemmSetting::AutoTf32,
         }
     }
 }
@@ -90,20 +90,12 @@ pub struct PpoConfig {
     /// over all T + 1 observation rows at the start of the update (the rollout runs the actor
     /// only; the default). Same values, a different cost split (docs/ppo.md).
     pub values_in_update: bool,
-    /// Run the update of each iteration's batch beside the next iteration's rollout (two
-    /// branches of one CUDA graph) instead of after it (docs/train.md, "Overlapping the
-    /// update"): the rollout samples from a copy of the parameters taken before each update,
-    /// one update behind, and the PPO ratio (log-probabilities stored at sampling time)
-    /// corrects for the lag. One GPU only. Off by default: on the H100 it hid 9% of the
-    /// update and the lag took the backflip 2.9x the frames (BENCHMARKS.md).
-    pub overlap_update: bool,
     /// Record the actor's and the critic's forward passes, backward passes and Adam steps of
     /// each minibatch as two branches of the update's graph, which the GPU may run at the same
     /// time (the critic then has its own cuBLAS handle and scratch), instead of one after the
     /// other. The same operations on the same data: the same update, bit for bit
-    /// (docs/ppo.md, "Concurrent networks"). Off by default until measured on a GPU. Left out
-    /// of written configurations when off, so their checkpoints stay readable by older builds.
-    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    /// (docs/ppo.md, "Concurrent networks"). On by default: the loop's frames/s went up on
+    /// every GPU measured (BENCHMARKS.md, `bench full`).
     pub concurrent_networks: bool,
     /// A floor under the actor's log standard deviations, applied after every Adam step (none:
     /// no floor). With many clips the easy ones pull the one shared log std down until the hard
@@ -132,8 +124,7 @@ impl Default for PpoConfig {
             kl_measure: KlMeasure::Sample,
             adaptive_learning_rate: true,
             values_in_update: true,
-            overlap_update: false,
-            concurrent_networks: false,
+            concurrent_networks: true,
             min_log_std: None,
             max_grad_norm: 1.0,
         }

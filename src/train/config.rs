@@ -43,12 +43,84 @@ pub enum ConfigError {
     },
     #[error("cannot write the configuration as TOML: {0}")]
     Serialize(String),
+    /// A key that was measured, rejected and removed, at a value other than the one every run
+    /// had.
+    #[error("{path}: `{key}` was removed: {why}; delete the key")]
+    Retired {
+        path: String,
+        key: String,
+        why: &'static str,
+    },
     /// A `[motion_library]` section that cannot be used (the message names the key).
     #[error("{path}: {error}")]
     Library {
         path: String,
         error: MotionLibraryError,
     },
+}
+
+/// A key that configurations once had and no longer do: measured, rejected and removed. Run
+/// directories and checkpoints written before then hold it at `value`.
+pub struct RetiredKey {
+    pub section: &'static str,
+    pub name: &'static str,
+    /// The value every written configuration held (the default then).
+    pub value: bool,
+    /// Why it went, and where the measurement is.
+    pub why: &'static str,
+}
+
+impl RetiredKey {
+    fn key(&self) -> String {
+        format!("{}.{}", self.section, self.name)
+    }
+
+    fn error(&self, path: &str) -> ConfigError {
+        ConfigError::Retired {
+            path: path.to_owned(),
+            key: self.key(),
+            why: self.why,
+        }
+    }
+}
+
+/// Every retired key.
+pub const RETIRED_KEYS: &[RetiredKey] = &[
+    RetiredKey {
+        section: "ppo",
+        name: "overlap_update",
+        value: false,
+        why: "the update beside the next rollout hid 9% of the update on the H100 and its one-update lag took the backflip 2.9x the frames (BENCHMARKS.md)",
+    },
+    RetiredKey {
+        section: "run",
+        name: "nccl_in_graph",
+        value: false,
+        why: "NCCL refused to capture several ranks' all-reduces on every machine measured; they run between parts of the iteration graph (BENCHMARKS.md)",
+    },
+];
+
+/// Removes every retired key of `table` that holds the value all runs had; true when one was
+/// removed. Another value is an error: the run asked for something this build cannot do.
+fn drop_retired_keys(table: &mut toml::Table, path: &str) -> Result<bool, ConfigError> {
+    let mut dropped = false;
+    for retired in RETIRED_KEYS {
+        let Some(section) = table
+            .get_mut(retired.section)
+            .and_then(toml::Value::as_table_mut)
+        else {
+            continue;
+        };
+        match section.get(retired.name) {
+            None => {}
+            Some(toml::Value::Boolean(v)) if *v == retired.value => {
+                section.remove(retired.name);
+                dropped = true;
+            }
+            Some(_) => return Err(retired.error(path)),
+        }
+    }
+    Ok(dropped)
 }
 
 /// A TOML error as one line: "line 24, column 1 (`num_envz = 12`): unknown field `num_envz`,
@@ -204,13 +276,6 @@ pub struct RunConfig {
     /// (docs/train.md, "Several GPUs"). Empty (the default) or one device: one GPU, no NCCL.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub gpus: Vec<u32>,
-    /// With several `gpus`: run the NCCL all-reduces between parts of the iteration's CUDA
-    /// graph (false, the default: the graph is split at each all-reduce), or record them into
-    /// it (true). On the H100s measured (NCCL 2.28.9, driver 580, 2026-11-26) the capture of
-    /// several ranks' all-reduces fails ("dependency created on uncaptured work in another
-    /// stream"), and the split graph scales at 97% (BENCHMARKS.md, "Several GPUs").
-    #[serde(skip_serializing_if = "std::ops::Not::not")]
-    pub nccl_in_graph: bool,
 }
 
 impl Default for RunConfig {
@@ -230,7 +295,6 @@ impl Default for RunConfig {
             max_divergence_restores: 3,
             replay: true,
             gpus: Vec::new(),
-            nccl_in_graph: false,
         }
     }
 }
@@ -423,12 +487,24 @@ impl TrainConfig {
         }
     }
 
-    /// Parses and validates TOML text; `name` labels errors.
+    /// Parses and validates TOML text; `name` labels errors. A retired key at the value every
+    /// run had ([`RETIRED_KEYS`]: older run directories and checkpoints write it) is dropped;
+    /// at another value it is an error that says why it went.
     pub fn from_toml(text: &str, name: &str) -> Result<TrainConfig, ConfigError> {
-        let config: TrainConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+        let parse_error = |message: String| ConfigError::Parse {
             path: name.to_string(),
-            message: toml_error_line(&e, text),
-        })?;
+            message,
+        };
+        let mut table = text
+            .parse::<toml::Table>()
+            .map_err(|e| parse_error(toml_error_line(&e, text)))?;
+        let config: TrainConfig = if drop_retired_keys(&mut table, name)? {
+            table
+                .try_into()
+                .map_err(|e: toml::de::Error| parse_error(plain_type_names(e.message().trim())))?
+        } else {
+            toml::from_str(text).map_err(|e| parse_error(toml_error_line(&e, text)))?
+        };
         config.validate(name)?;
         Ok(config)
     }
@@ -767,18 +843,6 @@ impl TrainConfig {
                 ));
             }
         }
-        // The overlapped loop is built for one GPU's iteration graph; the replicas' all-reduces
-        // run between parts of theirs (docs/train.md, "Overlapping the update").
-        if q.overlap_update && run.data_parallel() {
-            return Err(bad(
-                "ppo.overlap_update",
-                "true".to_owned(),
-                &format!(
-                    "runs on one GPU only, and run.gpus names {} devices {gpus:?}: train on one GPU or leave ppo.overlap_update off",
-                    gpus.len()
-                ),
-            ));
-        }
         // The returns' count of one update over every GPU is an i32 on the device.
         let all_samples = samples * run.replicas() as u64;
         if all_samples > i32::MAX as u64 {
@@ -801,10 +865,10 @@ impl TrainConfig {
                 "must divide ppo.horizon x env.num_envs (the rows of one rollout)"
             );
             check!(
-                !run.data_parallel() && !q.overlap_update,
+                !run.data_parallel(),
                 "latent",
                 "[latent]",
-                "the latent controller trains on one GPU, rollout then update (leave run.gpus and ppo.overlap_update off)"
+                "the latent controller trains on one GPU (leave run.gpus out)"
             );
             check!(
                 self.goal.is_none(),
@@ -847,6 +911,9 @@ impl TrainConfig {
                     "--set {key}={text}: no such key (use section.name, e.g. ppo.clip)"
                 ))
             })?;
+            if let Some(retired) = RETIRED_KEYS.iter().find(|r| r.key() == *key) {
+                return Err(retired.error(label));
+            }
             let name = parts[parts.len() - 1].to_string();
             table.insert(name, value);
         }

@@ -75,13 +75,17 @@ fn action_mode_is_residual_unless_the_config_says_absolute() {
 }
 
 #[test]
-fn gemm_is_auto_unless_the_config_names_a_path() {
-    assert_eq!(TrainConfig::with_motion("w").policy.gemm, GemmSetting::Auto);
+fn gemm_is_auto_tf32_unless_the_config_names_a_path() {
+    assert_eq!(
+        TrainConfig::with_motion("w").policy.gemm,
+        GemmSetting::AutoTf32
+    );
     let parse = |v: &str| {
         TrainConfig::from_toml(&format!("motion = \"w\"\n[policy]\ngemm = {v}"), "c.toml")
     };
     for (text, setting) in [
         ("\"warp\"", GemmSetting::Warp),
+        ("\"auto\"", GemmSetting::Auto),
         ("\"cublas_tf32\"", GemmSetting::CublasTf32),
     ] {
         assert_eq!(parse(text).unwrap().policy.gemm, setting);
@@ -319,64 +323,52 @@ fn overrides_set_any_key_and_are_validated() {
     }
 }
 
+/// A retired key (measured and removed) at the value older run directories and checkpoints
+/// hold is read and dropped; at another value, and through --set, it is refused in one line
+/// that says it was removed and why.
 #[test]
-fn overlap_update_is_off_by_default_and_refused_on_several_gpus() {
-    let c = TrainConfig::with_motion("walk");
-    assert!(!c.ppo.overlap_update);
-    for (name, _) in COMMITTED_CONFIGS {
-        let (_, committed) = TrainConfig::committed(name).unwrap();
-        assert!(!committed.unwrap().ppo.overlap_update, "{name}");
+fn retired_keys_are_dropped_at_their_old_value_and_refused_at_another() {
+    use crate::train::RETIRED_KEYS;
+    let walk = TrainConfig::with_motion("walk");
+    for retired in RETIRED_KEYS {
+        let key = format!("{}.{}", retired.section, retired.name);
+        let section = format!(
+            "[{}]\n{} = {}",
+            retired.section, retired.name, retired.value
+        );
+        let text = format!("motion = \"walk\"\n{section}");
+        let old = TrainConfig::from_toml(&text, "old.toml").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(old, walk, "{key}");
+        let other = format!(
+            "motion = \"walk\"\n[{}]\n{} = {}",
+            retired.section, retired.name, !retired.value
+        );
+        let e = TrainConfig::from_toml(&other, "new.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with(&format!("new.toml: `{key}` was removed: "))
+                && e.contains("BENCHMARKS.md")
+                && e.ends_with("delete the key")
+                && !e.contains('\n'),
+            "{e}"
+        );
+        let e = walk
+            .with_overrides(&[(key.clone(), "true".to_owned())], "walk with --set")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(&format!("`{key}` was removed")), "{e}");
+        // Written configurations no longer name it.
+        assert!(!walk.to_toml().unwrap().contains(retired.name));
     }
-    let parse =
-        |text: &str| TrainConfig::from_toml(&format!("motion = \"walk\"\n{text}"), "c.toml");
-    let on = parse("[ppo]\noverlap_update = true").unwrap();
-    assert!(on.ppo.overlap_update);
-    // One device of run.gpus is one GPU: allowed, as is either place of the values.
-    for text in [
-        "[ppo]\noverlap_update = true\n[run]\ngpus = [2]",
-        "[ppo]\noverlap_update = true\nvalues_in_update = false",
-    ] {
-        parse(text).unwrap_or_else(|e| panic!("{text}: {e}"));
-    }
-    let e = parse("[ppo]\noverlap_update = true\n[run]\ngpus = [0, 1]")
-        .unwrap_err()
-        .to_string();
-    assert!(
-        e.starts_with("c.toml: ")
-            && e.contains("`ppo.overlap_update` = true")
-            && e.contains("one GPU")
-            && e.contains("run.gpus")
-            && !e.contains('\n'),
-        "{e}"
-    );
-    // --set reaches it, and the refusal names the key there too.
-    let set = |pairs: &[(&str, &str)]| {
-        let pairs: Vec<(String, String)> = pairs
-            .iter()
-            .map(|(k, v)| (k.to_string(), v.to_string()))
-            .collect();
-        c.with_overrides(&pairs, "walk with --set")
-    };
-    assert!(
-        set(&[("ppo.overlap_update", "true")])
-            .unwrap()
-            .ppo
-            .overlap_update
-    );
-    let e = set(&[("ppo.overlap_update", "true"), ("run.gpus", "[0, 1, 2]")])
-        .unwrap_err()
-        .to_string();
-    assert!(
-        e.contains("ppo.overlap_update") && e.contains("3 devices"),
-        "{e}"
-    );
-    let e = set(&[("ppo.overlap_update", "yes")])
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("overlap_update"), "{e}");
-    // The key round-trips through a run's config.toml.
-    let back = TrainConfig::from_toml(&on.to_toml().unwrap(), "round trip").unwrap();
-    assert_eq!(back, on);
+    // Other errors of a file with a retired key still name the key at fault.
+    let e = TrainConfig::from_toml(
+        "motion = \"walk\"\n[ppo]\noverlap_update = false\nclip = \"wide\"",
+        "c.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("clip") || e.contains("number"), "{e}");
 }
 
 #[test]
@@ -543,16 +535,30 @@ fn latent_and_goal_are_alternatives() {
     assert!(e.contains("[latent]") && e.contains("[goal]"), "{e}");
 }
 
+/// The winners of the measurements are the defaults (concurrent networks, fused body
+/// kinematics, TF32 GEMMs with a fallback), and a written configuration names each, so that a
+/// run resumes with what it trained with.
 #[test]
-fn concurrent_networks_is_written_only_when_on() {
-    let mut c = TrainConfig::with_motion("walk");
-    let off = c.to_toml().unwrap();
-    assert!(!off.contains("concurrent_networks"), "{off}");
-    c.ppo.concurrent_networks = true;
-    let on = c.to_toml().unwrap();
-    assert!(on.contains("concurrent_networks = true"), "{on}");
-    let back = TrainConfig::from_toml(&on, "on.toml").unwrap();
-    assert!(back.ppo.concurrent_networks);
+fn the_fast_paths_are_the_defaults_and_written_out() {
+    use crate::env::BodyKinematics;
+    use crate::ppo::GemmSetting;
+    let c = TrainConfig::with_motion("walk");
+    assert!(c.ppo.concurrent_networks);
+    assert_eq!(c.env.body_kinematics, BodyKinematics::Fused);
+    assert_eq!(c.policy.gemm, GemmSetting::AutoTf32);
+    let text = c.to_toml().unwrap();
+    for needle in [
+        "concurrent_networks = true",
+        "body_kinematics = \"fused\"",
+        "gemm = \"auto_tf32\"",
+    ] {
+        assert!(text.contains(needle), "{needle} in {text}");
+    }
+    let mut off = c.clone();
+    off.ppo.concurrent_networks = false;
+    off.env.body_kinematics = BodyKinematics::Plan;
+    let back = TrainConfig::from_toml(&off.to_toml().unwrap(), "off.toml").unwrap();
+    assert_eq!(back, off);
 }
 
 #[test]
@@ -596,24 +602,19 @@ fn phase_share_is_resets_unless_the_config_says_frames_and_written_only_then() {
 }
 
 #[test]
-fn body_kinematics_is_the_plan_unless_the_config_says_fused_and_written_only_then() {
+fn body_kinematics_takes_plan_or_fused_and_names_the_key_otherwise() {
     use crate::env::BodyKinematics;
-    let mut c = TrainConfig::with_motion("walk");
-    assert_eq!(c.env.body_kinematics, BodyKinematics::Plan);
-    assert!(!c.to_toml().unwrap().contains("body_kinematics"));
-    c.env.body_kinematics = BodyKinematics::Fused;
-    let on = c.to_toml().unwrap();
-    assert!(on.contains("body_kinematics = \"fused\""), "{on}");
-    let back = TrainConfig::from_toml(&on, "on.toml").unwrap();
-    assert_eq!(back.env.body_kinematics, BodyKinematics::Fused);
     let set = TrainConfig::with_motion("walk")
         .with_overrides(
-            &[("env.body_kinematics".to_owned(), "fused".to_owned())],
+            &[("env.body_kinematics".to_owned(), "plan".to_owned())],
             "walk",
         )
         .unwrap();
-    assert_eq!(set.env.body_kinematics, BodyKinematics::Fused);
-    let bad = on.replace("\"fused\"", "\"kernel\"");
+    assert_eq!(set.env.body_kinematics, BodyKinematics::Plan);
+    let bad = set
+        .to_toml()
+        .unwrap()
+        .replace("body_kinematics = \"plan\"", "body_kinematics = \"kernel\"");
     let e = TrainConfig::from_toml(&bad, "bad.toml")
         .unwrap_err()
         .to_string();

@@ -211,13 +211,6 @@ pub fn validate_goal(config: &TrainConfig, path: &str) -> Result<(), ConfigError
             "the goal task trains on one GPU for now",
         );
     }
-    if config.ppo.overlap_update {
-        return bad(
-            "ppo.overlap_update",
-            "true".to_owned(),
-            "the goal task reads its counters after each iteration's rollout: leave it off",
-        );
-    }
     Ok(())
 }
 
@@ -266,9 +259,6 @@ mod tests {
         let mut c = goal_config();
         c.obs.future_frames = 2;
         assert_eq!(key_of(&c), Some("obs.future_frames"));
-        let mut c = goal_config();
-        c.ppo.overlap_update = true;
-        assert_eq!(key_of(&c), Some("ppo.overlap_update"));
         // No [goal] section: tracking, nothing of the goal task is checked.
         assert_eq!(key_of(&TrainConfig::with_motion("walk")), None);
     }

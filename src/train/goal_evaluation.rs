@@ -65,7 +65,6 @@ pub fn check_goal_checkpoint(
     }
     // Only the evaluation's worlds are simulated; it never trains.
     config.env.num_envs = config.run.eval_envs;
-    config.ppo.overlap_update = false;
     let (mut checks, motion) = preflight_training(&config, motions_dir, store)?;
     let decoder = load_goal_decoder(&config, motion.tracked().character())?;
     match &decoder {

@@ -224,12 +224,6 @@ pub fn train_with<'a>(
     let mut trainer = Trainer::new(gpu, store, motion, session.config())?;
     let scorer = Scorer::new(trainer.evaluation_rollout().0, motion, session.config())?;
     let mut notes = vec![format!("GEMMs: {}", trainer.gemm().describe())];
-    if trainer.overlaps_update() {
-        notes.push(
-            "ppo.overlap_update: each update runs beside the next rollout, which samples from the parameters one update behind (docs/train.md, \"Overlapping the update\")"
-                .to_owned(),
-        );
-    }
     if let Some(goal) = config.goal.as_ref().filter(|g| !g.decoder.is_empty()) {
         notes.push(format!(
             "goal policy in the latent action space of {} (decoder, prior and observation statistics frozen; docs/goal.md)",
@@ -626,8 +620,6 @@ pub fn evaluation_trainer(
 ) -> Result<Trainer, TrainError> {
     let mut small = config.clone();
     small.env.num_envs = config.run.eval_envs;
-    // It never trains: the overlapped loop's graphs would only cost setup time.
-    small.ppo.overlap_update = false;
     let mut trainer = Trainer::new(gpu, store, motion, &small)?;
     trainer.restore(checkpoint)?;
     Ok(trainer)

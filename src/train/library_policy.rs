@@ -156,7 +156,6 @@ pub fn prepare_library_policy(
     }
     // Only the evaluation's worlds are simulated: plans for the training count are not needed.
     config.env.num_envs = config.run.eval_envs;
-    config.ppo.overlap_update = false;
     let (mut preflight, motion) = preflight_training(&config, motions_dir, store)?;
     if let (Some(path), TrainMotion::Library { library, .. }) = (library, &motion) {
         // Names the library scored in the messages, not the stored configuration's.

@@ -26,7 +26,6 @@ pub mod library;
 pub mod library_evaluation;
 pub mod library_policy;
 pub mod metrics;
-mod pipeline;
 pub mod preflight;
 mod progress;
 pub mod replicas;
@@ -45,7 +44,9 @@ pub use checkpoint::{
 };
 pub use clock::{ActiveClock, StopReason, StopRule};
 pub(crate) use config::toml_error_line;
-pub use config::{COMMITTED_CONFIGS, ConfigError, MAX_GPUS, RunConfig, TrainConfig};
+pub use config::{
+    COMMITTED_CONFIGS, ConfigError, MAX_GPUS, RETIRED_KEYS, RetiredKey, RunConfig, TrainConfig,
+};
 // The sections `TrainConfig` composes, at their old paths (they live in the layers that
 // consume them).
 pub use crate::env::{ActionMode, EndEffectorFrame, EnvConfig, EvalStart, ObsConfig, RewardConfig};

@@ -28,7 +28,6 @@ impl IterationReport {
             termination: EpisodeEnds::from_counts(t.episodes, t.failures, t.failures_by_cause),
             parameter_squares: self.parameter_squares,
             update: self.update.clone(),
-            extra_rollouts: 0,
         }
     }
 

@@ -50,10 +50,6 @@ pub struct IterationStats {
     /// Sums of squares of the actor's and the critic's parameters after the update (the
     /// divergence guard's view of the parameters: NaN or infinite when one is).
     pub parameter_squares: [f64; 2],
-    /// Rollouts the GPU ran in this iteration beyond its own one: 1 where the overlapped loop
-    /// (`ppo.overlap_update`) filled its pipeline first (its first iteration, and the first
-    /// after a restore), else 0. Their frames count in `frames`.
-    pub extra_rollouts: u32,
 }
 
 /// An iteration done on the GPU, not yet recorded.
@@ -297,11 +293,10 @@ impl RunSession {
         self.clock.pause();
         let active = self.clock.seconds();
         let iteration = self.iteration + 1;
-        // Every GPU's envs (each runs env.num_envs), every rollout the iteration ran.
+        // Every GPU's envs (each runs env.num_envs).
         let frames_now = u64::from(self.config.env.num_envs)
             * u64::from(self.config.ppo.horizon)
-            * self.config.run.replicas() as u64
-            * (1 + u64::from(stats.extra_rollouts));
+            * self.config.run.replicas() as u64;
         let elapsed = active - self.iteration_start_s;
         let record = IterationRecord {
             iteration,

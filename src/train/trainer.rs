@@ -6,9 +6,7 @@
 //! the rollout's statistics and the update's into one small report. The host launches it,
 //! queues one asynchronous copy of the report, and reads the report when the iteration is done:
 //! nothing inside an iteration waits for the host. Evaluation is a second graph over the
-//! 32-world plans that reads the same policy parameters. With `ppo.overlap_update` the
-//! iteration's graph holds the update of the last rollout's batch and the next rollout as two
-//! branches instead (src/train/pipeline.rs).
+//! 32-world plans that reads the same policy parameters.
 //!
 //! The trainer owns the policy and lends it to the rollouts (which run it) and to the update
 //! (which changes its parameters in place); the rollouts own the observation normalization and
@@ -40,7 +38,6 @@ use super::error::TrainError;
 use super::evaluation::EnvEvaluation;
 use super::goal::{GoalRates, GoalRecord};
 use super::goal_latent::{DECODER_DIGEST, GoalDecoder, decoder_digest, load_goal_decoder};
-use super::pipeline::Pipeline;
 use super::replica_seed;
 use super::report::IterationReport;
 use super::session::IterationStats;
@@ -51,13 +48,12 @@ pub struct Trainer {
     gpu: Gpu,
     rollout: Rollout,
     evaluation: Rollout,
-    /// The policy the training rollout samples from and the update trains (with
-    /// `ppo.overlap_update` the rollout samples from a copy one update behind, the pipeline's)...
+    /// The policy the training rollout samples from and the update trains...
     policy: GaussianPolicy,
     /// ...and the same parameters with the evaluation's batch (shared, not copied).
     evaluation_policy: GaussianPolicy,
     update: PpoUpdate,
-    iterations: Iterations,
+    iteration: Iteration,
     evaluation_graph: Graph,
     /// The goal task's counter totals at the last [`Trainer::goal_record`] (zeros when
     /// tracking, and after every reset of the rollout).
@@ -75,16 +71,8 @@ struct DecoderNetworks {
     evaluation: LatentDecoder,
 }
 
-/// How an iteration runs.
-enum Iterations {
-    /// The rollout, then the update of its batch, in one graph (the default).
-    Sequential(Box<SequentialIteration>),
-    /// The update of the last rollout's batch beside the next rollout (`ppo.overlap_update`).
-    Overlapped(Box<Pipeline>),
-}
-
-/// The default iteration: one graph and its report.
-struct SequentialIteration {
+/// One iteration: the rollout, then the update of its batch, in one graph, and its report.
+struct Iteration {
     graph: Graph,
     report: DeviceRange,
     readback: Readback,
@@ -139,18 +127,12 @@ impl Trainer {
         config: &TrainConfig,
         replicas: Option<&Communicator>,
     ) -> Result<Trainer, TrainError> {
-        if config.ppo.overlap_update && replicas.is_some() {
-            // The configuration's validation refuses it already (with run.gpus).
-            return Err(TrainError::Setup(
-                "ppo.overlap_update runs on one GPU only, not in a replica of several".to_owned(),
-            ));
-        }
         let rank = replicas.map_or(0, Communicator::rank);
         let own_seed = replica_seed(config.seed, rank);
         let mut rollout_config = config.rollout_config();
         rollout_config.seed = own_seed;
         let goal_decoder = load_goal_decoder(config, motion.character())?;
-        if goal_decoder.is_some() && (replicas.is_some() || config.ppo.overlap_update) {
+        if goal_decoder.is_some() && replicas.is_some() {
             // The configuration's validation refuses both for the goal task already.
             return Err(TrainError::Setup(
                 "goal.decoder: a latent goal run trains on one GPU, rollout then update".to_owned(),
@@ -222,17 +204,12 @@ impl Trainer {
             // NCCL's first collectives outside the capture, every rank at this point.
             replicas.warm_up(gpu)?;
         }
-        let iterations = if config.ppo.overlap_update {
-            Iterations::Overlapped(Box::new(Pipeline::new(gpu, &rollout, &policy, &update)?))
-        } else {
-            let sequential = match &decoder {
-                Some(d) => {
-                    let acting = d.training.driven_by(&policy)?;
-                    SequentialIteration::capture(gpu, &rollout, &acting, &policy, &update)?
-                }
-                None => SequentialIteration::capture(gpu, &rollout, &policy, &policy, &update)?,
-            };
-            Iterations::Sequential(Box::new(sequential))
+        let iteration = match &decoder {
+            Some(d) => {
+                let acting = d.training.driven_by(&policy)?;
+                Iteration::capture(gpu, &rollout, &acting, &policy, &update)?
+            }
+            None => Iteration::capture(gpu, &rollout, &policy, &policy, &update)?,
         };
         let (evaluation_graph, _) = match &decoder {
             Some(d) => evaluation.capture(&d.evaluation.driven_by(&evaluation_policy)?, false)?,
@@ -246,7 +223,7 @@ impl Trainer {
             policy,
             evaluation_policy,
             update,
-            iterations,
+            iteration,
             evaluation_graph,
             goal_seen: GoalTally::default(),
             decoder,
@@ -256,26 +233,13 @@ impl Trainer {
     /// Runs one training iteration (rollout and update) and returns its statistics. Waits for
     /// the iteration to finish: the caller's clock measures it.
     pub fn iterate(&mut self) -> Result<IterationStats, TrainError> {
-        let (report, extra_rollouts) = self.run_iteration()?;
-        Ok(IterationStats {
-            extra_rollouts,
-            ..report.stats()
-        })
+        Ok(self.iterate_report()?.stats())
     }
 
     /// [`Trainer::iterate`], returning this GPU's report as read back (what several GPUs'
     /// reports are merged from).
     pub fn iterate_report(&mut self) -> Result<IterationReport, TrainError> {
-        Ok(self.run_iteration()?.0)
-    }
-
-    /// One iteration: its report and the rollouts it ran beyond its own.
-    fn run_iteration(&mut self) -> Result<(IterationReport, u32), TrainError> {
-        let stream = self.gpu.stream();
-        match &mut self.iterations {
-            Iterations::Sequential(sequential) => Ok((sequential.run(stream)?, 0)),
-            Iterations::Overlapped(pipeline) => pipeline.iterate(stream),
-        }
+        self.iteration.run(self.gpu.stream())
     }
 
     /// Evaluates the current policy by the paper's protocol (one episode per evaluation env,
@@ -438,7 +402,6 @@ impl Trainer {
     /// Restores the policy and the normalization from `checkpoint`, and, when it has them
     /// (a training checkpoint), the optimizer and the start-phase statistics; then puts every
     /// env at a new reference state (episodes in progress are not stored).
-    /// With `ppo.overlap_update` the pipeline restarts: the next iteration fills it again.
     pub fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainError> {
         use tensor_names::*;
         self.gpu.synchronize()?;
@@ -486,10 +449,6 @@ impl Trainer {
         }
         self.rollout.reset_all()?;
         self.goal_seen = GoalTally::default();
-        // The batch in flight was sampled from other parameters: the next iteration refills.
-        if let Iterations::Overlapped(pipeline) = &mut self.iterations {
-            pipeline.restart();
-        }
         Ok(())
     }
 
@@ -537,11 +496,6 @@ impl Trainer {
         self.update.flops().total()
     }
 
-    /// Whether iterations run the update beside the next rollout (`ppo.overlap_update`).
-    pub fn overlaps_update(&self) -> bool {
-        matches!(self.iterations, Iterations::Overlapped(_))
-    }
-
     /// The policy the update trains (its parameters are what evaluation and checkpoints see).
     pub fn policy(&self) -> &GaussianPolicy {
         &self.policy
@@ -550,16 +504,6 @@ impl Trainer {
     /// A latent goal run's frozen decoder and prior parameters on the GPU (None otherwise).
     pub fn goal_decoder_parameters(&self) -> Option<(&DeviceArray<f32>, &DeviceArray<f32>)> {
         self.decoder.as_ref().map(|d| d.training.parameters())
-    }
-
-    /// With `ppo.overlap_update`, the copy of the policy the training rollout samples from:
-    /// after an iteration, the parameters as they were before that iteration's update (those
-    /// after the update before it). `None` without the overlap.
-    pub fn behaviour_policy(&self) -> Option<&GaussianPolicy> {
-        match &self.iterations {
-            Iterations::Overlapped(pipeline) => Some(pipeline.behaviour()),
-            Iterations::Sequential(_) => None,
-        }
     }
 
     /// The training rollout and the policy whose parameters the update trains, for a caller
@@ -600,18 +544,13 @@ impl Trainer {
         Ok((graph, events))
     }
 
-    /// Node kinds of the graph one iteration launches (the steady graph of the overlapped
-    /// loop), e.g. `{"kernel": .., "memcpy": .., "conditional": ..}`.
+    /// Node kinds of the graph one iteration launches, e.g. `{"kernel": .., "memcpy": .., "conditional": ..}`.
     pub fn iteration_graph_nodes(&self) -> Result<BTreeMap<String, usize>, TrainError> {
-        let graph = match &self.iterations {
-            Iterations::Sequential(sequential) => &sequential.graph,
-            Iterations::Overlapped(pipeline) => pipeline.steady_graph(),
-        };
-        Ok(graph.node_counts()?)
+        Ok(self.iteration.graph.node_counts()?)
     }
 }
 
-impl SequentialIteration {
+impl Iteration {
     /// The rollout (run by `acting`: `policy` itself, or a decoder driven by it), the whole
     /// update of its batch, the parameters' sums of squares and the report's copies, in one
     /// graph.
@@ -621,7 +560,7 @@ impl SequentialIteration {
         acting: &dyn RolloutPolicy,
         policy: &GaussianPolicy,
         update: &PpoUpdate,
-    ) -> Result<SequentialIteration, TrainError> {
+    ) -> Result<Iteration, TrainError> {
         let report = DeviceRange::whole(&Arc::new(gpu.alloc_zeroed(REPORT_BYTES)?));
         let parameter_squares = DeviceArray::<f64>::zeros(gpu, [2])?;
         let stream = gpu.stream();
@@ -632,7 +571,7 @@ impl SequentialIteration {
             record_report(s, &report, rollout, update, &parameter_squares)
         })?;
         graph.upload(stream)?;
-        Ok(SequentialIteration {
+        Ok(Iteration {
             graph,
             report,
             readback: Readback::new(gpu, REPORT_BYTES)?,

@@ -80,18 +80,6 @@ impl ReduceOp {
     }
 }
 
-/// Where a collective queued during a stream capture goes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum CollectivePlacement {
-    /// Into the graph, as NCCL's own kernel nodes (NCCL supports stream capture since 2.9): one
-    /// graph launch runs everything.
-    InGraph,
-    /// Between parts of the graph: the capture is split at each all-reduce
-    /// ([`super::Graph`] then launches its parts in order and queues the all-reduces between
-    /// them, eagerly). The fallback where NCCL's capture does not work.
-    BetweenGraphParts,
-}
-
 /// An all-reduce a split capture runs between two graph parts, queued at every launch.
 pub(crate) struct RecordedCollective {
     communicator: Communicator,
@@ -159,7 +147,6 @@ pub(crate) struct CommunicatorInner {
     size: usize,
     /// The CUDA device ordinal the communicator was made for.
     ordinal: usize,
-    placement: CollectivePlacement,
 }
 
 impl Drop for CommunicatorInner {
@@ -222,14 +209,13 @@ pub fn nccl_version() -> Result<(String, String), CudaError> {
 
 impl Communicator {
     /// One communicator per device of `ordinals` (rank i on `ordinals[i]`), made together in
-    /// this process (`ncclCommInitAll`), whose all-reduces go where `placement` says when they
-    /// are queued during a capture. Loads NCCL first: a missing library is a
+    /// this process (`ncclCommInitAll`). An all-reduce queued during a capture splits the
+    /// graph there ([`super::Graph`] launches its parts in order and queues the all-reduces
+    /// between them): NCCL's own capture of several ranks failed on every machine measured
+    /// ("dependency created on uncaptured work in another stream", NCCL 2.28.9; BENCHMARKS.md). Loads NCCL first: a missing library is a
     /// [`CudaError::NcclUnavailable`] that says how to get it. Call it before the threads that
     /// use the devices start.
-    pub fn create_all(
-        ordinals: &[usize],
-        placement: CollectivePlacement,
-    ) -> Result<Vec<Communicator>, CudaError> {
+    pub fn create_all(ordinals: &[usize]) -> Result<Vec<Communicator>, CudaError> {
         let invalid = |reason: String| CudaError::InvalidArgument {
             operation: "Communicator::create_all",
             reason,
@@ -285,7 +271,6 @@ impl Communicator {
                     rank,
                     size,
                     ordinal,
-                    placement,
                 }),
             })
             .collect())
@@ -361,17 +346,12 @@ impl Communicator {
         }
     }
 
-    /// Where this communicator's all-reduces go during a capture.
-    pub fn placement(&self) -> CollectivePlacement {
-        self.inner.placement
-    }
-
     /// Queues the all-reduce of every buffer of `buffers` in place (one NCCL group, so one
     /// launch) on `stream`, which must belong to this rank's device, as must the buffers. Every
     /// rank must queue the same buffers (counts and types) in the same order. Valid inside a
-    /// capture: the graph then keeps the buffers and the communicator alive, and holds the
-    /// all-reduce as NCCL's nodes or, with [`CollectivePlacement::BetweenGraphParts`], between
-    /// two of its parts (only at the capture's top level, not in a conditional body).
+    /// capture: the graph then keeps the buffers and the communicator alive, and runs the
+    /// all-reduce between two of its parts (only at the capture's top level, not in a
+    /// conditional body).
     pub fn all_reduce(
         &self,
         stream: &Stream,
@@ -402,9 +382,7 @@ impl Communicator {
         if buffers.is_empty() {
             return Ok(());
         }
-        if self.inner.placement == CollectivePlacement::BetweenGraphParts
-            && stream.is_capturing()?
-        {
+        if stream.is_capturing()? {
             for buffer in &buffers {
                 stream.remember_memory(&buffer.range);
             }

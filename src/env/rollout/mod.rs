@@ -615,53 +615,12 @@ impl Rollout {
         )
     }
 
-    /// [`Rollout::record`] into `storage` instead of [`Rollout::storage`]: the overlapped
-    /// training loop (`ppo.overlap_update`) alternates two storages, so that the update of one
-    /// rollout's batch reads it while the next rollout writes the other. Only a training
-    /// rollout; `storage` comes from [`Rollout::new_storage`].
-    pub fn record_into(
-        &self,
-        s: &Stream,
-        policy: &dyn RolloutPolicy,
-        storage: &RolloutStorage,
-    ) -> Result<(), RolloutError> {
-        if !self.is_training() {
-            return Err(RolloutError::Setup(
-                "only a training rollout records into another storage".to_owned(),
-            ));
-        }
-        let wanted = self.storage.observations.shape();
-        if storage.observations.shape() != wanted
-            || storage.actions.shape() != self.storage.actions.shape()
-        {
-            return Err(RolloutError::Setup(format!(
-                "a storage of observations {:?} and actions {:?} for a rollout of {wanted:?} and {:?} (make it with Rollout::new_storage)",
-                storage.observations.shape(),
-                storage.actions.shape(),
-                self.storage.actions.shape()
-            )));
-        }
-        self.record_rollout(s, policy, storage, &mut StageRecorder::untimed(), None)
-    }
-
-    /// A second storage shaped like [`Rollout::storage`] (zeros), for [`Rollout::record_into`].
-    pub fn new_storage(&self) -> Result<RolloutStorage, RolloutError> {
-        let [rows, n, obs] = self.storage.observations.shape();
-        Ok(RolloutStorage::zeros(
-            &self.gpu,
-            rows - 1,
-            n,
-            obs,
-            self.storage.actions.shape()[2],
-        )?)
-    }
-
     /// The loaded kernels (shared with the PPO update).
     pub fn kernels(&self) -> &Arc<EnvKernels> {
         &self.kernels
     }
 
-    /// The rollout into `storage` (this rollout's own, or one from [`Rollout::new_storage`]).
+    /// The rollout into `storage`.
     fn record_rollout(
         &self,
         s: &Stream,

@@ -29,7 +29,7 @@ use std::sync::Arc;
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
-use crate::cuda::{CollectivePlacement, Communicator, nccl_version};
+use crate::cuda::{Communicator, nccl_version};
 use crate::env::TrackedMotion;
 use crate::plan::{PhysicsOverflow, PlanStore};
 
@@ -92,12 +92,7 @@ impl Replicas {
         motion: impl Into<TrackedMotion<'a>>,
         store: &PlanStore,
     ) -> Result<Replicas, TrainError> {
-        let placement = if config.run.nccl_in_graph {
-            CollectivePlacement::InGraph
-        } else {
-            CollectivePlacement::BetweenGraphParts
-        };
-        let communicators = Communicator::create_all(devices, placement)?;
+        let communicators = Communicator::create_all(devices)?;
         let (replies_to, replies) = std::sync::mpsc::channel();
         let start = Start {
             config: Arc::new(config.clone()),
@@ -127,14 +122,8 @@ impl Replicas {
         replicas.built = replicas.gather::<Built>(SETUP_CALL, &ranks)?;
         replicas.check_digests("after setup")?;
         if let Ok((version, library)) = nccl_version() {
-            let placement = match placement {
-                CollectivePlacement::InGraph => "all-reduces in the iteration graph",
-                CollectivePlacement::BetweenGraphParts => {
-                    "all-reduces between parts of the iteration graph (run.nccl_in_graph = false)"
-                }
-            };
             replicas.notes.push(format!(
-                "GPUs {devices:?} ({}): {} envs each, {} in all; NCCL {version} ({library}), {placement}",
+                "GPUs {devices:?} ({}): {} envs each, {} in all; NCCL {version} ({library}), all-reduces between parts of the iteration graph",
                 replicas.built[0].gpu_name,
                 config.env.num_envs,
                 u64::from(config.env.num_envs) * devices.len() as u64
