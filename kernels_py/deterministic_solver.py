@@ -4,7 +4,7 @@ With contacts and constraint rows in a canonical order (determinism.py), MuJoCo 
 step still differs from run to run by ~1e-4 in qvel: four kernels add into the same float from
 threads in different warps (constraint forces into qfrc_constraint, the squared gradient norm,
 and the Hessian's J'DJ terms, both in full and incrementally). Measured on the H100
-(tests/device/det_probe.py): with Warp's deterministic atomics on exactly these four, runs are
+(experiments/scripts/det_probe.py): with Warp's deterministic atomics on exactly these four, runs are
 bit-identical; on any fewer, they are not. Warp cannot record those atomics into a plan, so the
 kernels below compute the same sums in a fixed order instead, each addend owned by one thread:
 

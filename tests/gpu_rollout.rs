@@ -343,7 +343,7 @@ fn rollout_bits(rollout: &Rollout) -> Vec<u32> {
 /// A clip (`Rollout::new(&motion)`, resampled as the library of one inside) and the library of
 /// one built outside and passed as a library roll out alike, bit for bit, over two replays, on
 /// the deterministic physics (whose replays are exact, issue 2). Today's rollout before
-/// libraries is compared with this one across builds by tests/device/library_of_one.sh.
+/// libraries is compared with this one across builds by experiments/scripts/library_of_one.sh.
 #[test]
 fn a_clip_and_its_library_of_one_roll_out_bit_for_bit() {
     let assets = Path::new("ptx/deterministic");

@@ -23,7 +23,7 @@
 # in 15 minutes). A plan file given as the argument is sourced first; it may set all of the above.
 #   tests/device/stage.sh; then there:
 #   BIN=.device-bin LANE1='train tracker 520 --config configs/train/library_all.toml' tests/device/lanes.sh
-#   BIN=.device-bin tests/device/lanes.sh tests/device/plans/NAME.sh
+#   BIN=.device-bin tests/device/lanes.sh experiments/plans/NAME.sh
 set -uo pipefail
 if [ -n "${1:-}" ]; then
   [ -f "$1" ] || { echo "lanes.sh: no plan file $1" >&2; exit 2; }
