@@ -14,6 +14,7 @@
 
 pub mod body_model;
 pub mod config;
+mod error;
 mod evaluation;
 mod goal_counters;
 pub mod layout;
@@ -46,7 +47,8 @@ pub use goal_counters::{GoalCounter, GoalTally};
 pub use physics_state::{PhysicsSizes, PhysicsState, PhysicsStateError};
 pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;
-pub use rollout::{EpisodeState, Rollout, RolloutError};
+pub use error::RolloutError;
+pub use rollout::{EpisodeState, Rollout};
 pub use stages::{RolloutStage, Stage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 pub use storage::{ActStorage, RolloutStorage};

@@ -7,7 +7,7 @@
 use crate::cuda::Stream;
 use crate::kernels::{DeviceArray, DeviceArray2, EnvKernels};
 
-use super::rollout::RolloutError;
+use super::error::RolloutError;
 use super::storage::ActStorage;
 
 /// What the rollout graph runs at the start of every control step.

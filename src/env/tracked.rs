@@ -5,7 +5,7 @@
 
 use crate::motion::{Character, MotionLibrary, ReferenceMotion};
 
-use super::rollout::RolloutError;
+use super::error::RolloutError;
 
 /// The reference a rollout is built from.
 #[derive(Clone, Copy, Debug)]

@@ -15,14 +15,13 @@ mod recording;
 
 use std::sync::Arc;
 
-use thiserror::Error;
-
-use crate::cuda::{Communicator, CudaError, Gpu, Graph, Stream};
+use crate::cuda::{Communicator, Gpu, Graph, Stream};
 use crate::motion::MotionLibrary;
 use crate::motion::table::TableLayout;
-use crate::plan::{PlanStore, Simulation, SimulationError};
+use crate::plan::{PlanStore, Simulation};
 
 use super::DeviceReferenceTable;
+use super::error::RolloutError;
 use super::body_model::{BodyModel, DeviceBodyModel};
 use super::config::{ActionMode, BodyKinematics, RolloutConfig, TaskConfig};
 use super::evaluation::{ClipEvaluation, EpisodeScores, clip_evaluation, yardstick};
@@ -33,7 +32,7 @@ use super::layout::{
 };
 use super::normalizer::ObservationNormalizer;
 use super::phases::PhaseStatistics;
-use super::physics_state::{PhysicsSizes, PhysicsState, PhysicsStateError};
+use super::physics_state::{PhysicsSizes, PhysicsState};
 use super::policy::RolloutPolicy;
 use super::stages::{RolloutStage, StageEvents, StageRecorder};
 use super::statistics::RolloutStatistics;
@@ -42,29 +41,9 @@ use super::task::{GoalTask, Task, goal_observation_config, goal_observation_size
 use super::tracked::TrackedMotion;
 use super::trajectory::Trajectory;
 use crate::kernels::{
-    DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels, ObservationParams, ResetParams,
+    DeviceArray, DeviceArray2, DeviceArray3, EnvKernels, ObservationParams, ResetParams,
     Yardstick,
 };
-
-/// Why a rollout cannot be built or run.
-#[derive(Debug, Error)]
-pub enum RolloutError {
-    #[error(transparent)]
-    Cuda(#[from] CudaError),
-    #[error(transparent)]
-    Simulation(#[from] SimulationError),
-    #[error(transparent)]
-    Env(#[from] EnvError),
-    #[error(transparent)]
-    Physics(#[from] PhysicsStateError),
-    /// What the policy's implementation reports (`ppo::PolicyError` for PPO's policy).
-    #[error(transparent)]
-    Policy(Box<dyn std::error::Error + Send + Sync>),
-    #[error("reference motion: {0}")]
-    Motion(String),
-    #[error("{0}")]
-    Setup(String),
-}
 
 /// Per-env episode state.
 pub struct EpisodeState {
