@@ -10,8 +10,8 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use instantmimic::cuda::{
-    ArgLayout, CudaError, DeviceMemory, DeviceRange, Function, Gpu, KernelArgs, Module, NvtxRange,
-    PtxIsa, Stream,
+    AddressSource, ArgLayout, CudaError, DeviceMemory, DeviceRange, Function, Gpu, KernelArgs,
+    Module, NvtxRange, PtxIsa, Stream,
 };
 
 const KERNELS_PTX: &str = include_str!("fixtures/test_kernels.ptx");
@@ -52,7 +52,12 @@ fn range(memory: &Arc<DeviceMemory>, offset: usize, len: usize) -> Result<Device
 
 fn fill_args(out: &Arc<DeviceMemory>, n: u32, scale: f32) -> KernelArgs {
     // { u64 out; u32 n; f32 scale }: offsets 0, 8, 12.
-    let layout = ArgLayout::new(vec![(0, 8), (8, 4), (12, 4)], [0]).unwrap();
+    let layout = ArgLayout::trusting(
+        AddressSource::KernelBeside,
+        vec![(0, 8), (8, 4), (12, 4)],
+        [0],
+    )
+    .unwrap();
     let mut args = KernelArgs::new(layout);
     args.write_address(0, &whole(out)).unwrap();
     args.write(8, &n.to_ne_bytes()).unwrap();
@@ -62,7 +67,9 @@ fn fill_args(out: &Arc<DeviceMemory>, n: u32, scale: f32) -> KernelArgs {
 
 fn add_args(counter: &Arc<DeviceMemory>, value: u32) -> KernelArgs {
     // struct { u64 ptr; u32 value; u32 pad }
-    let mut args = KernelArgs::new(ArgLayout::new(vec![(0, 16)], [0]).unwrap());
+    let mut args = KernelArgs::new(
+        ArgLayout::trusting(AddressSource::KernelBeside, vec![(0, 16)], [0]).unwrap(),
+    );
     args.write_address(0, &whole(counter)).unwrap();
     args.write(8, &value.to_ne_bytes()).unwrap();
     args
@@ -80,7 +87,11 @@ impl Kernels {
     }
 
     fn decrement(&self, s: &Stream, flag: &Arc<DeviceMemory>) -> Result<(), CudaError> {
-        let mut args = KernelArgs::new(ArgLayout::new(vec![(0, 8)], [0])?);
+        let mut args = KernelArgs::new(ArgLayout::trusting(
+            AddressSource::KernelBeside,
+            vec![(0, 8)],
+            [0],
+        )?);
         args.write_address(0, &whole(flag))?;
         s.launch(&self.decrement_i32, [1, 1, 1], [1, 1, 1], 0, &args)
     }
@@ -151,7 +162,12 @@ fn a_launch_needs_every_address_slot_filled_and_the_drivers_parameters() {
     let s = k.gpu.stream();
     let out = k.gpu.alloc_zeroed(4 * 4).map(Arc::new).unwrap();
     // fill_scaled(u64 out, u32 n, f32 scale): the address slot left unset.
-    let layout = ArgLayout::new(vec![(0, 8), (8, 4), (12, 4)], [0]).unwrap();
+    let layout = ArgLayout::trusting(
+        AddressSource::KernelBeside,
+        vec![(0, 8), (8, 4), (12, 4)],
+        [0],
+    )
+    .unwrap();
     let mut unset = KernelArgs::new(layout.clone());
     unset.write(8, &4u32.to_ne_bytes()).unwrap();
     let err = s
@@ -162,7 +178,9 @@ fn a_launch_needs_every_address_slot_filled_and_the_drivers_parameters() {
     let err = unset.write(0, &0x1000u64.to_ne_bytes()).unwrap_err();
     assert!(err.to_string().contains("device address"), "{err}");
     // The same 16 bytes described as other parameters than the driver reports.
-    let mut other = KernelArgs::new(ArgLayout::new(vec![(0, 8), (8, 8)], [0]).unwrap());
+    let mut other = KernelArgs::new(
+        ArgLayout::trusting(AddressSource::KernelBeside, vec![(0, 8), (8, 8)], [0]).unwrap(),
+    );
     other.write_address(0, &whole(&out)).unwrap();
     let err = s
         .launch(&k.fill_scaled, [1, 1, 1], [4, 1, 1], 0, &other)
@@ -300,7 +318,12 @@ fn warp_fill_args(out: &Arc<DeviceMemory>, n: u32, scale: f32) -> KernelArgs {
     args.extend_from_slice(&0i32.to_ne_bytes());
     args.extend_from_slice(&scale.to_ne_bytes());
     // The array's data and grad pointers are address slots; grad stays null.
-    let layout = ArgLayout::new(vec![(0, 24), (24, 56), (80, 4)], [24, 32]).unwrap();
+    let layout = ArgLayout::trusting(
+        AddressSource::KernelBeside,
+        vec![(0, 24), (24, 56), (80, 4)],
+        [24, 32],
+    )
+    .unwrap();
     let mut args = KernelArgs::with_bytes(layout, args).unwrap();
     args.write_address(24, &whole(out)).unwrap();
     args.write_null(32).unwrap();
@@ -846,11 +869,15 @@ fn dynamic_shared_memory_above_48_kib_needs_the_attribute() {
         .map(Arc::new)
         .unwrap();
     // (u64 out, u32 bytes): 12 bytes, the exact parameter size.
-    let mut args = KernelArgs::new(ArgLayout::new(vec![(0, 8), (8, 4)], [0]).unwrap());
+    let mut args = KernelArgs::new(
+        ArgLayout::trusting(AddressSource::KernelBeside, vec![(0, 8), (8, 4)], [0]).unwrap(),
+    );
     args.write_address(0, &whole(&out)).unwrap();
     args.write(8, &bytes.to_ne_bytes()).unwrap();
     assert_eq!(smem.param_layout(), [(0, 8), (8, 4)]);
-    let mut padded = KernelArgs::new(ArgLayout::new(vec![(0, 8), (8, 8)], [0]).unwrap());
+    let mut padded = KernelArgs::new(
+        ArgLayout::trusting(AddressSource::KernelBeside, vec![(0, 8), (8, 8)], [0]).unwrap(),
+    );
     padded.write_address(0, &whole(&out)).unwrap();
     padded.write(8, &bytes.to_ne_bytes()).unwrap();
     let err = s

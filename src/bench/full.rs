@@ -306,7 +306,7 @@ fn time_stages<S: Stage>(
     launches: u32,
     total_ms: f64,
 ) -> Result<BTreeMap<S, f64>, TrainError> {
-    let events = events.ok_or_else(|| TrainError::Setup("no stage events".to_owned()))?;
+    let events = events.ok_or_else(|| TrainError::Internal("no stage events".to_owned()))?;
     let mut raw: BTreeMap<S, f64> = BTreeMap::new();
     for _ in 0..warmup {
         graph.launch(gpu.stream())?;

@@ -22,20 +22,38 @@ const ADDRESS_BYTES: usize = 8;
 /// offsets of the 8-byte slots the kernel reads as device addresses.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ArgLayout {
+    /// Who vouches for the address slots.
+    source: AddressSource,
     params: Vec<(usize, usize)>,
     /// Sorted; each slot lies inside one parameter; slots do not overlap.
     pointers: Vec<usize>,
 }
 
+/// Where a layout's address slots come from: the one thing about a kernel's arguments that is
+/// taken on trust (the driver does not report which bytes are addresses), named at every call
+/// site so that a reader sees whose word it is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AddressSource {
+    /// The generated kernel manifest: the data and grad pointers of every `array_t` parameter
+    /// of a Warp kernel of ours (`src/kernels/abi.rs`).
+    KernelManifest,
+    /// Warp's relocations of a captured plan's launch (`PackedLaunchArgs::pointers`).
+    PlanRelocations,
+    /// A kernel written beside the layout, in the same file (tests of this module).
+    KernelBeside,
+}
+
 impl ArgLayout {
     /// A layout of parameters `params` (`(offset, size)` in order, not overlapping) with
-    /// device addresses at byte offsets `pointers`, each inside one parameter.
-    pub fn new(
+    /// device addresses at byte offsets `pointers`, each inside one parameter. Everything but
+    /// the address slots' completeness is checked here; `source` says who vouches for that.
+    pub fn trusting(
+        source: AddressSource,
         params: Vec<(usize, usize)>,
         pointers: impl IntoIterator<Item = usize>,
     ) -> Result<ArgLayout, CudaError> {
         let bad = |reason: String| CudaError::InvalidArgument {
-            operation: "ArgLayout::new",
+            operation: "ArgLayout::trusting",
             reason,
         };
         let mut end = 0;
@@ -67,7 +85,11 @@ impl ArgLayout {
                 )));
             }
         }
-        Ok(ArgLayout { params, pointers })
+        Ok(ArgLayout {
+            source,
+            params,
+            pointers,
+        })
     }
 
     /// Bytes of the packed buffer: the end of the last parameter.
@@ -226,8 +248,8 @@ impl KernelArgs {
             .ok_or_else(|| CudaError::InvalidArgument {
                 operation,
                 reason: format!(
-                    "byte {at} is not a device address slot of this layout (slots {:?})",
-                    self.layout.pointers
+                    "byte {at} is not a device address slot of this layout (slots {:?}, from {:?})",
+                    self.layout.pointers, self.layout.source
                 ),
             })
     }
@@ -275,18 +297,26 @@ mod tests {
 
     fn layout() -> ArgLayout {
         // { u64 ptr; u32 n; u32 pad } then a 56-byte array_t with data and grad pointers.
-        ArgLayout::new(vec![(0, 8), (8, 4), (16, 56)], [0, 16, 24]).unwrap()
+        ArgLayout::trusting(
+            AddressSource::KernelBeside,
+            vec![(0, 8), (8, 4), (16, 56)],
+            [0, 16, 24],
+        )
+        .unwrap()
     }
 
     #[test]
     fn layouts_keep_address_slots_inside_parameters() {
         let l = layout();
         assert_eq!((l.len(), l.pointers()), (72, &[0, 16, 24][..]));
-        let err = ArgLayout::new(vec![(0, 8), (8, 4)], [8]).unwrap_err();
+        let err = ArgLayout::trusting(AddressSource::KernelBeside, vec![(0, 8), (8, 4)], [8])
+            .unwrap_err();
         assert!(err.to_string().contains("lies in no parameter"), "{err}");
-        let err = ArgLayout::new(vec![(0, 16)], [0, 4]).unwrap_err();
+        let err =
+            ArgLayout::trusting(AddressSource::KernelBeside, vec![(0, 16)], [0, 4]).unwrap_err();
         assert!(err.to_string().contains("overlap"), "{err}");
-        let err = ArgLayout::new(vec![(0, 8), (4, 4)], []).unwrap_err();
+        let err =
+            ArgLayout::trusting(AddressSource::KernelBeside, vec![(0, 8), (4, 4)], []).unwrap_err();
         assert!(err.to_string().contains("overlaps"), "{err}");
     }
 

@@ -35,7 +35,7 @@ mod range;
 mod readback;
 mod stream;
 
-pub use args::{ArgLayout, KernelArgs};
+pub use args::{AddressSource, ArgLayout, KernelArgs};
 pub use blas::{BLAS_WORKSPACE_BYTES, Blas, BlasMatrix, GemmMath, GemmOperand};
 pub use conditional::{
     Branch, GRAPH_CONDITIONAL_ENTRIES, GRAPH_CONDITIONAL_MODULE, GRAPH_CONDITIONAL_PTX,

@@ -36,6 +36,7 @@ pub use config::{
     ActionMode, BodyKinematics, EndEffectorFrame, EnvConfig, EvalStart, EvaluationProtocol,
     GoalConfig, ObsConfig, PhaseShare, RewardConfig, RolloutConfig, TaskConfig,
 };
+pub use error::RolloutError;
 pub use evaluation::{
     COMPLETED, ClipEvaluation, EpisodeScore, EpisodeScores, FAILED, LIBRARY_EVALUATION_WINDOW_S,
     ROBOTICS_MAX_ANCHOR_HEIGHT_ERROR_M, ROBOTICS_MAX_ANCHOR_TILT,
@@ -47,7 +48,6 @@ pub use goal_counters::{GoalCounter, GoalTally};
 pub use physics_state::{PhysicsSizes, PhysicsState, PhysicsStateError};
 pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;
-pub use error::RolloutError;
 pub use rollout::{EpisodeState, Rollout};
 pub use stages::{RolloutStage, Stage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};

@@ -10,7 +10,7 @@
 
 use zerocopy::{Immutable, IntoBytes, TryFromBytes};
 
-use crate::cuda::{ArgLayout, KernelArgs};
+use crate::cuda::{AddressSource, ArgLayout, KernelArgs};
 
 use super::contract::Violation;
 use super::error::{EnvError, LaunchContractError};
@@ -179,7 +179,11 @@ impl KernelAbi {
             .iter()
             .filter(|p| matches!(p.kind, ParamKind::Array { .. }))
             .flat_map(|p| [p.offset + f.data, p.offset + f.grad]);
-        Ok(ArgLayout::new(self.param_layout(), pointers)?)
+        Ok(ArgLayout::trusting(
+            AddressSource::KernelManifest,
+            self.param_layout(),
+            pointers,
+        )?)
     }
 
     /// Checks a launch over `dim` against the kernel's launch contract, given the shapes of its

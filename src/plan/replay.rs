@@ -21,8 +21,8 @@ use std::collections::{BTreeSet, HashMap, HashSet};
 use std::sync::Arc;
 
 use crate::cuda::{
-    ArgLayout, CaptureNodes, CudaError, DeviceMemory, DeviceRange, Function, KernelArgs,
-    PinnedHostMemory, Stream,
+    AddressSource, ArgLayout, CaptureNodes, CudaError, DeviceMemory, DeviceRange, Function,
+    KernelArgs, PinnedHostMemory, Stream,
 };
 
 use super::error::PlanError;
@@ -305,7 +305,8 @@ fn prepare_launch(
     // Warp's relocations say which bytes are addresses: those are the layout's address slots,
     // the driver's parameters its parameters (fit_to_layout checked that they agree).
     let bytes = fit_to_layout(packed.bytes, &packed.offsets, &function, at)?;
-    let layout = ArgLayout::new(
+    let layout = ArgLayout::trusting(
+        AddressSource::PlanRelocations,
         function.param_layout().to_vec(),
         packed.pointers.iter().map(|slot| slot.at),
     )

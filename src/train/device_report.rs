@@ -60,7 +60,7 @@ pub(super) fn record_report(
 
 /// The report in the first [`REPORT_BYTES`] of `bytes`.
 pub(super) fn read_report(bytes: &[u8]) -> Result<IterationReport, TrainError> {
-    let short = || TrainError::Setup("a short iteration report".to_owned());
+    let short = || TrainError::Internal("a short iteration report".to_owned());
     let bytes = bytes.get(..REPORT_BYTES).ok_or_else(short)?;
     let totals = read_totals(&bytes[..TOTALS_BYTES])?;
     let squares_at = TOTALS_BYTES + STATISTICS_BYTES;
@@ -95,5 +95,5 @@ pub(super) fn read_report(bytes: &[u8]) -> Result<IterationReport, TrainError> {
 /// A rollout's totals ([`TOTALS_BYTES`] bytes).
 pub(super) fn read_totals(bytes: &[u8]) -> Result<RolloutTotals, TrainError> {
     RolloutTotals::from_bytes(bytes)
-        .ok_or_else(|| TrainError::Setup("malformed rollout totals".to_owned()))
+        .ok_or_else(|| TrainError::Internal("malformed rollout totals".to_owned()))
 }

@@ -67,9 +67,15 @@ pub enum TrainError {
         "the GPUs' replicas of the network are no longer identical {when} (state checksums {digests}): the averaged update lost its determinism (a bug, or a GPU that computes differently); the run stops and its last checkpoint is intact"
     )]
     ReplicasDiffer { when: String, digests: String },
-    /// The run's settings are inconsistent with the plans, the motion or a checkpoint.
+    /// The run's settings are inconsistent with the plans, the motion or a checkpoint: the
+    /// message says what to change.
     #[error("{0}")]
     Setup(String),
+    /// An invariant of the program does not hold: a bug, not something a user can fix.
+    #[error(
+        "internal error (a bug in instantmimic; please report it with the command that ran): {0}"
+    )]
+    Internal(String),
     /// `character` (or `--character`) names no built-in character and no path.
     #[error(
         "no character {name:?}{did_you_mean}: give a built-in one ({built_in}), a description JSON (*.json) or a character directory (a path with a `/`, e.g. ./{name}, holding character.json, plans/ and mjwarp/)"

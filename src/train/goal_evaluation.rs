@@ -179,7 +179,7 @@ pub fn evaluate_goal_on_gpu(
     let mut tallies = Vec::new();
     for _ in 0..rounds.max(1) {
         let tally = trainer.evaluate_goal()?.ok_or_else(|| {
-            TrainError::Setup("the evaluation rollout does not run the goal task".to_owned())
+            TrainError::Internal("the evaluation rollout does not run the goal task".to_owned())
         })?;
         tallies.push(tally);
     }

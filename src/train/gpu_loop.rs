@@ -331,9 +331,9 @@ impl Scorer {
 
 /// How the evaluation rollout `rollout` (of a motion library) plays every clip.
 fn library_plan(rollout: &Rollout) -> Result<LibraryPlan, TrainError> {
-    let evaluations = rollout
-        .clip_evaluations()
-        .ok_or_else(|| TrainError::Setup("the evaluation rollout has no clip plan".to_owned()))?;
+    let evaluations = rollout.clip_evaluations().ok_or_else(|| {
+        TrainError::Internal("the evaluation rollout has no clip plan".to_owned())
+    })?;
     Ok(LibraryPlan::new(
         rollout.library(),
         evaluations,

@@ -201,7 +201,9 @@ impl LatentTrainer {
         let scores = self
             .evaluation
             .episode_scores()
-            .ok_or_else(|| TrainError::Setup("the evaluation rollout keeps no scores".to_owned()))?
+            .ok_or_else(|| {
+                TrainError::Internal("the evaluation rollout keeps no scores".to_owned())
+            })?
             .download()?;
         Ok(scores.iter().map(EnvEvaluation::from).collect())
     }

@@ -366,7 +366,7 @@ impl LibraryPolicyEvaluator {
                 let scores = evaluation
                     .episode_scores()
                     .ok_or_else(|| {
-                        TrainError::Setup("the evaluation rollout keeps no scores".to_owned())
+                        TrainError::Internal("the evaluation rollout keeps no scores".to_owned())
                     })?
                     .download()?;
                 Ok(scores.iter().map(EnvEvaluation::from).collect())

@@ -194,8 +194,9 @@ impl RunSession {
         if config != before {
             dir.write_config(&config)?;
         }
-        let metrics = metrics
-            .ok_or_else(|| TrainError::Setup("the resumed metrics log is not open".to_string()))?;
+        let metrics = metrics.ok_or_else(|| {
+            TrainError::Internal("the resumed metrics log is not open".to_string())
+        })?;
         let start = checkpoint.as_ref().map_or(0, |(_, c)| c.meta.iteration);
         let events = RunEvents::create(dir.root(), Some(start))?;
         let progress = Progress::new(progress, &config.run);

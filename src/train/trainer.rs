@@ -111,7 +111,7 @@ impl Trainer {
         replicas: &Communicator,
     ) -> Result<Trainer, TrainError> {
         if replicas.device() != gpu.info().ordinal {
-            return Err(TrainError::Setup(format!(
+            return Err(TrainError::Internal(format!(
                 "the communicator of device {} for a trainer on device {}",
                 replicas.device(),
                 gpu.info().ordinal
@@ -134,7 +134,7 @@ impl Trainer {
         let goal_decoder = load_goal_decoder(config, motion.character())?;
         if goal_decoder.is_some() && replicas.is_some() {
             // The configuration's validation refuses both for the goal task already.
-            return Err(TrainError::Setup(
+            return Err(TrainError::Internal(
                 "goal.decoder: a latent goal run trains on one GPU, rollout then update".to_owned(),
             ));
         }
@@ -252,7 +252,7 @@ impl Trainer {
             .evaluation
             .episode_scores()
             .ok_or_else(|| {
-                TrainError::Setup(
+                TrainError::Internal(
                     "the evaluation rollout keeps no tracking scores (the goal task's evaluation is Trainer::goal_record)"
                         .to_owned(),
                 )
@@ -275,7 +275,7 @@ impl Trainer {
             bins,
         )
         .ok_or_else(|| {
-            TrainError::Setup(format!(
+            TrainError::Internal(format!(
                 "the reset sampler's statistics are not a CDF over {clips} clips x {bins} bins"
             ))
         })
@@ -583,10 +583,9 @@ impl Iteration {
     fn run(&mut self, stream: &crate::cuda::Stream) -> Result<IterationReport, TrainError> {
         self.graph.launch(stream)?;
         self.readback.queue(stream, &self.report)?;
-        let bytes = self
-            .readback
-            .wait()?
-            .ok_or_else(|| TrainError::Setup("the iteration report was not queued".to_owned()))?;
+        let bytes = self.readback.wait()?.ok_or_else(|| {
+            TrainError::Internal("the iteration report was not queued".to_owned())
+        })?;
         read_report(bytes)
     }
 }

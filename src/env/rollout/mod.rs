@@ -21,9 +21,9 @@ use crate::motion::table::TableLayout;
 use crate::plan::{PlanStore, Simulation};
 
 use super::DeviceReferenceTable;
-use super::error::RolloutError;
 use super::body_model::{BodyModel, DeviceBodyModel};
 use super::config::{ActionMode, BodyKinematics, RolloutConfig, TaskConfig};
+use super::error::RolloutError;
 use super::evaluation::{ClipEvaluation, EpisodeScores, clip_evaluation, yardstick};
 use super::goal_counters::GoalTally;
 use super::layout::{
@@ -41,8 +41,7 @@ use super::task::{GoalTask, Task, goal_observation_config, goal_observation_size
 use super::tracked::TrackedMotion;
 use super::trajectory::Trajectory;
 use crate::kernels::{
-    DeviceArray, DeviceArray2, DeviceArray3, EnvKernels, ObservationParams, ResetParams,
-    Yardstick,
+    DeviceArray, DeviceArray2, DeviceArray3, EnvKernels, ObservationParams, ResetParams, Yardstick,
 };
 
 /// Per-env episode state.

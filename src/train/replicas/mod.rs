@@ -184,7 +184,7 @@ impl Replicas {
         let reports = self.iterate_reports()?;
         IterationReport::merge(&reports)
             .map(|r| r.stats())
-            .ok_or_else(|| TrainError::Setup("no GPU reported the iteration".to_owned()))
+            .ok_or_else(|| TrainError::Internal("no GPU reported the iteration".to_owned()))
     }
 
     /// The evaluation, on rank 0 (every replica holds the same policy and normalization).
@@ -280,13 +280,13 @@ impl Replicas {
             let job = job.take();
             Box::new(move |t: &mut Trainer| match job {
                 Some(job) => job(t).map(|r| Box::new(r) as Box<dyn Any + Send>),
-                None => Err(TrainError::Setup("a job was sent twice".to_owned())),
+                None => Err(TrainError::Internal("a job was sent twice".to_owned())),
             })
         })?;
         let mut answers = self.gather::<R>(call, &[0])?;
         answers
             .pop()
-            .ok_or_else(|| TrainError::Setup("rank 0 did not answer".to_owned()))
+            .ok_or_else(|| TrainError::Internal("rank 0 did not answer".to_owned()))
     }
 
     /// Sends `make(rank)` to each of `ranks`; returns the call's number.
@@ -337,7 +337,7 @@ impl Replicas {
                         && answers[at].is_none()
                     {
                         let device = self.devices[rank];
-                        return Err(self.fail(TrainError::Setup(format!(
+                        return Err(self.fail(TrainError::Internal(format!(
                             "the worker of GPU {device} (rank {rank}) stopped without answering (it panicked)"
                         ))));
                     }
@@ -349,7 +349,7 @@ impl Replicas {
                         (Some(at), Ok(value)) => match value.downcast::<R>() {
                             Ok(value) => answers[at] = Some(*value),
                             Err(_) => {
-                                return Err(self.fail(TrainError::Setup(
+                                return Err(self.fail(TrainError::Internal(
                                     "a GPU worker answered with the wrong type".to_owned(),
                                 )));
                             }
