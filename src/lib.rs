@@ -7,6 +7,8 @@
 //! - [`plan`]: the `.wrp` plan format: reader, validation, packing, replay into CUDA graphs.
 //! - [`kernels`]: our own kernels (AOT-compiled Warp PTX, typed launchers, device arrays).
 //! - [`env`]: the tracking task on the GPU and its rollout graph.
+//! - [`nn`]: the GPU NN toolkit any learner builds on: GEMMs (Warp tiles or cuBLAS), MLPs and
+//!   their backward pass, Adam, reductions, the device shuffle.
 //! - [`ppo`]: the policy networks and the PPO update on the GPU.
 //! - [`latent`]: the latent controller (encoder, decoder, prior) distilled from a tracker.
 //! - [`motion`]: DeepMimic reference motions and their kinematics.
@@ -41,6 +43,7 @@ pub mod hpo;
 pub mod kernels;
 pub mod latent;
 pub mod motion;
+pub mod nn;
 pub mod plan;
 pub mod plot;
 pub mod ppo;

@@ -19,7 +19,7 @@ use instantmimic::export::onnx::latent::{LATENT_KEY, LatentContract};
 use instantmimic::export::onnx::normalizer;
 use instantmimic::latent::networks::mlp_forward_f64;
 use instantmimic::motion::Character;
-use instantmimic::ppo::{LayerShape, initial_parameters, mlp_layout};
+use instantmimic::nn::{LayerShape, initial_parameters, mlp_layout};
 use instantmimic::train::checkpoint::tensor_names;
 use instantmimic::train::goal_latent::{DECODER_DIGEST, load_goal_decoder};
 use instantmimic::train::latent_trainer::{insert_latent_networks, latent_shapes};

@@ -19,7 +19,7 @@ use instantmimic::export::onnx::contract::{CONTRACT_KEY, PolicyContract};
 use instantmimic::export::onnx::proto::{DimensionValue, FLOAT, ModelProto};
 use instantmimic::export::onnx::{IR_VERSION, OPSET, actor_layers, normalizer};
 use instantmimic::motion::Character;
-use instantmimic::ppo::initial_parameters;
+use instantmimic::nn::initial_parameters;
 use instantmimic::train::checkpoint::tensor_names;
 use instantmimic::train::{Checkpoint, CheckpointMeta, PolicyShapes, TrainConfig};
 use prost::Message as _;
@@ -54,7 +54,7 @@ fn seeded_checkpoint(config: &TrainConfig, seed: u64) -> Checkpoint {
     }
     actor.extend(std::iter::repeat_n(-1.5f32, shapes.action_size));
     let critic_layers =
-        instantmimic::ppo::mlp_layout(shapes.observation_size, &config.policy.critic_hidden, 1);
+        instantmimic::nn::mlp_layout(shapes.observation_size, &config.policy.critic_hidden, 1);
     let critic = initial_parameters(&critic_layers, 2f64.sqrt(), 1.0, &mut rng);
     let d = shapes.observation_size;
     let count = 5000.0;

@@ -1,5 +1,5 @@
 //! cuBLAS (optional, from the CUDA toolkit) and the policy's GEMM paths (`policy.gemm`,
-//! src/ppo/gemm.rs) on the GPU. Run on a machine with an NVIDIA GPU, with the toolkit's
+//! src/nn/gemm.rs) on the GPU. Run on a machine with an NVIDIA GPU, with the toolkit's
 //! libraries on the library path:
 //! `LD_LIBRARY_PATH=/usr/local/cuda/lib64 cargo test --release --features gpu --test gpu_blas -- --nocapture`
 //!
@@ -27,8 +27,9 @@ use std::sync::Arc;
 use instantmimic::bench::bench_gemm;
 use instantmimic::cuda::{Blas, BlasMatrix, GemmMath, GemmOperand, Gpu};
 use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels};
-use instantmimic::ppo::reduce::record_clear;
-use instantmimic::ppo::{GaussianPolicy, GemmPath, PolicyGemm, PpoUpdate, mlp_layout};
+use instantmimic::nn::reduce::record_clear;
+use instantmimic::nn::{GemmPath, PolicyGemm, mlp_layout};
+use instantmimic::ppo::{GaussianPolicy, PpoUpdate};
 use instantmimic::train::{GemmSetting, TrainConfig};
 use ppo_support::{RolloutStorage, mlp_backward, mlp_forward, normal, relative_error, to_f64};
 use rand::SeedableRng;
@@ -337,7 +338,7 @@ fn mlp_forward_and_backward_of_every_gemm_path_match_f64_under_capture() {
                     gemm.record_linear(&kernels, s, input, w, b, y, l != last)?;
                     input = y;
                 }
-                // As src/ppo/backward.rs records it: the weight gradient reads x before the
+                // As src/nn/backward.rs records it: the weight gradient reads x before the
                 // input gradient overwrites it.
                 for l in (0..=last).rev() {
                     let dz = if l == last { &d_out_d } else { &activations[l] };
@@ -357,7 +358,7 @@ fn mlp_forward_and_backward_of_every_gemm_path_match_f64_under_capture() {
                         )?;
                     }
                 }
-                Ok::<(), instantmimic::ppo::PpoError>(())
+                Ok::<(), instantmimic::nn::NnError>(())
             })
             .expect("capture");
         println!("{path:?}: graph {:?}", graph.node_counts().unwrap());

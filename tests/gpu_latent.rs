@@ -22,7 +22,7 @@ use instantmimic::latent::networks::distillation_loss_f64;
 use instantmimic::latent::{
     DistillationBatch, DistillationUpdate, LatentConfig, LatentShapes, LatentStudent,
 };
-use instantmimic::ppo::{GemmSetting, PolicyGemm};
+use instantmimic::nn::{GemmSetting, PolicyGemm};
 use instantmimic::train::latent_trainer::load_frozen_decoder;
 use rand::SeedableRng;
 use rand::rngs::StdRng;

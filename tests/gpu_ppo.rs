@@ -26,16 +26,16 @@ use std::sync::Arc;
 use instantmimic::cuda::Gpu;
 use instantmimic::kernels::ScheduleParams;
 use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels, PpoLossParams};
-use instantmimic::ppo::adam::{AdamMoments, AdamStep, adam_params, record_schedule};
-use instantmimic::ppo::backward::{
-    record_linear_backward_input_elu, record_linear_backward_weight,
-};
-use instantmimic::ppo::batch::{Advantages, Minibatch, ValueNormalization};
-use instantmimic::ppo::loss::{LOSS_TERMS, LossGradients};
-use instantmimic::ppo::reduce::{
+use instantmimic::nn::adam::{AdamMoments, AdamStep, adam_params};
+use instantmimic::nn::backward::{record_linear_backward_input_elu, record_linear_backward_weight};
+use instantmimic::nn::reduce::{
     record_clear, record_column_sums, record_sum_and_squares, record_sum_of_squares,
 };
-use instantmimic::ppo::{GaussianPolicy, GemmSetting, LayerShape, PpoUpdate};
+use instantmimic::nn::{GemmSetting, LayerShape};
+use instantmimic::ppo::batch::{Advantages, Minibatch, ValueNormalization};
+use instantmimic::ppo::loss::{LOSS_TERMS, LossGradients};
+use instantmimic::ppo::schedule::record_schedule;
+use instantmimic::ppo::{GaussianPolicy, PpoUpdate};
 use instantmimic::train::TrainConfig;
 use ppo_support::*;
 use rand::SeedableRng;

@@ -14,8 +14,9 @@ mod skip_support;
 use std::path::Path;
 
 use instantmimic::env::layout;
+use instantmimic::nn::{backward, reduce};
 use instantmimic::ppo::PpoStatistics;
-use instantmimic::ppo::{backward, batch, loss, reduce};
+use instantmimic::ppo::{batch, loss};
 
 const CHECKS: [&str; 5] = [
     "kernels_py/checks/ppo_gae.py",

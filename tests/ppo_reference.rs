@@ -5,7 +5,7 @@
 
 mod ppo_support;
 
-use instantmimic::ppo::mlp_layout;
+use instantmimic::nn::mlp_layout;
 use ppo_support::*;
 use rand::SeedableRng;
 use rand::rngs::StdRng;

@@ -12,7 +12,7 @@ use serde::Serialize;
 use super::timing::timed_seconds;
 use crate::cuda::{Blas, GemmMath, Gpu};
 use crate::kernels::{DeviceArray, EnvError, EnvKernels};
-use crate::ppo::policy::{TILE, TILE_THREADS};
+use crate::nn::gemm::{TILE, TILE_THREADS};
 
 /// One GEMM shape: `[rows, inputs] x [inputs, outputs]`.
 #[derive(Clone, Debug, Serialize)]

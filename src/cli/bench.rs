@@ -141,7 +141,7 @@ pub(super) fn benchmark_inputs(
     Ok((store, motion))
 }
 
-/// `bench rollout --gemm`: `policy.gemm` (src/ppo/config.rs, `GemmSetting`).
+/// `bench rollout --gemm`: `policy.gemm` (src/nn/gemm.rs, `GemmSetting`).
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub(super) enum GemmArg {
     /// cuBLAS f32 when libcublas can be loaded, else Warp tiles.

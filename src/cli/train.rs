@@ -390,7 +390,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             let teacher = load_teacher(&config, &checks.policy)?;
             let shapes = latent_shapes(&config, &checks.policy)?;
             let (e, d, p) = shapes.parameter_counts();
-            let hidden = |layers: &[crate::ppo::LayerShape]| -> Vec<usize> {
+            let hidden = |layers: &[crate::nn::LayerShape]| -> Vec<usize> {
                 layers.iter().skip(1).map(|l| l.inputs).collect()
             };
             Some(format!(

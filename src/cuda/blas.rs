@@ -1,5 +1,5 @@
 //! cuBLAS GEMMs on row-major f32 matrices: the policy's layers when `policy.gemm` picks cuBLAS
-//! (src/ppo/gemm.rs), and `instantmimic bench gemm`. cuBLAS ships with the CUDA toolkit (or
+//! (src/nn/gemm.rs), and `instantmimic bench gemm`. cuBLAS ships with the CUDA toolkit (or
 //! pip's nvidia-cublas-cu12), not with the driver, so it is optional: it is opened at run time
 //! and a missing library is a [`CudaError::BlasUnavailable`] that says where it comes from.
 //!

@@ -8,12 +8,12 @@
 //!    (`latent_sample`, eps keyed by the update counter and the slot), the decoder on
 //!    `[proprio | z]`;
 //! 3. backward: the reconstruction's gradient (`latent_reconstruction_gradient`), the
-//!    decoder's backward pass (`ppo::backward`), the gradient of z from its first layer
+//!    decoder's backward pass (`nn::backward`), the gradient of z from its first layer
 //!    (`latent_z_gradient`), the encoder's and the prior's output gradients through the
 //!    sample and the KL (`latent_kl_gradients`), their backward passes;
 //! 4. the loss terms' column sums into row s of the loss sums; Adam's step count; the squared
 //!    global norm of the three networks' gradients into slot s; Adam on each network with the
-//!    gradients clipped by that norm (`ppo::adam`).
+//!    gradients clipped by that norm (`nn::adam`).
 //!
 //! The update counter advances once at the end (the next update shuffles differently).
 
@@ -22,11 +22,11 @@ use std::sync::Arc;
 use crate::cuda::{Gpu, Stream};
 use crate::env::RolloutStorage;
 use crate::kernels::{AdamParams, DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
-use crate::ppo::adam::{AdamMoments, AdamStep, adam_params, record_advance};
-use crate::ppo::backward::{MlpGradients, input_gradient_scratch_len};
-use crate::ppo::batch::{minibatch_rows, record_shuffle};
-use crate::ppo::policy::Mlp;
-use crate::ppo::reduce::{record_clear, record_column_sums, record_sum_of_squares};
+use crate::nn::adam::{AdamMoments, AdamStep, adam_params, record_advance};
+use crate::nn::backward::{MlpGradients, input_gradient_scratch_len};
+use crate::nn::mlp::Mlp;
+use crate::nn::reduce::{record_clear, record_column_sums, record_sum_of_squares};
+use crate::nn::shuffle::{minibatch_rows, record_shuffle};
 
 use super::LatentError;
 use super::config::LatentConfig;
@@ -74,10 +74,10 @@ struct Trained {
 impl Trained {
     fn new(
         gpu: &Gpu,
-        shapes: &[crate::ppo::LayerShape],
+        shapes: &[crate::nn::LayerShape],
         params: &DeviceArray<f32>,
         rows: usize,
-        gemm: &crate::ppo::PolicyGemm,
+        gemm: &crate::nn::PolicyGemm,
     ) -> Result<Trained, LatentError> {
         let shared = params.view(0, [params.len()])?;
         Ok(Trained {
@@ -302,7 +302,7 @@ impl DistillationUpdate {
         )?;
         let scratch = self.scratch.as_ref();
         let blocks = self.target_blocks;
-        crate::ppo::backward::record_mlp_backward(
+        crate::nn::backward::record_mlp_backward(
             k,
             stream,
             decoder,
@@ -335,7 +335,7 @@ impl DistillationUpdate {
             &self.d_prior,
             &self.terms,
         )?;
-        crate::ppo::backward::record_mlp_backward(
+        crate::nn::backward::record_mlp_backward(
             k,
             stream,
             encoder,
@@ -345,7 +345,7 @@ impl DistillationUpdate {
             blocks,
             scratch,
         )?;
-        crate::ppo::backward::record_mlp_backward(
+        crate::nn::backward::record_mlp_backward(
             k,
             stream,
             prior,

@@ -5,7 +5,7 @@
 //! and against what the task observes and actuates, so that a checkpoint of another shape is
 //! refused with one line.
 
-use crate::ppo::{LayerShape, mlp_layout};
+use crate::nn::{LayerShape, mlp_layout};
 
 use super::LatentError;
 

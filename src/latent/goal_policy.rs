@@ -19,8 +19,8 @@ use crate::env::{
     ActStorage, GOAL_OBSERVATION, ObsConfig, RolloutError, RolloutPolicy, goal_observation_config,
 };
 use crate::kernels::{DeviceArray, DeviceArray2, EnvKernels};
-use crate::ppo::PolicyGemm;
-use crate::ppo::policy::Mlp;
+use crate::nn::PolicyGemm;
+use crate::nn::mlp::Mlp;
 
 use super::LatentError;
 use super::frozen::FrozenDecoder;

@@ -33,7 +33,7 @@ use thiserror::Error;
 use crate::cuda::CudaError;
 use crate::env::RolloutError;
 use crate::kernels::EnvError;
-use crate::ppo::{PolicyError, PpoError};
+use crate::nn::NnError;
 
 pub use config::LatentConfig;
 pub use distill::{
@@ -53,9 +53,7 @@ pub enum LatentError {
     #[error(transparent)]
     Cuda(#[from] CudaError),
     #[error(transparent)]
-    Policy(#[from] PolicyError),
-    #[error(transparent)]
-    Ppo(#[from] PpoError),
+    Nn(#[from] NnError),
     #[error("latent controller: {0}")]
     Shape(String),
     /// A checkpoint (teacher or latent) that does not fit this run; the message names the

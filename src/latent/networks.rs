@@ -1,6 +1,6 @@
 //! The latent controller's three networks as layouts (no GPU): which observation columns the
 //! prior and the decoder see, each network's layers in its flat parameter buffer
-//! (`ppo::mlp_layout`), their initialization, and a float64 host reference of the
+//! (`nn::mlp_layout`), their initialization, and a float64 host reference of the
 //! distillation loss (the GPU tests compare with it).
 
 use rand::SeedableRng;
@@ -8,7 +8,7 @@ use rand::rngs::StdRng;
 
 use crate::env::ObsConfig;
 use crate::env::layout::{ObservationCounts, observation_blocks};
-use crate::ppo::{LayerShape, initial_parameters, mlp_layout};
+use crate::nn::{LayerShape, initial_parameters, mlp_layout};
 
 use super::LatentError;
 use super::config::LatentConfig;

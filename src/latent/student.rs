@@ -1,12 +1,12 @@
 //! The latent controller on the GPU: encoder, decoder and prior parameters (one flat buffer
-//! each, `ppo::mlp_layout`), and, as the rollout's [`RolloutPolicy`], the student that acts
+//! each, `nn::mlp_layout`), and, as the rollout's [`RolloutPolicy`], the student that acts
 //! with its decoder while the frozen teacher labels every step (DAgger).
 
 use crate::cuda::{Gpu, Stream};
 use crate::env::{ActStorage, RolloutError, RolloutPolicy};
 use crate::kernels::{DeviceArray, DeviceArray2, EnvKernels};
-use crate::ppo::PolicyGemm;
-use crate::ppo::policy::Mlp;
+use crate::nn::PolicyGemm;
+use crate::nn::mlp::Mlp;
 
 use super::LatentError;
 use super::networks::LatentShapes;

@@ -4,7 +4,7 @@
 //! and hands the values here.
 
 use crate::env::ObsConfig;
-use crate::ppo::{LayerShape, mlp_layout};
+use crate::nn::{LayerShape, mlp_layout};
 
 use super::LatentError;
 

@@ -1,6 +1,7 @@
 //! The batch side of the update: what the rollout hands over ([`PpoBatch`]), GAE
-//! (`kernels_py/env/gae.py`), the per-epoch device shuffle and the minibatch gather
-//! (`kernels_py/env/minibatch.py`), with the shape checks the launchers cannot do.
+//! (`kernels_py/env/gae.py`), value normalization and the minibatch gather
+//! (`kernels_py/env/minibatch.py`), with the shape checks the launchers cannot do; the per-epoch
+//! device shuffle is `nn::shuffle`.
 
 use crate::cuda::{Communicator, Gpu, ReduceOp, Stream};
 use crate::env::RolloutStorage;
@@ -129,8 +130,8 @@ impl ValueNormalization {
             return Ok(());
         }
         let flat = returns.view(0, [returns.len()])?;
-        super::reduce::record_clear(stream, &self.moments)?;
-        super::reduce::record_sum_and_squares(kernels, stream, &flat, &self.moments)?;
+        crate::nn::reduce::record_clear(stream, &self.moments)?;
+        crate::nn::reduce::record_sum_and_squares(kernels, stream, &flat, &self.moments)?;
         let mut samples = returns.len();
         if let Some(replicas) = &self.replicas {
             replicas.all_reduce(stream, &[self.moments.collective()?], ReduceOp::Sum)?;
@@ -208,38 +209,10 @@ impl Advantages {
     }
 }
 
-/// Queues `permutation[j] = pi(j)`, a random permutation of `[0, B)` (B = its length) keyed by
-/// `(seed, update_counter[0], epoch)`: a Feistel bijection with cycle walking, no sort.
-pub fn record_shuffle(
-    kernels: &EnvKernels,
-    stream: &Stream,
-    update_counter: &DeviceArray<i32>,
-    seed: i32,
-    epoch: usize,
-    permutation: &DeviceArray<i32>,
-) -> Result<(), PpoError> {
-    // The Feistel domain is the next power of four, computed in 64 bits; indices are i32.
-    if permutation.len() > 1 << 30 {
-        return Err(PpoError::Shape(format!(
-            "a batch of {} samples: the device shuffle handles at most 2^30",
-            permutation.len()
-        )));
-    }
-    kernels.shuffle_indices(
-        stream,
-        permutation.len(),
-        update_counter,
-        seed,
-        epoch as i32,
-        permutation,
-    )?;
-    Ok(())
-}
-
 /// One minibatch, gathered into contiguous rows `[M, ...]`.
 pub struct Minibatch {
     /// `[M, D']`: the `D` observations of each row, then `D' - D` zeros that align the rows for
-    /// cuBLAS (`gemm::padded_input_width`).
+    /// cuBLAS (`nn::gemm::padded_input_width`).
     pub observations: DeviceArray2<f32>,
     observation_size: usize,
     pub actions: DeviceArray2<f32>,
@@ -333,25 +306,4 @@ impl Minibatch {
         )?;
         Ok(())
     }
-}
-
-/// Rows per minibatch when `horizon` x `envs` samples are split into `minibatches` for
-/// `epochs` passes; why not, when a size is 0, the minibatches do not divide the samples, or a
-/// sample index would not fit the kernels' `i32`.
-pub fn minibatch_rows(
-    horizon: usize,
-    envs: usize,
-    epochs: usize,
-    minibatches: usize,
-) -> Result<usize, String> {
-    let samples = horizon * envs;
-    if samples == 0 || epochs == 0 || minibatches == 0 || !samples.is_multiple_of(minibatches) {
-        return Err(format!(
-            "{horizon} x {envs} samples in {minibatches} minibatches, {epochs} epochs: sizes must be positive and the minibatches must divide the samples"
-        ));
-    }
-    if samples > i32::MAX as usize {
-        return Err(format!("{samples} samples: indices are i32"));
-    }
-    Ok(samples / minibatches)
 }

@@ -4,6 +4,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::nn::GemmSetting;
+
 /// `[policy]`: the actor and critic networks.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
@@ -32,25 +34,6 @@ impl Default for PolicyConfig {
             gemm: GemmSetting::AutoTf32,
         }
     }
-}
-
-/// `policy.gemm` (docs/ppo.md, "GEMMs"): cuBLAS comes with the CUDA toolkit, not the driver.
-#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum GemmSetting {
-    /// cuBLAS in f32 when libcublas can be loaded, else Warp's tile kernels.
-    #[default]
-    Auto,
-    /// cuBLAS with TF32 tensor-core products when libcublas can be loaded, else Warp's tile
-    /// kernels (f32). The committed training configs' choice (issue 20: on the H100 the update
-    /// 5.5 ms instead of 8.2, the backflip's frames to success unchanged).
-    AutoTf32,
-    /// Warp's tile kernels (plain f32; needs only the driver).
-    Warp,
-    /// cuBLAS, f32 arithmetic; an error at setup when libcublas cannot be loaded.
-    Cublas,
-    /// cuBLAS with TF32 tensor-core products (about 1e-3 relative error); as `cublas`.
-    CublasTf32,
 }
 
 /// `[ppo]`: the update (issue 5).

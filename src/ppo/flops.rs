@@ -1,6 +1,6 @@
 //! The floating-point cost of one PPO update (docs/ppo.md, "Cost").
 
-use super::policy::LayerShape;
+use crate::nn::LayerShape;
 
 /// Floating-point operations of one update (multiply and add counted as 2).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -44,7 +44,7 @@ impl UpdateFlops {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ppo::mlp_layout;
+    use crate::nn::mlp_layout;
 
     #[test]
     fn flops_of_the_baseline_update() {

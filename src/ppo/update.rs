@@ -15,7 +15,7 @@
 //!    learning rate, Adam step count); the squared global gradient norm into slot s; Adam on
 //!    the actor's and the critic's parameters (clipped by that norm). The forward and backward
 //!    GEMMs run through cuBLAS and `gemm_epilogue.py` instead when `policy.gemm` says so
-//!    (gemm.rs);
+//!    (`nn::gemm`);
 //! 4. the statistics (`ppo_statistics.py`) into one small buffer, and the update counter.
 //!
 //! Every hyperparameter is a kernel argument (recorded with the launch; change it by
@@ -47,15 +47,20 @@ use crate::kernels::{
     AdamParams, DeviceArray, DeviceArray2, EnvError, EnvKernels, PpoLossParams, ScheduleParams,
 };
 
-use super::adam::{AdamMoments, AdamStep, LEARNING_RATE_MAX, LEARNING_RATE_MIN, adam_params};
-use super::backward::{MlpGradients, input_gradient_scratch_len};
-use super::batch::{Advantages, Minibatch, PpoBatch, ValueNormalization, minibatch_rows};
+use crate::nn::NnError;
+use crate::nn::adam::{AdamMoments, AdamStep, adam_params};
+use crate::nn::backward::{MlpGradients, input_gradient_scratch_len};
+use crate::nn::gemm::padded_input_width;
+use crate::nn::mlp::{LayerShape, Mlp};
+use crate::nn::reduce::{record_clear, record_column_sums, record_sum_and_squares};
+use crate::nn::shuffle::minibatch_rows;
+
+use super::batch::{Advantages, Minibatch, PpoBatch, ValueNormalization};
 use super::config::{KlMeasure, PpoConfig};
 use super::flops::UpdateFlops;
-use super::gemm::padded_input_width;
 use super::loss::{LOSS_TERMS, LossGradients, PpoStatistics};
-use super::policy::{GaussianPolicy, LayerShape, Mlp, PolicyError};
-use super::reduce::{record_clear, record_column_sums, record_sum_and_squares};
+use super::policy::GaussianPolicy;
+use super::schedule::{LEARNING_RATE_MAX, LEARNING_RATE_MIN};
 use super::update_stages::UpdateStage;
 
 mod pipeline;
@@ -74,7 +79,7 @@ pub enum PpoError {
     #[error(transparent)]
     Cuda(#[from] CudaError),
     #[error(transparent)]
-    Policy(#[from] PolicyError),
+    Nn(#[from] NnError),
     #[error("PPO update: {0}")]
     Shape(String),
 }
@@ -520,7 +525,8 @@ impl PpoUpdate {
         let sums = self.loss_sums.view(slot * width, [width])?;
         stages.stage(gpu, stream, UpdateStage::Loss, |s| {
             self.record_loss(s, minibatch)?;
-            record_column_sums(k, s, &self.loss.terms, &sums)
+            record_column_sums(k, s, &self.loss.terms, &sums)?;
+            Ok::<(), PpoError>(())
         })?;
         stages.stage(gpu, stream, UpdateStage::Backward, |stream| {
             self.record_backward(stream, branching, &minibatch.observations, &sums)

@@ -3,7 +3,8 @@
 
 use super::*;
 use crate::env::{ActionMode, EndEffectorFrame};
-use crate::ppo::{GemmSetting, KlMeasure};
+use crate::nn::GemmSetting;
+use crate::ppo::KlMeasure;
 
 #[test]
 fn defaults_are_the_paper_baseline_and_valid() {
@@ -541,7 +542,7 @@ fn latent_and_goal_are_alternatives() {
 #[test]
 fn the_fast_paths_are_the_defaults_and_written_out() {
     use crate::env::BodyKinematics;
-    use crate::ppo::GemmSetting;
+    use crate::nn::GemmSetting;
     let c = TrainConfig::with_motion("walk");
     assert!(c.ppo.concurrent_networks);
     assert_eq!(c.env.body_kinematics, BodyKinematics::Fused);

@@ -10,7 +10,7 @@
 use crate::cuda::{DeviceRange, Stream};
 use crate::env::{Rollout, RolloutTotals, TOTALS};
 use crate::kernels::{DeviceArray, EnvKernels};
-use crate::ppo::reduce::{record_clear, record_sum_of_squares};
+use crate::nn::reduce::{record_clear, record_sum_of_squares};
 use crate::ppo::{GaussianPolicy, PpoStatistics, PpoUpdate};
 
 use super::error::TrainError;

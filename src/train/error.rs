@@ -113,6 +113,8 @@ pub enum TrainError {
     #[error(transparent)]
     Rollout(#[from] crate::env::RolloutError),
     #[error(transparent)]
+    Nn(#[from] crate::nn::NnError),
+    #[error(transparent)]
     Ppo(#[from] crate::ppo::PpoError),
     #[error(transparent)]
     Policy(#[from] crate::ppo::PolicyError),

@@ -17,7 +17,7 @@ use crate::env::ActionMode;
 use crate::env::layout::JointLayout;
 use crate::latent::{FrozenDecoder, GoalDecoding};
 use crate::motion::Character;
-use crate::ppo::{LayerShape, mlp_layout};
+use crate::nn::{LayerShape, mlp_layout};
 
 /// The checkpoint tensor of a latent goal run that names its decoder: i32 `[5]`, the CRC-32 of
 /// the decoder's and of the prior's parameter bytes (as i32), then the character-state columns,

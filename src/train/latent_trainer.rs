@@ -29,14 +29,14 @@ use crate::latent::{
     DistillationBatch, DistillationOptimizerState, DistillationStatistics, DistillationUpdate,
     FrozenDecoder, LatentConfig, LatentShapes, LatentStudent, TeacherCheckpoint, proprio_columns,
 };
+use crate::nn::PolicyGemm;
+use crate::nn::reduce::{record_clear, record_sum_of_squares};
 use crate::plan::{PhysicsOverflow, PlanStore};
-use crate::ppo::PolicyGemm;
-use crate::ppo::reduce::{record_clear, record_sum_of_squares};
 
 /// The latent checkpoint's own tensors (the observation statistics, the learning rate, Adam's
 /// step, the start-phase statistics and the rollout's counter keep the tracker's names).
 pub mod latent_tensor_names {
-    /// f32 flat parameters, `ppo::mlp_layout` of each network.
+    /// f32 flat parameters, `nn::mlp_layout` of each network.
     pub const ENCODER: &str = "latent.encoder.params";
     pub const DECODER: &str = "latent.decoder.params";
     pub const PRIOR: &str = "latent.prior.params";

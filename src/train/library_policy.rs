@@ -24,8 +24,8 @@ use crate::env::{Rollout, RolloutPolicy, clip_evaluation};
 use crate::latent::{LatentShapes, LatentStudent};
 use crate::motion::LibraryConfig;
 use crate::motion::MotionLibraryError;
+use crate::nn::PolicyGemm;
 use crate::plan::PlanStore;
-use crate::ppo::PolicyGemm;
 
 /// Which policy a library checkpoint holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -50,7 +50,8 @@ pub use config::{
 // The sections `TrainConfig` composes, at their old paths (they live in the layers that
 // consume them).
 pub use crate::env::{ActionMode, EndEffectorFrame, EnvConfig, EvalStart, ObsConfig, RewardConfig};
-pub use crate::ppo::{GemmSetting, KlMeasure, PolicyConfig, PpoConfig};
+pub use crate::nn::GemmSetting;
+pub use crate::ppo::{KlMeasure, PolicyConfig, PpoConfig};
 pub use character::{
     CharacterRecord, ChosenCharacter, check_plan_model, check_trained_character,
     checkpoint_character,

@@ -16,8 +16,8 @@ use crate::env::goal_observation_size;
 use crate::env::layout::{JointLayout, ObservationCounts, observation_size};
 use crate::motion::find::{MotionSource, ResolvedMotion, resolve_motion};
 use crate::motion::{Character, LoopMode, MotionClip, ReferenceMotion, ReferenceTable};
+use crate::nn::mlp_layout;
 use crate::plan::{PlanStore, SimulatedModel};
-use crate::ppo::mlp_layout;
 
 /// The plans a run replays: physics steps, and the kinematics a reset needs.
 pub const RUN_PLANS: [&str; 2] = ["step", "kinematics"];
@@ -44,7 +44,7 @@ impl PolicyShapes {
             None => observation_size(&config.obs, counts),
             Some(_) => goal_observation_size(&config.obs, counts),
         };
-        let end = |layers: Vec<crate::ppo::LayerShape>| layers.last().map_or(0, |l| l.end());
+        let end = |layers: Vec<crate::nn::LayerShape>| layers.last().map_or(0, |l| l.end());
         Ok(PolicyShapes {
             observation_size: observation,
             observation_counts: counts,

@@ -26,8 +26,9 @@ use crate::env::{
 };
 use crate::kernels::DeviceArray;
 use crate::latent::LatentDecoder;
+use crate::nn::PolicyGemm;
 use crate::plan::PlanStore;
-use crate::ppo::{GaussianPolicy, PolicyGemm, PpoBatch, PpoOptimizerState, PpoUpdate, UpdateStage};
+use crate::ppo::{GaussianPolicy, PpoBatch, PpoOptimizerState, PpoUpdate, UpdateStage};
 
 use super::checkpoint::tensor_names;
 use super::checkpoint::{Checkpoint, CheckpointError};

@@ -12,7 +12,7 @@
 //! of anything, a single element, and the actor's widest layer.
 
 use instantmimic::kernels::{BIAS_ADD, BIAS_ELU, ELU_INPUT_GRADIENT};
-use instantmimic::ppo::reduce::{ColumnChunks, GRADIENT_ROWS};
+use instantmimic::nn::reduce::{ColumnChunks, GRADIENT_ROWS};
 
 use super::compare::{Report, wide};
 use super::policy::{elu, linear_reference};

@@ -10,7 +10,8 @@
 use instantmimic::cuda::Gpu;
 use instantmimic::env::{ActStorage, RolloutPolicy};
 use instantmimic::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
-use instantmimic::ppo::{GaussianPolicy, LayerShape};
+use instantmimic::nn::LayerShape;
+use instantmimic::ppo::GaussianPolicy;
 use rand::Rng;
 use rand::rngs::StdRng;
 use rand_distr::StandardNormal;
@@ -169,7 +170,7 @@ fn elu(z: f64) -> f64 {
 }
 
 /// Each layer's output for `rows` inputs `x [rows, in]` (ELU on hidden layers, linear last),
-/// parameters laid out as `src/ppo/policy.rs` does.
+/// parameters laid out as `src/nn/mlp.rs` does.
 pub fn mlp_forward(layers: &[LayerShape], params: &[f64], x: &[f64], rows: usize) -> Vec<Vec<f64>> {
     let mut outputs: Vec<Vec<f64>> = Vec::new();
     for (l, s) in layers.iter().enumerate() {

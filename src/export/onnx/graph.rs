@@ -4,7 +4,7 @@
 
 use std::collections::BTreeSet;
 
-use crate::ppo::LayerShape;
+use crate::nn::LayerShape;
 
 use super::proto::*;
 use super::{BATCH, IR_VERSION, OPSET};

@@ -18,7 +18,7 @@ use crate::env::layout::{JointLayout, observation_blocks};
 use crate::latent::FrozenDecoder;
 use crate::latent::networks::REFERENCE_BLOCKS;
 use crate::motion::Character;
-use crate::ppo::LayerShape;
+use crate::nn::LayerShape;
 use crate::train::goal_latent::GoalDecoder;
 use crate::train::latent_trainer::{frozen_decoder_of, latent_shapes, latent_tensor_names};
 use crate::train::{Checkpoint, PolicyShapes, TrainError};

@@ -20,7 +20,7 @@ use prost::Message as _;
 use crate::env::layout::{JointLayout, ObservationBlock, ObservationCounts, observation_blocks};
 use crate::env::{GOAL_OBSERVATION, ObsConfig, goal_observation_config};
 use crate::motion::Character;
-use crate::ppo::{LayerShape, mlp_layout};
+use crate::nn::{LayerShape, mlp_layout};
 use crate::train::checkpoint::tensor_names;
 use crate::train::goal_latent::{DECODER_DIGEST, load_goal_decoder};
 use crate::train::{Checkpoint, PolicyShapes, TrainConfig, TrainError};

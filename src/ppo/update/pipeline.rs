@@ -15,10 +15,11 @@
 //! order of atomic additions, as with `ppo.concurrent_networks` alone (docs/ppo.md).
 
 use crate::cuda::{CaptureNodes, Stream};
+use crate::nn::reduce::record_column_sums;
+use crate::nn::shuffle::record_shuffle;
 
-use super::super::batch::{Minibatch, PpoBatch, record_shuffle};
+use super::super::batch::{Minibatch, PpoBatch};
 use super::super::loss::LOSS_TERMS;
-use super::super::reduce::record_column_sums;
 use super::{Network, PpoError, PpoUpdate, Stages};
 
 impl PpoUpdate {

@@ -5,11 +5,12 @@
 use crate::cuda::Stream;
 use crate::kernels::{DeviceArray, DeviceArray2};
 
-use super::super::adam::record_schedule;
-use super::super::backward::{MlpGradients, record_mlp_backward};
+use crate::nn::backward::{MlpGradients, record_mlp_backward};
+use crate::nn::mlp::Mlp;
+use crate::nn::reduce::{record_clear, record_sum_of_squares};
+
 use super::super::batch::Minibatch;
-use super::super::policy::Mlp;
-use super::super::reduce::{record_clear, record_sum_of_squares};
+use super::super::schedule::record_schedule;
 use super::{PpoError, PpoUpdate};
 
 /// Which of the two networks a step's per-network work is for.
@@ -63,7 +64,7 @@ impl PpoUpdate {
         stream: &Stream,
         network: Network,
     ) -> Result<(), PpoError> {
-        record_clear(stream, &self.grads_of(network).flat)
+        Ok(record_clear(stream, &self.grads_of(network).flat)?)
     }
 
     pub(super) fn grads_of(&self, network: Network) -> &MlpGradients {
@@ -109,7 +110,13 @@ impl PpoUpdate {
     ) -> Result<(), PpoError> {
         let grads = &self.grads_of(network).flat;
         let at = self.norm_slot(network, slot);
-        record_sum_of_squares(&self.kernels, stream, grads, &self.grad_norm_sq, at)
+        Ok(record_sum_of_squares(
+            &self.kernels,
+            stream,
+            grads,
+            &self.grad_norm_sq,
+            at,
+        )?)
     }
 
     /// Queues `network`'s Adam step of step `slot` (the actor's with the log-std floor).
@@ -157,7 +164,7 @@ impl PpoUpdate {
                     .or(self.input_gradient_scratch.as_ref()),
             ),
         };
-        record_mlp_backward(
+        Ok(record_mlp_backward(
             &self.kernels,
             stream,
             self.mlp_of(network),
@@ -166,6 +173,6 @@ impl PpoUpdate {
             self.grads_of(network),
             self.target_blocks,
             scratch,
-        )
+        )?)
     }
 }

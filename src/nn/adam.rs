@@ -1,18 +1,17 @@
 //! The optimizer (`kernels_py/env/optimizer.py`): Adam moments per parameter buffer, global
-//! gradient-norm clipping, and the KL-adaptive learning rate, all read from device memory.
+//! gradient-norm clipping, and the step's learning rate, count and factors, all read from device
+//! memory. PPO's KL-adaptive learning rate (`ppo::schedule`) writes the step's factors in place
+//! of [`record_advance`].
 
 use crate::cuda::{Gpu, Stream};
-use crate::kernels::{AdamParams, DeviceArray, EnvKernels, ScheduleParams};
+use crate::kernels::{AdamParams, DeviceArray, EnvKernels};
 
-use super::PpoError;
+use super::NnError;
 
 /// torch.optim.Adam's defaults, as rsl_rl uses them.
 pub const ADAM_BETA1: f32 = 0.9;
 pub const ADAM_BETA2: f32 = 0.999;
 pub const ADAM_EPSILON: f32 = 1e-8;
-/// rsl_rl's bounds of the adaptive learning rate.
-pub const LEARNING_RATE_MIN: f32 = 1e-5;
-pub const LEARNING_RATE_MAX: f32 = 1e-2;
 
 /// Adam's moments for one flat parameter buffer.
 pub struct AdamMoments {
@@ -21,7 +20,7 @@ pub struct AdamMoments {
 }
 
 impl AdamMoments {
-    pub fn zeros(gpu: &Gpu, len: usize) -> Result<AdamMoments, PpoError> {
+    pub fn zeros(gpu: &Gpu, len: usize) -> Result<AdamMoments, NnError> {
         Ok(AdamMoments {
             moment1: DeviceArray::zeros(gpu, [len])?,
             moment2: DeviceArray::zeros(gpu, [len])?,
@@ -30,8 +29,8 @@ impl AdamMoments {
 
     /// Queues one Adam step of `params` with `grads` scaled by
     /// `min(1, max_grad_norm / (sqrt(grad_norm_sq[slot]) + 1e-6))`, with the step's factors
-    /// (`[ADAM_FACTORS]`: the step size and `sqrt(1 - b2^t)`, written by [`record_schedule`] or
-    /// [`record_advance`] for the step).
+    /// (`[ADAM_FACTORS]`: the step size and `sqrt(1 - b2^t)`, written by [`record_advance`] or
+    /// PPO's schedule for the step).
     #[allow(clippy::too_many_arguments)]
     pub fn record_step(
         &self,
@@ -43,10 +42,10 @@ impl AdamMoments {
         grad_norm_sq: &DeviceArray<f64>,
         slot: usize,
         hp: &AdamParams,
-    ) -> Result<(), PpoError> {
+    ) -> Result<(), NnError> {
         let n = self.moment1.len();
         if params.len() != n || grads.len() != n || self.moment2.len() != n {
-            return Err(PpoError::Shape(format!(
+            return Err(NnError::Shape(format!(
                 "Adam step of {} parameters with {} gradients and moments of {} and {}",
                 params.len(),
                 grads.len(),
@@ -55,7 +54,7 @@ impl AdamMoments {
             )));
         }
         if slot >= grad_norm_sq.len() || adam_factors.len() != ADAM_FACTORS {
-            return Err(PpoError::Shape(format!(
+            return Err(NnError::Shape(format!(
                 "Adam step reads slot {slot} of {} gradient norms and {} factors",
                 grad_norm_sq.len(),
                 adam_factors.len()
@@ -102,7 +101,7 @@ pub struct AdamStep {
 
 impl AdamStep {
     /// Step 0 at rate `learning_rate`.
-    pub fn new(gpu: &Gpu, learning_rate: f32) -> Result<AdamStep, PpoError> {
+    pub fn new(gpu: &Gpu, learning_rate: f32) -> Result<AdamStep, NnError> {
         Ok(AdamStep {
             learning_rate: DeviceArray::from_slice(gpu, [1], &[learning_rate])?,
             count: DeviceArray::zeros(gpu, [1])?,
@@ -111,47 +110,14 @@ impl AdamStep {
     }
 }
 
-/// Queues the per-minibatch bookkeeping before the step: `log_std_grad = sums[LOSS_TERMS..] -
-/// entropy_coef`, the learning rate adapted to the minibatch's KL `sums[TERM_KL]` (when
-/// `params.adaptive`), `adam.count += 1` and the step's factors. One thread.
-pub fn record_schedule(
-    kernels: &EnvKernels,
-    stream: &Stream,
-    sums: &DeviceArray<f32>,
-    params: &ScheduleParams,
-    hp: &AdamParams,
-    log_std_grad: &DeviceArray<f32>,
-    adam: &AdamStep,
-) -> Result<(), PpoError> {
-    if sums.len() != super::loss::LOSS_TERMS + log_std_grad.len() {
-        return Err(PpoError::Shape(format!(
-            "schedule: {} loss sums for {} actions",
-            sums.len(),
-            log_std_grad.len()
-        )));
-    }
-    kernels.ppo_minibatch_schedule(
-        stream,
-        1,
-        sums,
-        params,
-        hp,
-        log_std_grad,
-        &adam.learning_rate,
-        &adam.count,
-        &adam.factors,
-    )?;
-    Ok(())
-}
-
 /// Queues `adam.count += 1` and the step's factors at the current rate, for optimizers without
-/// the PPO schedule. One thread.
+/// PPO's schedule. One thread.
 pub fn record_advance(
     kernels: &EnvKernels,
     stream: &Stream,
     hp: &AdamParams,
     adam: &AdamStep,
-) -> Result<(), PpoError> {
+) -> Result<(), NnError> {
     kernels.adam_advance(
         stream,
         1,

@@ -1,5 +1,6 @@
-//! What computes the policy's GEMMs (`policy.gemm`; docs/ppo.md, "GEMMs"): the forward pass of
-//! a layer (rollout and update), and the two backward products (weight and input gradient).
+//! What computes the networks' GEMMs (`policy.gemm`, [`GemmSetting`]; docs/ppo.md, "GEMMs"):
+//! the forward pass of a layer (rollout and update), and the two backward products (weight and
+//! input gradient).
 //!
 //! - Warp tiles: `policy.py`'s `linear_elu` / `linear` and `mlp_backward.py`'s kernels, each a
 //!   shared-memory tile GEMM with its epilogue fused (bias and ELU; bias gradient; ELU
@@ -14,17 +15,41 @@
 
 use std::sync::Arc;
 
-use super::config::GemmSetting;
-use crate::cuda::{Blas, CudaError, GemmMath, Gpu, Stream};
-use crate::kernels::{DeviceArray, DeviceArray2, EnvError, EnvKernels};
+use serde::{Deserialize, Serialize};
 
-use super::PpoError;
+use crate::cuda::{Blas, CudaError, GemmMath, Gpu, Stream};
+use crate::kernels::{DeviceArray, DeviceArray2, EnvKernels};
+
+use super::NnError;
 use super::backward::{
     input_gradient_shape, record_linear_backward_input_elu, record_linear_backward_weight,
     weight_gradient_shape,
 };
-use super::policy::{PolicyError, TILE, TILE_THREADS};
 use super::reduce::{ColumnChunks, GRADIENT_ROWS, record_column_sums};
+
+/// Edge of the output tile of one thread block of `linear_elu` / `linear` (policy.py).
+pub const TILE: usize = 64;
+/// Threads per tile (policy.py `TILE_THREADS`, the module's block size).
+pub const TILE_THREADS: usize = 128;
+
+/// `policy.gemm` (docs/ppo.md, "GEMMs"): cuBLAS comes with the CUDA toolkit, not the driver.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum GemmSetting {
+    /// cuBLAS in f32 when libcublas can be loaded, else Warp's tile kernels.
+    #[default]
+    Auto,
+    /// cuBLAS with TF32 tensor-core products when libcublas can be loaded, else Warp's tile
+    /// kernels (f32). The committed training configs' choice (issue 20: on the H100 the update
+    /// 5.5 ms instead of 8.2, the backflip's frames to success unchanged).
+    AutoTf32,
+    /// Warp's tile kernels (plain f32; needs only the driver).
+    Warp,
+    /// cuBLAS, f32 arithmetic; an error at setup when libcublas cannot be loaded.
+    Cublas,
+    /// cuBLAS with TF32 tensor-core products (about 1e-3 relative error); as `cublas`.
+    CublasTf32,
+}
 
 /// Values per row of an input of `k` values that `gemm` reads fastest: on the cuBLAS path
 /// a multiple of 4 f32 (16 bytes; observations of 362 values made cuBLAS pick its `align1`
@@ -153,10 +178,10 @@ impl PolicyGemm {
         }
     }
 
-    fn blas(&self) -> Result<(&Blas, GemmMath), PolicyError> {
+    fn blas(&self) -> Result<(&Blas, GemmMath), NnError> {
         match (&self.path, &self.blas) {
             (GemmPath::Cublas(math), Some(blas)) => Ok((blas, *math)),
-            _ => Err(PolicyError::Shape(
+            _ => Err(NnError::Internal(
                 "the cuBLAS path has no handle".to_owned(),
             )),
         }
@@ -174,10 +199,10 @@ impl PolicyGemm {
         b: &DeviceArray<f32>,
         y: &DeviceArray2<f32>,
         elu: bool,
-    ) -> Result<(), PolicyError> {
+    ) -> Result<(), NnError> {
         let ([m, x_cols], [k, n]) = (x.shape(), w.shape());
         if !self.reads_columns(x_cols, k) || b.shape() != [n] || y.shape() != [m, n] {
-            return Err(PolicyError::Shape(format!(
+            return Err(NnError::Shape(format!(
                 "layer of x {:?}, w {:?}, b {:?} into y {:?}: expected x [M, K] (cuBLAS: or rows padded past K), w [K, N], b [N], y [M, N]",
                 x.shape(),
                 w.shape(),
@@ -196,8 +221,7 @@ impl PolicyGemm {
         }
         let (blas, math) = self.blas()?;
         let (xm, wm, ym) = (x.blas_columns(k)?, w.blas_matrix()?, y.blas_matrix()?);
-        blas.gemm(stream, xm.plain(), wm.plain(), ym, 0.0, math)
-            .map_err(EnvError::from)?;
+        blas.gemm(stream, xm.plain(), wm.plain(), ym, 0.0, math)?;
         if elu {
             kernels.bias_elu(stream, m * n, b, y)?;
         } else {
@@ -234,10 +258,12 @@ impl PolicyGemm {
         dw: &DeviceArray2<f32>,
         db: Option<&DeviceArray<f32>>,
         target_blocks: usize,
-    ) -> Result<(), PpoError> {
+    ) -> Result<(), NnError> {
         if self.path == GemmPath::WarpTiles {
             let db = db.ok_or_else(|| {
-                PpoError::Shape("the Warp path's weight gradient adds the bias gradient".to_owned())
+                NnError::Internal(
+                    "the Warp path's weight gradient adds the bias gradient".to_owned(),
+                )
             })?;
             // It checks the shapes itself.
             return record_linear_backward_weight(kernels, stream, x, dz, dw, db, target_blocks);
@@ -245,7 +271,7 @@ impl PolicyGemm {
         let (blas, math) = self.blas()?;
         let k = dw.shape()[0];
         if !self.reads_columns(x.shape()[1], k) {
-            return Err(PpoError::Shape(format!(
+            return Err(NnError::Shape(format!(
                 "weight gradient of x {:?} into dw {:?}: x has fewer columns than dw rows",
                 x.shape(),
                 dw.shape()
@@ -277,21 +303,21 @@ impl PolicyGemm {
         y_prev: &DeviceArray2<f32>,
         scratch: Option<&DeviceArray<f32>>,
         db_prev: &DeviceArray<f32>,
-    ) -> Result<(), PpoError> {
+    ) -> Result<(), NnError> {
         if self.path == GemmPath::WarpTiles {
             // It checks the shapes itself.
             return record_linear_backward_input_elu(kernels, stream, dz, w, y_prev);
         }
         let [m, k, _] = input_gradient_shape(dz, w, y_prev)?;
         if db_prev.shape() != [k] {
-            return Err(PpoError::Shape(format!(
+            return Err(NnError::Shape(format!(
                 "bias gradient {:?} of a layer of {k} outputs",
                 db_prev.shape()
             )));
         }
         let (blas, math) = self.blas()?;
         let scratch = scratch.ok_or_else(|| {
-            PpoError::Shape("the cuBLAS input gradient needs a scratch buffer".to_owned())
+            NnError::Internal("the cuBLAS input gradient needs a scratch buffer".to_owned())
         })?;
         let product = scratch.view(0, [m, k])?;
         let (dzm, wm, gm) = (dz.blas_matrix()?, w.blas_matrix()?, product.blas_matrix()?);

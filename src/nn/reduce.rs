@@ -4,7 +4,7 @@
 use crate::cuda::Stream;
 use crate::kernels::{DeviceArray, DeviceArray2, EnvKernels};
 
-use super::PpoError;
+use super::NnError;
 
 /// Threads per block of the tile kernels (reduce.py and mlp_backward.py `TILE_THREADS`).
 pub const TILE_THREADS: usize = 128;
@@ -55,10 +55,10 @@ pub fn record_column_sums(
     stream: &Stream,
     x: &DeviceArray2<f32>,
     out: &DeviceArray<f32>,
-) -> Result<(), PpoError> {
+) -> Result<(), NnError> {
     let [rows, cols] = x.shape();
     if out.shape() != [cols] {
-        return Err(PpoError::Shape(format!(
+        return Err(NnError::Shape(format!(
             "column sums of {:?} into {:?}: the output needs {cols} values",
             x.shape(),
             out.shape()
@@ -80,9 +80,9 @@ pub fn record_sum_of_squares(
     x: &DeviceArray<f32>,
     out: &DeviceArray<f64>,
     slot: usize,
-) -> Result<(), PpoError> {
+) -> Result<(), NnError> {
     if slot >= out.len() {
-        return Err(PpoError::Shape(format!(
+        return Err(NnError::Shape(format!(
             "sum of squares into slot {slot} of {} slots",
             out.len()
         )));
@@ -98,9 +98,9 @@ pub fn record_sum_and_squares(
     stream: &Stream,
     x: &DeviceArray<f32>,
     out: &DeviceArray<f64>,
-) -> Result<(), PpoError> {
+) -> Result<(), NnError> {
     if out.shape() != [2] {
-        return Err(PpoError::Shape(format!(
+        return Err(NnError::Shape(format!(
             "sum and sum of squares into {:?}: the output needs 2 values",
             out.shape()
         )));
@@ -114,7 +114,7 @@ pub fn record_sum_and_squares(
 pub fn record_clear<T: crate::kernels::Element, const N: usize>(
     stream: &Stream,
     array: &DeviceArray<T, N>,
-) -> Result<(), PpoError> {
+) -> Result<(), NnError> {
     array.record_zero(stream)?;
     Ok(())
 }

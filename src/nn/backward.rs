@@ -1,12 +1,12 @@
-//! The backward pass of the actor and critic MLPs (`kernels_py/env/mlp_backward.py`): gradient
+//! The backward pass of the MLPs (`kernels_py/env/mlp_backward.py`): gradient
 //! buffers laid out like the parameters, the split of the weight-gradient reductions, and the
 //! launches layer by layer.
 
 use crate::cuda::{Gpu, Stream};
 use crate::kernels::{DeviceArray, DeviceArray2, EnvKernels};
 
-use super::PpoError;
-use super::policy::{LayerShape, Mlp};
+use super::NnError;
+use super::mlp::{LayerShape, Mlp};
 use super::reduce::TILE_THREADS;
 
 /// Output tile edge and reduction step of the backward GEMMs (mlp_backward.py `TILE_M`,
@@ -27,7 +27,7 @@ pub struct MlpGradients {
 
 impl MlpGradients {
     /// Zeroed gradients of `len` values (the parameter buffer's length) for `shapes`.
-    pub fn new(gpu: &Gpu, shapes: &[LayerShape], len: usize) -> Result<MlpGradients, PpoError> {
+    pub fn new(gpu: &Gpu, shapes: &[LayerShape], len: usize) -> Result<MlpGradients, NnError> {
         let flat = DeviceArray::zeros(gpu, [len])?;
         let layers = shapes
             .iter()
@@ -37,7 +37,7 @@ impl MlpGradients {
                     flat.view(s.bias_offset(), [s.outputs])?,
                 ))
             })
-            .collect::<Result<_, PpoError>>()?;
+            .collect::<Result<_, NnError>>()?;
         Ok(MlpGradients { flat, layers })
     }
 
@@ -86,10 +86,10 @@ pub(crate) fn weight_gradient_shape(
     dz: &DeviceArray2<f32>,
     dw: &DeviceArray2<f32>,
     db: &DeviceArray<f32>,
-) -> Result<[usize; 3], PpoError> {
+) -> Result<[usize; 3], NnError> {
     let ([m, k], [m2, n]) = (x.shape(), dz.shape());
     if m != m2 || dw.shape() != [k, n] || db.shape() != [n] {
-        return Err(PpoError::Shape(format!(
+        return Err(NnError::Shape(format!(
             "weight gradient of x {:?}, dz {:?} into dw {:?}, db {:?}: expected x [M, K], dz [M, N], dw [K, N], db [N]",
             x.shape(),
             dz.shape(),
@@ -106,10 +106,10 @@ pub(crate) fn input_gradient_shape(
     dz: &DeviceArray2<f32>,
     w: &DeviceArray2<f32>,
     y_prev: &DeviceArray2<f32>,
-) -> Result<[usize; 3], PpoError> {
+) -> Result<[usize; 3], NnError> {
     let ([m, n], [k, n2], [m2, k2]) = (dz.shape(), w.shape(), y_prev.shape());
     if n != n2 || m != m2 || k != k2 {
-        return Err(PpoError::Shape(format!(
+        return Err(NnError::Shape(format!(
             "input gradient of dz {:?}, w {:?} into y_prev {:?}: expected dz [M, N], w [K, N], y_prev [M, K]",
             dz.shape(),
             w.shape(),
@@ -129,7 +129,7 @@ pub fn record_linear_backward_weight(
     dw: &DeviceArray2<f32>,
     db: &DeviceArray<f32>,
     target_blocks: usize,
-) -> Result<(), PpoError> {
+) -> Result<(), NnError> {
     let [m, k, n] = weight_gradient_shape(x, dz, dw, db)?;
     let split = WeightGradSplit::plan(m, k, n, target_blocks);
     kernels.linear_backward_weight(
@@ -152,7 +152,7 @@ pub fn record_linear_backward_input_elu(
     dz: &DeviceArray2<f32>,
     w: &DeviceArray2<f32>,
     y_prev: &DeviceArray2<f32>,
-) -> Result<(), PpoError> {
+) -> Result<(), NnError> {
     let [m, k, _] = input_gradient_shape(dz, w, y_prev)?;
     let blocks = m.div_ceil(TILE) * k.div_ceil(TILE);
     kernels.linear_backward_input_elu(stream, [blocks, TILE_THREADS], dz, w, y_prev)?;
@@ -175,10 +175,10 @@ pub(crate) fn record_mlp_backward(
     grads: &MlpGradients,
     target_blocks: usize,
     scratch: Option<&DeviceArray<f32>>,
-) -> Result<(), PpoError> {
+) -> Result<(), NnError> {
     let last = mlp.layers.len() - 1;
     if d_output.shape() != mlp.activations[last].shape() {
-        return Err(PpoError::Shape(format!(
+        return Err(NnError::Shape(format!(
             "output gradient {:?} for an output of {:?}",
             d_output.shape(),
             mlp.activations[last].shape()
@@ -199,7 +199,7 @@ pub(crate) fn record_mlp_backward(
         let layer = |l: usize| {
             grads
                 .layer(l)
-                .ok_or_else(|| PpoError::Shape(format!("no gradient buffer for layer {l}")))
+                .ok_or_else(|| NnError::Shape(format!("no gradient buffer for layer {l}")))
         };
         let (dw, db) = layer(l)?;
         // A hidden layer's bias gradient may have come with the input gradient above.
