@@ -559,6 +559,8 @@ fn small_setup_with(
     config.policy.actor_hidden = vec![64, 32];
     config.policy.critic_hidden = vec![64, 32];
     config.policy.init_log_std = -1.0;
+    // f32 products: the checks compare against f64 (TF32, the default, is ~1e-3 relative).
+    config.policy.gemm = GemmSetting::Auto;
     // The update's checks read the values the rollout stored (values_in_update has its own test).
     config.ppo.values_in_update = false;
     config.seed = seed;

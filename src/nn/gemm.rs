@@ -37,11 +37,11 @@ pub const TILE_THREADS: usize = 128;
 #[serde(rename_all = "snake_case")]
 pub enum GemmSetting {
     /// cuBLAS in f32 when libcublas can be loaded, else Warp's tile kernels.
-    #[default]
     Auto,
     /// cuBLAS with TF32 tensor-core products when libcublas can be loaded, else Warp's tile
-    /// kernels (f32). The committed training configs' choice (issue 20: on the H100 the update
-    /// 5.5 ms instead of 8.2, the backflip's frames to success unchanged).
+    /// kernels (f32). The default (issue 20: on the H100 the update 5.5 ms instead of 8.2,
+    /// the backflip's frames to success unchanged).
+    #[default]
     AutoTf32,
     /// Warp's tile kernels (plain f32; needs only the driver).
     Warp,

@@ -7,7 +7,7 @@ use crate::cuda::{Communicator, Gpu, ReduceOp, Stream};
 use crate::env::RolloutStorage;
 use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
 
-use super::PpoError;
+use super::error::PpoError;
 
 /// Columns each thread of `gather_minibatch` copies (minibatch.py `GATHER_COLUMNS`).
 pub const GATHER_COLUMNS: usize = 4;

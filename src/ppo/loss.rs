@@ -4,8 +4,8 @@
 use crate::cuda::{Gpu, Stream};
 use crate::kernels::{DeviceArray, DeviceArray2, EnvKernels, PpoLossParams};
 
-use super::PpoError;
 use super::batch::Minibatch;
+use super::error::PpoError;
 
 /// Columns of the per-sample terms before the log-std gradient terms (ppo_loss.py
 /// `LOSS_TERMS`), and the index of each (`TERM_*`).

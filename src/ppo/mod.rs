@@ -16,6 +16,7 @@
 
 pub mod batch;
 pub mod config;
+mod error;
 mod flops;
 pub mod loss;
 pub(crate) mod policy;
@@ -25,8 +26,9 @@ mod update_stages;
 
 pub use batch::PpoBatch;
 pub use config::{KlMeasure, PolicyConfig, PpoConfig};
+pub use error::PpoError;
 pub use flops::UpdateFlops;
 pub use loss::PpoStatistics;
 pub use policy::{GaussianPolicy, PolicyError};
-pub use update::{PpoError, PpoOptimizerState, PpoUpdate};
+pub use update::{PpoOptimizerState, PpoUpdate};
 pub use update_stages::UpdateStage;

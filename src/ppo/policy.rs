@@ -151,68 +151,6 @@ impl GaussianPolicy {
         })
     }
 
-    /// A copy of this policy with parameters of its own, equal to this one's now: the same
-    /// networks, batch and sampling seed, and, on the cuBLAS path, a cuBLAS handle of its own
-    /// ([`PolicyGemm::separate`]). The overlapped training loop (`ppo.overlap_update`) samples
-    /// its rollouts from such a copy, refreshed by [`GaussianPolicy::record_parameters_from`]
-    /// before each update, while the update changes this policy's parameters beside it.
-    /// The parameters are read back and uploaded in the order of the GPU's stream (waits for
-    /// it); not inside a capture.
-    pub fn separate_copy(&self, gpu: &Gpu) -> Result<GaussianPolicy, PolicyError> {
-        let own = |a: &DeviceArray<f32>| DeviceArray::from_slice(gpu, [a.len()], &a.download()?);
-        let actor_params = own(&self.actor.params)?;
-        let log_std = actor_params.view(
-            self.actor_shapes.last().map_or(0, LayerShape::end),
-            [self.action_size],
-        )?;
-        let gemm = self.gemm.separate(gpu).map_err(EnvError::from)?;
-        Ok(GaussianPolicy {
-            actor: Mlp::new(
-                gpu,
-                &self.actor_shapes,
-                actor_params,
-                self.batch,
-                gemm.clone(),
-            )?,
-            critic: Mlp::new(
-                gpu,
-                &self.critic_shapes,
-                own(&self.critic.params)?,
-                self.batch,
-                gemm.clone(),
-            )?,
-            actor_shapes: self.actor_shapes.clone(),
-            critic_shapes: self.critic_shapes.clone(),
-            log_std,
-            gemm,
-            observation_size: self.observation_size,
-            action_size: self.action_size,
-            batch: self.batch,
-            seed: self.seed,
-        })
-    }
-
-    /// Queues copies of `source`'s actor and critic parameters (log std included) into this
-    /// policy's: inside a capture, two copy nodes. The networks must have the same shapes.
-    pub fn record_parameters_from(
-        &self,
-        stream: &Stream,
-        source: &GaussianPolicy,
-    ) -> Result<(), PolicyError> {
-        if source.actor_shapes != self.actor_shapes || source.critic_shapes != self.critic_shapes {
-            return Err(PolicyError::Shape(
-                "parameters copied between policies of different networks".to_owned(),
-            ));
-        }
-        for (to, from) in [
-            (&self.actor.params, &source.actor.params),
-            (&self.critic.params, &source.critic.params),
-        ] {
-            to.copy_from(stream, from, 0..from.len(), 0)?;
-        }
-        Ok(())
-    }
-
     /// What computes the GEMMs (shared by [`GaussianPolicy::with_batch`] copies and the
     /// update).
     pub fn gemm(&self) -> &PolicyGemm {

@@ -6,7 +6,7 @@ use crate::cuda::Stream;
 use crate::kernels::{AdamParams, DeviceArray, EnvKernels, ScheduleParams};
 use crate::nn::adam::AdamStep;
 
-use super::PpoError;
+use super::error::PpoError;
 use super::loss::LOSS_TERMS;
 
 /// rsl_rl's bounds of the adaptive learning rate.

@@ -39,15 +39,12 @@
 
 use std::sync::Arc;
 
-use thiserror::Error;
-
-use crate::cuda::{Communicator, CudaError, Gpu, ReduceOp, Stream};
+use crate::cuda::{Communicator, Gpu, ReduceOp, Stream};
 use crate::env::StageRecorder;
 use crate::kernels::{
-    AdamParams, DeviceArray, DeviceArray2, EnvError, EnvKernels, PpoLossParams, ScheduleParams,
+    AdamParams, DeviceArray, DeviceArray2, EnvKernels, PpoLossParams, ScheduleParams,
 };
 
-use crate::nn::NnError;
 use crate::nn::adam::{AdamMoments, AdamStep, adam_params};
 use crate::nn::backward::{MlpGradients, input_gradient_scratch_len};
 use crate::nn::gemm::padded_input_width;
@@ -57,6 +54,7 @@ use crate::nn::shuffle::minibatch_rows;
 
 use super::batch::{Advantages, Minibatch, PpoBatch, ValueNormalization};
 use super::config::{KlMeasure, PpoConfig};
+use super::error::PpoError;
 use super::flops::UpdateFlops;
 use super::loss::{LOSS_TERMS, LossGradients, PpoStatistics};
 use super::policy::GaussianPolicy;
@@ -70,19 +68,6 @@ use step_parts::Network;
 
 /// The update's stage recorder: NVTX ranges, and events when timed.
 type Stages = StageRecorder<UpdateStage>;
-
-/// Why an update cannot be built or recorded.
-#[derive(Debug, Error)]
-pub enum PpoError {
-    #[error(transparent)]
-    Env(#[from] EnvError),
-    #[error(transparent)]
-    Cuda(#[from] CudaError),
-    #[error(transparent)]
-    Nn(#[from] NnError),
-    #[error("PPO update: {0}")]
-    Shape(String),
-}
 
 /// Target of resident blocks per SM for the split weight-gradient reductions: the kernel uses
 /// 165 registers per thread (ptxas, sm_90) and 48 KiB of shared memory, so 3 blocks of 128
@@ -334,7 +319,7 @@ impl PpoUpdate {
     /// [`Stream::capture`]. The statistics land in [`PpoUpdate::statistics`] at the end.
     /// `batch` was sampled by this update's policy, whose parameters have not changed since.
     pub fn record(&self, stream: &Stream, batch: &PpoBatch<'_>) -> Result<(), PpoError> {
-        self.record_update(stream, batch, true, &mut Stages::untimed())
+        self.record_update(stream, batch, &mut Stages::untimed())
     }
 
     /// [`PpoUpdate::record`] with each [`UpdateStage`] handed to `stages` (a timed recorder
@@ -345,45 +330,14 @@ impl PpoUpdate {
         batch: &PpoBatch<'_>,
         stages: &mut StageRecorder<UpdateStage>,
     ) -> Result<(), PpoError> {
-        self.record_update(stream, batch, true, stages)
+        self.record_update(stream, batch, stages)
     }
 
-    /// Queues a copy of `sampled_with` as the log std the next lagged batch was sampled with
-    /// (the analytic KL's old Gaussians; [`PpoUpdate::record_lagged`]). Record it before the
-    /// sampling policy's parameters change.
-    pub fn record_sampling_log_std(
-        &self,
-        stream: &Stream,
-        sampled_with: &DeviceArray<f32>,
-    ) -> Result<(), PpoError> {
-        if sampled_with.len() != self.action_size {
-            return Err(PpoError::Shape(format!(
-                "a sampling log std of {} values for {} actions",
-                sampled_with.len(),
-                self.action_size
-            )));
-        }
-        self.old_log_std
-            .copy_from(stream, sampled_with, 0..self.action_size, 0)?;
-        Ok(())
-    }
-
-    /// [`PpoUpdate::record`] of a batch that another copy of the policy sampled, with
-    /// parameters older than this update's (the overlapped training loop, docs/train.md):
-    /// the same update, except that the sampling log std is the one
-    /// [`PpoUpdate::record_sampling_log_std`] recorded before, not the policy's current one.
-    /// The ratio and the sampled KL read the log-probabilities stored at sampling time, so
-    /// they measure the new policy against the one that sampled, as PPO asks.
-    pub fn record_lagged(&self, stream: &Stream, batch: &PpoBatch<'_>) -> Result<(), PpoError> {
-        self.record_update(stream, batch, false, &mut Stages::untimed())
-    }
-
-    /// The update; with `own_log_std`, the policy's current log std is the sampling one.
+    /// The update.
     fn record_update(
         &self,
         stream: &Stream,
         batch: &PpoBatch<'_>,
-        own_log_std: bool,
         stages: &mut Stages,
     ) -> Result<(), PpoError> {
         let (t, n, d, a) = (
@@ -395,7 +349,7 @@ impl PpoUpdate {
         batch.check(t, n, d, a)?;
         let gpu = &self.gpu;
         stages.stage(gpu, stream, UpdateStage::Advantages, |s| {
-            self.record_advantages(s, batch, own_log_std)
+            self.record_advantages(s, batch)
         })?;
         let k = &*self.kernels;
         if self.pipelines(stream, stages)? {
@@ -438,22 +392,15 @@ impl PpoUpdate {
 
     /// Step 1 of the module docs: the clears, the values and bootstrap, GAE, the value
     /// normalization's update and the advantages' moments.
-    fn record_advantages(
-        &self,
-        stream: &Stream,
-        batch: &PpoBatch<'_>,
-        own_log_std: bool,
-    ) -> Result<(), PpoError> {
+    fn record_advantages(&self, stream: &Stream, batch: &PpoBatch<'_>) -> Result<(), PpoError> {
         let (t, n, d) = (self.horizon, self.envs, self.observation_size);
         let k = &*self.kernels;
         record_clear(stream, &self.loss_sums)?;
         record_clear(stream, &self.grad_norm_sq)?;
         record_clear(stream, &self.advantage_moments)?;
-        if own_log_std {
-            // The rollout that precedes this update sampled with the current log std.
-            self.old_log_std
-                .copy_from(stream, &self.log_std, 0..self.action_size, 0)?;
-        }
+        // The rollout that precedes this update sampled with the current log std.
+        self.old_log_std
+            .copy_from(stream, &self.log_std, 0..self.action_size, 0)?;
 
         let last_values = if self.values_in_update {
             // One forward over all rows; rows 0..T are the rollout's values (what GAE, the
