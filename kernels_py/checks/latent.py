@@ -206,7 +206,7 @@ class Net:
             launch_forward(policy.linear if i == last else policy.linear_elu, x if i == 0 else self.y[i - 1], self.w[i], self.b[i], self.y[i])
 
     def backward(self, x, d_out):
-        # As src/ppo/backward.rs records it: the weight gradient, then the input gradient over
+        # As src/nn/backward.rs records it: the weight gradient, then the input gradient over
         # the layer below's activation.
         for i in range(len(self.w) - 1, -1, -1):
             dz = d_out if i == len(self.w) - 1 else self.y[i]

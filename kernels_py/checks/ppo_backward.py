@@ -6,8 +6,8 @@ Warp's CPU device against numpy float64.
   where the last splits see no rows), accumulated onto non-zero initial values.
 - `linear_backward_input_elu`: (dz @ w^T) * elu'(y) written over y.
 - A whole MLP (policy.py's forward kernels, then the backward kernels layer by layer, as
-  src/ppo/backward.rs records them) against float64 backpropagation.
-- The same MLP through the cuBLAS path's steps (src/ppo/gemm.rs): products in numpy float32
+  src/nn/backward.rs records them) against float64 backpropagation.
+- The same MLP through the cuBLAS path's steps (src/nn/gemm.rs): products in numpy float32
   (standing in for cuBLAS), then gemm_epilogue.py's `bias_elu` / `bias_add` and
   `elu_input_gradient` and reduce.py's `column_sums`, against the same float64 backprop.
 - `column_sums`, `sum_of_squares`, `sum_and_squares`.
@@ -133,7 +133,7 @@ def launch_elementwise(kernel, a, y):
 
 
 def check_mlp_cublas_path(v: Verdict, rng):
-    """The cuBLAS path of src/ppo/gemm.rs: each product in float32 (cuBLAS's role), each
+    """The cuBLAS path of src/nn/gemm.rs: each product in float32 (cuBLAS's role), each
     epilogue a kernel, in the order the Rust side records them."""
     m, sizes = 150, [37, 70, 45, 5]
     layers = len(sizes) - 1
