@@ -27,7 +27,9 @@ use instantmimic::cuda::Gpu;
 use instantmimic::kernels::ScheduleParams;
 use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels, PpoLossParams};
 use instantmimic::nn::adam::{AdamMoments, AdamStep, adam_params};
-use instantmimic::nn::backward::{record_linear_backward_input_elu, record_linear_backward_weight};
+use instantmimic::nn::linear_backward::{
+    record_linear_backward_input_elu, record_linear_backward_weight,
+};
 use instantmimic::nn::reduce::{
     record_clear, record_column_sums, record_sum_and_squares, record_sum_of_squares,
 };

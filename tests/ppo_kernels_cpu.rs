@@ -14,7 +14,7 @@ mod skip_support;
 use std::path::Path;
 
 use instantmimic::env::layout;
-use instantmimic::nn::{backward, reduce};
+use instantmimic::nn::{linear_backward, reduce};
 use instantmimic::ppo::PpoStatistics;
 use instantmimic::ppo::{batch, loss};
 
@@ -76,9 +76,9 @@ fn rust_and_kernels_agree_on_shared_constants() {
     }
     let backward_py = kernel_source("mlp_backward.py");
     for (name, rust) in [
-        ("TILE_M", backward::TILE),
-        ("TILE_N", backward::TILE),
-        ("TILE_K", backward::TILE_K),
+        ("TILE_M", linear_backward::TILE),
+        ("TILE_N", linear_backward::TILE),
+        ("TILE_K", linear_backward::TILE_K),
         ("TILE_THREADS", reduce::TILE_THREADS),
     ] {
         assert_eq!(

@@ -21,7 +21,7 @@ use crate::cuda::{Blas, CudaError, GemmMath, Gpu, Stream};
 use crate::kernels::{DeviceArray, DeviceArray2, EnvKernels};
 
 use super::NnError;
-use super::backward::{
+use super::linear_backward::{
     input_gradient_shape, record_linear_backward_input_elu, record_linear_backward_weight,
     weight_gradient_shape,
 };

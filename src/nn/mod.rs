@@ -18,6 +18,7 @@ pub mod adam;
 pub mod backward;
 mod error;
 pub mod gemm;
+pub mod linear_backward;
 pub mod mlp;
 pub mod reduce;
 pub mod shuffle;
