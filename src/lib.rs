@@ -49,5 +49,6 @@ pub mod plot;
 pub mod ppo;
 pub mod recording;
 pub mod replay;
+pub mod run;
 pub mod train;
 pub mod viewer;

@@ -24,7 +24,8 @@ use instantmimic::motion::skeleton_maps::detect_skeleton;
 use instantmimic::motion::{Character, MotionClip, ReferenceMotion, format, mjlab, npz};
 use instantmimic::plan::{Plan, load_plan_with_limit, pack};
 use instantmimic::recording::{ClipRecordingSpec, Recording, synthetic};
-use instantmimic::train::{Checkpoint, CheckpointMeta, TrainConfig};
+use instantmimic::run::{Checkpoint, CheckpointMeta};
+use instantmimic::train::TrainConfig;
 
 /// One `mujoco_warp.step` of a 2-link pendulum and a free box, 2 worlds (tests/plan_reader.rs).
 const PLAN_FIXTURE: &[u8] = include_bytes!("fixtures/pendulum_cpu.wrp");
@@ -293,7 +294,7 @@ fn checkpoint_reader_never_panics() {
     let seeds = vec![checkpoint.to_bytes().expect("a checkpoint serializes")];
     campaign("checkpoint", &seeds, Kind::Binary, |b| {
         Checkpoint::from_bytes(b, "fuzz.safetensors")
-            .and_then(|c| c.meta.config("fuzz.safetensors"))
+            .and_then(|c| c.meta.config::<TrainConfig>("fuzz.safetensors"))
             .is_ok()
     });
 }

@@ -9,9 +9,10 @@ mod small_run_support;
 
 use instantmimic::cuda::Gpu;
 use instantmimic::plan::PlanStore;
-use instantmimic::train::checkpoint::tensor_names;
-use instantmimic::train::divergence::{RESTORE_LEARNING_RATE_FACTOR, non_finite_report};
-use instantmimic::train::{DivergenceGuard, TrainConfig, Trainer};
+use instantmimic::run::DivergenceGuard;
+use instantmimic::run::checkpoint::tensor_names;
+use instantmimic::run::divergence::{RESTORE_LEARNING_RATE_FACTOR, non_finite_report};
+use instantmimic::train::{TrainConfig, Trainer};
 use small_run_support::{built_in_motion, snapshot};
 
 #[test]

@@ -30,11 +30,10 @@ use instantmimic::cuda::Gpu;
 use instantmimic::env::TrackedMotion;
 use instantmimic::motion::Character;
 use instantmimic::plan::PlanStore;
+use instantmimic::run::{Checkpoint, CheckpointMeta};
 use instantmimic::train::goal_latent::{DECODER_DIGEST, decoder_digest};
 use instantmimic::train::latent_trainer::{insert_latent_networks, latent_shapes};
-use instantmimic::train::{
-    ActionMode, Checkpoint, CheckpointMeta, PolicyShapes, TrainConfig, Trainer,
-};
+use instantmimic::train::{ActionMode, PolicyShapes, TrainConfig, Trainer};
 use small_run_support::{
     binary, built_in_library, check_success, metrics, small_goal_config, snapshot,
 };
@@ -234,7 +233,10 @@ fn a_short_latent_goal_run_through_the_binary_reports_goals_per_episode() {
         }
         let c = Checkpoint::load(&file).expect("loads");
         assert_eq!(c.get::<i32>(DECODER_DIGEST, &[5]).expect("digest"), digest);
-        let stored = c.meta.config(c.source()).expect("its configuration");
+        let stored = c
+            .meta
+            .config::<TrainConfig>(c.source())
+            .expect("its configuration");
         assert_eq!(
             stored.goal.expect("[goal]").decoder,
             decoder_path.display().to_string()

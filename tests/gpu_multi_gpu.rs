@@ -43,10 +43,9 @@ use instantmimic::kernels::{DeviceArray, EnvKernels};
 use instantmimic::motion::Character;
 use instantmimic::plan::PlanStore;
 use instantmimic::ppo::{GaussianPolicy, PpoUpdate};
-use instantmimic::train::checkpoint::tensor_names::{PHASE_CDF, PHASE_VISITS};
-use instantmimic::train::{
-    Checkpoint, CheckpointMeta, IterationReport, Replicas, TrainConfig, Trainer, replica_mismatch,
-};
+use instantmimic::run::checkpoint::tensor_names::{PHASE_CDF, PHASE_VISITS};
+use instantmimic::run::{Checkpoint, CheckpointMeta};
+use instantmimic::train::{IterationReport, Replicas, TrainConfig, Trainer, replica_mismatch};
 use ppo_support::RolloutStorage;
 use rand::SeedableRng;
 use rand::rngs::StdRng;

@@ -30,10 +30,11 @@ use instantmimic::motion::{Character, ReferenceMotion};
 use instantmimic::plan::PlanStore;
 use instantmimic::recording::{Outcome, Recording};
 use instantmimic::replay::{Replay, ReplayInput, chosen_envs, record_replay};
-use instantmimic::train::{
-    Checkpoint, EnvEvaluation, EvalStart, SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M,
-    TrainConfig, evaluate_episodes_on_gpu, evaluation_steps, preflight,
+use instantmimic::run::{
+    Checkpoint, EnvEvaluation, SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M,
+    evaluation_steps,
 };
+use instantmimic::train::{EvalStart, TrainConfig, evaluate_episodes_on_gpu, preflight};
 use small_run_support::{binary, deterministic_assets};
 
 /// The page's size limit (issue 18's acceptance).
@@ -98,7 +99,7 @@ fn load(
     let checkpoint = Checkpoint::load(checkpoint_path).expect("checkpoint");
     let mut config = checkpoint
         .meta
-        .config(checkpoint.source())
+        .config::<TrainConfig>(checkpoint.source())
         .expect("stored config");
     config.run.eval_start = start;
     config.env.num_envs = config.run.eval_envs;
@@ -321,7 +322,7 @@ fn replays_record_what_the_evaluation_scores_and_pages_stay_small() {
     assert_eq!(recording.reference(), from_file.reference());
     let clip = motion.clip();
     let steps = evaluation_steps(
-        &config,
+        &config.run,
         clip.duration(),
         recording.meta.control_dt,
         clip.loop_mode(),

@@ -23,7 +23,8 @@ use instantmimic::motion::find::resolve_motion;
 use instantmimic::motion::{Character, MotionLibrary, MotionLibraryBuilder, ReferenceMotion};
 use instantmimic::plan::PlanStore;
 use instantmimic::ppo::GaussianPolicy;
-use instantmimic::train::{LibraryPlan, TrainConfig};
+use instantmimic::run::LibraryPlan;
+use instantmimic::train::TrainConfig;
 
 /// The built-in backflip clip.
 fn motion() -> ReferenceMotion {
@@ -513,7 +514,7 @@ fn library_evaluation_plays_every_clip_from_its_spread_starts() {
     }
     let episodes: Vec<_> = scores
         .iter()
-        .map(instantmimic::train::EnvEvaluation::from)
+        .map(instantmimic::run::EnvEvaluation::from)
         .collect();
     let summary = plan.summarize(&episodes, 0.9).expect("summary");
     let library_scores = summary.library.expect("per clip");

@@ -343,7 +343,9 @@ fn a_run_sent_sigint_checkpoints_its_last_iteration_exits_130_and_resumes() {
     assert_eq!(summary["iterations"].as_u64(), Some(iterations));
     assert!(run.join("curve.png").is_file());
     assert!(!run.join("replay.html").exists(), "no replay after a stop");
-    let resumed = instantmimic::train::RunDir::inspect_resume(&run).expect("resumable");
+    let resumed =
+        instantmimic::run::RunDir::inspect_resume::<instantmimic::train::TrainConfig>(&run)
+            .expect("resumable");
     let (_, checkpoint) = resumed.checkpoint.expect("the stop's checkpoint");
     assert_eq!(checkpoint.meta.iteration, iterations);
 

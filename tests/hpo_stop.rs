@@ -19,7 +19,7 @@ use instantmimic::hpo::backend::offline::OfflineProposer;
 use instantmimic::hpo::experiment::{Candidate, run_experiment};
 use instantmimic::hpo::trial::{BoxedRunner, build_runners};
 use instantmimic::hpo::{HpoConfig, HpoError, RunnerPool, Search, TrialOutcome, TrialRunner};
-use instantmimic::train::{StopFlag, StopSignal};
+use instantmimic::run::{StopFlag, StopSignal};
 
 /// The synthetic runner, with a stop requested (as a signal would) during trial `stop_in`
 /// (counted from 1 across the runner's life); that trial still completes.

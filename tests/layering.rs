@@ -1,16 +1,34 @@
-//! The lower floors import only what lies below them (docs/architecture.md): every `crate::X`
-//! a file of `src/<floor>/` (or `src/<floor>.rs`) names outside comments must be one of the
-//! floor's allowed modules. The floors above `env` and `nn` (train, ppo, latent and their
-//! neighbours) still have cycles the `train/` split removes; they join this list then.
+//! The layers of `src/` (docs/architecture.md), checked from the code: every `crate::X` a file
+//! of `src/<floor>/` (or `src/<floor>.rs`) names outside comments must be one of the floor's
+//! allowed modules, and the files of the task, learner and run folders import each other
+//! without a loop.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-/// Each lower floor and the modules it may import, bottom up.
+/// The modules below the learners: every floor under `train` may import these.
+const BELOW_TRAIN: &[&str] = &[
+    "assets",
+    "cuda",
+    "env",
+    "files",
+    "kernels",
+    "latent",
+    "motion",
+    "nn",
+    "plan",
+    "plot",
+    "ppo",
+    "recording",
+    "run",
+];
+
+/// Each floor and the modules it may import, bottom up (docs/architecture.md).
 const FLOORS: &[(&str, &[&str])] = &[
     ("cuda", &[]),
     ("files", &[]),
     ("assets", &[]),
+    ("plot", &[]),
     ("motion", &["files"]),
     ("plan", &["assets", "cuda", "files"]),
     ("kernels", &["assets", "cuda", "plan", "files"]),
@@ -20,7 +38,18 @@ const FLOORS: &[(&str, &[&str])] = &[
         "env",
         &["assets", "cuda", "files", "kernels", "motion", "plan"],
     ),
+    // The run harness knows no learner and no training configuration.
+    ("run", &["env", "files", "motion", "plan", "plot"]),
+    // The learners' algorithms, side by side.
+    ("ppo", &["cuda", "env", "kernels", "nn"]),
+    ("latent", &["cuda", "env", "kernels", "nn"]),
+    ("train", BELOW_TRAIN),
+    ("viewer", &["files", "motion", "recording"]),
 ];
+
+/// The tools over `train`: each may import `train` and everything below it, `viewer`, and no
+/// other tool.
+const TOOLS: &[&str] = &["replay", "export", "bench", "hpo"];
 
 fn rust_files(floor: &str) -> Vec<PathBuf> {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
@@ -67,9 +96,18 @@ fn crate_modules(text: &str) -> BTreeSet<String> {
 }
 
 #[test]
-fn the_lower_floors_import_only_downward() {
+fn every_floor_imports_only_downward() {
+    let mut allowed_of: Vec<(&str, Vec<&str>)> = FLOORS
+        .iter()
+        .map(|(floor, allowed)| (*floor, allowed.to_vec()))
+        .collect();
+    for tool in TOOLS {
+        let mut allowed = BELOW_TRAIN.to_vec();
+        allowed.extend(["train", "viewer"]);
+        allowed_of.push((tool, allowed));
+    }
     let mut violations = Vec::new();
-    for (floor, allowed) in FLOORS {
+    for (floor, allowed) in &allowed_of {
         let files = rust_files(floor);
         assert!(!files.is_empty(), "src/{floor}: no Rust file found");
         for file in files {
@@ -78,7 +116,7 @@ fn the_lower_floors_import_only_downward() {
                 if module != *floor && !allowed.contains(&module.as_str()) {
                     violations.push(format!(
                         "{}: imports crate::{module}, which is not below {floor}",
-                        file.display()
+                        shown(&file)
                     ));
                 }
             }
@@ -96,9 +134,9 @@ fn the_import_scan_sees_code_and_skips_comments() {
     );
 }
 
-/// Folders whose files import each other without a loop: the task and learner code. `train/`
-/// joins when the run harness leaves it (issue 38).
-const ACYCLIC_FOLDERS: &[&str] = &["env", "nn", "ppo", "latent"];
+/// Folders whose files import each other without a loop: the tasks, the NN toolkit, the run
+/// harness, the learners and the training configuration.
+const ACYCLIC_FOLDERS: &[&str] = &["env", "nn", "run", "ppo", "latent", "train"];
 
 /// The module path of a file under `src/` (`src/env/rollout/mod.rs` -> `env::rollout`).
 fn module_path(src: &Path, file: &Path) -> Vec<String> {
@@ -118,62 +156,65 @@ fn module_path(src: &Path, file: &Path) -> Vec<String> {
 /// with a brace group's members as paths of their own: `use super::{a::X, b}` gives `super::a`
 /// and `super::b`.
 fn path_expressions(text: &str) -> Vec<Vec<String>> {
+    // Comments out, lines joined: a `use` group may span lines.
+    let code: Vec<char> = text
+        .lines()
+        .map(|line| line.split("//").next().unwrap_or(""))
+        .collect::<Vec<_>>()
+        .join("\n")
+        .chars()
+        .collect();
+    let is_name = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    let at = |i: usize, pattern: &str| {
+        pattern
+            .chars()
+            .enumerate()
+            .all(|(k, p)| code.get(i + k) == Some(&p))
+    };
+    let name_at = |i: usize| -> String { code[i..].iter().take_while(|c| is_name(**c)).collect() };
     let mut paths = Vec::new();
-    for line in text.lines() {
-        let code = line.split("//").next().unwrap_or("");
-        let bytes: Vec<char> = code.chars().collect();
-        let mut i = 0;
-        while i < bytes.len() {
-            let starts = ["crate::", "super::", "self::"].iter().any(|p| {
-                code.chars().skip(i).take(p.len()).collect::<String>() == *p
-                    && (i == 0 || !(bytes[i - 1].is_ascii_alphanumeric() || bytes[i - 1] == '_'))
-            });
-            if !starts {
-                i += 1;
-                continue;
-            }
-            let mut segments = Vec::new();
-            let mut j = i;
-            loop {
-                let name: String = bytes[j..]
-                    .iter()
-                    .take_while(|c| c.is_ascii_alphanumeric() || **c == '_')
-                    .collect();
-                if name.is_empty() {
-                    break;
-                }
-                j += name.len();
-                segments.push(name);
-                if bytes.get(j) == Some(&':') && bytes.get(j + 1) == Some(&':') {
-                    j += 2;
-                } else {
-                    break;
-                }
-            }
-            if bytes.get(j) == Some(&'{') {
-                let close = bytes[j..]
-                    .iter()
-                    .position(|c| *c == '}')
-                    .map_or(bytes.len(), |k| j + k);
-                let group: String = bytes[j + 1..close].iter().collect();
-                for member in group.split(',') {
-                    let first: String = member
-                        .trim()
-                        .chars()
-                        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
-                        .collect();
-                    if !first.is_empty() {
-                        let mut path = segments.clone();
-                        path.push(first);
-                        paths.push(path);
-                    }
-                }
-                j = close;
-            } else if !segments.is_empty() {
-                paths.push(segments);
-            }
-            i = j.max(i + 1);
+    let mut i = 0;
+    while i < code.len() {
+        let starts = (i == 0 || !is_name(code[i - 1]))
+            && ["crate::", "super::", "self::"].iter().any(|p| at(i, p));
+        if !starts {
+            i += 1;
+            continue;
         }
+        let mut segments = Vec::new();
+        let mut j = i;
+        loop {
+            let name = name_at(j);
+            if name.is_empty() {
+                break;
+            }
+            j += name.len();
+            segments.push(name);
+            if at(j, "::") {
+                j += 2;
+            } else {
+                break;
+            }
+        }
+        if code.get(j) == Some(&'{') {
+            let close = code[j..]
+                .iter()
+                .position(|c| *c == '}')
+                .map_or(code.len(), |k| j + k);
+            let group: String = code[j + 1..close].iter().collect();
+            for member in group.split(',') {
+                let first: String = member.trim().chars().take_while(|c| is_name(*c)).collect();
+                if !first.is_empty() {
+                    let mut path = segments.clone();
+                    path.push(first);
+                    paths.push(path);
+                }
+            }
+            j = close;
+        } else if !segments.is_empty() {
+            paths.push(segments);
+        }
+        i = j.max(i + 1);
     }
     paths
 }
@@ -363,6 +404,14 @@ fn the_cycle_search_finds_a_loop_and_passes_a_chain() {
             vec!["super".to_string(), "a".into()],
             vec!["super".into(), "b".into()],
             vec!["crate".into(), "c".into(), "d".into(), "Y".into()],
+        ]
+    );
+    let multi_line = path_expressions("use super::{\n    a::X, // super::z\n    b,\n};");
+    assert_eq!(
+        multi_line,
+        [
+            vec!["super".to_string(), "a".into()],
+            vec!["super".into(), "b".into()]
         ]
     );
     let file = |n: &str| PathBuf::from(n);

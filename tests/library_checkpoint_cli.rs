@@ -11,8 +11,9 @@ use std::path::Path;
 use std::process::Output;
 
 use instantmimic::motion::{Character, LibraryConfig};
+use instantmimic::run::{Checkpoint, CheckpointMeta};
 use instantmimic::train::latent_trainer::{insert_latent_networks, latent_shapes};
-use instantmimic::train::{Checkpoint, CheckpointMeta, PolicyShapes, TrainConfig};
+use instantmimic::train::{PolicyShapes, TrainConfig};
 use train_cli_support::{add_policy, run, stdout};
 
 fn repo() -> &'static Path {

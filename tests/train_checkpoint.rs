@@ -3,10 +3,11 @@
 
 use std::path::Path;
 
-use instantmimic::train::{
+use instantmimic::run::{
     CHECKPOINT_FORMAT_VERSION, Checkpoint, CheckpointDir, CheckpointError, CheckpointMeta,
-    TensorData, TrainConfig, write_atomically,
+    TensorData,
 };
+use instantmimic::train::{TrainConfig, write_atomically};
 
 fn config() -> TrainConfig {
     let mut c = TrainConfig::with_motion("backflip");
@@ -55,7 +56,10 @@ fn round_trip_keeps_every_value_shape_and_the_metadata() {
     assert_eq!(back.meta, original.meta);
     assert_eq!(back.meta.format_version, CHECKPOINT_FORMAT_VERSION);
     assert_eq!(back.meta.crate_version, env!("CARGO_PKG_VERSION"));
-    assert_eq!(back.meta.config(back.source()).unwrap(), config());
+    assert_eq!(
+        back.meta.config::<TrainConfig>(back.source()).unwrap(),
+        config()
+    );
     for name in ["actor.params", "obs_norm.mean", "counters", "adam.step"] {
         assert_eq!(back.tensor(name), original.tensor(name), "{name}");
     }

@@ -7,7 +7,8 @@ mod train_cli_support;
 
 use instantmimic::motion::SyntheticMotion;
 use instantmimic::motion::find::CLIP_NAMES;
-use instantmimic::train::{Checkpoint, TrainConfig};
+use instantmimic::run::Checkpoint;
+use instantmimic::train::TrainConfig;
 use train_cli_support::{
     add_policy, make_run, one_line_error, resolved_config, run, stdout, succeeded, workspace,
 };

@@ -12,9 +12,10 @@ mod train_cli_support;
 use std::path::{Path, PathBuf};
 
 use instantmimic::motion::Character;
+use instantmimic::run::{Checkpoint, CheckpointMeta};
 use instantmimic::train::goal_latent::{DECODER_DIGEST, load_goal_decoder};
 use instantmimic::train::latent_trainer::{insert_latent_networks, latent_shapes};
-use instantmimic::train::{ActionMode, Checkpoint, CheckpointMeta, PolicyShapes, TrainConfig};
+use instantmimic::train::{ActionMode, PolicyShapes, TrainConfig};
 use train_cli_support::{one_line_error, resolved_config, run, succeeded};
 
 fn repo() -> &'static Path {

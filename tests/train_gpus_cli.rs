@@ -6,7 +6,8 @@
 
 mod train_cli_support;
 
-use instantmimic::train::{ProgressMode, RunSession, TrainConfig};
+use instantmimic::run::{ProgressMode, RunSession};
+use instantmimic::train::TrainConfig;
 use train_cli_support::{make_run, one_line_error, resolved_config, run, succeeded, workspace};
 
 /// Whether this process can open NCCL (then a dry run on two GPUs goes through).
@@ -170,16 +171,21 @@ fn a_run_resumes_only_on_as_many_gpus_as_it_trained_on() {
     // A run on two GPUs: other devices are fine, another count is not.
     let two = ws.path().join("runs/two");
     make_run(&two, &motions, 6, vec![0, 1]);
-    let resumed = RunSession::resume(&two, |c| c.run.gpus = vec![2, 3], ProgressMode::Quiet);
+    let resumed =
+        RunSession::<TrainConfig>::resume(&two, |c| c.run.gpus = vec![2, 3], ProgressMode::Quiet);
     let (session, checkpoint, _) = resumed.expect("same count on other devices");
     assert_eq!(session.config().run.gpus, vec![2, 3]);
     assert_eq!(checkpoint.map(|c| c.meta.iteration), Some(5));
     drop(session);
     for gpus in [vec![0], vec![0, 1, 2], Vec::new()] {
-        let err = RunSession::resume(&two, |c| c.run.gpus = gpus.clone(), ProgressMode::Quiet)
-            .err()
-            .map(|e| e.to_string())
-            .unwrap_or_default();
+        let err = RunSession::<TrainConfig>::resume(
+            &two,
+            |c| c.run.gpus = gpus.clone(),
+            ProgressMode::Quiet,
+        )
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
         assert!(
             err.contains(
                 "run.gpus: this run trained on 2 GPUs; resume it on 2 (--gpus with 2 devices"

@@ -9,8 +9,9 @@ use std::path::Path;
 use std::process::Output;
 
 use instantmimic::motion::Character;
-use instantmimic::train::checkpoint::tensor_names;
-use instantmimic::train::{Checkpoint, CheckpointMeta, PolicyShapes, TrainConfig};
+use instantmimic::run::checkpoint::tensor_names;
+use instantmimic::run::{Checkpoint, CheckpointMeta};
+use instantmimic::train::{PolicyShapes, TrainConfig};
 use train_cli_support::{resolved_config, run, succeeded};
 
 fn repo() -> &'static Path {

@@ -9,12 +9,13 @@ mod tensorboard_support;
 use std::io::Write;
 use std::path::Path;
 
-use instantmimic::train::checkpoint::tensor_names;
-use instantmimic::train::{
-    EpisodeEnds, EvaluationSummary, GoalRates, GoalRecord, IterationRecord, IterationStats,
-    MetricsLog, ProgressMode, RunDir, RunSession, StopReason, TrainConfig, TrainError, UpdateStats,
-    curve,
+use instantmimic::env::{GoalRates, GoalRecord, TaskRecord};
+use instantmimic::run::checkpoint::tensor_names;
+use instantmimic::run::{
+    EpisodeEnds, EvaluationSummary, IterationRecord, IterationStats, MetricsLog, ProgressMode,
+    RunDir, RunError, RunSession, StopReason, UpdateStats, curve,
 };
+use instantmimic::train::TrainConfig;
 
 fn config(max_iterations: u64) -> TrainConfig {
     let mut c = TrainConfig::with_motion("walk");
@@ -74,7 +75,11 @@ fn evaluation(iteration: u64, success_from: u64) -> EvaluationSummary {
 /// Runs iterations the way the GPU loop will, until `stop_after` iterations (a "kill") or a
 /// stop reason. The checkpoint holds one tensor derived from the iteration, so a resume can be
 /// checked to restore the right one.
-fn drive(session: &mut RunSession, stop_after: u64, success_from: u64) -> Option<StopReason> {
+fn drive(
+    session: &mut RunSession<TrainConfig>,
+    stop_after: u64,
+    success_from: u64,
+) -> Option<StopReason> {
     drive_with(session, stop_after, |iteration| {
         evaluation(iteration, success_from)
     })
@@ -82,7 +87,7 @@ fn drive(session: &mut RunSession, stop_after: u64, success_from: u64) -> Option
 
 /// [`drive`] with the evaluations `evaluate` makes.
 fn drive_with(
-    session: &mut RunSession,
+    session: &mut RunSession<TrainConfig>,
     stop_after: u64,
     evaluate: impl Fn(u64) -> EvaluationSummary,
 ) -> Option<StopReason> {
@@ -138,8 +143,12 @@ fn a_killed_run_resumes_from_its_checkpoint_without_gap_or_duplicate() {
     assert_eq!(iterations(&metrics), (1..=27).collect::<Vec<_>>());
     let active_at_20 = MetricsLog::read(&metrics).unwrap().records[19].active_time_s;
 
-    let (mut session, checkpoint, warnings) =
-        RunSession::resume(&root, |c| c.run.max_iterations = 45, ProgressMode::Quiet).unwrap();
+    let (mut session, checkpoint, warnings) = RunSession::<TrainConfig>::resume(
+        &root,
+        |c| c.run.max_iterations = 45,
+        ProgressMode::Quiet,
+    )
+    .unwrap();
     let checkpoint = checkpoint.unwrap();
     assert_eq!(checkpoint.meta.iteration, 20);
     assert_eq!(
@@ -201,10 +210,10 @@ fn a_killed_run_resumes_from_its_checkpoint_without_gap_or_duplicate() {
 
 fn session_checkpoints(root: &Path) -> Vec<u64> {
     let config = TrainConfig::load(&root.join("config.toml")).unwrap();
-    RunDir::inspect_resume(root)
+    RunDir::inspect_resume::<TrainConfig>(root)
         .unwrap()
         .dir
-        .checkpoints(&config)
+        .checkpoints(&config.run)
         .list()
         .unwrap()
         .into_iter()
@@ -216,7 +225,7 @@ fn session_checkpoints(root: &Path) -> Vec<u64> {
 /// clip's run writes neither.
 #[test]
 fn a_library_run_writes_its_clips_table_and_chart() {
-    use instantmimic::train::library_evaluation::{ClipScore, LibraryEvaluation};
+    use instantmimic::run::{ClipScore, LibraryEvaluation};
     let clip = |name: &str, success_rate: f64| ClipScore {
         name: name.to_owned(),
         duration_s: 1.0,
@@ -292,7 +301,7 @@ fn success_stops_the_run_and_is_its_time_to_success() {
     assert_eq!(summary.success_iteration, Some(25));
     assert_eq!(summary.time_to_success_s, Some(at_25));
     let text = std::fs::read_to_string(root.join("summary.json")).unwrap();
-    let back: instantmimic::train::RunSummary = serde_json::from_str(&text).unwrap();
+    let back: instantmimic::run::RunSummary = serde_json::from_str(&text).unwrap();
     assert_eq!(back, summary);
     // The final checkpoint is written at the stop, off the 10-iteration interval.
     assert_eq!(session_checkpoints(&root), [20, 25]);
@@ -307,7 +316,7 @@ fn a_new_run_refuses_a_non_empty_directory_unless_told() {
     let err = RunSession::start_new(&root, &config, false, ProgressMode::Quiet)
         .err()
         .unwrap();
-    assert!(matches!(err, TrainError::RunDirNotEmpty { .. }), "{err}");
+    assert!(matches!(err, RunError::RunDirNotEmpty { .. }), "{err}");
     let text = err.to_string();
     assert!(
         text.contains("is not empty") && text.contains("--resume") && text.contains("--overwrite"),
@@ -344,19 +353,19 @@ fn resume_skips_a_corrupt_newest_checkpoint_and_refuses_a_changed_training() {
     let bytes = std::fs::read(&newest).unwrap();
     std::fs::write(&newest, &bytes[..bytes.len() / 3]).unwrap();
     // A dry run inspects without changing anything.
-    let inspected = RunDir::inspect_resume(&root).unwrap();
+    let inspected = RunDir::inspect_resume::<TrainConfig>(&root).unwrap();
     assert_eq!(inspected.iteration(), 20);
     assert_eq!(iterations(&root.join("metrics.jsonl")).len(), 30);
     assert!(newest.exists());
 
     // Changing the training (not [run]) is refused.
-    let err = RunSession::resume(&root, |c| c.ppo.epochs = 3, ProgressMode::Quiet)
+    let err = RunSession::<TrainConfig>::resume(&root, |c| c.ppo.epochs = 3, ProgressMode::Quiet)
         .err()
         .unwrap();
     assert!(err.to_string().contains("only [run] settings"), "{err}");
 
     let (session, checkpoint, warnings) =
-        RunSession::resume(&root, |_| {}, ProgressMode::Quiet).unwrap();
+        RunSession::<TrainConfig>::resume(&root, |_| {}, ProgressMode::Quiet).unwrap();
     assert_eq!(checkpoint.unwrap().meta.iteration, 20);
     assert_eq!(session.iteration(), 20);
     assert!(
@@ -378,14 +387,18 @@ fn resume_skips_a_corrupt_newest_checkpoint_and_refuses_a_changed_training() {
         text.replace("gamma = 0.99", "gamma = 0.98"),
     )
     .unwrap();
-    let err = RunDir::inspect_resume(&root).unwrap_err().to_string();
+    let err = RunDir::inspect_resume::<TrainConfig>(&root)
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("different [ppo]"), "{err}");
 }
 
 #[test]
 fn resume_without_a_run_directory_or_checkpoint() {
     let dir = tempfile::tempdir().unwrap();
-    let err = RunDir::inspect_resume(dir.path()).unwrap_err().to_string();
+    let err = RunDir::inspect_resume::<TrainConfig>(dir.path())
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains("not a run directory") && err.contains("config.toml"),
         "{err}"
@@ -397,7 +410,7 @@ fn resume_without_a_run_directory_or_checkpoint() {
     drive(&mut session, 7, 1000);
     drop(session);
     let (mut session, checkpoint, warnings) =
-        RunSession::resume(&root, |_| {}, ProgressMode::Quiet).unwrap();
+        RunSession::<TrainConfig>::resume(&root, |_| {}, ProgressMode::Quiet).unwrap();
     assert!(checkpoint.is_none());
     assert!(
         warnings.iter().any(|w| w.contains("starts over")),
@@ -579,8 +592,8 @@ fn steps_of(scalars: &[(usize, String, i64, f32)], file: usize, tag: &str) -> Ve
 
 #[test]
 fn tensorboard_event_files_hold_every_metric_by_iteration_across_a_resume() {
-    use instantmimic::train::DivergenceEvent;
-    use instantmimic::train::library_evaluation::{ClipScore, LibraryEvaluation};
+    use instantmimic::run::DivergenceEvent;
+    use instantmimic::run::{ClipScore, LibraryEvaluation};
     let clip = |name: &str, success_rate: f64| ClipScore {
         name: name.to_owned(),
         duration_s: 1.0,
@@ -597,13 +610,13 @@ fn tensorboard_event_files_hold_every_metric_by_iteration_across_a_resume() {
         failures_per_step: None,
     };
     // A library run with the goal task's records on every iteration and a divergence at 7.
-    let run = |session: &mut RunSession, until: u64| {
+    let run = |session: &mut RunSession<TrainConfig>, until: u64| {
         while session.iteration() < until {
             session.start_iteration();
             std::thread::sleep(std::time::Duration::from_millis(1));
             let mut step = session.finish_iteration(stats(session.iteration() + 1));
             let iteration = step.iteration;
-            step.set_goal(GoalRecord {
+            step.set_task(TaskRecord::Goal(GoalRecord {
                 rollout: GoalRates {
                     episodes: 4,
                     goals_per_episode: iteration as f64,
@@ -614,7 +627,7 @@ fn tensorboard_event_files_hold_every_metric_by_iteration_across_a_resume() {
                     goals_per_episode: 2.0 * iteration as f64,
                     fall_rate: 0.5,
                 }),
-            });
+            }));
             if iteration == 7 {
                 step.diverged(DivergenceEvent {
                     cause: "value loss".to_owned(),
@@ -648,7 +661,8 @@ fn tensorboard_event_files_hold_every_metric_by_iteration_across_a_resume() {
         RunSession::start_new(&root, &config(15), false, ProgressMode::Quiet).unwrap();
     run(&mut session, 12);
     drop(session); // killed after 12; the checkpoint is at 10
-    let (mut session, _, _) = RunSession::resume(&root, |_| {}, ProgressMode::Quiet).unwrap();
+    let (mut session, _, _) =
+        RunSession::<TrainConfig>::resume(&root, |_| {}, ProgressMode::Quiet).unwrap();
     run(&mut session, 15);
     session.finish(StopReason::IterationBudget).unwrap();
 

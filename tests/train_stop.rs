@@ -1,14 +1,15 @@
-//! Stopping a run on request (SIGINT/SIGTERM set a `StopFlag`; src/train/stop.rs), driven
+//! Stopping a run on request (SIGINT/SIGTERM set a `StopFlag`; src/run/stop.rs), driven
 //! through `RunSession` as the GPU loop drives it, with made-up statistics in place of the GPU:
 //! a request that comes during an iteration lets that iteration finish, be recorded and
 //! checkpointed; the run then ends with stop reason `interrupted` in `summary.json`, and a
 //! resume continues after it with no gap.
 
-use instantmimic::train::checkpoint::tensor_names;
-use instantmimic::train::{
+use instantmimic::run::checkpoint::tensor_names;
+use instantmimic::run::{
     IterationStats, MetricsLog, ProgressMode, RunDir, RunSession, RunSummary, StopFlag, StopReason,
-    StopSignal, TrainConfig, UpdateStats,
+    StopSignal, UpdateStats,
 };
+use instantmimic::train::TrainConfig;
 
 fn config(max_iterations: u64) -> TrainConfig {
     let mut c = TrainConfig::with_motion("walk");
@@ -38,7 +39,7 @@ fn stats() -> IterationStats {
 /// the iteration during whose GPU work the flag is set (after it started, before it was
 /// recorded). Returns the stop reason and how many iterations started.
 fn drive(
-    session: &mut RunSession,
+    session: &mut RunSession<TrainConfig>,
     flag: &StopFlag,
     signal_during: Option<u64>,
 ) -> (StopReason, u64) {
@@ -67,10 +68,10 @@ fn drive(
 
 fn checkpoints(root: &std::path::Path) -> Vec<u64> {
     let config = TrainConfig::load(&root.join("config.toml")).unwrap();
-    RunDir::inspect_resume(root)
+    RunDir::inspect_resume::<TrainConfig>(root)
         .unwrap()
         .dir
-        .checkpoints(&config)
+        .checkpoints(&config.run)
         .list()
         .unwrap()
         .into_iter()
@@ -114,7 +115,7 @@ fn a_stop_request_ends_the_run_after_the_current_iteration_with_a_checkpoint() {
 
     // A resume (a new process: its own flag, not set) continues from iteration 13.
     let (mut session, checkpoint, _) =
-        RunSession::resume(&root, |_| {}, ProgressMode::Quiet).unwrap();
+        RunSession::<TrainConfig>::resume(&root, |_| {}, ProgressMode::Quiet).unwrap();
     let checkpoint = checkpoint.unwrap();
     assert_eq!(checkpoint.meta.iteration, 13);
     assert_eq!(

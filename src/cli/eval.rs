@@ -9,11 +9,9 @@ use anyhow::{Result, bail};
 use clap::Args;
 
 use super::library_eval::LibraryEvalJob;
+use crate::run::{Checkpoint, evaluation_steps, format_evaluation_report};
 use crate::train::library_policy::LibraryPolicyKind;
-use crate::train::{
-    Checkpoint, checkpoint_character, evaluate_on_gpu, evaluation_steps, format_evaluation_report,
-    preflight,
-};
+use crate::train::{checkpoint_character, evaluate_on_gpu, preflight};
 
 #[derive(Args, Debug)]
 pub struct EvalArgs {
@@ -81,7 +79,9 @@ pub fn run(args: EvalArgs) -> Result<()> {
     }
     let mut checkpoint = Checkpoint::load(&args.checkpoint)?;
     let chosen = checkpoint_character(&mut checkpoint, args.character.as_deref())?;
-    let config = checkpoint.meta.config(checkpoint.source())?;
+    let config = checkpoint
+        .meta
+        .config::<crate::train::TrainConfig>(checkpoint.source())?;
     let motions_dir = super::output::motions_dir(args.motions_dir.as_deref())?;
     let store = chosen.plan_store(args.assets.as_deref());
     if config.goal.is_some() {
@@ -144,7 +144,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
             args.episodes,
             config.run.eval_envs,
             evaluation_steps(
-                &config,
+                &config.run,
                 checks.clip_duration_s,
                 checks.control_dt,
                 checks.loop_mode

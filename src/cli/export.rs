@@ -18,7 +18,8 @@ use crate::motion::character::DEFAULT_CHARACTER;
 use crate::motion::find::resolve_motion;
 use crate::motion::{Character, LoopMode};
 use crate::recording::{ClipRecordingSpec, Recording};
-use crate::train::{Checkpoint, ChosenCharacter, check_plans, checkpoint_character};
+use crate::run::Checkpoint;
+use crate::train::{ChosenCharacter, check_plans, checkpoint_character};
 
 use super::output::{check_clip_frames, check_frame_rate, check_output_path, motions_dir};
 
@@ -120,7 +121,9 @@ fn onnx_export(path: &Path, args: &ExportArgs) -> Result<(Vec<u8>, String)> {
     let mut checkpoint = Checkpoint::load(path)?;
     let chosen = checkpoint_character(&mut checkpoint, args.character.as_deref())?;
     let character = chosen.character();
-    let config = checkpoint.meta.config(checkpoint.source())?;
+    let config = checkpoint
+        .meta
+        .config::<crate::train::TrainConfig>(checkpoint.source())?;
     // The physics timestep is the plans' (the contract states it); the evaluation's plans are
     // the smallest.
     let store = chosen.plan_store(args.assets.as_deref());

@@ -12,7 +12,7 @@ use crate::cuda::Gpu;
 use crate::plan::PlanStore;
 use crate::recording::Outcome;
 use crate::replay::{GoalReplay, GoalReplayInput, record_goal_replay};
-use crate::train::Checkpoint;
+use crate::run::Checkpoint;
 use crate::train::goal_evaluation::{
     check_goal_checkpoint, evaluate_goal_on_gpu, format_goal_evaluation,
 };
@@ -139,9 +139,9 @@ fn goal_episodes_report(replay: &GoalReplay, envs: u32) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::env::GoalRates;
     use crate::motion::Character;
     use crate::recording::synthetic::goal_replay;
-    use crate::train::GoalRates;
 
     #[test]
     fn the_goal_replay_report_names_each_episodes_goals() {

@@ -9,7 +9,7 @@ use clap::Args;
 
 use super::stopped::Stopped;
 use crate::hpo::{HpoError, HpoRequest, SearchOverrides, run};
-use crate::train::StopFlag;
+use crate::run::StopFlag;
 
 #[derive(Args, Debug)]
 pub struct HpoArgs {

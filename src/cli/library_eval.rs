@@ -14,11 +14,11 @@ use crate::plan::PlanStore;
 use crate::replay::library::{
     LibraryReplayInput, LibraryReplays, library_chosen_envs, record_library_replays,
 };
+use crate::run::{Checkpoint, EvaluationSummary};
 use crate::train::library_policy::{
     LibraryPolicy, LibraryPolicyEvaluator, evaluation_clips_table, format_library_report,
     prepare_library_policy,
 };
-use crate::train::{Checkpoint, EvaluationSummary};
 use crate::viewer::{ClipPageRow, clip_page_name, save_index_page, save_page};
 
 /// What `eval` was given for a library checkpoint.
@@ -68,7 +68,7 @@ fn library_lines(prepared: &LibraryPolicy) -> String {
         plan.clips.len(),
         plan.longest_steps(),
         prepared.config.run.success_rate,
-        crate::train::CLIP_SUCCESS_RATE
+        crate::run::CLIP_SUCCESS_RATE
     );
     out
 }

@@ -13,10 +13,9 @@ use crate::motion::Character;
 use crate::plan::PlanStore;
 use crate::recording::{Outcome, Recording};
 use crate::replay::{DEFAULT_EPISODES, Replay, ReplayInput, chosen_envs, record_replay};
+use crate::run::{Checkpoint, format_evaluation_report};
 use crate::train::library_policy::LibraryPolicyKind;
-use crate::train::{
-    Checkpoint, EvalStart, checkpoint_character, format_evaluation_report, preflight,
-};
+use crate::train::{EvalStart, checkpoint_character, preflight};
 use crate::viewer::save_page;
 
 /// The longest episode `replay --steps` records.
@@ -120,7 +119,9 @@ pub(super) fn write_replay(job: &ReplayJob<'_>) -> Result<String> {
     }
     let mut checkpoint = Checkpoint::load(job.checkpoint)?;
     checkpoint_character(&mut checkpoint, job.character)?;
-    let mut config = checkpoint.meta.config(checkpoint.source())?;
+    let mut config = checkpoint
+        .meta
+        .config::<crate::train::TrainConfig>(checkpoint.source())?;
     if config.goal.is_some() {
         // The goals and the goals reached (src/cli/goal_checkpoint.rs).
         return super::goal_checkpoint::write_goal_replay(job, &checkpoint);
@@ -296,7 +297,9 @@ fn replay_library_checkpoint(
     motions_dir: Option<&Path>,
     store: &PlanStore,
 ) -> Result<Option<String>> {
-    let config = checkpoint.meta.config(checkpoint.source())?;
+    let config = checkpoint
+        .meta
+        .config::<crate::train::TrainConfig>(checkpoint.source())?;
     if LibraryPolicyKind::of(&config).is_none() {
         let flag = match (&args.clip, &args.library, args.all_clips) {
             (Some(clip), _, _) => Some(format!("--clip {clip}")),

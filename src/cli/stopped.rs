@@ -2,7 +2,7 @@
 //! it has printed its own lines, and the process exits with the shell's status for the
 //! signal (130, 143) instead of `error: ...` and 1.
 
-use crate::train::StopSignal;
+use crate::run::StopSignal;
 
 /// Returned by a command stopped by `signal`; `main` exits with the signal's status.
 #[derive(Debug, thiserror::Error)]

@@ -20,13 +20,16 @@ use crate::cuda::nccl_version;
 use crate::motion::LibraryConfig;
 use crate::plan::PlanStore;
 use crate::replay::DEFAULT_EPISODES;
+use crate::run::run_dir::{CHECKPOINTS_DIR, REPLAY_DIR, REPLAY_FILE};
+use crate::run::{
+    Checkpoint, CheckpointDir, ProgressMode, RunDir, RunSummary, StopFlag, StopReason, StopSignal,
+    check_same_gpu_count,
+};
 use crate::train::goal_latent::load_goal_decoder;
 use crate::train::latent_trainer::{latent_shapes, load_teacher};
-use crate::train::run_dir::{CHECKPOINTS_DIR, REPLAY_DIR, REPLAY_FILE};
 use crate::train::{
-    Checkpoint, CheckpointDir, ChosenCharacter, ProgressMode, RunDir, RunStart, RunSummary,
-    StopFlag, StopReason, StopSignal, TrainConfig, TrainSetup, check_same_gpu_count,
-    check_trained_character, default_run_dir, preflight_training, train_on_gpu,
+    ChosenCharacter, RunStart, TrainConfig, TrainSetup, check_trained_character, default_run_dir,
+    preflight_training, train_on_gpu,
 };
 
 /// `--progress`.
@@ -310,7 +313,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     };
     let (config, label, start, directory_line, resume_checkpoint) = match &args.resume {
         Some(root) => {
-            let resumed = RunDir::inspect_resume(root)
+            let resumed = RunDir::inspect_resume::<TrainConfig>(root)
                 .with_context(|| format!("cannot resume {}", root.display()))?;
             for warning in &resumed.warnings {
                 eprintln!("warning: {warning}");
@@ -327,7 +330,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 label = format!("{label} with {}", flags.join(", "));
             }
             config.validate(&label)?;
-            check_same_gpu_count(&resumed.config, &config)?;
+            check_same_gpu_count(&resumed.config.run, &config.run)?;
             let line = match &resumed.checkpoint {
                 Some((path, c)) => format!(
                     "{} (resume from iteration {}: {}, {:.2} s active)",

@@ -12,7 +12,7 @@ use crate::motion::LoopMode;
 
 /// A tracked body farther than this from its reference (m) fails an evaluation episode: the
 /// committed `tracking_distance` before the success yardstick was separated from the training
-/// termination (docs/train.md, "Success"; the episode-level bound is src/train/evaluation.rs's).
+/// termination (docs/train.md, "Success"; the episode-level bound is src/run/evaluation.rs's).
 pub const SUCCESS_MAX_BODY_DISTANCE_M: f32 = 1.0;
 /// The root more than this below the reference root (m) fails an evaluation episode: the tuned
 /// backflip's termination height (the stricter of the committed 0.6 and the baseline's 0.8).

@@ -16,7 +16,7 @@ pub mod body_model;
 pub mod config;
 mod error;
 mod evaluation;
-mod goal_counters;
+mod goal;
 pub mod layout;
 mod normalizer;
 mod phases;
@@ -44,7 +44,10 @@ pub use evaluation::{
     SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps, clip_evaluation, evaluation_env,
     evaluation_episode_steps, evaluation_start_time, yardstick,
 };
-pub use goal_counters::{GoalCounter, GoalTally};
+pub use goal::{
+    GOAL_OBSERVATION, goal_episode_steps, goal_observation_config, goal_observation_size,
+};
+pub use goal::{GoalConfigProblem, GoalCounter, GoalRates, GoalRecord, GoalTally};
 pub use physics_state::{PhysicsSizes, PhysicsState, PhysicsStateError};
 pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;
@@ -52,8 +55,6 @@ pub use rollout::{EpisodeState, Rollout};
 pub use stages::{RolloutStage, Stage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 pub use storage::{ActStorage, RolloutStorage};
-pub use task::{
-    GOAL_OBSERVATION, goal_episode_steps, goal_observation_config, goal_observation_size,
-};
+pub use task::TaskRecord;
 pub use tracked::TrackedMotion;
 pub use trajectory::{Trajectory, TrajectoryFrames};

@@ -42,7 +42,7 @@ pub enum HpoError {
     /// SIGINT or SIGTERM stopped the search between trials (a training trial after its
     /// current iteration); the cycle that was running is not recorded.
     #[error("stopped by {}", .signal.name())]
-    Interrupted { signal: crate::train::StopSignal },
+    Interrupted { signal: crate::run::StopSignal },
 }
 
 impl HpoError {

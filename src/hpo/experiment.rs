@@ -11,7 +11,7 @@ use crate::hpo::objective::score;
 use crate::hpo::record::{CandidateResult, SeedTrial};
 use crate::hpo::space::{Assignment, ParamValue, apply};
 use crate::hpo::trial::{BoxedRunner, TrialOutcome};
-use crate::train::{StopFlag, StopSignal};
+use crate::run::{StopFlag, StopSignal};
 
 /// One configuration to train with one seed.
 pub struct Job {

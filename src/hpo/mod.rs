@@ -58,7 +58,7 @@ pub struct HpoRequest {
     pub stop_after_s: Option<f64>,
     /// Stops the search between trials (a training trial after its current iteration);
     /// `hpo` connects it to SIGINT and SIGTERM.
-    pub stop: crate::train::StopFlag,
+    pub stop: crate::run::StopFlag,
 }
 
 /// What a finished search reports.
@@ -75,7 +75,7 @@ pub struct HpoSummary {
     pub complete: bool,
     /// The signal that stopped the search, if one did (the state on disk is its last
     /// complete cycle).
-    pub interrupted: Option<crate::train::StopSignal>,
+    pub interrupted: Option<crate::run::StopSignal>,
 }
 
 /// Runs or resumes a search with the runner and agent its configuration names, then writes

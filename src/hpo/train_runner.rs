@@ -16,9 +16,9 @@ use crate::hpo::trial::{BoxedRunner, TrialOutcome, TrialRunner, TrialSpec};
 use crate::motion::ReferenceMotion;
 use crate::motion::find::motions_dir_from_env;
 use crate::plan::PlanStore;
+use crate::run::{ProgressMode, StopFlag, StopReason};
 use crate::train::{
-    ChosenCharacter, ProgressMode, RunStart, StopFlag, StopReason, TrainConfig, check_plan_model,
-    load_motion, train_with,
+    ChosenCharacter, RunStart, TrainConfig, check_plan_model, load_motion, train_with,
 };
 
 /// Distinguishes the scratch directories of the trials of one process.

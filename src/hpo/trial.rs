@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::hpo::config::{RunnerKind, RunnerSettings};
 use crate::hpo::error::HpoError;
 use crate::hpo::synthetic::SyntheticObjective;
-use crate::train::{RunSummary, StopFlag};
+use crate::run::{RunSummary, StopFlag};
 
 /// What every trial of a search is held to. A runner stops a trial once `budget_s` of active
 /// training time is spent without success.
@@ -134,12 +134,12 @@ mod tests {
         }
     }
 
-    use crate::train::summary::test_records::records;
+    use crate::run::summary::test_records::records;
 
-    /// The summaries of src/train/summary.rs's tests, as the search scores them.
+    /// The summaries of src/run/summary.rs's tests, as the search scores them.
     #[test]
     fn the_outcome_of_a_run_is_its_first_success_or_its_time_spent() {
-        use crate::train::StopReason;
+        use crate::run::StopReason;
         let s =
             RunSummary::from_records("backflip", 1, &records(15, 10), StopReason::IterationBudget);
         let outcome = TrialOutcome::from(&s);

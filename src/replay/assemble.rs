@@ -11,7 +11,7 @@
 
 use crate::motion::{Character, TableLayout};
 use crate::recording::{EpisodeInfo, Outcome, Recording, RecordingError, RecordingMeta, Track};
-use crate::train::{EnvEvaluation, SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M};
+use crate::run::{EnvEvaluation, SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M};
 
 /// One chosen env's episode as the GPU replay left it, frame by frame (frame 0 the initial
 /// state, frame f the state after f control steps; every array `[frames, ...]` row-major).

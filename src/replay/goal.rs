@@ -9,14 +9,15 @@
 //! falls is `failed` at the frame it fell.
 
 use crate::cuda::Gpu;
+use crate::env::GoalRates;
 use crate::env::GoalTally;
 use crate::motion::Character;
 use crate::plan::PlanStore;
 use crate::recording::{
     EpisodeInfo, GoalTrack, Outcome, Recording, RecordingError, RecordingMeta, Track,
 };
+use crate::run::Checkpoint;
 use crate::train::goal_evaluation::GoalCheckpoint;
-use crate::train::{Checkpoint, GoalRates};
 
 use super::{ReplayError, chosen_envs};
 

@@ -7,8 +7,8 @@ use crate::cuda::Gpu;
 use crate::motion::TableLayout;
 use crate::plan::PlanStore;
 use crate::recording::Recording;
+use crate::run::{Checkpoint, EnvEvaluation, EvaluationSummary};
 use crate::train::library_policy::{LibraryPolicy, LibraryPolicyEvaluator};
-use crate::train::{Checkpoint, EnvEvaluation, EvaluationSummary};
 
 use super::assemble::{ReplaySource, assemble_recording};
 use super::{ReplayError, chosen_envs, run_recorded};

@@ -1,5 +1,5 @@
 //! `replay`: a checkpoint's policy run as the evaluation runs it (mean actions, no reset noise,
-//! the fixed yardstick; src/train/evaluation.rs), with every chosen env's state recorded after
+//! the fixed yardstick; src/run/evaluation.rs), with every chosen env's state recorded after
 //! every control step, turned into a [`Recording`] with the reference at the same clip times
 //! (docs/replay.md). The command line writes it as a page (`crate::viewer`) and a recording
 //! file; `train` gets its `replay.html` the same way, from the command line, so that `train`
@@ -25,10 +25,8 @@ use crate::kernels::EnvError;
 use crate::motion::{ReferenceMotion, TableLayout};
 use crate::plan::PlanStore;
 use crate::recording::{Recording, RecordingError};
-use crate::train::{
-    Checkpoint, EnvEvaluation, EvaluationError, EvaluationSummary, TrainConfig, TrainError,
-    evaluation_trainer, summarize,
-};
+use crate::run::{Checkpoint, EnvEvaluation, EvaluationError, EvaluationSummary, summarize};
+use crate::train::{TrainConfig, TrainError, evaluation_trainer};
 
 pub use assemble::{RecordedEpisode, ReplaySource, assemble_recording};
 pub use goal::{

@@ -25,59 +25,17 @@
 
 use std::path::Path;
 
-use serde::{Deserialize, Serialize};
-
-use super::checkpoint::Checkpoint;
+use super::character_name::{
+    built_in_names, character_did_you_mean, check_character_name, is_built_in,
+};
 use super::error::TrainError;
-use crate::motion::character::{BUILT_IN, DEFAULT_CHARACTER};
+use crate::motion::character::DEFAULT_CHARACTER;
 use crate::motion::{Character, MotionError};
 use crate::plan::{EMBEDDED_CHARACTERS_DIR, MANIFEST_PATH, PlanSource, PlanStore, SimulatedModel};
+use crate::run::{CharacterRecord, Checkpoint, simulated_model};
 
 /// The description in a character directory.
 pub const CHARACTER_FILE: &str = "character.json";
-
-/// The built-in characters' names, for messages: `humanoid, g1`.
-fn built_in_names() -> String {
-    BUILT_IN
-        .iter()
-        .map(|(name, _)| *name)
-        .collect::<Vec<_>>()
-        .join(", ")
-}
-
-/// ` (did you mean "g1"?)` for the built-in characters nearest `name`, or empty.
-fn character_did_you_mean(name: &str) -> String {
-    crate::motion::suggest::did_you_mean(name, BUILT_IN.iter().map(|(n, _)| *n))
-}
-
-fn is_built_in(name: &str) -> bool {
-    BUILT_IN.iter().any(|(built_in, _)| *built_in == name)
-}
-
-/// Whether `spec` is a path (a description JSON or a character directory) rather than a name:
-/// it ends in `.json` or holds a path separator.
-fn names_a_path(spec: &str) -> bool {
-    spec.ends_with(".json") || spec.contains('/') || spec.contains(std::path::MAIN_SEPARATOR)
-}
-
-/// Checks how `character` (the key or the flag) is written, without reading a file: a built-in
-/// name, or a path. The reason is for `TrainConfig::validate`'s message.
-pub fn check_character_name(spec: &str) -> Result<(), String> {
-    if spec.trim().is_empty() || spec.trim() != spec {
-        return Err(format!(
-            "name a built-in character ({}), a description JSON or a character directory",
-            built_in_names()
-        ));
-    }
-    if is_built_in(spec) || names_a_path(spec) {
-        return Ok(());
-    }
-    Err(format!(
-        "not a built-in character{}: the built-in ones are {}; a description JSON ends in .json and a character directory is written as a path with a `/` (e.g. ./{spec})",
-        character_did_you_mean(spec),
-        built_in_names()
-    ))
-}
 
 /// Where the embedded plans of the character called `name` are, relative to `ptx/`: the top
 /// for the default character (and for a name that is not built in: its plans must come from a
@@ -167,18 +125,6 @@ impl ChosenCharacter {
     }
 }
 
-/// The model a character's plans must simulate: the MJCF its description was compiled from and
-/// its sizes.
-pub fn simulated_model(character: &Character) -> SimulatedModel {
-    SimulatedModel {
-        mjcf: character.simulation_mjcf().to_string(),
-        nq: character.nq(),
-        nv: character.nv(),
-        nu: character.actuators().len(),
-        nbody: character.bodies().len(),
-    }
-}
-
 /// Checks that `store`'s plans (its manifest) simulate `character`.
 pub fn check_plan_model(store: &PlanStore, character: &Character) -> Result<(), TrainError> {
     let found = store.model().map_err(|e| {
@@ -212,30 +158,6 @@ pub(super) fn check_model(
     })
 }
 
-/// The character a checkpoint was trained on, as its metadata records it (`character`): enough
-/// to refuse another character, whether it was named or given as a path.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct CharacterRecord {
-    /// The description's name.
-    pub name: String,
-    #[serde(flatten)]
-    pub model: SimulatedModel,
-}
-
-impl CharacterRecord {
-    pub fn of(character: &Character) -> CharacterRecord {
-        CharacterRecord {
-            name: character.name().to_string(),
-            model: simulated_model(character),
-        }
-    }
-
-    /// `` `g1`, configs/characters/g1.xml (nq 36, nv 35, nu 29, nbody 31) ``.
-    pub fn describe(&self) -> String {
-        format!("`{}`, {}", self.name, self.model.describe())
-    }
-}
-
 /// The character `checkpoint` was trained on: its record, else (a checkpoint written before
 /// checkpoints recorded it) the character its stored configuration names, the default one when
 /// the configuration names none.
@@ -243,7 +165,9 @@ pub fn trained_character(checkpoint: &Checkpoint) -> Result<CharacterRecord, Tra
     if let Some(record) = &checkpoint.meta.character {
         return Ok(record.clone());
     }
-    let config = checkpoint.meta.config(checkpoint.source())?;
+    let config = checkpoint
+        .meta
+        .config::<super::config::TrainConfig>(checkpoint.source())?;
     let chosen = ChosenCharacter::of_config(&config)?;
     Ok(CharacterRecord::of(chosen.character()))
 }
@@ -274,7 +198,9 @@ pub fn checkpoint_character(
     checkpoint: &mut Checkpoint,
     flag: Option<&str>,
 ) -> Result<ChosenCharacter, TrainError> {
-    let mut config = checkpoint.meta.config(checkpoint.source())?;
+    let mut config = checkpoint
+        .meta
+        .config::<super::config::TrainConfig>(checkpoint.source())?;
     let chosen = ChosenCharacter::resolve(flag.unwrap_or(&config.character))?;
     check_trained_character(checkpoint, chosen.character())?;
     if let Some(flag) = flag.filter(|flag| *flag != config.character) {

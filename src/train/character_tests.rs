@@ -2,7 +2,7 @@ use std::path::Path;
 
 use super::*;
 use crate::motion::character::{G1_JSON, HUMANOID_JSON};
-use crate::train::checkpoint::CheckpointMeta;
+use crate::run::checkpoint::CheckpointMeta;
 use crate::train::config::TrainConfig;
 
 fn g1() -> Character {
@@ -259,7 +259,10 @@ fn the_character_flag_may_find_the_checkpoints_character_by_path() {
     let chosen = checkpoint_character(&mut checkpoint, Some(&spec)).expect("the same character");
     assert_eq!(chosen.character().name(), "g1");
     // Whatever reads the stored configuration now finds the character where the flag did.
-    let config = checkpoint.meta.config(checkpoint.source()).expect("config");
+    let config = checkpoint
+        .meta
+        .config::<TrainConfig>(checkpoint.source())
+        .expect("config");
     assert_eq!(config.character, spec);
     // Without the flag, the checkpoint's own.
     let mut checkpoint = checkpoint_of("g1", true);

@@ -11,19 +11,20 @@
 //! A run trains on one clip (`motion`) or on a motion library (`[motion_library]`,
 //! `motion::library_config`, docs/library.md): exactly one of the two.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::env::{
-    EnvConfig, EvalStart, EvaluationProtocol, GoalConfig, LIBRARY_EVALUATION_WINDOW_S, ObsConfig,
+    EnvConfig, EvaluationProtocol, GoalConfig, LIBRARY_EVALUATION_WINDOW_S, ObsConfig,
     RewardConfig, RolloutConfig, TaskConfig,
 };
 use crate::latent::LatentConfig;
 use crate::motion::character::DEFAULT_CHARACTER;
 use crate::motion::{LibraryConfig, MotionLibraryError};
 use crate::ppo::{PolicyConfig, PpoConfig};
+use crate::run::{BoxedError, ResolvedConfig, RunConfig};
 
 /// A configuration that cannot be used.
 #[derive(Debug, Error)]
@@ -232,87 +233,24 @@ fn default_character() -> String {
     DEFAULT_CHARACTER.to_string()
 }
 
-/// `[run]`: evaluation, stopping, checkpoints (the paper's protocol; docs/train.md).
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct RunConfig {
-    /// Training iterations between evaluations (the paper: 5).
-    pub eval_interval: u32,
-    /// Evaluation environments; a plan for this many worlds must exist (the committed 32).
-    pub eval_envs: u32,
-    /// Control steps of an evaluation episode. Absent: one pass of the clip,
-    /// ceil(duration / control dt).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub eval_steps: Option<u32>,
-    /// Initial states of the evaluation episodes (no noise, mean action: deterministic).
-    pub eval_start: EvalStart,
-    /// Fraction of evaluation envs that must pass the fixed success yardstick (the paper: 0.9
-    /// completing the episode; src/train/evaluation.rs).
-    pub success_rate: f64,
-    /// Stop at the first successful evaluation (the paper's time-to-success protocol); false
-    /// keeps training until a budget runs out.
-    pub stop_on_success: bool,
-    /// With `stop_on_success`, keep training after success until an evaluation also meets the
-    /// paper's second criterion (average pose error at most 0.06 m), so that both times are
-    /// measured in one run.
-    pub stop_on_pose_error: bool,
-    /// Active training seconds (initialization, evaluation and checkpoints excluded) after
-    /// which the run stops.
-    pub time_budget_s: f64,
-    /// Training iterations after which the run stops.
-    pub max_iterations: u64,
-    /// Iterations between checkpoints; 0 writes only the final one.
-    pub checkpoint_interval: u32,
-    /// Checkpoints kept in `checkpoints/` (older ones are deleted).
-    pub keep_checkpoints: u32,
-    /// Times a run goes back to its last good state (with half the learning rate) after a
-    /// non-finite iteration before it stops with an error (src/train/divergence.rs).
-    pub max_divergence_restores: u32,
-    /// Write `replay.html` into the run directory at the end: the final policy replayed as the
-    /// evaluation runs it (`train --no-replay` turns it off).
-    pub replay: bool,
-    /// CUDA devices to train on together (`train --gpus 0,1`): one replica of the rollout and
-    /// the update per GPU, each with `env.num_envs` envs, gradients averaged through NCCL
-    /// (docs/train.md, "Several GPUs"). Empty (the default) or one device: one GPU, no NCCL.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub gpus: Vec<u32>,
-}
-
-impl Default for RunConfig {
-    fn default() -> Self {
-        RunConfig {
-            eval_interval: 5,
-            eval_envs: 32,
-            eval_steps: None,
-            eval_start: EvalStart::Spread,
-            success_rate: 0.9,
-            stop_on_success: true,
-            stop_on_pose_error: false,
-            time_budget_s: 60.0,
-            max_iterations: 5000,
-            checkpoint_interval: 50,
-            keep_checkpoints: 3,
-            max_divergence_restores: 3,
-            replay: true,
-            gpus: Vec::new(),
-        }
-    }
+/// The default run directory of a configuration: `runs/<motion>-seed<seed>`, the motion's
+/// file stem without DeepMimic's `humanoid3d_` prefix (`runs/library-seed<seed>` for a motion
+/// library).
+pub fn default_run_dir(config: &TrainConfig) -> PathBuf {
+    let stem = if config.motion_library.is_some() {
+        "library"
+    } else {
+        Path::new(&config.motion)
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("run")
+    };
+    let stem = stem.strip_prefix("humanoid3d_").unwrap_or(stem);
+    PathBuf::from("runs").join(format!("{stem}-seed{}", config.seed))
 }
 
 /// Most GPUs one run may train on (one host).
 pub const MAX_GPUS: usize = 64;
-
-impl RunConfig {
-    /// GPUs the run trains on together (1 for the single-GPU path).
-    pub fn replicas(&self) -> usize {
-        self.gpus.len().max(1)
-    }
-
-    /// Whether the run trains on several GPUs (through NCCL).
-    pub fn data_parallel(&self) -> bool {
-        self.gpus.len() > 1
-    }
-}
 
 /// The committed `configs/train/<motion>.toml` files, built into the binary so that
 /// `train --motion walk` works from any directory.
@@ -526,8 +464,11 @@ impl TrainConfig {
                 }
             };
         }
-        super::goal::validate_goal(self, name)?;
-        if let Err(reason) = super::character::check_character_name(&self.character) {
+        if let Some(goal) = &self.goal {
+            goal.validate(&self.env, &self.obs, &self.run.gpus)
+                .map_err(|p| bad(p.key, p.value, p.reason))?;
+        }
+        if let Err(reason) = super::character_name::check_character_name(&self.character) {
             return Err(bad("character", format!("{:?}", self.character), &reason));
         }
         let (e, r, o, p, q) = (&self.env, &self.reward, &self.obs, &self.policy, &self.ppo);
@@ -965,3 +906,70 @@ impl TrainConfig {
 #[cfg(test)]
 #[path = "config_tests.rs"]
 mod tests;
+
+/// What the run harness reads of a training configuration.
+impl ResolvedConfig for TrainConfig {
+    fn run(&self) -> &RunConfig {
+        &self.run
+    }
+
+    fn run_mut(&mut self) -> &mut RunConfig {
+        &mut self.run
+    }
+
+    fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    fn label(&self) -> String {
+        self.motion_label()
+    }
+
+    fn frames_per_gpu_iteration(&self) -> u64 {
+        u64::from(self.env.num_envs) * u64::from(self.ppo.horizon)
+    }
+
+    fn max_episode_steps(&self) -> u32 {
+        self.env.max_episode_steps
+    }
+
+    fn counts_goals(&self) -> bool {
+        self.goal.is_some()
+    }
+
+    fn to_toml(&self) -> Result<String, BoxedError> {
+        Ok(TrainConfig::to_toml(self)?)
+    }
+
+    fn load(path: &Path) -> Result<Self, BoxedError> {
+        Ok(TrainConfig::load(path)?)
+    }
+
+    fn from_toml(text: &str, name: &str) -> Result<Self, BoxedError> {
+        Ok(TrainConfig::from_toml(text, name)?)
+    }
+
+    fn validate(&self, name: &str) -> Result<(), BoxedError> {
+        Ok(TrainConfig::validate(self, name)?)
+    }
+
+    fn differences_from(&self, stored: &Self) -> Vec<&'static str> {
+        [
+            ("motion", stored.motion != self.motion),
+            (
+                "[motion_library]",
+                stored.motion_library != self.motion_library,
+            ),
+            ("seed", stored.seed != self.seed),
+            ("[env]", stored.env != self.env),
+            ("[reward]", stored.reward != self.reward),
+            ("[obs]", stored.obs != self.obs),
+            ("[policy]", stored.policy != self.policy),
+            ("[ppo]", stored.ppo != self.ppo),
+        ]
+        .into_iter()
+        .filter(|(_, differs)| *differs)
+        .map(|(key, _)| key)
+        .collect()
+    }
+}

@@ -2,7 +2,7 @@
 //! message naming its key.
 
 use super::*;
-use crate::env::{ActionMode, EndEffectorFrame};
+use crate::env::{ActionMode, EndEffectorFrame, EvalStart};
 use crate::nn::GemmSetting;
 use crate::ppo::KlMeasure;
 

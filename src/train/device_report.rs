@@ -1,7 +1,5 @@
 //! One iteration's report on the device: its byte layout, the copies that gather it at the end
-//! of an iteration graph, and its parsing once it has been read back. The sequential iteration
-//! graph (src/train/trainer.rs) and the overlapped loop's graphs (src/train/pipeline.rs) write
-//! the same layout, so one parser reads either.
+//! of an iteration graph (src/train/trainer.rs), and its parsing once it has been read back.
 //!
 //! Layout: the rollout's totals (float64), then the update's statistics (float32), then the
 //! parameters' sums of squares after the update (float64, actor and critic: the divergence
@@ -14,8 +12,8 @@ use crate::nn::reduce::{record_clear, record_sum_of_squares};
 use crate::ppo::{GaussianPolicy, PpoStatistics, PpoUpdate};
 
 use super::error::TrainError;
-use super::metrics::UpdateStats;
 use super::report::IterationReport;
+use crate::run::metrics::UpdateStats;
 
 pub(super) const TOTALS_BYTES: usize = TOTALS * 8;
 pub(super) const STATISTICS_BYTES: usize = PpoStatistics::LEN * 4;

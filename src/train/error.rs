@@ -1,16 +1,15 @@
-//! Errors of a training run outside the GPU: files of the run directory, the configuration,
-//! the motion, the plans, checkpoints and the learning curve. Each message names the file or
-//! key at fault.
+//! Errors of training as a whole: the configuration, the character and its plans, the
+//! learners on the GPU, several GPUs; the run harness's own ([`RunError`]) pass through. Each
+//! message names the file or key at fault.
 
 use std::path::Path;
 
 use thiserror::Error;
 
-use super::checkpoint::CheckpointError;
 use super::config::ConfigError;
-use super::evaluation::EvaluationError;
 use crate::motion::MotionError;
 use crate::plan::PlanError;
+use crate::run::{CheckpointError, RunError};
 
 #[derive(Debug, Error)]
 pub enum TrainError {
@@ -20,41 +19,13 @@ pub enum TrainError {
     #[error(transparent)]
     Config(#[from] ConfigError),
     #[error(transparent)]
+    Run(#[from] RunError),
+    #[error(transparent)]
     Checkpoint(#[from] CheckpointError),
     #[error(transparent)]
     Motion(#[from] MotionError),
     #[error(transparent)]
     Plan(#[from] PlanError),
-    #[error("evaluation: {0}")]
-    Evaluation(#[from] EvaluationError),
-    #[error("{path}: {problem}")]
-    Metrics { path: String, problem: String },
-    #[error("learning curve: {0}")]
-    Plot(String),
-    /// A new run aimed at a directory that already holds files.
-    #[error(
-        "{path} is not empty: continue that run with --resume {path}, replace it with --overwrite, or choose another --out"
-    )]
-    RunDirNotEmpty { path: String },
-    /// A new run aimed at a directory that holds files but no run (no `config.toml`).
-    #[error(
-        "{path} is not empty and holds no run (it has no config.toml): choose another --out, or pass --overwrite to write the run's files beside what is there"
-    )]
-    NotEmptyNotARun { path: String },
-    /// A new run's directory cannot be created or written.
-    #[error("cannot write the run directory {path}: {problem}; choose another --out")]
-    RunDirNotWritable { path: String, problem: String },
-    #[error("{path}: not a run directory: {problem}")]
-    NotARunDir { path: String, problem: String },
-    /// Training kept producing non-finite values after every restore the run allows.
-    #[error(
-        "training diverged at iteration {iteration} ({cause} not finite) after {restores} restores of the last good state with a halved learning rate each: lower ppo.learning_rate or ppo.kl_threshold, or raise run.max_divergence_restores"
-    )]
-    Diverged {
-        iteration: u64,
-        cause: String,
-        restores: u32,
-    },
     /// One GPU's replica failed (a run on several GPUs): the run stopped with its error.
     #[error("GPU {device} (rank {rank}): {error}")]
     Replica {
@@ -120,6 +91,13 @@ pub enum TrainError {
     Policy(#[from] crate::ppo::PolicyError),
     #[error(transparent)]
     Latent(#[from] crate::latent::LatentError),
+}
+
+/// The evaluation protocol's arithmetic, reached from training code: the harness's error.
+impl From<crate::run::EvaluationError> for TrainError {
+    fn from(e: crate::run::EvaluationError) -> TrainError {
+        TrainError::Run(RunError::from(e))
+    }
 }
 
 impl TrainError {

@@ -11,17 +11,17 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use super::checkpoint::Checkpoint;
 use super::config::TrainConfig;
 use super::error::TrainError;
-use super::goal::GoalRates;
 use super::goal_latent::{DECODER_DIGEST, GoalDecoder, load_goal_decoder};
 use super::library::{TrainMotion, preflight_training};
 use super::preflight::Preflight;
 use super::trainer::Trainer;
 use crate::cuda::Gpu;
+use crate::env::GoalRates;
 use crate::env::{GoalTally, goal_episode_steps};
 use crate::plan::PlanStore;
+use crate::run::checkpoint::Checkpoint;
 
 /// A goal checkpoint checked for evaluation: its configuration at the evaluation's size, what
 /// the checks found, the motion its resets draw from, and its decoder (latent action space).
@@ -34,7 +34,11 @@ pub struct GoalCheckpoint {
 
 /// Whether `checkpoint` is a goal run's (its stored configuration has a `[goal]` section).
 pub fn is_goal_checkpoint(checkpoint: &Checkpoint) -> Result<bool, TrainError> {
-    Ok(checkpoint.meta.config(checkpoint.source())?.goal.is_some())
+    Ok(checkpoint
+        .meta
+        .config::<TrainConfig>(checkpoint.source())?
+        .goal
+        .is_some())
 }
 
 /// Checks `checkpoint` (a goal run's) for `eval` and `replay` without a GPU. `decoder`
@@ -48,7 +52,7 @@ pub fn check_goal_checkpoint(
     store: &PlanStore,
 ) -> Result<GoalCheckpoint, TrainError> {
     let source = checkpoint.source();
-    let mut config = checkpoint.meta.config(source)?;
+    let mut config = checkpoint.meta.config::<TrainConfig>(source)?;
     let Some(goal) = config.goal.as_mut() else {
         return Err(TrainError::Setup(format!(
             "{source}: a tracking checkpoint, not a goal run's (no [goal] section in its configuration)"
@@ -215,8 +219,8 @@ pub fn format_goal_evaluation(report: &GoalEvaluationReport) -> String {
 mod tests {
     use super::*;
     use crate::motion::Character;
-    use crate::train::CheckpointMeta;
-    use crate::train::checkpoint::tensor_names::{ACTOR, CRITIC, OBS_COUNT, OBS_M2, OBS_MEAN};
+    use crate::run::CheckpointMeta;
+    use crate::run::checkpoint::tensor_names::{ACTOR, CRITIC, OBS_COUNT, OBS_M2, OBS_MEAN};
     use crate::train::preflight::PolicyShapes;
 
     fn reach() -> TrainConfig {

@@ -8,7 +8,6 @@ use std::path::Path;
 use zerocopy::IntoBytes;
 
 use super::character::check_trained_character;
-use super::checkpoint::Checkpoint;
 use super::config::TrainConfig;
 use super::error::TrainError;
 use super::latent_trainer::frozen_decoder_of;
@@ -18,6 +17,7 @@ use crate::env::layout::JointLayout;
 use crate::latent::{FrozenDecoder, GoalDecoding};
 use crate::motion::Character;
 use crate::nn::{LayerShape, mlp_layout};
+use crate::run::checkpoint::Checkpoint;
 
 /// The checkpoint tensor of a latent goal run that names its decoder: i32 `[5]`, the CRC-32 of
 /// the decoder's and of the prior's parameter bytes (as i32), then the character-state columns,
@@ -70,7 +70,7 @@ pub fn load_goal_decoder(
         .map_err(|e| TrainError::Setup(format!("goal.decoder (train --decoder): {e}")))?;
     check_trained_character(&checkpoint, character)
         .map_err(|e| TrainError::Setup(format!("goal.decoder (train --decoder): {e}")))?;
-    let trained = checkpoint.meta.config(&source)?;
+    let trained = checkpoint.meta.config::<TrainConfig>(&source)?;
     let frozen = frozen_decoder_of(&checkpoint, &source)?;
     let refuse = |reason: String| Err(TrainError::Setup(format!("{source}: {reason}")));
     let (env, run_env) = (&trained.env, &config.env);
@@ -136,7 +136,7 @@ impl GoalDecoder {
         if recorded != self.digest {
             let trained_with = checkpoint
                 .meta
-                .config(source)
+                .config::<TrainConfig>(source)
                 .ok()
                 .and_then(|c| c.goal.map(|g| g.decoder))
                 .unwrap_or_default();
@@ -179,7 +179,7 @@ impl GoalDecoder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::train::CheckpointMeta;
+    use crate::run::CheckpointMeta;
     use crate::train::latent_trainer::{insert_latent_networks, latent_shapes};
 
     fn repo(path: &str) -> std::path::PathBuf {

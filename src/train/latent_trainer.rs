@@ -10,15 +10,11 @@ use std::path::Path;
 use zerocopy::IntoBytes;
 
 use super::character::{ChosenCharacter, check_trained_character};
-use super::checkpoint::{Checkpoint, tensor_names};
 use super::config::TrainConfig;
 use super::device_report::read_totals;
 use super::error::TrainError;
-use super::evaluation::EnvEvaluation;
-use super::metrics::UpdateStats;
 use super::preflight::PolicyShapes;
 use super::report::IterationReport;
-use super::session::IterationStats;
 use crate::cuda::{Gpu, Graph};
 use crate::env::layout::{JointLayout, observation_size};
 use crate::env::{Rollout, TrackedMotion};
@@ -32,6 +28,10 @@ use crate::latent::{
 use crate::nn::PolicyGemm;
 use crate::nn::reduce::{record_clear, record_sum_of_squares};
 use crate::plan::{PhysicsOverflow, PlanStore};
+use crate::run::IterationStats;
+use crate::run::checkpoint::{Checkpoint, tensor_names};
+use crate::run::evaluation::EnvEvaluation;
+use crate::run::metrics::UpdateStats;
 
 /// The latent checkpoint's own tensors (the observation statistics, the learning rate, Adam's
 /// step, the start-phase statistics and the rollout's counter keep the tracker's names).
@@ -386,7 +386,7 @@ pub fn load_teacher(
     let character = ChosenCharacter::of_config(config)?;
     check_trained_character(&checkpoint, character.character())
         .map_err(|e| TrainError::Setup(format!("latent.teacher (train --teacher): {e}")))?;
-    let teacher_config = checkpoint.meta.config(&source)?;
+    let teacher_config = checkpoint.meta.config::<TrainConfig>(&source)?;
     if teacher_config.latent.is_some() {
         return Err(TrainError::Setup(format!(
             "{source}: a latent controller's checkpoint; the teacher is a tracker's (train --config configs/train/library_shipped.toml)"
@@ -447,7 +447,7 @@ pub fn frozen_decoder_of(
     source: &str,
 ) -> Result<FrozenDecoder, TrainError> {
     use latent_tensor_names as names;
-    let config = checkpoint.meta.config(source)?;
+    let config = checkpoint.meta.config::<TrainConfig>(source)?;
     let latent = config.latent.as_ref().ok_or_else(|| {
         TrainError::Setup(format!(
             "{source}: not a latent controller's checkpoint (its configuration has no [latent] section)"

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use super::*;
 use crate::motion::Character;
-use crate::train::CheckpointMeta;
+use crate::run::CheckpointMeta;
 
 fn repo(path: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(path)

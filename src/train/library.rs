@@ -7,12 +7,12 @@ use std::path::Path;
 use super::character::ChosenCharacter;
 use super::config::TrainConfig;
 use super::error::TrainError;
-use super::library_evaluation::LibraryPlan;
 use super::preflight::{PolicyShapes, Preflight, character_line, physics_checks};
 use crate::env::{TrackedMotion, clip_evaluation};
 use crate::motion::library_config::load_library;
 use crate::motion::{Character, LibraryConfig, MotionLibrary, ReferenceMotion};
 use crate::plan::PlanStore;
+use crate::run::library_evaluation::LibraryPlan;
 
 /// What a run trains on.
 pub enum TrainMotion {

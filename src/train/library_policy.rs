@@ -8,15 +8,10 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::checkpoint::{Checkpoint, tensor_names};
 use super::config::TrainConfig;
 use super::error::TrainError;
-use super::evaluation::{EnvEvaluation, EvaluationSummary};
 use super::latent_trainer::{latent_shapes, latent_tensor_names};
 use super::library::{TrainMotion, preflight_training};
-use super::library_evaluation::{
-    CLIP_SUCCESS_RATE, CLIP_TABLE_COLUMNS, LibraryPlan, clip_table_row, library_table_row,
-};
 use super::preflight::Preflight;
 use super::trainer::Trainer;
 use crate::cuda::{Gpu, Graph};
@@ -26,6 +21,10 @@ use crate::motion::LibraryConfig;
 use crate::motion::MotionLibraryError;
 use crate::nn::PolicyGemm;
 use crate::plan::PlanStore;
+use crate::run::checkpoint::{Checkpoint, tensor_names};
+use crate::run::clips_table::{CLIP_TABLE_COLUMNS, clip_table_row, library_table_row};
+use crate::run::evaluation::{EnvEvaluation, EvaluationSummary};
+use crate::run::{CLIP_SUCCESS_RATE, LibraryPlan};
 
 /// Which policy a library checkpoint holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -137,7 +136,7 @@ pub fn prepare_library_policy(
     store: &PlanStore,
 ) -> Result<LibraryPolicy, TrainError> {
     let source = checkpoint.source().to_string();
-    let mut config = checkpoint.meta.config(&source)?;
+    let mut config = checkpoint.meta.config::<TrainConfig>(&source)?;
     let kind = LibraryPolicyKind::of(&config).ok_or_else(|| {
         TrainError::Setup(format!(
             "{source}: neither a motion library tracker's nor a latent controller's checkpoint"

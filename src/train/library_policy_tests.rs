@@ -6,9 +6,10 @@ use std::path::{Path, PathBuf};
 
 use super::*;
 use crate::motion::Character;
+use crate::run::CheckpointMeta;
+use crate::run::{ClipScore, LibraryEvaluation};
+use crate::train::PolicyShapes;
 use crate::train::latent_trainer::insert_latent_networks;
-use crate::train::library_evaluation::{ClipScore, LibraryEvaluation};
-use crate::train::{CheckpointMeta, PolicyShapes};
 
 fn repo(path: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(path)

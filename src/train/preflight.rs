@@ -8,16 +8,16 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use super::character::{ChosenCharacter, check_model, check_plan_model};
-use super::checkpoint::tensor_names;
 use super::config::TrainConfig;
 use super::error::TrainError;
-use super::evaluation::evaluation_steps;
 use crate::env::goal_observation_size;
 use crate::env::layout::{JointLayout, ObservationCounts, observation_size};
 use crate::motion::find::{MotionSource, ResolvedMotion, resolve_motion};
 use crate::motion::{Character, LoopMode, MotionClip, ReferenceMotion, ReferenceTable};
 use crate::nn::mlp_layout;
 use crate::plan::{PlanStore, SimulatedModel};
+use crate::run::checkpoint::tensor_names;
+use crate::run::evaluation::evaluation_steps;
 
 /// The plans a run replays: physics steps, and the kinematics a reset needs.
 pub const RUN_PLANS: [&str; 2] = ["step", "kinematics"];
@@ -59,7 +59,7 @@ impl PolicyShapes {
     }
 
     /// Checks that `checkpoint` holds the policy and normalizer of these sizes.
-    pub fn check(&self, checkpoint: &super::checkpoint::Checkpoint) -> Result<(), TrainError> {
+    pub fn check(&self, checkpoint: &crate::run::checkpoint::Checkpoint) -> Result<(), TrainError> {
         use tensor_names::*;
         checkpoint.get::<f32>(ACTOR, &[self.actor_params])?;
         checkpoint.get::<f32>(CRITIC, &[self.critic_params])?;
@@ -210,7 +210,7 @@ pub fn preflight(
         physics_dt,
         control_dt,
         table_frames: table.num_rows(),
-        eval_steps: evaluation_steps(config, clip.duration(), control_dt, clip.loop_mode()),
+        eval_steps: evaluation_steps(&config.run, clip.duration(), control_dt, clip.loop_mode()),
         plans,
         policy: PolicyShapes::new(config, motion.character())?,
         library: None,
@@ -322,7 +322,7 @@ impl Preflight {
                 if self.library.is_some() {
                     format!(
                         " of the episodes and every clip at {}",
-                        super::library_evaluation::CLIP_SUCCESS_RATE
+                        crate::run::CLIP_SUCCESS_RATE
                     )
                 } else {
                     String::new()

@@ -4,8 +4,8 @@
 
 use crate::env::RolloutTotals;
 
-use super::metrics::{EpisodeEnds, UpdateStats};
-use super::session::IterationStats;
+use crate::run::IterationStats;
+use crate::run::metrics::{EpisodeEnds, UpdateStats};
 
 /// One GPU's iteration as its report reads back.
 #[derive(Clone, Debug, PartialEq)]

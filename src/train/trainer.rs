@@ -30,19 +30,32 @@ use crate::nn::PolicyGemm;
 use crate::plan::PlanStore;
 use crate::ppo::{GaussianPolicy, PpoBatch, PpoOptimizerState, PpoUpdate, UpdateStage};
 
-use super::checkpoint::tensor_names;
-use super::checkpoint::{Checkpoint, CheckpointError};
-use super::clip_sampling::{ClipSampling, clip_sampling};
 use super::config::TrainConfig;
 use super::device_report::{REPORT_BYTES, read_report, record_parameter_squares, record_report};
 use super::error::TrainError;
-use super::evaluation::EnvEvaluation;
-use super::goal::{GoalRates, GoalRecord};
 use super::goal_latent::{DECODER_DIGEST, GoalDecoder, decoder_digest, load_goal_decoder};
-use super::replica_seed;
 use super::report::IterationReport;
-use super::session::IterationStats;
+use crate::env::{GoalRates, GoalRecord};
 use crate::plan::PhysicsOverflow;
+use crate::run::IterationStats;
+use crate::run::checkpoint::tensor_names;
+use crate::run::checkpoint::{Checkpoint, CheckpointError};
+use crate::run::clip_sampling::{ClipSampling, clip_sampling};
+use crate::run::evaluation::EnvEvaluation;
+
+/// The seed of GPU rank `rank`'s envs and action noise: the run's seed for rank 0 (a run on
+/// one GPU, or rank 0 of several, draws what a single-GPU run draws), a well-mixed different
+/// one for every other rank (splitmix64 of the seed and the rank). The parameters are
+/// initialized from the run's seed on every rank.
+pub fn replica_seed(seed: u64, rank: usize) -> u64 {
+    if rank == 0 {
+        return seed;
+    }
+    let mut z = seed ^ (rank as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
 
 /// Everything on the GPU that a run trains and evaluates with.
 pub struct Trainer {

@@ -15,9 +15,10 @@ use instantmimic::env::layout::{JointLayout, without_failures};
 use instantmimic::env::{EvalStart, EvaluationProtocol, clip_evaluation};
 use instantmimic::kernels::{EVALUATION_ACCUMULATE, TrackingParams};
 use instantmimic::motion::{Character, LoopMode, MotionLibraryBuilder, SyntheticMotion};
-use instantmimic::train::{
-    EnvEvaluation, TrainConfig, clamped_clip_steps, evaluation_steps, summarize, yardstick,
+use instantmimic::run::{
+    EnvEvaluation, clamped_clip_steps, evaluation_steps, summarize, yardstick,
 };
+use instantmimic::train::TrainConfig;
 
 use super::compare::Report;
 use super::physics::{PhysicsBatch, Shape};
@@ -223,7 +224,7 @@ fn case(fx: &Fixture, frames: usize, fps: f64, dt: f64) -> Check {
     );
     let duration = clip.duration(0);
     let config = TrainConfig::with_motion("synthetic");
-    let steps = evaluation_steps(&config, duration, dt, LoopMode::Clamp) as usize;
+    let steps = evaluation_steps(&config.run, duration, dt, LoopMode::Clamp) as usize;
     let rows = steps + EXTRA_STEPS;
     let p = program(
         format!(

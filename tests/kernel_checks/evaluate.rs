@@ -505,11 +505,11 @@ pub fn checks(fx: &Fixture) -> Vec<Check> {
         robotics_max_end_effector_height: 0.15,
     };
     vec![
-        case(fx, 0, 96, 8, 3, instantmimic::train::yardstick(), 51),
-        case(fx, 1, 61, 53, 52, instantmimic::train::yardstick(), 52),
+        case(fx, 0, 96, 8, 3, instantmimic::run::yardstick(), 51),
+        case(fx, 1, 61, 53, 52, instantmimic::run::yardstick(), 52),
         case(fx, 0, 96, 4, 0, stricter, 53),
         case(fx, 1, 96, 2, 1, stricter, 54),
         // A library: every env its clip, clips' episodes of their own lengths.
-        case(fx, 2, 120, 8, 5, instantmimic::train::yardstick(), 55),
+        case(fx, 2, 120, 8, 5, instantmimic::run::yardstick(), 55),
     ]
 }

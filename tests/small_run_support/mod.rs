@@ -10,7 +10,8 @@ use std::process::{Command, Output};
 
 use instantmimic::motion::find::{MOTIONS_ENV, resolve_motion};
 use instantmimic::motion::{Character, MotionLibrary, MotionLibraryBuilder, ReferenceMotion};
-use instantmimic::train::{Checkpoint, CheckpointMeta, TrainConfig, Trainer};
+use instantmimic::run::{Checkpoint, CheckpointMeta};
+use instantmimic::train::{TrainConfig, Trainer};
 
 /// A built-in clip, loaded for the humanoid.
 pub fn built_in_motion(name: &str) -> ReferenceMotion {

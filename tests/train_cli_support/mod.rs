@@ -7,10 +7,9 @@ use std::process::{Command, Output};
 
 use instantmimic::motion::find::MOTIONS_ENV;
 use instantmimic::motion::{Character, SyntheticMotion};
-use instantmimic::train::checkpoint::tensor_names;
-use instantmimic::train::{
-    Checkpoint, IterationStats, PolicyShapes, ProgressMode, RunSession, TrainConfig,
-};
+use instantmimic::run::checkpoint::tensor_names;
+use instantmimic::run::{Checkpoint, IterationStats, ProgressMode, RunSession};
+use instantmimic::train::{PolicyShapes, TrainConfig};
 
 /// Runs the binary with `args` in `cwd`, the user's motions directory set to `motions_dir` (or
 /// unset).

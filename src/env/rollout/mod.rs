@@ -25,7 +25,10 @@ use super::body_model::{BodyModel, DeviceBodyModel};
 use super::config::{ActionMode, BodyKinematics, RolloutConfig, TaskConfig};
 use super::error::RolloutError;
 use super::evaluation::{ClipEvaluation, EpisodeScores, clip_evaluation, yardstick};
-use super::goal_counters::GoalTally;
+use super::goal::{
+    GOAL_OBSERVATION, GoalTally, GoalTask, goal_observation_config, goal_observation_size,
+    goal_params,
+};
 use super::layout::{
     DeviceJointLayout, ERROR_SUMS, JointLayout, TRACKING_LANES, observation_params,
     observation_size, reset_params, tracking_params, without_failures,
@@ -37,7 +40,7 @@ use super::policy::RolloutPolicy;
 use super::stages::{RolloutStage, StageEvents, StageRecorder};
 use super::statistics::RolloutStatistics;
 use super::storage::{ActStorage, RolloutStorage};
-use super::task::{GoalTask, Task, goal_observation_config, goal_observation_size, goal_params};
+use super::task::Task;
 use super::tracked::TrackedMotion;
 use super::trajectory::Trajectory;
 use crate::kernels::{
@@ -337,12 +340,7 @@ impl Rollout {
         let task = match goal {
             Some(mut params) => {
                 params.horizon = reset.horizon;
-                Task::Goal(GoalTask::new(
-                    gpu,
-                    params,
-                    n,
-                    obs_size - super::task::GOAL_OBSERVATION,
-                )?)
+                Task::Goal(GoalTask::new(gpu, params, n, obs_size - GOAL_OBSERVATION)?)
             }
             None => Task::Tracking(tracking),
         };

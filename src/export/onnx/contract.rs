@@ -6,7 +6,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::env::layout::{BALL, JointLayout, ObservationBlock, observation_blocks};
 use crate::motion::Character;
-use crate::train::{ActionMode, CheckpointMeta, TrainConfig};
+use crate::run::CheckpointMeta;
+use crate::train::{ActionMode, TrainConfig};
 
 /// The version of this contract's layout.
 pub const POLICY_FORMAT_VERSION: u32 = 1;

@@ -19,9 +19,10 @@ use crate::latent::FrozenDecoder;
 use crate::latent::networks::REFERENCE_BLOCKS;
 use crate::motion::Character;
 use crate::nn::LayerShape;
+use crate::run::Checkpoint;
 use crate::train::goal_latent::GoalDecoder;
 use crate::train::latent_trainer::{frozen_decoder_of, latent_shapes, latent_tensor_names};
-use crate::train::{Checkpoint, PolicyShapes, TrainError};
+use crate::train::{PolicyShapes, TrainError};
 
 use super::contract::PolicyContract;
 use super::graph::{GraphBuilder, value_info};
@@ -160,7 +161,10 @@ pub fn export_latent_controller(
 ) -> Result<LatentExport, ExportError> {
     use latent_tensor_names as names;
     let source = checkpoint.source();
-    let config = checkpoint.meta.config(source).map_err(TrainError::from)?;
+    let config = checkpoint
+        .meta
+        .config::<crate::train::TrainConfig>(source)
+        .map_err(TrainError::from)?;
     let frozen = frozen_decoder_of(checkpoint, source)?;
     let policy = PolicyShapes::new(&config, character)?;
     let shapes = latent_shapes(&config, &policy)?;

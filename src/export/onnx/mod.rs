@@ -21,9 +21,10 @@ use crate::env::layout::{JointLayout, ObservationBlock, ObservationCounts, obser
 use crate::env::{GOAL_OBSERVATION, ObsConfig, goal_observation_config};
 use crate::motion::Character;
 use crate::nn::{LayerShape, mlp_layout};
-use crate::train::checkpoint::tensor_names;
+use crate::run::Checkpoint;
+use crate::run::checkpoint::tensor_names;
 use crate::train::goal_latent::{DECODER_DIGEST, load_goal_decoder};
-use crate::train::{Checkpoint, PolicyShapes, TrainConfig, TrainError};
+use crate::train::{PolicyShapes, TrainConfig, TrainError};
 
 use super::{ExportError, Format};
 use contract::{PolicyContract, VARIANCE_EPSILON};
@@ -102,7 +103,7 @@ pub fn export_policy(
 ) -> Result<PolicyExport, ExportError> {
     let config = checkpoint
         .meta
-        .config(checkpoint.source())
+        .config::<crate::train::TrainConfig>(checkpoint.source())
         .map_err(TrainError::from)?;
     if config.latent.is_some() {
         return Err(ExportError::Unsupported(format!(

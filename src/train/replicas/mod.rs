@@ -4,7 +4,7 @@
 //! One worker thread per GPU owns that GPU's [`Trainer`] replica (its envs, rollout graph and
 //! update graph, built with the GPU's NCCL communicator), and the coordinating thread drives
 //! them as the training loop drives one trainer ([`Replicas`] implements the loop's
-//! `LoopTrainer`): every iteration runs on every GPU at once (their graphs all-reduce
+//! `run::Learner`): every iteration runs on every GPU at once (their graphs all-reduce
 //! gradients and statistics), evaluation and checkpoints on rank 0 only (every replica holds
 //! the same network), restores on every GPU.
 //!
@@ -13,7 +13,7 @@
 //! differ, and at every setup, restore and checkpoint, an exact checksum of each replica's
 //! whole state ([`Trainer::replica_digest`]) decides, and replicas that differ stop the run.
 //!
-//! Stopping (SIGINT, SIGTERM; src/train/stop.rs): the coordinating thread reads the request
+//! Stopping (SIGINT, SIGTERM; src/run/stop.rs): the coordinating thread reads the request
 //! between iterations, so every rank completes the same last iteration and none is left in an
 //! all-reduce; the final checkpoint is rank 0's, as every checkpoint is.
 //!
@@ -33,34 +33,20 @@ use crate::cuda::{Communicator, nccl_version};
 use crate::env::TrackedMotion;
 use crate::plan::{PhysicsOverflow, PlanStore};
 
-use super::checkpoint::Checkpoint;
-use super::clip_sampling::ClipSampling;
 use super::config::TrainConfig;
 use super::error::TrainError;
-use super::evaluation::EnvEvaluation;
 use super::library::TrainMotion;
 use super::report::{IterationReport, replica_mismatch};
-use super::session::IterationStats;
 use super::trainer::Trainer;
+use crate::run::IterationStats;
+use crate::run::checkpoint::Checkpoint;
+use crate::run::clip_sampling::ClipSampling;
+use crate::run::evaluation::EnvEvaluation;
 use worker::{Built, Job, Reply, SETUP_CALL, Start, Worker};
 
 /// How long the coordinator waits, after a failure or at the end, for the workers to leave
 /// before it goes on without them (a worker stuck in a GPU fault must not hang the process).
 const EXIT_WAIT: Duration = Duration::from_secs(60);
-
-/// The seed of GPU rank `rank`'s envs and action noise: the run's seed for rank 0 (a run on
-/// one GPU, or rank 0 of several, draws what a single-GPU run draws), a well-mixed different
-/// one for every other rank (splitmix64 of the seed and the rank). The parameters are
-/// initialized from the run's seed on every rank.
-pub fn replica_seed(seed: u64, rank: usize) -> u64 {
-    if rank == 0 {
-        return seed;
-    }
-    let mut z = seed ^ (rank as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
 
 /// The replicas of a run on several GPUs and the threads that drive them.
 pub struct Replicas {
@@ -432,6 +418,7 @@ impl Drop for Replicas {
 mod tests {
     use super::*;
     use crate::env::layout::reset_params;
+    use crate::train::replica_seed;
 
     #[test]
     fn rank_zero_keeps_the_run_seed_and_other_ranks_draw_their_own() {

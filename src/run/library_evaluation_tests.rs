@@ -1,7 +1,9 @@
 use super::*;
 use crate::env::{EvalStart, EvaluationProtocol, clip_evaluation};
 use crate::motion::{Character, MotionLibraryBuilder, SyntheticMotion};
-use crate::train::metrics::UpdateStats;
+use crate::run::clip_sampling::ClipSampling;
+use crate::run::clips_table::clips_table;
+use crate::run::metrics::{IterationRecord, UpdateStats};
 
 const DT: f64 = 1.0 / 30.0;
 

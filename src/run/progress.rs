@@ -195,7 +195,10 @@ impl Progress {
         };
         let status = self.budget.status(record, since_first);
         // The goal task's evaluation (docs/goal.md) has a line of its own.
-        let goal_line = super::goal::goal_progress_line(record);
+        let goal_line = record
+            .goal
+            .as_ref()
+            .and_then(|g| g.progress_line(record.iteration, record.active_time_s));
         if let Some(bar) = &self.bar {
             bar.set_position((self.budget.fraction(record) * BAR_STEPS as f64) as u64);
             bar.set_message(format!(
@@ -272,7 +275,7 @@ pub fn evaluation_line(record: &IterationRecord) -> String {
         if let Some(library) = &e.library {
             line.push_str(&format!(
                 "  clips at {} {}/{}",
-                super::library_evaluation::CLIP_SUCCESS_RATE,
+                super::library_scores::CLIP_SUCCESS_RATE,
                 library.clips_at_threshold,
                 library.clips.len()
             ));
@@ -286,8 +289,8 @@ mod tests {
     use std::sync::{Arc, Mutex};
 
     use super::*;
-    use crate::train::evaluation::EvaluationSummary;
-    use crate::train::metrics::UpdateStats;
+    use crate::run::evaluation::EvaluationSummary;
+    use crate::run::metrics::UpdateStats;
 
     #[derive(Clone, Default)]
     struct Shared(Arc<Mutex<Vec<u8>>>);

@@ -21,7 +21,7 @@
 
 use std::path::Path;
 
-use super::error::TrainError;
+use super::error::RunError;
 use super::metrics::IterationRecord;
 use crate::files::event_file::EventFileWriter;
 
@@ -35,24 +35,24 @@ impl RunEvents {
     /// A new event file in the run directory `root`. A resumed run (`resumed_after`: the
     /// iteration of its checkpoint) marks the restart, so that TensorBoard drops an earlier
     /// file's iterations that run again.
-    pub fn create(root: &Path, resumed_after: Option<u64>) -> Result<RunEvents, TrainError> {
-        let mut writer = EventFileWriter::create(root).map_err(|e| TrainError::io(root, e))?;
+    pub fn create(root: &Path, resumed_after: Option<u64>) -> Result<RunEvents, RunError> {
+        let mut writer = EventFileWriter::create(root).map_err(|e| RunError::io(root, e))?;
         if let Some(iteration) = resumed_after {
             let path = writer.path().to_path_buf();
             writer
                 .session_start(step(iteration + 1))
-                .map_err(|e| TrainError::io(&path, e))?;
+                .map_err(|e| RunError::io(&path, e))?;
         }
         Ok(RunEvents { writer })
     }
 
     /// Appends `record`'s scalars at its iteration.
-    pub fn append(&mut self, record: &IterationRecord) -> Result<(), TrainError> {
+    pub fn append(&mut self, record: &IterationRecord) -> Result<(), RunError> {
         let values = scalars(record);
         let path = self.writer.path().to_path_buf();
         self.writer
             .scalars(step(record.iteration), &values)
-            .map_err(|e| TrainError::io(&path, e))
+            .map_err(|e| RunError::io(&path, e))
     }
 }
 
@@ -165,7 +165,7 @@ fn tag_part(name: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::train::metrics::{EpisodeEnds, UpdateStats};
+    use crate::run::metrics::{EpisodeEnds, UpdateStats};
 
     #[test]
     fn non_finite_values_are_left_out_and_clip_names_make_one_tag_part() {

@@ -12,23 +12,14 @@
 //! active time at which each clip first reached [`CLIP_SUCCESS_RATE`] and the reset sampler's
 //! part for the clip ([`super::clip_sampling`]).
 
-use std::fmt::Write as _;
-
-use serde::{Deserialize, Serialize};
-
-use super::clip_sampling::ClipSampling;
 use super::evaluation::{
     EnvEpisodeRow, EnvEvaluation, EvaluationError, EvaluationSummary, summarize,
 };
-use super::metrics::{IterationRecord, nan_from_null};
+use super::library_scores::{CLIP_SUCCESS_RATE, ClipScore, LibraryEvaluation};
 use crate::env::{
     ClipEvaluation, LIBRARY_EVALUATION_WINDOW_S, evaluation_env, evaluation_start_time,
 };
 use crate::motion::{LoopMode, MotionLibrary};
-
-/// The fraction of a clip's evaluation episodes that must succeed for the clip to count as
-/// tracked (issue 19: "each clip reaches at least 0.8").
-pub const CLIP_SUCCESS_RATE: f64 = 0.8;
 
 /// How the evaluation plays one clip.
 #[derive(Clone, Debug, PartialEq)]
@@ -45,66 +36,6 @@ pub struct PlannedClip {
 pub struct LibraryPlan {
     pub clips: Vec<PlannedClip>,
     pub envs: usize,
-}
-
-/// One clip's results in one evaluation (`metrics.jsonl`'s `evaluation.library.clips`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ClipScore {
-    pub name: String,
-    pub duration_s: f64,
-    /// `wrap` or `none` (DeepMimic's loop names).
-    #[serde(rename = "loop")]
-    pub loop_mode: String,
-    /// The window a long clip is evaluated over (s); absent: the whole clip (one pass).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub window_s: Option<f64>,
-    /// Control steps of one of the clip's episodes.
-    pub episode_steps: u32,
-    pub episodes: u32,
-    pub succeeded: u32,
-    pub success_rate: f64,
-    /// Step-weighted means over the clip's episodes (NaN, written null, without a step).
-    #[serde(deserialize_with = "nan_from_null")]
-    pub global_mpjpe_m: f64,
-    #[serde(deserialize_with = "nan_from_null")]
-    pub pose_error_m: f64,
-    /// Training runs: the clip's share of the reset sampler's next resets and of the training
-    /// frames, and its failing steps per step ([`super::clip_sampling`]); absent from `eval`'s
-    /// scores.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub reset_share: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub frame_share: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub failures_per_step: Option<f64>,
-}
-
-/// The library part of an evaluation (`EvaluationSummary::library`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct LibraryEvaluation {
-    pub clips: Vec<ClipScore>,
-    /// Clips whose success rate is at least [`CLIP_SUCCESS_RATE`], and their fraction.
-    pub clips_at_threshold: u32,
-    pub clip_fraction: f64,
-    /// Whether the fraction of episodes that succeed reached `run.success_rate`.
-    pub episodes_pass: bool,
-    /// Whether every clip reached [`CLIP_SUCCESS_RATE`].
-    pub all_clips_pass: bool,
-}
-
-impl LibraryEvaluation {
-    /// Adds the reset sampler's part for each clip (`sampling` in the library's clip order; a
-    /// list of another length is left out: it is not this library's).
-    pub fn set_sampling(&mut self, sampling: &[ClipSampling]) {
-        if sampling.len() != self.clips.len() {
-            return;
-        }
-        for (clip, s) in self.clips.iter_mut().zip(sampling) {
-            clip.reset_share = Some(s.reset_share);
-            clip.frame_share = s.frame_share;
-            clip.failures_per_step = s.failures_per_step;
-        }
-    }
 }
 
 impl LibraryPlan {
@@ -268,103 +199,6 @@ fn summarize_mixed(episodes: &[EnvEvaluation]) -> EvaluationSummary {
         ee_orientation_error_rad: mean(&|e| e.ee_orientation_error_sum),
         library: None,
     }
-}
-
-/// The columns of a per-clip table that every library evaluation has (`clips.tsv` adds the
-/// active time at which each reached [`CLIP_SUCCESS_RATE`]; `eval --out` writes these alone).
-pub(crate) const CLIP_TABLE_COLUMNS: &str = "clip\tduration_s\tloop\tevaluated_over\tepisode_steps\tepisodes\tsucceeded\tsuccess_rate\tglobal_mpjpe_m\tpose_error_m";
-
-/// A table's number: 4 decimals, `-` when not finite (no step was scored).
-fn table_number(x: f64) -> String {
-    if x.is_finite() {
-        format!("{x:.4}")
-    } else {
-        "-".to_string()
-    }
-}
-
-/// Clip `c`'s row of [`CLIP_TABLE_COLUMNS`].
-pub(crate) fn clip_table_row(c: &ClipScore) -> String {
-    let over = c
-        .window_s
-        .map_or("whole clip".to_string(), |w| format!("{w} s windows"));
-    format!(
-        "{}\t{:.3}\t{}\t{over}\t{}\t{}\t{}\t{:.3}\t{}\t{}",
-        c.name,
-        c.duration_s,
-        c.loop_mode,
-        c.episode_steps,
-        c.episodes,
-        c.succeeded,
-        c.success_rate,
-        table_number(c.global_mpjpe_m),
-        table_number(c.pose_error_m),
-    )
-}
-
-/// The whole library's row of [`CLIP_TABLE_COLUMNS`] for evaluation `summary` (its episodes,
-/// and how many clips reached [`CLIP_SUCCESS_RATE`] in the first column).
-pub(crate) fn library_table_row(
-    library: &LibraryEvaluation,
-    summary: &EvaluationSummary,
-) -> String {
-    format!(
-        "all ({} of {} clips at {CLIP_SUCCESS_RATE})\t{:.3}\t-\t-\t{}\t{}\t{}\t{:.3}\t{}\t{}",
-        library.clips_at_threshold,
-        library.clips.len(),
-        library.clips.iter().map(|c| c.duration_s).sum::<f64>(),
-        summary.episode_steps,
-        summary.episodes,
-        summary.succeeded,
-        summary.success_rate,
-        table_number(summary.global_mpjpe_m),
-        table_number(summary.pose_error_m),
-    )
-}
-
-/// `clips.tsv`: the latest evaluation's per-clip table, with the active time at which each
-/// clip first reached [`CLIP_SUCCESS_RATE`], and a last row for the whole library (the run's
-/// time to success: episodes and every clip). None before a library evaluation.
-pub fn clips_table(records: &[IterationRecord]) -> Option<String> {
-    let evaluated = || {
-        records.iter().filter_map(|r| {
-            let e = r.evaluation.as_ref()?;
-            Some((r.active_time_s, e, e.library.as_ref()?))
-        })
-    };
-    let (_, last, library) = evaluated().next_back()?;
-    let first_at = |name: &str| {
-        evaluated().find_map(|(t, _, l)| {
-            l.clips
-                .iter()
-                .any(|c| c.name == name && c.success_rate >= CLIP_SUCCESS_RATE)
-                .then_some(t)
-        })
-    };
-    let time = |t: Option<f64>| t.map_or("-".to_string(), |t| format!("{t:.3}"));
-    let rate = |x: Option<f64>| x.map_or("-".to_string(), |x| format!("{x:.3}"));
-    let mut out = format!(
-        "{CLIP_TABLE_COLUMNS}\ttime_to_threshold_s\treset_share\tframe_share\tfailures_per_step\n"
-    );
-    for c in &library.clips {
-        let _ = writeln!(
-            out,
-            "{}\t{}\t{}\t{}\t{}",
-            clip_table_row(c),
-            time(first_at(&c.name)),
-            rate(c.reset_share),
-            rate(c.frame_share),
-            rate(c.failures_per_step)
-        );
-    }
-    let run_success = evaluated().find_map(|(t, e, _)| e.success.then_some(t));
-    let _ = writeln!(
-        out,
-        "{}\t{}\t-\t-\t-",
-        library_table_row(library, last),
-        time(run_success)
-    );
-    Some(out)
 }
 
 #[cfg(test)]

@@ -6,8 +6,8 @@
 
 use plotters::prelude::*;
 
-use super::error::TrainError;
-use super::library_evaluation::CLIP_SUCCESS_RATE;
+use super::error::RunError;
+use super::library_scores::CLIP_SUCCESS_RATE;
 use super::metrics::IterationRecord;
 
 pub const CHART_WIDTH: u32 = 1000;
@@ -15,8 +15,8 @@ pub const CHART_WIDTH: u32 = 1000;
 const ROW_HEIGHT: u32 = 26;
 const MARGINS_HEIGHT: u32 = 130;
 
-fn plot_error(e: impl std::fmt::Display) -> TrainError {
-    TrainError::Plot(e.to_string())
+fn plot_error(e: impl std::fmt::Display) -> RunError {
+    RunError::Plot(e.to_string())
 }
 
 /// The color of a success rate: red at 0, yellow at 0.5, green at 1 (clamped; NaN grey).
@@ -51,8 +51,8 @@ pub fn chart_height(clips: usize) -> u32 {
 pub fn clips_chart_png(
     records: &[IterationRecord],
     title: &str,
-) -> Option<Result<Vec<u8>, TrainError>> {
-    let evaluations: Vec<(f64, &super::library_evaluation::LibraryEvaluation)> = records
+) -> Option<Result<Vec<u8>, RunError>> {
+    let evaluations: Vec<(f64, &super::library_scores::LibraryEvaluation)> = records
         .iter()
         .filter_map(|r| Some((r.active_time_s, r.evaluation.as_ref()?.library.as_ref()?)))
         .filter(|(t, _)| t.is_finite())
@@ -129,8 +129,8 @@ pub fn clips_chart_png(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::train::evaluation::EvaluationSummary;
-    use crate::train::library_evaluation::{ClipScore, LibraryEvaluation};
+    use crate::run::evaluation::EvaluationSummary;
+    use crate::run::library_scores::{ClipScore, LibraryEvaluation};
 
     fn clip(name: &str, success_rate: f64) -> ClipScore {
         ClipScore {

@@ -85,7 +85,7 @@ pub enum StopReason {
     TimeBudget,
     /// `run.max_iterations` iterations are done.
     IterationBudget,
-    /// SIGINT or SIGTERM stopped the run after its current iteration (src/train/stop.rs);
+    /// SIGINT or SIGTERM stopped the run after its current iteration (src/run/stop.rs);
     /// `train --resume` continues it.
     Interrupted,
 }

@@ -16,7 +16,7 @@
 //! if let Some(reason) = next.stop { return session.finish(reason); }
 //! ```
 //!
-//! A stop request ([`RunSession::stop_on`]: SIGINT or SIGTERM, src/train/stop.rs) is read in
+//! A stop request ([`RunSession::stop_on`]: SIGINT or SIGTERM, src/run/stop.rs) is read in
 //! `record`, between iterations: the iteration that was running completes, is recorded and
 //! checkpointed, and the run finishes with [`StopReason::Interrupted`].
 //!
@@ -25,32 +25,21 @@
 
 use std::path::Path;
 
-use super::character::CharacterRecord;
+use super::character_record::CharacterRecord;
 use super::checkpoint::{Checkpoint, CheckpointDir, CheckpointMeta};
+use super::clips_table::clips_table;
 use super::clock::{ActiveClock, Milestones, StopReason, StopRule};
-use super::config::TrainConfig;
-use super::divergence::DivergenceEvent;
-use super::error::TrainError;
+use super::config::ResolvedConfig;
+use super::error::RunError;
 use super::evaluation::EvaluationSummary;
-use super::library_evaluation::clips_table;
-use super::metrics::{EpisodeEnds, IterationRecord, MetricsLog, UpdateStats};
+use super::metrics::DivergenceEvent;
+use super::metrics::{IterationRecord, IterationStats, MetricsLog};
 use super::progress::{Progress, ProgressMode};
-use super::run_dir::{ResumedRun, RunDir};
+use super::run_dir::{ResumedRun, RunDir, check_same_gpu_count};
 use super::stop::StopFlag;
 use super::summary::RunSummary;
 use super::tensorboard::RunEvents;
-
-/// What the GPU reports about one iteration (the per-iteration statistics copy).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct IterationStats {
-    pub mean_return: f64,
-    pub mean_episode_length: f64,
-    pub update: UpdateStats,
-    pub termination: EpisodeEnds,
-    /// Sums of squares of the actor's and the critic's parameters after the update (the
-    /// divergence guard's view of the parameters: NaN or infinite when one is).
-    pub parameter_squares: [f64; 2],
-}
+use crate::env::TaskRecord;
 
 /// An iteration done on the GPU, not yet recorded.
 #[derive(Clone, Debug, PartialEq)]
@@ -63,17 +52,19 @@ pub struct IterationStep {
 }
 
 impl IterationStep {
-    /// Marks the iteration as diverged (src/train/divergence.rs): it is recorded with `event`
+    /// Marks the iteration as diverged (src/run/divergence.rs): it is recorded with `event`
     /// and not evaluated.
     pub fn diverged(&mut self, event: DivergenceEvent) {
         self.evaluate = false;
         self.record.divergence = Some(event);
     }
 
-    /// The goal task's record of this iteration (its rollout's episodes, and its evaluation
-    /// when one ran).
-    pub fn set_goal(&mut self, goal: super::goal::GoalRecord) {
-        self.record.goal = Some(goal);
+    /// The task's record of this iteration (its rollout's episodes, and its evaluation when
+    /// one ran).
+    pub fn set_task(&mut self, task: TaskRecord) {
+        match task {
+            TaskRecord::Goal(goal) => self.record.goal = Some(goal),
+        }
     }
 }
 
@@ -85,12 +76,16 @@ pub struct NextStep {
     pub stop: Option<StopReason>,
 }
 
+/// A resumed run: the session, the checkpoint to restore on the GPU (`None`: start over) and
+/// the warnings to show.
+pub type ResumedSession<C> = (RunSession<C>, Option<Checkpoint>, Vec<String>);
+
 /// A run in progress (see the module documentation for the call sequence).
-pub struct RunSession {
-    config: TrainConfig,
+pub struct RunSession<C: ResolvedConfig> {
+    config: C,
     dir: RunDir,
     metrics: MetricsLog,
-    /// TensorBoard's copy of the metrics (src/train/tensorboard.rs).
+    /// TensorBoard's copy of the metrics (src/run/tensorboard.rs).
     events: RunEvents,
     records: Vec<IterationRecord>,
     checkpoints: CheckpointDir,
@@ -112,38 +107,21 @@ pub struct RunSession {
     character: Option<CharacterRecord>,
 }
 
-/// A run resumes on as many GPUs as it trained on (which devices may change): the checkpoint
-/// holds one replica's state, the per-GPU batch and the seeds of the replicas depend on the
-/// count, and so would the meaning of its frames and learning rate.
-pub fn check_same_gpu_count(before: &TrainConfig, resumed: &TrainConfig) -> Result<(), TrainError> {
-    let (trained, now) = (before.run.replicas(), resumed.run.replicas());
-    if trained == now {
-        return Ok(());
-    }
-    let how = if trained == 1 {
-        "on one (no --gpus, or one device)".to_owned()
-    } else {
-        format!("on {trained} (--gpus with {trained} devices; which ones may change)")
-    };
-    Err(TrainError::Setup(format!(
-        "run.gpus: this run trained on {trained} GPU{}; resume it {how}, not on {now}",
-        if trained == 1 { "" } else { "s" }
-    )))
-}
-
 /// Wall seconds between redraws of `curve.png` during a run (and once at its end): drawing
 /// and encoding the picture after every evaluation would cost more than a short run trains.
 const CURVE_REDRAW_S: f64 = 5.0;
 
-impl RunSession {
+impl<C: ResolvedConfig> RunSession<C> {
     /// A new run in `root` (see [`RunDir::create`]).
     pub fn start_new(
         root: &Path,
-        config: &TrainConfig,
+        config: &C,
         overwrite: bool,
         progress: ProgressMode,
-    ) -> Result<RunSession, TrainError> {
-        config.validate("the run configuration")?;
+    ) -> Result<RunSession<C>, RunError> {
+        config
+            .validate("the run configuration")
+            .map_err(RunError::Config)?;
         let (dir, metrics) = RunDir::create(root, config, overwrite)?;
         let events = RunEvents::create(dir.root(), None)?;
         Ok(RunSession::assemble(
@@ -153,7 +131,7 @@ impl RunSession {
             events,
             Vec::new(),
             None,
-            Progress::new(progress, &config.run),
+            Progress::new(progress, config.run()),
         ))
     }
 
@@ -163,25 +141,27 @@ impl RunSession {
     /// warnings to show (skipped checkpoints, dropped records; the caller prints them).
     pub fn resume(
         root: &Path,
-        adjust: impl FnOnce(&mut TrainConfig),
+        adjust: impl FnOnce(&mut C),
         progress: ProgressMode,
-    ) -> Result<(RunSession, Option<Checkpoint>, Vec<String>), TrainError> {
+    ) -> Result<ResumedSession<C>, RunError> {
         // Settle the configuration before anything in the directory changes.
-        let before = RunDir::inspect_resume(root)?.config;
+        let before: C = RunDir::inspect_resume::<C>(root)?.config;
         let mut config = before.clone();
         adjust(&mut config);
-        check_same_gpu_count(&before, &config)?;
+        check_same_gpu_count(before.run(), config.run())?;
         if config != before {
             // Only [run] may change: the checkpoint was trained with the rest.
             let mut rest = config.clone();
-            rest.run = before.run.clone();
+            *rest.run_mut() = before.run().clone();
             if rest != before {
-                return Err(TrainError::Setup(
+                return Err(RunError::Setup(
                     "only [run] settings (budgets, evaluation, checkpoints) may change when resuming"
                         .to_string(),
                 ));
             }
-            config.validate("the resumed configuration")?;
+            config
+                .validate("the resumed configuration")
+                .map_err(RunError::Config)?;
         }
         let ResumedRun {
             dir,
@@ -190,16 +170,15 @@ impl RunSession {
             records,
             warnings,
             ..
-        } = RunDir::resume(root)?;
+        } = RunDir::resume::<C>(root)?;
         if config != before {
             dir.write_config(&config)?;
         }
-        let metrics = metrics.ok_or_else(|| {
-            TrainError::Internal("the resumed metrics log is not open".to_string())
-        })?;
+        let metrics = metrics
+            .ok_or_else(|| RunError::Internal("the resumed metrics log is not open".to_string()))?;
         let start = checkpoint.as_ref().map_or(0, |(_, c)| c.meta.iteration);
         let events = RunEvents::create(dir.root(), Some(start))?;
-        let progress = Progress::new(progress, &config.run);
+        let progress = Progress::new(progress, config.run());
         let session = RunSession::assemble(
             config,
             dir,
@@ -213,14 +192,14 @@ impl RunSession {
     }
 
     fn assemble(
-        config: TrainConfig,
+        config: C,
         dir: RunDir,
         metrics: MetricsLog,
         events: RunEvents,
         records: Vec<IterationRecord>,
         checkpoint: Option<&Checkpoint>,
         progress: Progress,
-    ) -> RunSession {
+    ) -> RunSession<C> {
         let (iteration, active, frames) = checkpoint.map_or((0, 0.0, 0), |c| {
             (c.meta.iteration, c.meta.active_time_s, c.meta.frames)
         });
@@ -230,8 +209,8 @@ impl RunSession {
             pose_error: evaluations().any(EvaluationSummary::meets_pose_error_target),
         };
         RunSession {
-            checkpoints: dir.checkpoints(&config),
-            rule: StopRule::new(&config.run),
+            checkpoints: dir.checkpoints(config.run()),
+            rule: StopRule::new(config.run()),
             clock: ActiveClock::paused_at(active),
             config,
             dir,
@@ -260,7 +239,7 @@ impl RunSession {
         self.character = Some(character);
     }
 
-    pub fn config(&self) -> &TrainConfig {
+    pub fn config(&self) -> &C {
         &self.config
     }
 
@@ -295,9 +274,8 @@ impl RunSession {
         let active = self.clock.seconds();
         let iteration = self.iteration + 1;
         // Every GPU's envs (each runs env.num_envs).
-        let frames_now = u64::from(self.config.env.num_envs)
-            * u64::from(self.config.ppo.horizon)
-            * self.config.run.replicas() as u64;
+        let frames_now =
+            self.config.frames_per_gpu_iteration() * self.config.run().replicas() as u64;
         let elapsed = active - self.iteration_start_s;
         let record = IterationRecord {
             iteration,
@@ -332,7 +310,7 @@ impl RunSession {
         &mut self,
         step: IterationStep,
         evaluation: Option<EvaluationSummary>,
-    ) -> Result<NextStep, TrainError> {
+    ) -> Result<NextStep, RunError> {
         let mut record = step.record;
         let evaluated = evaluation.is_some();
         record.evaluation = evaluation;
@@ -363,7 +341,7 @@ impl RunSession {
             // A motion library's per-clip table, after every evaluation (atomically).
             self.dir.write_clips_table(&table)?;
         }
-        let interval = u64::from(self.config.run.checkpoint_interval);
+        let interval = u64::from(self.config.run().checkpoint_interval);
         let checkpoint_due =
             stop.is_some() || (interval > 0 && self.iteration.is_multiple_of(interval));
         Ok(NextStep {
@@ -374,7 +352,7 @@ impl RunSession {
 
     /// An empty checkpoint of the current iteration with its metadata filled in; the loop
     /// adds the tensors.
-    pub fn new_checkpoint(&self) -> Result<Checkpoint, TrainError> {
+    pub fn new_checkpoint(&self) -> Result<Checkpoint, RunError> {
         let mut meta = CheckpointMeta::new(
             &self.config,
             self.iteration,
@@ -386,19 +364,19 @@ impl RunSession {
     }
 
     /// Writes a checkpoint (the clock is paused: checkpointing is not active time).
-    pub fn save_checkpoint(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainError> {
+    pub fn save_checkpoint(&mut self, checkpoint: &Checkpoint) -> Result<(), RunError> {
         let checkpoints = &self.checkpoints;
         self.clock.excluding(|| checkpoints.save(checkpoint))?;
         Ok(())
     }
 
     /// Ends the run: redraws the curve, writes `summary.json`, and returns the summary.
-    pub fn finish(mut self, reason: StopReason) -> Result<RunSummary, TrainError> {
+    pub fn finish(mut self, reason: StopReason) -> Result<RunSummary, RunError> {
         self.clock.pause();
         self.dir.write_curve(&self.config, &self.records)?;
         let summary = RunSummary::from_records(
-            &self.config.motion_label(),
-            self.config.seed,
+            &self.config.label(),
+            self.config.seed(),
             &self.records,
             reason,
         );

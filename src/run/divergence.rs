@@ -6,28 +6,12 @@
 //! record, and after `run.max_divergence_restores` restores the run stops with an error that
 //! says what to change.
 
-use serde::{Deserialize, Serialize};
-
 use super::checkpoint::{Checkpoint, tensor_names};
-use super::error::TrainError;
-use super::session::IterationStats;
+use super::error::RunError;
+use super::metrics::{DivergenceEvent, IterationStats};
 
 /// What the learning rate is multiplied by at each restore.
 pub const RESTORE_LEARNING_RATE_FACTOR: f32 = 0.5;
-
-/// A restore, as `metrics.jsonl` records it (the `divergence` field of the iteration that
-/// diverged).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct DivergenceEvent {
-    /// What was not finite.
-    pub cause: String,
-    /// The iteration of the state training went back to (0: the initial state).
-    pub restored_iteration: u64,
-    /// The learning rate training continues with.
-    pub learning_rate: f64,
-    /// Restores so far in this process, this one included.
-    pub restores: u32,
-}
 
 /// The last good state and the restores left.
 pub struct DivergenceGuard {
@@ -39,9 +23,9 @@ pub struct DivergenceGuard {
 impl DivergenceGuard {
     /// Starts from `initial`, a complete training checkpoint of the state training starts
     /// from (it must be finite).
-    pub fn new(initial: Checkpoint, max_restores: u32) -> Result<DivergenceGuard, TrainError> {
+    pub fn new(initial: Checkpoint, max_restores: u32) -> Result<DivergenceGuard, RunError> {
         if let Some(name) = initial.first_non_finite_tensor() {
-            return Err(TrainError::Setup(format!(
+            return Err(RunError::Setup(format!(
                 "the starting state is not finite (tensor {name}): resume from an earlier checkpoint or start over"
             )));
         }
@@ -72,9 +56,9 @@ impl DivergenceGuard {
         &mut self,
         iteration: u64,
         cause: &str,
-    ) -> Result<(Checkpoint, DivergenceEvent), TrainError> {
+    ) -> Result<(Checkpoint, DivergenceEvent), RunError> {
         if self.restores >= self.max_restores {
-            return Err(TrainError::Diverged {
+            return Err(RunError::Diverged {
                 iteration,
                 cause: cause.to_string(),
                 restores: self.restores,
@@ -111,11 +95,20 @@ pub fn non_finite_report(stats: &IterationStats) -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::train::{CheckpointMeta, TrainConfig};
+    use crate::run::{CHECKPOINT_FORMAT_VERSION, CheckpointMeta};
 
     fn checkpoint(iteration: u64, rate: f32, actor: Vec<f32>) -> Checkpoint {
-        let config = TrainConfig::with_motion("walk");
-        let meta = CheckpointMeta::new(&config, iteration, 1.0, 1000).unwrap();
+        let meta = CheckpointMeta {
+            format_version: CHECKPOINT_FORMAT_VERSION,
+            iteration,
+            active_time_s: 1.0,
+            frames: 1000,
+            motion: "walk".to_owned(),
+            seed: 0,
+            config_toml: String::new(),
+            crate_version: env!("CARGO_PKG_VERSION").to_owned(),
+            character: None,
+        };
         let mut c = Checkpoint::new(meta);
         c.insert(tensor_names::LEARNING_RATE, &[1], vec![rate])
             .unwrap();
@@ -157,7 +150,7 @@ mod tests {
 
     #[test]
     fn the_event_round_trips_through_a_metrics_record() {
-        let record = crate::train::IterationRecord {
+        let record = crate::run::IterationRecord {
             iteration: 9,
             active_time_s: 1.0,
             frames: 100,
@@ -177,13 +170,12 @@ mod tests {
         };
         let line = serde_json::to_string(&record).unwrap();
         assert!(line.contains("\"divergence\":{\"cause\":\"KL\""), "{line}");
-        let back: crate::train::IterationRecord = serde_json::from_str(&line).unwrap();
+        let back: crate::run::IterationRecord = serde_json::from_str(&line).unwrap();
         assert_eq!(back.divergence, record.divergence);
         // Records written before the guard have neither field.
         let old = line.replace(",\"grad_norm\":0.0", "");
         let old = &old[..old.find(",\"divergence\"").unwrap()];
-        let back: crate::train::IterationRecord =
-            serde_json::from_str(&format!("{old}}}")).unwrap();
+        let back: crate::run::IterationRecord = serde_json::from_str(&format!("{old}}}")).unwrap();
         assert_eq!(back.divergence, None);
     }
 

@@ -8,7 +8,7 @@
 //! clips.png        a motion library's per-clip success over time, with curve.png
 //! checkpoints/     iter_<iteration>.safetensors, the last run.keep_checkpoints of them
 //! summary.json     the final report (written when the run stops)
-//! events.out.tfevents.*  TensorBoard's copy of metrics.jsonl (src/train/tensorboard.rs; a
+//! events.out.tfevents.*  TensorBoard's copy of metrics.jsonl (src/run/tensorboard.rs; a
 //!                  resumed run adds a file)
 //! evaluation.json  every env's episode of the last evaluation (written when the run stops)
 //! replay.html      the final policy's replay page (`run.replay`; written by the command line
@@ -23,9 +23,9 @@ use std::path::{Path, PathBuf};
 
 use super::checkpoint::{Checkpoint, CheckpointDir};
 use super::clips_chart::clips_chart_png;
-use super::config::TrainConfig;
+use super::config::{ResolvedConfig, RunConfig};
 use super::curve::{RightAxis, write_learning_curve};
-use super::error::TrainError;
+use super::error::RunError;
 use super::evaluation::EnvEpisodeRow;
 use super::metrics::{IterationRecord, MetricsLog};
 use super::summary::RunSummary;
@@ -33,13 +33,13 @@ use crate::files::event_file::EVENT_FILE_MARKER;
 use crate::files::write_bytes_atomically;
 
 /// Writes `value` as pretty JSON, atomically.
-fn write_json<T: serde::Serialize + ?Sized>(path: &Path, value: &T) -> Result<(), TrainError> {
-    let mut text = serde_json::to_string_pretty(value).map_err(|e| TrainError::Metrics {
+fn write_json<T: serde::Serialize + ?Sized>(path: &Path, value: &T) -> Result<(), RunError> {
+    let mut text = serde_json::to_string_pretty(value).map_err(|e| RunError::Metrics {
         path: path.display().to_string(),
         problem: e.to_string(),
     })?;
     text.push('\n');
-    write_bytes_atomically(path, text.as_bytes()).map_err(|e| TrainError::io(path, e))
+    write_bytes_atomically(path, text.as_bytes()).map_err(|e| RunError::io(path, e))
 }
 
 pub const CONFIG_FILE: &str = "config.toml";
@@ -69,7 +69,7 @@ const RUN_ENTRIES: [&str; 10] = [
 ];
 
 /// Whether a directory entry's name is one a run writes: [`RUN_ENTRIES`] and TensorBoard's
-/// event files (src/train/tensorboard.rs).
+/// event files (src/run/tensorboard.rs).
 fn is_run_entry(name: &str) -> bool {
     RUN_ENTRIES.contains(&name)
         || (name.starts_with("events.out.") && name.contains(EVENT_FILE_MARKER))
@@ -77,7 +77,7 @@ fn is_run_entry(name: &str) -> bool {
 
 /// Fails unless `root` (which does not exist) can be created: its nearest existing ancestor
 /// must be a directory that can be written.
-fn check_creatable(root: &Path) -> Result<(), TrainError> {
+fn check_creatable(root: &Path) -> Result<(), RunError> {
     let existing = root
         .ancestors()
         .skip(1)
@@ -91,7 +91,7 @@ fn check_creatable(root: &Path) -> Result<(), TrainError> {
         .find(|a| a.exists())
         .unwrap_or(Path::new("."));
     if !existing.is_dir() {
-        return Err(TrainError::RunDirNotWritable {
+        return Err(RunError::RunDirNotWritable {
             path: root.display().to_string(),
             problem: format!("{} is a file, not a directory", existing.display()),
         });
@@ -101,11 +101,11 @@ fn check_creatable(root: &Path) -> Result<(), TrainError> {
 
 /// Fails unless a directory can be made in `dir` (made and removed at once); permission and
 /// read-only file systems are what this finds, before a run or a dry run approves `root`.
-fn probe_writable(root: &Path, dir: &Path) -> Result<(), TrainError> {
+fn probe_writable(root: &Path, dir: &Path) -> Result<(), RunError> {
     let probe = dir.join(format!(".instantmimic-write-check-{}", std::process::id()));
     match std::fs::create_dir(&probe) {
-        Ok(()) => std::fs::remove_dir(&probe).map_err(|e| TrainError::io(&probe, e)),
-        Err(e) => Err(TrainError::RunDirNotWritable {
+        Ok(()) => std::fs::remove_dir(&probe).map_err(|e| RunError::io(&probe, e)),
+        Err(e) => Err(RunError::RunDirNotWritable {
             path: root.display().to_string(),
             problem: format!("{} cannot be written ({e})", dir.display()),
         }),
@@ -120,9 +120,9 @@ pub struct RunDir {
 
 /// A run directory reopened by `--resume`.
 #[derive(Debug)]
-pub struct ResumedRun {
+pub struct ResumedRun<C> {
     pub dir: RunDir,
-    pub config: TrainConfig,
+    pub config: C,
     /// The checkpoint to continue from; `None` starts over from iteration 0.
     pub checkpoint: Option<(PathBuf, Checkpoint)>,
     /// The log, cut to the checkpoint's iteration and open for appending (`None` when only
@@ -134,29 +134,13 @@ pub struct ResumedRun {
     pub warnings: Vec<String>,
 }
 
-impl ResumedRun {
+impl<C> ResumedRun<C> {
     /// Iterations already done.
     pub fn iteration(&self) -> u64 {
         self.checkpoint
             .as_ref()
             .map_or(0, |(_, c)| c.meta.iteration)
     }
-}
-
-/// The default run directory of a configuration: `runs/<motion>-seed<seed>`, the motion's
-/// file stem without DeepMimic's `humanoid3d_` prefix (`runs/library-seed<seed>` for a motion
-/// library).
-pub fn default_run_dir(config: &TrainConfig) -> PathBuf {
-    let stem = if config.motion_library.is_some() {
-        "library"
-    } else {
-        Path::new(&config.motion)
-            .file_stem()
-            .and_then(|s| s.to_str())
-            .unwrap_or("run")
-    };
-    let stem = stem.strip_prefix("humanoid3d_").unwrap_or(stem);
-    PathBuf::from("runs").join(format!("{stem}-seed{}", config.seed))
 }
 
 impl RunDir {
@@ -180,19 +164,16 @@ impl RunDir {
         self.root.join(SUMMARY_FILE)
     }
 
-    /// The checkpoints of the run, keeping `config.run.keep_checkpoints`.
-    pub fn checkpoints(&self, config: &TrainConfig) -> CheckpointDir {
-        CheckpointDir::new(
-            &self.root.join(CHECKPOINTS_DIR),
-            config.run.keep_checkpoints,
-        )
+    /// The checkpoints of the run, keeping `run.keep_checkpoints`.
+    pub fn checkpoints(&self, run: &RunConfig) -> CheckpointDir {
+        CheckpointDir::new(&self.root.join(CHECKPOINTS_DIR), run.keep_checkpoints)
     }
 
     /// Checks that a new run may use `root`: it does not exist, is empty, or `overwrite` is
     /// set; and that it can be created and written (a probe directory is made and removed
     /// again, so that `--dry-run` refuses what the run would fail on). Returns the run files
     /// `--overwrite` would remove.
-    pub fn check_new(root: &Path, overwrite: bool) -> Result<Vec<PathBuf>, TrainError> {
+    pub fn check_new(root: &Path, overwrite: bool) -> Result<Vec<PathBuf>, RunError> {
         let entries = match std::fs::read_dir(root) {
             Ok(entries) => entries,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
@@ -201,21 +182,21 @@ impl RunDir {
             }
             Err(e) if e.kind() == std::io::ErrorKind::NotADirectory => {
                 if root.is_file() {
-                    return Err(TrainError::NotARunDir {
+                    return Err(RunError::NotARunDir {
                         path: root.display().to_string(),
                         problem: "it is a file".to_string(),
                     });
                 }
                 // A parent is a file.
                 check_creatable(root)?;
-                return Err(TrainError::io(root, e));
+                return Err(RunError::io(root, e));
             }
-            Err(e) => return Err(TrainError::io(root, e)),
+            Err(e) => return Err(RunError::io(root, e)),
         };
         let mut ours = Vec::new();
         let mut any = false;
         for entry in entries {
-            let entry = entry.map_err(|e| TrainError::io(root, e))?;
+            let entry = entry.map_err(|e| RunError::io(root, e))?;
             any = true;
             if entry.file_name().to_str().is_some_and(is_run_entry) {
                 ours.push(entry.path());
@@ -224,9 +205,9 @@ impl RunDir {
         if any && !overwrite {
             let path = root.display().to_string();
             return Err(if root.join(CONFIG_FILE).is_file() {
-                TrainError::RunDirNotEmpty { path }
+                RunError::RunDirNotEmpty { path }
             } else {
-                TrainError::NotEmptyNotARun { path }
+                RunError::NotEmptyNotARun { path }
             });
         }
         probe_writable(root, root)?;
@@ -236,20 +217,20 @@ impl RunDir {
 
     /// Starts a new run in `root`: checks it ([`check_new`](Self::check_new)), removes an old
     /// run's files when overwriting, writes `config.toml` and opens an empty metrics log.
-    pub fn create(
+    pub fn create<C: ResolvedConfig>(
         root: &Path,
-        config: &TrainConfig,
+        config: &C,
         overwrite: bool,
-    ) -> Result<(RunDir, MetricsLog), TrainError> {
+    ) -> Result<(RunDir, MetricsLog), RunError> {
         for old in RunDir::check_new(root, overwrite)? {
             let removed = if old.is_dir() {
                 std::fs::remove_dir_all(&old)
             } else {
                 std::fs::remove_file(&old)
             };
-            removed.map_err(|e| TrainError::io(&old, e))?;
+            removed.map_err(|e| RunError::io(&old, e))?;
         }
-        std::fs::create_dir_all(root).map_err(|e| TrainError::io(root, e))?;
+        std::fs::create_dir_all(root).map_err(|e| RunError::io(root, e))?;
         let dir = RunDir {
             root: root.to_path_buf(),
         };
@@ -259,92 +240,92 @@ impl RunDir {
     }
 
     /// Replaces `config.toml` (a resumed run with new budgets).
-    pub fn write_config(&self, config: &TrainConfig) -> Result<(), TrainError> {
+    pub fn write_config<C: ResolvedConfig>(&self, config: &C) -> Result<(), RunError> {
         let path = self.config_path();
         let text = format!(
             "# The resolved configuration of this run (instantmimic {}); `train --resume` reads it.\n{}",
             env!("CARGO_PKG_VERSION"),
-            config.to_toml()?
+            config.to_toml().map_err(RunError::Config)?
         );
-        write_bytes_atomically(&path, text.as_bytes()).map_err(|e| TrainError::io(&path, e))
+        write_bytes_atomically(&path, text.as_bytes()).map_err(|e| RunError::io(&path, e))
     }
 
     /// Redraws `curve.png` from the records, and `clips.png` when they hold a motion library's
     /// evaluations.
-    pub fn write_curve(
+    pub fn write_curve<C: ResolvedConfig>(
         &self,
-        config: &TrainConfig,
+        config: &C,
         records: &[IterationRecord],
-    ) -> Result<(), TrainError> {
-        let title = format!("{} (seed {})", config.motion_label(), config.seed);
+    ) -> Result<(), RunError> {
+        let title = format!("{} (seed {})", config.label(), config.seed());
         if let Some(png) = clips_chart_png(records, &title) {
             let path = self.root.join(CLIPS_CHART_FILE);
-            write_bytes_atomically(&path, &png?).map_err(|e| TrainError::io(&path, e))?;
+            write_bytes_atomically(&path, &png?).map_err(|e| RunError::io(&path, e))?;
         }
         // The left axis reaches at least the episode limit and every length drawn (a goal
         // episode's own limit, goal.episode_s, is in the lengths once an episode ends by it).
-        let right = if config.goal.is_some() {
+        let right = if config.counts_goals() {
             RightAxis::GoalsPerEpisode
         } else {
             RightAxis::SuccessRate {
-                threshold: config.run.success_rate,
+                threshold: config.run().success_rate,
             }
         };
         write_learning_curve(
             &self.curve_path(),
             records,
             &title,
-            f64::from(config.env.max_episode_steps),
+            f64::from(config.max_episode_steps()),
             right,
         )
     }
 
     /// Writes `summary.json`.
-    pub fn write_summary(&self, summary: &RunSummary) -> Result<(), TrainError> {
+    pub fn write_summary(&self, summary: &RunSummary) -> Result<(), RunError> {
         write_json(&self.summary_path(), summary)
     }
 
     /// Writes `evaluation.json`: every env's episode of the last evaluation.
-    pub fn write_last_evaluation(&self, rows: &[EnvEpisodeRow]) -> Result<(), TrainError> {
+    pub fn write_last_evaluation(&self, rows: &[EnvEpisodeRow]) -> Result<(), RunError> {
         write_json(&self.root.join(EVALUATION_FILE), rows)
     }
 
-    /// Replaces `clips.tsv` (a motion library's per-clip table, `library_evaluation::clips_table`).
-    pub fn write_clips_table(&self, text: &str) -> Result<(), TrainError> {
+    /// Replaces `clips.tsv` (a motion library's per-clip table, `clips_table::clips_table`).
+    pub fn write_clips_table(&self, text: &str) -> Result<(), RunError> {
         let path = self.root.join(CLIPS_FILE);
-        write_bytes_atomically(&path, text.as_bytes()).map_err(|e| TrainError::io(&path, e))
+        write_bytes_atomically(&path, text.as_bytes()).map_err(|e| RunError::io(&path, e))
     }
 
     /// Reopens a run to continue it: its configuration, the newest good checkpoint (newer
     /// corrupt ones are renamed to `*.corrupt`), and the metrics log cut to that checkpoint.
-    pub fn resume(root: &Path) -> Result<ResumedRun, TrainError> {
+    pub fn resume<C: ResolvedConfig>(root: &Path) -> Result<ResumedRun<C>, RunError> {
         RunDir::reopen(root, true)
     }
 
     /// What [`resume`](Self::resume) would continue from, changing nothing (`--dry-run`).
-    pub fn inspect_resume(root: &Path) -> Result<ResumedRun, TrainError> {
+    pub fn inspect_resume<C: ResolvedConfig>(root: &Path) -> Result<ResumedRun<C>, RunError> {
         RunDir::reopen(root, false)
     }
 
-    fn reopen(root: &Path, modify: bool) -> Result<ResumedRun, TrainError> {
+    fn reopen<C: ResolvedConfig>(root: &Path, modify: bool) -> Result<ResumedRun<C>, RunError> {
         let dir = RunDir {
             root: root.to_path_buf(),
         };
         let config_path = dir.config_path();
         if !root.exists() {
-            return Err(TrainError::NotARunDir {
+            return Err(RunError::NotARunDir {
                 path: root.display().to_string(),
                 problem: "it does not exist (give the --out of an earlier run)".to_string(),
             });
         }
         if !config_path.is_file() {
-            return Err(TrainError::NotARunDir {
+            return Err(RunError::NotARunDir {
                 path: root.display().to_string(),
                 problem: format!("it has no {CONFIG_FILE}"),
             });
         }
-        let config = TrainConfig::load(&config_path)?;
-        let scan = dir.checkpoints(&config).latest_good()?;
+        let config = C::load(&config_path).map_err(RunError::Config)?;
+        let scan = dir.checkpoints(config.run()).latest_good()?;
         let mut warnings: Vec<String> = scan
             .skipped
             .iter()
@@ -353,10 +334,10 @@ impl RunDir {
         if modify {
             // Out of the way, so that pruning and the next resume do not meet them again.
             let newest_good = scan.latest.as_ref().map_or(0, |(_, c)| c.meta.iteration);
-            for (iteration, path) in dir.checkpoints(&config).list()? {
+            for (iteration, path) in dir.checkpoints(config.run()).list()? {
                 if iteration > newest_good {
                     let aside = path.with_extension("safetensors.corrupt");
-                    std::fs::rename(&path, &aside).map_err(|e| TrainError::io(&path, e))?;
+                    std::fs::rename(&path, &aside).map_err(|e| RunError::io(&path, e))?;
                     warnings.push(format!("renamed {} to {}", path.display(), aside.display()));
                 }
             }
@@ -410,33 +391,39 @@ impl RunDir {
     }
 }
 
+/// A run resumes on as many GPUs as it trained on (which devices may change): the checkpoint
+/// holds one replica's state, the per-GPU batch and the seeds of the replicas depend on the
+/// count, and so would the meaning of its frames and learning rate.
+pub fn check_same_gpu_count(before: &RunConfig, resumed: &RunConfig) -> Result<(), RunError> {
+    let (trained, now) = (before.replicas(), resumed.replicas());
+    if trained == now {
+        return Ok(());
+    }
+    let how = if trained == 1 {
+        "on one (no --gpus, or one device)".to_owned()
+    } else {
+        format!("on {trained} (--gpus with {trained} devices; which ones may change)")
+    };
+    Err(RunError::Setup(format!(
+        "run.gpus: this run trained on {trained} GPU{}; resume it {how}, not on {now}",
+        if trained == 1 { "" } else { "s" }
+    )))
+}
+
 /// A checkpoint continues a run only if it was trained with the same settings (the budgets
 /// and other `[run]` keys may change between sessions).
-fn check_same_training(
-    config: &TrainConfig,
+fn check_same_training<C: ResolvedConfig>(
+    config: &C,
     checkpoint: &Checkpoint,
     path: &Path,
-) -> Result<(), TrainError> {
-    let stored = checkpoint.meta.config(&path.display().to_string())?;
-    let differs = [
-        ("motion", stored.motion != config.motion),
-        (
-            "[motion_library]",
-            stored.motion_library != config.motion_library,
-        ),
-        ("seed", stored.seed != config.seed),
-        ("[env]", stored.env != config.env),
-        ("[reward]", stored.reward != config.reward),
-        ("[obs]", stored.obs != config.obs),
-        ("[policy]", stored.policy != config.policy),
-        ("[ppo]", stored.ppo != config.ppo),
-    ];
-    let keys: Vec<&str> = differs.iter().filter(|d| d.1).map(|d| d.0).collect();
+) -> Result<(), RunError> {
+    let stored: C = checkpoint.meta.config(&path.display().to_string())?;
+    let keys = config.differences_from(&stored);
     if keys.is_empty() {
         // [run] may change, but not the number of GPUs the checkpoint was trained on.
-        super::session::check_same_gpu_count(&stored, config)
+        check_same_gpu_count(stored.run(), config.run())
     } else {
-        Err(TrainError::Setup(format!(
+        Err(RunError::Setup(format!(
             "{}: trained with a different {} than {}; only [run] may change when resuming",
             path.display(),
             keys.join(", "),

@@ -10,12 +10,12 @@ use std::fs::{File, OpenOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Deserializer, Serialize};
+use serde::{Deserialize, Serialize};
 
-use super::divergence::DivergenceEvent;
-use super::error::TrainError;
+use super::error::RunError;
 use super::evaluation::EvaluationSummary;
-use crate::env::FailureCause;
+use crate::env::{FailureCause, GoalRecord};
+use crate::files::json::nan_from_null;
 use crate::files::write_bytes_atomically;
 
 /// What the PPO update of one iteration reports (means over its minibatches).
@@ -145,17 +145,38 @@ pub struct IterationRecord {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub evaluation: Option<EvaluationSummary>,
     /// Present when this iteration was not finite and training went back to its last good
-    /// state (src/train/divergence.rs).
+    /// state (src/run/divergence.rs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub divergence: Option<DivergenceEvent>,
     /// The goal task's goals per episode and falls (absent when tracking).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub goal: Option<super::goal::GoalRecord>,
+    pub goal: Option<GoalRecord>,
 }
 
-/// `null` read as NaN: serde_json writes non-finite floats as `null`.
-pub(crate) fn nan_from_null<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+/// What the GPU reports about one iteration (the per-iteration statistics copy).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct IterationStats {
+    pub mean_return: f64,
+    pub mean_episode_length: f64,
+    pub update: UpdateStats,
+    pub termination: EpisodeEnds,
+    /// Sums of squares of the actor's and the critic's parameters after the update (the
+    /// divergence guard's view of the parameters: NaN or infinite when one is).
+    pub parameter_squares: [f64; 2],
+}
+
+/// A restore, as `metrics.jsonl` records it (the `divergence` field of the iteration that
+/// diverged).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DivergenceEvent {
+    /// What was not finite.
+    pub cause: String,
+    /// The iteration of the state training went back to (0: the initial state).
+    pub restored_iteration: u64,
+    /// The learning rate training continues with.
+    pub learning_rate: f64,
+    /// Restores so far in this process, this one included.
+    pub restores: u32,
 }
 
 /// The log of a run, open for appending.
@@ -190,8 +211,8 @@ pub struct MetricsFile {
 
 impl MetricsLog {
     /// A new, empty log at `path` (an existing file is replaced).
-    pub fn create(path: &Path) -> Result<MetricsLog, TrainError> {
-        let file = File::create(path).map_err(|e| TrainError::io(path, e))?;
+    pub fn create(path: &Path) -> Result<MetricsLog, RunError> {
+        let file = File::create(path).map_err(|e| RunError::io(path, e))?;
         Ok(MetricsLog {
             path: path.to_path_buf(),
             file,
@@ -204,9 +225,9 @@ impl MetricsLog {
     }
 
     /// Appends one record as one line and flushes it to the file. Iterations must increase.
-    pub fn append(&mut self, record: &IterationRecord) -> Result<(), TrainError> {
+    pub fn append(&mut self, record: &IterationRecord) -> Result<(), RunError> {
         if record.iteration <= self.last_iteration {
-            return Err(TrainError::Metrics {
+            return Err(RunError::Metrics {
                 path: self.path.display().to_string(),
                 problem: format!(
                     "iteration {} appended after iteration {}",
@@ -214,7 +235,7 @@ impl MetricsLog {
                 ),
             });
         }
-        let mut line = serde_json::to_string(record).map_err(|e| TrainError::Metrics {
+        let mut line = serde_json::to_string(record).map_err(|e| RunError::Metrics {
             path: self.path.display().to_string(),
             problem: e.to_string(),
         })?;
@@ -223,7 +244,7 @@ impl MetricsLog {
         self.file
             .write_all(line.as_bytes())
             .and_then(|()| self.file.flush())
-            .map_err(|e| TrainError::io(&self.path, e))?;
+            .map_err(|e| RunError::io(&self.path, e))?;
         self.last_iteration = record.iteration;
         Ok(())
     }
@@ -231,13 +252,13 @@ impl MetricsLog {
     /// Reads a log. A last line without a newline is a partial write: it is reported, not
     /// parsed. Any other line that is not a record, or a record whose iteration does not
     /// increase, is an error naming the line.
-    pub fn read(path: &Path) -> Result<MetricsFile, TrainError> {
-        let text = std::fs::read(path).map_err(|e| TrainError::io(path, e))?;
+    pub fn read(path: &Path) -> Result<MetricsFile, RunError> {
+        let text = std::fs::read(path).map_err(|e| RunError::io(path, e))?;
         MetricsLog::parse(&text, path)
     }
 
-    fn parse(text: &[u8], path: &Path) -> Result<MetricsFile, TrainError> {
-        let bad = |line: usize, problem: String| TrainError::Metrics {
+    fn parse(text: &[u8], path: &Path) -> Result<MetricsFile, RunError> {
+        let bad = |line: usize, problem: String| RunError::Metrics {
             path: format!("{} line {line}", path.display()),
             problem,
         };
@@ -284,10 +305,10 @@ impl MetricsLog {
     pub fn resume(
         path: &Path,
         checkpoint_iteration: u64,
-    ) -> Result<(MetricsLog, ResumedMetrics), TrainError> {
+    ) -> Result<(MetricsLog, ResumedMetrics), RunError> {
         let exists = path.exists();
         let text = if exists {
-            std::fs::read(path).map_err(|e| TrainError::io(path, e))?
+            std::fs::read(path).map_err(|e| RunError::io(path, e))?
         } else {
             Vec::new()
         };
@@ -311,12 +332,12 @@ impl MetricsLog {
         }
         if dropped_after_checkpoint > 0 || file.partial_last_line || !exists {
             let end = keep.checked_sub(1).map_or(0, |last| file.line_ends[last]);
-            write_bytes_atomically(path, &text[..end]).map_err(|e| TrainError::io(path, e))?;
+            write_bytes_atomically(path, &text[..end]).map_err(|e| RunError::io(path, e))?;
         }
         let handle = OpenOptions::new()
             .append(true)
             .open(path)
-            .map_err(|e| TrainError::io(path, e))?;
+            .map_err(|e| RunError::io(path, e))?;
         Ok((
             MetricsLog {
                 path: path.to_path_buf(),

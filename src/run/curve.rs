@@ -8,7 +8,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::error::TrainError;
+use super::error::RunError;
 use super::metrics::IterationRecord;
 use crate::files::write_bytes_atomically;
 
@@ -78,8 +78,8 @@ fn right_series(records: &[IterationRecord], axis: RightAxis) -> RightSeries {
         }
     }
 }
-fn plot_error(e: impl std::fmt::Display) -> TrainError {
-    TrainError::Plot(e.to_string())
+fn plot_error(e: impl std::fmt::Display) -> RunError {
+    RunError::Plot(e.to_string())
 }
 
 /// The learning curve as PNG bytes. `max_episode_length` sets the left axis (the episode
@@ -89,7 +89,7 @@ pub fn learning_curve_png(
     title: &str,
     max_episode_length: f64,
     right: RightAxis,
-) -> Result<Vec<u8>, TrainError> {
+) -> Result<Vec<u8>, RunError> {
     let finite = |x: f64| x.is_finite();
     let lengths: Vec<(f64, f64)> = records
         .iter()
@@ -203,7 +203,7 @@ pub fn write_learning_curve(
     title: &str,
     max_episode_length: f64,
     right: RightAxis,
-) -> Result<(), TrainError> {
+) -> Result<(), RunError> {
     let png = learning_curve_png(records, title, max_episode_length, right)?;
-    write_bytes_atomically(path, &png).map_err(|e| TrainError::io(path, e))
+    write_bytes_atomically(path, &png).map_err(|e| RunError::io(path, e))
 }

@@ -30,15 +30,15 @@ use std::fmt::Write as _;
 
 use serde::{Deserialize, Serialize};
 
-use super::config::TrainConfig;
-use super::library_evaluation::LibraryEvaluation;
-use super::metrics::nan_from_null;
+use super::config::RunConfig;
+use super::library_scores::LibraryEvaluation;
 use crate::env::{EpisodeScore, EvalStart};
 pub use crate::env::{
     ROBOTICS_MAX_ANCHOR_HEIGHT_ERROR_M, ROBOTICS_MAX_ANCHOR_TILT,
     ROBOTICS_MAX_END_EFFECTOR_HEIGHT_ERROR_M, SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M,
     clamped_clip_steps, evaluation_episode_steps, yardstick,
 };
+use crate::files::json::nan_from_null;
 use crate::motion::LoopMode;
 
 /// Largest global MPJPE (m, mean over the episode's steps and the tracked bodies) of a successful
@@ -140,7 +140,7 @@ pub struct EvaluationSummary {
     pub ee_position_error_m: f64,
     #[serde(deserialize_with = "nan_from_null")]
     pub ee_orientation_error_rad: f64,
-    /// A motion library's per-clip results (`train::library_evaluation`); absent for a single
+    /// A motion library's per-clip results (`run::library_evaluation`); absent for a single
     /// clip. With a library, `success` needs every clip at its threshold too, `episode_steps`
     /// is the longest clip's, and `clip_start_success` says whether every clip's episode from
     /// its beginning succeeded.
@@ -305,17 +305,12 @@ pub fn summarize(
 /// Control steps of an evaluation episode: `run.eval_steps`, or one pass of the clip
 /// ([`evaluation_episode_steps`], which the evaluation rollout itself uses).
 pub fn evaluation_steps(
-    config: &TrainConfig,
+    run: &RunConfig,
     clip_duration_s: f64,
     control_dt_s: f64,
     loop_mode: LoopMode,
 ) -> u32 {
-    evaluation_episode_steps(
-        config.run.eval_steps,
-        clip_duration_s,
-        control_dt_s,
-        loop_mode,
-    )
+    evaluation_episode_steps(run.eval_steps, clip_duration_s, control_dt_s, loop_mode)
 }
 
 /// Clip time (s) at which each of `envs` evaluation episodes starts: spread evenly over a
@@ -572,7 +567,7 @@ mod tests {
 
     #[test]
     fn episode_length_is_one_pass_of_the_clip() {
-        let mut c = TrainConfig::with_motion("backflip");
+        let mut c = RunConfig::default();
         // Backflip: 1.75 s at 30 Hz is 52.5 steps -> 53; walk 1.266616 s -> 38.
         assert_eq!(evaluation_steps(&c, 1.75, 1.0 / 30.0, LoopMode::Wrap), 53);
         assert_eq!(
@@ -581,7 +576,7 @@ mod tests {
         );
         // An exact multiple is not rounded up by floating-point noise: 0.8 s is 24 steps.
         assert_eq!(evaluation_steps(&c, 0.8, 4.0 / 120.0, LoopMode::Wrap), 24);
-        c.run.eval_steps = Some(90);
+        c.eval_steps = Some(90);
         assert_eq!(evaluation_steps(&c, 1.75, 1.0 / 30.0, LoopMode::Wrap), 90);
         // A clamped clip caps even a configured length at its end.
         assert_eq!(
@@ -629,7 +624,7 @@ mod tests {
                     f64::from(steps) * dt <= duration + 1e-5,
                     "{steps} x {dt} > {duration}"
                 );
-                let c = TrainConfig::with_motion("punch");
+                let c = RunConfig::default();
                 assert!(evaluation_steps(&c, duration, dt, LoopMode::Clamp) <= steps);
             }
         }

@@ -13,8 +13,8 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 use zerocopy::{FromBytes, IntoBytes};
 
-use super::character::CharacterRecord;
-use super::config::TrainConfig;
+use super::character_record::CharacterRecord;
+use super::config::ResolvedConfig;
 use crate::files::tagged::{FORMAT_KEY, TaggedFileError, open_tagged};
 use crate::files::{is_temporary, write_bytes_atomically};
 
@@ -120,8 +120,8 @@ pub struct CheckpointMeta {
 
 impl CheckpointMeta {
     /// Metadata for a checkpoint of `config` after `iteration` iterations.
-    pub fn new(
-        config: &TrainConfig,
+    pub fn new<C: ResolvedConfig>(
+        config: &C,
         iteration: u64,
         active_time_s: f64,
         frames: u64,
@@ -131,8 +131,8 @@ impl CheckpointMeta {
             iteration,
             active_time_s,
             frames,
-            motion: config.motion_label(),
-            seed: config.seed,
+            motion: config.label(),
+            seed: config.seed(),
             config_toml: config
                 .to_toml()
                 .map_err(|e| CheckpointError::Encode(e.to_string()))?,
@@ -142,8 +142,8 @@ impl CheckpointMeta {
     }
 
     /// The configuration stored in the checkpoint, parsed and validated.
-    pub fn config(&self, source: &str) -> Result<TrainConfig, CheckpointError> {
-        TrainConfig::from_toml(
+    pub fn config<C: ResolvedConfig>(&self, source: &str) -> Result<C, CheckpointError> {
+        C::from_toml(
             &self.config_toml,
             &format!("{source} (stored configuration)"),
         )

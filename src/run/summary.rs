@@ -46,7 +46,7 @@ pub struct RunSummary {
     /// The goal task's last evaluation: goals per episode and the fall rate (absent when
     /// tracking).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub goal_evaluation: Option<super::goal::GoalRates>,
+    pub goal_evaluation: Option<crate::env::GoalRates>,
 }
 
 /// When a motion library's run first met each of its success criteria (active seconds; null:
@@ -114,7 +114,10 @@ impl RunSummary {
             time_to_robotics_rule_success_s: robotics_rule.map(|r| r.active_time_s),
             last_evaluation: records.iter().rev().find_map(|r| r.evaluation.clone()),
             library,
-            goal_evaluation: super::goal::last_goal_evaluation(records),
+            goal_evaluation: records
+                .iter()
+                .rev()
+                .find_map(|r| r.goal.as_ref().and_then(|g| g.evaluation.clone())),
         }
     }
 
@@ -153,7 +156,7 @@ impl RunSummary {
                 out,
                 "motion library: time to the episodes' success rate {}; to every clip at {} {}",
                 at(times.time_to_episode_rate_s),
-                super::library_evaluation::CLIP_SUCCESS_RATE,
+                super::library_scores::CLIP_SUCCESS_RATE,
                 at(times.time_to_every_clip_s)
             );
         }
@@ -167,7 +170,7 @@ impl RunSummary {
                 "last evaluation: {} of {} clips at {} (clips.tsv)",
                 library.clips_at_threshold,
                 library.clips.len(),
-                super::library_evaluation::CLIP_SUCCESS_RATE
+                super::library_scores::CLIP_SUCCESS_RATE
             );
         }
         if let Some(e) = &self.last_evaluation {
@@ -199,7 +202,7 @@ impl RunSummary {
 #[cfg(test)]
 pub(crate) mod test_records {
     use super::*;
-    use crate::train::metrics::UpdateStats;
+    use crate::run::metrics::UpdateStats;
 
     pub(crate) fn record(iteration: u64, success: Option<bool>) -> IterationRecord {
         IterationRecord {
@@ -349,5 +352,52 @@ mod tests {
         assert_eq!(back.time_to_robotics_rule_success_s, None);
         let none = RunSummary::from_records("backflip", 0, &records[..8], StopReason::Success);
         assert_eq!(none.time_to_robotics_rule_success_s, None);
+    }
+
+    #[test]
+    fn the_last_goal_evaluation_reaches_the_summary_and_the_progress_line() {
+        use super::test_records::record;
+        use crate::env::{GoalRates, GoalRecord, GoalTally};
+        use crate::run::{IterationRecord, StopReason};
+        let rates = |goals: u64, falls: u64| {
+            GoalRates::from(&GoalTally {
+                episodes: 32,
+                goals,
+                falls,
+            })
+        };
+        let mut records: Vec<IterationRecord> = (1..=4).map(|i| record(i, None)).collect();
+        for (i, r) in records.iter_mut().enumerate() {
+            r.goal = Some(GoalRecord {
+                rollout: rates(10, 4),
+                evaluation: (i % 2 == 1).then(|| rates(64 * (i as u64 + 1), 8)),
+            });
+        }
+        let progress_line = |r: &IterationRecord| {
+            r.goal
+                .as_ref()
+                .and_then(|g| g.progress_line(r.iteration, r.active_time_s))
+        };
+        assert_eq!(progress_line(&records[0]), None);
+        let line = progress_line(&records[3]).expect("an evaluation iteration");
+        assert!(
+            line.contains("8.00 goals per episode, fall rate 0.250 (32 episodes)"),
+            "{line}"
+        );
+        let summary = RunSummary::from_records("walk", 0, &records, StopReason::IterationBudget);
+        let last = summary
+            .goal_evaluation
+            .as_ref()
+            .expect("the last goal evaluation");
+        assert_eq!(last.goals_per_episode, 8.0);
+        assert!(
+            summary
+                .report()
+                .contains("last goal evaluation: 8.00 goals per episode")
+        );
+        // Tracking runs have none.
+        let tracking: Vec<IterationRecord> = (1..=2).map(|i| record(i, Some(false))).collect();
+        let summary = RunSummary::from_records("walk", 0, &tracking, StopReason::IterationBudget);
+        assert!(summary.goal_evaluation.is_none());
     }
 }

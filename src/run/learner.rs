@@ -1,0 +1,301 @@
+//! The run loop over any [`Learner`]: the harness's side of training (docs/train.md, "The
+//! training loop"). One iteration: the learner iterates (the active clock runs), the divergence
+//! guard checks its report, the task's record and, on evaluation iterations, the evaluation
+//! protocol's summary are recorded, checkpoints are saved when due, and the stop rule decides.
+
+use super::checkpoint::Checkpoint;
+use super::clip_sampling::ClipSampling;
+use super::config::{ResolvedConfig, RunConfig};
+use super::divergence::{DivergenceGuard, non_finite_report};
+use super::error::RunError;
+use super::evaluation::{
+    EnvEpisodeRow, EnvEvaluation, EvaluationError, EvaluationSummary, episode_rows,
+    evaluation_start_times, summarize,
+};
+use super::library_evaluation::LibraryPlan;
+use super::metrics::{DivergenceEvent, IterationStats};
+use super::session::RunSession;
+use super::summary::RunSummary;
+use crate::env::{Rollout, TaskRecord, TrackedMotion};
+use crate::motion::ReferenceMotion;
+use crate::plan::PhysicsOverflow;
+
+/// What the run loop drives: a learner's iterations, its evaluation and its state. The loop
+/// knows nothing else of it (one GPU's PPO trainer, the replicas of several GPUs, the latent
+/// controller's distillation: `train` implements it for each). Errors a learner reports of
+/// its own go in [`RunError::Learner`].
+pub trait Learner {
+    fn iterate(&mut self) -> Result<IterationStats, RunError>;
+    fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, RunError>;
+    fn evaluation_steps(&self) -> u32;
+    /// The task's record of the iteration just run, with its evaluation when `evaluate` (None
+    /// for a task whose evaluation is the tracking protocol's episodes).
+    fn task_record(&mut self, evaluate: bool) -> Result<Option<TaskRecord>, RunError>;
+    fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), RunError>;
+    fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), RunError>;
+    fn physics_overflow(&mut self) -> Result<PhysicsOverflow, RunError>;
+    /// Lines for the run's output since the last call.
+    fn notes(&mut self) -> Vec<String>;
+    /// Each clip's part in the reset sampler, for a library's evaluation (none where the
+    /// learner does not say).
+    fn clip_sampling(&mut self) -> Result<Option<Vec<ClipSampling>>, RunError> {
+        Ok(None)
+    }
+}
+
+/// How an evaluation's episodes are scored: one clip (the paper's protocol), or a motion
+/// library's clips each by their own episodes ([`LibraryPlan`]).
+pub enum Scorer {
+    /// Where each env's episode started (s).
+    Clip {
+        start_times: Vec<f64>,
+    },
+    Library(LibraryPlan),
+}
+
+impl Scorer {
+    /// The scorer of `rollout`'s episodes (the evaluation rollout of a run on `motion`);
+    /// `task_evaluates` when the task's own record is its evaluation (no tracking episodes are
+    /// scored).
+    pub fn new(
+        rollout: &Rollout,
+        motion: TrackedMotion<'_>,
+        run: &RunConfig,
+        task_evaluates: bool,
+    ) -> Result<Scorer, RunError> {
+        Ok(match motion {
+            _ if task_evaluates => Scorer::Clip {
+                start_times: Vec::new(),
+            },
+            TrackedMotion::Clip(motion) => Scorer::for_clip(motion, run),
+            TrackedMotion::Library { .. } => Scorer::Library(Scorer::library_plan(rollout)?),
+        })
+    }
+
+    /// One clip's scorer: the paper's protocol on `run.eval_envs` envs.
+    pub fn for_clip(motion: &ReferenceMotion, run: &RunConfig) -> Scorer {
+        let clip = motion.clip();
+        Scorer::Clip {
+            start_times: evaluation_start_times(
+                run.eval_start,
+                run.eval_envs,
+                clip.duration(),
+                clip.loop_mode(),
+            ),
+        }
+    }
+
+    /// The evaluation's summary of `episodes` (of `episode_steps` control steps at most).
+    pub fn summarize(
+        &self,
+        episodes: &[EnvEvaluation],
+        episode_steps: u32,
+        threshold: f64,
+    ) -> Result<EvaluationSummary, EvaluationError> {
+        match self {
+            Scorer::Clip { .. } => summarize(episodes, episode_steps, threshold),
+            Scorer::Library(plan) => plan.summarize(episodes, threshold),
+        }
+    }
+
+    /// Every env's episode, as `evaluation.json` lists them.
+    pub fn rows(&self, episodes: &[EnvEvaluation]) -> Vec<EnvEpisodeRow> {
+        match self {
+            Scorer::Clip { start_times } => episode_rows(episodes, start_times),
+            Scorer::Library(plan) => plan.episode_rows(episodes),
+        }
+    }
+
+    /// How the evaluation rollout `rollout` (of a motion library) plays every clip.
+    pub fn library_plan(rollout: &Rollout) -> Result<LibraryPlan, RunError> {
+        let evaluations = rollout.clip_evaluations().ok_or_else(|| {
+            RunError::Internal("the evaluation rollout has no clip plan".to_owned())
+        })?;
+        Ok(LibraryPlan::new(
+            rollout.library(),
+            evaluations,
+            rollout.num_envs(),
+        )?)
+    }
+}
+
+/// The loop itself, on a built trainer (`setup`: when building it started; `notes`: what to
+/// say about it).
+pub fn run_loop<C: ResolvedConfig, L: Learner>(
+    mut session: RunSession<C>,
+    trainer: &mut L,
+    checkpoint: Option<Checkpoint>,
+    scorer: &Scorer,
+    setup: std::time::Instant,
+    notes: Vec<String>,
+) -> Result<RunSummary, RunError> {
+    let run = session.config().run().clone();
+    // Outside the active time; printed so that a user (or a search) sees what a run costs.
+    session.progress().note(&format!(
+        "setup {:.2} s (plans, kernels, CUDA graphs; not active time)",
+        setup.elapsed().as_secs_f64()
+    ));
+    for note in &notes {
+        session.progress().note(note);
+    }
+    if let Some(checkpoint) = &checkpoint {
+        trainer.restore(checkpoint)?;
+        session.progress().note(&format!(
+            "resumed at iteration {} ({:.2} s active)",
+            checkpoint.meta.iteration, checkpoint.meta.active_time_s
+        ));
+    }
+    let threshold = run.success_rate;
+    // The state to go back to if training diverges: where this run starts (a resumed run's
+    // checkpoint, or the initial one), then every checkpoint it saves.
+    let mut guard = {
+        let mut initial = session.new_checkpoint()?;
+        trainer.save_into(&mut initial)?;
+        DivergenceGuard::new(initial, run.max_divergence_restores)?
+    };
+    let mut last_episodes = Vec::new();
+    let mut wall = WallTime::starting(setup.elapsed().as_secs_f64());
+    loop {
+        session.start_iteration();
+        let stats = trainer.iterate()?;
+        let cause = non_finite_report(&stats);
+        let mut step = session.finish_iteration(stats);
+        for note in trainer.notes() {
+            session.progress().note(&note);
+        }
+        if let Some(cause) = cause {
+            let event = go_back(&mut guard, trainer, &mut session, step.iteration, &cause)?;
+            step.diverged(event);
+        }
+        let started = std::time::Instant::now();
+        let task = trainer.task_record(step.evaluate)?;
+        let task_evaluates = task.is_some();
+        if let Some(task) = task {
+            if step.evaluate {
+                wall.evaluation(started);
+            }
+            step.set_task(task);
+        }
+        let evaluation = if step.evaluate && !task_evaluates {
+            let started = std::time::Instant::now();
+            let episodes = trainer.evaluate()?;
+            wall.evaluation(started);
+            let mut summary = scorer.summarize(&episodes, trainer.evaluation_steps(), threshold)?;
+            if let Some(library) = summary.library.as_mut()
+                && let Some(sampling) = trainer.clip_sampling()?
+            {
+                library.set_sampling(&sampling);
+            }
+            last_episodes = episodes;
+            Some(summary)
+        } else {
+            None
+        };
+        let started = std::time::Instant::now();
+        let next = session.record(step, evaluation)?;
+        if next.checkpoint_due {
+            let mut checkpoint = session.new_checkpoint()?;
+            trainer.save_into(&mut checkpoint)?;
+            match guard.keep(&checkpoint) {
+                None => session.save_checkpoint(&checkpoint)?,
+                // The report was finite but a saved tensor is not (the normalizer's or the
+                // optimizer's state): not saved; training goes back instead.
+                Some(cause) => {
+                    let iteration = session.iteration();
+                    go_back(&mut guard, trainer, &mut session, iteration, &cause)?;
+                }
+            }
+        }
+        wall.bookkeeping(started);
+        if let Some(reason) = next.stop {
+            let line = wall.describe(session.active_time_s());
+            session.progress().note(&line);
+            session
+                .run_dir()
+                .write_last_evaluation(&scorer.rows(&last_episodes))?;
+            // Iteration limits no longer print from the kernels (kernels_py/physics.py); the
+            // flags they set are summed here, once, outside the timed loop.
+            match trainer.physics_overflow() {
+                Ok(overflow) => {
+                    if let Some(line) = overflow.describe() {
+                        session.progress().note(&line);
+                    }
+                }
+                Err(e) => session.progress().note(&format!(
+                    "warning: could not read the physics' overflow flags: {e}"
+                )),
+            }
+            return session.finish(reason);
+        }
+    }
+}
+
+/// Restores the guard's last good state (learning rate halved) after `cause` was found not
+/// finite at `iteration`, and says so; errors when no restore is left.
+fn go_back<C: ResolvedConfig>(
+    guard: &mut DivergenceGuard,
+    trainer: &mut impl Learner,
+    session: &mut RunSession<C>,
+    iteration: u64,
+    cause: &str,
+) -> Result<DivergenceEvent, RunError> {
+    let (state, event) = guard.restore_point(iteration, cause)?;
+    trainer.restore(&state)?;
+    let allowed = session.config().run().max_divergence_restores;
+    session.progress().note(&format!(
+        "warning: iteration {iteration}: {cause} not finite; training goes back to iteration {} with learning rate {:.3e} (restore {} of {})",
+        event.restored_iteration,
+        event.learning_rate,
+        event.restores,
+        allowed
+    ));
+    Ok(event)
+}
+
+/// Where a run's wall time went, printed at its end, so that a user (or a search) sees what
+/// the evaluations and the files cost beside the active training time.
+struct WallTime {
+    start: std::time::Instant,
+    setup_s: f64,
+    evaluation_s: f64,
+    evaluations: u32,
+    bookkeeping_s: f64,
+}
+
+impl WallTime {
+    fn starting(setup_s: f64) -> WallTime {
+        WallTime {
+            start: std::time::Instant::now(),
+            setup_s,
+            evaluation_s: 0.0,
+            evaluations: 0,
+            bookkeeping_s: 0.0,
+        }
+    }
+
+    fn evaluation(&mut self, started: std::time::Instant) {
+        self.evaluation_s += started.elapsed().as_secs_f64();
+        self.evaluations += 1;
+    }
+
+    fn bookkeeping(&mut self, started: std::time::Instant) {
+        self.bookkeeping_s += started.elapsed().as_secs_f64();
+    }
+
+    fn describe(&self, active_s: f64) -> String {
+        let each = if self.evaluations > 0 {
+            self.evaluation_s / f64::from(self.evaluations)
+        } else {
+            0.0
+        };
+        format!(
+            "wall {:.2} s after setup {:.2} s: active {active_s:.2} s, {} evaluations {:.2} s ({:.3} s each), metrics/curve/checkpoints {:.2} s",
+            self.start.elapsed().as_secs_f64(),
+            self.setup_s,
+            self.evaluations,
+            self.evaluation_s,
+            each,
+            self.bookkeeping_s
+        )
+    }
+}
