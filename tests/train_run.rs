@@ -484,7 +484,7 @@ fn curve_record(i: u64) -> IterationRecord {
         termination: Default::default(),
         evaluation: None,
         divergence: None,
-        goal: None,
+        task: None,
     }
 }
 
@@ -492,7 +492,7 @@ fn curve_record(i: u64) -> IterationRecord {
 fn a_goal_runs_curve_draws_goals_per_episode_instead_of_a_success_rate() {
     let records: Vec<IterationRecord> = (1..=40)
         .map(|i| IterationRecord {
-            goal: Some(GoalRecord {
+            task: Some(TaskRecord::Goal(GoalRecord {
                 rollout: GoalRates {
                     episodes: 10,
                     goals_per_episode: 1.0,
@@ -503,7 +503,7 @@ fn a_goal_runs_curve_draws_goals_per_episode_instead_of_a_success_rate() {
                     goals_per_episode: 0.2 * i as f64,
                     fall_rate: 0.1,
                 }),
-            }),
+            })),
             ..curve_record(i)
         })
         .collect();
@@ -511,14 +511,14 @@ fn a_goal_runs_curve_draws_goals_per_episode_instead_of_a_success_rate() {
         &records,
         "reach (seed 0)",
         300.0,
-        curve::RightAxis::GoalsPerEpisode,
+        curve::RightAxis::TaskScore,
     )
     .unwrap();
     let pixels = curve_pixels(png);
     assert!(
-        count(&pixels, curve::GOALS_COLOR) > 500,
+        count(&pixels, curve::TASK_SCORE_COLOR) > 500,
         "{}",
-        count(&pixels, curve::GOALS_COLOR)
+        count(&pixels, curve::TASK_SCORE_COLOR)
     );
     assert!(count(&pixels, curve::EPISODE_LENGTH_COLOR) > 500);
     assert_eq!(
@@ -551,7 +551,7 @@ fn the_learning_curve_is_a_png_with_both_series() {
         "{}",
         count(curve::SUCCESS_RATE_COLOR)
     );
-    assert_eq!(count(curve::GOALS_COLOR), 0);
+    assert_eq!(count(curve::TASK_SCORE_COLOR), 0);
     // No records at all still draws (a run killed before its first iteration).
     assert!(curve::learning_curve_png(&[], "empty", 300.0, threshold).is_ok());
 }

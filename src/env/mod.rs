@@ -55,6 +55,6 @@ pub use rollout::{EpisodeState, Rollout};
 pub use stages::{RolloutStage, Stage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 pub use storage::{ActStorage, RolloutStorage};
-pub use task::TaskRecord;
+pub use task::{TaskEvaluation, TaskRecord, TaskScore};
 pub use tracked::TrackedMotion;
 pub use trajectory::{Trajectory, TrajectoryFrames};

@@ -180,7 +180,7 @@ mod tests {
             termination: Default::default(),
             evaluation: Some(evaluation),
             divergence: None,
-            goal: None,
+            task: None,
         }
     }
 

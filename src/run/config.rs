@@ -23,9 +23,9 @@ pub trait ResolvedConfig: Clone + PartialEq + Send + Sync + 'static {
     fn frames_per_gpu_iteration(&self) -> u64;
     /// The longest training episode in control steps (the learning curve's scale).
     fn max_episode_steps(&self) -> u32;
-    /// Whether the task records goals (the learning curve's right axis is then goals per
-    /// episode, not the success rate).
-    fn counts_goals(&self) -> bool;
+    /// Whether the task evaluates itself (its record's score, not the tracking protocol's
+    /// success rate, is the learning curve's right axis).
+    fn task_evaluates(&self) -> bool;
     /// The TOML of `config.toml`.
     fn to_toml(&self) -> Result<String, BoxedError>;
     /// Reads, parses and validates a `config.toml`.

@@ -1,7 +1,7 @@
 //! `curve.png`: the learning curve of a run: mean episode length (left axis, every iteration)
 //! and the evaluation (right axis, every evaluation) against active training time: a tracking
-//! run's success rate with the success threshold as a dashed line, a goal run's goals per
-//! episode with the last fall rate in the legend. Drawn into a pixel buffer with the embedded
+//! run's success rate with the success threshold as a dashed line, or the task's own score (a
+//! goal run's goals per episode, the last fall rate in the legend). Drawn into a pixel buffer with the embedded
 //! font (as `hpo/plot.rs`), so it needs no system fonts or libraries.
 
 use std::path::Path;
@@ -10,6 +10,7 @@ use plotters::prelude::*;
 
 use super::error::RunError;
 use super::metrics::IterationRecord;
+use crate::env::TaskScore;
 use crate::files::write_bytes_atomically;
 
 pub const CURVE_WIDTH: u32 = 1000;
@@ -17,7 +18,7 @@ pub const CURVE_HEIGHT: u32 = 600;
 /// Series colors (tests look for them in the image).
 pub const EPISODE_LENGTH_COLOR: RGBColor = RGBColor(40, 100, 200);
 pub const SUCCESS_RATE_COLOR: RGBColor = RGBColor(215, 80, 30);
-pub const GOALS_COLOR: RGBColor = RGBColor(30, 150, 70);
+pub const TASK_SCORE_COLOR: RGBColor = RGBColor(30, 150, 70);
 
 /// What the curve's right axis shows.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -25,8 +26,9 @@ pub enum RightAxis {
     /// A tracking run's evaluation success rate, with `threshold` (the run's success rate)
     /// dashed.
     SuccessRate { threshold: f64 },
-    /// A goal run's evaluation goals per episode (the goal task has no success rate).
-    GoalsPerEpisode,
+    /// The task's own evaluation score (the goal task's goals per episode: it has no success
+    /// rate).
+    TaskScore,
 }
 
 /// The right axis's series: its points, label, color and upper bound.
@@ -52,26 +54,24 @@ fn right_series(records: &[IterationRecord], axis: RightAxis) -> RightSeries {
             top: 1.05,
             threshold: Some(threshold),
         },
-        RightAxis::GoalsPerEpisode => {
-            let evaluations: Vec<(f64, f64, f64)> = records
+        RightAxis::TaskScore => {
+            let scores: Vec<(f64, TaskScore)> = records
                 .iter()
-                .filter_map(|r| {
-                    let e = r.goal.as_ref()?.evaluation.as_ref()?;
-                    Some((r.active_time_s, e.goals_per_episode, e.fall_rate))
-                })
-                .filter(|&(t, g, _)| finite(&(t, g)))
+                .filter_map(|r| Some((r.active_time_s, r.task.as_ref()?.score()?)))
+                .filter(|(t, s)| finite(&(*t, s.value)))
                 .collect();
-            let most = evaluations.iter().map(|e| e.1).fold(0.0, f64::max);
-            let label = match evaluations.last() {
-                Some(&(_, goals, falls)) if falls.is_finite() => {
-                    format!("goals per episode (last {goals:.2}, fall rate {falls:.3})")
-                }
-                _ => "goals per episode".to_owned(),
+            let most = scores.iter().map(|(_, s)| s.value).fold(0.0, f64::max);
+            let label = match scores.last() {
+                Some((_, s)) => match &s.detail {
+                    Some(detail) => format!("{} (last {:.2}, {detail})", s.name, s.value),
+                    None => format!("{} (last {:.2})", s.name, s.value),
+                },
+                None => "task evaluation".to_owned(),
             };
             RightSeries {
-                points: evaluations.iter().map(|&(t, g, _)| (t, g)).collect(),
+                points: scores.iter().map(|(t, s)| (*t, s.value)).collect(),
                 label,
-                color: GOALS_COLOR,
+                color: TASK_SCORE_COLOR,
                 top: (most * 1.1).max(1.0),
                 threshold: None,
             }
@@ -132,8 +132,15 @@ pub fn learning_curve_png(
         chart
             .configure_secondary_axes()
             .y_desc(match right {
-                RightAxis::SuccessRate { .. } => "evaluation success rate",
-                RightAxis::GoalsPerEpisode => "evaluation goals per episode",
+                RightAxis::SuccessRate { .. } => "evaluation success rate".to_owned(),
+                RightAxis::TaskScore => format!(
+                    "evaluation {}",
+                    records
+                        .iter()
+                        .rev()
+                        .find_map(|r| r.task.as_ref()?.score())
+                        .map_or("score", |s| s.name)
+                ),
             })
             .label_style(("sans-serif", 15))
             .axis_desc_style(("sans-serif", 17))

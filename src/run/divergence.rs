@@ -166,7 +166,7 @@ mod tests {
                 learning_rate: 2.5e-4,
                 restores: 1,
             }),
-            goal: None,
+            task: None,
         };
         let line = serde_json::to_string(&record).unwrap();
         assert!(line.contains("\"divergence\":{\"cause\":\"KL\""), "{line}");

@@ -158,7 +158,7 @@ fn the_clips_table_lists_each_clip_with_its_time_to_threshold() {
         termination: Default::default(),
         evaluation: Some(plan.summarize(&episodes(&plan, fail), 0.9).unwrap()),
         divergence: None,
-        goal: None,
+        task: None,
     };
     assert!(clips_table(&[]).is_none());
     let records = [record(1, &[0, 3, 5]), record(2, &[5]), record(3, &[])];

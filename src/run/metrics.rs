@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use super::error::RunError;
 use super::evaluation::EvaluationSummary;
-use crate::env::{FailureCause, GoalRecord};
+use crate::env::{FailureCause, TaskRecord};
 use crate::files::json::nan_from_null;
 use crate::files::write_bytes_atomically;
 
@@ -148,9 +148,9 @@ pub struct IterationRecord {
     /// state (src/run/divergence.rs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub divergence: Option<DivergenceEvent>,
-    /// The goal task's goals per episode and falls (absent when tracking).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub goal: Option<GoalRecord>,
+    /// The task's own record (absent when tracking), under the task's name (`"goal": {..}`).
+    #[serde(flatten, default, skip_serializing_if = "Option::is_none")]
+    pub task: Option<TaskRecord>,
 }
 
 /// What the GPU reports about one iteration (the per-iteration statistics copy).
@@ -357,6 +357,55 @@ impl MetricsLog {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::env::{GoalRates, GoalRecord};
+
+    /// A task's record is a key of the line named after the task (`"goal": {..}`, as before
+    /// tasks owned their records), absent when tracking, and reads back through the log.
+    #[test]
+    fn a_task_record_is_its_own_key_of_the_line_and_reads_back() {
+        let rates = |episodes: u64, goals: f64| GoalRates {
+            episodes,
+            goals_per_episode: goals,
+            fall_rate: 0.25,
+        };
+        let tracking = IterationRecord {
+            iteration: 1,
+            active_time_s: 0.5,
+            frames: 100,
+            frames_per_s: 200.0,
+            mean_return: 1.0,
+            mean_episode_length: 10.0,
+            update: UpdateStats::default(),
+            termination: EpisodeEnds::default(),
+            evaluation: None,
+            divergence: None,
+            task: None,
+        };
+        let goal = IterationRecord {
+            iteration: 2,
+            task: Some(TaskRecord::Goal(GoalRecord {
+                rollout: rates(4, 2.0),
+                evaluation: Some(rates(32, 3.0)),
+            })),
+            ..tracking.clone()
+        };
+        let line = serde_json::to_value(&goal).expect("json");
+        assert_eq!(line["goal"]["evaluation"]["goals_per_episode"], 3.0);
+        assert!(line.get("task").is_none(), "{line}");
+        assert!(
+            serde_json::to_value(&tracking)
+                .expect("json")
+                .get("goal")
+                .is_none()
+        );
+        let dir = tempfile::tempdir().expect("a directory");
+        let path = dir.path().join("metrics.jsonl");
+        let mut log = MetricsLog::create(&path).expect("a log");
+        log.append(&tracking).expect("appended");
+        log.append(&goal).expect("appended");
+        let back = MetricsLog::read(&path).expect("read back").records;
+        assert_eq!(back, [tracking, goal]);
+    }
 
     #[test]
     fn episode_ends_are_fractions_of_the_episodes_that_ended() {

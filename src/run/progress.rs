@@ -194,11 +194,11 @@ impl Progress {
             }
         };
         let status = self.budget.status(record, since_first);
-        // The goal task's evaluation (docs/goal.md) has a line of its own.
+        // A task's own evaluation (the goal task's, docs/goal.md) has a line of its own.
         let goal_line = record
-            .goal
+            .task
             .as_ref()
-            .and_then(|g| g.progress_line(record.iteration, record.active_time_s));
+            .and_then(|t| t.progress_line(record.iteration, record.active_time_s));
         if let Some(bar) = &self.bar {
             bar.set_position((self.budget.fraction(record) * BAR_STEPS as f64) as u64);
             bar.set_message(format!(
@@ -337,7 +337,7 @@ mod tests {
                 library: None,
             }),
             divergence: None,
-            goal: None,
+            task: None,
         }
     }
 

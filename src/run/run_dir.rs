@@ -264,8 +264,8 @@ impl RunDir {
         }
         // The left axis reaches at least the episode limit and every length drawn (a goal
         // episode's own limit, goal.episode_s, is in the lengths once an episode ends by it).
-        let right = if config.counts_goals() {
-            RightAxis::GoalsPerEpisode
+        let right = if config.task_evaluates() {
+            RightAxis::TaskScore
         } else {
             RightAxis::SuccessRate {
                 threshold: config.run().success_rate,

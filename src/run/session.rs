@@ -62,9 +62,7 @@ impl IterationStep {
     /// The task's record of this iteration (its rollout's episodes, and its evaluation when
     /// one ran).
     pub fn set_task(&mut self, task: TaskRecord) {
-        match task {
-            TaskRecord::Goal(goal) => self.record.goal = Some(goal),
-        }
+        self.record.task = Some(task);
     }
 }
 
@@ -292,7 +290,7 @@ impl<C: ResolvedConfig> RunSession<C> {
             termination: stats.termination,
             evaluation: None,
             divergence: None,
-            goal: None,
+            task: None,
         };
         IterationStep {
             iteration,

@@ -43,10 +43,10 @@ pub struct RunSummary {
     /// A motion library's times to its two criteria (absent for one clip).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub library: Option<LibraryTimes>,
-    /// The goal task's last evaluation: goals per episode and the fall rate (absent when
-    /// tracking).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub goal_evaluation: Option<crate::env::GoalRates>,
+    /// The task's last evaluation, under its own key (`goal_evaluation`: goals per episode and
+    /// the fall rate); absent when tracking.
+    #[serde(flatten, default, skip_serializing_if = "Option::is_none")]
+    pub task_evaluation: Option<crate::env::TaskEvaluation>,
 }
 
 /// When a motion library's run first met each of its success criteria (active seconds; null:
@@ -114,10 +114,10 @@ impl RunSummary {
             time_to_robotics_rule_success_s: robotics_rule.map(|r| r.active_time_s),
             last_evaluation: records.iter().rev().find_map(|r| r.evaluation.clone()),
             library,
-            goal_evaluation: records
+            task_evaluation: records
                 .iter()
                 .rev()
-                .find_map(|r| r.goal.as_ref().and_then(|g| g.evaluation.clone())),
+                .find_map(|r| r.task.as_ref()?.evaluation()),
         }
     }
 
@@ -186,12 +186,8 @@ impl RunSummary {
                 e.ee_orientation_error_rad
             );
         }
-        if let Some(g) = &self.goal_evaluation {
-            let _ = writeln!(
-                out,
-                "last goal evaluation: {:.2} goals per episode, fall rate {:.3} ({} episodes)",
-                g.goals_per_episode, g.fall_rate, g.episodes
-            );
+        if let Some(t) = &self.task_evaluation {
+            let _ = writeln!(out, "{}", t.describe());
         }
         out
     }
@@ -233,7 +229,7 @@ pub(crate) mod test_records {
                 library: None,
             }),
             divergence: None,
-            goal: None,
+            task: None,
         }
     }
 
@@ -357,7 +353,7 @@ mod tests {
     #[test]
     fn the_last_goal_evaluation_reaches_the_summary_and_the_progress_line() {
         use super::test_records::record;
-        use crate::env::{GoalRates, GoalRecord, GoalTally};
+        use crate::env::{GoalRates, GoalRecord, GoalTally, TaskEvaluation, TaskRecord};
         use crate::run::{IterationRecord, StopReason};
         let rates = |goals: u64, falls: u64| {
             GoalRates::from(&GoalTally {
@@ -368,15 +364,15 @@ mod tests {
         };
         let mut records: Vec<IterationRecord> = (1..=4).map(|i| record(i, None)).collect();
         for (i, r) in records.iter_mut().enumerate() {
-            r.goal = Some(GoalRecord {
+            r.task = Some(TaskRecord::Goal(GoalRecord {
                 rollout: rates(10, 4),
                 evaluation: (i % 2 == 1).then(|| rates(64 * (i as u64 + 1), 8)),
-            });
+            }));
         }
         let progress_line = |r: &IterationRecord| {
-            r.goal
+            r.task
                 .as_ref()
-                .and_then(|g| g.progress_line(r.iteration, r.active_time_s))
+                .and_then(|t| t.progress_line(r.iteration, r.active_time_s))
         };
         assert_eq!(progress_line(&records[0]), None);
         let line = progress_line(&records[3]).expect("an evaluation iteration");
@@ -385,11 +381,13 @@ mod tests {
             "{line}"
         );
         let summary = RunSummary::from_records("walk", 0, &records, StopReason::IterationBudget);
-        let last = summary
-            .goal_evaluation
-            .as_ref()
-            .expect("the last goal evaluation");
+        let Some(TaskEvaluation::Goal(last)) = &summary.task_evaluation else {
+            panic!("the last goal evaluation");
+        };
         assert_eq!(last.goals_per_episode, 8.0);
+        // summary.json keeps it under the goal task's key.
+        let json = serde_json::to_value(&summary).expect("json");
+        assert_eq!(json["goal_evaluation"]["goals_per_episode"], 8.0);
         assert!(
             summary
                 .report()
@@ -398,6 +396,6 @@ mod tests {
         // Tracking runs have none.
         let tracking: Vec<IterationRecord> = (1..=2).map(|i| record(i, Some(false))).collect();
         let summary = RunSummary::from_records("walk", 0, &tracking, StopReason::IterationBudget);
-        assert!(summary.goal_evaluation.is_none());
+        assert!(summary.task_evaluation.is_none());
     }
 }

@@ -127,15 +127,9 @@ pub fn scalars(record: &IterationRecord) -> Vec<(String, f32)> {
             }
         }
     }
-    if let Some(goal) = &record.goal {
-        put(
-            "goal/rollout/goals_per_episode".into(),
-            goal.rollout.goals_per_episode,
-        );
-        put("goal/rollout/fall_rate".into(), goal.rollout.fall_rate);
-        if let Some(e) = &goal.evaluation {
-            put("goal/eval/goals_per_episode".into(), e.goals_per_episode);
-            put("goal/eval/fall_rate".into(), e.fall_rate);
+    if let Some(task) = &record.task {
+        for (tag, value) in task.scalars() {
+            put(tag, value);
         }
     }
     if let Some(d) = &record.divergence {
@@ -183,7 +177,7 @@ mod tests {
             termination: EpisodeEnds::default(),
             evaluation: None,
             divergence: None,
-            goal: None,
+            task: None,
         };
         let tags: Vec<String> = scalars(&record).into_iter().map(|(t, _)| t).collect();
         assert!(!tags.contains(&"train/return".to_string()), "{tags:?}");

@@ -933,7 +933,7 @@ impl ResolvedConfig for TrainConfig {
         self.env.max_episode_steps
     }
 
-    fn counts_goals(&self) -> bool {
+    fn task_evaluates(&self) -> bool {
         self.goal.is_some()
     }
 
