@@ -10,6 +10,11 @@ BIN=$(cd "$BIN" && pwd)
 OUT=${OUT:-/tmp/instantmimic-out}
 mkdir -p "$OUT"
 export INSTANTMIMIC_MOTIONS=${INSTANTMIMIC_MOTIONS:-$BIN/motions}
+# The Python with TensorBoard's reader (gpu_tensorboard reads the event files back with it): the
+# GPU machine's image has one in /opt/torch/.venv.
+if [ -z "${INSTANTMIMIC_BUILD_PYTHON:-}" ] && [ -x /opt/torch/.venv/bin/python3 ]; then
+  export INSTANTMIMIC_BUILD_PYTHON=/opt/torch/.venv/bin/python3
+fi
 
 # The CUDA toolkit's library directory (cuBLAS), appended to LD_LIBRARY_PATH.
 toolkit_libs() {

@@ -14,9 +14,9 @@ GPUS=${GPUS:-$(nvidia-smi --query-gpu=index --format=csv,noheader | tr '\n' ' ')
 summary="$OUT/summary.txt"
 : > "$summary"
 
-# Longest first (seconds measured on an H100, 2026-11), so the last worker is not left alone
-# with a long binary; a binary not listed goes last.
-order="gpu_overlap gpu_train gpu_replay gpu_ppo gpu_rollout gpu_divergence gpu_env_kernels gpu_physics gpu_reference_table gpu_blas gpu_cuda"
+# Longest first (seconds measured on H100s and H200s, 2026-11), so the last worker is not left
+# alone with a long binary; a binary not listed goes last.
+order="gpu_goal_latent gpu_goal gpu_latent gpu_library_eval gpu_train gpu_tensorboard gpu_divergence gpu_replay gpu_blas gpu_ppo gpu_rollout gpu_env_kernels gpu_reference_table gpu_cuda gpu_physics"
 queue="$OUT/queue.txt"; : > "$queue"
 for name in $order $(cd "$BIN" && ls gpu_*); do
   [ -x "$BIN/$name" ] || continue
