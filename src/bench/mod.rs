@@ -1,6 +1,7 @@
 //! Benchmarks of the real thing, shared by `instantmimic bench ...` and `benches/`: physics,
-//! the rollout, the GEMMs, whole training iterations against the physics floor (with and
-//! without the overlapped update), and whole training iterations on 1, 2, ... GPUs.
+//! the rollout, the GEMMs, whole training iterations against the physics floor (with the
+//! actor's and the critic's update concurrent and one after the other), and whole training
+//! iterations on 1, 2, ... GPUs.
 
 mod full;
 mod gemm;

@@ -72,7 +72,7 @@ pub enum GemmPath {
 
 /// The policy's GEMM path and, for cuBLAS, the handle (shared by the rollout's policy, the
 /// evaluation's and the update: all record onto the GPU's main stream, one after the other;
-/// the overlapped loop's rollout policy has a handle of its own, [`PolicyGemm::separate`]).
+/// the critic of concurrent networks has a handle of its own, [`PolicyGemm::separate`]).
 #[derive(Clone)]
 pub struct PolicyGemm {
     setting: GemmSetting,
@@ -131,7 +131,7 @@ impl PolicyGemm {
 
     /// The same path with a cuBLAS handle, and so a workspace, of its own (Warp tiles need
     /// none): for GEMMs recorded into a branch of a graph that may run at the same time as
-    /// this one's (the overlapped loop's rollout beside the update), which must not share a
+    /// this one's (the critic's branch beside the actor's, `ppo.concurrent_networks`), which must not share a
     /// workspace. Not inside a capture.
     pub fn separate(&self, gpu: &Gpu) -> Result<PolicyGemm, CudaError> {
         match self.path {
