@@ -225,6 +225,33 @@ fn an_empty_motion_file_is_called_empty_and_says_what_a_motion_file_holds() {
     }
 }
 
+/// An empty robot motion file (mjlab's CSV, a NumPy archive) or mocap file is called empty too,
+/// with what a file of its format holds, not the format parser's own complaint (a zip's missing
+/// end record, "no frames").
+#[test]
+fn an_empty_robot_or_mocap_file_is_called_empty_with_what_its_format_holds() {
+    let dir = tempfile::tempdir().expect("temporary directory");
+    for (name, holds) in [
+        ("empty.csv", "one frame a line"),
+        ("empty.npz", "NumPy's savez"),
+        ("empty.bvh", "HIERARCHY"),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, "").expect("write the file");
+        let path = path.to_str().expect("utf-8 path");
+        let args = ["motion", "inspect", path, "--character", "g1"];
+        let err = failed(&run(&args, None), &format!("{args:?}"));
+        assert!(
+            err.contains(&format!("{name}: "))
+                && err.contains("empty")
+                && err.contains(holds)
+                && !err.contains("EOCD")
+                && err.trim().lines().count() == 1,
+            "{args:?}: {err}"
+        );
+    }
+}
+
 /// Newcomer report row 30 asked for a hint for a BVH file; a `.bvh` is now imported on the fly
 /// (tests/motion_import_cli.rs). A BVH under a DeepMimic name (`.txt`) is named as BVH, with
 /// the two ways to read it, not "not valid JSON".

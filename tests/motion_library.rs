@@ -483,3 +483,30 @@ fn the_shipped_library_config_lists_every_built_in_clip() {
     assert_eq!(&clips[..names.len()], names.as_slice());
     assert!(clips[names.len()..].iter().all(|c| c.starts_with("long/")));
 }
+
+/// Newcomer report rows 34-35 for the files a user writes besides the configuration: a
+/// library file's and a character description's wrong types are one line that quotes the
+/// line, in words ("a list"), not serde's ("a sequence") or Rust's ("u32").
+#[test]
+fn a_library_file_or_character_descriptions_wrong_type_is_one_line_in_words() {
+    use instantmimic::motion::{Character, LibraryConfig};
+    let err = LibraryConfig::from_toml("[motion_library]\nclips = \"walk\"\n", "lib.toml")
+        .expect_err("clips must be a list")
+        .to_string();
+    assert!(
+        err.contains("lib.toml")
+            && err.contains("line 2")
+            && err.contains("`clips = \"walk\"`")
+            && err.contains("expected a list")
+            && !err.contains("sequence")
+            && !err.contains('\n'),
+        "{err}"
+    );
+    let err = Character::from_json(r#"{"name": "x", "joints": 5}"#, "c.json")
+        .expect_err("joints must be a list")
+        .to_string();
+    assert!(
+        err.contains("c.json") && err.contains("expected a list") && !err.contains("sequence"),
+        "{err}"
+    );
+}

@@ -65,5 +65,11 @@ if [ "$#" -eq 0 ]; then
   cargo fmt --check
   cargo clippy --all-targets --all-features -- -D warnings
   cargo test --features gpu --no-run --quiet
+  # The README's install step, as a new user takes it (`cargo install --path .`), into a
+  # directory of its own instead of ~/.cargo; tests/readme_commands.rs then runs the README's
+  # commands with that directory on the PATH.
+  cargo install --path . --locked --quiet --force --root target/new-user --target-dir target
+  INSTANTMIMIC_INSTALLED_BIN=$PWD/target/new-user/bin
+  export INSTANTMIMIC_INSTALLED_BIN
 fi
 exec cargo test "$@"

@@ -6,6 +6,7 @@
 mod atomic;
 pub mod event_file;
 pub mod json;
+pub mod messages;
 pub mod tagged;
 
 pub use atomic::{is_temporary, write_atomically, write_bytes_atomically};

@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::files::messages::toml_error_line;
 use crate::hpo::backend::chat::ChatSettings;
 use crate::hpo::backend::command::CommandSettings;
 use crate::hpo::error::HpoError;
@@ -18,7 +19,6 @@ use crate::hpo::space::{
 };
 use crate::hpo::synthetic::SyntheticSpec;
 use crate::hpo::trial::TrialSpec;
-use crate::train::toml_error_line;
 
 /// A loaded, checked HPO configuration. Everything a search needs is resolved into it (the
 /// base configuration and the prompt templates included), so a run directory's snapshot of it

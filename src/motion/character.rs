@@ -10,6 +10,7 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::Deserialize;
 
 use super::error::CharacterError;
+use crate::files::messages::plain_type_names;
 
 /// The humanoid's compiled description, embedded so that a run needs no file beside the binary.
 pub const HUMANOID_JSON: &str = include_str!("../../configs/characters/humanoid.json");
@@ -350,11 +351,10 @@ impl Character {
 
     /// Parses and validates a character description; `source_name` names it in errors.
     pub fn from_json(text: &str, source_name: &str) -> Result<Character, CharacterError> {
-        let file: CharacterFile =
-            serde_json::from_str(text).map_err(|source| CharacterError::Json {
-                source_name: source_name.to_string(),
-                source,
-            })?;
+        let file: CharacterFile = serde_json::from_str(text).map_err(|e| CharacterError::Json {
+            source_name: source_name.to_string(),
+            message: plain_type_names(&e.to_string()),
+        })?;
         let invalid = |problem: String| CharacterError::Invalid {
             source_name: source_name.to_string(),
             problem,

@@ -13,12 +13,13 @@ pub enum CharacterError {
         source: std::io::Error,
     },
     #[error(
-        "{source_name}: not a valid character description: {source}; \
+        "{source_name}: not a valid character description: {message}; \
          regenerate it with `python kernels_py/export_character.py`"
     )]
     Json {
         source_name: String,
-        source: serde_json::Error,
+        /// serde_json's message, its type names in words.
+        message: String,
     },
     #[error("{source_name}: {problem}; regenerate it with `python kernels_py/export_character.py`")]
     Invalid {
@@ -62,6 +63,9 @@ pub enum MotionError {
          (docs/motions.md)"
     )]
     EmptyFile { file: String },
+    /// An empty robot motion or mocap file (0 bytes).
+    #[error("{file}: the file is empty (0 bytes); {holds}")]
+    EmptyMotionFile { file: String, holds: &'static str },
     /// A BVH file under a DeepMimic file's name (`.txt`, `.json`, no extension).
     #[error(
         "{file}: a BVH file (it starts with HIERARCHY), read as DeepMimic's JSON for its \

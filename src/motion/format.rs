@@ -35,6 +35,24 @@ pub enum MotionFormat {
 }
 
 impl MotionFormat {
+    /// What a file of this format holds, for the message about an empty one.
+    pub fn what_it_holds(self) -> &'static str {
+        match self {
+            MotionFormat::DeepMimic => {
+                "a DeepMimic motion file holds a JSON object with \"Loop\" and \"Frames\" (docs/motions.md)"
+            }
+            MotionFormat::Npz => {
+                "a robot motion file is the zip that NumPy's savez writes: holosoma's or mjlab's arrays (docs/motions.md)"
+            }
+            MotionFormat::MjlabCsv => {
+                "an mjlab CSV holds one frame a line: root position, root quaternion (x, y, z, w), joint angles (docs/motions.md)"
+            }
+            MotionFormat::Bvh => {
+                "a BVH file holds a HIERARCHY and a MOTION section (docs/motions.md)"
+            }
+        }
+    }
+
     /// The format of the file at `path`, by its extension (any case); DeepMimic's for any
     /// extension but `.npz`, `.csv` and `.bvh`.
     pub fn of_path(path: &Path) -> MotionFormat {
@@ -92,6 +110,13 @@ pub(crate) fn load_robot_clip(
     options: &ReadOptions,
 ) -> Result<MotionClip, MotionError> {
     let file = path.display().to_string();
+    // An empty file said as such, before any format's parser words it as its own error.
+    if std::fs::metadata(path).is_ok_and(|m| m.is_file() && m.len() == 0) {
+        return Err(MotionError::EmptyMotionFile {
+            file,
+            holds: format.what_it_holds(),
+        });
+    }
     match format {
         MotionFormat::MjlabCsv => {
             let text = std::fs::read_to_string(path).map_err(|source| MotionError::Read {

@@ -23,6 +23,7 @@ use super::error::{MotionError, MotionLibraryError};
 use super::find::{MotionSource, ResolvedMotion, directory_clips, resolve_motion};
 use super::format::strip_motion_extension;
 use super::motion_library::{MotionLibrary, MotionLibraryBuilder};
+use crate::files::messages::toml_error_line;
 
 /// The `[motion_library]` section: exactly one of the three keys.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -111,7 +112,7 @@ fn parse_toml<T: serde::de::DeserializeOwned>(
 ) -> Result<T, MotionLibraryError> {
     toml::from_str(text).map_err(|e| MotionLibraryError::Parse {
         path: path.to_string(),
-        message: e.to_string().trim().replace('\n', " "),
+        message: toml_error_line(&e, text),
     })
 }
 

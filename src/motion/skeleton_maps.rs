@@ -19,6 +19,7 @@ use thiserror::Error;
 
 use super::character::Character;
 use super::source_motion::{Role, RoleMap, Side};
+use crate::files::messages::plain_type_names;
 
 /// A built-in skeleton's joint names by role.
 #[derive(Clone, Copy, Debug)]
@@ -331,7 +332,7 @@ pub fn parse_map_file(text: &str, file: &str, names: &[String]) -> Result<RoleMa
         line: e.span().map_or(1, |s| line_of(text, s.start)),
         problem: format!(
             "{}; a map file is a [roles] table of role = \"joint\" lines",
-            e.message().trim()
+            plain_type_names(e.message().trim())
         ),
     })?;
     let invalid = |problem: String| JointMapError::Invalid {

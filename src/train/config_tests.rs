@@ -721,22 +721,3 @@ fn a_wrong_type_is_said_in_plain_words() {
     let e = set("ppo.learning_rate", "[1]");
     assert!(e.contains("expected a number") && !e.contains("f32"), "{e}");
 }
-
-#[test]
-fn plain_type_names_change_only_whole_type_names() {
-    assert_eq!(
-        plain_type_names("expected u32, expected f64; expected usize"),
-        "expected a whole number from 0 to 4294967295, expected a number; expected a whole number ≥ 0"
-    );
-    assert_eq!(plain_type_names("expected a sequence"), "expected a list");
-    // Names that merely start like a type, and other words, stay.
-    for kept in [
-        "expected u32x",
-        "expected f64_thing",
-        "expected one of `num_envs`",
-        "expected a string",
-        "unexpected",
-    ] {
-        assert_eq!(plain_type_names(kept), kept);
-    }
-}

@@ -26,7 +26,6 @@ mod report;
 mod trainer;
 
 pub use crate::files::{is_temporary, write_atomically, write_bytes_atomically};
-pub(crate) use config::toml_error_line;
 pub use config::{
     COMMITTED_CONFIGS, ConfigError, MAX_GPUS, RETIRED_KEYS, RetiredKey, TrainConfig,
     default_run_dir,
