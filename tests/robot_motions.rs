@@ -344,7 +344,13 @@ fn a_truncated_archive_is_refused() {
         ),
         false,
     );
-    for cut in [0, 10, bytes.len() / 2, bytes.len() - 10] {
+    // An empty file is said to be empty, with what a robot motion file holds.
+    let (err, msg) = load_error("cut.npz", &[], &character);
+    assert!(
+        matches!(err, MotionError::EmptyMotionFile { .. }) && msg.contains("empty"),
+        "{err:?}: {msg}"
+    );
+    for cut in [10, bytes.len() / 2, bytes.len() - 10] {
         let (err, msg) = load_error("cut.npz", &bytes[..cut], &character);
         assert!(
             matches!(
