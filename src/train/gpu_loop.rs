@@ -20,6 +20,7 @@ use crate::cuda::Gpu;
 use crate::env::{TaskRecord, TrackedMotion};
 use crate::motion::{Character, ReferenceMotion};
 use crate::plan::{PhysicsOverflow, PlanStore};
+use crate::run::ResolvedConfig as _;
 use crate::run::clip_sampling::ClipSampling;
 use crate::run::{
     CharacterRecord, Checkpoint, EnvEvaluation, EvaluationSummary, IterationStats, Learner,
@@ -215,7 +216,7 @@ pub fn train_with<'a>(
         trainer.evaluation_rollout().0,
         motion,
         &config.run,
-        config.goal.is_some(),
+        config.task_evaluates(),
     )?;
     let mut notes = vec![format!("GEMMs: {}", trainer.gemm().describe())];
     if let Some(goal) = config.goal.as_ref().filter(|g| !g.decoder.is_empty()) {
