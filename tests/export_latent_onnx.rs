@@ -17,12 +17,13 @@ use std::process::{Command, Output};
 
 use instantmimic::export::onnx::latent::{LATENT_KEY, LatentContract};
 use instantmimic::export::onnx::normalizer;
+use instantmimic::latent::DECODER_DIGEST;
 use instantmimic::latent::networks::mlp_forward_f64;
 use instantmimic::motion::Character;
 use instantmimic::nn::{LayerShape, initial_parameters, mlp_layout};
 use instantmimic::run::checkpoint::tensor_names;
 use instantmimic::run::{Checkpoint, CheckpointMeta};
-use instantmimic::train::goal_latent::{DECODER_DIGEST, load_goal_decoder};
+use instantmimic::train::goal_latent::{head_shapes, load_goal_decoder};
 use instantmimic::train::latent_trainer::{insert_latent_networks, latent_shapes};
 use instantmimic::train::{ActionMode, PolicyShapes, TrainConfig};
 use rand::rngs::StdRng;
@@ -337,7 +338,7 @@ fn a_latent_goal_policy_exports_as_one_graph_through_the_frozen_decoder() {
     let loaded = load_goal_decoder(&config, &humanoid())
         .expect("the decoder fits")
         .expect("a decoder");
-    let head = loaded.head_shapes(&config);
+    let head = head_shapes(&loaded, &config);
     let mut rng = StdRng::seed_from_u64(5);
     let stats = statistics(head.observation_size, &mut rng);
     let checkpoint = dir.path().join("iter_8.safetensors");

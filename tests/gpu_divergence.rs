@@ -12,7 +12,7 @@ use instantmimic::plan::PlanStore;
 use instantmimic::run::DivergenceGuard;
 use instantmimic::run::checkpoint::tensor_names;
 use instantmimic::run::divergence::{RESTORE_LEARNING_RATE_FACTOR, non_finite_report};
-use instantmimic::train::{TrainConfig, Trainer};
+use instantmimic::train::{TrainConfig, new_trainer};
 use small_run_support::{built_in_motion, snapshot};
 
 #[test]
@@ -25,7 +25,7 @@ fn an_injected_nan_is_reported_and_training_recovers() {
     config.env.num_envs = 32;
     config.validate("test").expect("valid config");
     let motion = built_in_motion("walk");
-    let mut trainer = Trainer::new(&gpu, &store, &motion, &config).expect("trainer");
+    let mut trainer = new_trainer(&gpu, &store, &motion, &config).expect("trainer");
 
     for _ in 0..3 {
         let stats = trainer.iterate().expect("iterate");

@@ -27,13 +27,14 @@ mod goal_see_support;
 use std::path::{Path, PathBuf};
 
 use instantmimic::cuda::Gpu;
-use instantmimic::env::TrackedMotion;
+use instantmimic::env::{TaskRecord, TrackedMotion};
+use instantmimic::latent::{DECODER_DIGEST, decoder_digest};
 use instantmimic::motion::Character;
 use instantmimic::plan::PlanStore;
+use instantmimic::ppo::Trainer;
 use instantmimic::run::{Checkpoint, CheckpointMeta};
-use instantmimic::train::goal_latent::{DECODER_DIGEST, decoder_digest};
 use instantmimic::train::latent_trainer::{insert_latent_networks, latent_shapes};
-use instantmimic::train::{ActionMode, PolicyShapes, TrainConfig, Trainer};
+use instantmimic::train::{ActionMode, PolicyShapes, TrainConfig, new_trainer};
 use small_run_support::{
     binary, built_in_library, check_success, metrics, small_goal_config, snapshot,
 };
@@ -98,7 +99,7 @@ fn the_head_trains_in_z_and_the_frozen_decoder_never_changes() {
         character: &character,
         library: &library,
     };
-    let mut trainer = Trainer::new(&gpu, &store, motion, &config).expect("a latent goal trainer");
+    let mut trainer = new_trainer(&gpu, &store, motion, &config).expect("a latent goal trainer");
     assert_eq!(trainer.policy().action_size(), 64, "the head acts in z");
     let (rollout, _) = trainer.training_rollout();
     assert_eq!(rollout.storage.actions.shape(), [32, 32, 64]);
@@ -127,10 +128,10 @@ fn the_head_trains_in_z_and_the_frozen_decoder_never_changes() {
         .expect("head");
     for i in 1..=4 {
         let stats = trainer.iterate().expect("iteration");
-        let record = trainer
-            .goal_record(i % 2 == 0)
-            .expect("goal record")
-            .expect("the goal task");
+        let Some(TaskRecord::Goal(record)) = trainer.task_record(i % 2 == 0).expect("task record")
+        else {
+            panic!("a goal run records the goal task");
+        };
         eprintln!("iteration {i}: {stats:?}\n  goal {record:?}");
         if i % 2 == 0 {
             let e = record.evaluation.expect("an evaluation");

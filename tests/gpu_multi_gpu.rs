@@ -43,9 +43,10 @@ use instantmimic::kernels::{DeviceArray, EnvKernels};
 use instantmimic::motion::Character;
 use instantmimic::plan::PlanStore;
 use instantmimic::ppo::{GaussianPolicy, PpoUpdate};
+use instantmimic::ppo::{IterationReport, Replicas, Trainer, replica_mismatch};
 use instantmimic::run::checkpoint::tensor_names::{PHASE_CDF, PHASE_VISITS};
 use instantmimic::run::{Checkpoint, CheckpointMeta};
-use instantmimic::train::{IterationReport, Replicas, TrainConfig, Trainer, replica_mismatch};
+use instantmimic::train::{TrainConfig, new_trainer, trainer_config};
 use ppo_support::RolloutStorage;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
@@ -210,8 +211,10 @@ fn one_gpu_a_world_of_one_rank_starts_as_the_single_gpu_trainer() {
     let config = small_run_support::small_config("backflip");
     let motion = built_in_motion("backflip");
     let world = Communicator::create_all(&[0]).expect("a world of one rank");
-    let plain = Trainer::new(&gpu, &store, &motion, &config).expect("trainer");
-    let mut replica = Trainer::replica(&gpu, &store, &motion, &config, &world[0]).expect("replica");
+    let plain = new_trainer(&gpu, &store, &motion, &config).expect("trainer");
+    let sections = trainer_config(&config, motion.character()).expect("trainer config");
+    let mut replica =
+        Trainer::replica(&gpu, &store, &motion, &sections, &world[0]).expect("replica");
     assert_eq!(
         replica.replica_digest().expect("digest"),
         plain.replica_digest().expect("digest"),
@@ -232,7 +235,8 @@ fn several_gpus_replicas_stay_bit_identical_for_100_iterations() {
     };
     let config = small_run_support::small_config("backflip");
     let motion = built_in_motion("backflip");
-    let replicas = Replicas::start(&devices, &config, &motion, &PlanStore::new(None));
+    let sections = trainer_config(&config, motion.character()).expect("trainer config");
+    let replicas = Replicas::start(&devices, &sections, &motion, &PlanStore::new(None));
     replicas_stay_bit_identical(&mut replicas.expect("replicas"), &devices, 100, false);
 }
 
@@ -382,7 +386,8 @@ fn several_gpus_a_library_keeps_bit_identical_replicas_for_20_iterations() {
         character: &character,
         library: &library,
     };
-    let replicas = Replicas::start(&devices, &config, motion, &PlanStore::new(None));
+    let sections = trainer_config(&config, &character).expect("trainer config");
+    let replicas = Replicas::start(&devices, &sections, motion, &PlanStore::new(None));
     let mut replicas = replicas.expect("library replicas");
     let cells = LIBRARY_CLIPS.len() * config.env.phase_bins as usize;
     let before = phase_tensors(&mut replicas, &config, cells);

@@ -40,9 +40,14 @@ const FLOORS: &[(&str, &[&str])] = &[
     ),
     // The run harness knows no learner and no training configuration.
     ("run", &["env", "files", "motion", "plan", "plot"]),
-    // The learners' algorithms, side by side.
-    ("ppo", &["cuda", "env", "kernels", "nn"]),
-    ("latent", &["cuda", "env", "kernels", "nn"]),
+    // The learners, each beside its algorithm, on the run harness's seam (`run::Learner`). A
+    // latent goal run's PPO head drives the latent controller's frozen decoder, so `ppo` sits
+    // over `latent`.
+    ("latent", &["cuda", "env", "kernels", "nn", "run"]),
+    (
+        "ppo",
+        &["cuda", "env", "kernels", "latent", "nn", "plan", "run"],
+    ),
     ("train", BELOW_TRAIN),
     ("viewer", &["files", "motion", "recording"]),
 ];

@@ -11,9 +11,10 @@ mod train_cli_support;
 
 use std::path::{Path, PathBuf};
 
+use instantmimic::latent::DECODER_DIGEST;
 use instantmimic::motion::Character;
 use instantmimic::run::{Checkpoint, CheckpointMeta};
-use instantmimic::train::goal_latent::{DECODER_DIGEST, load_goal_decoder};
+use instantmimic::train::goal_latent::{head_shapes, load_goal_decoder};
 use instantmimic::train::latent_trainer::{insert_latent_networks, latent_shapes};
 use instantmimic::train::{ActionMode, PolicyShapes, TrainConfig};
 use train_cli_support::{one_line_error, resolved_config, run, succeeded};
@@ -308,7 +309,7 @@ fn eval_and_replay_check_a_latent_goal_checkpoint_before_the_gpu() {
     let err = eval(&checkpoint, &["--decoder", &missing]);
     assert!(err.contains("moved.safetensors"), "{err}");
     // The flags a goal replay has no use for.
-    let head = loaded.head_shapes(&config);
+    let head = head_shapes(&loaded, &config);
     let checkpoint = write_goal_checkpoint(dir.path(), &config, Some(loaded.digest), Some(&head));
     let err = replay(&checkpoint, &["--start", "spread"]);
     assert!(

@@ -17,8 +17,9 @@ use super::timing::timed_seconds;
 use crate::cuda::{Gpu, Graph, NvtxRange};
 use crate::env::{RolloutError, RolloutStage, Stage, StageEvents, TrackedMotion};
 use crate::plan::PlanStore;
+use crate::ppo::Trainer;
 use crate::ppo::UpdateStage;
-use crate::train::{TrainConfig, TrainError, Trainer};
+use crate::train::{TrainConfig, TrainError, new_trainer};
 
 /// One way of running the loop, measured.
 #[derive(Clone, Debug, Serialize)]
@@ -120,7 +121,7 @@ pub fn bench_full(
     // Builds the variant's trainer and times its iterations; the trainer is kept for more.
     let run = |concurrent: bool| {
         let started = Instant::now();
-        let mut trainer = Trainer::new(gpu, store, motion, &variant(concurrent)?)?;
+        let mut trainer = new_trainer(gpu, store, motion, &variant(concurrent)?)?;
         let setup_seconds = started.elapsed().as_secs_f64();
         let timed = time_rounds(&mut trainer, frames, warmup, iterations, rounds)?;
         let mut case = timed.case(setup_seconds, trainer.iteration_graph_nodes()?);

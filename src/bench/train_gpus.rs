@@ -11,7 +11,8 @@ use serde::Serialize;
 use crate::cuda::{Gpu, NvtxRange};
 use crate::motion::ReferenceMotion;
 use crate::plan::PlanStore;
-use crate::train::{Replicas, TrainConfig, TrainError, Trainer};
+use crate::ppo::Replicas;
+use crate::train::{TrainConfig, TrainError, new_trainer, trainer_config};
 
 /// One GPU count's measurement.
 #[derive(Clone, Debug, Serialize)]
@@ -54,7 +55,7 @@ pub fn default_counts(devices: usize) -> Vec<usize> {
 }
 
 /// For each count of `counts` (each at most `devices.len()`), builds the trainer on the first
-/// that many devices (one: the single-GPU [`Trainer`]; more: the [`Replicas`]), runs `warmup`
+/// that many devices (one: the single-GPU [`Trainer`](crate::ppo::Trainer); more: the [`Replicas`]), runs `warmup`
 /// untimed iterations and times `iterations` more.
 pub fn bench_train_gpus(
     devices: &[usize],
@@ -84,14 +85,19 @@ pub fn bench_train_gpus(
         let seconds = if count == 1 {
             let gpu = Gpu::open(used[0])?;
             gpu_name = gpu.info().name.clone();
-            let mut trainer = Trainer::new(&gpu, store, motion, config)?;
+            let mut trainer = new_trainer(&gpu, store, motion, config)?;
             let setup = started.elapsed().as_secs_f64();
-            let timed = time_iterations(warmup, iterations, || trainer.iterate().map(|_| ()))?;
+            let timed = time_iterations(warmup, iterations, || {
+                trainer.iterate().map(|_| ()).map_err(TrainError::from)
+            })?;
             (setup, timed)
         } else {
-            let mut replicas = Replicas::start(used, config, motion, store)?;
+            let trainer_config = trainer_config(config, motion.character())?;
+            let mut replicas = Replicas::start(used, &trainer_config, motion, store)?;
             let setup = started.elapsed().as_secs_f64();
-            let timed = time_iterations(warmup, iterations, || replicas.iterate().map(|_| ()))?;
+            let timed = time_iterations(warmup, iterations, || {
+                replicas.iterate().map(|_| ()).map_err(TrainError::from)
+            })?;
             (setup, timed)
         };
         let (setup_seconds, seconds) = seconds;

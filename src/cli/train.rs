@@ -25,7 +25,7 @@ use crate::run::{
     Checkpoint, CheckpointDir, ProgressMode, RunDir, RunSummary, StopFlag, StopReason, StopSignal,
     check_same_gpu_count,
 };
-use crate::train::goal_latent::load_goal_decoder;
+use crate::train::goal_latent::{describe_decoder, head_shapes, load_goal_decoder};
 use crate::train::latent_trainer::{latent_shapes, load_teacher};
 use crate::train::{
     ChosenCharacter, RunStart, TrainConfig, TrainSetup, check_trained_character, default_run_dir,
@@ -373,7 +373,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     // A latent goal run's decoder must fit the run; its head acts in the latent space.
     let decoder = load_goal_decoder(&config, motion.tracked().character())?;
     if let Some(d) = &decoder {
-        checks.policy = d.head_shapes(&config);
+        checks.policy = head_shapes(d, &config);
         if let Some(checkpoint) = &resume_checkpoint {
             d.check_checkpoint(checkpoint)?;
         }
@@ -444,7 +444,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             println!("{line}");
         }
         if let Some(d) = &decoder {
-            println!("{}", d.describe(&config));
+            println!("{}", describe_decoder(d, &config));
         }
         print!("{}", checks.report(&config));
         println!();

@@ -28,6 +28,7 @@ mod stages;
 mod statistics;
 mod storage;
 mod task;
+mod task_sections;
 mod tracked;
 mod trajectory;
 
@@ -47,7 +48,7 @@ pub use evaluation::{
 pub use goal::{
     GOAL_OBSERVATION, goal_episode_steps, goal_observation_config, goal_observation_size,
 };
-pub use goal::{GoalConfigProblem, GoalCounter, GoalRates, GoalRecord, GoalTally};
+pub use goal::{GoalCounter, GoalRates, GoalRecord, GoalTally};
 pub use physics_state::{PhysicsSizes, PhysicsState, PhysicsStateError};
 pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;
@@ -56,5 +57,7 @@ pub use stages::{RolloutStage, Stage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 pub use storage::{ActStorage, RolloutStorage};
 pub use task::{TaskEvaluation, TaskRecord, TaskScore};
-pub use tracked::TrackedMotion;
+pub(crate) use task_sections::with_task_sections;
+pub use task_sections::{TaskSectionProblem, TaskSections};
+pub use tracked::{TrackedMotion, TrainMotion};
 pub use trajectory::{Trajectory, TrajectoryFrames};

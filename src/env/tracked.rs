@@ -26,6 +26,49 @@ impl<'a> From<&'a ReferenceMotion> for TrackedMotion<'a> {
     }
 }
 
+/// What a run trains on.
+pub enum TrainMotion {
+    /// One clip (`motion`).
+    Clip(ReferenceMotion),
+    /// A motion library (`[motion_library]`), resampled at the run's control rate.
+    Library {
+        character: Character,
+        library: MotionLibrary,
+    },
+}
+
+impl TrainMotion {
+    /// The rollout's view of it.
+    pub fn tracked(&self) -> TrackedMotion<'_> {
+        match self {
+            TrainMotion::Clip(motion) => TrackedMotion::Clip(motion),
+            TrainMotion::Library { character, library } => {
+                TrackedMotion::Library { character, library }
+            }
+        }
+    }
+
+    /// An owned copy of `motion` (each GPU's worker of a run on several GPUs builds its
+    /// replica from one).
+    pub fn owned(motion: TrackedMotion<'_>) -> TrainMotion {
+        match motion {
+            TrackedMotion::Clip(motion) => TrainMotion::Clip(motion.clone()),
+            TrackedMotion::Library { character, library } => TrainMotion::Library {
+                character: character.clone(),
+                library: library.clone(),
+            },
+        }
+    }
+
+    /// The single clip (None for a library).
+    pub fn clip(&self) -> Option<&ReferenceMotion> {
+        match self {
+            TrainMotion::Clip(motion) => Some(motion),
+            TrainMotion::Library { .. } => None,
+        }
+    }
+}
+
 /// Control timesteps closer than this (relative) are the same rate: a library resampled at
 /// `substeps * physics_dt` computed elsewhere in f64.
 const SAME_RATE: f64 = 1e-9;

@@ -23,6 +23,7 @@
 pub mod config;
 mod distill;
 pub mod frozen;
+mod goal_decoder;
 pub mod goal_policy;
 pub mod networks;
 mod student;
@@ -40,6 +41,7 @@ pub use distill::{
     DistillationBatch, DistillationOptimizerState, DistillationStatistics, DistillationUpdate,
 };
 pub use frozen::FrozenDecoder;
+pub use goal_decoder::{DECODER_DIGEST, GoalDecoder, decoder_digest};
 pub use goal_policy::{GoalDecoding, LatentDecoder, LatentGoalPolicy};
 pub use networks::{LatentShapes, proprio_columns};
 pub use student::LatentStudent;
@@ -60,6 +62,8 @@ pub enum LatentError {
     /// file and what differs.
     #[error("{path}: {reason}")]
     Incompatible { path: String, reason: String },
+    #[error(transparent)]
+    Checkpoint(#[from] crate::run::CheckpointError),
 }
 
 /// A latent-controller error inside the rollout (it knows policies only through

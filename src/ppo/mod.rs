@@ -13,22 +13,36 @@
 //!   NN toolkit's ([`crate::nn`]).
 //! - [`UpdateStage`]: the update's parts, as NVTX ranges and event-timed (`bench full`).
 //! - [`config`]: the `[policy]` and `[ppo]` sections of the training configuration.
+//! - The learner: [`Trainer`] (rollout, update and evaluation as CUDA graphs on one GPU, built
+//!   from a [`TrainerConfig`]) and [`Replicas`] (one trainer per GPU, averaged through NCCL),
+//!   each a [`crate::run::Learner`]; their [`IterationReport`] and [`TrainerError`].
 
 pub mod batch;
 pub mod config;
+mod device_report;
 mod error;
 mod flops;
+mod learner;
 pub mod loss;
 pub(crate) mod policy;
+pub mod replicas;
+mod report;
 pub mod schedule;
+mod trainer;
+mod trainer_error;
 mod update;
 mod update_stages;
 
 pub use batch::PpoBatch;
 pub use config::{KlMeasure, PolicyConfig, PpoConfig};
+pub use device_report::read_totals;
 pub use error::PpoError;
 pub use flops::UpdateFlops;
 pub use loss::PpoStatistics;
 pub use policy::{GaussianPolicy, PolicyError};
+pub use replicas::Replicas;
+pub use report::{IterationReport, replica_mismatch};
+pub use trainer::{Trainer, TrainerConfig, replica_seed};
+pub use trainer_error::TrainerError;
 pub use update::{PpoOptimizerState, PpoUpdate};
 pub use update_stages::UpdateStage;

@@ -17,6 +17,7 @@ use crate::recording::{
     EpisodeInfo, GoalTrack, Outcome, Recording, RecordingError, RecordingMeta, Track,
 };
 use crate::run::Checkpoint;
+use crate::train::TrainError;
 use crate::train::goal_evaluation::GoalCheckpoint;
 
 use super::{ReplayError, chosen_envs};
@@ -174,7 +175,9 @@ pub fn record_goal_replay(
     let (rollout, _) = trainer.evaluation_rollout();
     let trajectory = rollout.new_trajectory()?;
     // The graph writes into `trajectory` at every launch: it lives to the end of this call.
-    let graph = trainer.capture_recorded_evaluation(&trajectory)?;
+    let graph = trainer
+        .capture_recorded_evaluation(&trajectory)
+        .map_err(TrainError::from)?;
     rollout.reset_all()?;
     graph.launch(gpu.stream())?;
     gpu.synchronize()?;

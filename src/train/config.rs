@@ -17,8 +17,8 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::env::{
-    EnvConfig, EvaluationProtocol, GoalConfig, LIBRARY_EVALUATION_WINDOW_S, ObsConfig,
-    RewardConfig, RolloutConfig, TaskConfig,
+    EnvConfig, EvaluationProtocol, LIBRARY_EVALUATION_WINDOW_S, ObsConfig, RewardConfig,
+    RolloutConfig,
 };
 use crate::files::messages::{plain_type_names, toml_error_line};
 use crate::latent::LatentConfig;
@@ -125,7 +125,9 @@ fn drop_retired_keys(table: &mut toml::Table, path: &str) -> Result<bool, Config
     Ok(dropped)
 }
 
-/// The whole training configuration.
+crate::env::with_task_sections! {
+/// The whole training configuration; each task's section (`[goal]`, ...) is appended by
+/// `with_task_sections!` (src/env/task_sections.rs), where the tasks declare them.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct TrainConfig {
@@ -161,10 +163,7 @@ pub struct TrainConfig {
     /// instead of PPO (docs/latent.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub latent: Option<LatentConfig>,
-    /// `[goal]`: train the goal-reaching task (docs/goal.md) instead of tracking; the motion
-    /// (or library) gives the reset's start states.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub goal: Option<GoalConfig>,
+}
 }
 
 fn default_character() -> String {
@@ -228,7 +227,7 @@ impl TrainConfig {
     /// --all-clips` writes them): a motion library's tracking run, tracker or latent controller.
     /// A goal run's replay is one page of its goals whatever its resets draw from.
     pub fn replays_every_clip(&self) -> bool {
-        self.motion_library.is_some() && self.goal.is_none()
+        self.motion_library.is_some() && self.task_sections().is_tracking()
     }
 
     /// The built-in library configuration (its `[motion_library]` is the 13 built-in clips) and
@@ -280,20 +279,12 @@ impl TrainConfig {
 
     /// The built-in baseline for `motion` (every section at its default).
     pub fn with_motion(motion: &str) -> TrainConfig {
-        TrainConfig {
-            motion: motion.to_owned(),
-            character: default_character(),
-            motion_library: None,
-            seed: 0,
-            env: EnvConfig::default(),
-            reward: RewardConfig::default(),
-            obs: ObsConfig::default(),
-            policy: PolicyConfig::default(),
-            ppo: PpoConfig::default(),
-            run: RunConfig::default(),
-            latent: None,
-            goal: None,
-        }
+        // An empty file: every key takes its default, and no task section is given (so this
+        // names no task's field).
+        let mut config: TrainConfig = toml::from_str("")
+            .expect("a bug: every key of TrainConfig has a default, so an empty file parses");
+        config.motion = motion.to_owned();
+        config
     }
 
     /// Reads and validates a TOML file. The paths of a `[motion_library]` section are taken
@@ -321,7 +312,7 @@ impl TrainConfig {
         };
         let used = [
             ("env", true),
-            ("reward", self.goal.is_none()),
+            ("reward", self.task_sections().is_tracking()),
             ("obs", true),
             ("policy", true),
             ("ppo", self.latent.is_none()),
@@ -402,10 +393,9 @@ impl TrainConfig {
                 }
             };
         }
-        if let Some(goal) = &self.goal {
-            goal.validate(&self.env, &self.obs, &self.run.gpus)
-                .map_err(|p| bad(p.key, p.value, p.reason))?;
-        }
+        self.task_sections()
+            .validate(&self.env, &self.obs, &self.run.gpus)
+            .map_err(|p| bad(p.key, p.value, p.reason))?;
         if let Err(reason) = super::character_name::check_character_name(&self.character) {
             return Err(bad("character", format!("{:?}", self.character), &reason));
         }
@@ -749,12 +739,15 @@ impl TrainConfig {
                 "[latent]",
                 "the latent controller trains on one GPU (leave run.gpus out)"
             );
-            check!(
-                self.goal.is_none(),
-                "latent",
-                "[latent]",
-                "the latent controller is distilled on the tracking task; [goal] trains a task policy (give one of the two sections)"
-            );
+            if let Some(task) = self.task_sections().section() {
+                return Err(bad(
+                    "latent",
+                    "[latent]".to_owned(),
+                    &format!(
+                        "the latent controller is distilled on the tracking task; [{task}] trains a task policy (give one of the two sections)"
+                    ),
+                ));
+            }
         }
         Ok(())
     }
@@ -812,10 +805,7 @@ impl TrainConfig {
     /// evaluation protocol of `[run]`.
     pub fn rollout_config(&self) -> RolloutConfig {
         RolloutConfig {
-            task: match &self.goal {
-                Some(goal) => TaskConfig::Goal(goal.clone()),
-                None => TaskConfig::Tracking,
-            },
+            task: self.task_sections().task_config(),
             env: self.env.clone(),
             reward: self.reward.clone(),
             obs: self.obs.clone(),
@@ -872,7 +862,7 @@ impl ResolvedConfig for TrainConfig {
     }
 
     fn task_evaluates(&self) -> bool {
-        self.goal.is_some()
+        self.task_sections().evaluates_itself()
     }
 
     fn to_toml(&self) -> Result<String, BoxedError> {

@@ -2,7 +2,7 @@
 //! message naming its key.
 
 use super::*;
-use crate::env::{ActionMode, EndEffectorFrame, EvalStart};
+use crate::env::{ActionMode, EndEffectorFrame, EvalStart, GoalConfig, ObsConfig};
 use crate::nn::GemmSetting;
 use crate::ppo::KlMeasure;
 
@@ -720,4 +720,49 @@ fn a_wrong_type_is_said_in_plain_words() {
     );
     let e = set("ppo.learning_rate", "[1]");
     assert!(e.contains("expected a number") && !e.contains("f32"), "{e}");
+}
+
+// The goal task's section, checked through the configuration.
+fn goal_config() -> TrainConfig {
+    let mut c = TrainConfig::with_motion("walk");
+    c.goal = Some(GoalConfig::default());
+    c.env.action_mode = ActionMode::Absolute;
+    c.obs = ObsConfig {
+        future_frames: 0,
+        ..ObsConfig::default()
+    };
+    c
+}
+
+fn key_of(c: &TrainConfig) -> Option<&'static str> {
+    match c.validate("goal.toml") {
+        Ok(()) => None,
+        Err(ConfigError::Invalid { key, .. }) => Some(key),
+        Err(other) => panic!("{other}"),
+    }
+}
+
+#[test]
+fn a_goal_section_is_validated_with_the_key_named() {
+    assert_eq!(key_of(&goal_config()), None);
+    let mut c = goal_config();
+    c.goal.as_mut().unwrap().reach_radius = 1.5;
+    assert_eq!(key_of(&c), Some("goal.reach_radius"));
+    let mut c = goal_config();
+    c.goal.as_mut().unwrap().max_distance = 0.5;
+    assert_eq!(key_of(&c), Some("goal.max_distance"));
+    let mut c = goal_config();
+    c.goal.as_mut().unwrap().episode_s = 0.0;
+    assert_eq!(key_of(&c), Some("goal.episode_s"));
+    let mut c = goal_config();
+    c.goal.as_mut().unwrap().bonus_weight = f32::NAN;
+    assert_eq!(key_of(&c), Some("goal.bonus_weight"));
+    let mut c = goal_config();
+    c.env.action_mode = ActionMode::Residual;
+    assert_eq!(key_of(&c), Some("env.action_mode"));
+    let mut c = goal_config();
+    c.obs.future_frames = 2;
+    assert_eq!(key_of(&c), Some("obs.future_frames"));
+    // No [goal] section: tracking, nothing of the goal task is checked.
+    assert_eq!(key_of(&TrainConfig::with_motion("walk")), None);
 }

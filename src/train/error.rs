@@ -26,18 +26,6 @@ pub enum TrainError {
     Motion(#[from] MotionError),
     #[error(transparent)]
     Plan(#[from] PlanError),
-    /// One GPU's replica failed (a run on several GPUs): the run stopped with its error.
-    #[error("GPU {device} (rank {rank}): {error}")]
-    Replica {
-        device: usize,
-        rank: usize,
-        error: Box<TrainError>,
-    },
-    /// The replicas of a run on several GPUs no longer hold the same state.
-    #[error(
-        "the GPUs' replicas of the network are no longer identical {when} (state checksums {digests}): the averaged update lost its determinism (a bug, or a GPU that computes differently); the run stops and its last checkpoint is intact"
-    )]
-    ReplicasDiffer { when: String, digests: String },
     /// The run's settings are inconsistent with the plans, the motion or a checkpoint: the
     /// message says what to change.
     #[error("{0}")]
@@ -91,6 +79,8 @@ pub enum TrainError {
     Policy(#[from] crate::ppo::PolicyError),
     #[error(transparent)]
     Latent(#[from] crate::latent::LatentError),
+    #[error(transparent)]
+    Trainer(#[from] crate::ppo::TrainerError),
 }
 
 /// The evaluation protocol's arithmetic, reached from training code: the harness's error.

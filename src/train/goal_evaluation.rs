@@ -13,14 +13,17 @@ use serde::Serialize;
 
 use super::config::TrainConfig;
 use super::error::TrainError;
-use super::goal_latent::{DECODER_DIGEST, GoalDecoder, load_goal_decoder};
-use super::library::{TrainMotion, preflight_training};
+use super::goal_latent::{head_shapes, load_goal_decoder};
+use super::library::preflight_training;
+use super::ppo_trainer::new_trainer;
 use super::preflight::Preflight;
-use super::trainer::Trainer;
 use crate::cuda::Gpu;
 use crate::env::GoalRates;
+use crate::env::TrainMotion;
 use crate::env::{GoalTally, goal_episode_steps};
+use crate::latent::{DECODER_DIGEST, GoalDecoder};
 use crate::plan::PlanStore;
+use crate::ppo::Trainer;
 use crate::run::checkpoint::Checkpoint;
 
 /// A goal checkpoint checked for evaluation: its configuration at the evaluation's size, what
@@ -74,7 +77,7 @@ pub fn check_goal_checkpoint(
     match &decoder {
         Some(d) => {
             d.check_checkpoint(checkpoint)?;
-            checks.policy = d.head_shapes(&config);
+            checks.policy = head_shapes(d, &config);
         }
         None if checkpoint.tensor(DECODER_DIGEST).is_some() => {
             return Err(TrainError::Setup(format!(
@@ -107,7 +110,7 @@ impl GoalCheckpoint {
         checkpoint: &Checkpoint,
         store: &PlanStore,
     ) -> Result<Trainer, TrainError> {
-        let mut trainer = Trainer::new(gpu, store, self.motion.tracked(), &self.config)?;
+        let mut trainer = new_trainer(gpu, store, self.motion.tracked(), &self.config)?;
         trainer.restore(checkpoint)?;
         Ok(trainer)
     }
@@ -182,7 +185,9 @@ pub fn evaluate_goal_on_gpu(
     let trainer = checked.trainer(gpu, checkpoint, store)?;
     let mut tallies = Vec::new();
     for _ in 0..rounds.max(1) {
-        let tally = trainer.evaluate_goal()?.ok_or_else(|| {
+        trainer.run_evaluation()?;
+        let (evaluation, _) = trainer.evaluation_rollout();
+        let tally = evaluation.goal_tally()?.ok_or_else(|| {
             TrainError::Internal("the evaluation rollout does not run the goal task".to_owned())
         })?;
         tallies.push(tally);

@@ -12,16 +12,14 @@ use super::character::check_trained_character;
 use super::config::TrainConfig;
 use super::error::TrainError;
 use super::latent_trainer::{LatentTrainer, load_teacher};
-use super::library::TrainMotion;
+use super::ppo_trainer::{new_trainer, trainer_config};
 use super::preflight::Preflight;
-use super::replicas::Replicas;
-use super::trainer::Trainer;
 use crate::cuda::Gpu;
-use crate::env::{TaskRecord, TrackedMotion};
+use crate::env::{TaskRecord, TrackedMotion, TrainMotion};
 use crate::motion::{Character, ReferenceMotion};
 use crate::plan::{PhysicsOverflow, PlanStore};
+use crate::ppo::{Replicas, Trainer};
 use crate::run::ResolvedConfig as _;
-use crate::run::clip_sampling::ClipSampling;
 use crate::run::{
     CharacterRecord, Checkpoint, EnvEvaluation, EvaluationSummary, IterationStats, Learner,
     LibraryPlan, ProgressMode, RunError, RunSession, RunSummary, Scorer, StopFlag, run_loop,
@@ -63,73 +61,6 @@ fn learner_error(e: TrainError) -> RunError {
     match e {
         TrainError::Run(run) => run,
         other => RunError::Learner(Box::new(other)),
-    }
-}
-
-impl Learner for Trainer {
-    fn iterate(&mut self) -> Result<IterationStats, RunError> {
-        Trainer::iterate(self).map_err(learner_error)
-    }
-    fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, RunError> {
-        Trainer::evaluate(self).map_err(learner_error)
-    }
-    fn evaluation_steps(&self) -> u32 {
-        Trainer::evaluation_steps(self)
-    }
-    fn task_record(&mut self, evaluate: bool) -> Result<Option<TaskRecord>, RunError> {
-        Trainer::goal_record(self, evaluate)
-            .map(|g| g.map(TaskRecord::Goal))
-            .map_err(learner_error)
-    }
-    fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), RunError> {
-        Trainer::save_into(self, checkpoint).map_err(learner_error)
-    }
-    fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), RunError> {
-        Trainer::restore(self, checkpoint).map_err(learner_error)
-    }
-    fn physics_overflow(&mut self) -> Result<PhysicsOverflow, RunError> {
-        Trainer::physics_overflow(self).map_err(learner_error)
-    }
-    fn notes(&mut self) -> Vec<String> {
-        Vec::new()
-    }
-    fn clip_sampling(&mut self) -> Result<Option<Vec<ClipSampling>>, RunError> {
-        Trainer::clip_sampling(self)
-            .map(Some)
-            .map_err(learner_error)
-    }
-}
-
-impl Learner for Replicas {
-    fn iterate(&mut self) -> Result<IterationStats, RunError> {
-        Replicas::iterate(self).map_err(learner_error)
-    }
-    fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, RunError> {
-        Replicas::evaluate(self).map_err(learner_error)
-    }
-    fn evaluation_steps(&self) -> u32 {
-        Replicas::evaluation_steps(self)
-    }
-    fn task_record(&mut self, _evaluate: bool) -> Result<Option<TaskRecord>, RunError> {
-        // The configuration refuses the goal task on several GPUs (run.gpus).
-        Ok(None)
-    }
-    fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), RunError> {
-        Replicas::save_into(self, checkpoint).map_err(learner_error)
-    }
-    fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), RunError> {
-        Replicas::restore(self, checkpoint).map_err(learner_error)
-    }
-    fn physics_overflow(&mut self) -> Result<PhysicsOverflow, RunError> {
-        Replicas::physics_overflow(self).map_err(learner_error)
-    }
-    fn notes(&mut self) -> Vec<String> {
-        self.take_notes()
-    }
-    fn clip_sampling(&mut self) -> Result<Option<Vec<ClipSampling>>, RunError> {
-        Replicas::clip_sampling(self)
-            .map(Some)
-            .map_err(learner_error)
     }
 }
 
@@ -211,7 +142,7 @@ pub fn train_with<'a>(
     let motion = motion.into();
     let (session, checkpoint) = open_session(config, motion.character(), start, progress, stop)?;
     let setup = std::time::Instant::now();
-    let mut trainer = Trainer::new(gpu, store, motion, session.config())?;
+    let mut trainer = new_trainer(gpu, store, motion, session.config())?;
     let scorer = Scorer::new(
         trainer.evaluation_rollout().0,
         motion,
@@ -322,7 +253,8 @@ pub fn train_on_gpus<'a>(
         .map(|&d| d as usize)
         .collect();
     let setup = std::time::Instant::now();
-    let mut replicas = Replicas::start(&devices, session.config(), motion, store)?;
+    let trainer_config = trainer_config(session.config(), motion.character())?;
+    let mut replicas = Replicas::start(&devices, &trainer_config, motion, store)?;
     let mut notes = vec![format!("GEMMs: {} (every GPU)", replicas.gemm())];
     notes.extend(replicas.take_notes());
     let scorer = match motion {
@@ -330,7 +262,7 @@ pub fn train_on_gpus<'a>(
         // Rank 0 evaluates: its evaluation rollout's plan scores the episodes.
         TrackedMotion::Library { .. } => {
             let plan =
-                replicas.on_rank0(|t| Ok(Scorer::library_plan(t.evaluation_rollout().0)?))?;
+                replicas.on_rank0(|t| Ok(Scorer::library_plan(t.evaluation_rollout().0)))??;
             notes.push(library_note(&plan));
             Scorer::Library(plan)
         }
@@ -389,7 +321,7 @@ pub fn evaluation_trainer(
 ) -> Result<Trainer, TrainError> {
     let mut small = config.clone();
     small.env.num_envs = config.run.eval_envs;
-    let mut trainer = Trainer::new(gpu, store, motion, &small)?;
+    let mut trainer = new_trainer(gpu, store, motion, &small)?;
     trainer.restore(checkpoint)?;
     Ok(trainer)
 }

@@ -11,10 +11,8 @@ use zerocopy::IntoBytes;
 
 use super::character::{ChosenCharacter, check_trained_character};
 use super::config::TrainConfig;
-use super::device_report::read_totals;
 use super::error::TrainError;
 use super::preflight::PolicyShapes;
-use super::report::IterationReport;
 use crate::cuda::{Gpu, Graph};
 use crate::env::layout::{JointLayout, observation_size};
 use crate::env::{Rollout, TrackedMotion};
@@ -28,6 +26,7 @@ use crate::latent::{
 use crate::nn::PolicyGemm;
 use crate::nn::reduce::{record_clear, record_sum_of_squares};
 use crate::plan::{PhysicsOverflow, PlanStore};
+use crate::ppo::{IterationReport, read_totals};
 use crate::run::IterationStats;
 use crate::run::checkpoint::{Checkpoint, tensor_names};
 use crate::run::evaluation::EnvEvaluation;

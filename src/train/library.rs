@@ -1,6 +1,8 @@
 //! Training on a motion library (docs/library.md): what a run trains on ([`TrainMotion`]: one
 //! clip, or a library loaded from the configuration's `[motion_library]` at the control rate),
 //! and the checks `train --dry-run` makes of a library.
+//!
+//! [`TrainMotion`]: crate::env::TrainMotion
 
 use std::path::Path;
 
@@ -8,54 +10,11 @@ use super::character::ChosenCharacter;
 use super::config::TrainConfig;
 use super::error::TrainError;
 use super::preflight::{PolicyShapes, Preflight, character_line, physics_checks};
-use crate::env::{TrackedMotion, clip_evaluation};
+use crate::env::{TrainMotion, clip_evaluation};
+use crate::motion::LibraryConfig;
 use crate::motion::library_config::load_library;
-use crate::motion::{Character, LibraryConfig, MotionLibrary, ReferenceMotion};
 use crate::plan::PlanStore;
 use crate::run::library_evaluation::LibraryPlan;
-
-/// What a run trains on.
-pub enum TrainMotion {
-    /// One clip (`motion`).
-    Clip(ReferenceMotion),
-    /// A motion library (`[motion_library]`), resampled at the run's control rate.
-    Library {
-        character: Character,
-        library: MotionLibrary,
-    },
-}
-
-impl TrainMotion {
-    /// The rollout's view of it.
-    pub fn tracked(&self) -> TrackedMotion<'_> {
-        match self {
-            TrainMotion::Clip(motion) => TrackedMotion::Clip(motion),
-            TrainMotion::Library { character, library } => {
-                TrackedMotion::Library { character, library }
-            }
-        }
-    }
-
-    /// An owned copy of `motion` (each GPU's worker of a run on several GPUs builds its
-    /// replica from one).
-    pub fn owned(motion: TrackedMotion<'_>) -> TrainMotion {
-        match motion {
-            TrackedMotion::Clip(motion) => TrainMotion::Clip(motion.clone()),
-            TrackedMotion::Library { character, library } => TrainMotion::Library {
-                character: character.clone(),
-                library: library.clone(),
-            },
-        }
-    }
-
-    /// The single clip (None for a library).
-    pub fn clip(&self) -> Option<&ReferenceMotion> {
-        match self {
-            TrainMotion::Clip(motion) => Some(motion),
-            TrainMotion::Library { .. } => None,
-        }
-    }
-}
 
 /// Every check a run can make without a GPU, for a clip or a library; returns what it found
 /// and what the run trains on.

@@ -11,16 +11,18 @@ use std::path::Path;
 use super::config::TrainConfig;
 use super::error::TrainError;
 use super::latent_trainer::{latent_shapes, latent_tensor_names};
-use super::library::{TrainMotion, preflight_training};
+use super::library::preflight_training;
+use super::ppo_trainer::new_trainer;
 use super::preflight::Preflight;
-use super::trainer::Trainer;
 use crate::cuda::{Gpu, Graph};
+use crate::env::TrainMotion;
 use crate::env::{Rollout, RolloutPolicy, clip_evaluation};
 use crate::latent::{LatentShapes, LatentStudent};
 use crate::motion::LibraryConfig;
 use crate::motion::MotionLibraryError;
 use crate::nn::PolicyGemm;
 use crate::plan::PlanStore;
+use crate::ppo::Trainer;
 use crate::run::checkpoint::{Checkpoint, tensor_names};
 use crate::run::clips_table::{CLIP_TABLE_COLUMNS, clip_table_row, library_table_row};
 use crate::run::evaluation::{EnvEvaluation, EvaluationSummary};
@@ -291,7 +293,7 @@ impl LibraryPolicyEvaluator {
         let motion = prepared.motion.tracked();
         let held = match prepared.kind {
             LibraryPolicyKind::Tracker => {
-                let mut trainer = Trainer::new(gpu, store, motion, config)?;
+                let mut trainer = new_trainer(gpu, store, motion, config)?;
                 trainer.restore(&policy_only(checkpoint)?)?;
                 Held::Tracker(Box::new(trainer))
             }
@@ -355,7 +357,7 @@ impl LibraryPolicyEvaluator {
     /// One episode per evaluation env (env i on clip i mod C), deterministic.
     pub fn evaluate(&self) -> Result<Vec<EnvEvaluation>, TrainError> {
         match &self.held {
-            Held::Tracker(trainer) => trainer.evaluate(),
+            Held::Tracker(trainer) => Ok(trainer.evaluate()?),
             Held::Latent {
                 evaluation, graph, ..
             } => {

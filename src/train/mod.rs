@@ -1,9 +1,9 @@
 //! Training: the configuration ([`TrainConfig`], the run's [`ResolvedConfig`]), the character
-//! and its plans, the checks of `train --dry-run` (docs/train.md), and the learners on the GPU:
-//! [`Trainer`] (rollout, PPO update and evaluation as CUDA graphs), the [`Replicas`] of several
-//! GPUs and the latent controller's distillation, each a [`Learner`] that `train_on_gpu` hands
-//! to the run harness (`crate::run`). A run trains on one clip or on a motion library
-//! ([`TrainMotion`]).
+//! and its plans, the checks of `train --dry-run` (docs/train.md), and the choice of learner:
+//! the PPO trainer (`crate::ppo::Trainer`, or its `Replicas` on several GPUs, built from
+//! [`trainer_config`]) or the latent controller's distillation ([`latent_trainer`]), each a
+//! [`Learner`] that `train_on_gpu` hands to the run harness (`crate::run`). A run trains on
+//! one clip or on a motion library ([`TrainMotion`]).
 //!
 //! [`ResolvedConfig`]: crate::run::ResolvedConfig
 //! [`Learner`]: crate::run::Learner
@@ -11,19 +11,15 @@
 pub mod character;
 mod character_name;
 mod config;
-mod device_report;
 mod error;
-pub mod goal;
 pub mod goal_evaluation;
 pub mod goal_latent;
 mod gpu_loop;
 pub mod latent_trainer;
 pub mod library;
 pub mod library_policy;
+mod ppo_trainer;
 pub mod preflight;
-pub mod replicas;
-mod report;
-mod trainer;
 
 pub use crate::files::{is_temporary, write_atomically, write_bytes_atomically};
 pub use config::{
@@ -32,6 +28,7 @@ pub use config::{
 };
 // The sections `TrainConfig` composes, at their old paths (they live in the layers that
 // consume them).
+pub use crate::env::TrainMotion;
 pub use crate::env::{ActionMode, EndEffectorFrame, EnvConfig, EvalStart, ObsConfig, RewardConfig};
 pub use crate::nn::GemmSetting;
 pub use crate::ppo::{KlMeasure, PolicyConfig, PpoConfig};
@@ -44,9 +41,6 @@ pub use gpu_loop::{
     RunStart, TrainSetup, evaluate_episodes_on_gpu, evaluate_on_gpu, evaluation_trainer,
     train_on_gpu, train_with,
 };
-pub use library::{TrainMotion, preflight_training};
+pub use library::preflight_training;
+pub use ppo_trainer::{new_trainer, trainer_config};
 pub use preflight::{PolicyShapes, Preflight, check_plans, load_motion, preflight};
-pub use replicas::Replicas;
-pub use report::{IterationReport, replica_mismatch};
-pub use trainer::Trainer;
-pub use trainer::replica_seed;

@@ -10,8 +10,7 @@ use std::path::Path;
 use super::character::{ChosenCharacter, check_model, check_plan_model};
 use super::config::TrainConfig;
 use super::error::TrainError;
-use crate::env::goal_observation_size;
-use crate::env::layout::{JointLayout, ObservationCounts, observation_size};
+use crate::env::layout::{JointLayout, ObservationCounts};
 use crate::motion::find::{MotionSource, ResolvedMotion, resolve_motion};
 use crate::motion::{Character, LoopMode, MotionClip, ReferenceMotion, ReferenceTable};
 use crate::nn::mlp_layout;
@@ -40,10 +39,7 @@ impl PolicyShapes {
             JointLayout::for_character(character).map_err(|e| TrainError::Setup(e.to_string()))?;
         let actions = layout.num_motors;
         let counts = layout.observation_counts();
-        let observation = match &config.goal {
-            None => observation_size(&config.obs, counts),
-            Some(_) => goal_observation_size(&config.obs, counts),
-        };
+        let observation = config.task_sections().observation_size(&config.obs, counts);
         let end = |layers: Vec<crate::nn::LayerShape>| layers.last().map_or(0, |l| l.end());
         Ok(PolicyShapes {
             observation_size: observation,
@@ -306,8 +302,14 @@ impl Preflight {
             "iteration     {} envs x {} steps = {frames} frames; {} epochs x {} minibatches",
             config.env.num_envs, config.ppo.horizon, config.ppo.epochs, config.ppo.minibatches
         );
-        let _ = writeln!(out, "{}", super::goal::task_line(config, self.control_dt));
-        if let Some(line) = super::goal::goal_evaluation_line(config, self.control_dt) {
+        let tasks = config.task_sections();
+        let _ = writeln!(out, "{}", tasks.describe(self.control_dt));
+        if let Some(line) = tasks.evaluation_line(
+            self.control_dt,
+            config.run.eval_interval,
+            config.run.eval_envs,
+            config.seed,
+        ) {
             let _ = writeln!(out, "{line}");
         } else {
             let _ = writeln!(

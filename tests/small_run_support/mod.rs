@@ -10,8 +10,9 @@ use std::process::{Command, Output};
 
 use instantmimic::motion::find::{MOTIONS_ENV, resolve_motion};
 use instantmimic::motion::{Character, MotionLibrary, MotionLibraryBuilder, ReferenceMotion};
+use instantmimic::ppo::Trainer;
 use instantmimic::run::{Checkpoint, CheckpointMeta};
-use instantmimic::train::{TrainConfig, Trainer};
+use instantmimic::train::TrainConfig;
 
 /// A built-in clip, loaded for the humanoid.
 pub fn built_in_motion(name: &str) -> ReferenceMotion {

@@ -13,4 +13,3 @@ pub use task::{
     GOAL_OBSERVATION, goal_episode_steps, goal_observation_config, goal_observation_size,
     goal_params,
 };
-pub use validation::GoalConfigProblem;

@@ -1,12 +1,15 @@
 //! The goal task's part of a rollout (docs/goal.md): its parameters and per-env state on the
 //! device, its observation block and its episode length.
 
+use std::cell::Cell;
+
 use crate::cuda::Gpu;
 use crate::kernels::{DeviceArray, DeviceArray2, EnvError, GoalParams};
 
 use super::super::config::{GoalConfig, ObsConfig, RolloutConfig};
 use super::super::layout::{ObservationCounts, observation_size};
 use super::counters::{GoalCounter, GoalTally};
+use super::record::{GoalRates, GoalRecord};
 
 /// The goal block of the observation: the goal's x and y in the heading frame, and its
 /// horizontal distance (goal.py: `goal_observe`).
@@ -24,6 +27,9 @@ pub(in crate::env) struct GoalTask {
     pub counters: DeviceArray2<i32>,
     /// Where the goal block starts in the observation row: after the character's own state.
     pub column: usize,
+    /// The totals at the last [`GoalTask::record`] (zeros after every clear), so that each
+    /// record holds the episodes that ended since the one before.
+    recorded: Cell<GoalTally>,
 }
 
 impl GoalTask {
@@ -39,13 +45,27 @@ impl GoalTask {
             distance: DeviceArray::zeros(gpu, [num_envs])?,
             counters: DeviceArray::zeros(gpu, [num_envs, GoalCounter::ALL.len()])?,
             column,
+            recorded: Cell::new(GoalTally::default()),
         })
     }
 
     /// Clears every counter (a new run of episodes: training's start, an evaluation).
     pub fn clear_counters(&self) -> Result<(), EnvError> {
         let [n, c] = self.counters.shape();
+        self.recorded.set(GoalTally::default());
         self.counters.upload(&vec![0; n * c])
+    }
+
+    /// A training rollout's record of the episodes that ended since the last record, with the
+    /// evaluation rollout's tally of first episodes when one ran (waits for the GPU).
+    pub fn record(&self, evaluation: Option<GoalTally>) -> Result<GoalRecord, EnvError> {
+        let total = self.tally(false)?;
+        let rollout = GoalRates::from(&total.since(&self.recorded.get()));
+        self.recorded.set(total);
+        Ok(GoalRecord {
+            rollout,
+            evaluation: evaluation.as_ref().map(GoalRates::from),
+        })
     }
 
     /// The counters' totals: every ended episode since the last clear, or (`first_episodes`)

@@ -1,15 +1,9 @@
-//! The `[goal]` section's checks, and what the goal task needs of the other sections.
+//! The `[goal]` section's checks, what the goal task needs of the other sections, and its
+//! description.
 
 use super::super::config::{ActionMode, EnvConfig, GoalConfig, ObsConfig};
-
-/// A `[goal]` value out of range, or another section's value the goal task cannot train with:
-/// the key (`goal.<name>`, `env.action_mode`, ...), the value and why.
-#[derive(Clone, Debug, PartialEq)]
-pub struct GoalConfigProblem {
-    pub key: &'static str,
-    pub value: String,
-    pub reason: &'static str,
-}
+use super::super::task_sections::TaskSectionProblem;
+use super::task::goal_episode_steps;
 
 impl GoalConfig {
     /// Checks every value and what the goal task needs of the other sections (`[env]`,
@@ -20,10 +14,10 @@ impl GoalConfig {
         env: &EnvConfig,
         obs: &ObsConfig,
         gpus: &[u32],
-    ) -> Result<(), GoalConfigProblem> {
+    ) -> Result<(), TaskSectionProblem> {
         let g = self;
         let bad = |key: &'static str, value: String, reason: &'static str| {
-            Err(GoalConfigProblem { key, value, reason })
+            Err(TaskSectionProblem { key, value, reason })
         };
         let GoalConfig {
             episode_s,
@@ -119,5 +113,37 @@ impl GoalConfig {
             );
         }
         Ok(())
+    }
+}
+
+impl GoalConfig {
+    /// `train --dry-run`'s lines of the task at control step `control_dt` (s).
+    pub fn describe(&self, control_dt: f64) -> String {
+        let g = self;
+        [
+            format!(
+                "task          goal reaching: goals {}-{} m from the root, reached within {} m (the next at once)",
+                g.min_distance, g.max_distance, g.reach_radius
+            ),
+            format!(
+                "              episodes of {} s ({} steps), ending early when the root falls below {} m",
+                g.episode_s,
+                goal_episode_steps(g.episode_s, control_dt),
+                g.fall_height
+            ),
+            format!(
+                "              reward {} x progress (m per step) + {} per goal",
+                g.progress_weight, g.bonus_weight
+            ),
+            if g.decoder.is_empty() {
+                "              action: PD targets (env.action_mode absolute)".to_owned()
+            } else {
+                format!(
+                    "              action: a residual on the prior's mean of {}, decoded by its frozen decoder into PD targets (docs/goal.md)",
+                    g.decoder
+                )
+            },
+        ]
+        .join("\n")
     }
 }

@@ -40,7 +40,7 @@ use super::policy::RolloutPolicy;
 use super::stages::{RolloutStage, StageEvents, StageRecorder};
 use super::statistics::RolloutStatistics;
 use super::storage::{ActStorage, RolloutStorage};
-use super::task::Task;
+use super::task::{Task, TaskRecord};
 use super::tracked::TrackedMotion;
 use super::trajectory::Trajectory;
 use crate::kernels::{
@@ -505,6 +505,29 @@ impl Rollout {
     /// Whether this rollout runs the goal task.
     pub fn is_goal_task(&self) -> bool {
         matches!(self.task, Task::Goal(_))
+    }
+
+    /// Whether the task evaluates itself: its evaluation rollout records the task's own tally
+    /// ([`Rollout::task_record`]) instead of the tracking protocol's scored episodes.
+    pub fn task_evaluates(&self) -> bool {
+        !matches!(self.task, Task::Tracking(_))
+    }
+
+    /// The task's record of the iteration just run by this training rollout (None when
+    /// tracking; waits for the GPU): its episodes that ended since the last record, and the
+    /// `evaluation` rollout's episodes when it has just run (every env's first episode).
+    pub fn task_record(
+        &self,
+        evaluation: Option<&Rollout>,
+    ) -> Result<Option<TaskRecord>, RolloutError> {
+        let evaluated = match evaluation {
+            Some(e) => e.goal_tally()?,
+            None => None,
+        };
+        match &self.task {
+            Task::Goal(goal) => Ok(Some(TaskRecord::Goal(goal.record(evaluated)?))),
+            Task::Tracking(_) => Ok(None),
+        }
     }
 
     /// The goal task's per-env goals `[N, 2]` (world x, y) and root distances to them `[N]`

@@ -16,11 +16,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::env::layout::{JointLayout, observation_blocks};
 use crate::latent::FrozenDecoder;
+use crate::latent::GoalDecoder;
 use crate::latent::networks::REFERENCE_BLOCKS;
 use crate::motion::Character;
 use crate::nn::LayerShape;
 use crate::run::Checkpoint;
-use crate::train::goal_latent::GoalDecoder;
 use crate::train::latent_trainer::{frozen_decoder_of, latent_shapes, latent_tensor_names};
 use crate::train::{PolicyShapes, TrainError};
 

@@ -19,11 +19,12 @@ use prost::Message as _;
 
 use crate::env::layout::{JointLayout, ObservationBlock, ObservationCounts, observation_blocks};
 use crate::env::{GOAL_OBSERVATION, ObsConfig, goal_observation_config};
+use crate::latent::DECODER_DIGEST;
 use crate::motion::Character;
 use crate::nn::{LayerShape, mlp_layout};
 use crate::run::Checkpoint;
 use crate::run::checkpoint::tensor_names;
-use crate::train::goal_latent::{DECODER_DIGEST, load_goal_decoder};
+use crate::train::goal_latent::{head_shapes, load_goal_decoder};
 use crate::train::{PolicyShapes, TrainConfig, TrainError};
 
 use super::{ExportError, Format};
@@ -116,8 +117,8 @@ pub fn export_policy(
     let decoder = load_goal_decoder(&config, character)?;
     let shapes = match &decoder {
         Some(d) => {
-            d.check_checkpoint(checkpoint)?;
-            d.head_shapes(&config)
+            d.check_checkpoint(checkpoint).map_err(TrainError::from)?;
+            head_shapes(d, &config)
         }
         None if checkpoint.tensor(DECODER_DIGEST).is_some() => {
             return Err(ExportError::Unsupported(format!(

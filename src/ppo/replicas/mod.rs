@@ -33,11 +33,10 @@ use crate::cuda::{Communicator, nccl_version};
 use crate::env::TrackedMotion;
 use crate::plan::{PhysicsOverflow, PlanStore};
 
-use super::config::TrainConfig;
-use super::error::TrainError;
-use super::library::TrainMotion;
 use super::report::{IterationReport, replica_mismatch};
-use super::trainer::Trainer;
+use super::trainer::{Trainer, TrainerConfig};
+use super::trainer_error::TrainerError;
+use crate::env::TrainMotion;
 use crate::run::IterationStats;
 use crate::run::checkpoint::Checkpoint;
 use crate::run::clip_sampling::ClipSampling;
@@ -74,10 +73,10 @@ impl Replicas {
     /// bin) start statistics with the others' every rollout, as a clip's per-bin ones.
     pub fn start<'a>(
         devices: &[usize],
-        config: &TrainConfig,
+        config: &TrainerConfig,
         motion: impl Into<TrackedMotion<'a>>,
         store: &PlanStore,
-    ) -> Result<Replicas, TrainError> {
+    ) -> Result<Replicas, TrainerError> {
         let communicators = Communicator::create_all(devices)?;
         let (replies_to, replies) = std::sync::mpsc::channel();
         let start = Start {
@@ -111,8 +110,8 @@ impl Replicas {
             replicas.notes.push(format!(
                 "GPUs {devices:?} ({}): {} envs each, {} in all; NCCL {version} ({library}), all-reduces between parts of the iteration graph",
                 replicas.built[0].gpu_name,
-                config.env.num_envs,
-                u64::from(config.env.num_envs) * devices.len() as u64
+                config.rollout.env.num_envs,
+                u64::from(config.rollout.env.num_envs) * devices.len() as u64
             ));
         }
         Ok(replicas)
@@ -149,7 +148,7 @@ impl Replicas {
     }
 
     /// Runs one iteration on every GPU and returns each rank's report (not merged).
-    pub fn iterate_reports(&mut self) -> Result<Vec<IterationReport>, TrainError> {
+    pub fn iterate_reports(&mut self) -> Result<Vec<IterationReport>, TrainerError> {
         let reports = self.on_all(|t| t.iterate_report())?;
         if let Some(mismatch) = replica_mismatch(&reports) {
             // The sums of squares add block sums in a device-dependent order: equal parameters
@@ -166,26 +165,26 @@ impl Replicas {
     }
 
     /// One iteration on every GPU, merged (episodes over every GPU's envs).
-    pub fn iterate(&mut self) -> Result<IterationStats, TrainError> {
+    pub fn iterate(&mut self) -> Result<IterationStats, TrainerError> {
         let reports = self.iterate_reports()?;
         IterationReport::merge(&reports)
             .map(|r| r.stats())
-            .ok_or_else(|| TrainError::Internal("no GPU reported the iteration".to_owned()))
+            .ok_or_else(|| TrainerError::Internal("no GPU reported the iteration".to_owned()))
     }
 
     /// The evaluation, on rank 0 (every replica holds the same policy and normalization).
-    pub fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, TrainError> {
+    pub fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, TrainerError> {
         self.on_rank0(|t| t.evaluate())
     }
 
     /// The reset sampler's part per clip, from rank 0 (every replica samples from the same
     /// averaged statistics).
-    pub fn clip_sampling(&mut self) -> Result<Vec<ClipSampling>, TrainError> {
+    pub fn clip_sampling(&mut self) -> Result<Vec<ClipSampling>, TrainerError> {
         self.on_rank0(|t| t.clip_sampling())
     }
 
     /// Fills `checkpoint` from rank 0, after checking that every replica holds the same state.
-    pub fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), TrainError> {
+    pub fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), TrainerError> {
         self.check_digests("at a checkpoint")?;
         let empty = checkpoint.clone();
         *checkpoint = self.on_rank0(move |t| {
@@ -197,14 +196,14 @@ impl Replicas {
     }
 
     /// Restores `checkpoint` on every GPU (each resets its envs), then checks the replicas.
-    pub fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainError> {
+    pub fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainerError> {
         let shared = Arc::new(checkpoint.clone());
         self.on_all(move |t| t.restore(&shared))?;
         self.check_digests("after a restore")
     }
 
     /// Every GPU's physics overflow flags, counted together.
-    pub fn physics_overflow(&mut self) -> Result<PhysicsOverflow, TrainError> {
+    pub fn physics_overflow(&mut self) -> Result<PhysicsOverflow, TrainerError> {
         let all = self.on_all(|t| t.physics_overflow())?;
         Ok(all
             .into_iter()
@@ -219,12 +218,12 @@ impl Replicas {
 
     /// Every rank's [`Trainer::replica_digest`], in rank order (equal while the replicas are
     /// identical).
-    pub fn digests(&mut self) -> Result<Vec<u32>, TrainError> {
+    pub fn digests(&mut self) -> Result<Vec<u32>, TrainerError> {
         self.on_all(|t| t.replica_digest())
     }
 
     /// Fails unless every replica's [`Trainer::replica_digest`] is the same.
-    fn check_digests(&mut self, when: &str) -> Result<(), TrainError> {
+    fn check_digests(&mut self, when: &str) -> Result<(), TrainerError> {
         let digests = self.digests()?;
         if digests.windows(2).all(|w| w[0] == w[1]) {
             return Ok(());
@@ -234,17 +233,17 @@ impl Replicas {
             .zip(&self.devices)
             .map(|(digest, device)| format!("GPU {device}: {digest:08x}"))
             .collect();
-        Err(self.fail(TrainError::ReplicasDiffer {
+        Err(self.fail(TrainerError::ReplicasDiffer {
             when: when.to_owned(),
             digests: listed.join(", "),
         }))
     }
 
     /// Runs `job` on every rank's trainer at once and returns the answers in rank order.
-    fn on_all<R, F>(&mut self, job: F) -> Result<Vec<R>, TrainError>
+    fn on_all<R, F>(&mut self, job: F) -> Result<Vec<R>, TrainerError>
     where
         R: Send + 'static,
-        F: Fn(&mut Trainer) -> Result<R, TrainError> + Send + Sync + 'static,
+        F: Fn(&mut Trainer) -> Result<R, TrainerError> + Send + Sync + 'static,
     {
         let job = Arc::new(job);
         let ranks: Vec<usize> = (0..self.workers.len()).collect();
@@ -256,23 +255,23 @@ impl Replicas {
     }
 
     /// Runs `job` on rank 0's trainer (the training loop asks it for the evaluation's plan).
-    pub(super) fn on_rank0<R, F>(&mut self, job: F) -> Result<R, TrainError>
+    pub fn on_rank0<R, F>(&mut self, job: F) -> Result<R, TrainerError>
     where
         R: Send + 'static,
-        F: FnOnce(&mut Trainer) -> Result<R, TrainError> + Send + 'static,
+        F: FnOnce(&mut Trainer) -> Result<R, TrainerError> + Send + 'static,
     {
         let mut job = Some(job);
         let call = self.send(&[0], |_| {
             let job = job.take();
             Box::new(move |t: &mut Trainer| match job {
                 Some(job) => job(t).map(|r| Box::new(r) as Box<dyn Any + Send>),
-                None => Err(TrainError::Internal("a job was sent twice".to_owned())),
+                None => Err(TrainerError::Internal("a job was sent twice".to_owned())),
             })
         })?;
         let mut answers = self.gather::<R>(call, &[0])?;
         answers
             .pop()
-            .ok_or_else(|| TrainError::Internal("rank 0 did not answer".to_owned()))
+            .ok_or_else(|| TrainerError::Internal("rank 0 did not answer".to_owned()))
     }
 
     /// Sends `make(rank)` to each of `ranks`; returns the call's number.
@@ -280,9 +279,9 @@ impl Replicas {
         &mut self,
         ranks: &[usize],
         mut make: impl FnMut(usize) -> Job,
-    ) -> Result<u64, TrainError> {
+    ) -> Result<u64, TrainerError> {
         if self.failed {
-            return Err(TrainError::Setup(
+            return Err(TrainerError::Setup(
                 "the GPU workers stopped after an earlier failure".to_owned(),
             ));
         }
@@ -295,7 +294,7 @@ impl Replicas {
                 .is_some_and(|jobs| jobs.send((call, make(rank))).is_ok());
             if !sent {
                 let device = self.devices[rank];
-                return Err(self.fail(TrainError::Setup(format!(
+                return Err(self.fail(TrainerError::Setup(format!(
                     "the worker of GPU {device} (rank {rank}) has stopped"
                 ))));
             }
@@ -305,15 +304,15 @@ impl Replicas {
 
     /// Waits for every rank of `ranks` to answer call `call`; the first error (or a worker
     /// that leaves) fails the call and aborts the communicators.
-    fn gather<R: 'static>(&mut self, call: u64, ranks: &[usize]) -> Result<Vec<R>, TrainError> {
+    fn gather<R: 'static>(&mut self, call: u64, ranks: &[usize]) -> Result<Vec<R>, TrainerError> {
         let mut answers: Vec<Option<R>> = ranks.iter().map(|_| None).collect();
         while answers.iter().any(Option::is_none) {
             let reply = match self.replies.recv() {
                 Ok(reply) => reply,
                 Err(_) => {
-                    return Err(
-                        self.fail(TrainError::Setup("every GPU worker has stopped".to_owned()))
-                    );
+                    return Err(self.fail(TrainerError::Setup(
+                        "every GPU worker has stopped".to_owned(),
+                    )));
                 }
             };
             match reply {
@@ -323,7 +322,7 @@ impl Replicas {
                         && answers[at].is_none()
                     {
                         let device = self.devices[rank];
-                        return Err(self.fail(TrainError::Internal(format!(
+                        return Err(self.fail(TrainerError::Internal(format!(
                             "the worker of GPU {device} (rank {rank}) stopped without answering (it panicked)"
                         ))));
                     }
@@ -335,14 +334,14 @@ impl Replicas {
                         (Some(at), Ok(value)) => match value.downcast::<R>() {
                             Ok(value) => answers[at] = Some(*value),
                             Err(_) => {
-                                return Err(self.fail(TrainError::Internal(
+                                return Err(self.fail(TrainerError::Internal(
                                     "a GPU worker answered with the wrong type".to_owned(),
                                 )));
                             }
                         },
                         (Some(_), Err(error)) => {
                             let device = self.devices[rank];
-                            return Err(self.fail(TrainError::Replica {
+                            return Err(self.fail(TrainerError::Replica {
                                 device,
                                 rank,
                                 error: Box::new(error),
@@ -359,7 +358,7 @@ impl Replicas {
     /// After the first failure: no more jobs, and every communicator aborted (on a thread of
     /// its own: NCCL's last abort waits until the workers have dropped their graphs, which
     /// they do once the aborted collectives let them go). Returns `error`.
-    fn fail(&mut self, error: TrainError) -> TrainError {
+    fn fail(&mut self, error: TrainerError) -> TrainerError {
         if !self.failed {
             self.failed = true;
             let communicators = self.communicators.clone();
@@ -416,9 +415,12 @@ impl Drop for Replicas {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use super::super::trainer::replica_seed;
     use crate::env::layout::reset_params;
-    use crate::train::replica_seed;
+    use crate::env::{
+        EnvConfig, EvalStart, EvaluationProtocol, ObsConfig, RewardConfig, RolloutConfig,
+        TaskConfig,
+    };
 
     #[test]
     fn rank_zero_keeps_the_run_seed_and_other_ranks_draw_their_own() {
@@ -430,7 +432,21 @@ mod tests {
             unique.dedup();
             assert_eq!(unique.len(), seeds.len(), "seed {seed}: {seeds:?}");
             // The kernels see 32-bit folds: the policy's (halves xor-ed) and the reset's.
-            let mut config = TrainConfig::with_motion("walk").rollout_config();
+            let mut config = RolloutConfig {
+                task: TaskConfig::Tracking,
+                env: EnvConfig::default(),
+                reward: RewardConfig::default(),
+                obs: ObsConfig::default(),
+                horizon: 32,
+                seed,
+                values_in_update: false,
+                evaluation: EvaluationProtocol {
+                    envs: 32,
+                    steps: None,
+                    start: EvalStart::Spread,
+                    window_s: None,
+                },
+            };
             let mut sampling = Vec::new();
             let mut resets = Vec::new();
             for &s in &seeds {

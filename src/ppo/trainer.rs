@@ -15,14 +15,18 @@
 //! On several GPUs each runs one [`Trainer::replica`]: the same construction with its GPU's
 //! NCCL communicator, its own envs and seed (`replica_seed`), the run's initial parameters,
 //! and the all-reduces of the rollout and the update inside its iteration graph
-//! (src/train/replicas/ drives them together).
+//! ([`Replicas`](super::Replicas) drives them together).
+//!
+//! `train` builds it from its configuration ([`TrainerConfig`]: the rollout's sections, the
+//! `[policy]` and `[ppo]` sections, the seed, a goal run's frozen decoder) and hands it to the
+//! run harness as a [`Learner`](crate::run::Learner) (`super::learner`).
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use crate::cuda::{Communicator, DeviceRange, Gpu, Graph, Readback};
 use crate::env::{
-    GoalTally, Rollout, RolloutPolicy, StageEvents, StageRecorder, TrackedMotion, Trajectory,
+    Rollout, RolloutPolicy, StageEvents, StageRecorder, TaskRecord, TrackedMotion, Trajectory,
 };
 use crate::kernels::DeviceArray;
 use crate::latent::LatentDecoder;
@@ -30,12 +34,12 @@ use crate::nn::PolicyGemm;
 use crate::plan::PlanStore;
 use crate::ppo::{GaussianPolicy, PpoBatch, PpoOptimizerState, PpoUpdate, UpdateStage};
 
-use super::config::TrainConfig;
 use super::device_report::{REPORT_BYTES, read_report, record_parameter_squares, record_report};
-use super::error::TrainError;
-use super::goal_latent::{DECODER_DIGEST, GoalDecoder, decoder_digest, load_goal_decoder};
 use super::report::IterationReport;
-use crate::env::{GoalRates, GoalRecord};
+use super::trainer_error::TrainerError;
+use super::{PolicyConfig, PpoConfig};
+use crate::env::RolloutConfig;
+use crate::latent::{DECODER_DIGEST, GoalDecoder, decoder_digest};
 use crate::plan::PhysicsOverflow;
 use crate::run::IterationStats;
 use crate::run::checkpoint::tensor_names;
@@ -57,6 +61,18 @@ pub fn replica_seed(seed: u64, rank: usize) -> u64 {
     z ^ (z >> 31)
 }
 
+/// What a [`Trainer`] is built from.
+#[derive(Clone, Debug)]
+pub struct TrainerConfig {
+    /// The rollouts' task, sections, horizon and evaluation protocol; its seed is the run's.
+    pub rollout: RolloutConfig,
+    pub policy: PolicyConfig,
+    pub ppo: PpoConfig,
+    /// A goal run in a latent controller's action space: the frozen decoder the policy drives
+    /// (its action is the latent residual).
+    pub decoder: Option<GoalDecoder>,
+}
+
 /// Everything on the GPU that a run trains and evaluates with.
 pub struct Trainer {
     gpu: Gpu,
@@ -69,9 +85,6 @@ pub struct Trainer {
     update: PpoUpdate,
     iteration: Iteration,
     evaluation_graph: Graph,
-    /// The goal task's counter totals at the last [`Trainer::goal_record`] (zeros when
-    /// tracking, and after every reset of the rollout).
-    goal_seen: GoalTally,
     /// A goal run in a latent controller's action space (`goal.decoder`): the frozen decoder
     /// the policy above (the head) drives; the graphs address its buffers.
     decoder: Option<DecoderNetworks>,
@@ -104,14 +117,14 @@ impl Trainer {
         gpu: &Gpu,
         store: &PlanStore,
         motion: impl Into<TrackedMotion<'a>>,
-        config: &TrainConfig,
-    ) -> Result<Trainer, TrainError> {
+        config: &TrainerConfig,
+    ) -> Result<Trainer, TrainerError> {
         Trainer::build(gpu, store, motion.into(), config, None)
     }
 
     /// Rank `replicas.rank()` of a data-parallel run over `replicas.size()` GPUs, on `gpu`
-    /// (the communicator's device): `config.env.num_envs` envs of its own, rollout and sampling
-    /// seeded by `replica_seed(config.seed, rank)` (rank 0: the run's seed), the parameters
+    /// (the communicator's device): `env.num_envs` envs of its own, rollout and sampling
+    /// seeded by `replica_seed(seed, rank)` (rank 0: the run's seed), the parameters
     /// initialized from the run's seed like every other rank's, and the all-reduces of the
     /// rollout and the update recorded into its iteration graph. Every rank's thread must build
     /// its replica at the same time (the construction ends with collectives), as it must call
@@ -121,11 +134,11 @@ impl Trainer {
         gpu: &Gpu,
         store: &PlanStore,
         motion: impl Into<TrackedMotion<'a>>,
-        config: &TrainConfig,
+        config: &TrainerConfig,
         replicas: &Communicator,
-    ) -> Result<Trainer, TrainError> {
+    ) -> Result<Trainer, TrainerError> {
         if replicas.device() != gpu.info().ordinal {
-            return Err(TrainError::Internal(format!(
+            return Err(TrainerError::Internal(format!(
                 "the communicator of device {} for a trainer on device {}",
                 replicas.device(),
                 gpu.info().ordinal
@@ -138,17 +151,18 @@ impl Trainer {
         gpu: &Gpu,
         store: &PlanStore,
         motion: TrackedMotion<'_>,
-        config: &TrainConfig,
+        config: &TrainerConfig,
         replicas: Option<&Communicator>,
-    ) -> Result<Trainer, TrainError> {
+    ) -> Result<Trainer, TrainerError> {
         let rank = replicas.map_or(0, Communicator::rank);
-        let own_seed = replica_seed(config.seed, rank);
-        let mut rollout_config = config.rollout_config();
+        let run_seed = config.rollout.seed;
+        let own_seed = replica_seed(run_seed, rank);
+        let mut rollout_config = config.rollout.clone();
         rollout_config.seed = own_seed;
-        let goal_decoder = load_goal_decoder(config, motion.character())?;
+        let goal_decoder = config.decoder.clone();
         if goal_decoder.is_some() && replicas.is_some() {
             // The configuration's validation refuses both for the goal task already.
-            return Err(TrainError::Internal(
+            return Err(TrainerError::Internal(
                 "goal.decoder: a latent goal run trains on one GPU, rollout then update".to_owned(),
             ));
         }
@@ -173,7 +187,7 @@ impl Trainer {
             rollout.observation_size(),
             action_size,
             rollout.num_envs(),
-            config.seed,
+            run_seed,
         )?
         .with_sampling_seed(own_seed);
         let mut evaluation = Rollout::evaluation(&rollout, store, &rollout_config)?;
@@ -211,7 +225,7 @@ impl Trainer {
             &policy,
             &config.ppo,
             rollout.num_envs(),
-            config.seed,
+            run_seed,
         )?;
         if let Some(replicas) = replicas {
             update = update.averaging_over(replicas);
@@ -239,35 +253,32 @@ impl Trainer {
             update,
             iteration,
             evaluation_graph,
-            goal_seen: GoalTally::default(),
             decoder,
         })
     }
 
     /// Runs one training iteration (rollout and update) and returns its statistics. Waits for
     /// the iteration to finish: the caller's clock measures it.
-    pub fn iterate(&mut self) -> Result<IterationStats, TrainError> {
+    pub fn iterate(&mut self) -> Result<IterationStats, TrainerError> {
         Ok(self.iterate_report()?.stats())
     }
 
     /// [`Trainer::iterate`], returning this GPU's report as read back (what several GPUs'
     /// reports are merged from).
-    pub fn iterate_report(&mut self) -> Result<IterationReport, TrainError> {
+    pub fn iterate_report(&mut self) -> Result<IterationReport, TrainerError> {
         self.iteration.run(self.gpu.stream())
     }
 
     /// Evaluates the current policy by the paper's protocol (one episode per evaluation env,
     /// mean actions, fixed start states) and returns every env's episode.
-    pub fn evaluate(&self) -> Result<Vec<EnvEvaluation>, TrainError> {
-        self.evaluation.reset_all()?;
-        self.evaluation_graph.launch(self.gpu.stream())?;
-        self.gpu.synchronize()?;
+    pub fn evaluate(&self) -> Result<Vec<EnvEvaluation>, TrainerError> {
+        self.run_evaluation()?;
         let scores = self
             .evaluation
             .episode_scores()
             .ok_or_else(|| {
-                TrainError::Internal(
-                    "the evaluation rollout keeps no tracking scores (the goal task's evaluation is Trainer::goal_record)"
+                TrainerError::Internal(
+                    "the evaluation rollout keeps no tracking scores (a task that evaluates itself records its evaluation in Trainer::task_record)"
                         .to_owned(),
                 )
             })?
@@ -277,7 +288,7 @@ impl Trainer {
 
     /// What the adaptive reset sampler gives each clip now (waits for the GPU): its share of the
     /// next rollout's resets and its recent failure rate ([`clip_sampling`]).
-    pub fn clip_sampling(&self) -> Result<Vec<ClipSampling>, TrainError> {
+    pub fn clip_sampling(&self) -> Result<Vec<ClipSampling>, TrainerError> {
         self.gpu.synchronize()?;
         let (visits, failures, cdf, _) = self.rollout.phase_statistics();
         let [clips, bins] = cdf.shape();
@@ -289,38 +300,31 @@ impl Trainer {
             bins,
         )
         .ok_or_else(|| {
-            TrainError::Internal(format!(
+            TrainerError::Internal(format!(
                 "the reset sampler's statistics are not a CDF over {clips} clips x {bins} bins"
             ))
         })
     }
 
-    /// The goal task's record of the iteration just run (None when tracking; waits for the
-    /// GPU): the training rollout's episodes that ended since the last call, and with
-    /// `evaluate`, the evaluation rollout's (every env's first episode: mean actions, no reset
-    /// noise, every env starting at its clip's start).
-    pub fn goal_record(&mut self, evaluate: bool) -> Result<Option<GoalRecord>, TrainError> {
-        let Some(total) = self.rollout.goal_tally()? else {
-            return Ok(None);
-        };
-        let rollout = GoalRates::from(&total.since(&self.goal_seen));
-        self.goal_seen = total;
-        let evaluation = if evaluate {
-            self.evaluate_goal()?.map(|t| GoalRates::from(&t))
+    /// The task's record of the iteration just run (None when tracking; waits for the GPU):
+    /// the training rollout's episodes that ended since the last call, and with `evaluate`,
+    /// the evaluation rollout's when the task evaluates itself (every env's first episode:
+    /// mean actions, no reset noise, every env starting at its clip's start).
+    pub fn task_record(&mut self, evaluate: bool) -> Result<Option<TaskRecord>, TrainerError> {
+        let evaluation = if evaluate && self.evaluation.task_evaluates() {
+            self.run_evaluation()?;
+            Some(&self.evaluation)
         } else {
             None
         };
-        Ok(Some(GoalRecord {
-            rollout,
-            evaluation,
-        }))
+        Ok(self.rollout.task_record(evaluation)?)
     }
 
     /// Overflow flags of the training worlds' physics since the plans were loaded (waits for
     /// the GPU; read once, at the end of a run).
-    pub fn physics_overflow(&self) -> Result<PhysicsOverflow, TrainError> {
+    pub fn physics_overflow(&self) -> Result<PhysicsOverflow, TrainerError> {
         PhysicsOverflow::read(self.rollout.simulation())
-            .map_err(|e| TrainError::from(crate::env::RolloutError::from(e)))
+            .map_err(|e| TrainerError::from(crate::env::RolloutError::from(e)))
     }
 
     /// What computes the policy's GEMMs (rollout, update and evaluation share it).
@@ -333,17 +337,14 @@ impl Trainer {
         self.evaluation.horizon() as u32
     }
 
-    /// The goal task's evaluation of the current policy (None when tracking; waits for the
-    /// GPU): every evaluation env's first episode, mean actions, no reset noise, every env
-    /// starting at its clip's start, the run's seed (what `goal.evaluation` records).
-    pub fn evaluate_goal(&self) -> Result<Option<GoalTally>, TrainError> {
-        if !self.evaluation.is_goal_task() {
-            return Ok(None);
-        }
+    /// Runs the evaluation rollout once from a reset (the policy's mean actions, fixed start
+    /// states) and waits for it: its scores, or its task's tally, are then on the rollout
+    /// ([`Trainer::evaluation_rollout`]).
+    pub fn run_evaluation(&self) -> Result<(), TrainerError> {
         self.evaluation.reset_all()?;
         self.evaluation_graph.launch(self.gpu.stream())?;
         self.gpu.synchronize()?;
-        Ok(self.evaluation.goal_tally()?)
+        Ok(())
     }
 
     /// The evaluation rollout captured as the evaluation runs it (the policy's mean actions,
@@ -353,7 +354,7 @@ impl Trainer {
     pub fn capture_recorded_evaluation(
         &self,
         trajectory: &Trajectory,
-    ) -> Result<Graph, TrainError> {
+    ) -> Result<Graph, TrainerError> {
         Ok(match &self.decoder {
             Some(d) => self.evaluation.capture_recorded(
                 &d.evaluation.driven_by(&self.evaluation_policy)?,
@@ -374,7 +375,7 @@ impl Trainer {
 
     /// Adds the policy, the normalization and everything an exact continuation needs to
     /// `checkpoint` (waits for the GPU).
-    pub fn save_into(&self, checkpoint: &mut Checkpoint) -> Result<(), TrainError> {
+    pub fn save_into(&self, checkpoint: &mut Checkpoint) -> Result<(), TrainerError> {
         use tensor_names::*;
         self.gpu.synchronize()?;
         let policy = &self.policy;
@@ -416,13 +417,13 @@ impl Trainer {
     /// Restores the policy and the normalization from `checkpoint`, and, when it has them
     /// (a training checkpoint), the optimizer and the start-phase statistics; then puts every
     /// env at a new reference state (episodes in progress are not stored).
-    pub fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainError> {
+    pub fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainerError> {
         use tensor_names::*;
         self.gpu.synchronize()?;
         match &self.decoder {
             Some(d) => d.loaded.check_checkpoint(checkpoint)?,
             None if checkpoint.tensor(DECODER_DIGEST).is_some() => {
-                return Err(TrainError::Setup(format!(
+                return Err(TrainerError::Setup(format!(
                     "{}: a latent goal run's checkpoint (its policy drives a decoder); this configuration has no goal.decoder",
                     checkpoint.source()
                 )));
@@ -462,7 +463,6 @@ impl Trainer {
             }
         }
         self.rollout.reset_all()?;
-        self.goal_seen = GoalTally::default();
         Ok(())
     }
 
@@ -472,7 +472,7 @@ impl Trainer {
     /// phase bin) cell (waits for the GPU). The replicas
     /// of a run on several GPUs must have equal digests: an exact check, where the per
     /// iteration comparison of the sums of squares is a cheap one.
-    pub fn replica_digest(&self) -> Result<u32, TrainError> {
+    pub fn replica_digest(&self) -> Result<u32, TrainerError> {
         use zerocopy::IntoBytes;
         let mut crc = crc32fast::Hasher::new();
         let policy = &self.policy;
@@ -530,7 +530,7 @@ impl Trainer {
 
     /// The update alone, of the batch in the rollout's own storage, captured as a graph of its
     /// own (`bench full` times it). Launching it trains the parameters.
-    pub fn capture_update(&self) -> Result<Graph, TrainError> {
+    pub fn capture_update(&self) -> Result<Graph, TrainerError> {
         let (graph, _) = self.capture_update_staged(false)?;
         Ok(graph)
     }
@@ -540,7 +540,7 @@ impl Trainer {
     pub fn capture_update_staged(
         &self,
         timed: bool,
-    ) -> Result<(Graph, Option<StageEvents<UpdateStage>>), TrainError> {
+    ) -> Result<(Graph, Option<StageEvents<UpdateStage>>), TrainerError> {
         let stream = self.gpu.stream();
         let mut events = None;
         let graph = stream.capture(|s| {
@@ -552,14 +552,14 @@ impl Trainer {
             let batch = PpoBatch::from(&self.rollout.storage);
             self.update.record_staged(s, &batch, &mut stages)?;
             events = stages.into_events();
-            Ok::<(), TrainError>(())
+            Ok::<(), TrainerError>(())
         })?;
         graph.upload(stream)?;
         Ok((graph, events))
     }
 
     /// Node kinds of the graph one iteration launches, e.g. `{"kernel": .., "memcpy": .., "conditional": ..}`.
-    pub fn iteration_graph_nodes(&self) -> Result<BTreeMap<String, usize>, TrainError> {
+    pub fn iteration_graph_nodes(&self) -> Result<BTreeMap<String, usize>, TrainerError> {
         Ok(self.iteration.graph.node_counts()?)
     }
 }
@@ -574,7 +574,7 @@ impl Iteration {
         acting: &dyn RolloutPolicy,
         policy: &GaussianPolicy,
         update: &PpoUpdate,
-    ) -> Result<Iteration, TrainError> {
+    ) -> Result<Iteration, TrainerError> {
         let report = DeviceRange::whole(&Arc::new(gpu.alloc_zeroed(REPORT_BYTES)?));
         let parameter_squares = DeviceArray::<f64>::zeros(gpu, [2])?;
         let stream = gpu.stream();
@@ -594,11 +594,11 @@ impl Iteration {
     }
 
     /// Launches the graph, queues the report's copy and waits for it.
-    fn run(&mut self, stream: &crate::cuda::Stream) -> Result<IterationReport, TrainError> {
+    fn run(&mut self, stream: &crate::cuda::Stream) -> Result<IterationReport, TrainerError> {
         self.graph.launch(stream)?;
         self.readback.queue(stream, &self.report)?;
         let bytes = self.readback.wait()?.ok_or_else(|| {
-            TrainError::Internal("the iteration report was not queued".to_owned())
+            TrainerError::Internal("the iteration report was not queued".to_owned())
         })?;
         read_report(bytes)
     }
@@ -610,12 +610,12 @@ fn put_f32<const N: usize>(
     c: &mut Checkpoint,
     name: &str,
     a: &DeviceArray<f32, N>,
-) -> Result<(), TrainError> {
+) -> Result<(), TrainerError> {
     c.insert(name, &[a.len()], a.download()?)?;
     Ok(())
 }
 
-fn put_f64(c: &mut Checkpoint, name: &str, a: &DeviceArray<f64>) -> Result<(), TrainError> {
+fn put_f64(c: &mut Checkpoint, name: &str, a: &DeviceArray<f64>) -> Result<(), TrainerError> {
     c.insert(name, &[a.len()], a.download()?)?;
     Ok(())
 }
@@ -629,12 +629,12 @@ fn get_f32<const N: usize>(
     c: &Checkpoint,
     name: &str,
     a: &DeviceArray<f32, N>,
-) -> Result<(), TrainError> {
+) -> Result<(), TrainerError> {
     a.upload(c.get::<f32>(name, &[a.len()])?)?;
     Ok(())
 }
 
-fn get_f64(c: &Checkpoint, name: &str, a: &DeviceArray<f64>) -> Result<(), TrainError> {
+fn get_f64(c: &Checkpoint, name: &str, a: &DeviceArray<f64>) -> Result<(), TrainerError> {
     a.upload(c.get::<f64>(name, &[a.len()])?)?;
     Ok(())
 }

@@ -11,13 +11,12 @@ use std::thread::JoinHandle;
 use crate::cuda::{Communicator, Gpu};
 use crate::plan::PlanStore;
 
-use super::super::config::TrainConfig;
-use super::super::error::TrainError;
-use super::super::library::TrainMotion;
-use super::super::trainer::Trainer;
+use super::super::trainer::{Trainer, TrainerConfig};
+use super::super::trainer_error::TrainerError;
+use crate::env::TrainMotion;
 
 /// A job's answer, type-erased (the coordinator downcasts it to what it asked for).
-pub(super) type Answer = Result<Box<dyn Any + Send>, TrainError>;
+pub(super) type Answer = Result<Box<dyn Any + Send>, TrainerError>;
 
 /// Work for one replica.
 pub(super) type Job = Box<dyn FnOnce(&mut Trainer) -> Answer + Send>;
@@ -46,7 +45,7 @@ pub(super) struct Built {
 
 /// Everything a worker starts from (shared with the other workers).
 pub(super) struct Start {
-    pub config: Arc<TrainConfig>,
+    pub config: Arc<TrainerConfig>,
     /// One clip, or a motion library (every GPU holds the whole library table).
     pub motion: Arc<TrainMotion>,
     pub store: Arc<PlanStore>,
@@ -75,7 +74,7 @@ pub(super) fn spawn(
     communicator: Communicator,
     start: &Start,
     replies: Sender<Reply>,
-) -> Result<Worker, TrainError> {
+) -> Result<Worker, TrainerError> {
     let (jobs, inbox) = std::sync::mpsc::channel();
     let rank = communicator.rank();
     let start = Start {
@@ -87,7 +86,7 @@ pub(super) fn spawn(
         .name(format!("gpu{}-rank{rank}", communicator.device()))
         .spawn(move || run(communicator, start, inbox, replies))
         .map_err(|e| {
-            TrainError::Setup(format!("cannot start the thread of GPU rank {rank}: {e}"))
+            TrainerError::Setup(format!("cannot start the thread of GPU rank {rank}: {e}"))
         })?;
     Ok(Worker {
         jobs: Some(jobs),
@@ -107,7 +106,7 @@ fn run(
         replies: replies.clone(),
     };
     let built = Gpu::open(communicator.device())
-        .map_err(TrainError::from)
+        .map_err(TrainerError::from)
         .and_then(|gpu| {
             let trainer = Trainer::replica(
                 &gpu,

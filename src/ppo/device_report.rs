@@ -5,14 +5,14 @@
 //! parameters' sums of squares after the update (float64, actor and critic: the divergence
 //! guard's view of the parameters).
 
+use super::{GaussianPolicy, PpoStatistics, PpoUpdate};
 use crate::cuda::{DeviceRange, Stream};
 use crate::env::{Rollout, RolloutTotals, TOTALS};
 use crate::kernels::{DeviceArray, EnvKernels};
 use crate::nn::reduce::{record_clear, record_sum_of_squares};
-use crate::ppo::{GaussianPolicy, PpoStatistics, PpoUpdate};
 
-use super::error::TrainError;
 use super::report::IterationReport;
+use super::trainer_error::TrainerError;
 use crate::run::metrics::UpdateStats;
 
 pub(super) const TOTALS_BYTES: usize = TOTALS * 8;
@@ -27,7 +27,7 @@ pub(super) fn record_parameter_squares(
     s: &Stream,
     policy: &GaussianPolicy,
     squares: &DeviceArray<f64>,
-) -> Result<(), TrainError> {
+) -> Result<(), TrainerError> {
     record_clear(s, squares)?;
     record_sum_of_squares(kernels, s, policy.actor_parameters(), squares, 0)?;
     record_sum_of_squares(kernels, s, policy.critic_parameters(), squares, 1)?;
@@ -42,7 +42,7 @@ pub(super) fn record_report(
     rollout: &Rollout,
     update: &PpoUpdate,
     squares: &DeviceArray<f64>,
-) -> Result<(), TrainError> {
+) -> Result<(), TrainerError> {
     let parts = [
         (rollout.statistics().totals().range()?, TOTALS_BYTES),
         (update.statistics().range()?, STATISTICS_BYTES),
@@ -57,8 +57,8 @@ pub(super) fn record_report(
 }
 
 /// The report in the first [`REPORT_BYTES`] of `bytes`.
-pub(super) fn read_report(bytes: &[u8]) -> Result<IterationReport, TrainError> {
-    let short = || TrainError::Internal("a short iteration report".to_owned());
+pub(super) fn read_report(bytes: &[u8]) -> Result<IterationReport, TrainerError> {
+    let short = || TrainerError::Internal("a short iteration report".to_owned());
     let bytes = bytes.get(..REPORT_BYTES).ok_or_else(short)?;
     let totals = read_totals(&bytes[..TOTALS_BYTES])?;
     let squares_at = TOTALS_BYTES + STATISTICS_BYTES;
@@ -91,7 +91,7 @@ pub(super) fn read_report(bytes: &[u8]) -> Result<IterationReport, TrainError> {
 }
 
 /// A rollout's totals ([`TOTALS_BYTES`] bytes).
-pub(super) fn read_totals(bytes: &[u8]) -> Result<RolloutTotals, TrainError> {
+pub fn read_totals(bytes: &[u8]) -> Result<RolloutTotals, TrainerError> {
     RolloutTotals::from_bytes(bytes)
-        .ok_or_else(|| TrainError::Internal("malformed rollout totals".to_owned()))
+        .ok_or_else(|| TrainerError::Internal("malformed rollout totals".to_owned()))
 }
