@@ -13,8 +13,12 @@
 //! - [`latent`]: the latent controller (encoder, decoder, prior) distilled from a tracker.
 //! - [`motion`]: DeepMimic reference motions and their kinematics.
 //! - [`bench`]: benchmarks of physics and of the rollout, for `instantmimic bench`.
-//! - [`train`]: training runs: the GPU loop (`Trainer`), configuration, run directories,
-//!   checkpoints, metrics, the evaluation protocol.
+//! - [`run`]: the run harness: run directories, checkpoints, metrics, the stop rule, the
+//!   evaluation protocol's bookkeeping, behind the `Learner` seam.
+//! - [`train`]: training runs: the configuration, the character, and the learner it asks for
+//!   (the PPO `Trainer` lives in [`ppo`], the distillation in [`latent`]).
+//! - [`world`]: one run across processes and hosts: the rank, the rendezvous, the control
+//!   connections.
 //! - [`hpo`]: hyperparameter search by an agent (plan → propose → experiment).
 //! - [`assets`]: PTX and plans embedded in the binary at build time.
 //! - [`plot`]: PNG charts with an embedded font.
@@ -52,3 +56,4 @@ pub mod replay;
 pub mod run;
 pub mod train;
 pub mod viewer;
+pub mod world;

@@ -21,6 +21,7 @@ const BELOW_TRAIN: &[&str] = &[
     "ppo",
     "recording",
     "run",
+    "world",
 ];
 
 /// Each floor and the modules it may import, bottom up (docs/architecture.md).
@@ -29,6 +30,8 @@ const FLOORS: &[(&str, &[&str])] = &[
     ("files", &[]),
     ("assets", &[]),
     ("plot", &[]),
+    // One run across processes: std's TCP, nothing of CUDA or training.
+    ("world", &[]),
     ("motion", &["files"]),
     ("plan", &["assets", "cuda", "files"]),
     ("kernels", &["assets", "cuda", "plan", "files"]),
