@@ -49,7 +49,9 @@ const FLOORS: &[(&str, &[&str])] = &[
     ("latent", &["cuda", "env", "kernels", "nn", "run"]),
     (
         "ppo",
-        &["cuda", "env", "kernels", "latent", "nn", "plan", "run"],
+        &[
+            "cuda", "env", "kernels", "latent", "nn", "plan", "run", "world",
+        ],
     ),
     ("train", BELOW_TRAIN),
     ("viewer", &["files", "motion", "recording"]),

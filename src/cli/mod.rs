@@ -39,7 +39,7 @@ struct Cli {
 // In the order a user meets them: train and look at the result first, the developer tools last.
 enum Command {
     /// Train a motion-tracking policy (PPO on the GPU) into a run directory (see docs/train.md).
-    Train(train::TrainArgs),
+    Train(Box<train::TrainArgs>),
     /// Evaluate a checkpoint by the paper's protocol.
     Eval(eval::EvalArgs),
     /// Replay a checkpoint's policy as the evaluation runs it and write an HTML page to watch it
@@ -86,7 +86,7 @@ pub fn run() -> Result<()> {
         Command::Motion(args) => motion::run(args),
         Command::Gpu(args) => gpu::run(&args),
         Command::Hpo(args) => hpo::run_hpo(args),
-        Command::Train(args) => train::run(args),
+        Command::Train(args) => train::run(*args),
         Command::Eval(args) => eval::run(args),
         Command::Replay(args) => replay::run(args),
         Command::Export(args) => export::run(args),

@@ -28,9 +28,11 @@ use crate::run::{
 use crate::train::goal_latent::{describe_decoder, head_shapes, load_goal_decoder};
 use crate::train::latent_trainer::{latent_shapes, load_teacher};
 use crate::train::{
-    ChosenCharacter, RunStart, TrainConfig, TrainSetup, check_trained_character, default_run_dir,
-    preflight_training, train_on_gpu,
+    ChosenCharacter, RankOutcome, RunStart, TrainConfig, TrainSetup, WorldRun,
+    check_trained_character, check_world_config, default_run_dir, preflight_training,
+    train_as_rank, train_on_gpu,
 };
+use crate::world::{WorldFlags, WorldSource, WorldSpec};
 
 /// `--progress`.
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -128,6 +130,31 @@ pub struct TrainArgs {
     /// GPU alone. A resumed run must use as many GPUs as it trained on.
     #[arg(help_heading = "Several GPUs", long, value_delimiter = ',', num_args = 1.., conflicts_with = "device")]
     gpus: Option<Vec<u32>>,
+    /// This process's rank in a world of processes, one per GPU, on one host or several
+    /// (docs/train.md, "Several processes"); with --world-size and --rendezvous. Without these
+    /// flags torchrun's variables (RANK, WORLD_SIZE, LOCAL_RANK, MASTER_ADDR, MASTER_PORT) or
+    /// Slurm's (SLURM_PROCID, SLURM_NTASKS, SLURM_LOCALID) are read when set.
+    #[arg(help_heading = "Several processes", long, conflicts_with_all = ["gpus", "device"])]
+    rank: Option<usize>,
+    /// Processes in the world (rank 0 to N-1).
+    #[arg(help_heading = "Several processes", long)]
+    world_size: Option<usize>,
+    /// This process's GPU among its host's (default: the rank; a process that sees one GPU
+    /// takes it).
+    #[arg(help_heading = "Several processes", long)]
+    local_rank: Option<usize>,
+    /// Rank 0's host and a free port on it, where the other ranks join (e.g. node01:29500).
+    #[arg(help_heading = "Several processes", long, value_name = "HOST:PORT")]
+    rendezvous: Option<String>,
+    /// Seconds a rank waits for the others: to join, and at every iteration (a rank that dies
+    /// or hangs longer stops every rank with its name).
+    #[arg(
+        help_heading = "Several processes",
+        long,
+        default_value_t = 300,
+        value_name = "SECONDS"
+    )]
+    world_timeout: u64,
     /// The library tracker's checkpoint a latent controller is distilled from (overrides
     /// `latent.teacher`; the configuration needs a `[latent]` section, docs/latent.md).
     #[arg(
@@ -170,6 +197,30 @@ impl TrainArgs {
             config.run.gpus = gpus.clone();
             flags.push("--gpus");
         }
+    }
+
+    /// The world of processes this `train` is a rank of (None: one process), checked against
+    /// `config`.
+    fn world(&self, config: &TrainConfig) -> Result<Option<WorldRun>> {
+        let flags = WorldFlags {
+            rank: self.rank,
+            world_size: self.world_size,
+            local_rank: self.local_rank,
+            rendezvous: self.rendezvous.clone(),
+        };
+        let Some(spec) = WorldSpec::resolve(&flags, |name| std::env::var(name).ok())? else {
+            return Ok(None);
+        };
+        check_world_config(config)?;
+        if self.world_timeout == 0 {
+            anyhow::bail!(
+                "--world-timeout 0: give the seconds a rank waits for the others (e.g. 300)"
+            );
+        }
+        Ok(Some(WorldRun {
+            spec,
+            timeout: std::time::Duration::from_secs(self.world_timeout),
+        }))
     }
 
     /// The device of a single-GPU run, and the one that writes the replay page: the first of
@@ -350,7 +401,14 @@ pub fn run(args: TrainArgs) -> Result<()> {
         None => {
             let (config, label) = resolve_new(&args)?;
             let root = args.out.clone().unwrap_or_else(|| default_run_dir(&config));
-            let replaced = RunDir::check_new(&root, args.overwrite)?;
+            // Rank 0 of a world of processes writes the run directory; the other ranks only
+            // read it (and may find rank 0's files there already).
+            let follower = args.world(&config)?.is_some_and(|w| !w.spec.is_leader());
+            let replaced = if follower {
+                Vec::new()
+            } else {
+                RunDir::check_new(&root, args.overwrite)?
+            };
             let line = match (root.exists(), replaced.len()) {
                 (false, _) => format!("{} (new)", root.display()),
                 (true, 0) => format!("{} (exists, no run files)", root.display()),
@@ -418,8 +476,27 @@ pub fn run(args: TrainArgs) -> Result<()> {
         }
         None => None,
     };
+    // One rank of a world of processes (flags, torchrun's or Slurm's variables).
+    let world = args.world(&config)?;
     // Several GPUs need NCCL: say so before a run directory is made.
-    let nccl = if config.run.data_parallel() {
+    let nccl = if let Some(world) = &world {
+        let (version, library) = nccl_version()?;
+        let spec = &world.spec;
+        Some(format!(
+            "world of {} processes ({}): this is rank {} (local rank {}), rendezvous at {}; {} envs each ({} in all), NCCL {version} ({library})",
+            spec.size,
+            match spec.source {
+                WorldSource::Flags => "--rank",
+                WorldSource::Torchrun => "torchrun's variables",
+                WorldSource::Slurm => "Slurm's variables",
+            },
+            spec.rank,
+            spec.local_rank,
+            spec.rendezvous,
+            config.env.num_envs,
+            u64::from(config.env.num_envs) * spec.size as u64,
+        ))
+    } else if config.run.data_parallel() {
         let (version, library) = nccl_version()?;
         Some(format!(
             "GPUs {:?}: {} envs each ({} in all), NCCL {version} ({library})",
@@ -475,7 +552,20 @@ pub fn run(args: TrainArgs) -> Result<()> {
         device: args.device,
         stop: stop.clone(),
     };
-    let summary = train_on_gpu(setup)?;
+    let summary = match &world {
+        None => train_on_gpu(setup)?,
+        Some(world) => match train_as_rank(&setup, world)? {
+            RankOutcome::Leader(summary) => *summary,
+            // Rank 0 writes the run directory and its replay; this rank is done.
+            RankOutcome::Follower(followed) => {
+                println!(
+                    "rank {} of {}: trained {} iterations beside rank 0, whose run directory holds the results",
+                    world.spec.rank, world.spec.size, followed.iterations
+                );
+                return Ok(());
+            }
+        },
+    };
     print!("{}", summary.report());
     if let Some(signal) = stop.requested() {
         println!("{}", stopped_line(signal, &summary, &root));

@@ -57,7 +57,7 @@ pub(super) fn record_report(
 }
 
 /// The report in the first [`REPORT_BYTES`] of `bytes`.
-pub(super) fn read_report(bytes: &[u8]) -> Result<IterationReport, TrainerError> {
+pub fn read_report(bytes: &[u8]) -> Result<IterationReport, TrainerError> {
     let short = || TrainerError::Internal("a short iteration report".to_owned());
     let bytes = bytes.get(..REPORT_BYTES).ok_or_else(short)?;
     let totals = read_totals(&bytes[..TOTALS_BYTES])?;

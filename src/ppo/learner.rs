@@ -1,6 +1,7 @@
 //! The PPO trainer on one GPU ([`Trainer`]) and on several ([`Replicas`]) as the run harness
 //! drives them ([`Learner`]).
 
+use super::rank_replica::RankReplica;
 use super::replicas::Replicas;
 use super::trainer::Trainer;
 use super::trainer_error::TrainerError;
@@ -74,6 +75,41 @@ impl Learner for Replicas {
     }
     fn clip_sampling(&mut self) -> Result<Option<Vec<ClipSampling>>, RunError> {
         Replicas::clip_sampling(self)
+            .map(Some)
+            .map_err(learner_error)
+    }
+}
+
+impl Learner for RankReplica {
+    fn iterate(&mut self) -> Result<IterationStats, RunError> {
+        RankReplica::iterate(self).map_err(learner_error)
+    }
+    fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, RunError> {
+        // Rank 0 evaluates alone: the evaluation rollout has no collective.
+        self.trainer().evaluate().map_err(learner_error)
+    }
+    fn evaluation_steps(&self) -> u32 {
+        self.trainer().evaluation_steps()
+    }
+    fn task_record(&mut self, _evaluate: bool) -> Result<Option<TaskRecord>, RunError> {
+        // The configuration refuses the goal task on several GPUs.
+        Ok(None)
+    }
+    fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), RunError> {
+        self.trainer().save_into(checkpoint).map_err(learner_error)
+    }
+    fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), RunError> {
+        RankReplica::restore(self, checkpoint).map_err(learner_error)
+    }
+    fn physics_overflow(&mut self) -> Result<PhysicsOverflow, RunError> {
+        self.trainer().physics_overflow().map_err(learner_error)
+    }
+    fn notes(&mut self) -> Vec<String> {
+        Vec::new()
+    }
+    fn clip_sampling(&mut self) -> Result<Option<Vec<ClipSampling>>, RunError> {
+        self.trainer()
+            .clip_sampling()
             .map(Some)
             .map_err(learner_error)
     }

@@ -266,6 +266,12 @@ impl Trainer {
     /// [`Trainer::iterate`], returning this GPU's report as read back (what several GPUs'
     /// reports are merged from).
     pub fn iterate_report(&mut self) -> Result<IterationReport, TrainerError> {
+        read_report(&self.iterate_bytes()?)
+    }
+
+    /// [`Trainer::iterate`], returning this GPU's report as its bytes (what the ranks of a world
+    /// of processes send each other; [`read_report`] reads them).
+    pub fn iterate_bytes(&mut self) -> Result<Vec<u8>, TrainerError> {
         self.iteration.run(self.gpu.stream())
     }
 
@@ -593,14 +599,14 @@ impl Iteration {
         })
     }
 
-    /// Launches the graph, queues the report's copy and waits for it.
-    fn run(&mut self, stream: &crate::cuda::Stream) -> Result<IterationReport, TrainerError> {
+    /// Launches the graph, queues the report's copy and waits for it: the report's bytes.
+    fn run(&mut self, stream: &crate::cuda::Stream) -> Result<Vec<u8>, TrainerError> {
         self.graph.launch(stream)?;
         self.readback.queue(stream, &self.report)?;
         let bytes = self.readback.wait()?.ok_or_else(|| {
             TrainerError::Internal("the iteration report was not queued".to_owned())
         })?;
-        read_report(bytes)
+        Ok(bytes.to_vec())
     }
 }
 

@@ -53,4 +53,7 @@ pub enum TrainerError {
     Policy(#[from] PolicyError),
     #[error(transparent)]
     Latent(#[from] LatentError),
+    /// A world of processes lost a rank, or could not form.
+    #[error(transparent)]
+    World(#[from] crate::world::WorldError),
 }

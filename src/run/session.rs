@@ -103,6 +103,8 @@ pub struct RunSession<C: ResolvedConfig> {
     /// The character trained, recorded in every checkpoint (None: the checkpoints record none,
     /// and their readers take the configuration's).
     character: Option<CharacterRecord>,
+    /// Replicas whose envs each iteration counts: `run.gpus`'s, or a world of processes'.
+    replicas: usize,
 }
 
 /// Wall seconds between redraws of `curve.png` during a run (and once at its end): drawing
@@ -223,6 +225,7 @@ impl<C: ResolvedConfig> RunSession<C> {
             reached,
             stop: StopFlag::new(),
             character: None,
+            replicas: 0,
         }
     }
 
@@ -230,6 +233,12 @@ impl<C: ResolvedConfig> RunSession<C> {
     /// documentation); a new session has a flag of its own that nothing sets.
     pub fn stop_on(&mut self, flag: StopFlag) {
         self.stop = flag;
+    }
+
+    /// Counts `replicas` replicas' envs in every iteration's frames (a world of processes; by
+    /// default `run.gpus`'s).
+    pub fn count_replicas(&mut self, replicas: usize) {
+        self.replicas = replicas;
     }
 
     /// Records `character` in the run's checkpoints.
@@ -272,8 +281,11 @@ impl<C: ResolvedConfig> RunSession<C> {
         let active = self.clock.seconds();
         let iteration = self.iteration + 1;
         // Every GPU's envs (each runs env.num_envs).
-        let frames_now =
-            self.config.frames_per_gpu_iteration() * self.config.run().replicas() as u64;
+        let replicas = match self.replicas {
+            0 => self.config.run().replicas(),
+            n => n,
+        };
+        let frames_now = self.config.frames_per_gpu_iteration() * replicas as u64;
         let elapsed = active - self.iteration_start_s;
         let record = IterationRecord {
             iteration,

@@ -81,6 +81,9 @@ pub enum TrainError {
     Latent(#[from] crate::latent::LatentError),
     #[error(transparent)]
     Trainer(#[from] crate::ppo::TrainerError),
+    /// A world of processes could not form, or lost a rank.
+    #[error(transparent)]
+    World(#[from] crate::world::WorldError),
 }
 
 /// The evaluation protocol's arithmetic, reached from training code: the harness's error.

@@ -215,7 +215,7 @@ fn train_latent_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
 }
 
 /// The library note of a run's output.
-fn library_note(plan: &LibraryPlan) -> String {
+pub(super) fn library_note(plan: &LibraryPlan) -> String {
     format!(
         "motion library: {} clips, evaluated on {} envs (clip i mod {}), episodes of up to {} steps",
         plan.clips.len(),
@@ -280,7 +280,7 @@ pub fn train_on_gpus<'a>(
 /// Opens the run directory (new or resumed), connects the stop request, records `character`
 /// in the checkpoints (a resumed run's checkpoint must be of it) and prints the resume's
 /// warnings.
-fn open_session(
+pub(super) fn open_session(
     config: &TrainConfig,
     character: &Character,
     start: &RunStart,

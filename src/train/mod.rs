@@ -20,6 +20,7 @@ pub mod library;
 pub mod library_policy;
 mod ppo_trainer;
 pub mod preflight;
+mod world_run;
 
 pub use crate::files::{is_temporary, write_atomically, write_bytes_atomically};
 pub use config::{
@@ -44,3 +45,4 @@ pub use gpu_loop::{
 pub use library::preflight_training;
 pub use ppo_trainer::{new_trainer, trainer_config};
 pub use preflight::{PolicyShapes, Preflight, check_plans, load_motion, preflight};
+pub use world_run::{RankOutcome, WorldRun, check_world_config, train_as_rank, world_fingerprint};

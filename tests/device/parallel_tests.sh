@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Every GPU test binary in one device call, spread over the GPUs of a multi-GPU machine: one
 # worker per GPU (CUDA_VISIBLE_DEVICES) takes the next binary, longest first, and runs it through
-# session.sh's `tests` section with its own log directory. gpu_multi_gpu, which needs every GPU,
-# runs first and alone unless SKIP names it. The summary lines of all the tests are printed last.
+# session.sh's `tests` section with its own log directory. gpu_multi_gpu and gpu_world, which
+# need every GPU, run first and alone unless SKIP names them. The summary lines of all the tests are printed last.
 #   BIN=.device-bin tests/device/parallel_tests.sh
 # GPUS: the GPUs to spread over (default every GPU); SKIP: test binaries to leave out;
 # TEST_TIMEOUT as session.sh. Logs: $OUT/<test>/logs.tgz.
@@ -20,7 +20,7 @@ order="gpu_goal_latent gpu_goal gpu_latent gpu_library_eval gpu_train gpu_tensor
 queue="$OUT/queue.txt"; : > "$queue"
 for name in $order $(cd "$BIN" && ls gpu_*); do
   [ -x "$BIN/$name" ] || continue
-  case " ${SKIP:-} gpu_multi_gpu " in *" $name "*) continue ;; esac
+  case " ${SKIP:-} gpu_multi_gpu gpu_world " in *" $name "*) continue ;; esac
   grep -qx "$name" "$queue" || echo "$name" >> "$queue"
 done
 
@@ -29,9 +29,11 @@ run_one() { # gpus name
   tar xzf "$OUT/$2/logs.tgz" -O ./summary.txt >> "$summary" 2>/dev/null || echo "test  $2  NO SUMMARY" >> "$summary"
 }
 
-case " ${SKIP:-} " in *" gpu_multi_gpu "*) ;; *)
-  [ -x "$BIN/gpu_multi_gpu" ] && run_one "$(echo $GPUS | tr ' ' ,)" gpu_multi_gpu ;;
-esac
+for whole in gpu_multi_gpu gpu_world; do
+  case " ${SKIP:-} " in *" $whole "*) ;; *)
+    [ -x "$BIN/$whole" ] && run_one "$(echo $GPUS | tr ' ' ,)" "$whole" ;;
+  esac
+done
 
 echo 0 > "$OUT/next.txt"
 next_test() { # prints the next binary's name under a lock; nothing when none is left

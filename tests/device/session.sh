@@ -65,7 +65,7 @@ run_tests() {
     # Several GPUs need NCCL; on a machine with one GPU their tests are left out, and the
     # summary says so (with INSTANTMIMIC_NO_SKIP=1 they would fail for want of a second GPU).
     filter=(); left_out=
-    if [ "$name" = gpu_multi_gpu ]; then
+    if [ "$name" = gpu_multi_gpu ] || [ "$name" = gpu_world ]; then
       libs=$(LD_LIBRARY_PATH=$libs nccl_libs)
       if [ "$(gpu_count)" -lt 2 ]; then filter=(--skip several_gpus); left_out=" (several_gpus_* left out: $(gpu_count) GPU)"; fi
     fi

@@ -13,7 +13,7 @@
 use std::ffi::{CStr, c_char, c_int, c_void};
 use std::sync::OnceLock;
 
-use cudarc::nccl::sys::{cudaStream_t, ncclComm_t};
+use cudarc::nccl::sys::{cudaStream_t, ncclComm_t, ncclUniqueId};
 
 use crate::cuda::CudaError;
 
@@ -30,6 +30,8 @@ type GetVersion = unsafe extern "C" fn(*mut c_int) -> RawResult;
 type GetErrorString = unsafe extern "C" fn(RawResult) -> *const c_char;
 type GetLastError = unsafe extern "C" fn(ncclComm_t) -> *const c_char;
 type CommInitAll = unsafe extern "C" fn(*mut ncclComm_t, c_int, *const c_int) -> RawResult;
+type GetUniqueId = unsafe extern "C" fn(*mut ncclUniqueId) -> RawResult;
+type CommInitRank = unsafe extern "C" fn(*mut ncclComm_t, c_int, ncclUniqueId, c_int) -> RawResult;
 type CommFree = unsafe extern "C" fn(ncclComm_t) -> RawResult;
 type AllReduce = unsafe extern "C" fn(
     *const c_void,
@@ -54,6 +56,8 @@ pub(super) struct NcclLibrary {
     pub(super) get_error_string: GetErrorString,
     pub(super) get_last_error: GetLastError,
     pub(super) comm_init_all: CommInitAll,
+    pub(super) get_unique_id: GetUniqueId,
+    pub(super) comm_init_rank: CommInitRank,
     pub(super) comm_destroy: CommFree,
     pub(super) comm_abort: CommFree,
     pub(super) all_reduce: AllReduce,
@@ -128,6 +132,8 @@ fn open() -> Result<NcclLibrary, String> {
         get_error_string: symbol!(GetErrorString, "ncclGetErrorString"),
         get_last_error: symbol!(GetLastError, "ncclGetLastError"),
         comm_init_all: symbol!(CommInitAll, "ncclCommInitAll"),
+        get_unique_id: symbol!(GetUniqueId, "ncclGetUniqueId"),
+        comm_init_rank: symbol!(CommInitRank, "ncclCommInitRank"),
         comm_destroy: symbol!(CommFree, "ncclCommDestroy"),
         comm_abort: symbol!(CommFree, "ncclCommAbort"),
         all_reduce: symbol!(AllReduce, "ncclAllReduce"),

@@ -26,7 +26,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, Once, TryLockError};
 use std::time::Duration;
 
-use cudarc::nccl::sys::{cudaStream_t, ncclComm_t, ncclDataType_t, ncclRedOp_t};
+use cudarc::nccl::sys::{cudaStream_t, ncclComm_t, ncclDataType_t, ncclRedOp_t, ncclUniqueId};
 
 pub use library::{MIN_NCCL_VERSION, NCCL_HELP, describe_version};
 
@@ -274,6 +274,90 @@ impl Communicator {
                 }),
             })
             .collect())
+    }
+
+    /// NCCL's id of a new world of processes (`ncclGetUniqueId`), made by rank 0 and handed to
+    /// every other rank (the rendezvous, `crate::world`) for [`Communicator::join_world`]: the
+    /// bytes as they go over the wire. Loads NCCL first.
+    pub fn new_world_id() -> Result<Vec<u8>, CudaError> {
+        prepare_environment();
+        let library = library::library()?;
+        let mut id = ncclUniqueId { internal: [0; 128] };
+        // SAFETY: ncclGetUniqueId writes one ncclUniqueId through a live local.
+        let code = unsafe { (library.get_unique_id)(&mut id) };
+        if code != 0 {
+            return Err(CudaError::Nccl {
+                operation: "ncclGetUniqueId".to_owned(),
+                status: library.error_string(code),
+                detail: library.last_error(std::ptr::null_mut()),
+            });
+        }
+        Ok(id.internal.iter().map(|&c| c as u8).collect())
+    }
+
+    /// This process's communicator as rank `rank` of a world of `size` processes on `gpu`
+    /// (`ncclCommInitRank`; keep `gpu` open while the communicator lives: it holds the
+    /// device's primary context), from rank 0's [`Communicator::new_world_id`]. Blocks
+    /// until every rank has called it (NCCL's own bootstrap, over the network); the same
+    /// all-reduces as [`Communicator::create_all`]'s communicators.
+    pub fn join_world(
+        gpu: &Gpu,
+        size: usize,
+        rank: usize,
+        world_id: &[u8],
+    ) -> Result<Communicator, CudaError> {
+        let invalid = |reason: String| CudaError::InvalidArgument {
+            operation: "Communicator::join_world",
+            reason,
+        };
+        let mut id = ncclUniqueId { internal: [0; 128] };
+        if world_id.len() != id.internal.len() {
+            return Err(invalid(format!(
+                "a world id of {} bytes (NCCL's has {})",
+                world_id.len(),
+                id.internal.len()
+            )));
+        }
+        for (to, &from) in id.internal.iter_mut().zip(world_id) {
+            *to = from as std::ffi::c_char;
+        }
+        if rank >= size {
+            return Err(invalid(format!("rank {rank} of a world of {size}")));
+        }
+        let ordinal = gpu.info().ordinal;
+        let c = |v: usize, what: &str| {
+            c_int::try_from(v).map_err(|_| invalid(format!("{what} {v} is too large")))
+        };
+        let (size_c, rank_c) = (c(size, "world size")?, c(rank, "rank")?);
+        // NCCL makes the communicator on the current device: select the device's primary
+        // context (the one `Gpu::open` retains) first.
+        gpu.shared.bind()?;
+        prepare_environment();
+        let library = library::library()?;
+        let mut comm: ncclComm_t = std::ptr::null_mut();
+        // SAFETY: `comm` is a live local NCCL writes one handle through; `id` is passed by value
+        // (ncclCommInitRank(comm, nranks, commId, rank)), rank < nranks checked above.
+        let code = unsafe { (library.comm_init_rank)(&mut comm, size_c, id, rank_c) };
+        if code != 0 {
+            return Err(CudaError::Nccl {
+                operation: format!("ncclCommInitRank (rank {rank} of {size}, device {ordinal})"),
+                status: library.error_string(code),
+                detail: library.last_error(std::ptr::null_mut()),
+            });
+        }
+        Ok(Communicator {
+            inner: Arc::new(CommunicatorInner {
+                library,
+                handle: Mutex::new(Handle {
+                    comm,
+                    state: State::Live,
+                }),
+                aborted: AtomicBool::new(false),
+                rank,
+                size,
+                ordinal,
+            }),
+        })
     }
 
     pub fn rank(&self) -> usize {

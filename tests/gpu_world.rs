@@ -1,0 +1,224 @@
+//! One run across processes (docs/train.md, "Several processes") on the GPUs of one host, the
+//! same path as across hosts: `train --rank R --world-size N --rendezvous 127.0.0.1:PORT`, one
+//! process per GPU.
+//! - A world of one process trains as a run does (one GPU is enough).
+//! - Two processes on two GPUs train in step for 100 iterations (every iteration checks that
+//!   the replicas agree bit for bit, and the first one their whole state) and end together.
+//! - A killed rank ends the other within the world's timeout, with its name.
+//! - SIGTERM to both stops them after the same iteration; the run then resumes.
+#![cfg(feature = "gpu")]
+
+mod skip_support;
+mod small_run_support;
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use instantmimic::cuda::{Gpu, nccl_version};
+use small_run_support::{binary, check_success, metrics};
+
+/// GPUs a test needs, or a skip (a failure with INSTANTMIMIC_NO_SKIP=1).
+fn gpus_or_skip(needed: usize) -> bool {
+    if let Err(e) = nccl_version() {
+        skip_support::skip(&e.to_string());
+        return false;
+    }
+    let count = Gpu::device_count().unwrap_or(0);
+    if count < needed {
+        skip_support::skip(&format!("{count} GPU visible: this test needs {needed}"));
+        return false;
+    }
+    true
+}
+
+/// A free TCP port on the loopback (released at once; the rank 0 binds it again).
+fn free_port() -> u16 {
+    let l = std::net::TcpListener::bind(("127.0.0.1", 0)).expect("a port");
+    l.local_addr().expect("address").port()
+}
+
+fn write_config(dir: &Path, max_iterations: u64) -> PathBuf {
+    let mut config = small_run_support::small_config("backflip");
+    config.run.max_iterations = max_iterations;
+    config.run.checkpoint_interval = 5;
+    config.run.replay = false;
+    config.validate("test").expect("valid test config");
+    let path = dir.join("config.toml");
+    std::fs::write(&path, config.to_toml().expect("toml")).expect("write config");
+    path
+}
+
+/// `train` as rank `rank` of `size` on GPU `rank`, writing `out`.
+fn rank(rank: usize, size: usize, port: u16, args: &[&str]) -> Command {
+    let mut c = binary();
+    c.arg("train")
+        .args([
+            "--rank",
+            &rank.to_string(),
+            "--world-size",
+            &size.to_string(),
+        ])
+        .args(["--rendezvous", &format!("127.0.0.1:{port}")])
+        .args(["--world-timeout", "30", "--progress", "lines"])
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    c
+}
+
+fn text(out: &Output) -> String {
+    format!(
+        "{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    )
+}
+
+fn summary(run: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(run.join("summary.json")).expect("summary.json");
+    serde_json::from_str(&text).expect("json")
+}
+
+#[test]
+fn a_world_of_one_process_trains() {
+    if !gpus_or_skip(1) {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let config = write_config(dir.path(), 6);
+    let out_dir = dir.path().join("run");
+    let out = rank(0, 1, free_port(), &[])
+        .args(["--config", &config.display().to_string()])
+        .args(["--out", &out_dir.display().to_string()])
+        .output()
+        .expect("runs");
+    check_success(&out, "a world of one");
+    assert!(
+        text(&out).contains("world of 1 processes"),
+        "{}",
+        text(&out)
+    );
+    assert_eq!(summary(&out_dir)["iterations"], 6);
+    assert_eq!(metrics(&out_dir).len(), 6);
+}
+
+/// Starts ranks 0 and 1 of `args`, rank 0 writing `out_dir`.
+fn start_two(port: u16, config: &Path, out_dir: &Path, extra: &[&str]) -> (Child, Child) {
+    let common = |r: usize| {
+        let mut c = rank(r, 2, port, extra);
+        c.args(["--config", &config.display().to_string()])
+            .args(["--out", &out_dir.display().to_string()]);
+        c
+    };
+    let zero = common(0).spawn().expect("rank 0 starts");
+    let one = common(1).spawn().expect("rank 1 starts");
+    (zero, one)
+}
+
+#[test]
+fn several_gpus_two_processes_train_in_step_for_100_iterations() {
+    if !gpus_or_skip(2) {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let config = write_config(dir.path(), 100);
+    let out_dir = dir.path().join("run");
+    let (zero, one) = start_two(free_port(), &config, &out_dir, &[]);
+    let (zero, one) = (
+        zero.wait_with_output().unwrap(),
+        one.wait_with_output().unwrap(),
+    );
+    check_success(&zero, "rank 0");
+    check_success(&one, "rank 1");
+    assert_eq!(summary(&out_dir)["iterations"], 100, "{}", text(&zero));
+    assert!(
+        text(&one).contains("rank 1 of 2: trained 100 iterations beside rank 0"),
+        "{}",
+        text(&one)
+    );
+    // Frames count both processes' envs.
+    let last = metrics(&out_dir).pop().expect("metrics");
+    let per_iteration = 32 * 16 * 2;
+    assert_eq!(last["frames"], 100 * per_iteration, "{last}");
+}
+
+#[test]
+fn several_gpus_a_killed_rank_ends_the_other_with_its_name() {
+    if !gpus_or_skip(2) {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let config = write_config(dir.path(), 1_000_000);
+    let out_dir = dir.path().join("run");
+    let (zero, mut one) = start_two(free_port(), &config, &out_dir, &["--time-budget", "600"]);
+    // Let them train a while, then kill rank 1 as a node failure would.
+    let started = Instant::now();
+    while metrics(&out_dir).len() < 5 && started.elapsed() < Duration::from_secs(120) {
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    one.kill().expect("kill rank 1");
+    let killed = Instant::now();
+    let zero = zero.wait_with_output().expect("rank 0 ends");
+    assert!(!zero.status.success(), "rank 0 must fail: {}", text(&zero));
+    let all = text(&zero);
+    assert!(all.contains("rank 1"), "{all}");
+    // Within the world's timeout (30 s) and NCCL's own abort.
+    assert!(
+        killed.elapsed() < Duration::from_secs(90),
+        "{:?}",
+        killed.elapsed()
+    );
+    let _ = one.wait();
+}
+
+#[cfg(unix)]
+#[test]
+fn several_gpus_sigterm_stops_both_after_the_same_iteration_and_the_run_resumes() {
+    if !gpus_or_skip(2) {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let config = write_config(dir.path(), 1_000_000);
+    let out_dir = dir.path().join("run");
+    let (zero, one) = start_two(free_port(), &config, &out_dir, &["--time-budget", "600"]);
+    let started = Instant::now();
+    while metrics(&out_dir).len() < 5 && started.elapsed() < Duration::from_secs(120) {
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    for child in [&zero, &one] {
+        let status = Command::new("kill")
+            .args(["-TERM", &child.id().to_string()])
+            .status()
+            .expect("kill");
+        assert!(status.success());
+    }
+    let (zero, one) = (
+        zero.wait_with_output().unwrap(),
+        one.wait_with_output().unwrap(),
+    );
+    let iterations = summary(&out_dir)["iterations"]
+        .as_u64()
+        .expect("iterations");
+    assert!(
+        text(&one).contains(&format!("trained {iterations} iterations beside rank 0")),
+        "rank 0 stopped after {iterations}: {}\n{}",
+        text(&zero),
+        text(&one)
+    );
+    // Resumed by both ranks for 3 more iterations.
+    let port = free_port();
+    let resume = |r: usize| {
+        let mut c = rank(r, 2, port, &["--resume", &out_dir.display().to_string()]);
+        c.args(["--max-iterations", &(iterations + 3).to_string()]);
+        c.spawn().expect("starts")
+    };
+    let (zero, one) = (resume(0), resume(1));
+    let (zero, one) = (
+        zero.wait_with_output().unwrap(),
+        one.wait_with_output().unwrap(),
+    );
+    check_success(&zero, "rank 0 resumed");
+    check_success(&one, "rank 1 resumed");
+    assert_eq!(summary(&out_dir)["iterations"], iterations + 3);
+}
