@@ -129,14 +129,15 @@ fn lead(
             gpu.info().ordinal
         ));
     }
-    let scorer = match motion {
-        TrackedMotion::Clip(clip) => Scorer::for_clip(clip, &session.config().run),
-        TrackedMotion::Library { .. } => {
-            let plan = Scorer::library_plan(trainer.evaluation_rollout().0)?;
-            notes.push(library_note(&plan));
-            Scorer::Library(plan)
-        }
-    };
+    let scorer = Scorer::new(
+        trainer.evaluation_rollout().0,
+        motion,
+        &session.config().run,
+        false,
+    )?;
+    if let Scorer::Library(plan) = &scorer {
+        notes.push(library_note(plan));
+    }
     let mut replica = RankReplica::new(trainer, control, world.timeout, setup.stop.clone());
     let result = run_loop(session, &mut replica, checkpoint, &scorer, started, notes);
     match &result {

@@ -260,20 +260,31 @@ impl Communicator {
             .into_iter()
             .zip(ordinals)
             .enumerate()
-            .map(|(rank, (comm, &ordinal))| Communicator {
-                inner: Arc::new(CommunicatorInner {
-                    library,
-                    handle: Mutex::new(Handle {
-                        comm,
-                        state: State::Live,
-                    }),
-                    aborted: AtomicBool::new(false),
-                    rank,
-                    size,
-                    ordinal,
-                }),
-            })
+            .map(|(rank, (comm, &ordinal))| Communicator::live(library, comm, rank, size, ordinal))
             .collect())
+    }
+
+    /// A communicator NCCL has just made (rank `rank` of `size` on device `ordinal`).
+    fn live(
+        library: &'static library::NcclLibrary,
+        comm: ncclComm_t,
+        rank: usize,
+        size: usize,
+        ordinal: usize,
+    ) -> Communicator {
+        Communicator {
+            inner: Arc::new(CommunicatorInner {
+                library,
+                handle: Mutex::new(Handle {
+                    comm,
+                    state: State::Live,
+                }),
+                aborted: AtomicBool::new(false),
+                rank,
+                size,
+                ordinal,
+            }),
+        }
     }
 
     /// NCCL's id of a new world of processes (`ncclGetUniqueId`), made by rank 0 and handed to
@@ -345,19 +356,7 @@ impl Communicator {
                 detail: library.last_error(std::ptr::null_mut()),
             });
         }
-        Ok(Communicator {
-            inner: Arc::new(CommunicatorInner {
-                library,
-                handle: Mutex::new(Handle {
-                    comm,
-                    state: State::Live,
-                }),
-                aborted: AtomicBool::new(false),
-                rank,
-                size,
-                ordinal,
-            }),
-        })
+        Ok(Communicator::live(library, comm, rank, size, ordinal))
     }
 
     pub fn rank(&self) -> usize {
