@@ -83,6 +83,7 @@ impl TrialRunner for FailingRunner {
             mpjpe_m: None,
             ee_error_m: None,
             frames_per_s: Some(1e5),
+            wall_time_to_success_s: None,
         })
     }
 }

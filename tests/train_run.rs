@@ -485,6 +485,7 @@ fn curve_record(i: u64) -> IterationRecord {
         evaluation: None,
         divergence: None,
         task: None,
+        wall_s: None,
     }
 }
 

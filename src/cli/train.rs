@@ -355,6 +355,7 @@ pub(super) fn parse_override(text: &str) -> Result<(String, String), String> {
 
 /// Runs `train`.
 pub fn run(args: TrainArgs) -> Result<()> {
+    let started = std::time::Instant::now();
     let motions_dir = super::output::motions_dir(args.motions_dir.as_deref())?;
     let progress = match args.progress {
         ProgressArg::Auto => ProgressMode::for_stdout(),
@@ -551,6 +552,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         progress,
         device: args.device,
         stop: stop.clone(),
+        started,
     };
     let summary = match &world {
         None => train_on_gpu(setup)?,

@@ -62,6 +62,7 @@ mod tests {
                 mpjpe_m: None,
                 ee_error_m: None,
                 frames_per_s: None,
+                wall_time_to_success_s: None,
             },
         }
     }

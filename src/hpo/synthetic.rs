@@ -140,6 +140,7 @@ impl TrialRunner for SyntheticObjective {
             mpjpe_m: Some(0.04 * spread),
             ee_error_m: Some(0.06 * spread),
             frames_per_s: None,
+            wall_time_to_success_s: None,
         })
     }
 }

@@ -118,6 +118,8 @@ impl TrialRunner for TrainRunner {
             },
             ProgressMode::Quiet,
             &self.stop,
+            // A trial's wall times count from its run directory's opening.
+            None,
         );
         // The scratch directory goes whatever happened; a failure to remove it is harmless.
         let _ = std::fs::remove_dir_all(&root);

@@ -41,6 +41,10 @@ pub struct TrialOutcome {
     pub ee_error_m: Option<f64>,
     /// Training throughput, environment frames per second.
     pub frames_per_s: Option<f64>,
+    /// Wall seconds from the trial's start to its success (setup, evaluations and files
+    /// included): what the search waited. Absent when it failed, and in older records.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wall_time_to_success_s: Option<f64>,
 }
 
 impl TrialOutcome {
@@ -70,6 +74,7 @@ impl From<&RunSummary> for TrialOutcome {
             mpjpe_m: evaluation.and_then(|e| finite(e.global_mpjpe_m)),
             ee_error_m: evaluation.and_then(|e| finite(e.ee_position_error_m)),
             frames_per_s: finite(summary.frames_per_s).filter(|&f| f > 0.0),
+            wall_time_to_success_s: summary.wall_time_to_success_s,
         }
     }
 }
@@ -131,6 +136,7 @@ mod tests {
             mpjpe_m: None,
             ee_error_m: None,
             frames_per_s: None,
+            wall_time_to_success_s: None,
         }
     }
 

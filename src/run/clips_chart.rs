@@ -181,6 +181,7 @@ mod tests {
             evaluation: Some(evaluation),
             divergence: None,
             task: None,
+            wall_s: None,
         }
     }
 

@@ -167,6 +167,7 @@ mod tests {
                 restores: 1,
             }),
             task: None,
+            wall_s: None,
         };
         let line = serde_json::to_string(&record).unwrap();
         assert!(line.contains("\"divergence\":{\"cause\":\"KL\""), "{line}");

@@ -155,6 +155,7 @@ pub fn run_loop<C: ResolvedConfig, L: Learner>(
     };
     let mut last_episodes = Vec::new();
     let mut wall = WallTime::starting(setup.elapsed().as_secs_f64());
+    session.start_training();
     loop {
         session.start_iteration();
         let stats = trainer.iterate()?;

@@ -159,6 +159,7 @@ fn the_clips_table_lists_each_clip_with_its_time_to_threshold() {
         evaluation: Some(plan.summarize(&episodes(&plan, fail), 0.9).unwrap()),
         divergence: None,
         task: None,
+        wall_s: None,
     };
     assert!(clips_table(&[]).is_none());
     let records = [record(1, &[0, 3, 5]), record(2, &[5]), record(3, &[])];

@@ -151,6 +151,11 @@ pub struct IterationRecord {
     /// The task's own record (absent when tracking), under the task's name (`"goal": {..}`).
     #[serde(flatten, default, skip_serializing_if = "Option::is_none")]
     pub task: Option<TaskRecord>,
+    /// Wall seconds from the start of the command (or of the run, for a run started in
+    /// process) to the end of this iteration's record, its evaluation and checkpoint included:
+    /// what a person waiting sees (absent in logs written before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wall_s: Option<f64>,
 }
 
 /// What the GPU reports about one iteration (the per-iteration statistics copy).
@@ -380,6 +385,7 @@ mod tests {
             evaluation: None,
             divergence: None,
             task: None,
+            wall_s: None,
         };
         let goal = IterationRecord {
             iteration: 2,

@@ -338,6 +338,7 @@ mod tests {
             }),
             divergence: None,
             task: None,
+            wall_s: None,
         }
     }
 

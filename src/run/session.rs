@@ -105,6 +105,12 @@ pub struct RunSession<C: ResolvedConfig> {
     character: Option<CharacterRecord>,
     /// Replicas whose envs each iteration counts: `run.gpus`'s, or a world of processes'.
     replicas: usize,
+    /// Where the wall clock of the records starts: the command's start when the caller gives it
+    /// ([`RunSession::measure_wall_from`]), else this session's creation.
+    wall_origin: std::time::Instant,
+    /// Wall seconds before this command's first iteration, and that iteration
+    /// ([`RunSession::start_training`]).
+    setup: Option<(f64, u64)>,
 }
 
 /// Wall seconds between redraws of `curve.png` during a run (and once at its end): drawing
@@ -226,6 +232,8 @@ impl<C: ResolvedConfig> RunSession<C> {
             stop: StopFlag::new(),
             character: None,
             replicas: 0,
+            wall_origin: std::time::Instant::now(),
+            setup: None,
         }
     }
 
@@ -233,6 +241,18 @@ impl<C: ResolvedConfig> RunSession<C> {
     /// documentation); a new session has a flag of its own that nothing sets.
     pub fn stop_on(&mut self, flag: StopFlag) {
         self.stop = flag;
+    }
+
+    /// Measures the records' wall seconds from `origin` (the command's start) instead of this
+    /// session's creation.
+    pub fn measure_wall_from(&mut self, origin: std::time::Instant) {
+        self.wall_origin = origin;
+    }
+
+    /// Marks the end of setup: the next iteration is this command's first.
+    pub fn start_training(&mut self) {
+        let wall = self.wall_origin.elapsed().as_secs_f64();
+        self.setup = Some((wall, self.iteration + 1));
     }
 
     /// Counts `replicas` replicas' envs in every iteration's frames (a world of processes; by
@@ -303,6 +323,7 @@ impl<C: ResolvedConfig> RunSession<C> {
             evaluation: None,
             divergence: None,
             task: None,
+            wall_s: None,
         };
         IterationStep {
             iteration,
@@ -324,6 +345,7 @@ impl<C: ResolvedConfig> RunSession<C> {
         let mut record = step.record;
         let evaluated = evaluation.is_some();
         record.evaluation = evaluation;
+        record.wall_s = Some(self.wall_origin.elapsed().as_secs_f64());
         self.metrics.append(&record)?;
         self.events.append(&record)?;
         self.iteration = record.iteration;
@@ -384,12 +406,15 @@ impl<C: ResolvedConfig> RunSession<C> {
     pub fn finish(mut self, reason: StopReason) -> Result<RunSummary, RunError> {
         self.clock.pause();
         self.dir.write_curve(&self.config, &self.records)?;
-        let summary = RunSummary::from_records(
+        let mut summary = RunSummary::from_records(
             &self.config.label(),
             self.config.seed(),
             &self.records,
             reason,
         );
+        if let Some((setup_s, first_iteration)) = self.setup {
+            summary = summary.with_setup(setup_s, first_iteration);
+        }
         self.dir.write_summary(&summary)?;
         self.progress.finish();
         Ok(summary)

@@ -47,6 +47,19 @@ pub struct RunSummary {
     /// the fall rate); absent when tracking.
     #[serde(flatten, default, skip_serializing_if = "Option::is_none")]
     pub task_evaluation: Option<crate::env::TaskEvaluation>,
+    /// Wall seconds from the start of the command (of the run, for one started in process) to
+    /// the end of the evaluation that first succeeded: what a person waits, setup, evaluations
+    /// and checkpoints included.
+    #[serde(default)]
+    pub wall_time_to_success_s: Option<f64>,
+    /// The same, less this command's setup (its wall seconds before the first iteration):
+    /// null when the success came in an earlier command of a resumed run.
+    #[serde(default)]
+    pub wall_time_to_success_after_setup_s: Option<f64>,
+    /// This command's wall seconds before its first iteration (configuration, plans, kernels,
+    /// CUDA graphs).
+    #[serde(default)]
+    pub wall_setup_s: Option<f64>,
 }
 
 /// When a motion library's run first met each of its success criteria (active seconds; null:
@@ -118,7 +131,22 @@ impl RunSummary {
                 .iter()
                 .rev()
                 .find_map(|r| r.task.as_ref()?.evaluation()),
+            wall_time_to_success_s: first_success.and_then(|r| r.wall_s),
+            wall_time_to_success_after_setup_s: None,
+            wall_setup_s: None,
         }
+    }
+
+    /// Records this command's setup (wall seconds before its first iteration), the first
+    /// iteration it ran, and so the wall time to success after setup when the success came in
+    /// this command.
+    pub fn with_setup(mut self, setup_s: f64, first_iteration: u64) -> RunSummary {
+        self.wall_setup_s = Some(setup_s);
+        if self.success_iteration.is_some_and(|i| i >= first_iteration) {
+            self.wall_time_to_success_after_setup_s =
+                self.wall_time_to_success_s.map(|t| (t - setup_s).max(0.0));
+        }
+        self
     }
 
     /// The lines `train` prints when a run ends.
@@ -138,6 +166,16 @@ impl RunSummary {
         match (self.time_to_success_s, self.success_iteration) {
             (Some(t), Some(i)) => {
                 let _ = writeln!(out, "time to success {t:.3} s (active, at iteration {i})");
+                if let Some(wall) = self.wall_time_to_success_s {
+                    let after = match self.wall_time_to_success_after_setup_s {
+                        Some(after) => format!(", {after:.2} s after setup"),
+                        None => String::new(),
+                    };
+                    let _ = writeln!(
+                        out,
+                        "wall time to success {wall:.2} s from the start{after} (evaluations and files included)"
+                    );
+                }
             }
             _ => {
                 let _ = writeln!(out, "no success");
@@ -230,7 +268,41 @@ pub(crate) mod test_records {
             }),
             divergence: None,
             task: None,
+            // One wall second per iteration after a 2-s setup, evaluations included.
+            wall_s: Some(2.0 + iteration as f64),
         }
+    }
+
+    #[test]
+    fn the_wall_time_to_success_counts_from_the_start_and_after_setup() {
+        let records: Vec<IterationRecord> = (1..=10)
+            .map(|i| record(i, (i % 5 == 0).then_some(i >= 10)))
+            .collect();
+        let s = RunSummary::from_records("walk", 0, &records, StopReason::Success);
+        assert_eq!(s.success_iteration, Some(10));
+        assert_eq!(s.wall_time_to_success_s, Some(12.0));
+        // This command started at iteration 1 after 2 s of setup.
+        let s = s.with_setup(2.0, 1);
+        assert_eq!(s.wall_setup_s, Some(2.0));
+        assert_eq!(s.wall_time_to_success_after_setup_s, Some(10.0));
+        assert!(
+            s.report()
+                .contains("wall time to success 12.00 s from the start, 10.00 s after setup"),
+            "{}",
+            s.report()
+        );
+        // A resumed command that started after the success: no after-setup time of its own.
+        let resumed =
+            RunSummary::from_records("walk", 0, &records, StopReason::Success).with_setup(1.0, 11);
+        assert_eq!(resumed.wall_time_to_success_after_setup_s, None);
+        // Logs written before wall times were recorded.
+        let old: Vec<IterationRecord> = records
+            .into_iter()
+            .map(|r| IterationRecord { wall_s: None, ..r })
+            .collect();
+        let s = RunSummary::from_records("walk", 0, &old, StopReason::Success);
+        assert_eq!(s.wall_time_to_success_s, None);
+        assert!(!s.report().contains("wall time"), "{}", s.report());
     }
 
     /// Iterations 1..=n evaluated every 5, succeeding from iteration `first_success` on (never

@@ -178,6 +178,7 @@ mod tests {
             evaluation: None,
             divergence: None,
             task: None,
+            wall_s: None,
         };
         let tags: Vec<String> = scalars(&record).into_iter().map(|(t, _)| t).collect();
         assert!(!tags.contains(&"train/return".to_string()), "{tags:?}");

@@ -53,6 +53,8 @@ pub struct TrainSetup {
     /// Stops the run after the current iteration, with a checkpoint (`train` connects it to
     /// SIGINT and SIGTERM; src/run/stop.rs).
     pub stop: StopFlag,
+    /// When the command started: the records' and the summary's wall times count from here.
+    pub started: std::time::Instant,
 }
 
 /// A learner's error as the run harness carries it: the harness's own passes through as it is
@@ -111,6 +113,7 @@ pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
             &setup.start,
             setup.progress,
             &setup.stop,
+            Some(setup.started),
         );
     }
     let device = run.gpus.first().map_or(setup.device, |&d| d as usize);
@@ -123,13 +126,16 @@ pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
         &setup.start,
         setup.progress,
         &setup.stop,
+        Some(setup.started),
     )
 }
 
 /// [`train_on_gpu`] on an open GPU (the hyperparameter search trains trial after trial on
 /// one): `config` is the resolved configuration (for a resumed run, its `[run]` section
 /// replaces the run directory's). `run.gpus` is not read: this is one GPU. `stop` ends the run
-/// after the iteration it is requested in (stop reason `interrupted`).
+/// after the iteration it is requested in (stop reason `interrupted`). Wall times count from
+/// `started` (the command's start), else from the run directory's opening.
+#[allow(clippy::too_many_arguments)]
 pub fn train_with<'a>(
     gpu: &Gpu,
     config: &TrainConfig,
@@ -138,9 +144,11 @@ pub fn train_with<'a>(
     start: &RunStart,
     progress: ProgressMode,
     stop: &StopFlag,
+    started: Option<std::time::Instant>,
 ) -> Result<RunSummary, TrainError> {
     let motion = motion.into();
-    let (session, checkpoint) = open_session(config, motion.character(), start, progress, stop)?;
+    let (session, checkpoint) =
+        open_session(config, motion.character(), start, progress, stop, started)?;
     let setup = std::time::Instant::now();
     let mut trainer = new_trainer(gpu, store, motion, session.config())?;
     let scorer = Scorer::new(
@@ -188,6 +196,7 @@ fn train_latent_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
         &setup.start,
         setup.progress,
         &setup.stop,
+        Some(setup.started),
     )?;
     let started = std::time::Instant::now();
     let mut trainer = LatentTrainer::new(&gpu, &setup.store, motion, session.config(), &teacher)?;
@@ -242,9 +251,11 @@ pub fn train_on_gpus<'a>(
     start: &RunStart,
     progress: ProgressMode,
     stop: &StopFlag,
+    started: Option<std::time::Instant>,
 ) -> Result<RunSummary, TrainError> {
     let motion = motion.into();
-    let (session, checkpoint) = open_session(config, motion.character(), start, progress, stop)?;
+    let (session, checkpoint) =
+        open_session(config, motion.character(), start, progress, stop, started)?;
     let devices: Vec<usize> = session
         .config()
         .run
@@ -279,13 +290,14 @@ pub fn train_on_gpus<'a>(
 
 /// Opens the run directory (new or resumed), connects the stop request, records `character`
 /// in the checkpoints (a resumed run's checkpoint must be of it) and prints the resume's
-/// warnings.
+/// warnings. Wall times count from `started` when given (the command's start).
 pub(super) fn open_session(
     config: &TrainConfig,
     character: &Character,
     start: &RunStart,
     progress: ProgressMode,
     stop: &StopFlag,
+    started: Option<std::time::Instant>,
 ) -> Result<(RunSession<TrainConfig>, Option<Checkpoint>), TrainError> {
     let (mut session, checkpoint, warnings) = match start {
         RunStart::New { root, overwrite } => (
@@ -303,6 +315,9 @@ pub(super) fn open_session(
     }
     session.record_character(CharacterRecord::of(character));
     session.stop_on(stop.clone());
+    if let Some(started) = started {
+        session.measure_wall_from(started);
+    }
     for warning in &warnings {
         session.progress().note(&format!("warning: {warning}"));
     }

@@ -97,6 +97,7 @@ fn lead(
         &setup.start,
         setup.progress,
         &setup.stop,
+        Some(setup.started),
     )?;
     session.count_replicas(spec.size);
     let started = Instant::now();
