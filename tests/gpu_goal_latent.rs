@@ -28,12 +28,13 @@ use std::path::{Path, PathBuf};
 
 use instantmimic::cuda::Gpu;
 use instantmimic::env::{TaskRecord, TrackedMotion};
+use instantmimic::latent::checkpoint::insert_latent_networks;
 use instantmimic::latent::{DECODER_DIGEST, decoder_digest};
 use instantmimic::motion::Character;
 use instantmimic::plan::PlanStore;
 use instantmimic::ppo::Trainer;
 use instantmimic::run::{Checkpoint, CheckpointMeta};
-use instantmimic::train::latent_trainer::{insert_latent_networks, latent_shapes};
+use instantmimic::train::latent_setup::latent_shapes;
 use instantmimic::train::{ActionMode, PolicyShapes, TrainConfig, new_trainer};
 use small_run_support::{
     binary, built_in_library, check_success, metrics, small_goal_config, snapshot,

@@ -23,7 +23,7 @@ use instantmimic::latent::{
     DistillationBatch, DistillationUpdate, LatentConfig, LatentShapes, LatentStudent,
 };
 use instantmimic::nn::{GemmSetting, PolicyGemm};
-use instantmimic::train::latent_trainer::load_frozen_decoder;
+use instantmimic::train::latent_setup::load_frozen_decoder;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};

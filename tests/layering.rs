@@ -46,7 +46,7 @@ const FLOORS: &[(&str, &[&str])] = &[
     // The learners, each beside its algorithm, on the run harness's seam (`run::Learner`). A
     // latent goal run's PPO head drives the latent controller's frozen decoder, so `ppo` sits
     // over `latent`.
-    ("latent", &["cuda", "env", "kernels", "nn", "run"]),
+    ("latent", &["cuda", "env", "kernels", "nn", "plan", "run"]),
     (
         "ppo",
         &[

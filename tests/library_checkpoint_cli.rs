@@ -10,9 +10,10 @@ use std::collections::BTreeSet;
 use std::path::Path;
 use std::process::Output;
 
+use instantmimic::latent::checkpoint::insert_latent_networks;
 use instantmimic::motion::{Character, LibraryConfig};
 use instantmimic::run::{Checkpoint, CheckpointMeta};
-use instantmimic::train::latent_trainer::{insert_latent_networks, latent_shapes};
+use instantmimic::train::latent_setup::latent_shapes;
 use instantmimic::train::{PolicyShapes, TrainConfig};
 use train_cli_support::{add_policy, run, stdout};
 

@@ -5,17 +5,18 @@
 //! `replay` of a latent goal checkpoint refuse, in one line, one trained with another decoder
 //! (the digest), and `--decoder` on a tracking checkpoint. The latent
 //! checkpoints are written by the latent module's own writer
-//! (`train::latent_trainer::insert_latent_networks`).
+//! (`train::latent_setup::insert_latent_networks`).
 
 mod train_cli_support;
 
 use std::path::{Path, PathBuf};
 
 use instantmimic::latent::DECODER_DIGEST;
+use instantmimic::latent::checkpoint::insert_latent_networks;
 use instantmimic::motion::Character;
 use instantmimic::run::{Checkpoint, CheckpointMeta};
 use instantmimic::train::goal_latent::{head_shapes, load_goal_decoder};
-use instantmimic::train::latent_trainer::{insert_latent_networks, latent_shapes};
+use instantmimic::train::latent_setup::latent_shapes;
 use instantmimic::train::{ActionMode, PolicyShapes, TrainConfig};
 use train_cli_support::{one_line_error, resolved_config, run, succeeded};
 

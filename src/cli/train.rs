@@ -26,7 +26,7 @@ use crate::run::{
     check_same_gpu_count,
 };
 use crate::train::goal_latent::{describe_decoder, head_shapes, load_goal_decoder};
-use crate::train::latent_trainer::{latent_shapes, load_teacher};
+use crate::train::latent_setup::{latent_shapes, load_teacher};
 use crate::train::{
     ChosenCharacter, RankOutcome, RunStart, TrainConfig, TrainSetup, WorldRun,
     check_trained_character, check_world_config, default_run_dir, preflight_training,

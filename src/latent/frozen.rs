@@ -1,7 +1,7 @@
 //! What a downstream task takes from a trained latent controller: the decoder (the low-level
 //! policy) and the prior, frozen, with the observation statistics their inputs are
 //! normalized by. The train layer reads them from a latent checkpoint
-//! (`train::latent_trainer::load_frozen_decoder`); here they are checked against each other
+//! (`train::latent_setup::load_frozen_decoder`); here they are checked against each other
 //! and against what the task observes and actuates, so that a checkpoint of another shape is
 //! refused with one line.
 

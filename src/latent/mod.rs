@@ -15,16 +15,21 @@
 //!   onto a stream (one CUDA graph with the rollout).
 //! - [`FrozenDecoder`]: the decoder and the prior of a trained latent controller with the
 //!   observation statistics, shape-checked: what a goal task drives with its latent actions.
-//!   The train layer reads and writes the checkpoint files (`train::latent_trainer`).
+//!   Its checkpoint's own tensors are [`checkpoint`]'s; the train layer's loaders read them
+//!   with the stored configuration (`train::latent_setup`).
+//! - [`LatentTrainer`]: the learner (rollout, distillation and evaluation as CUDA graphs),
+//!   built from a [`DistillationConfig`].
 //! - [`goal_policy`]: the goal task in the latent action space: how the goal observation
 //!   feeds the frozen decoder ([`GoalDecoding`]), the decoder and prior on the GPU
 //!   ([`LatentDecoder`]), and the head plus decoder as one rollout policy ([`LatentGoalPolicy`]).
 
+pub mod checkpoint;
 pub mod config;
 mod distill;
 pub mod frozen;
 mod goal_decoder;
 pub mod goal_policy;
+mod learner;
 pub mod networks;
 mod student;
 pub mod teacher;
@@ -43,6 +48,7 @@ pub use distill::{
 pub use frozen::FrozenDecoder;
 pub use goal_decoder::{DECODER_DIGEST, GoalDecoder, decoder_digest};
 pub use goal_policy::{GoalDecoding, LatentDecoder, LatentGoalPolicy};
+pub use learner::{DistillationConfig, LatentTrainer};
 pub use networks::{LatentShapes, proprio_columns};
 pub use student::LatentStudent;
 pub use teacher::TeacherCheckpoint;
@@ -64,6 +70,20 @@ pub enum LatentError {
     Incompatible { path: String, reason: String },
     #[error(transparent)]
     Checkpoint(#[from] crate::run::CheckpointError),
+    /// The rollout's own error (building it, its physics' flags).
+    #[error(transparent)]
+    Rollout(Box<RolloutError>),
+    /// An invariant of the program does not hold: a bug, not something a user can fix.
+    #[error(
+        "internal error (a bug in instantmimic; please report it with the command that ran): {0}"
+    )]
+    Internal(String),
+}
+
+impl From<RolloutError> for LatentError {
+    fn from(e: RolloutError) -> Self {
+        LatentError::Rollout(Box::new(e))
+    }
 }
 
 /// A latent-controller error inside the rollout (it knows policies only through

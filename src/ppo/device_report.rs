@@ -11,8 +11,8 @@ use crate::env::{Rollout, RolloutTotals, TOTALS};
 use crate::kernels::{DeviceArray, EnvKernels};
 use crate::nn::reduce::{record_clear, record_sum_of_squares};
 
-use super::report::IterationReport;
 use super::trainer_error::TrainerError;
+use crate::run::IterationReport;
 use crate::run::metrics::UpdateStats;
 
 pub(super) const TOTALS_BYTES: usize = TOTALS * 8;

@@ -15,7 +15,7 @@
 //! - [`config`]: the `[policy]` and `[ppo]` sections of the training configuration.
 //! - The learner: [`Trainer`] (rollout, update and evaluation as CUDA graphs on one GPU, built
 //!   from a [`TrainerConfig`]) and [`Replicas`] (one trainer per GPU, averaged through NCCL),
-//!   each a [`crate::run::Learner`]; their [`IterationReport`] and [`TrainerError`].
+//!   each a [`crate::run::Learner`], with their [`TrainerError`].
 
 pub mod batch;
 pub mod config;
@@ -27,7 +27,6 @@ pub mod loss;
 pub(crate) mod policy;
 mod rank_replica;
 pub mod replicas;
-mod report;
 pub mod schedule;
 mod trainer;
 mod trainer_error;
@@ -43,7 +42,6 @@ pub use loss::PpoStatistics;
 pub use policy::{GaussianPolicy, PolicyError};
 pub use rank_replica::{Followed, RankReplica};
 pub use replicas::Replicas;
-pub use report::{IterationReport, replica_mismatch};
 pub use trainer::{Trainer, TrainerConfig, replica_seed};
 pub use trainer_error::TrainerError;
 pub use update::{PpoOptimizerState, PpoUpdate};

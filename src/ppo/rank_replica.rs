@@ -19,10 +19,9 @@
 use std::time::Duration;
 
 use super::device_report::read_report;
-use super::report::{IterationReport, replica_mismatch};
 use super::trainer::Trainer;
 use super::trainer_error::TrainerError;
-use crate::run::{IterationStats, StopFlag};
+use crate::run::{IterationReport, IterationStats, StopFlag, replica_mismatch};
 use crate::world::Control;
 
 /// Answers of rank 0 (the first byte of a decision).

@@ -35,12 +35,12 @@ use crate::plan::PlanStore;
 use crate::ppo::{GaussianPolicy, PpoBatch, PpoOptimizerState, PpoUpdate, UpdateStage};
 
 use super::device_report::{REPORT_BYTES, read_report, record_parameter_squares, record_report};
-use super::report::IterationReport;
 use super::trainer_error::TrainerError;
 use super::{PolicyConfig, PpoConfig};
 use crate::env::RolloutConfig;
 use crate::latent::{DECODER_DIGEST, GoalDecoder, decoder_digest};
 use crate::plan::PhysicsOverflow;
+use crate::run::IterationReport;
 use crate::run::IterationStats;
 use crate::run::checkpoint::tensor_names;
 use crate::run::checkpoint::{Checkpoint, CheckpointError};

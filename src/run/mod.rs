@@ -21,6 +21,7 @@ pub mod library_evaluation;
 pub mod library_scores;
 pub mod metrics;
 mod progress;
+pub mod report;
 pub mod run_dir;
 mod session;
 pub mod stop;
@@ -51,6 +52,7 @@ pub use metrics::{
     UpdateStats,
 };
 pub use progress::{Progress, ProgressMode};
+pub use report::{IterationReport, replica_mismatch};
 pub use run_dir::{ResumedRun, RunDir, check_same_gpu_count};
 pub use session::{IterationStep, NextStep, RunSession};
 pub use stop::{StopFlag, StopSignal};

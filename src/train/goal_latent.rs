@@ -8,7 +8,7 @@ use std::path::Path;
 use super::character::check_trained_character;
 use super::config::TrainConfig;
 use super::error::TrainError;
-use super::latent_trainer::frozen_decoder_of;
+use super::latent_setup::frozen_decoder_of;
 use super::preflight::PolicyShapes;
 use crate::env::ActionMode;
 use crate::env::layout::JointLayout;
@@ -121,8 +121,9 @@ pub fn describe_decoder(decoder: &GoalDecoder, config: &TrainConfig) -> String {
 mod tests {
     use super::*;
     use crate::latent::DECODER_DIGEST;
+    use crate::latent::checkpoint::insert_latent_networks;
     use crate::run::CheckpointMeta;
-    use crate::train::latent_trainer::{insert_latent_networks, latent_shapes};
+    use crate::train::latent_setup::latent_shapes;
 
     fn repo(path: &str) -> std::path::PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR")).join(path)

@@ -11,19 +11,19 @@ use std::path::PathBuf;
 use super::character::check_trained_character;
 use super::config::TrainConfig;
 use super::error::TrainError;
-use super::latent_trainer::{LatentTrainer, load_teacher};
+use super::latent_setup::{distillation_config, load_teacher};
 use super::ppo_trainer::{new_trainer, trainer_config};
 use super::preflight::Preflight;
 use crate::cuda::Gpu;
-use crate::env::{TaskRecord, TrackedMotion, TrainMotion};
+use crate::env::{TrackedMotion, TrainMotion};
+use crate::latent::LatentTrainer;
 use crate::motion::{Character, ReferenceMotion};
-use crate::plan::{PhysicsOverflow, PlanStore};
+use crate::plan::PlanStore;
 use crate::ppo::{Replicas, Trainer};
 use crate::run::ResolvedConfig as _;
 use crate::run::{
-    CharacterRecord, Checkpoint, EnvEvaluation, EvaluationSummary, IterationStats, Learner,
-    LibraryPlan, ProgressMode, RunError, RunSession, RunSummary, Scorer, StopFlag, run_loop,
-    summarize,
+    CharacterRecord, Checkpoint, EnvEvaluation, EvaluationSummary, LibraryPlan, ProgressMode,
+    RunSession, RunSummary, Scorer, StopFlag, run_loop, summarize,
 };
 
 /// Where a run writes: a new directory, or one to continue.
@@ -55,43 +55,6 @@ pub struct TrainSetup {
     pub stop: StopFlag,
     /// When the command started: the records' and the summary's wall times count from here.
     pub started: std::time::Instant,
-}
-
-/// A learner's error as the run harness carries it: the harness's own passes through as it is
-/// (a divergence, a checkpoint's file), anything else is the learner's.
-fn learner_error(e: TrainError) -> RunError {
-    match e {
-        TrainError::Run(run) => run,
-        other => RunError::Learner(Box::new(other)),
-    }
-}
-
-impl Learner for LatentTrainer {
-    fn iterate(&mut self) -> Result<IterationStats, RunError> {
-        LatentTrainer::iterate(self).map_err(learner_error)
-    }
-    fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, RunError> {
-        LatentTrainer::evaluate(self).map_err(learner_error)
-    }
-    fn evaluation_steps(&self) -> u32 {
-        LatentTrainer::evaluation_steps(self)
-    }
-    fn task_record(&mut self, _evaluate: bool) -> Result<Option<TaskRecord>, RunError> {
-        // The configuration refuses [latent] with [goal]: the latent controller tracks.
-        Ok(None)
-    }
-    fn save_into(&mut self, checkpoint: &mut Checkpoint) -> Result<(), RunError> {
-        LatentTrainer::save_into(self, checkpoint).map_err(learner_error)
-    }
-    fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), RunError> {
-        LatentTrainer::restore(self, checkpoint).map_err(learner_error)
-    }
-    fn physics_overflow(&mut self) -> Result<PhysicsOverflow, RunError> {
-        LatentTrainer::physics_overflow(self).map_err(learner_error)
-    }
-    fn notes(&mut self) -> Vec<String> {
-        LatentTrainer::notes(self)
-    }
 }
 
 /// Trains on the GPU until the session says stop (success, time or iteration budget, or
@@ -199,7 +162,8 @@ fn train_latent_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
         Some(setup.started),
     )?;
     let started = std::time::Instant::now();
-    let mut trainer = LatentTrainer::new(&gpu, &setup.store, motion, session.config(), &teacher)?;
+    let distillation = distillation_config(session.config())?;
+    let mut trainer = LatentTrainer::new(&gpu, &setup.store, motion, &distillation, &teacher)?;
     let scorer = Scorer::new(
         trainer.evaluation_rollout(),
         motion,

@@ -10,13 +10,14 @@ use std::path::Path;
 
 use super::config::TrainConfig;
 use super::error::TrainError;
-use super::latent_trainer::{latent_shapes, latent_tensor_names};
+use super::latent_setup::latent_shapes;
 use super::library::preflight_training;
 use super::ppo_trainer::new_trainer;
 use super::preflight::Preflight;
 use crate::cuda::{Gpu, Graph};
 use crate::env::TrainMotion;
 use crate::env::{Rollout, RolloutPolicy, clip_evaluation};
+use crate::latent::checkpoint::latent_tensor_names;
 use crate::latent::{LatentShapes, LatentStudent};
 use crate::motion::LibraryConfig;
 use crate::motion::MotionLibraryError;

@@ -5,11 +5,11 @@
 use std::path::{Path, PathBuf};
 
 use super::*;
+use crate::latent::checkpoint::insert_latent_networks;
 use crate::motion::Character;
 use crate::run::CheckpointMeta;
 use crate::run::{ClipScore, LibraryEvaluation};
 use crate::train::PolicyShapes;
-use crate::train::latent_trainer::insert_latent_networks;
 
 fn repo(path: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(path)

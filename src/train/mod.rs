@@ -1,7 +1,7 @@
 //! Training: the configuration ([`TrainConfig`], the run's [`ResolvedConfig`]), the character
 //! and its plans, the checks of `train --dry-run` (docs/train.md), and the choice of learner:
 //! the PPO trainer (`crate::ppo::Trainer`, or its `Replicas` on several GPUs, built from
-//! [`trainer_config`]) or the latent controller's distillation ([`latent_trainer`]), each a
+//! [`trainer_config`]) or the latent controller's distillation (`crate::latent::LatentTrainer`, built from [`latent_setup`]), each a
 //! [`Learner`] that `train_on_gpu` hands to the run harness (`crate::run`). A run trains on
 //! one clip or on a motion library ([`TrainMotion`]).
 //!
@@ -15,7 +15,7 @@ mod error;
 pub mod goal_evaluation;
 pub mod goal_latent;
 mod gpu_loop;
-pub mod latent_trainer;
+pub mod latent_setup;
 pub mod library;
 pub mod library_policy;
 mod ppo_trainer;

@@ -17,11 +17,12 @@ use serde::{Deserialize, Serialize};
 use crate::env::layout::{JointLayout, observation_blocks};
 use crate::latent::FrozenDecoder;
 use crate::latent::GoalDecoder;
+use crate::latent::checkpoint::latent_tensor_names;
 use crate::latent::networks::REFERENCE_BLOCKS;
 use crate::motion::Character;
 use crate::nn::LayerShape;
 use crate::run::Checkpoint;
-use crate::train::latent_trainer::{frozen_decoder_of, latent_shapes, latent_tensor_names};
+use crate::train::latent_setup::{frozen_decoder_of, latent_shapes};
 use crate::train::{PolicyShapes, TrainError};
 
 use super::contract::PolicyContract;

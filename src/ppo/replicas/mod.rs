@@ -33,7 +33,6 @@ use crate::cuda::{Communicator, nccl_version};
 use crate::env::TrackedMotion;
 use crate::plan::{PhysicsOverflow, PlanStore};
 
-use super::report::{IterationReport, replica_mismatch};
 use super::trainer::{Trainer, TrainerConfig};
 use super::trainer_error::TrainerError;
 use crate::env::TrainMotion;
@@ -41,6 +40,7 @@ use crate::run::IterationStats;
 use crate::run::checkpoint::Checkpoint;
 use crate::run::clip_sampling::ClipSampling;
 use crate::run::evaluation::EnvEvaluation;
+use crate::run::{IterationReport, replica_mismatch};
 use worker::{Built, Job, Reply, SETUP_CALL, Start, Worker};
 
 /// How long the coordinator waits, after a failure or at the end, for the workers to leave

@@ -2,10 +2,8 @@
 //! of several GPUs (one replica each, `run.gpus`) into one iteration: episodes counted over
 //! every GPU, and the check that the replicas are still the same network.
 
+use super::metrics::{EpisodeEnds, IterationStats, UpdateStats};
 use crate::env::RolloutTotals;
-
-use crate::run::IterationStats;
-use crate::run::metrics::{EpisodeEnds, UpdateStats};
 
 /// One GPU's iteration as its report reads back.
 #[derive(Clone, Debug, PartialEq)]
