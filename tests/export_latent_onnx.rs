@@ -22,6 +22,7 @@ use instantmimic::latent::checkpoint::insert_latent_networks;
 use instantmimic::latent::networks::mlp_forward_f64;
 use instantmimic::motion::Character;
 use instantmimic::nn::{LayerShape, initial_parameters, mlp_layout};
+use instantmimic::ppo::checkpoint::ppo_tensor_names;
 use instantmimic::run::checkpoint::tensor_names;
 use instantmimic::run::{Checkpoint, CheckpointMeta};
 use instantmimic::train::goal_latent::{head_shapes, load_goal_decoder};
@@ -303,10 +304,10 @@ fn write_goal(
     actor.extend(std::iter::repeat_n(-1.0f32, shapes.action_size));
     assert_eq!(actor.len(), shapes.actor_params);
     let mut c = Checkpoint::new(CheckpointMeta::new(config, 8, 2.0, 100).expect("meta"));
-    c.insert(tensor_names::ACTOR, &[actor.len()], actor.clone())
+    c.insert(ppo_tensor_names::ACTOR, &[actor.len()], actor.clone())
         .expect("actor");
     c.insert(
-        tensor_names::CRITIC,
+        ppo_tensor_names::CRITIC,
         &[shapes.critic_params],
         vec![0.0f32; shapes.critic_params],
     )

@@ -20,6 +20,7 @@ use instantmimic::export::onnx::proto::{DimensionValue, FLOAT, ModelProto};
 use instantmimic::export::onnx::{IR_VERSION, OPSET, actor_layers, normalizer};
 use instantmimic::motion::Character;
 use instantmimic::nn::initial_parameters;
+use instantmimic::ppo::checkpoint::ppo_tensor_names;
 use instantmimic::run::checkpoint::tensor_names;
 use instantmimic::run::{Checkpoint, CheckpointMeta};
 use instantmimic::train::{PolicyShapes, TrainConfig};
@@ -68,10 +69,10 @@ fn seeded_checkpoint(config: &TrainConfig, seed: u64) -> Checkpoint {
     let meta = CheckpointMeta::new(config, 42, 3.5, 1_000_000).expect("meta");
     let mut checkpoint = Checkpoint::new(meta);
     checkpoint
-        .insert(tensor_names::ACTOR, &[actor.len()], actor)
+        .insert(ppo_tensor_names::ACTOR, &[actor.len()], actor)
         .expect("actor");
     checkpoint
-        .insert(tensor_names::CRITIC, &[critic.len()], critic)
+        .insert(ppo_tensor_names::CRITIC, &[critic.len()], critic)
         .expect("critic");
     checkpoint
         .insert(tensor_names::OBS_COUNT, &[2], vec![count, count])
@@ -104,7 +105,7 @@ fn forward_f64(checkpoint: &Checkpoint, config: &TrainConfig, obs: &[f32]) -> Ve
         .map(|(&o, (m, s))| ((f64::from(o) - m) * s).clamp(-clip, clip))
         .collect();
     let params = checkpoint
-        .get::<f32>(tensor_names::ACTOR, &[shapes.actor_params])
+        .get::<f32>(ppo_tensor_names::ACTOR, &[shapes.actor_params])
         .expect("actor");
     let layers = actor_layers(config, &shapes);
     for (l, layer) in layers.iter().enumerate() {
@@ -389,7 +390,7 @@ fn a_checkpoint_of_another_shape_fails_with_one_line() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(
-        err.contains("mismatch.safetensors") && err.contains(tensor_names::ACTOR),
+        err.contains("mismatch.safetensors") && err.contains(ppo_tensor_names::ACTOR),
         "{err}"
     );
     assert!(!dir.path().join("policy.onnx").exists());

@@ -9,6 +9,7 @@ mod small_run_support;
 
 use instantmimic::cuda::Gpu;
 use instantmimic::plan::PlanStore;
+use instantmimic::ppo::checkpoint::ppo_tensor_names;
 use instantmimic::run::DivergenceGuard;
 use instantmimic::run::checkpoint::tensor_names;
 use instantmimic::run::divergence::{RESTORE_LEARNING_RATE_FACTOR, non_finite_report};
@@ -44,17 +45,17 @@ fn an_injected_nan_is_reported_and_training_recovers() {
     // Inject: one actor weight becomes NaN.
     let mut poisoned = good.clone();
     let actor = poisoned
-        .tensor(tensor_names::ACTOR)
+        .tensor(ppo_tensor_names::ACTOR)
         .map(|t| t.shape.clone())
         .expect("actor tensor");
     let n: usize = actor.iter().product();
     let mut values = poisoned
-        .get::<f32>(tensor_names::ACTOR, &[n])
+        .get::<f32>(ppo_tensor_names::ACTOR, &[n])
         .expect("actor")
         .to_vec();
     values[7] = f32::NAN;
     poisoned
-        .insert(tensor_names::ACTOR, &actor, values)
+        .insert(ppo_tensor_names::ACTOR, &actor, values)
         .expect("poison");
     trainer
         .restore(&poisoned)

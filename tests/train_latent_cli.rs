@@ -9,6 +9,7 @@ use std::path::Path;
 use std::process::Output;
 
 use instantmimic::motion::Character;
+use instantmimic::ppo::checkpoint::ppo_tensor_names;
 use instantmimic::run::checkpoint::tensor_names;
 use instantmimic::run::{Checkpoint, CheckpointMeta};
 use instantmimic::train::{PolicyShapes, TrainConfig};
@@ -26,7 +27,7 @@ fn write_tracker(path: &Path, config: &TrainConfig, actor_len: Option<usize>) {
     let d = shapes.observation_size;
     let n = actor_len.unwrap_or(shapes.actor_params);
     let mut c = Checkpoint::new(CheckpointMeta::new(config, 40, 12.0, 1000).expect("meta"));
-    c.insert(tensor_names::ACTOR, &[n], vec![0.0f32; n])
+    c.insert(ppo_tensor_names::ACTOR, &[n], vec![0.0f32; n])
         .expect("actor");
     c.insert(tensor_names::OBS_COUNT, &[2], vec![9.0f64, 9.0])
         .expect("count");

@@ -10,7 +10,7 @@ use std::io::Write;
 use std::path::Path;
 
 use instantmimic::env::{GoalRates, GoalRecord, TaskRecord};
-use instantmimic::run::checkpoint::tensor_names;
+use instantmimic::ppo::checkpoint::ppo_tensor_names;
 use instantmimic::run::{
     EpisodeEnds, EvaluationSummary, IterationRecord, IterationStats, MetricsLog, ProgressMode,
     RunDir, RunError, RunSession, StopReason, UpdateStats, curve,
@@ -101,7 +101,7 @@ fn drive_with(
         if next.checkpoint_due {
             let mut ckpt = session.new_checkpoint().unwrap();
             ckpt.insert(
-                tensor_names::ACTOR,
+                ppo_tensor_names::ACTOR,
                 &[2],
                 vec![iteration as f32, -(iteration as f32)],
             )
@@ -152,7 +152,9 @@ fn a_killed_run_resumes_from_its_checkpoint_without_gap_or_duplicate() {
     let checkpoint = checkpoint.unwrap();
     assert_eq!(checkpoint.meta.iteration, 20);
     assert_eq!(
-        checkpoint.get::<f32>(tensor_names::ACTOR, &[2]).unwrap(),
+        checkpoint
+            .get::<f32>(ppo_tensor_names::ACTOR, &[2])
+            .unwrap(),
         [20.0, -20.0]
     );
     assert_eq!(checkpoint.meta.frames, 20 * 64 * 8);
@@ -650,7 +652,7 @@ fn tensorboard_event_files_hold_every_metric_by_iteration_across_a_resume() {
             let next = session.record(step, eval).unwrap();
             if next.checkpoint_due {
                 let mut ckpt = session.new_checkpoint().unwrap();
-                ckpt.insert(tensor_names::ACTOR, &[1], vec![iteration as f32])
+                ckpt.insert(ppo_tensor_names::ACTOR, &[1], vec![iteration as f32])
                     .unwrap();
                 session.save_checkpoint(&ckpt).unwrap();
             }

@@ -4,7 +4,7 @@
 //! checkpointed; the run then ends with stop reason `interrupted` in `summary.json`, and a
 //! resume continues after it with no gap.
 
-use instantmimic::run::checkpoint::tensor_names;
+use instantmimic::ppo::checkpoint::ppo_tensor_names;
 use instantmimic::run::{
     IterationStats, MetricsLog, ProgressMode, RunDir, RunSession, RunSummary, StopFlag, StopReason,
     StopSignal, UpdateStats,
@@ -55,7 +55,7 @@ fn drive(
         let next = session.record(step, None).unwrap();
         if next.checkpoint_due {
             let mut ckpt = session.new_checkpoint().unwrap();
-            ckpt.insert(tensor_names::ACTOR, &[1], vec![iteration as f32])
+            ckpt.insert(ppo_tensor_names::ACTOR, &[1], vec![iteration as f32])
                 .unwrap();
             session.save_checkpoint(&ckpt).unwrap();
         }
@@ -119,7 +119,9 @@ fn a_stop_request_ends_the_run_after_the_current_iteration_with_a_checkpoint() {
     let checkpoint = checkpoint.unwrap();
     assert_eq!(checkpoint.meta.iteration, 13);
     assert_eq!(
-        checkpoint.get::<f32>(tensor_names::ACTOR, &[1]).unwrap(),
+        checkpoint
+            .get::<f32>(ppo_tensor_names::ACTOR, &[1])
+            .unwrap(),
         [13.0]
     );
     let flag = StopFlag::new();

@@ -18,6 +18,7 @@
 //!   each a [`crate::run::Learner`], with their [`TrainerError`].
 
 pub mod batch;
+pub mod checkpoint;
 pub mod config;
 mod device_report;
 mod error;

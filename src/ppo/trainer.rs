@@ -382,6 +382,7 @@ impl Trainer {
     /// Adds the policy, the normalization and everything an exact continuation needs to
     /// `checkpoint` (waits for the GPU).
     pub fn save_into(&self, checkpoint: &mut Checkpoint) -> Result<(), TrainerError> {
+        use super::checkpoint::ppo_tensor_names::*;
         use tensor_names::*;
         self.gpu.synchronize()?;
         let policy = &self.policy;
@@ -424,6 +425,7 @@ impl Trainer {
     /// (a training checkpoint), the optimizer and the start-phase statistics; then puts every
     /// env at a new reference state (episodes in progress are not stored).
     pub fn restore(&mut self, checkpoint: &Checkpoint) -> Result<(), TrainerError> {
+        use super::checkpoint::ppo_tensor_names::*;
         use tensor_names::*;
         self.gpu.synchronize()?;
         match &self.decoder {

@@ -68,22 +68,16 @@ pub enum CheckpointError {
     Encode(String),
 }
 
-/// Every checkpoint tensor's name, in one place (docs/train.md, "Checkpoints").
+/// The tensors every learner's checkpoint shares (docs/train.md, "Checkpoints"): the
+/// rollout's (observation normalizer, start-phase statistics, random streams' counter) and the
+/// optimizer's step and learning rate (which the divergence guard halves). Each learner names
+/// its own networks' tensors beside its algorithm (`ppo::checkpoint`, `latent::checkpoint`).
 pub mod tensor_names {
-    /// Actor parameters, f32 `[P]`: layer by layer `w [in, out]` then `b [out]`, then `log_std [A]`.
-    pub const ACTOR: &str = "actor.params";
-    /// Critic parameters, f32 `[P]`, the same layout without `log_std`.
-    pub const CRITIC: &str = "critic.params";
     /// Observation normalizer: running count and merged count, f64 `[2]`.
     pub const OBS_COUNT: &str = "obs_norm.count";
     /// Running mean and sum of squared deviations, f64 `[D]`.
     pub const OBS_MEAN: &str = "obs_norm.mean";
     pub const OBS_M2: &str = "obs_norm.m2";
-    // What an exact continuation needs beyond the policy (training checkpoints only).
-    pub const ADAM_ACTOR_M: &str = "adam.actor.m";
-    pub const ADAM_ACTOR_V: &str = "adam.actor.v";
-    pub const ADAM_CRITIC_M: &str = "adam.critic.m";
-    pub const ADAM_CRITIC_V: &str = "adam.critic.v";
     /// i32 `[2]`: Adam's step count and the update counter (the shuffle's stream).
     pub const ADAM_STEP: &str = "adam.step";
     pub const LEARNING_RATE: &str = "ppo.learning_rate";
@@ -92,8 +86,6 @@ pub mod tensor_names {
     pub const PHASE_CDF: &str = "phase.cdf";
     /// i32 `[1]`: the rollout's iteration counter (its random streams).
     pub const RNG_ITERATION: &str = "rng.iteration";
-    /// f64 `[3]`: the returns' running count, mean and M2 (value normalization).
-    pub const VALUE_STATISTICS: &str = "value_norm.stats";
 }
 
 /// What a checkpoint says about the run (the `instantmimic` metadata entry).

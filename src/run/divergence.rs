@@ -97,6 +97,9 @@ mod tests {
     use super::*;
     use crate::run::{CHECKPOINT_FORMAT_VERSION, CheckpointMeta};
 
+    /// A learner's parameters (any tensor name: the guard reads none but the learning rate).
+    const PARAMS: &str = "actor.params";
+
     fn checkpoint(iteration: u64, rate: f32, actor: Vec<f32>) -> Checkpoint {
         let meta = CheckpointMeta {
             format_version: CHECKPOINT_FORMAT_VERSION,
@@ -112,8 +115,7 @@ mod tests {
         let mut c = Checkpoint::new(meta);
         c.insert(tensor_names::LEARNING_RATE, &[1], vec![rate])
             .unwrap();
-        c.insert(tensor_names::ACTOR, &[actor.len()], actor)
-            .unwrap();
+        c.insert(PARAMS, &[actor.len()], actor).unwrap();
         c
     }
 
@@ -123,13 +125,10 @@ mod tests {
         assert_eq!(guard.keep(&checkpoint(50, 4e-4, vec![3.0, 4.0])), None);
         // A poisoned checkpoint is refused and does not replace the good one.
         let refused = guard.keep(&checkpoint(100, 4e-4, vec![f32::NAN, 4.0]));
-        assert!(refused.unwrap().contains(tensor_names::ACTOR));
+        assert!(refused.unwrap().contains(PARAMS));
         let (restored, event) = guard.restore_point(120, "value loss").unwrap();
         assert_eq!(restored.meta.iteration, 50);
-        assert_eq!(
-            restored.get::<f32>(tensor_names::ACTOR, &[2]).unwrap(),
-            &[3.0, 4.0]
-        );
+        assert_eq!(restored.get::<f32>(PARAMS, &[2]).unwrap(), &[3.0, 4.0]);
         assert_eq!(
             restored
                 .get::<f32>(tensor_names::LEARNING_RATE, &[1])
@@ -186,10 +185,7 @@ mod tests {
             .err()
             .unwrap()
             .to_string();
-        assert!(
-            e.contains("not finite") && e.contains(tensor_names::ACTOR),
-            "{e}"
-        );
+        assert!(e.contains("not finite") && e.contains(PARAMS), "{e}");
     }
 
     #[test]

@@ -224,8 +224,9 @@ pub fn format_goal_evaluation(report: &GoalEvaluationReport) -> String {
 mod tests {
     use super::*;
     use crate::motion::Character;
+    use crate::ppo::checkpoint::ppo_tensor_names::{ACTOR, CRITIC};
     use crate::run::CheckpointMeta;
-    use crate::run::checkpoint::tensor_names::{ACTOR, CRITIC, OBS_COUNT, OBS_M2, OBS_MEAN};
+    use crate::run::checkpoint::tensor_names::{OBS_COUNT, OBS_M2, OBS_MEAN};
     use crate::train::preflight::PolicyShapes;
 
     fn reach() -> TrainConfig {

@@ -4,6 +4,7 @@ use std::path::Path;
 
 use super::*;
 use crate::motion::Character;
+use crate::ppo::checkpoint::ppo_tensor_names;
 use crate::run::CheckpointMeta;
 
 fn repo(path: &str) -> std::path::PathBuf {
@@ -20,8 +21,12 @@ fn tracker_checkpoint(dir: &Path, config: &TrainConfig, actor_len: usize) -> Str
     let d = humanoid_shapes(config).observation_size;
     let meta = CheckpointMeta::new(config, 7, 1.0, 100).expect("meta");
     let mut c = Checkpoint::new(meta);
-    c.insert(tensor_names::ACTOR, &[actor_len], vec![0.01f32; actor_len])
-        .expect("actor");
+    c.insert(
+        ppo_tensor_names::ACTOR,
+        &[actor_len],
+        vec![0.01f32; actor_len],
+    )
+    .expect("actor");
     c.insert(tensor_names::OBS_COUNT, &[2], vec![5.0f64, 5.0])
         .expect("count");
     c.insert(tensor_names::OBS_MEAN, &[d], vec![0.0f64; d])

@@ -247,6 +247,7 @@ pub fn check_latent_fits(checkpoint: &Checkpoint, shapes: &LatentShapes) -> Resu
 /// The tracker's policy and observation statistics of `checkpoint` alone: another library's
 /// start-phase statistics (one per clip and phase bin) and the optimizer are not restored.
 pub fn policy_only(checkpoint: &Checkpoint) -> Result<Checkpoint, TrainError> {
+    use crate::ppo::checkpoint::ppo_tensor_names::*;
     use tensor_names::*;
     let mut policy = Checkpoint::new(checkpoint.meta.clone());
     for name in [ACTOR, CRITIC, OBS_COUNT, OBS_MEAN, OBS_M2] {

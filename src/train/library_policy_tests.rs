@@ -22,6 +22,7 @@ fn shapes_of(config: &TrainConfig) -> PolicyShapes {
 /// A library tracker's checkpoint of `config` as the trainer writes its policy (zeros), with
 /// start-phase statistics of its own library's size.
 fn tracker(config: &TrainConfig) -> Checkpoint {
+    use crate::ppo::checkpoint::ppo_tensor_names::*;
     use tensor_names::*;
     let s = shapes_of(config);
     let mut c = Checkpoint::new(CheckpointMeta::new(config, 10, 2.0, 100).expect("meta"));

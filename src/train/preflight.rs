@@ -56,6 +56,7 @@ impl PolicyShapes {
 
     /// Checks that `checkpoint` holds the policy and normalizer of these sizes.
     pub fn check(&self, checkpoint: &crate::run::checkpoint::Checkpoint) -> Result<(), TrainError> {
+        use crate::ppo::checkpoint::ppo_tensor_names::*;
         use tensor_names::*;
         checkpoint.get::<f32>(ACTOR, &[self.actor_params])?;
         checkpoint.get::<f32>(CRITIC, &[self.critic_params])?;

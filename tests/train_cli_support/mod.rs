@@ -7,6 +7,7 @@ use std::process::{Command, Output};
 
 use instantmimic::motion::find::MOTIONS_ENV;
 use instantmimic::motion::{Character, SyntheticMotion};
+use instantmimic::ppo::checkpoint::ppo_tensor_names;
 use instantmimic::run::checkpoint::tensor_names;
 use instantmimic::run::{Checkpoint, IterationStats, ProgressMode, RunSession};
 use instantmimic::train::{PolicyShapes, TrainConfig};
@@ -79,8 +80,8 @@ pub fn add_policy(checkpoint: &mut Checkpoint, config: &TrainConfig) {
         let len = values.len();
         checkpoint.insert(name, &[len], values).unwrap();
     };
-    put(tensor_names::ACTOR, vec![0.0; shapes.actor_params]);
-    put(tensor_names::CRITIC, vec![0.0; shapes.critic_params]);
+    put(ppo_tensor_names::ACTOR, vec![0.0; shapes.actor_params]);
+    put(ppo_tensor_names::CRITIC, vec![0.0; shapes.critic_params]);
     checkpoint
         .insert(tensor_names::OBS_COUNT, &[2], vec![1.0f64, 1.0])
         .unwrap();
