@@ -6,6 +6,7 @@
 //!   the replicas agree bit for bit, and the first one their whole state) and end together.
 //! - A killed rank ends the other within the world's timeout, with its name.
 //! - SIGTERM to both stops them after the same iteration; the run then resumes.
+//! - Two processes train as the two threads of `--gpus 0,1` do, iteration by iteration.
 #![cfg(feature = "gpu")]
 
 mod skip_support;
@@ -221,4 +222,39 @@ fn several_gpus_sigterm_stops_both_after_the_same_iteration_and_the_run_resumes(
     check_success(&zero, "rank 0 resumed");
     check_success(&one, "rank 1 resumed");
     assert_eq!(summary(&out_dir)["iterations"], iterations + 3);
+}
+
+#[test]
+fn several_gpus_two_processes_train_as_the_threads_of_one_do() {
+    if !gpus_or_skip(2) {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let config = write_config(dir.path(), 10);
+    let threaded = dir.path().join("threaded");
+    let out = binary()
+        .arg("train")
+        .args(["--config", &config.display().to_string()])
+        .args(["--out", &threaded.display().to_string()])
+        .args(["--gpus", "0,1", "--progress", "lines"])
+        .output()
+        .expect("runs");
+    check_success(&out, "--gpus 0,1");
+    let processes = dir.path().join("processes");
+    let (zero, one) = start_two(free_port(), &config, &processes, &[]);
+    let (zero, one) = (
+        zero.wait_with_output().unwrap(),
+        one.wait_with_output().unwrap(),
+    );
+    check_success(&zero, "rank 0");
+    check_success(&one, "rank 1");
+    // The same replicas (seeds, parameters, all-reduces): the update's statistics and the
+    // rollouts' returns agree iteration by iteration; only the timings differ.
+    let (a, b) = (metrics(&threaded), metrics(&processes));
+    assert_eq!((a.len(), b.len()), (10, 10));
+    for (x, y) in a.iter().zip(&b) {
+        for key in ["policy_loss", "value_loss", "kl", "mean_return", "frames"] {
+            assert_eq!(x[key], y[key], "iteration {}: {key}", x["iteration"]);
+        }
+    }
 }
