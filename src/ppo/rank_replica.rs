@@ -226,3 +226,69 @@ fn decide(reports: &[Vec<u8>]) -> Result<(IterationReport, bool), String> {
     let merged = IterationReport::merge(&parsed).ok_or_else(|| "no report".to_owned())?;
     Ok((merged, stop_asked))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::device_report::{PARAMETER_SQUARES_BYTES, REPORT_BYTES};
+    use super::*;
+
+    /// A device report of `episodes` episodes (return sum 10 each) and parameter squares
+    /// `squares`, with this rank's `flags` and digest in front, as a rank sends it.
+    fn report(flags: u8, digest: Option<u32>, episodes: f64, squares: [f64; 2]) -> Vec<u8> {
+        let mut device = vec![0u8; REPORT_BYTES];
+        device[..8].copy_from_slice(&episodes.to_le_bytes());
+        device[8..16].copy_from_slice(&(10.0 * episodes).to_le_bytes());
+        let at = REPORT_BYTES - PARAMETER_SQUARES_BYTES;
+        device[at..at + 8].copy_from_slice(&squares[0].to_le_bytes());
+        device[at + 8..].copy_from_slice(&squares[1].to_le_bytes());
+        let mut out = vec![flags | if digest.is_some() { HAS_DIGEST } else { 0 }];
+        if let Some(d) = digest {
+            out.extend_from_slice(&d.to_le_bytes());
+        }
+        out.extend_from_slice(&device);
+        out
+    }
+
+    #[test]
+    fn rank_0_merges_every_ranks_episodes_and_hears_a_stop_request() {
+        let reports = [
+            report(0, None, 3.0, [1.5, 2.5]),
+            report(STOP_ASKED, None, 5.0, [1.5, 2.5]),
+        ];
+        let (merged, stop_asked) = decide(&reports).expect("the replicas agree");
+        assert_eq!(merged.totals.episodes, 8.0, "every rank's episodes");
+        assert_eq!(merged.totals.mean_return, 10.0);
+        assert_eq!(merged.parameter_squares, [1.5, 2.5]);
+        assert!(stop_asked, "rank 1 was asked to stop");
+        let (_, stop_asked) = decide(&reports[..1]).expect("one rank");
+        assert!(!stop_asked);
+    }
+
+    #[test]
+    fn replicas_that_differ_are_named() {
+        // The parameters' squares differ in one bit.
+        let other = f64::from_bits(1.5f64.to_bits() ^ 1);
+        let e = decide(&[
+            report(0, None, 3.0, [1.5, 2.5]),
+            report(0, None, 3.0, [other, 2.5]),
+        ])
+        .expect_err("they differ");
+        assert!(e.contains("rank 1"), "{e}");
+        // Their whole state's checksums differ (after the start, or a resume).
+        let e = decide(&[
+            report(0, Some(7), 3.0, [1.5, 2.5]),
+            report(0, Some(8), 3.0, [1.5, 2.5]),
+        ])
+        .expect_err("checksums differ");
+        assert_eq!(e, "00000007 00000008");
+        decide(&[
+            report(0, Some(7), 3.0, [1.5, 2.5]),
+            report(0, Some(7), 3.0, [1.5, 2.5]),
+        ])
+        .expect("equal checksums");
+        // A cut report is named, not a panic.
+        let e = decide(&[report(0, None, 3.0, [1.5, 2.5]), vec![HAS_DIGEST, 1]])
+            .expect_err("cut short");
+        assert!(e.contains("rank 1"), "{e}");
+    }
+}
