@@ -9,12 +9,12 @@ use std::time::{Duration, Instant};
 
 use super::config::TrainConfig;
 use super::error::TrainError;
-use super::gpu_loop::{TrainSetup, library_note, open_session};
+use super::gpu_loop::{RunStart, TrainSetup, library_note, open_session};
 use super::ppo_trainer::trainer_config;
 use crate::cuda::{Communicator, Gpu, nccl_version};
 use crate::env::TrackedMotion;
 use crate::ppo::{Followed, RankReplica, Trainer};
-use crate::run::{Checkpoint, RunSummary, Scorer, run_loop};
+use crate::run::{Checkpoint, RunDir, RunSummary, Scorer, run_loop};
 use crate::world::{Host, WorldError, WorldSpec, join};
 
 /// NCCL's world id: the first bytes of what rank 0 hands the others.
@@ -91,6 +91,27 @@ fn lead(
     let spec = &world.spec;
     // The port first: a port in use is the first thing to say.
     let host = Host::bind(spec.rendezvous.port)?;
+    // The world forms before the run directory is touched: a world that does not form leaves
+    // nothing to clean up. The checkpoint a resume continues from is read-only until then.
+    let resume = match &setup.start {
+        RunStart::New { .. } => None,
+        RunStart::Resume { root } => RunDir::inspect_resume::<TrainConfig>(root)?
+            .checkpoint
+            .map(|(path, _)| path.display().to_string()),
+    };
+    let world_id = Communicator::new_world_id()?;
+    eprintln!(
+        "world of {} processes: rank 0 waits for the others on port {} (at most {} s)",
+        spec.size,
+        host.port(),
+        world.timeout.as_secs()
+    );
+    let control = host.gather(
+        spec.size,
+        fingerprint,
+        &shared_bytes(&world_id, resume.as_deref()),
+        world.timeout,
+    )?;
     let (mut session, checkpoint) = open_session(
         &setup.config,
         motion.character(),
@@ -101,20 +122,19 @@ fn lead(
     )?;
     session.count_replicas(spec.size);
     let started = Instant::now();
-    let world_id = Communicator::new_world_id()?;
-    let resume = checkpoint.as_ref().map(|c| c.source().to_owned());
-    session.progress().note(&format!(
-        "world of {} processes: rank 0 waits for the others on port {} (at most {} s)",
-        spec.size,
-        host.port(),
-        world.timeout.as_secs()
-    ));
-    let control = host.gather(
-        spec.size,
-        fingerprint,
-        &shared_bytes(&world_id, resume.as_deref()),
-        world.timeout,
-    )?;
+    let opened = checkpoint.as_ref().map(|c| c.source().to_owned());
+    let file = |p: &Option<String>| {
+        p.as_ref()
+            .and_then(|p| std::path::Path::new(p).file_name().map(|f| f.to_owned()))
+    };
+    if file(&opened) != file(&resume) {
+        // The run directory changed between the inspection and its opening.
+        return Err(TrainError::Setup(format!(
+            "the run directory's newest checkpoint changed while the world formed ({} then {}): resume again",
+            resume.as_deref().unwrap_or("none"),
+            opened.as_deref().unwrap_or("none")
+        )));
+    }
     let gpu = Gpu::open(rank_device(spec)?)?;
     let communicator = Communicator::join_world(&gpu, spec.size, 0, &world_id)?;
     let config = trainer_config(session.config(), motion.character())?;
