@@ -157,7 +157,7 @@ fn a_run_resumes_only_on_as_many_gpus_as_it_trained_on() {
         ws.path(),
     ));
     assert!(
-        err.contains("run.gpus: this run trained on 1 GPU; resume it on one (no --gpus, or one device), not on 2"),
+        err.contains("run.gpus: this run trained on 1 GPU; resume it on one (no --gpus, or one device; one process), not on 2"),
         "{err}"
     );
     // One device is still one GPU.

@@ -127,6 +127,11 @@ fn bad_worlds_are_one_line_before_a_run_directory() {
             "WORLD_SIZE=\"two\" is not a whole number",
         ),
         (
+            vec!["--set", "run.processes=2"],
+            vec![],
+            "this run trains in a world of 2 processes; start every rank",
+        ),
+        (
             vec!["--set", "run.gpus=[0]"],
             torchrun_with("RANK", "0"),
             "leave run.gpus out",

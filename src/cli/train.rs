@@ -199,6 +199,22 @@ impl TrainArgs {
         }
     }
 
+    /// Sets `run.processes` to the size of the world this `train` is a rank of (1: one
+    /// process), checked against `config`; a configuration that trained in a world (a resume)
+    /// and is now run alone is refused with what to do.
+    fn apply_world(&self, config: &mut TrainConfig) -> Result<Option<WorldRun>> {
+        let world = self.world(config)?;
+        match &world {
+            Some(world) => config.run.processes = world.spec.size as u32,
+            None if config.run.processes > 1 => anyhow::bail!(
+                "run.processes = {0}: this run trains in a world of {0} processes; start every rank (--rank R --world-size {0} --rendezvous HOST:PORT, or torchrun, or Slurm; docs/train.md, \"Several processes\")",
+                config.run.processes
+            ),
+            None => {}
+        }
+        Ok(world)
+    }
+
     /// The world of processes this `train` is a rank of (None: one process), checked against
     /// `config`.
     fn world(&self, config: &TrainConfig) -> Result<Option<WorldRun>> {
@@ -377,6 +393,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 flags.push("--character");
             }
             args.apply_run_overrides(&mut config, &mut flags);
+            args.apply_world(&mut config)?;
             let mut label = resumed.dir.config_path().display().to_string();
             if !flags.is_empty() {
                 label = format!("{label} with {}", flags.join(", "));
@@ -400,11 +417,12 @@ pub fn run(args: TrainArgs) -> Result<()> {
             (config, label, start, line, checkpoint)
         }
         None => {
-            let (config, label) = resolve_new(&args)?;
+            let (mut config, label) = resolve_new(&args)?;
+            let world = args.apply_world(&mut config)?;
             let root = args.out.clone().unwrap_or_else(|| default_run_dir(&config));
             // Rank 0 of a world of processes writes the run directory; the other ranks only
             // read it (and may find rank 0's files there already).
-            let follower = args.world(&config)?.is_some_and(|w| !w.spec.is_leader());
+            let follower = world.is_some_and(|w| !w.spec.is_leader());
             let replaced = if follower {
                 Vec::new()
             } else {
@@ -477,7 +495,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
         }
         None => None,
     };
-    // One rank of a world of processes (flags, torchrun's or Slurm's variables).
+    // One rank of a world of processes (flags, torchrun's or Slurm's variables; `run.processes`
+    // already holds its size).
     let world = args.world(&config)?;
     // Several GPUs need NCCL: say so before a run directory is made.
     let nccl = if let Some(world) = &world {

@@ -83,6 +83,19 @@ pub struct RunConfig {
     /// (docs/train.md, "Several GPUs"). Empty (the default) or one device: one GPU, no NCCL.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub gpus: Vec<u32>,
+    /// Processes of the world this run trains in, one replica each (docs/train.md, "Several
+    /// processes"): `train` sets it from `--world-size` (or torchrun's or Slurm's variables);
+    /// 1, the default, is one process. Recorded so that a resume continues with as many.
+    #[serde(default = "one_process", skip_serializing_if = "is_one_process")]
+    pub processes: u32,
+}
+
+fn one_process() -> u32 {
+    1
+}
+
+fn is_one_process(n: &u32) -> bool {
+    *n == 1
 }
 
 impl Default for RunConfig {
@@ -102,14 +115,16 @@ impl Default for RunConfig {
             max_divergence_restores: 3,
             replay: true,
             gpus: Vec::new(),
+            processes: 1,
         }
     }
 }
 
 impl RunConfig {
-    /// GPUs the run trains on together (1 for the single-GPU path).
+    /// Replicas the run trains together: its GPUs in one process, or its world's processes
+    /// (1 for the single-GPU path).
     pub fn replicas(&self) -> usize {
-        self.gpus.len().max(1)
+        self.gpus.len().max(1) * self.processes.max(1) as usize
     }
 
     /// Whether the run trains on several GPUs (through NCCL).

@@ -400,9 +400,11 @@ pub fn check_same_gpu_count(before: &RunConfig, resumed: &RunConfig) -> Result<(
         return Ok(());
     }
     let how = if trained == 1 {
-        "on one (no --gpus, or one device)".to_owned()
+        "on one (no --gpus, or one device; one process)".to_owned()
     } else {
-        format!("on {trained} (--gpus with {trained} devices; which ones may change)")
+        format!(
+            "on {trained} (--gpus with {trained} devices, or a world of {trained} processes: --world-size {trained}; which devices may change)"
+        )
     };
     Err(RunError::Setup(format!(
         "run.gpus: this run trained on {trained} GPU{}; resume it {how}, not on {now}",

@@ -103,8 +103,6 @@ pub struct RunSession<C: ResolvedConfig> {
     /// The character trained, recorded in every checkpoint (None: the checkpoints record none,
     /// and their readers take the configuration's).
     character: Option<CharacterRecord>,
-    /// Replicas whose envs each iteration counts: `run.gpus`'s, or a world of processes'.
-    replicas: usize,
     /// Where the wall clock of the records starts: the command's start when the caller gives it
     /// ([`RunSession::measure_wall_from`]), else this session's creation.
     wall_origin: std::time::Instant,
@@ -231,7 +229,6 @@ impl<C: ResolvedConfig> RunSession<C> {
             reached,
             stop: StopFlag::new(),
             character: None,
-            replicas: 0,
             wall_origin: std::time::Instant::now(),
             setup: None,
         }
@@ -253,12 +250,6 @@ impl<C: ResolvedConfig> RunSession<C> {
     pub fn start_training(&mut self) {
         let wall = self.wall_origin.elapsed().as_secs_f64();
         self.setup = Some((wall, self.iteration + 1));
-    }
-
-    /// Counts `replicas` replicas' envs in every iteration's frames (a world of processes; by
-    /// default `run.gpus`'s).
-    pub fn count_replicas(&mut self, replicas: usize) {
-        self.replicas = replicas;
     }
 
     /// Records `character` in the run's checkpoints.
@@ -301,11 +292,9 @@ impl<C: ResolvedConfig> RunSession<C> {
         let active = self.clock.seconds();
         let iteration = self.iteration + 1;
         // Every GPU's envs (each runs env.num_envs).
-        let replicas = match self.replicas {
-            0 => self.config.run().replicas(),
-            n => n,
-        };
-        let frames_now = self.config.frames_per_gpu_iteration() * replicas as u64;
+        // Every replica's envs: `run.gpus`'s, or a world of processes'.
+        let frames_now =
+            self.config.frames_per_gpu_iteration() * self.config.run().replicas() as u64;
         let elapsed = active - self.iteration_start_s;
         let record = IterationRecord {
             iteration,

@@ -712,6 +712,18 @@ impl TrainConfig {
                 ));
             }
         }
+        check!(
+            (1..=crate::world::MAX_WORLD as u32).contains(&run.processes),
+            "run.processes",
+            run.processes,
+            "must be 1 to 4096 (train sets it from --world-size)"
+        );
+        check!(
+            run.processes == 1 || gpus.is_empty(),
+            "run.processes",
+            run.processes,
+            "a world of processes takes one GPU per process: leave run.gpus out"
+        );
         // The returns' count of one update over every GPU is an i32 on the device.
         let all_samples = samples * run.replicas() as u64;
         if all_samples > i32::MAX as u64 {
@@ -734,10 +746,10 @@ impl TrainConfig {
                 "must divide ppo.horizon x env.num_envs (the rows of one rollout)"
             );
             check!(
-                !run.data_parallel(),
+                run.replicas() == 1,
                 "latent",
                 "[latent]",
-                "the latent controller trains on one GPU (leave run.gpus out)"
+                "the latent controller trains on one GPU (leave run.gpus out, one process)"
             );
             if let Some(task) = self.task_sections().section() {
                 return Err(bad(

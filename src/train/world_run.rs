@@ -112,7 +112,7 @@ fn lead(
         &shared_bytes(&world_id, resume.as_deref()),
         world.timeout,
     )?;
-    let (mut session, checkpoint) = open_session(
+    let (session, checkpoint) = open_session(
         &setup.config,
         motion.character(),
         &setup.start,
@@ -120,7 +120,6 @@ fn lead(
         &setup.stop,
         Some(setup.started),
     )?;
-    session.count_replicas(spec.size);
     let started = Instant::now();
     let opened = checkpoint.as_ref().map(|c| c.source().to_owned());
     let file = |p: &Option<String>| {

@@ -18,4 +18,6 @@ mod spec;
 pub use control::Control;
 pub use error::WorldError;
 pub use rendezvous::{Host, join};
-pub use spec::{RendezvousAddress, WorldFlags, WorldSource, WorldSpec, first_slurm_host};
+pub use spec::{
+    MAX_WORLD, RendezvousAddress, WorldFlags, WorldSource, WorldSpec, first_slurm_host,
+};
