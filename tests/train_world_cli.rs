@@ -13,7 +13,7 @@ use instantmimic::motion::find::MOTIONS_ENV;
 use train_cli_support::{one_line_error, stdout, workspace};
 
 /// Every variable a launcher may set, removed unless `vars` sets it.
-const WORLD_VARS: [&str; 12] = [
+const WORLD_VARS: [&str; 13] = [
     "RANK",
     "WORLD_SIZE",
     "LOCAL_RANK",
@@ -22,6 +22,7 @@ const WORLD_VARS: [&str; 12] = [
     "SLURM_PROCID",
     "SLURM_NTASKS",
     "SLURM_LOCALID",
+    "SLURM_STEP_ID",
     "SLURM_JOB_NODELIST",
     "SLURM_NODELIST",
     "SLURM_JOB_ID",
@@ -173,6 +174,7 @@ fn a_dry_run_names_the_rank_and_the_rendezvous() {
             ("SLURM_PROCID", "1"),
             ("SLURM_NTASKS", "4"),
             ("SLURM_LOCALID", "1"),
+            ("SLURM_STEP_ID", "0"),
             ("SLURM_JOB_NODELIST", "gpu[07-08]"),
             ("SLURM_JOB_ID", "77"),
         ],

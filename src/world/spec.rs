@@ -82,6 +82,12 @@ impl WorldSpec {
     /// The world `flags` describe, else the one the environment's variables (read by `var`)
     /// describe, else None: this process trains alone. Every inconsistency is one line that
     /// names the flag or variable.
+    ///
+    /// From the environment, a world of one process is no world (a launcher's single task
+    /// trains as a plain run), and Slurm's variables count only in a job step that `srun`
+    /// launched (`SLURM_STEP_ID` set): a batch script of a job of several tasks has
+    /// `SLURM_NTASKS` too, and a `train` run there directly is one process, not rank 0 of a
+    /// world waiting for ranks that never come.
     pub fn resolve(
         flags: &WorldFlags,
         var: impl Fn(&str) -> Option<String>,
@@ -89,13 +95,17 @@ impl WorldSpec {
         if flags.any() {
             return from_flags(flags).map(Some);
         }
-        if var("RANK").is_some() || var("WORLD_SIZE").is_some() {
-            return from_torchrun(&var).map(Some);
-        }
-        if var("SLURM_PROCID").is_some() && var("SLURM_NTASKS").is_some() {
-            return from_slurm(&var).map(Some);
-        }
-        Ok(None)
+        let spec = if var("RANK").is_some() || var("WORLD_SIZE").is_some() {
+            from_torchrun(&var)?
+        } else if var("SLURM_PROCID").is_some()
+            && var("SLURM_NTASKS").is_some()
+            && var("SLURM_STEP_ID").is_some()
+        {
+            from_slurm(&var)?
+        } else {
+            return Ok(None);
+        };
+        Ok((spec.size > 1).then_some(spec))
     }
 
     /// Whether this process is rank 0 (it hosts the rendezvous, evaluates and checkpoints).
@@ -364,6 +374,7 @@ mod tests {
                 ("SLURM_PROCID", "0"),
                 ("SLURM_NTASKS", "16"),
                 ("SLURM_LOCALID", "0"),
+                ("SLURM_STEP_ID", "0"),
                 ("SLURM_JOB_NODELIST", "gpu[07-08,11],login1"),
                 ("SLURM_JOB_ID", "123456"),
             ]),
@@ -383,6 +394,7 @@ mod tests {
                 ("SLURM_PROCID", "1"),
                 ("SLURM_NTASKS", "2"),
                 ("SLURM_LOCALID", "1"),
+                ("SLURM_STEP_ID", "3"),
                 ("SLURM_JOB_NODELIST", "gpu07"),
                 ("MASTER_ADDR", "10.0.0.5"),
                 ("MASTER_PORT", "4000"),
@@ -391,6 +403,39 @@ mod tests {
         .expect("valid")
         .expect("a world");
         assert_eq!(spec.rendezvous.to_string(), "10.0.0.5:4000");
+    }
+
+    #[test]
+    fn a_batch_script_or_a_single_task_is_one_process() {
+        // A batch script of a 4-task job: Slurm's variables without a job step.
+        let batch = [
+            ("SLURM_PROCID", "0"),
+            ("SLURM_NTASKS", "4"),
+            ("SLURM_LOCALID", "0"),
+            ("SLURM_JOB_NODELIST", "gpu07"),
+            ("SLURM_JOB_ID", "5"),
+        ];
+        let spec = WorldSpec::resolve(&WorldFlags::default(), vars(&batch));
+        assert_eq!(spec.expect("fine"), None);
+        // A launcher's world of one: a plain run.
+        let one = [
+            ("RANK", "0"),
+            ("WORLD_SIZE", "1"),
+            ("LOCAL_RANK", "0"),
+            ("MASTER_ADDR", "127.0.0.1"),
+            ("MASTER_PORT", "29500"),
+        ];
+        let spec = WorldSpec::resolve(&WorldFlags::default(), vars(&one));
+        assert_eq!(spec.expect("fine"), None);
+        // The flags ask for it explicitly: a world of one process is one.
+        let flags = WorldFlags {
+            rank: Some(0),
+            world_size: Some(1),
+            local_rank: None,
+            rendezvous: Some("127.0.0.1:29500".into()),
+        };
+        let spec = WorldSpec::resolve(&flags, vars(&[])).expect("fine");
+        assert_eq!(spec.map(|s| s.size), Some(1));
     }
 
     #[test]
@@ -468,6 +513,7 @@ mod tests {
                 ("SLURM_PROCID", "0"),
                 ("SLURM_NTASKS", "2"),
                 ("SLURM_LOCALID", "0"),
+                ("SLURM_STEP_ID", "0"),
                 ("SLURM_JOB_NODELIST", "gpu07"),
             ]),
         ));
