@@ -192,6 +192,26 @@ fn no_rank_0_is_one_line_after_the_deadline() {
     assert!(started.elapsed() < BOUND);
 }
 
+#[test]
+fn a_host_that_does_not_resolve_is_said_at_once() {
+    let started = Instant::now();
+    let address = RendezvousAddress {
+        host: "no-such-host.invalid".to_owned(),
+        port: 29500,
+    };
+    let e = join(&address, 2, 1, FINGERPRINT, Duration::from_secs(60))
+        .err()
+        .expect("unresolvable");
+    assert!(
+        one_line(&e).contains("no-such-host.invalid does not resolve"),
+        "{e}"
+    );
+    assert!(
+        started.elapsed() < Duration::from_secs(30),
+        "not after the deadline"
+    );
+}
+
 /// A world of three whose rank 2 is then `lost` (its connection dropped, or silent).
 fn lose_rank_2(drop_it: bool) {
     let (port, host) = start_host(3, Duration::from_secs(10));

@@ -170,20 +170,24 @@ pub fn join(
         seconds: timeout.as_secs(),
         error,
     };
+    // A host that does not resolve is a typo or a wrong variable: said at once, not after the
+    // deadline (rank 0 not listening yet is what the retries are for).
+    let addr = (address.host.as_str(), address.port)
+        .to_socket_addrs()
+        .map_err(|e| e.to_string())
+        .and_then(|mut addrs| {
+            addrs
+                .next()
+                .ok_or_else(|| "the host resolves to no address".to_owned())
+        })
+        .map_err(|error| WorldError::Spec(format!(
+            "rendezvous: rank 0's host {} does not resolve ({error}): check --rendezvous, MASTER_ADDR or the node list",
+            address.host
+        )))?;
     let mut stream = loop {
-        let attempt = (address.host.as_str(), address.port)
-            .to_socket_addrs()
-            .map_err(|e| e.to_string())
-            .and_then(|mut addrs| {
-                addrs
-                    .next()
-                    .ok_or_else(|| "the host resolves to no address".to_owned())
-            })
-            .and_then(|addr| {
-                let left = deadline.saturating_duration_since(Instant::now());
-                TcpStream::connect_timeout(&addr, left.max(Duration::from_millis(1)))
-                    .map_err(|e| e.to_string())
-            });
+        let left = deadline.saturating_duration_since(Instant::now());
+        let attempt = TcpStream::connect_timeout(&addr, left.max(Duration::from_millis(1)))
+            .map_err(|e| e.to_string());
         match attempt {
             Ok(stream) => break stream,
             Err(error) if Instant::now() + RETRY >= deadline => return Err(unreachable(error)),
