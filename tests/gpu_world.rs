@@ -7,6 +7,7 @@
 //! - A killed rank ends the other within the world's timeout, with its name.
 //! - SIGTERM to both stops them after the same iteration; the run then resumes.
 //! - Two processes train as the two threads of `--gpus 0,1` do, iteration by iteration.
+//! - torchrun launches the world as docs/train.md says (where the machine has torchrun).
 #![cfg(feature = "gpu")]
 
 mod skip_support;
@@ -257,4 +258,50 @@ fn several_gpus_two_processes_train_as_the_threads_of_one_do() {
             assert_eq!(x[key], y[key], "iteration {}: {key}", x["iteration"]);
         }
     }
+}
+
+/// torchrun, when the machine has it (`INSTANTMIMIC_TORCHRUN`, else beside
+/// `INSTANTMIMIC_BUILD_PYTHON`: the GPU machine's /opt/torch/.venv).
+fn torchrun() -> Option<PathBuf> {
+    if let Some(path) = std::env::var_os("INSTANTMIMIC_TORCHRUN") {
+        return Some(path.into());
+    }
+    let python = PathBuf::from(std::env::var_os("INSTANTMIMIC_BUILD_PYTHON")?);
+    let beside = python.with_file_name("torchrun");
+    beside.is_file().then_some(beside)
+}
+
+#[test]
+fn several_gpus_torchrun_launches_the_world_as_the_docs_say() {
+    if !gpus_or_skip(2) {
+        return;
+    }
+    let Some(torchrun) = torchrun() else {
+        skip_support::skip("no torchrun (set INSTANTMIMIC_TORCHRUN)");
+        return;
+    };
+    let dir = tempfile::tempdir().expect("temp dir");
+    let config = write_config(dir.path(), 10);
+    let out_dir = dir.path().join("run");
+    let exe = std::env::var_os("INSTANTMIMIC_BIN")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_instantmimic")));
+    // docs/train.md: torchrun --nnodes 1 --nproc-per-node 2 --no-python instantmimic train ...
+    let out = Command::new(torchrun)
+        .args(["--nnodes", "1", "--nproc-per-node", "2"])
+        .args(["--master-port", &free_port().to_string(), "--no-python"])
+        .arg(exe)
+        .arg("train")
+        .args(["--config", &config.display().to_string()])
+        .args([
+            "--out",
+            &out_dir.display().to_string(),
+            "--progress",
+            "lines",
+        ])
+        .output()
+        .expect("torchrun runs");
+    check_success(&out, "torchrun");
+    assert_eq!(summary(&out_dir)["iterations"], 10, "{}", text(&out));
+    assert!(text(&out).contains("rank 1 of 2: trained 10 iterations beside rank 0"));
 }

@@ -13,12 +13,13 @@ use instantmimic::motion::find::MOTIONS_ENV;
 use train_cli_support::{one_line_error, stdout, workspace};
 
 /// Every variable a launcher may set, removed unless `vars` sets it.
-const WORLD_VARS: [&str; 13] = [
+const WORLD_VARS: [&str; 14] = [
     "RANK",
     "WORLD_SIZE",
     "LOCAL_RANK",
     "MASTER_ADDR",
     "MASTER_PORT",
+    "TORCHELASTIC_RUN_ID",
     "SLURM_PROCID",
     "SLURM_NTASKS",
     "SLURM_LOCALID",

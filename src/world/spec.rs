@@ -168,7 +168,17 @@ fn from_flags(flags: &WorldFlags) -> Result<WorldSpec, WorldError> {
 fn from_torchrun(var: &impl Fn(&str) -> Option<String>) -> Result<WorldSpec, WorldError> {
     let source = WorldSource::Torchrun;
     let host = required(var, "MASTER_ADDR", source)?;
-    let port = parse_port(&required(var, "MASTER_PORT", source)?, "MASTER_PORT")?;
+    let mut port = parse_port(&required(var, "MASTER_PORT", source)?, "MASTER_PORT")?;
+    // Under torchrun's agent (`TORCHELASTIC_RUN_ID` set) the agent's own store listens on
+    // MASTER_PORT: the world takes the next port on rank 0's host.
+    if var("TORCHELASTIC_RUN_ID").is_some() {
+        port = port.checked_add(1).ok_or_else(|| {
+            WorldError::Spec(
+                "MASTER_PORT=65535 under torchrun: the world listens on the port after torchrun's (give --master-port below 65535)"
+                    .to_owned(),
+            )
+        })?;
+    }
     WorldSpec {
         rank: number(var, "RANK", source)?,
         size: number(var, "WORLD_SIZE", source)?,
@@ -364,6 +374,24 @@ mod tests {
             }
         );
         assert!(!spec.is_leader());
+    }
+
+    #[test]
+    fn under_torchrun_the_world_takes_the_port_after_the_agents() {
+        let spec = WorldSpec::resolve(
+            &WorldFlags::default(),
+            vars(&[
+                ("RANK", "1"),
+                ("WORLD_SIZE", "2"),
+                ("LOCAL_RANK", "1"),
+                ("MASTER_ADDR", "127.0.0.1"),
+                ("MASTER_PORT", "29500"),
+                ("TORCHELASTIC_RUN_ID", "none"),
+            ]),
+        )
+        .expect("valid")
+        .expect("a world");
+        assert_eq!(spec.rendezvous.port, 29501);
     }
 
     #[test]
