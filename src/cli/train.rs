@@ -379,7 +379,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         ProgressArg::Lines => ProgressMode::Lines,
         ProgressArg::Quiet => ProgressMode::Quiet,
     };
-    let (config, label, start, directory_line, resume_checkpoint) = match &args.resume {
+    let (config, label, start, directory_line, resume_checkpoint, world) = match &args.resume {
         Some(root) => {
             let resumed = RunDir::inspect_resume::<TrainConfig>(root)
                 .with_context(|| format!("cannot resume {}", root.display()))?;
@@ -393,7 +393,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 flags.push("--character");
             }
             args.apply_run_overrides(&mut config, &mut flags);
-            args.apply_world(&mut config)?;
+            let world = args.apply_world(&mut config)?;
             let mut label = resumed.dir.config_path().display().to_string();
             if !flags.is_empty() {
                 label = format!("{label} with {}", flags.join(", "));
@@ -414,7 +414,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 root: root.to_path_buf(),
             };
             let checkpoint = resumed.checkpoint.map(|(_, c)| c);
-            (config, label, start, line, checkpoint)
+            (config, label, start, line, checkpoint, world)
         }
         None => {
             let (mut config, label) = resolve_new(&args)?;
@@ -422,7 +422,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             let root = args.out.clone().unwrap_or_else(|| default_run_dir(&config));
             // Rank 0 of a world of processes writes the run directory; the other ranks only
             // read it (and may find rank 0's files there already).
-            let follower = world.is_some_and(|w| !w.spec.is_leader());
+            let follower = world.as_ref().is_some_and(|w| !w.spec.is_leader());
             let replaced = if follower {
                 Vec::new()
             } else {
@@ -440,7 +440,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
                 root,
                 overwrite: args.overwrite,
             };
-            (config, label, start, line, None)
+            (config, label, start, line, None, world)
         }
     };
     // The plans follow the character (--assets replaces them).
@@ -495,9 +495,6 @@ pub fn run(args: TrainArgs) -> Result<()> {
         }
         None => None,
     };
-    // One rank of a world of processes (flags, torchrun's or Slurm's variables; `run.processes`
-    // already holds its size).
-    let world = args.world(&config)?;
     // Several GPUs need NCCL: say so before a run directory is made.
     let nccl = if let Some(world) = &world {
         let (version, library) = nccl_version()?;
