@@ -72,12 +72,6 @@ pub enum TrainError {
     #[error(transparent)]
     Rollout(#[from] crate::env::RolloutError),
     #[error(transparent)]
-    Nn(#[from] crate::nn::NnError),
-    #[error(transparent)]
-    Ppo(#[from] crate::ppo::PpoError),
-    #[error(transparent)]
-    Policy(#[from] crate::ppo::PolicyError),
-    #[error(transparent)]
     Latent(#[from] crate::latent::LatentError),
     #[error(transparent)]
     Trainer(#[from] crate::ppo::TrainerError),
