@@ -13,7 +13,9 @@
 //!    iteration, with a checkpoint, and then tells every rank to stop).
 //!
 //! A rank that dies or hangs ends every other rank with its name within the control
-//! connections' deadline ([`crate::world`]). Rank 0 runs the harness (evaluation, checkpoints,
+//! connections' deadline ([`crate::world`]); one that dies inside an iteration, whose peers then
+//! wait in collectives that never complete, is seen by their [`Watch`], which aborts their
+//! communicators so that the wait ends. Rank 0 runs the harness (evaluation, checkpoints,
 //! metrics); the other ranks follow ([`RankReplica::follow`]).
 
 use std::time::Duration;
@@ -22,7 +24,7 @@ use super::device_report::read_report;
 use super::trainer::Trainer;
 use super::trainer_error::TrainerError;
 use crate::run::{IterationReport, IterationStats, StopFlag, replica_mismatch};
-use crate::world::Control;
+use crate::world::{Control, Watch};
 
 /// Answers of rank 0 (the first byte of a decision).
 const GO: u8 = 0;
@@ -37,6 +39,8 @@ const HAS_DIGEST: u8 = 2;
 pub struct RankReplica {
     trainer: Trainer,
     control: Control,
+    /// Watches the control connections while the GPU runs an iteration.
+    watch: Watch,
     /// How long a rank waits for the others at a step (rank 0's evaluations and checkpoints
     /// between iterations included).
     timeout: Duration,
@@ -58,11 +62,18 @@ pub struct Followed {
 
 impl RankReplica {
     /// `trainer` (built by [`Trainer::replica`] on this rank's communicator, at the same time
-    /// as every other rank's) with the world's `control`.
-    pub fn new(trainer: Trainer, control: Control, timeout: Duration, stop: StopFlag) -> Self {
+    /// as every other rank's, under `watch`) with the world's `control`.
+    pub fn new(
+        trainer: Trainer,
+        control: Control,
+        watch: Watch,
+        timeout: Duration,
+        stop: StopFlag,
+    ) -> Self {
         RankReplica {
             trainer,
             control,
+            watch,
             timeout,
             stop,
             digest_due: true,
@@ -99,7 +110,7 @@ impl RankReplica {
         }
         let timeout = self.timeout;
         self.control.exchange(&[], |_| vec![GO], timeout)?;
-        let bytes = self.trainer.iterate_bytes()?;
+        let bytes = self.watched_iteration()?;
         self.iterations += 1;
         let report = self.report(bytes)?;
         let mut outcome: Result<(IterationReport, bool), String> = Err(String::new());
@@ -165,7 +176,7 @@ impl RankReplica {
                     iterations: self.iterations,
                 });
             }
-            let bytes = self.trainer.iterate_bytes()?;
+            let bytes = self.watched_iteration()?;
             self.iterations += 1;
             let report = self.report(bytes)?;
             let decision = self.control.exchange(&report, |_| Vec::new(), timeout)?;
@@ -176,6 +187,19 @@ impl RankReplica {
                 });
             }
         }
+    }
+
+    /// One iteration on the GPU, under the watch: when a peer was lost meanwhile (the watch
+    /// aborted the communicator, so the results are garbage), every rank is told, and the
+    /// watch's verdict is the error.
+    fn watched_iteration(&mut self) -> Result<Vec<u8>, TrainerError> {
+        self.watch.enter();
+        let bytes = self.trainer.iterate_bytes();
+        if let Some(verdict) = self.watch.leave() {
+            self.control.abort(&verdict.to_string());
+            return Err(verdict.into());
+        }
+        bytes
     }
 
     /// This rank's report of an iteration: flags, the digest when due, the device report.

@@ -13,9 +13,9 @@ use super::gpu_loop::{RunStart, TrainSetup, library_note, open_session};
 use super::ppo_trainer::trainer_config;
 use crate::cuda::{Communicator, Gpu, nccl_version};
 use crate::env::TrackedMotion;
-use crate::ppo::{Followed, RankReplica, Trainer};
+use crate::ppo::{Followed, RankReplica, Trainer, TrainerConfig};
 use crate::run::{Checkpoint, RunDir, RunSummary, Scorer, run_loop};
-use crate::world::{Host, WorldError, WorldSpec, join};
+use crate::world::{Control, Host, Watch, WorldError, WorldSpec, join};
 
 /// NCCL's world id: the first bytes of what rank 0 hands the others.
 const WORLD_ID_BYTES: usize = 128;
@@ -137,7 +137,8 @@ fn lead(
     let gpu = Gpu::open(rank_device(spec)?)?;
     let communicator = Communicator::join_world(&gpu, spec.size, 0, &world_id)?;
     let config = trainer_config(session.config(), motion.character())?;
-    let trainer = Trainer::replica(&gpu, &setup.store, motion, &config, &communicator)?;
+    let (trainer, watch) =
+        watched_replica(&gpu, setup, motion, &config, &communicator, &control, world)?;
     let mut notes = vec![format!("GEMMs: {} (every rank)", trainer.gemm().describe())];
     if let Ok((version, library)) = nccl_version() {
         notes.push(format!(
@@ -158,7 +159,7 @@ fn lead(
     if let Scorer::Library(plan) = &scorer {
         notes.push(library_note(plan));
     }
-    let mut replica = RankReplica::new(trainer, control, world.timeout, setup.stop.clone());
+    let mut replica = RankReplica::new(trainer, control, watch, world.timeout, setup.stop.clone());
     let result = run_loop(session, &mut replica, checkpoint, &scorer, started, notes);
     match &result {
         Ok(_) => replica.finish(None)?,
@@ -192,8 +193,9 @@ fn follow(
     let gpu = Gpu::open(rank_device(spec)?)?;
     let communicator = Communicator::join_world(&gpu, spec.size, spec.rank, world_id)?;
     let config = trainer_config(&setup.config, motion.character())?;
-    let trainer = Trainer::replica(&gpu, &setup.store, motion, &config, &communicator)?;
-    let mut replica = RankReplica::new(trainer, control, world.timeout, setup.stop.clone());
+    let (trainer, watch) =
+        watched_replica(&gpu, setup, motion, &config, &communicator, &control, world)?;
+    let mut replica = RankReplica::new(trainer, control, watch, world.timeout, setup.stop.clone());
     if let Some(path) = resume {
         // Rank 0's checkpoint, on a file system every rank sees.
         let checkpoint = Checkpoint::load(std::path::Path::new(&path)).map_err(|e| {
@@ -217,6 +219,28 @@ fn follow(
         spec.rank, spec.size, followed.iterations
     );
     Ok(followed)
+}
+
+/// This rank's replica, built while the watch over the world's connections is on (building it
+/// runs NCCL's first collectives), and the watch, which aborts `communicator` when a peer is lost
+/// while this rank waits for its GPU.
+fn watched_replica(
+    gpu: &Gpu,
+    setup: &TrainSetup,
+    motion: TrackedMotion<'_>,
+    config: &TrainerConfig,
+    communicator: &Communicator,
+    control: &Control,
+    world: &WorldRun,
+) -> Result<(Trainer, Watch), TrainError> {
+    let aborted = communicator.clone();
+    let watch = Watch::start(control, world.timeout, move || aborted.abort())?;
+    watch.enter();
+    let trainer = Trainer::replica(gpu, &setup.store, motion, config, communicator);
+    if let Some(verdict) = watch.leave() {
+        return Err(verdict.into());
+    }
+    Ok((trainer?, watch))
 }
 
 /// This rank's CUDA device: `LOCAL_RANK` among the GPUs it sees, or the one it sees (a

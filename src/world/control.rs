@@ -49,6 +49,19 @@ impl Control {
         self.size
     }
 
+    /// Every connection this rank holds, with the rank at its other end (rank 0: one per other
+    /// rank; any other rank: rank 0's).
+    pub(super) fn connections(&self) -> impl Iterator<Item = (usize, &TcpStream)> {
+        let (leader, member) = match &self.role {
+            Role::Leader { peers } => (Some(peers), None),
+            Role::Member { stream } => (None, Some(stream)),
+        };
+        leader
+            .into_iter()
+            .flat_map(|peers| peers.iter().map(|(rank, stream)| (*rank, stream)))
+            .chain(member.map(|stream| (0, stream)))
+    }
+
     /// One step: this rank's `report` goes to rank 0, which calls `decide` on every rank's
     /// (its own first, then rank 1, 2, ...) and sends every rank the decision it returns; each
     /// rank gets that decision. `decide` runs on rank 0 only. Waits at most `timeout` for the

@@ -6,7 +6,8 @@
 //! iteration, or stop now), so that a rank that dies, hangs or is stopped ends every other rank
 //! with one line instead of leaving them waiting in a collective.
 //!
-//! Std's TCP with a deadline on every wait: no rank waits forever. Nothing here knows CUDA or
+//! Std's TCP with a deadline on every wait, and a watch over the connections while a rank waits
+//! for its GPU ([`Watch`]): no rank waits forever. Nothing here knows CUDA or
 //! training; the replicas give the bytes and read the reports.
 
 mod control;
@@ -14,6 +15,7 @@ mod error;
 mod frame;
 mod rendezvous;
 mod spec;
+mod watch;
 
 pub use control::Control;
 pub use error::WorldError;
@@ -21,3 +23,4 @@ pub use rendezvous::{Host, join};
 pub use spec::{
     MAX_WORLD, RendezvousAddress, WorldFlags, WorldSource, WorldSpec, first_slurm_host,
 };
+pub use watch::Watch;
