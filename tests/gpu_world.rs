@@ -9,7 +9,8 @@
 //! - SIGTERM to both stops them after the same iteration; the run then resumes.
 //! - Two processes train as the two threads of `--gpus 0,1` do: the same frames every iteration
 //!   and the same first iterations, up to the physics' run-to-run variation.
-//! - torchrun launches the world as docs/train.md says (where the machine has torchrun).
+//! - torchrun launches the world as docs/train.md says (where the machine has torchrun), and
+//!   the `sbatch` example's `srun` line runs with the variables `srun` sets.
 #![cfg(feature = "gpu")]
 
 mod skip_support;
@@ -322,4 +323,66 @@ fn several_gpus_torchrun_launches_the_world_as_the_docs_say() {
     check_success(&out, "torchrun");
     assert_eq!(summary(&out_dir)["iterations"], 10, "{}", text(&out));
     assert!(text(&out).contains("rank 1 of 2: trained 10 iterations beside rank 0"));
+}
+
+/// The `srun` line of docs/train.md's `sbatch` example, with the variables `srun` gives each task
+/// of a step on one node (no Slurm on the test machine): the same command on every task, the rank
+/// from `SLURM_PROCID`, the GPU from `SLURM_LOCALID`, rank 0's host from the node list.
+/// `MASTER_PORT` picks a free port instead of the job id's.
+#[test]
+fn several_gpus_srun_launches_the_world_as_the_sbatch_example_says() {
+    if !gpus_or_skip(2) {
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let config = write_config(dir.path(), 10);
+    let out_dir = dir.path().join("run");
+    let port = free_port().to_string();
+    let task = |id: usize| {
+        let mut c = binary();
+        // docs/train.md: srun instantmimic train --config run.toml --out /shared/runs/world
+        c.arg("train")
+            .args(["--config", &config.display().to_string()])
+            .args(["--out", &out_dir.display().to_string()])
+            .args(["--progress", "lines"]);
+        for name in [
+            "RANK",
+            "WORLD_SIZE",
+            "LOCAL_RANK",
+            "MASTER_ADDR",
+            "TORCHELASTIC_RUN_ID",
+        ] {
+            c.env_remove(name);
+        }
+        c.env("SLURM_PROCID", id.to_string())
+            .env("SLURM_NTASKS", "2")
+            .env("SLURM_LOCALID", id.to_string())
+            .env("SLURM_STEP_ID", "0")
+            .env("SLURM_JOB_ID", "4242")
+            .env("SLURM_JOB_NODELIST", "localhost")
+            .env("MASTER_PORT", &port)
+            .env("NCCL_NVLS_ENABLE", "0")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
+        c.spawn().expect("the task starts")
+    };
+    let (zero, one) = (task(0), task(1));
+    let (zero, one) = (
+        zero.wait_with_output().unwrap(),
+        one.wait_with_output().unwrap(),
+    );
+    check_success(&zero, "task 0");
+    check_success(&one, "task 1");
+    // Rank 0's host is the node list's first node, its port MASTER_PORT.
+    assert!(
+        text(&one).contains(&format!("rank 1 of 2: joining rank 0 at localhost:{port}")),
+        "{}",
+        text(&one)
+    );
+    assert_eq!(summary(&out_dir)["iterations"], 10, "{}", text(&zero));
+    assert!(
+        text(&one).contains("rank 1 of 2: trained 10 iterations beside rank 0"),
+        "{}",
+        text(&one)
+    );
 }
