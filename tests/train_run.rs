@@ -488,6 +488,7 @@ fn curve_record(i: u64) -> IterationRecord {
         divergence: None,
         task: None,
         wall_s: None,
+        evaluated: None,
     }
 }
 

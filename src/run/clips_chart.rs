@@ -182,6 +182,7 @@ mod tests {
             divergence: None,
             task: None,
             wall_s: None,
+            evaluated: None,
         }
     }
 
