@@ -182,7 +182,6 @@ mod tests {
             divergence: None,
             task: None,
             wall_s: None,
-            evaluated: None,
         }
     }
 

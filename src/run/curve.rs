@@ -46,10 +46,7 @@ fn right_series(records: &[IterationRecord], axis: RightAxis) -> RightSeries {
         RightAxis::SuccessRate { threshold } => RightSeries {
             points: records
                 .iter()
-                .filter_map(|r| {
-                    let e = r.evaluation.as_ref()?;
-                    Some((r.evaluated_iteration().active_time_s, e.success_rate))
-                })
+                .filter_map(|r| Some((r.active_time_s, r.evaluation.as_ref()?.success_rate)))
                 .filter(finite)
                 .collect(),
             label: "success rate".to_owned(),
