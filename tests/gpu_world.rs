@@ -108,6 +108,14 @@ fn a_world_of_one_process_trains() {
     assert_eq!(metrics(&out_dir).len(), 6);
 }
 
+/// Waits for both ranks and takes their output.
+fn wait_both(zero: Child, one: Child) -> (Output, Output) {
+    (
+        zero.wait_with_output().expect("rank 0 ends"),
+        one.wait_with_output().expect("rank 1 ends"),
+    )
+}
+
 /// Starts ranks 0 and 1 of `args`, rank 0 writing `out_dir`.
 fn start_two(port: u16, config: &Path, out_dir: &Path, extra: &[&str]) -> (Child, Child) {
     let common = |r: usize| {
@@ -130,10 +138,7 @@ fn several_gpus_two_processes_train_in_step_for_100_iterations() {
     let config = write_config(dir.path(), 100);
     let out_dir = dir.path().join("run");
     let (zero, one) = start_two(free_port(), &config, &out_dir, &[]);
-    let (zero, one) = (
-        zero.wait_with_output().unwrap(),
-        one.wait_with_output().unwrap(),
-    );
+    let (zero, one) = wait_both(zero, one);
     check_success(&zero, "rank 0");
     check_success(&one, "rank 1");
     assert_eq!(summary(&out_dir)["iterations"], 100, "{}", text(&zero));
@@ -198,10 +203,7 @@ fn several_gpus_sigterm_stops_both_after_the_same_iteration_and_the_run_resumes(
             .expect("kill");
         assert!(status.success());
     }
-    let (zero, one) = (
-        zero.wait_with_output().unwrap(),
-        one.wait_with_output().unwrap(),
-    );
+    let (zero, one) = wait_both(zero, one);
     let iterations = summary(&out_dir)["iterations"]
         .as_u64()
         .expect("iterations");
@@ -219,10 +221,7 @@ fn several_gpus_sigterm_stops_both_after_the_same_iteration_and_the_run_resumes(
         c.spawn().expect("starts")
     };
     let (zero, one) = (resume(0), resume(1));
-    let (zero, one) = (
-        zero.wait_with_output().unwrap(),
-        one.wait_with_output().unwrap(),
-    );
+    let (zero, one) = wait_both(zero, one);
     check_success(&zero, "rank 0 resumed");
     check_success(&one, "rank 1 resumed");
     assert_eq!(summary(&out_dir)["iterations"], iterations + 3);
@@ -246,10 +245,7 @@ fn several_gpus_two_processes_train_as_the_threads_of_one_do() {
     check_success(&out, "--gpus 0,1");
     let processes = dir.path().join("processes");
     let (zero, one) = start_two(free_port(), &config, &processes, &[]);
-    let (zero, one) = (
-        zero.wait_with_output().unwrap(),
-        one.wait_with_output().unwrap(),
-    );
+    let (zero, one) = wait_both(zero, one);
     check_success(&zero, "rank 0");
     check_success(&one, "rank 1");
     // The same replicas (seeds, parameters, all-reduces): the same frames every iteration, and
@@ -367,10 +363,7 @@ fn several_gpus_srun_launches_the_world_as_the_sbatch_example_says() {
         c.spawn().expect("the task starts")
     };
     let (zero, one) = (task(0), task(1));
-    let (zero, one) = (
-        zero.wait_with_output().unwrap(),
-        one.wait_with_output().unwrap(),
-    );
+    let (zero, one) = wait_both(zero, one);
     check_success(&zero, "task 0");
     check_success(&one, "task 1");
     // Rank 0's host is the node list's first node, its port MASTER_PORT.
