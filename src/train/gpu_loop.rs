@@ -153,14 +153,7 @@ fn train_latent_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
         .map_or(setup.device, |&d| d as usize);
     let gpu = Gpu::open(device)?;
     let motion = setup.motion.tracked();
-    let (session, checkpoint) = open_session(
-        &setup.config,
-        motion.character(),
-        &setup.start,
-        setup.progress,
-        &setup.stop,
-        Some(setup.started),
-    )?;
+    let (session, checkpoint) = setup.open_session(motion.character())?;
     let started = std::time::Instant::now();
     let distillation = distillation_config(session.config())?;
     let mut trainer = LatentTrainer::new(&gpu, &setup.store, motion, &distillation, &teacher)?;
@@ -255,6 +248,23 @@ pub fn train_on_gpus<'a>(
 /// Opens the run directory (new or resumed), connects the stop request, records `character`
 /// in the checkpoints (a resumed run's checkpoint must be of it) and prints the resume's
 /// warnings. Wall times count from `started` when given (the command's start).
+impl TrainSetup {
+    /// The run's session, new or resumed as this setup says, for `character`.
+    pub(super) fn open_session(
+        &self,
+        character: &Character,
+    ) -> Result<(RunSession<TrainConfig>, Option<Checkpoint>), TrainError> {
+        open_session(
+            &self.config,
+            character,
+            &self.start,
+            self.progress,
+            &self.stop,
+            Some(self.started),
+        )
+    }
+}
+
 pub(super) fn open_session(
     config: &TrainConfig,
     character: &Character,

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use super::config::TrainConfig;
 use super::error::TrainError;
-use super::gpu_loop::{RunStart, TrainSetup, library_note, open_session};
+use super::gpu_loop::{RunStart, TrainSetup, library_note};
 use super::ppo_trainer::trainer_config;
 use crate::cuda::{Communicator, Gpu, nccl_version};
 use crate::env::TrackedMotion;
@@ -112,14 +112,7 @@ fn lead(
         &shared_bytes(&world_id, resume.as_deref()),
         world.timeout,
     )?;
-    let (session, checkpoint) = open_session(
-        &setup.config,
-        motion.character(),
-        &setup.start,
-        setup.progress,
-        &setup.stop,
-        Some(setup.started),
-    )?;
+    let (session, checkpoint) = setup.open_session(motion.character())?;
     let started = Instant::now();
     let opened = checkpoint.as_ref().map(|c| c.source().to_owned());
     let file = |p: &Option<String>| {
