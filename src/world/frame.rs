@@ -84,13 +84,11 @@ pub fn write_frame(stream: &mut TcpStream, kind: Kind, payload: &[u8]) -> std::i
     stream.flush()
 }
 
-/// Reads one frame, waiting at most until `deadline`.
-pub fn read_frame(
-    stream: &mut TcpStream,
-    deadline: Instant,
-) -> Result<(Kind, Vec<u8>), ReadFailure> {
-    let mut head = [0u8; 5];
-    read_exact_by(stream, &mut head, deadline)?;
+/// Bytes before a frame's payload: its kind and its length.
+pub const HEAD_BYTES: usize = 5;
+
+/// A frame's kind and payload length from its first [`HEAD_BYTES`] bytes.
+pub fn read_head(head: &[u8; HEAD_BYTES]) -> Result<(Kind, usize), ReadFailure> {
     let kind = Kind::from_byte(head[0])
         .ok_or_else(|| ReadFailure::Malformed(format!("unknown message kind {}", head[0])))?;
     let len = u32::from_le_bytes([head[1], head[2], head[3], head[4]]) as usize;
@@ -99,6 +97,17 @@ pub fn read_frame(
             "a message of {len} bytes (at most {MAX_FRAME})"
         )));
     }
+    Ok((kind, len))
+}
+
+/// Reads one frame, waiting at most until `deadline`.
+pub fn read_frame(
+    stream: &mut TcpStream,
+    deadline: Instant,
+) -> Result<(Kind, Vec<u8>), ReadFailure> {
+    let mut head = [0u8; HEAD_BYTES];
+    read_exact_by(stream, &mut head, deadline)?;
+    let (kind, len) = read_head(&head)?;
     let mut payload = vec![0u8; len];
     read_exact_by(stream, &mut payload, deadline)?;
     Ok((kind, payload))

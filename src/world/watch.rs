@@ -21,7 +21,7 @@ use nix::sys::socket::{MsgFlags, recv};
 
 use super::control::Control;
 use super::error::WorldError;
-use super::frame::{Kind, MAX_FRAME};
+use super::frame::{HEAD_BYTES, Kind, ReadFailure, read_head};
 
 /// How often the thread looks while nothing happens (poll's timeout), and how long it sleeps
 /// while the rank is not waiting for its GPU.
@@ -227,31 +227,37 @@ enum Peeked {
 }
 
 fn peek(stream: &TcpStream) -> Peeked {
-    let mut buf = vec![0u8; 5 + 4096];
+    let mut buf = vec![0u8; HEAD_BYTES + 4096];
     match recv(
         stream.as_raw_fd(),
         &mut buf,
         MsgFlags::MSG_PEEK | MsgFlags::MSG_DONTWAIT,
     ) {
         Ok(0) => Peeked::Closed,
-        Ok(n) => match buf[0] {
-            b if b == Kind::Report as u8 => Peeked::Report,
-            b if b == Kind::Abort as u8 => {
-                // The reason, when the whole frame has arrived; the control step reads it too.
-                let len = if n >= 5 {
-                    u32::from_le_bytes([buf[1], buf[2], buf[3], buf[4]]) as usize
-                } else {
-                    0
-                };
-                let reason = if len <= MAX_FRAME && n >= 5 + len {
-                    String::from_utf8_lossy(&buf[5..5 + len]).into_owned()
-                } else {
-                    "no reason given yet".to_owned()
-                };
-                Peeked::Abort(reason)
+        // Less than a head: the rest is on its way; look again.
+        Ok(n) if n < HEAD_BYTES => Peeked::Nothing,
+        Ok(n) => {
+            let mut head = [0u8; HEAD_BYTES];
+            head.copy_from_slice(&buf[..HEAD_BYTES]);
+            match read_head(&head) {
+                Ok((Kind::Report, _)) => Peeked::Report,
+                Ok((Kind::Abort, len)) => {
+                    // The reason, when the whole frame has arrived; the control step reads it too.
+                    let reason = match buf.get(HEAD_BYTES..HEAD_BYTES + len) {
+                        Some(reason) if HEAD_BYTES + len <= n => {
+                            String::from_utf8_lossy(reason).into_owned()
+                        }
+                        _ => "no reason given yet".to_owned(),
+                    };
+                    Peeked::Abort(reason)
+                }
+                Ok((kind, _)) => Peeked::Other(format!("a message of kind {kind:?}")),
+                Err(ReadFailure::Malformed(what)) => {
+                    Peeked::Other(format!("a malformed message ({what})"))
+                }
+                Err(_) => Peeked::Nothing,
             }
-            b => Peeked::Other(format!("a message of kind {b}")),
-        },
+        }
         Err(nix::errno::Errno::EAGAIN) | Err(nix::errno::Errno::EINTR) => Peeked::Nothing,
         Err(nix::errno::Errno::ECONNRESET) | Err(nix::errno::Errno::EPIPE) => Peeked::Closed,
         Err(e) => Peeked::Other(format!("an error ({e})")),
