@@ -292,6 +292,13 @@ pub fn generate(manifest: &EnvManifest) -> Result<String, CodegenError> {
     if manifest.modules.is_empty() {
         out.push_str("        let _ = gpu;\n");
     }
+    if !manifest.modules.is_empty() {
+        out.push_str("        preload_modules(gpu, &[\n");
+        for module in &manifest.modules {
+            let _ = writeln!(out, "            {},", str_lit(&module.ptx));
+        }
+        out.push_str("        ])?;\n");
+    }
     for (m, module) in manifest.modules.iter().enumerate() {
         let _ = writeln!(
             out,

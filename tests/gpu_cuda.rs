@@ -370,6 +370,39 @@ fn warp_ptx_loads_and_runs_with_its_packed_abi() {
     );
 }
 
+/// A preload readies the modules for `load_ptx` (in this test binary, which starts no helper
+/// processes, by loading the largest), and a bad largest module fails it with its name.
+#[test]
+fn preloaded_modules_load_and_a_bad_one_is_named() {
+    let gpu = Gpu::open(0).unwrap();
+    let modules: Vec<(&str, &[u8])> = vec![
+        ("preloaded_kernels", KERNELS_PTX.as_bytes()),
+        ("preloaded_warp", WARP_PTX),
+    ];
+    gpu.preload_ptx(&modules).unwrap();
+    let kernels = gpu
+        .load_ptx("preloaded_kernels", KERNELS_PTX.as_bytes())
+        .unwrap();
+    let again = gpu
+        .load_ptx("preloaded_kernels", KERNELS_PTX.as_bytes())
+        .unwrap();
+    assert!(kernels.is_same_module(&again));
+    let out = gpu.alloc_zeroed(4 * 4).map(Arc::new).unwrap();
+    let fill = kernels.function("fill_scaled").unwrap();
+    let s = gpu.stream();
+    s.launch(&fill, [1, 1, 1], [4, 1, 1], 0, &fill_args(&out, 4, 2.0))
+        .unwrap();
+    s.synchronize().unwrap();
+
+    let garbage = vec![b'x'; KERNELS_PTX.len() + WARP_PTX.len()];
+    let bad: Vec<(&str, &[u8])> = vec![
+        ("preload_good", KERNELS_PTX.as_bytes()),
+        ("preload_garbage", &garbage),
+    ];
+    let err = gpu.preload_ptx(&bad).unwrap_err();
+    assert!(err.to_string().contains("preload_garbage"), "{err}");
+}
+
 #[test]
 fn bad_ptx_gives_errors_that_name_the_module() {
     let gpu = Gpu::open(0).unwrap();

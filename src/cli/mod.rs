@@ -57,6 +57,16 @@ enum Command {
     Gpu(gpu::GpuArgs),
     /// Inspect or pack physics plans (.wrp / .wrp.zst).
     Plan(plan::PlanArgs),
+    /// A helper process of this one: compiles PTX into the driver's cache (cuda/jit_cache.rs).
+    #[command(name = "__compile-ptx", hide = true)]
+    CompilePtx(CompilePtxArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct CompilePtxArgs {
+    /// CUDA device ordinal.
+    #[arg(long)]
+    device: usize,
 }
 
 /// An error as the one line `instantmimic` prints: the messages of its chain joined by ": ",
@@ -80,6 +90,9 @@ pub fn error_line(err: &anyhow::Error) -> String {
 /// Parses the command line and runs the command.
 pub fn run() -> Result<()> {
     let cli = Cli::parse();
+    if let Ok(exe) = std::env::current_exe() {
+        crate::cuda::jit_cache::enable_helpers(exe);
+    }
     match cli.command {
         Command::Bench(args) => bench::run(args),
         Command::Plan(args) => plan::run(args),
@@ -90,5 +103,6 @@ pub fn run() -> Result<()> {
         Command::Eval(args) => eval::run(args),
         Command::Replay(args) => replay::run(args),
         Command::Export(args) => export::run(args),
+        Command::CompilePtx(args) => Ok(crate::cuda::jit_cache::run_helper(args.device)?),
     }
 }

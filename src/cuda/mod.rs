@@ -15,6 +15,8 @@
 //! - [`Readback`]: device bytes copied to pinned host memory without stalling the stream.
 //! - [`Blas`]: optional cuBLAS GEMMs (toolkit, not driver) on [`BlasMatrix`] views, capturable:
 //!   the policy's layers when `policy.gemm` picks cuBLAS, and `bench gemm`.
+//! - [`jit_cache`]: on a machine whose JIT cache is empty, helper processes compile a set of
+//!   modules at once ([`Gpu::preload_ptx`]).
 //! - [`Communicator`]: optional NCCL all-reduces (opened at run time, like cuBLAS) on
 //!   [`CollectiveBuffer`]s, capturable: data-parallel training on several GPUs (`train --gpus`).
 
@@ -26,6 +28,7 @@ mod error;
 mod event;
 mod frontier;
 mod graph;
+pub mod jit_cache;
 mod memory;
 mod module;
 mod nccl;

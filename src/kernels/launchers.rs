@@ -30,6 +30,19 @@ fn load_module(gpu: &Gpu, ptx: &'static str) -> Result<Module, EnvError> {
     Ok(gpu.load_ptx(ptx, bytes)?)
 }
 
+/// Readies the embedded modules at `paths` for [`load_module`] ([`Gpu::preload_ptx`]): on a
+/// machine whose JIT cache is empty, helper processes compile them at once.
+fn preload_modules(gpu: &Gpu, paths: &[&'static str]) -> Result<(), EnvError> {
+    let modules = paths
+        .iter()
+        .map(|&path| {
+            let bytes = assets::get(path).ok_or(EnvError::MissingModule { path })?;
+            Ok((path, bytes))
+        })
+        .collect::<Result<Vec<(&str, &[u8])>, EnvError>>()?;
+    Ok(gpu.preload_ptx(&modules)?)
+}
+
 /// The kernel `abi` describes, from its loaded module, after checking that the driver sees the
 /// parameters where the launcher packs them, with its dynamic shared memory allowed
 /// ([`Function::allow_dynamic_shared_memory`]).

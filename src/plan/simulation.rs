@@ -162,8 +162,12 @@ impl Simulation {
             functions: HashMap::new(),
             plans: BTreeMap::new(),
         };
-        for name in names {
-            let plan = store.plan(name, nworld)?;
+        let plans = names
+            .iter()
+            .map(|name| store.plan(name, nworld))
+            .collect::<Result<Vec<_>, _>>()?;
+        sim.preload_modules(store, &plans)?;
+        for (name, plan) in names.iter().zip(plans) {
             sim.add_plan(name, plan, store)?;
         }
         Ok(sim)
@@ -277,6 +281,25 @@ impl Simulation {
             .map_err(|e| PlanError::Asset(format!("module {file}: {e}")))?;
         self.functions.insert(key, f.clone());
         Ok(f)
+    }
+
+    /// Readies every module `plans` name ([`Gpu::preload_ptx`]): on a machine whose JIT cache
+    /// is empty, helper processes compile them at once instead of this one after the other.
+    fn preload_modules(&self, store: &PlanStore, plans: &[Plan]) -> Result<(), SimulationError> {
+        let files: std::collections::BTreeSet<&str> = plans
+            .iter()
+            .filter(|plan| plan.header.device == DeviceType::Cuda)
+            .flat_map(|plan| plan.modules.iter().map(|m| m.binary_filename.as_str()))
+            .collect();
+        let texts = files
+            .iter()
+            .map(|file| Ok((*file, store.module_ptx(file)?)))
+            .collect::<Result<Vec<_>, PlanError>>()?;
+        let modules: Vec<(&str, &[u8])> = texts.iter().map(|(f, ptx)| (*f, &ptx[..])).collect();
+        self.gpu
+            .preload_ptx(&modules)
+            .map_err(|e| PlanError::Asset(format!("loading the plans' modules: {e}")))?;
+        Ok(())
     }
 
     fn add_plan(
