@@ -32,6 +32,9 @@ pub const HELPER_COMMAND: &str = "__compile-ptx";
 /// milliseconds; its JIT, seconds).
 pub const COLD_LOAD: Duration = Duration::from_millis(300);
 
+/// How long a helper may take: a set compiles in well under a minute on the machines measured.
+const HELPER_TIMEOUT: Duration = Duration::from_secs(180);
+
 /// The most helper processes one set of modules is spread over.
 const MAX_HELPERS: usize = 15;
 
@@ -158,7 +161,7 @@ impl Gpu {
             .iter()
             .filter_map(|set| {
                 let chosen: Vec<(&str, &[u8])> = set.iter().map(|&i| rest[i]).collect();
-                start_helper(exe, self.info().ordinal, &chosen)
+                start_helper(exe, self.info().ordinal, &chosen, HELPER_TIMEOUT)
             })
             .collect();
         for &i in &own {
@@ -187,12 +190,15 @@ fn split_largest<'a>(modules: &[NamedPtx<'a>]) -> Option<(NamedPtx<'a>, Vec<Name
     Some((modules[index], rest))
 }
 
-/// A helper process compiling `modules` on device `ordinal`, fed from a thread (its standard
-/// input may hold more than a pipe buffers); None when it could not be started.
+/// A helper process compiling `modules` on device `ordinal`, fed from a thread of its own (its
+/// standard input may hold more than a pipe buffers) and killed if it has not ended within
+/// `timeout` (a helper stuck in the driver must not hold the run); None when it could not be
+/// started. The handle's value: whether the helper took every module and succeeded.
 fn start_helper(
     exe: &std::path::Path,
     ordinal: usize,
     modules: &[(&str, &[u8])],
+    timeout: Duration,
 ) -> Option<std::thread::JoinHandle<bool>> {
     let mut bytes = Vec::new();
     write_modules(&mut bytes, modules).ok()?;
@@ -205,9 +211,62 @@ fn start_helper(
         .ok()?;
     let mut stdin = child.stdin.take()?;
     Some(std::thread::spawn(move || {
-        let written = stdin.write_all(&bytes).is_ok();
-        drop(stdin);
-        let exited = child.wait().is_ok_and(|status| status.success());
-        written && exited
+        let writer = std::thread::spawn(move || stdin.write_all(&bytes).is_ok());
+        let deadline = Instant::now() + timeout;
+        loop {
+            match child.try_wait() {
+                Ok(Some(status)) => return writer.join().unwrap_or(false) && status.success(),
+                Ok(None) if Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                _ => {
+                    let _ = child.kill();
+                    let _ = child.wait();
+                    // The writer ends when the pipe closes; nothing waits for it.
+                    return false;
+                }
+            }
+        }
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An executable script of `body` in `dir`.
+    fn script(dir: &std::path::Path, body: &str) -> PathBuf {
+        use std::os::unix::fs::PermissionsExt;
+        let path = dir.join("helper.sh");
+        std::fs::write(&path, format!("#!/bin/sh\n{body}\n")).unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+        path
+    }
+
+    #[test]
+    fn a_helper_that_hangs_is_killed_at_its_timeout() {
+        let dir = tempfile::tempdir().unwrap();
+        let exe = script(dir.path(), "sleep 30");
+        let big = vec![b'x'; 1 << 20];
+        let started = Instant::now();
+        let helper = start_helper(&exe, 0, &[("big", &big)], Duration::from_millis(300)).unwrap();
+        assert!(!helper.join().unwrap());
+        assert!(
+            started.elapsed() < Duration::from_secs(10),
+            "{:?}",
+            started.elapsed()
+        );
+    }
+
+    #[test]
+    fn a_helper_that_reads_everything_and_succeeds_counts_as_done() {
+        let dir = tempfile::tempdir().unwrap();
+        let exe = script(dir.path(), "cat > /dev/null");
+        let big = vec![b'x'; 1 << 20];
+        let helper = start_helper(&exe, 0, &[("big", &big)], Duration::from_secs(30)).unwrap();
+        assert!(helper.join().unwrap());
+        let exe = script(dir.path(), "cat > /dev/null; exit 3");
+        let helper = start_helper(&exe, 0, &[("big", &big)], Duration::from_secs(30)).unwrap();
+        assert!(!helper.join().unwrap());
+    }
 }
