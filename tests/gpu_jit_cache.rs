@@ -68,8 +68,8 @@ fn a_helper_compiles_into_the_cache_and_fails_on_bad_ptx() {
     ));
 }
 
-/// A run whose JIT cache is empty (a new machine) compiles through helpers and trains; a second
-/// run reads the cache the first filled.
+/// A run whose JIT cache is empty (a new machine) compiles through helpers, says so and trains;
+/// a second run reads the cache the first filled, and says nothing of it.
 #[test]
 fn a_run_with_an_empty_cache_trains_and_fills_the_cache() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -91,6 +91,13 @@ fn a_run_with_an_empty_cache_trains_and_fills_the_cache() {
             .output()
             .expect("train runs");
         check_success(&out, run);
+        // The user learns why the first setup takes longer, and only then.
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(
+            stderr.contains("note: compiling the GPU code for this GPU"),
+            run == "first",
+            "{run} run: {stderr}"
+        );
         let summary: serde_json::Value = serde_json::from_slice(
             &std::fs::read(dir.path().join(run).join("summary.json")).expect("summary"),
         )

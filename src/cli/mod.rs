@@ -91,7 +91,12 @@ pub fn error_line(err: &anyhow::Error) -> String {
 pub fn run() -> Result<()> {
     let cli = Cli::parse();
     if let Ok(exe) = std::env::current_exe() {
-        crate::cuda::jit_cache::enable_helpers(exe);
+        crate::cuda::jit_cache::enable_helpers(exe, |helpers| {
+            eprintln!(
+                "note: compiling the GPU code for this GPU in {} processes (the first run on this machine or after a driver update; later runs read the driver's cache, CUDA_CACHE_PATH or ~/.nv/ComputeCache)",
+                helpers + 1
+            );
+        });
     }
     match cli.command {
         Command::Bench(args) => bench::run(args),

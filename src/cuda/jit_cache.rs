@@ -19,6 +19,7 @@ use std::io::{Read, Write};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::sync::OnceLock;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use super::module::load_module;
@@ -38,12 +39,24 @@ const HELPER_TIMEOUT: Duration = Duration::from_secs(180);
 /// The most helper processes one set of modules is spread over.
 const MAX_HELPERS: usize = 15;
 
-static HELPER_EXE: OnceLock<PathBuf> = OnceLock::new();
+/// What starts helpers: the executable, and what to call once, when the first helpers start (the
+/// command line tells the user why setup takes longer this time).
+struct Helpers {
+    exe: PathBuf,
+    on_first_start: Box<dyn Fn(usize) + Send + Sync>,
+}
 
-/// Lets [`Gpu::preload_ptx`] start helper processes of `exe`, which must run
-/// [`run_helper`] when called with [`HELPER_COMMAND`].
-pub fn enable_helpers(exe: PathBuf) {
-    let _ = HELPER_EXE.set(exe);
+static HELPERS: OnceLock<Helpers> = OnceLock::new();
+static STARTED_ONCE: AtomicBool = AtomicBool::new(false);
+
+/// Lets [`Gpu::preload_ptx`] start helper processes of `exe`, which must run [`run_helper`] when
+/// called with [`HELPER_COMMAND`]. `on_first_start` is called with the number of helpers when
+/// the first of them start, once per process.
+pub fn enable_helpers(exe: PathBuf, on_first_start: impl Fn(usize) + Send + Sync + 'static) {
+    let _ = HELPERS.set(Helpers {
+        exe,
+        on_first_start: Box::new(on_first_start),
+    });
 }
 
 /// Writes `modules` as a helper reads them: for each, the name's length (u32 LE), the name, the
@@ -141,7 +154,7 @@ impl Gpu {
         };
         let started = Instant::now();
         self.load_ptx(largest.0, largest.1)?;
-        let Some(exe) = HELPER_EXE.get() else {
+        let Some(helpers) = HELPERS.get() else {
             return Ok(());
         };
         if started.elapsed() < COLD_LOAD
@@ -157,17 +170,20 @@ impl Gpu {
         let mut sets = spread_by_size(&sizes, processes.min(rest.len()));
         // This process compiles one set itself while the helpers compile the others.
         let own = sets.pop().unwrap_or_default();
-        let helpers: Vec<_> = sets
+        if !sets.is_empty() && !STARTED_ONCE.swap(true, Ordering::Relaxed) {
+            (helpers.on_first_start)(sets.len());
+        }
+        let started: Vec<_> = sets
             .iter()
             .filter_map(|set| {
                 let chosen: Vec<(&str, &[u8])> = set.iter().map(|&i| rest[i]).collect();
-                start_helper(exe, self.info().ordinal, &chosen, HELPER_TIMEOUT)
+                start_helper(&helpers.exe, self.info().ordinal, &chosen, HELPER_TIMEOUT)
             })
             .collect();
         for &i in &own {
             self.load_ptx(rest[i].0, rest[i].1)?;
         }
-        for helper in helpers {
+        for helper in started {
             // Best effort: a helper that failed leaves its modules to the ordinary load.
             let _ = helper.join();
         }
