@@ -245,9 +245,6 @@ pub fn train_on_gpus<'a>(
     )?)
 }
 
-/// Opens the run directory (new or resumed), connects the stop request, records `character`
-/// in the checkpoints (a resumed run's checkpoint must be of it) and prints the resume's
-/// warnings. Wall times count from `started` when given (the command's start).
 impl TrainSetup {
     /// The run's session, new or resumed as this setup says, for `character`.
     pub(super) fn open_session(
@@ -265,6 +262,9 @@ impl TrainSetup {
     }
 }
 
+/// Opens the run directory (new or resumed), connects the stop request, records `character`
+/// in the checkpoints (a resumed run's checkpoint must be of it) and prints the resume's
+/// warnings. Wall times count from `started` when given (the command's start).
 pub(super) fn open_session(
     config: &TrainConfig,
     character: &Character,
