@@ -58,7 +58,7 @@ enum Command {
     /// Inspect or pack physics plans (.wrp / .wrp.zst).
     Plan(plan::PlanArgs),
     /// A helper process of this one: compiles PTX into the driver's cache (cuda/jit_cache.rs).
-    #[command(name = "__compile-ptx", hide = true)]
+    #[command(name = crate::cuda::jit_cache::HELPER_COMMAND, hide = true)]
     CompilePtx(CompilePtxArgs),
 }
 

@@ -173,7 +173,7 @@ impl Gpu {
         if !sets.is_empty() && !STARTED_ONCE.swap(true, Ordering::Relaxed) {
             (helpers.on_first_start)(sets.len());
         }
-        let started: Vec<_> = sets
+        let running: Vec<_> = sets
             .iter()
             .filter_map(|set| {
                 let chosen: Vec<(&str, &[u8])> = set.iter().map(|&i| rest[i]).collect();
@@ -183,7 +183,7 @@ impl Gpu {
         for &i in &own {
             self.load_ptx(rest[i].0, rest[i].1)?;
         }
-        for helper in started {
+        for helper in running {
             // Best effort: a helper that failed leaves its modules to the ordinary load.
             let _ = helper.join();
         }
