@@ -17,7 +17,7 @@ mod skip_support;
 
 use std::path::Path;
 
-use instantmimic::cuda::Gpu;
+use instantmimic::cuda::{Gpu, Graph};
 use instantmimic::env::{Rollout, TrackedMotion};
 use instantmimic::motion::find::resolve_motion;
 use instantmimic::motion::{Character, MotionLibrary, MotionLibraryBuilder, ReferenceMotion};
@@ -314,6 +314,72 @@ fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
             assert!(per_step < 0.5, "{s:?}: mean MPJPE {per_step} m");
         }
     }
+}
+
+/// The evaluation rollout captured in chunks of a few control steps (what `Trainer::evaluate_until`
+/// launches, looking between two of them whether the evaluation is decided), launched one after
+/// the other, plays the same episodes as the whole graph: every env's outcome and step count
+/// equal, its error sums equal to float rounding. A training rollout is refused.
+#[test]
+fn an_evaluation_in_chunks_plays_the_same_episodes_as_the_whole_graph() {
+    let gpu = Gpu::open(0).expect("a GPU");
+    let store = PlanStore::new(None);
+    let config = config(32, 8);
+    let motion = motion();
+    let rollout_config = config.rollout_config();
+    let training = Rollout::new(&gpu, &store, &motion, &rollout_config).expect("training rollout");
+    let policy = policy_for(&gpu, &training, &config);
+    let evaluation =
+        Rollout::evaluation(&training, &store, &rollout_config).expect("evaluation rollout");
+    let evaluation_policy = policy
+        .with_batch(&gpu, evaluation.num_envs())
+        .expect("evaluation policy");
+    let (whole, _) = evaluation
+        .capture(&evaluation_policy, false)
+        .expect("capture");
+    let chunk_steps = 4;
+    let chunks = evaluation
+        .capture_in_chunks(&evaluation_policy, chunk_steps)
+        .expect("capture in chunks");
+    let horizon = evaluation.horizon();
+    assert_eq!(
+        chunks.len(),
+        horizon.div_ceil(chunk_steps),
+        "horizon {horizon}"
+    );
+    let play = |graphs: &[&Graph]| {
+        evaluation.reset_all().expect("reset");
+        for g in graphs {
+            g.launch(gpu.stream()).expect("launch");
+        }
+        gpu.synchronize().expect("evaluation");
+        evaluation
+            .episode_scores()
+            .expect("an evaluation rollout has scores")
+            .download()
+            .expect("scores")
+    };
+    let by_whole = play(&[&whole]);
+    let by_chunks = play(&chunks.iter().collect::<Vec<_>>());
+    for (env, (a, b)) in by_whole.iter().zip(&by_chunks).enumerate() {
+        assert_eq!(
+            (a.completed, a.failed, a.steps),
+            (b.completed, b.failed, b.steps),
+            "env {env}: whole {a:?}, in chunks {b:?}"
+        );
+        for (x, y) in [
+            (a.pose_error_sum, b.pose_error_sum),
+            (a.mpjpe_sum, b.mpjpe_sum),
+            (a.ee_position_error_sum, b.ee_position_error_sum),
+        ] {
+            assert!(
+                (x - y).abs() <= 1e-4 * x.abs().max(1.0),
+                "env {env}: {a:?} vs {b:?}"
+            );
+        }
+    }
+    // A training rollout ends its last step with bookkeeping: it is captured whole only.
+    assert!(training.capture_in_chunks(&policy, chunk_steps).is_err());
 }
 
 /// Every float the rollout stored, as bits: observations, actions, log-probabilities, rewards,

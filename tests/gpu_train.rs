@@ -81,8 +81,33 @@ fn a_short_run_trains_evaluates_checkpoints_and_its_checkpoint_evaluates() {
             assert_eq!(e["episodes"], 32);
             let rate = e["success_rate"].as_f64().expect("success rate");
             assert!((0.0..=1.0).contains(&rate), "{e}");
+            // run.eval_early_stop (on by default): an evaluation out of reach stops between
+            // two chunks of 4 control steps; the run's last one runs whole.
+            match e["stopped_at_step"].as_u64() {
+                Some(step) => {
+                    assert!(i + 1 < records.len(), "the last evaluation runs whole: {e}");
+                    assert_eq!(step % 4, 0, "{e}");
+                    assert!(step < e["episode_steps"].as_u64().expect("steps"), "{e}");
+                    assert_eq!(e["success"], false, "{e}");
+                    assert!(
+                        e["mean_episode_steps"].as_f64().expect("mean") <= step as f64,
+                        "{e}"
+                    );
+                }
+                None => assert!(e.get("stopped_at_step").is_none(), "{e}"),
+            }
         }
     }
+    // Six iterations of the backflip are far from success: the evaluations before the last
+    // stop early (the episode from the clip start falls within a pass of the clip).
+    let stopped = records
+        .iter()
+        .filter(|r| r["evaluation"]["stopped_at_step"].is_u64())
+        .count();
+    assert!(stopped >= 1, "no evaluation stopped when out of reach");
+    let out_text = String::from_utf8_lossy(&out.stdout);
+    assert!(out_text.contains("stopped at step"), "{out_text}");
+    assert!(out_text.contains("stopped when decided"), "{out_text}");
     let times: Vec<f64> = records
         .iter()
         .map(|r| r["active_time_s"].as_f64().expect("active time"))

@@ -69,6 +69,7 @@ fn evaluation(iteration: u64, success_from: u64) -> EvaluationSummary {
         ee_position_error_m: 0.15,
         ee_orientation_error_rad: 0.4,
         library: None,
+        stopped_at_step: None,
     }
 }
 

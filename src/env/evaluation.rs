@@ -116,7 +116,7 @@ impl EpisodeScores {
 }
 
 /// One env's evaluation episode.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct EpisodeScore {
     /// Reached the end of the episode without early termination.
     pub completed: bool,

@@ -8,6 +8,7 @@ use super::trainer_error::TrainerError;
 use crate::env::TaskRecord;
 use crate::plan::PhysicsOverflow;
 use crate::run::clip_sampling::ClipSampling;
+use crate::run::evaluation::{EarlyStop, EvaluationEpisodes};
 use crate::run::{Checkpoint, EnvEvaluation, IterationStats, Learner, RunError};
 
 /// The trainer's error as the run harness carries it.
@@ -21,6 +22,9 @@ impl Learner for Trainer {
     }
     fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, RunError> {
         Trainer::evaluate(self).map_err(learner_error)
+    }
+    fn evaluate_until(&mut self, stop: &EarlyStop) -> Result<EvaluationEpisodes, RunError> {
+        Trainer::evaluate_until(self, stop).map_err(learner_error)
     }
     fn evaluation_steps(&self) -> u32 {
         Trainer::evaluation_steps(self)
@@ -53,6 +57,9 @@ impl Learner for Replicas {
     }
     fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, RunError> {
         Replicas::evaluate(self).map_err(learner_error)
+    }
+    fn evaluate_until(&mut self, stop: &EarlyStop) -> Result<EvaluationEpisodes, RunError> {
+        Replicas::evaluate_until(self, stop).map_err(learner_error)
     }
     fn evaluation_steps(&self) -> u32 {
         Replicas::evaluation_steps(self)
@@ -87,6 +94,9 @@ impl Learner for RankReplica {
     fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, RunError> {
         // Rank 0 evaluates alone: the evaluation rollout has no collective.
         self.trainer().evaluate().map_err(learner_error)
+    }
+    fn evaluate_until(&mut self, stop: &EarlyStop) -> Result<EvaluationEpisodes, RunError> {
+        self.trainer().evaluate_until(stop).map_err(learner_error)
     }
     fn evaluation_steps(&self) -> u32 {
         self.trainer().evaluation_steps()

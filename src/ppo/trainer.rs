@@ -45,7 +45,13 @@ use crate::run::IterationStats;
 use crate::run::checkpoint::tensor_names;
 use crate::run::checkpoint::{Checkpoint, CheckpointError};
 use crate::run::clip_sampling::{ClipSampling, clip_sampling};
-use crate::run::evaluation::EnvEvaluation;
+use crate::run::evaluation::{EarlyStop, EnvEvaluation, EvaluationEpisodes};
+
+/// Control steps per graph of the evaluation rollout: how often [`Trainer::evaluate_until`]
+/// looks whether the evaluation is decided. Each look waits for the GPU (tens of
+/// microseconds); 4 steps at 32 worlds take about 14 ms (BENCHMARKS.md, "Evaluations that stop
+/// when decided").
+pub const EVALUATION_CHUNK_STEPS: usize = 4;
 
 /// The seed of GPU rank `rank`'s envs and action noise: the run's seed for rank 0 (a run on
 /// one GPU, or rank 0 of several, draws what a single-GPU run draws), a well-mixed different
@@ -84,7 +90,9 @@ pub struct Trainer {
     evaluation_policy: GaussianPolicy,
     update: PpoUpdate,
     iteration: Iteration,
-    evaluation_graph: Graph,
+    /// The evaluation rollout as consecutive graphs of [`EVALUATION_CHUNK_STEPS`] control
+    /// steps: [`Trainer::evaluate_until`] may stop between two of them.
+    evaluation_chunks: Vec<Graph>,
     /// A goal run in a latent controller's action space (`goal.decoder`): the frozen decoder
     /// the policy above (the head) drives; the graphs address its buffers.
     decoder: Option<DecoderNetworks>,
@@ -239,9 +247,12 @@ impl Trainer {
             }
             None => Iteration::capture(gpu, &rollout, &policy, &policy, &update)?,
         };
-        let (evaluation_graph, _) = match &decoder {
-            Some(d) => evaluation.capture(&d.evaluation.driven_by(&evaluation_policy)?, false)?,
-            None => evaluation.capture(&evaluation_policy, false)?,
+        let evaluation_chunks = match &decoder {
+            Some(d) => evaluation.capture_in_chunks(
+                &d.evaluation.driven_by(&evaluation_policy)?,
+                EVALUATION_CHUNK_STEPS,
+            )?,
+            None => evaluation.capture_in_chunks(&evaluation_policy, EVALUATION_CHUNK_STEPS)?,
         };
         rollout.reset_all()?;
         Ok(Trainer {
@@ -252,7 +263,7 @@ impl Trainer {
             evaluation_policy,
             update,
             iteration,
-            evaluation_graph,
+            evaluation_chunks,
             decoder,
         })
     }
@@ -348,9 +359,39 @@ impl Trainer {
     /// ([`Trainer::evaluation_rollout`]).
     pub fn run_evaluation(&self) -> Result<(), TrainerError> {
         self.evaluation.reset_all()?;
-        self.evaluation_graph.launch(self.gpu.stream())?;
+        for chunk in &self.evaluation_chunks {
+            chunk.launch(self.gpu.stream())?;
+        }
         self.gpu.synchronize()?;
         Ok(())
+    }
+
+    /// [`Trainer::evaluate`], stopping once `stop` finds the evaluation decided (read after
+    /// every chunk of [`EVALUATION_CHUNK_STEPS`] steps): every env's episode so far, and the
+    /// control steps run when it stopped early.
+    pub fn evaluate_until(&self, stop: &EarlyStop) -> Result<EvaluationEpisodes, TrainerError> {
+        let scores = self.evaluation.episode_scores().ok_or_else(|| {
+            TrainerError::Internal(
+                "the evaluation rollout keeps no tracking scores (a task that evaluates itself records its evaluation in Trainer::task_record)"
+                    .to_owned(),
+            )
+        })?;
+        self.evaluation.reset_all()?;
+        let mut stopped_at_step = None;
+        let last = self.evaluation_chunks.len().saturating_sub(1);
+        for (i, chunk) in self.evaluation_chunks.iter().enumerate() {
+            chunk.launch(self.gpu.stream())?;
+            // The download waits for the chunk: a few microseconds against its milliseconds.
+            if i < last && stop.decided(&scores.download()?) {
+                stopped_at_step = Some(((i + 1) * EVALUATION_CHUNK_STEPS) as u32);
+                break;
+            }
+        }
+        let episodes = scores.download()?.iter().map(EnvEvaluation::from).collect();
+        Ok(EvaluationEpisodes {
+            episodes,
+            stopped_at_step,
+        })
     }
 
     /// The evaluation rollout captured as the evaluation runs it (the policy's mean actions,

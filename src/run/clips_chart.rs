@@ -168,6 +168,7 @@ mod tests {
             ee_position_error_m: 0.05,
             ee_orientation_error_rad: 0.1,
             library,
+            stopped_at_step: None,
         };
         IterationRecord {
             iteration: i,

@@ -153,6 +153,7 @@ impl StopRule {
         let reached = Milestones {
             success: evaluation.is_some_and(|e| e.success),
             pose_error: evaluation.is_some_and(EvaluationSummary::meets_pose_error_target),
+            clip_start: evaluation.is_some_and(|e| e.clip_start_success),
         };
         self.check_milestones(iteration, active_time_s, reached)
     }
@@ -182,6 +183,8 @@ pub struct Milestones {
     pub success: bool,
     /// An evaluation's average pose error was at most the target (`POSE_ERROR_TARGET_M`).
     pub pose_error: bool,
+    /// An evaluation's episode from the clip start succeeded.
+    pub clip_start: bool,
 }
 
 #[cfg(test)]
@@ -206,6 +209,7 @@ mod tests {
             ee_position_error_m: 0.1,
             ee_orientation_error_rad: 0.1,
             library: None,
+            stopped_at_step: None,
         }
     }
 
@@ -289,11 +293,13 @@ mod tests {
         let success_only = Milestones {
             success: true,
             pose_error: false,
+            clip_start: false,
         };
         assert_eq!(rule.check_milestones(5, 1.0, success_only), None);
         let both = Milestones {
             success: true,
             pose_error: true,
+            clip_start: false,
         };
         assert_eq!(
             rule.check_milestones(5, 1.0, both),

@@ -56,6 +56,11 @@ pub struct RunConfig {
     /// Fraction of evaluation envs that must pass the fixed success yardstick (the paper: 0.9
     /// completing the episode; src/run/evaluation.rs).
     pub success_rate: f64,
+    /// Stop an evaluation once it can no longer succeed (more episodes failed than the success
+    /// rate leaves room for) and the episode from the clip start has ended, until the run has
+    /// seen that episode succeed (`EarlyStop`). No success and no time to success changes; the
+    /// record's rates are then lower bounds. A run's last evaluation always runs whole.
+    pub eval_early_stop: bool,
     /// Stop at the first successful evaluation (the paper's time-to-success protocol); false
     /// keeps training until a budget runs out.
     pub stop_on_success: bool,
@@ -106,6 +111,7 @@ impl Default for RunConfig {
             eval_steps: None,
             eval_start: EvalStart::Spread,
             success_rate: 0.9,
+            eval_early_stop: true,
             stop_on_success: true,
             stop_on_pose_error: false,
             time_budget_s: 60.0,

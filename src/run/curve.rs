@@ -34,6 +34,9 @@ pub enum RightAxis {
 /// The right axis's series: its points, label, color and upper bound.
 struct RightSeries {
     points: Vec<(f64, f64)>,
+    /// Evaluations that stopped once decided (`run.eval_early_stop`): their rates are lower
+    /// bounds, drawn apart from the line.
+    lower_bounds: Vec<(f64, f64)>,
     label: String,
     color: RGBColor,
     top: f64,
@@ -43,17 +46,27 @@ struct RightSeries {
 fn right_series(records: &[IterationRecord], axis: RightAxis) -> RightSeries {
     let finite = |&(t, y): &(f64, f64)| t.is_finite() && y.is_finite();
     match axis {
-        RightAxis::SuccessRate { threshold } => RightSeries {
-            points: records
-                .iter()
-                .filter_map(|r| Some((r.active_time_s, r.evaluation.as_ref()?.success_rate)))
-                .filter(finite)
-                .collect(),
-            label: "success rate".to_owned(),
-            color: SUCCESS_RATE_COLOR,
-            top: 1.05,
-            threshold: Some(threshold),
-        },
+        RightAxis::SuccessRate { threshold } => {
+            let rates = |stopped: bool| -> Vec<(f64, f64)> {
+                records
+                    .iter()
+                    .filter_map(|r| {
+                        let e = r.evaluation.as_ref()?;
+                        (e.stopped_at_step.is_some() == stopped)
+                            .then_some((r.active_time_s, e.success_rate))
+                    })
+                    .filter(finite)
+                    .collect()
+            };
+            RightSeries {
+                points: rates(false),
+                lower_bounds: rates(true),
+                label: "success rate".to_owned(),
+                color: SUCCESS_RATE_COLOR,
+                top: 1.05,
+                threshold: Some(threshold),
+            }
+        }
         RightAxis::TaskScore => {
             let scores: Vec<(f64, TaskScore)> = records
                 .iter()
@@ -70,6 +83,7 @@ fn right_series(records: &[IterationRecord], axis: RightAxis) -> RightSeries {
             };
             RightSeries {
                 points: scores.iter().map(|(t, s)| (*t, s.value)).collect(),
+                lower_bounds: Vec::new(),
                 label,
                 color: TASK_SCORE_COLOR,
                 top: (most * 1.1).max(1.0),
@@ -191,6 +205,18 @@ pub fn learning_curve_png(
             .map_err(plot_error)?
             .label(series.label.as_str())
             .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
+        if !series.lower_bounds.is_empty() {
+            chart
+                .draw_secondary_series(
+                    series
+                        .lower_bounds
+                        .iter()
+                        .map(|&p| Circle::new(p, 3, color.stroke_width(1))),
+                )
+                .map_err(plot_error)?
+                .label("stopped when out of reach (at least)")
+                .legend(move |(x, y)| Circle::new((x + 10, y), 3, color.stroke_width(1)));
+        }
         chart
             .configure_series_labels()
             .background_style(WHITE.mix(0.85))

@@ -65,7 +65,7 @@ pub struct EnvEvaluation {
 impl EvaluationSummary {
     /// The paper's second criterion: average pose error at most [`POSE_ERROR_TARGET_M`].
     pub fn meets_pose_error_target(&self) -> bool {
-        self.pose_error_m <= POSE_ERROR_TARGET_M
+        self.stopped_at_step.is_none() && self.pose_error_m <= POSE_ERROR_TARGET_M
     }
 }
 
@@ -146,6 +146,12 @@ pub struct EvaluationSummary {
     /// its beginning succeeded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub library: Option<LibraryEvaluation>,
+    /// Set when the evaluation stopped after this many control steps because it could no
+    /// longer succeed ([`EarlyStop`]): `success` is false as a whole evaluation's would be,
+    /// but the episodes still running count as not succeeded and the error means cover the
+    /// steps run, so the rates are lower bounds and the pose error counts for no milestone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stopped_at_step: Option<u32>,
 }
 
 /// One env's episode of an evaluation, as `evaluation.json` of a run directory lists them: where
@@ -299,7 +305,55 @@ pub fn summarize(
         ee_position_error_m: per_step(sums[2]),
         ee_orientation_error_rad: per_step(sums[3]),
         library: None,
+        stopped_at_step: None,
     })
+}
+
+/// Every env's episode of an evaluation, and the control steps it ran when it stopped early
+/// ([`EarlyStop`]; None when it ran to the end).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct EvaluationEpisodes {
+    pub episodes: Vec<EnvEvaluation>,
+    pub stopped_at_step: Option<u32>,
+}
+
+/// When an evaluation in progress may stop (`run.eval_early_stop`): once so many episodes have
+/// failed that the success rate can no longer be reached, and the watched episodes (the one
+/// from the clip start, until a run has seen it succeed) have ended. Stopping then changes no
+/// success and no time to success; it saves the rest of the episode's physics, which is most of
+/// an evaluation's time (BENCHMARKS.md, "Evaluations that stop when decided").
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct EarlyStop {
+    /// Failed episodes that still leave the success rate reachable.
+    failures_allowed: usize,
+    /// Episodes whose own result is wanted: the stop waits for them to end.
+    watched: Vec<usize>,
+}
+
+impl EarlyStop {
+    /// The stop for `episodes` episodes and success at `success_threshold` of them, waiting
+    /// for the episodes `watched` to end.
+    pub fn new(episodes: usize, success_threshold: f64, watched: Vec<usize>) -> EarlyStop {
+        // The fewest successes that make the rate, as `summarize` compares it.
+        let required = (0..=episodes)
+            .find(|&k| k as f64 / episodes.max(1) as f64 >= success_threshold)
+            .unwrap_or(episodes);
+        EarlyStop {
+            failures_allowed: episodes - required,
+            watched,
+        }
+    }
+
+    /// Whether the evaluation is decided by `scores` (every env's episode so far): success is
+    /// out of reach and every watched episode has ended.
+    pub fn decided(&self, scores: &[EpisodeScore]) -> bool {
+        let failed = scores.iter().filter(|s| s.failed).count();
+        failed > self.failures_allowed
+            && self
+                .watched
+                .iter()
+                .all(|&env| scores.get(env).is_none_or(|s| s.failed || s.completed))
+    }
 }
 
 /// Control steps of an evaluation episode: `run.eval_steps`, or one pass of the clip
@@ -654,5 +708,64 @@ mod tests {
         ] {
             assert!(text.contains(expected), "missing {expected:?} in\n{text}");
         }
+    }
+
+    fn episode(outcome: &str) -> EpisodeScore {
+        EpisodeScore {
+            completed: outcome == "completed",
+            failed: outcome == "failed",
+            ..EpisodeScore::default()
+        }
+    }
+
+    #[test]
+    fn an_evaluation_is_decided_when_success_is_out_of_reach_and_the_watched_have_ended() {
+        // 32 episodes at 0.9: 29 must succeed, so 3 may fail.
+        let stop = EarlyStop::new(32, 0.9, vec![0]);
+        let mut scores = vec![episode("running"); 32];
+        for score in &mut scores[1..=3] {
+            *score = episode("failed");
+        }
+        assert!(!stop.decided(&scores), "3 failed: 29 can still succeed");
+        scores[4] = episode("failed");
+        assert!(!stop.decided(&scores), "4 failed, but env 0 still runs");
+        scores[0] = episode("completed");
+        assert!(stop.decided(&scores), "4 failed and env 0 ended");
+        // Unwatched, the failures alone decide.
+        let unwatched = EarlyStop::new(32, 0.9, Vec::new());
+        scores[0] = episode("running");
+        assert!(unwatched.decided(&scores));
+        // The same threshold arithmetic as summarize: 0.5 of 4 needs 2 successes.
+        let half = EarlyStop::new(4, 0.5, Vec::new());
+        let two_failed = [
+            episode("failed"),
+            episode("failed"),
+            episode("running"),
+            episode("running"),
+        ];
+        assert!(!half.decided(&two_failed));
+        let three_failed = [
+            episode("failed"),
+            episode("failed"),
+            episode("failed"),
+            episode("running"),
+        ];
+        assert!(half.decided(&three_failed));
+        // At 1.0 one failure decides; at 0.0 nothing does.
+        assert!(EarlyStop::new(4, 1.0, Vec::new()).decided(&three_failed[..1]));
+        let all_failed = [episode("failed"); 4];
+        assert!(!EarlyStop::new(4, 0.0, Vec::new()).decided(&all_failed));
+    }
+
+    #[test]
+    fn a_stopped_evaluation_meets_no_pose_error_target() {
+        let envs = [env(false, 2, [0.01, 0.02, 0.03, 0.1])];
+        let mut summary = summarize(&envs, 4, 0.9).unwrap();
+        assert!(summary.meets_pose_error_target());
+        summary.stopped_at_step = Some(2);
+        assert!(
+            !summary.meets_pose_error_target(),
+            "its pose error covers 2 of 4 steps"
+        );
     }
 }

@@ -5,12 +5,13 @@
 
 use super::checkpoint::Checkpoint;
 use super::clip_sampling::ClipSampling;
+use super::clock::Milestones;
 use super::config::{ResolvedConfig, RunConfig};
 use super::divergence::{DivergenceGuard, non_finite_report};
 use super::error::RunError;
 use super::evaluation::{
-    EnvEpisodeRow, EnvEvaluation, EvaluationError, EvaluationSummary, episode_rows,
-    evaluation_start_times, summarize,
+    EarlyStop, EnvEpisodeRow, EnvEvaluation, EvaluationEpisodes, EvaluationError,
+    EvaluationSummary, episode_rows, evaluation_start_times, summarize,
 };
 use super::library_evaluation::LibraryPlan;
 use super::metrics::{DivergenceEvent, IterationStats};
@@ -27,6 +28,15 @@ use crate::plan::PhysicsOverflow;
 pub trait Learner {
     fn iterate(&mut self) -> Result<IterationStats, RunError>;
     fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, RunError>;
+    /// The evaluation, stopping early where `stop` finds it decided; a learner that cannot
+    /// stop one runs it whole.
+    fn evaluate_until(&mut self, stop: &EarlyStop) -> Result<EvaluationEpisodes, RunError> {
+        let _ = stop;
+        Ok(EvaluationEpisodes {
+            episodes: self.evaluate()?,
+            stopped_at_step: None,
+        })
+    }
     fn evaluation_steps(&self) -> u32;
     /// The task's record of the iteration just run, with its evaluation when `evaluate` (None
     /// for a task whose evaluation is the tracking protocol's episodes).
@@ -82,6 +92,28 @@ impl Scorer {
                 clip.duration(),
                 clip.loop_mode(),
             ),
+        }
+    }
+
+    /// How the next evaluation may stop early (`run.eval_early_stop`): for one clip's
+    /// protocol, not at a run's `last` evaluation, waiting for the episode from the clip start
+    /// (env 0) until the run has seen it succeed (`reached`). None: it runs whole.
+    pub fn early_stop(
+        &self,
+        run: &RunConfig,
+        reached: Milestones,
+        last: bool,
+    ) -> Option<EarlyStop> {
+        match self {
+            Scorer::Clip { start_times } if run.eval_early_stop && !last => {
+                let watched = if reached.clip_start {
+                    Vec::new()
+                } else {
+                    vec![0]
+                };
+                Some(EarlyStop::new(start_times.len(), run.success_rate, watched))
+            }
+            Scorer::Clip { .. } | Scorer::Library(_) => None,
         }
     }
 
@@ -179,9 +211,20 @@ pub fn run_loop<C: ResolvedConfig, L: Learner>(
         }
         let evaluation = if step.evaluate && !task_evaluates {
             let started = std::time::Instant::now();
-            let episodes = trainer.evaluate()?;
+            let EvaluationEpisodes {
+                episodes,
+                stopped_at_step,
+            } = match scorer.early_stop(&run, session.reached(), step.last) {
+                Some(stop) => trainer.evaluate_until(&stop)?,
+                None => EvaluationEpisodes {
+                    episodes: trainer.evaluate()?,
+                    stopped_at_step: None,
+                },
+            };
             wall.evaluation(started);
+            wall.stopped_early += u32::from(stopped_at_step.is_some());
             let mut summary = scorer.summarize(&episodes, trainer.evaluation_steps(), threshold)?;
+            summary.stopped_at_step = stopped_at_step;
             if let Some(library) = summary.library.as_mut()
                 && let Some(sampling) = trainer.clip_sampling()?
             {
@@ -260,6 +303,8 @@ struct WallTime {
     setup_s: f64,
     evaluation_s: f64,
     evaluations: u32,
+    /// Evaluations that stopped once decided (`run.eval_early_stop`).
+    stopped_early: u32,
     bookkeeping_s: f64,
 }
 
@@ -270,6 +315,7 @@ impl WallTime {
             setup_s,
             evaluation_s: 0.0,
             evaluations: 0,
+            stopped_early: 0,
             bookkeeping_s: 0.0,
         }
     }
@@ -289,8 +335,13 @@ impl WallTime {
         } else {
             0.0
         };
+        let stopped = if self.stopped_early > 0 {
+            format!(", {} of them stopped when decided", self.stopped_early)
+        } else {
+            String::new()
+        };
         format!(
-            "wall {:.2} s after setup {:.2} s: active {active_s:.2} s, {} evaluations {:.2} s ({:.3} s each), metrics/curve/checkpoints {:.2} s",
+            "wall {:.2} s after setup {:.2} s: active {active_s:.2} s, {} evaluations {:.2} s ({:.3} s each{stopped}), metrics/curve/checkpoints {:.2} s",
             self.start.elapsed().as_secs_f64(),
             self.setup_s,
             self.evaluations,
@@ -298,5 +349,44 @@ impl WallTime {
             each,
             self.bookkeeping_s
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn clip_scorer() -> Scorer {
+        Scorer::Clip {
+            start_times: vec![0.0; 32],
+        }
+    }
+
+    #[test]
+    fn evaluations_stop_early_but_the_last_and_watch_the_clip_start_until_it_succeeded() {
+        let run = RunConfig::default();
+        let none_yet = Milestones::default();
+        let stop = clip_scorer()
+            .early_stop(&run, none_yet, false)
+            .expect("a stop");
+        assert_eq!(stop, EarlyStop::new(32, run.success_rate, vec![0]));
+        assert_eq!(
+            clip_scorer().early_stop(&run, none_yet, true),
+            None,
+            "the last runs whole"
+        );
+        let clip_start = Milestones {
+            clip_start: true,
+            ..Milestones::default()
+        };
+        assert_eq!(
+            clip_scorer().early_stop(&run, clip_start, false),
+            Some(EarlyStop::new(32, run.success_rate, Vec::new()))
+        );
+        let whole = RunConfig {
+            eval_early_stop: false,
+            ..RunConfig::default()
+        };
+        assert_eq!(clip_scorer().early_stop(&whole, none_yet, false), None);
     }
 }

@@ -198,6 +198,7 @@ fn summarize_mixed(episodes: &[EnvEvaluation]) -> EvaluationSummary {
         ee_position_error_m: mean(&|e| e.ee_position_error_sum),
         ee_orientation_error_rad: mean(&|e| e.ee_orientation_error_sum),
         library: None,
+        stopped_at_step: None,
     }
 }
 

@@ -264,14 +264,21 @@ pub fn evaluation_line(record: &IterationRecord) -> String {
         record.mean_episode_length
     );
     if let Some(e) = &record.evaluation {
-        line.push_str(&format!(
-            "  success {:.3} ({}/{}){}  pose error {:.4} m",
-            e.success_rate,
-            e.completed,
-            e.episodes,
-            if e.success { " reached" } else { "" },
-            e.pose_error_m
-        ));
+        match e.stopped_at_step {
+            // The episodes still running count as failed: the rates are lower bounds.
+            Some(step) => line.push_str(&format!(
+                "  success >={:.3} ({}/{}), stopped at step {step} of {}: out of reach",
+                e.success_rate, e.completed, e.episodes, e.episode_steps
+            )),
+            None => line.push_str(&format!(
+                "  success {:.3} ({}/{}){}  pose error {:.4} m",
+                e.success_rate,
+                e.completed,
+                e.episodes,
+                if e.success { " reached" } else { "" },
+                e.pose_error_m
+            )),
+        }
         if let Some(library) = &e.library {
             line.push_str(&format!(
                 "  clips at {} {}/{}",
@@ -335,6 +342,7 @@ mod tests {
                 ee_position_error_m: 0.1,
                 ee_orientation_error_rad: 0.1,
                 library: None,
+                stopped_at_step: None,
             }),
             divergence: None,
             task: None,
@@ -405,5 +413,25 @@ mod tests {
             "0.612 M frames/s  return 12.35  episode 45.7  success -  1.50 s active"
         );
         assert!(bar_message(&record(3, false), Some(0.5)).contains("success 0.500"));
+    }
+
+    #[test]
+    fn an_evaluation_stopped_when_out_of_reach_says_so() {
+        let mut r = record(10, true);
+        if let Some(e) = r.evaluation.as_mut() {
+            e.success = false;
+            e.completed = 3;
+            e.success_rate = 3.0 / 32.0;
+            e.stopped_at_step = Some(12);
+        }
+        let line = evaluation_line(&r);
+        assert!(
+            line.contains("success >=0.094 (3/32), stopped at step 12 of 53: out of reach"),
+            "{line}"
+        );
+        assert!(
+            !line.contains("pose error"),
+            "a partial pose error is not shown: {line}"
+        );
     }
 }

@@ -48,6 +48,8 @@ pub struct IterationStep {
     pub iteration: u64,
     /// Whether the protocol evaluates after this iteration.
     pub evaluate: bool,
+    /// Whether a budget is spent after this iteration: its evaluation is the run's last.
+    pub last: bool,
     record: IterationRecord,
 }
 
@@ -211,6 +213,7 @@ impl<C: ResolvedConfig> RunSession<C> {
         let reached = Milestones {
             success: evaluations().any(|e| e.success),
             pose_error: evaluations().any(EvaluationSummary::meets_pose_error_target),
+            clip_start: evaluations().any(|e| e.clip_start_success),
         };
         RunSession {
             checkpoints: dir.checkpoints(config.run()),
@@ -317,6 +320,7 @@ impl<C: ResolvedConfig> RunSession<C> {
         IterationStep {
             iteration,
             evaluate: self.rule.evaluates_after(iteration, active),
+            last: self.rule.budget_spent(iteration, active).is_some(),
             record,
         }
     }
@@ -342,6 +346,7 @@ impl<C: ResolvedConfig> RunSession<C> {
         if let Some(e) = &record.evaluation {
             self.reached.success |= e.success;
             self.reached.pose_error |= e.meets_pose_error_target();
+            self.reached.clip_start |= e.clip_start_success;
         }
         // A budget or success reached at this iteration ends the run as it would have
         // anyway; otherwise a stop request ends it here.
@@ -407,6 +412,11 @@ impl<C: ResolvedConfig> RunSession<C> {
         self.dir.write_summary(&summary)?;
         self.progress.finish();
         Ok(summary)
+    }
+
+    /// What the run's evaluations have reached so far.
+    pub fn reached(&self) -> Milestones {
+        self.reached
     }
 
     /// The progress display (to print notes above the bar).

@@ -265,6 +265,7 @@ pub(crate) mod test_records {
                 ee_position_error_m: 0.07,
                 ee_orientation_error_rad: 0.3,
                 library: None,
+                stopped_at_step: None,
             }),
             divergence: None,
             task: None,

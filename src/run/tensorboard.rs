@@ -8,7 +8,8 @@
 //! ppo/       entropy, kl, learning_rate, grad_norm
 //! episodes/  ended, truncated, failed, and failed/<cause> (fractions of the ended episodes)
 //! eval/      success_rate, completed_rate, robotics_rule_rate, clip_start_success, pose_error_m,
-//!            global_mpjpe_m, ee_position_error_m, ee_orientation_error_rad, episode_steps
+//!            global_mpjpe_m, ee_position_error_m, ee_orientation_error_rad, episode_steps;
+//!            stopped_at_step alone for an evaluation stopped when out of reach
 //! library/   clips_at_threshold, clip_fraction; clips/<clip>/success_rate, pose_error_m,
 //!            global_mpjpe_m (a motion library's evaluations)
 //! goal/      rollout/goals_per_episode, rollout/fall_rate, eval/goals_per_episode,
@@ -93,7 +94,10 @@ pub fn scalars(record: &IterationRecord) -> Vec<(String, f32)> {
     ] {
         put(format!("episodes/failed/{cause}"), value);
     }
-    if let Some(e) = &record.evaluation {
+    if let Some(step) = record.evaluation.as_ref().and_then(|e| e.stopped_at_step) {
+        // An evaluation stopped when out of reach has lower bounds for rates: only its step.
+        put("eval/stopped_at_step".into(), f64::from(step));
+    } else if let Some(e) = &record.evaluation {
         let episodes = f64::from(e.episodes.max(1));
         put("eval/success_rate".into(), e.success_rate);
         put(
@@ -186,5 +190,49 @@ mod tests {
         assert!(tags.contains(&"train/episode_length".to_string()));
         assert!(!tags.iter().any(|t| t.starts_with("eval/")), "{tags:?}");
         assert_eq!(tag_part("dance/a b"), "dance_a_b");
+    }
+
+    #[test]
+    fn a_stopped_evaluation_writes_its_step_and_no_rate() {
+        let mut record = IterationRecord {
+            iteration: 5,
+            active_time_s: 2.0,
+            frames: 1000,
+            frames_per_s: 500.0,
+            mean_return: 1.0,
+            mean_episode_length: 30.0,
+            update: UpdateStats::default(),
+            termination: EpisodeEnds::default(),
+            evaluation: Some(
+                crate::run::evaluation::summarize(
+                    &[crate::run::EnvEvaluation {
+                        steps: 8,
+                        ..Default::default()
+                    }],
+                    53,
+                    0.9,
+                )
+                .expect("summary"),
+            ),
+            divergence: None,
+            task: None,
+            wall_s: None,
+        };
+        let tags = |r: &IterationRecord| -> Vec<String> {
+            scalars(r).into_iter().map(|(t, _)| t).collect()
+        };
+        assert!(tags(&record).contains(&"eval/success_rate".to_string()));
+        if let Some(e) = record.evaluation.as_mut() {
+            e.stopped_at_step = Some(8);
+        }
+        let stopped = tags(&record);
+        assert!(
+            stopped.contains(&"eval/stopped_at_step".to_string()),
+            "{stopped:?}"
+        );
+        assert!(
+            !stopped.contains(&"eval/success_rate".to_string()),
+            "{stopped:?}"
+        );
     }
 }

@@ -265,6 +265,7 @@ fn summary() -> EvaluationSummary {
             episodes_pass: false,
             all_clips_pass: false,
         }),
+        stopped_at_step: None,
     }
 }
 

@@ -594,7 +594,7 @@ impl Rollout {
             } else {
                 StageRecorder::untimed()
             };
-            self.record_rollout(s, policy, &self.storage, &mut stages, None)?;
+            self.record_rollout(s, policy, &self.storage, &mut stages, None, 0..self.horizon)?;
             events = stages.into_events();
             Ok::<(), RolloutError>(())
         })?;
@@ -611,7 +611,45 @@ impl Rollout {
             &self.storage,
             &mut StageRecorder::untimed(),
             None,
+            0..self.horizon,
         )
+    }
+
+    /// Captures an evaluation rollout, running `policy`, as consecutive graphs of at most
+    /// `chunk_steps` control steps each: launched in order after a reset they run the same
+    /// episode as [`Rollout::capture`]'s one graph, and between two of them the caller may read
+    /// the scores and stop early (`Trainer::evaluate_until`). The graphs read and write
+    /// `policy`'s buffers at each launch: keep the policy alive as long as them.
+    pub fn capture_in_chunks(
+        &self,
+        policy: &dyn RolloutPolicy,
+        chunk_steps: usize,
+    ) -> Result<Vec<Graph>, RolloutError> {
+        if self.is_training() {
+            return Err(RolloutError::Setup(
+                "a training rollout is captured whole (its bookkeeping ends the last step)"
+                    .to_owned(),
+            ));
+        }
+        let stream = self.gpu.stream();
+        let starts = (0..self.horizon).step_by(chunk_steps.max(1));
+        starts
+            .map(|start| {
+                let steps = start..(start + chunk_steps.max(1)).min(self.horizon);
+                let graph = stream.capture(|s| {
+                    self.record_rollout(
+                        s,
+                        policy,
+                        &self.storage,
+                        &mut StageRecorder::untimed(),
+                        None,
+                        steps,
+                    )
+                })?;
+                graph.upload(stream)?;
+                Ok(graph)
+            })
+            .collect()
     }
 
     /// The loaded kernels (shared with the PPO update).
@@ -627,6 +665,7 @@ impl Rollout {
         storage: &RolloutStorage,
         stages: &mut StageRecorder,
         trajectory: Option<&Trajectory>,
+        steps: std::ops::Range<usize>,
     ) -> Result<(), RolloutError> {
         let gpu = &self.gpu;
         let wanted = (self.num_envs, self.observation_size(), self.action_size());
@@ -640,10 +679,11 @@ impl Rollout {
                 "a policy for (envs, observations, actions) {lent:?} lent to a rollout of {wanted:?}"
             )));
         }
-        if let Some(trajectory) = trajectory {
+        let (first, last) = (steps.start == 0, steps.end == self.horizon);
+        if first && let Some(trajectory) = trajectory {
             self.record_frame(s, trajectory, 0)?;
         }
-        if self.is_training() {
+        if first && self.is_training() {
             self.statistics.record_clear(s)?;
             // Storage row 0 is this rollout's first input: the policy's input buffer, which
             // holds the latest observation (the last one of the previous rollout, or the
@@ -653,7 +693,7 @@ impl Rollout {
                 .normalized
                 .copy_into(s, &storage.observations, 0)?;
         }
-        for t in 0..self.horizon {
+        for t in steps {
             let t32 = t as i32;
             stages.stage(gpu, s, RolloutStage::Policy, |s| {
                 self.record_policy(s, policy, storage, t)
@@ -699,7 +739,7 @@ impl Rollout {
                 self.record_observation(s, storage, t + 1, self.is_training())
             })?;
         }
-        if !self.is_training() {
+        if !last || !self.is_training() {
             return Ok(());
         }
         stages.stage(gpu, s, RolloutStage::Bookkeeping, |s| {

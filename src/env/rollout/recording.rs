@@ -52,6 +52,7 @@ impl Rollout {
                 &self.storage,
                 &mut StageRecorder::untimed(),
                 Some(trajectory),
+                0..self.horizon,
             )
         })?;
         graph.upload(stream)?;

@@ -39,7 +39,7 @@ use crate::env::TrainMotion;
 use crate::run::IterationStats;
 use crate::run::checkpoint::Checkpoint;
 use crate::run::clip_sampling::ClipSampling;
-use crate::run::evaluation::EnvEvaluation;
+use crate::run::evaluation::{EarlyStop, EnvEvaluation, EvaluationEpisodes};
 use crate::run::{IterationReport, replica_mismatch};
 use worker::{Built, Job, Reply, SETUP_CALL, Start, Worker};
 
@@ -175,6 +175,12 @@ impl Replicas {
     /// The evaluation, on rank 0 (every replica holds the same policy and normalization).
     pub fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, TrainerError> {
         self.on_rank0(|t| t.evaluate())
+    }
+
+    /// [`Trainer::evaluate_until`], on rank 0.
+    pub fn evaluate_until(&mut self, stop: &EarlyStop) -> Result<EvaluationEpisodes, TrainerError> {
+        let stop = stop.clone();
+        self.on_rank0(move |t| t.evaluate_until(&stop))
     }
 
     /// The reset sampler's part per clip, from rank 0 (every replica samples from the same
