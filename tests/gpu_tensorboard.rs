@@ -85,13 +85,34 @@ fn a_short_run_writes_event_files_tensorboard_reads_by_iteration() {
     ] {
         assert_eq!(steps(&by_tag, tag), [1, 2, 3, 4, 5, 6], "{tag}");
     }
+    // Evaluations every 2 iterations; those stopped when out of reach (run.eval_early_stop)
+    // write only their step, the whole ones (the last always) their rates and errors.
+    let evaluated = |stopped: bool| -> Vec<i64> {
+        records
+            .iter()
+            .filter(|r| !r["evaluation"].is_null())
+            .filter(|r| r["evaluation"]["stopped_at_step"].is_u64() == stopped)
+            .map(|r| r["iteration"].as_i64().expect("iteration"))
+            .collect()
+    };
+    let (whole, stopped) = (evaluated(false), evaluated(true));
+    assert!(
+        whole.contains(&6),
+        "the last evaluation runs whole: {whole:?}"
+    );
+    let mut all = [whole.clone(), stopped.clone()].concat();
+    all.sort_unstable();
+    assert_eq!(all, [2, 4, 6]);
     for tag in [
         "eval/success_rate",
         "eval/pose_error_m",
         "eval/global_mpjpe_m",
         "eval/completed_rate",
     ] {
-        assert_eq!(steps(&by_tag, tag), [2, 4, 6], "{tag}");
+        assert_eq!(steps(&by_tag, tag), whole, "{tag}");
+    }
+    if !stopped.is_empty() {
+        assert_eq!(steps(&by_tag, "eval/stopped_at_step"), stopped);
     }
     for (record, (_, value)) in records.iter().zip(&by_tag["loss/value"]) {
         assert_eq!(
@@ -106,7 +127,7 @@ fn a_short_run_writes_event_files_tensorboard_reads_by_iteration() {
         .collect();
     assert_eq!(lines.len(), 3, "{stdout}");
     assert!(lines[2].contains("[it 6/6, ETA 0 s]"), "{stdout}");
-    tensorboard_reads(&run, &[1, 2, 3, 4, 5, 6], &[2, 4, 6]);
+    tensorboard_reads(&run, &[1, 2, 3, 4, 5, 6], &whole);
 }
 
 #[test]
