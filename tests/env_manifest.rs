@@ -24,7 +24,7 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 48] = [
+const EXPECTED_KERNELS: [(&str, &str); 49] = [
     ("control", "pd_control"),
     ("control", "pd_targets"),
     ("evaluate", "evaluation_accumulate"),
@@ -58,6 +58,7 @@ const EXPECTED_KERNELS: [(&str, &str); 48] = [
     ("optimizer", "adam_advance"),
     ("optimizer", "adam_update"),
     ("optimizer", "log_std_floor"),
+    ("optimizer", "parameter_average"),
     ("policy", "linear_elu"),
     ("policy", "linear"),
     ("policy", "gaussian_sample"),

@@ -10,6 +10,9 @@
   with the factors the schedule writes.
 - `log_std_floor`: values below the floor raised to it exactly, the others untouched bit for
   bit (a floor of -inf changes nothing).
+- `parameter_average`: `decay * average + (1 - decay) * params` against float64, several steps
+  in a row (the average approaches constant parameters geometrically); decay 0 copies the
+  parameters bit for bit.
 - `ppo_update_statistics`: means over minibatch slots, the learning rate, advantage moments,
   the update counter; the mean gradient norm from two squared norms per step (actor and
   critic clipped separately, or the global norm and 0).
@@ -170,6 +173,24 @@ def check_log_std_floor(v: Verdict, rng):
         v.check(f"log std floor {floor}: {raised} values raised", (floor == -float("inf")) == (raised == 0), f"{raised}")
 
 
+def check_parameter_average(v: Verdict, rng):
+    n = 301
+    params = f32(rng.standard_normal(n))
+    start = f32(rng.standard_normal(n))
+    average = array(start)
+    ref = start.astype(np.float64)
+    decay = 0.9
+    for _ in range(5):
+        wp.launch(optimizer.parameter_average, dim=n, inputs=[array(params), average, decay], device="cpu")
+        ref = decay * ref + (1.0 - decay) * params.astype(np.float64)
+    v.error("parameter average, 5 steps at decay 0.9", average.numpy(), ref, limit=1e-6)
+    left = np.abs(average.numpy() - params) / np.maximum(np.abs(start - params), 1e-6)
+    v.check("parameter average: 0.9^5 of the distance left", np.all(left <= 0.9**5 + 1e-4), f"{left.max()}")
+    copied = array(start)
+    wp.launch(optimizer.parameter_average, dim=n, inputs=[array(params), copied, 0.0], device="cpu")
+    v.check("parameter average at decay 0 copies bit for bit", np.array_equal(copied.numpy().view(np.uint32), params.astype(np.float32).view(np.uint32)))
+
+
 def check_statistics(v: Verdict, rng):
     steps, a, samples = 20, 4, 1000
     for separate in [True, False]:
@@ -208,6 +229,7 @@ def main() -> int:
     check_advance(v)
     check_adam(v, rng)
     check_log_std_floor(v, rng)
+    check_parameter_average(v, rng)
     check_statistics(v, rng)
     return v.finish()
 

@@ -155,6 +155,19 @@ def log_std_floor(log_std: wp.array(dtype=wp.float32), floor: wp.float32):
     i = wp.tid()
     log_std[i] = wp.max(log_std[i], floor)
 
+
+@wp.kernel
+def parameter_average(
+    params: wp.array(dtype=wp.float32),
+    average: wp.array(dtype=wp.float32),
+    decay: wp.float32,
+):
+    """One thread per parameter, after an update (config `ppo.evaluation_average`): the
+    exponential moving average `average = decay * average + (1 - decay) * params` of the
+    policy's parameters, which the evaluation runs instead of the last update's."""
+    i = wp.tid()
+    average[i] = decay * average[i] + (1.0 - decay) * params[i]
+
 # Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
 # dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
 # writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
@@ -175,5 +188,9 @@ LAUNCH = {
     ),
     "log_std_floor": (
         "dim == len(log_std)",
+    ),
+    "parameter_average": (
+        "dim == len(params)",
+        "dim <= len(average)",
     ),
 }
