@@ -122,6 +122,22 @@ fn a_short_run_trains_evaluates_checkpoints_and_its_checkpoint_evaluates() {
     }
     let checkpoint = run.join("checkpoints/iter_00000006.safetensors");
     assert!(checkpoint.is_file(), "final checkpoint written");
+    // The backflip's config evaluates an average of the actor (ppo.evaluation_average): the
+    // checkpoint keeps it beside the actor, in the actor's layout, finite and not the actor.
+    let saved = instantmimic::run::Checkpoint::load(&checkpoint).expect("checkpoint reads");
+    let actor = saved.get::<f32>(
+        "actor.params",
+        &[saved.tensor("actor.params").expect("actor").data.len()],
+    );
+    let actor = actor.expect("actor");
+    let average = saved
+        .get::<f32>("actor.average", &[actor.len()])
+        .expect("the average, in the actor's layout");
+    assert!(average.iter().all(|v| v.is_finite()));
+    assert_ne!(
+        average, actor,
+        "six updates moved the actor away from its average"
+    );
 
     let out = binary()
         .args(["eval", "--json", "--checkpoint"])

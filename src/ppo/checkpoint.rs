@@ -16,4 +16,18 @@ pub mod ppo_tensor_names {
     pub const ADAM_CRITIC_V: &str = "adam.critic.v";
     /// f64 `[3]`: the returns' running count, mean and M2 (value normalization).
     pub const VALUE_STATISTICS: &str = "value_norm.stats";
+    /// With `ppo.evaluation_average`: the moving average of the actor's parameters, f32 `[P]`
+    /// in `ACTOR`'s layout, the policy the run's evaluations ran (and so the one to deploy).
+    pub const ACTOR_AVERAGE: &str = "actor.average";
+}
+
+/// The name of the actor tensor a checkpoint's evaluations ran, which `eval`, `export` and a
+/// latent controller's teacher use: the average of the actor's parameters where the run kept
+/// one (`ppo.evaluation_average`), else the actor itself.
+pub fn evaluated_actor(checkpoint: &crate::run::Checkpoint) -> &'static str {
+    if checkpoint.tensor(ppo_tensor_names::ACTOR_AVERAGE).is_some() {
+        ppo_tensor_names::ACTOR_AVERAGE
+    } else {
+        ppo_tensor_names::ACTOR
+    }
 }

@@ -86,6 +86,13 @@ pub struct PpoConfig {
     /// configurations when unset, as `concurrent_networks`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub min_log_std: Option<f32>,
+    /// The evaluation runs an exponential moving average of the actor's parameters, with this
+    /// decay per iteration (in (0, 1)), instead of the last update's parameters; checkpoints
+    /// keep it, and `eval`, `export` and `replay` use it (none: the evaluation runs the last
+    /// update's). Training acts with its own parameters either way. The backflip's committed
+    /// 0.9 (BENCHMARKS.md, "The evaluation on an average of the actor").
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub evaluation_average: Option<f32>,
 }
 
 impl Default for PpoConfig {
@@ -109,6 +116,7 @@ impl Default for PpoConfig {
             values_in_update: true,
             concurrent_networks: true,
             min_log_std: None,
+            evaluation_average: None,
             max_grad_norm: 1.0,
         }
     }

@@ -151,6 +151,31 @@ impl GaussianPolicy {
         })
     }
 
+    /// [`GaussianPolicy::with_batch`] with the actor reading `actor_params` (the same layout,
+    /// e.g. an average of this policy's) instead of this policy's.
+    pub fn with_batch_reading(
+        &self,
+        gpu: &Gpu,
+        batch: usize,
+        actor_params: &DeviceArray<f32>,
+    ) -> Result<GaussianPolicy, PolicyError> {
+        if actor_params.len() != self.actor.params.len() {
+            return Err(PolicyError::Shape(format!(
+                "{} actor parameters for an actor of {}",
+                actor_params.len(),
+                self.actor.params.len()
+            )));
+        }
+        let mut policy = self.with_batch(gpu, batch)?;
+        let params = actor_params.view(0, [actor_params.len()])?;
+        policy.log_std = params.view(
+            self.actor_shapes.last().map_or(0, LayerShape::end),
+            [self.action_size],
+        )?;
+        policy.actor = Mlp::new(gpu, &self.actor_shapes, params, batch, self.gemm.clone())?;
+        Ok(policy)
+    }
+
     /// What computes the GEMMs (shared by [`GaussianPolicy::with_batch`] copies and the
     /// update).
     pub fn gemm(&self) -> &PolicyGemm {

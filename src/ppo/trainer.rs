@@ -93,6 +93,9 @@ pub struct Trainer {
     /// The evaluation rollout as consecutive graphs of [`EVALUATION_CHUNK_STEPS`] control
     /// steps: [`Trainer::evaluate_until`] may stop between two of them.
     evaluation_chunks: Vec<Graph>,
+    /// The moving average of the actor's parameters that the evaluation runs
+    /// (`ppo.evaluation_average`), updated after every update inside the iteration's graph.
+    average: Option<DeviceArray<f32>>,
     /// A goal run in a latent controller's action space (`goal.decoder`): the frozen decoder
     /// the policy above (the head) drives; the graphs address its buffers.
     decoder: Option<DecoderNetworks>,
@@ -202,7 +205,18 @@ impl Trainer {
         if goal_decoder.is_some() {
             evaluation = evaluation.storing_actions_of(action_size)?;
         }
-        let evaluation_policy = policy.with_batch(gpu, evaluation.num_envs())?;
+        let average = match config.ppo.evaluation_average {
+            Some(_) => Some(DeviceArray::from_slice(
+                gpu,
+                [policy.actor_parameters().len()],
+                &policy.actor_parameters().download()?,
+            )?),
+            None => None,
+        };
+        let evaluation_policy = match &average {
+            Some(a) => policy.with_batch_reading(gpu, evaluation.num_envs(), a)?,
+            None => policy.with_batch(gpu, evaluation.num_envs())?,
+        };
         let decoder = match goal_decoder {
             Some(loaded) => {
                 let training = LatentDecoder::new(
@@ -243,9 +257,12 @@ impl Trainer {
         let iteration = match &decoder {
             Some(d) => {
                 let acting = d.training.driven_by(&policy)?;
-                Iteration::capture(gpu, &rollout, &acting, &policy, &update)?
+                Iteration::capture(gpu, &rollout, &acting, &policy, &update, None)?
             }
-            None => Iteration::capture(gpu, &rollout, &policy, &policy, &update)?,
+            None => {
+                let averaging = average.as_ref().zip(config.ppo.evaluation_average);
+                Iteration::capture(gpu, &rollout, &policy, &policy, &update, averaging)?
+            }
         };
         let evaluation_chunks = match &decoder {
             Some(d) => evaluation.capture_in_chunks(
@@ -264,6 +281,7 @@ impl Trainer {
             update,
             iteration,
             evaluation_chunks,
+            average,
             decoder,
         })
     }
@@ -429,6 +447,9 @@ impl Trainer {
         let policy = &self.policy;
         put_f32(checkpoint, ACTOR, policy.actor_parameters())?;
         put_f32(checkpoint, CRITIC, policy.critic_parameters())?;
+        if let Some(average) = &self.average {
+            put_f32(checkpoint, ACTOR_AVERAGE, average)?;
+        }
         let [count, mean, m2] = self.rollout.normalizer_moments();
         put_f64(checkpoint, OBS_COUNT, count)?;
         put_f64(checkpoint, OBS_MEAN, mean)?;
@@ -482,6 +503,13 @@ impl Trainer {
         let policy = &self.policy;
         get_f32(checkpoint, ACTOR, policy.actor_parameters())?;
         get_f32(checkpoint, CRITIC, policy.critic_parameters())?;
+        if let Some(average) = &self.average {
+            // A checkpoint of a run that kept no average starts one at its actor.
+            match checkpoint.tensor(ACTOR_AVERAGE) {
+                Some(_) => get_f32(checkpoint, ACTOR_AVERAGE, average)?,
+                None => get_f32(checkpoint, ACTOR, average)?,
+            }
+        }
         let [count, mean, m2] = self.rollout.normalizer_moments();
         get_f64(checkpoint, OBS_COUNT, count)?;
         get_f64(checkpoint, OBS_MEAN, mean)?;
@@ -623,6 +651,7 @@ impl Iteration {
         acting: &dyn RolloutPolicy,
         policy: &GaussianPolicy,
         update: &PpoUpdate,
+        averaging: Option<(&DeviceArray<f32>, f32)>,
     ) -> Result<Iteration, TrainerError> {
         let report = DeviceRange::whole(&Arc::new(gpu.alloc_zeroed(REPORT_BYTES)?));
         let parameter_squares = DeviceArray::<f64>::zeros(gpu, [2])?;
@@ -630,6 +659,12 @@ impl Iteration {
         let graph = stream.capture(|s| {
             rollout.record(s, acting)?;
             update.record(s, &PpoBatch::from(&rollout.storage))?;
+            if let Some((average, decay)) = averaging {
+                let params = policy.actor_parameters();
+                rollout
+                    .kernels()
+                    .parameter_average(s, params.len(), params, average, decay)?;
+            }
             record_parameter_squares(rollout.kernels(), s, policy, &parameter_squares)?;
             record_report(s, &report, rollout, update, &parameter_squares)
         })?;

@@ -560,6 +560,15 @@ impl TrainConfig {
             let reason = format!("must be in [-10, policy.init_log_std = {}]", p.init_log_std);
             return Err(bad("ppo.min_log_std", floor.to_string(), &reason));
         }
+        if let Some(decay) = q.evaluation_average
+            && !(decay > 0.0 && decay < 1.0)
+        {
+            return Err(bad(
+                "ppo.evaluation_average",
+                decay.to_string(),
+                "must be in (0, 1): the average's decay per iteration (leave the key out to evaluate the last update's parameters)",
+            ));
+        }
         check!(
             p.init_hidden_gain > 0.0 && p.init_hidden_gain <= 10.0,
             "policy.init_hidden_gain",

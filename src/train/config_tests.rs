@@ -1,6 +1,8 @@
 //! Unit tests of src/train/config.rs: defaults, the committed files, and every validation
 //! message naming its key.
 
+use std::path::Path;
+
 use super::*;
 use crate::env::{ActionMode, EndEffectorFrame, EvalStart, GoalConfig, ObsConfig};
 use crate::nn::GemmSetting;
@@ -178,7 +180,12 @@ fn committed_configs_are_the_tuned_baseline_with_their_run_settings() {
         let (label, config) = TrainConfig::committed(name).unwrap();
         let config = config.unwrap_or_else(|e| panic!("{label}: {e}"));
         assert_eq!(config.motion, name);
-        let tuned = &issue16;
+        // Issue 37: the backflip evaluates an average of its actor (BENCHMARKS.md).
+        let mut tuned = issue16.clone();
+        if name == "backflip" {
+            tuned.ppo.evaluation_average = Some(0.9);
+        }
+        let tuned = &tuned;
         assert_eq!(
             (
                 &config.env,
@@ -503,6 +510,9 @@ fn the_library_configs_train_the_general_defaults_sections_on_a_library() {
         // sampler").
         let mut ppo = d.ppo.clone();
         ppo.min_log_std = Some(-2.0);
+        // A library evaluates its last update's parameters: the average is measured on one
+        // clip only (BENCHMARKS.md, "The evaluation on an average of the actor").
+        ppo.evaluation_average = None;
         let mut env = d.env.clone();
         env.phase_share = crate::env::PhaseShare::Frames;
         env.clip_base_share = Some(0.3);
@@ -765,4 +775,35 @@ fn a_goal_section_is_validated_with_the_key_named() {
     assert_eq!(key_of(&c), Some("obs.future_frames"));
     // No [goal] section: tracking, nothing of the goal task is checked.
     assert_eq!(key_of(&TrainConfig::with_motion("walk")), None);
+}
+
+#[test]
+fn the_evaluation_average_is_a_decay_in_the_open_unit_interval_and_written_only_when_set() {
+    let load =
+        |ppo: &str| TrainConfig::from_toml(&format!("motion = \"walk\"\n[ppo]\n{ppo}"), "c.toml");
+    let c = load("").expect("default");
+    assert_eq!(c.ppo.evaluation_average, None);
+    assert!(!c.to_toml().expect("toml").contains("evaluation_average"));
+    let c = load("evaluation_average = 0.9").expect("0.9");
+    assert_eq!(c.ppo.evaluation_average, Some(0.9));
+    assert!(
+        c.to_toml()
+            .expect("toml")
+            .contains("evaluation_average = 0.9")
+    );
+    for bad in ["0.0", "1.0", "-0.5", "nan"] {
+        let e = load(&format!("evaluation_average = {bad}"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("ppo.evaluation_average") && e.contains("(0, 1)"),
+            "{bad}: {e}"
+        );
+    }
+    // The backflip's committed config evaluates the average (BENCHMARKS.md).
+    let backflip = TrainConfig::load(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/train/backflip.toml"),
+    )
+    .expect("backflip config");
+    assert_eq!(backflip.ppo.evaluation_average, Some(0.9));
 }

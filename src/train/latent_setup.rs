@@ -18,7 +18,7 @@ use crate::latent::{
     DistillationConfig, FrozenDecoder, LatentConfig, LatentShapes, TeacherCheckpoint,
     proprio_columns,
 };
-use crate::ppo::checkpoint::ppo_tensor_names;
+use crate::ppo::checkpoint::evaluated_actor;
 use crate::run::checkpoint::{Checkpoint, tensor_names};
 
 /// What `config`'s latent controller is distilled with (its `[latent]` section, the rollout's
@@ -97,7 +97,7 @@ pub fn load_teacher(
         obs: &teacher_config.obs,
         observation_size: observation_size(&teacher_config.obs, shapes.observation_counts),
         action_size: shapes.action_size,
-        actor: f32s(ppo_tensor_names::ACTOR)?,
+        actor: f32s(evaluated_actor(&checkpoint))?,
         obs_count: f64s(tensor_names::OBS_COUNT)?,
         obs_mean: f64s(tensor_names::OBS_MEAN)?,
         obs_m2: f64s(tensor_names::OBS_M2)?,

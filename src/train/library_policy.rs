@@ -256,6 +256,10 @@ pub fn policy_only(checkpoint: &Checkpoint) -> Result<Checkpoint, TrainError> {
         })?;
         policy.insert(name, &tensor.shape, tensor.data.clone())?;
     }
+    // The policy its evaluations ran, where the run averaged its actor.
+    if let Some(tensor) = checkpoint.tensor(ACTOR_AVERAGE) {
+        policy.insert(ACTOR_AVERAGE, &tensor.shape, tensor.data.clone())?;
+    }
     Ok(policy)
 }
 

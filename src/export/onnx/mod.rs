@@ -22,7 +22,7 @@ use crate::env::{GOAL_OBSERVATION, ObsConfig, goal_observation_config};
 use crate::latent::DECODER_DIGEST;
 use crate::motion::Character;
 use crate::nn::{LayerShape, mlp_layout};
-use crate::ppo::checkpoint::ppo_tensor_names;
+use crate::ppo::checkpoint::evaluated_actor;
 use crate::run::Checkpoint;
 use crate::run::checkpoint::tensor_names;
 use crate::train::goal_latent::{head_shapes, load_goal_decoder};
@@ -134,7 +134,7 @@ pub fn export_policy(
         .map_err(|e| ExportError::Unsupported(e.to_string()))?;
     let d = shapes.observation_size;
     let actor = checkpoint
-        .get::<f32>(ppo_tensor_names::ACTOR, &[shapes.actor_params])
+        .get::<f32>(evaluated_actor(checkpoint), &[shapes.actor_params])
         .map_err(TrainError::from)?;
     let (mean, inv_std) = checkpoint_normalizer(checkpoint, d)?;
 
