@@ -63,6 +63,40 @@ fn policy_for(gpu: &Gpu, rollout: &Rollout, config: &TrainConfig) -> GaussianPol
     GaussianPolicy::for_rollout(gpu, &config.policy, rollout, config.seed).expect("policy")
 }
 
+/// The backflip's training rollout at 32 envs, a fresh policy for it, the evaluation rollout
+/// and the policy as the trainer lends it (the training parameters with the evaluation's
+/// batch).
+struct EvaluationSetup {
+    gpu: Gpu,
+    config: TrainConfig,
+    training: Rollout,
+    policy: GaussianPolicy,
+    evaluation: Rollout,
+    evaluation_policy: GaussianPolicy,
+}
+
+fn evaluation_setup(motion: &ReferenceMotion) -> EvaluationSetup {
+    let gpu = Gpu::open(0).expect("a GPU");
+    let store = PlanStore::new(None);
+    let config = config(32, 8);
+    let rollout_config = config.rollout_config();
+    let training = Rollout::new(&gpu, &store, motion, &rollout_config).expect("training rollout");
+    let policy = policy_for(&gpu, &training, &config);
+    let evaluation =
+        Rollout::evaluation(&training, &store, &rollout_config).expect("evaluation rollout");
+    let evaluation_policy = policy
+        .with_batch(&gpu, evaluation.num_envs())
+        .expect("evaluation policy");
+    EvaluationSetup {
+        gpu,
+        config,
+        training,
+        policy,
+        evaluation,
+        evaluation_policy,
+    }
+}
+
 #[test]
 fn rollout_graph_has_no_host_work_and_replays_advance() {
     let gpu = Gpu::open(0).expect("a GPU");
@@ -234,19 +268,15 @@ fn rollout_graph_has_no_host_work_and_replays_advance() {
 /// the clip within the horizon, the first step starts near the reference, the errors are finite.
 #[test]
 fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
-    let gpu = Gpu::open(0).expect("a GPU");
-    let store = PlanStore::new(None);
-    let config = config(32, 8);
     let motion = motion();
-    let rollout_config = config.rollout_config();
-    let training = Rollout::new(&gpu, &store, &motion, &rollout_config).expect("training rollout");
-    let policy = policy_for(&gpu, &training, &config);
-    let evaluation =
-        Rollout::evaluation(&training, &store, &rollout_config).expect("evaluation rollout");
-    // As the trainer lends it: the training parameters with the evaluation's batch.
-    let evaluation_policy = policy
-        .with_batch(&gpu, evaluation.num_envs())
-        .expect("evaluation policy");
+    let EvaluationSetup {
+        gpu,
+        config,
+        policy,
+        evaluation,
+        evaluation_policy,
+        ..
+    } = evaluation_setup(&motion);
     assert_eq!(
         evaluation_policy.actor_parameters().range().unwrap(),
         policy.actor_parameters().range().unwrap(),
@@ -322,18 +352,15 @@ fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
 /// equal, its error sums equal to float rounding. A training rollout is refused.
 #[test]
 fn an_evaluation_in_chunks_plays_the_same_episodes_as_the_whole_graph() {
-    let gpu = Gpu::open(0).expect("a GPU");
-    let store = PlanStore::new(None);
-    let config = config(32, 8);
     let motion = motion();
-    let rollout_config = config.rollout_config();
-    let training = Rollout::new(&gpu, &store, &motion, &rollout_config).expect("training rollout");
-    let policy = policy_for(&gpu, &training, &config);
-    let evaluation =
-        Rollout::evaluation(&training, &store, &rollout_config).expect("evaluation rollout");
-    let evaluation_policy = policy
-        .with_batch(&gpu, evaluation.num_envs())
-        .expect("evaluation policy");
+    let EvaluationSetup {
+        gpu,
+        training,
+        policy,
+        evaluation,
+        evaluation_policy,
+        ..
+    } = evaluation_setup(&motion);
     let (whole, _) = evaluation
         .capture(&evaluation_policy, false)
         .expect("capture");
