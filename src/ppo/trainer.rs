@@ -26,7 +26,8 @@ use std::sync::Arc;
 
 use crate::cuda::{Communicator, DeviceRange, Gpu, Graph, Readback};
 use crate::env::{
-    Rollout, RolloutPolicy, StageEvents, StageRecorder, TaskRecord, TrackedMotion, Trajectory,
+    EpisodeScores, Rollout, RolloutPolicy, StageEvents, StageRecorder, TaskRecord, TrackedMotion,
+    Trajectory,
 };
 use crate::kernels::DeviceArray;
 use crate::latent::LatentDecoder;
@@ -254,15 +255,13 @@ impl Trainer {
             // NCCL's first collectives outside the capture, every rank at this point.
             replicas.warm_up(gpu)?;
         }
+        let averaging = average.as_ref().zip(config.ppo.evaluation_average);
         let iteration = match &decoder {
             Some(d) => {
                 let acting = d.training.driven_by(&policy)?;
-                Iteration::capture(gpu, &rollout, &acting, &policy, &update, None)?
+                Iteration::capture(gpu, &rollout, &acting, &policy, &update, averaging)?
             }
-            None => {
-                let averaging = average.as_ref().zip(config.ppo.evaluation_average);
-                Iteration::capture(gpu, &rollout, &policy, &policy, &update, averaging)?
-            }
+            None => Iteration::capture(gpu, &rollout, &policy, &policy, &update, averaging)?,
         };
         let evaluation_chunks = match &decoder {
             Some(d) => evaluation.capture_in_chunks(
@@ -308,17 +307,18 @@ impl Trainer {
     /// mean actions, fixed start states) and returns every env's episode.
     pub fn evaluate(&self) -> Result<Vec<EnvEvaluation>, TrainerError> {
         self.run_evaluation()?;
-        let scores = self
-            .evaluation
-            .episode_scores()
-            .ok_or_else(|| {
-                TrainerError::Internal(
-                    "the evaluation rollout keeps no tracking scores (a task that evaluates itself records its evaluation in Trainer::task_record)"
-                        .to_owned(),
-                )
-            })?
-            .download()?;
+        let scores = self.tracking_scores()?.download()?;
         Ok(scores.iter().map(EnvEvaluation::from).collect())
+    }
+
+    /// The evaluation rollout's per-env scores (a bug to ask for where a task evaluates itself).
+    fn tracking_scores(&self) -> Result<&EpisodeScores, TrainerError> {
+        self.evaluation.episode_scores().ok_or_else(|| {
+            TrainerError::Internal(
+                "the evaluation rollout keeps no tracking scores (a task that evaluates itself records its evaluation in Trainer::task_record)"
+                    .to_owned(),
+            )
+        })
     }
 
     /// What the adaptive reset sampler gives each clip now (waits for the GPU): its share of the
@@ -388,12 +388,7 @@ impl Trainer {
     /// every chunk of [`EVALUATION_CHUNK_STEPS`] steps): every env's episode so far, and the
     /// control steps run when it stopped early.
     pub fn evaluate_until(&self, stop: &EarlyStop) -> Result<EvaluationEpisodes, TrainerError> {
-        let scores = self.evaluation.episode_scores().ok_or_else(|| {
-            TrainerError::Internal(
-                "the evaluation rollout keeps no tracking scores (a task that evaluates itself records its evaluation in Trainer::task_record)"
-                    .to_owned(),
-            )
-        })?;
+        let scores = self.tracking_scores()?;
         self.evaluation.reset_all()?;
         let mut stopped_at_step = None;
         let last = self.evaluation_chunks.len().saturating_sub(1);
