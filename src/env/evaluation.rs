@@ -89,6 +89,17 @@ impl EpisodeScores {
         Ok(())
     }
 
+    /// Where each env's scored episode stands, from the status column alone (waits for the
+    /// work queued before): what an evaluation stopping early reads between two chunks.
+    pub fn statuses(&self) -> Result<Vec<EpisodeStatus>, EnvError> {
+        Ok(self
+            .status
+            .download()?
+            .into_iter()
+            .map(EpisodeStatus::from_code)
+            .collect())
+    }
+
     /// Copies the scores to the host (waits for the work queued before).
     pub fn download(&self) -> Result<Vec<EpisodeScore>, EnvError> {
         let status = self.status.download()?;
@@ -115,8 +126,26 @@ impl EpisodeScores {
     }
 }
 
+/// Where an env's scored episode stands (evaluate.py's status codes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EpisodeStatus {
+    Running,
+    Completed,
+    Failed,
+}
+
+impl EpisodeStatus {
+    fn from_code(code: i32) -> EpisodeStatus {
+        match code {
+            COMPLETED => EpisodeStatus::Completed,
+            FAILED => EpisodeStatus::Failed,
+            _ => EpisodeStatus::Running,
+        }
+    }
+}
+
 /// One env's evaluation episode.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct EpisodeScore {
     /// Reached the end of the episode without early termination.
     pub completed: bool,

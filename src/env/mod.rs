@@ -39,8 +39,8 @@ pub use config::{
 };
 pub use error::RolloutError;
 pub use evaluation::{
-    COMPLETED, ClipEvaluation, EpisodeScore, EpisodeScores, FAILED, LIBRARY_EVALUATION_WINDOW_S,
-    ROBOTICS_MAX_ANCHOR_HEIGHT_ERROR_M, ROBOTICS_MAX_ANCHOR_TILT,
+    COMPLETED, ClipEvaluation, EpisodeScore, EpisodeScores, EpisodeStatus, FAILED,
+    LIBRARY_EVALUATION_WINDOW_S, ROBOTICS_MAX_ANCHOR_HEIGHT_ERROR_M, ROBOTICS_MAX_ANCHOR_TILT,
     ROBOTICS_MAX_END_EFFECTOR_HEIGHT_ERROR_M, RUNNING, SUCCESS_MAX_BODY_DISTANCE_M,
     SUCCESS_MAX_ROOT_DROP_M, clamped_clip_steps, clip_evaluation, evaluation_env,
     evaluation_episode_steps, evaluation_start_time, yardstick,

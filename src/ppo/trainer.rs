@@ -394,8 +394,9 @@ impl Trainer {
         let last = self.evaluation_chunks.len().saturating_sub(1);
         for (i, chunk) in self.evaluation_chunks.iter().enumerate() {
             chunk.launch(self.gpu.stream())?;
-            // The download waits for the chunk: a few microseconds against its milliseconds.
-            if i < last && stop.decided(&scores.download()?) {
+            // The status column's download waits for the chunk: microseconds against its
+            // milliseconds.
+            if i < last && stop.decided(&scores.statuses()?) {
                 stopped_at_step = Some(((i + 1) * EVALUATION_CHUNK_STEPS) as u32);
                 break;
             }

@@ -32,7 +32,7 @@ use serde::{Deserialize, Serialize};
 
 use super::config::RunConfig;
 use super::library_scores::LibraryEvaluation;
-use crate::env::{EpisodeScore, EvalStart};
+use crate::env::{EpisodeScore, EpisodeStatus, EvalStart};
 pub use crate::env::{
     ROBOTICS_MAX_ANCHOR_HEIGHT_ERROR_M, ROBOTICS_MAX_ANCHOR_TILT,
     ROBOTICS_MAX_END_EFFECTOR_HEIGHT_ERROR_M, SUCCESS_MAX_BODY_DISTANCE_M, SUCCESS_MAX_ROOT_DROP_M,
@@ -344,15 +344,18 @@ impl EarlyStop {
         }
     }
 
-    /// Whether the evaluation is decided by `scores` (every env's episode so far): success is
-    /// out of reach and every watched episode has ended.
-    pub fn decided(&self, scores: &[EpisodeScore]) -> bool {
-        let failed = scores.iter().filter(|s| s.failed).count();
+    /// Whether the evaluation is decided by `statuses` (every env's episode so far): success
+    /// is out of reach and every watched episode has ended.
+    pub fn decided(&self, statuses: &[EpisodeStatus]) -> bool {
+        let failed = statuses
+            .iter()
+            .filter(|&&s| s == EpisodeStatus::Failed)
+            .count();
         failed > self.failures_allowed
             && self
                 .watched
                 .iter()
-                .all(|&env| scores.get(env).is_none_or(|s| s.failed || s.completed))
+                .all(|&env| statuses.get(env) != Some(&EpisodeStatus::Running))
     }
 }
 
@@ -710,11 +713,11 @@ mod tests {
         }
     }
 
-    fn episode(outcome: &str) -> EpisodeScore {
-        EpisodeScore {
-            completed: outcome == "completed",
-            failed: outcome == "failed",
-            ..EpisodeScore::default()
+    fn episode(outcome: &str) -> EpisodeStatus {
+        match outcome {
+            "completed" => EpisodeStatus::Completed,
+            "failed" => EpisodeStatus::Failed,
+            _ => EpisodeStatus::Running,
         }
     }
 
