@@ -121,11 +121,29 @@ impl GaussianPolicy {
     /// The same networks (parameters shared, not copied: updates to this policy's parameters
     /// are seen by both) with activations for `batch` envs, e.g. the evaluation's 32.
     pub fn with_batch(&self, gpu: &Gpu, batch: usize) -> Result<GaussianPolicy, PolicyError> {
+        self.with_batch_reading(gpu, batch, &self.actor.params)
+    }
+
+    /// [`GaussianPolicy::with_batch`] with the actor reading `actor_params` (the same layout,
+    /// e.g. an average of this policy's; shared, not copied) instead of this policy's.
+    pub fn with_batch_reading(
+        &self,
+        gpu: &Gpu,
+        batch: usize,
+        actor_params: &DeviceArray<f32>,
+    ) -> Result<GaussianPolicy, PolicyError> {
         if batch == 0 {
             return Err(PolicyError::Shape("batch must be positive".to_owned()));
         }
+        if actor_params.len() != self.actor.params.len() {
+            return Err(PolicyError::Shape(format!(
+                "{} actor parameters for an actor of {}",
+                actor_params.len(),
+                self.actor.params.len()
+            )));
+        }
         let share = |a: &DeviceArray<f32>| a.view(0, [a.len()]);
-        let actor_params = share(&self.actor.params)?;
+        let actor_params = share(actor_params)?;
         let log_std = actor_params.view(
             self.actor_shapes.last().map_or(0, LayerShape::end),
             [self.action_size],
@@ -149,31 +167,6 @@ impl GaussianPolicy {
             batch,
             seed: self.seed,
         })
-    }
-
-    /// [`GaussianPolicy::with_batch`] with the actor reading `actor_params` (the same layout,
-    /// e.g. an average of this policy's) instead of this policy's.
-    pub fn with_batch_reading(
-        &self,
-        gpu: &Gpu,
-        batch: usize,
-        actor_params: &DeviceArray<f32>,
-    ) -> Result<GaussianPolicy, PolicyError> {
-        if actor_params.len() != self.actor.params.len() {
-            return Err(PolicyError::Shape(format!(
-                "{} actor parameters for an actor of {}",
-                actor_params.len(),
-                self.actor.params.len()
-            )));
-        }
-        let mut policy = self.with_batch(gpu, batch)?;
-        let params = actor_params.view(0, [actor_params.len()])?;
-        policy.log_std = params.view(
-            self.actor_shapes.last().map_or(0, LayerShape::end),
-            [self.action_size],
-        )?;
-        policy.actor = Mlp::new(gpu, &self.actor_shapes, params, batch, self.gemm.clone())?;
-        Ok(policy)
     }
 
     /// What computes the GEMMs (shared by [`GaussianPolicy::with_batch`] copies and the
