@@ -317,6 +317,16 @@ pub struct EvaluationEpisodes {
     pub stopped_at_step: Option<u32>,
 }
 
+impl EvaluationEpisodes {
+    /// An evaluation that ran to its end.
+    pub fn whole(episodes: Vec<EnvEvaluation>) -> EvaluationEpisodes {
+        EvaluationEpisodes {
+            episodes,
+            stopped_at_step: None,
+        }
+    }
+}
+
 /// When an evaluation in progress may stop (`run.eval_early_stop`): once so many episodes have
 /// failed that the success rate can no longer be reached, and the watched episodes (the one
 /// from the clip start, until a run has seen it succeed) have ended. Stopping then changes no

@@ -32,10 +32,7 @@ pub trait Learner {
     /// stop one runs it whole.
     fn evaluate_until(&mut self, stop: &EarlyStop) -> Result<EvaluationEpisodes, RunError> {
         let _ = stop;
-        Ok(EvaluationEpisodes {
-            episodes: self.evaluate()?,
-            stopped_at_step: None,
-        })
+        Ok(EvaluationEpisodes::whole(self.evaluate()?))
     }
     fn evaluation_steps(&self) -> u32;
     /// The task's record of the iteration just run, with its evaluation when `evaluate` (None
@@ -216,10 +213,7 @@ pub fn run_loop<C: ResolvedConfig, L: Learner>(
                 stopped_at_step,
             } = match scorer.early_stop(&run, session.reached(), step.last) {
                 Some(stop) => trainer.evaluate_until(&stop)?,
-                None => EvaluationEpisodes {
-                    episodes: trainer.evaluate()?,
-                    stopped_at_step: None,
-                },
+                None => EvaluationEpisodes::whole(trainer.evaluate()?),
             };
             wall.evaluation(started);
             wall.stopped_early += u32::from(stopped_at_step.is_some());
