@@ -33,6 +33,12 @@ PHYSICS_KEYS = {
     "graph_conditional": bool,
     "deterministic": bool,
 }
+# Optional keys: left out, MuJoCo's own default holds (and the manifest records none).
+OPTIONAL_PHYSICS_KEYS = {
+    # The Newton solver stops a world once its scaled cost improvement and gradient are below
+    # this (MuJoCo's `opt.tolerance`, default 1e-8).
+    "tolerance": float,
+}
 
 # The plans the runtime needs. `step` is one mj_step; `kinematics` is what a reset needs before
 # observations are built: body poses (kinematics), centers of mass and inertias (com_pos), and
@@ -52,8 +58,9 @@ def load_physics_config(path: str | pathlib.Path) -> dict:
     except (OSError, tomllib.TOMLDecodeError) as e:
         raise ConfigError(f"{path}: {e}") from e
     for key in raw:
-        if key not in PHYSICS_KEYS:
-            raise ConfigError(f"{path}: unknown key `{key}` (known: {', '.join(PHYSICS_KEYS)})")
+        if key not in PHYSICS_KEYS and key not in OPTIONAL_PHYSICS_KEYS:
+            known = ", ".join([*PHYSICS_KEYS, *OPTIONAL_PHYSICS_KEYS])
+            raise ConfigError(f"{path}: unknown key `{key}` (known: {known})")
     for key, typ in PHYSICS_KEYS.items():
         if key not in raw:
             raise ConfigError(f"{path}: missing key `{key}`")
@@ -63,6 +70,12 @@ def load_physics_config(path: str | pathlib.Path) -> dict:
         if not isinstance(value, typ) or (typ is int and isinstance(value, bool)):
             raise ConfigError(f"{path}: `{key}` must be a {typ.__name__}, got {value!r}")
         raw[key] = value
+    for key, typ in OPTIONAL_PHYSICS_KEYS.items():
+        if key in raw:
+            value = float(raw[key]) if isinstance(raw[key], int) and not isinstance(raw[key], bool) else raw[key]
+            if not isinstance(value, typ) or not value > 0.0:
+                raise ConfigError(f"{path}: `{key}` must be a positive {typ.__name__}, got {raw[key]!r}")
+            raw[key] = value
     choices = {
         "solver": ("newton", "cg"),
         "cone": ("pyramidal", "elliptic"),
@@ -164,6 +177,8 @@ def build_mjmodel(config: dict):
     mjm.opt.timestep = config["timestep"]
     mjm.opt.iterations = config["iterations"]
     mjm.opt.ls_iterations = config["ls_iterations"]
+    if "tolerance" in config:
+        mjm.opt.tolerance = config["tolerance"]
     mjm.opt.solver = {"newton": mujoco.mjtSolver.mjSOL_NEWTON, "cg": mujoco.mjtSolver.mjSOL_CG}[config["solver"]]
     mjm.opt.cone = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}[
         config["cone"]
