@@ -2,7 +2,8 @@
 
     python kernels_py/capture.py --physics configs/physics/default.toml --nworld 32 4096 --out WORK
 
-For each world count and each plan in physics.PLAN_NAMES this writes, under WORK:
+For each world count and each plan in physics.PLAN_NAMES (and physics.TRAINING_STEP_PLAN, the step
+with the config's training solver iterations, where it has them) this writes, under WORK:
   raw/<plan>_<nworld>.wrp             Warp's APIC recording (uncompressed, with every Model and
                                       Data array bound by name, see physics.named_arrays)
   raw/<plan>_<nworld>_modules/        the binaries Warp compiled on the GPU (CUBIN: driver 580
@@ -31,22 +32,27 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import physics  # noqa: E402
 
 
-def capture_plans(config: dict, nworld: int, out: pathlib.Path) -> tuple[list[dict], object]:
+def capture_plans(
+    config: dict, nworld: int, out: pathlib.Path, plans: dict[str, str] | None = None
+) -> tuple[list[dict], object]:
+    """Captures each plan of `plans` (its name -> the MuJoCo Warp calls of physics.run_plan;
+    default: physics.PLAN_NAMES) on a model built with `config`."""
     import mujoco_warp as mjw
     import warp as wp
 
+    plans = plans or {name: name for name in physics.PLAN_NAMES}
     mjm, m, d = physics.make_model_data(config, nworld)
     # Run each plan once outside a capture: Warp compiles and loads every module it launches.
-    for name in physics.PLAN_NAMES:
-        physics.run_plan(name, m, d)
+    for calls in plans.values():
+        physics.run_plan(calls, m, d)
     wp.synchronize()
 
     entries = []
-    for name in physics.PLAN_NAMES:
+    for name, calls in plans.items():
         mjw.reset_data(m, d)
         wp.synchronize()
         with wp.ScopedCapture(apic=True) as capture:
-            physics.run_plan(name, m, d)
+            physics.run_plan(calls, m, d)
         apic = capture.graph._apic_capture
         stem = f"{name}_{nworld}"
         wrp = out / "raw" / f"{stem}.wrp"
@@ -112,9 +118,13 @@ def main(argv=None) -> int:
     plans = []
     mjm = None
     with wp.ScopedDevice("cuda:0"):
+        training = physics.training_config(config)
         for nworld in args.nworld:
             entries, mjm = capture_plans(config, nworld, out)
             plans.extend(entries)
+            if training is not None:
+                entries, _ = capture_plans(training, nworld, out, {physics.TRAINING_STEP_PLAN: "step"})
+                plans.extend(entries)
     device = wp.get_device("cuda:0")
     manifest = {
         "format": 1,

@@ -44,15 +44,20 @@ def character_digest(config: dict) -> str:
 
 
 def instantiate_modules(config: dict, nworlds: list[int]) -> dict:
-    """Run every plan once on the CPU device; return Warp's module registry afterwards."""
+    """Run every plan once on the CPU device (the training step too, with its solver iterations,
+    where the config has them); return Warp's module registry afterwards."""
     import warp as wp
     from warp._src import context as wp_context
 
+    training = physics.training_config(config)
     with wp.ScopedDevice("cpu"):
         for nworld in nworlds:
             _, m, d = physics.make_model_data(config, nworld)
             for name in physics.PLAN_NAMES:
                 physics.run_plan(name, m, d)
+            if training is not None:
+                _, m, d = physics.make_model_data(training, nworld)
+                physics.run_plan("step", m, d)
     wp.synchronize()
     return dict(wp_context.user_modules)
 

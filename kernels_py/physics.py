@@ -33,17 +33,27 @@ PHYSICS_KEYS = {
     "graph_conditional": bool,
     "deterministic": bool,
 }
-# Optional keys: left out, MuJoCo's own default holds (and the manifest records none).
+# Optional keys, both or neither: the solver iterations of the training rollouts' step, captured
+# as a second step plan, TRAINING_STEP_PLAN (the evaluation keeps `iterations`/`ls_iterations`).
 OPTIONAL_PHYSICS_KEYS = {
-    # The Newton solver stops a world once its scaled cost improvement and gradient are below
-    # this (MuJoCo's `opt.tolerance`, default 1e-8).
-    "tolerance": float,
+    "training_iterations": int,
+    "training_ls_iterations": int,
 }
 
 # The plans the runtime needs. `step` is one mj_step; `kinematics` is what a reset needs before
 # observations are built: body poses (kinematics), centers of mass and inertias (com_pos), and
 # body velocities (com_vel).
 PLAN_NAMES = ("step", "kinematics")
+# The step again, with `training_iterations` and `training_ls_iterations`, where the config has
+# them (src/plan/store.rs TRAINING_STEP_PLAN; the training rollouts replay it).
+TRAINING_STEP_PLAN = "training_step"
+
+
+def training_config(config: dict) -> dict | None:
+    """The config of the training step: `config` with its training solver iterations, or None."""
+    if "training_iterations" not in config:
+        return None
+    return dict(config, iterations=config["training_iterations"], ls_iterations=config["training_ls_iterations"])
 
 
 class ConfigError(ValueError):
@@ -70,12 +80,12 @@ def load_physics_config(path: str | pathlib.Path) -> dict:
         if not isinstance(value, typ) or (typ is int and isinstance(value, bool)):
             raise ConfigError(f"{path}: `{key}` must be a {typ.__name__}, got {value!r}")
         raw[key] = value
-    for key, typ in OPTIONAL_PHYSICS_KEYS.items():
-        if key in raw:
-            value = float(raw[key]) if isinstance(raw[key], int) and not isinstance(raw[key], bool) else raw[key]
-            if not isinstance(value, typ) or not value > 0.0:
-                raise ConfigError(f"{path}: `{key}` must be a positive {typ.__name__}, got {raw[key]!r}")
-            raw[key] = value
+    present = [key for key in OPTIONAL_PHYSICS_KEYS if key in raw]
+    if present and len(present) != len(OPTIONAL_PHYSICS_KEYS):
+        raise ConfigError(f"{path}: give {' and '.join(OPTIONAL_PHYSICS_KEYS)} together, or neither")
+    for key in present:
+        if not isinstance(raw[key], int) or isinstance(raw[key], bool) or raw[key] <= 0:
+            raise ConfigError(f"{path}: `{key}` must be a positive int, got {raw[key]!r}")
     choices = {
         "solver": ("newton", "cg"),
         "cone": ("pyramidal", "elliptic"),
@@ -177,8 +187,6 @@ def build_mjmodel(config: dict):
     mjm.opt.timestep = config["timestep"]
     mjm.opt.iterations = config["iterations"]
     mjm.opt.ls_iterations = config["ls_iterations"]
-    if "tolerance" in config:
-        mjm.opt.tolerance = config["tolerance"]
     mjm.opt.solver = {"newton": mujoco.mjtSolver.mjSOL_NEWTON, "cg": mujoco.mjtSolver.mjSOL_CG}[config["solver"]]
     mjm.opt.cone = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}[
         config["cone"]

@@ -260,12 +260,7 @@ fn time_parts(
 ) -> Result<Parts, TrainError> {
     let (rollout, policy) = trainer.training_rollout();
     let (graph, _) = rollout.capture(policy, false)?;
-    let floor_graph = physics_only_graph(
-        rollout.simulation(),
-        rollout.substeps() as u32,
-        rollout.horizon() as u32,
-    )
-    .map_err(RolloutError::from)?;
+    let floor_graph = physics_only_graph(rollout).map_err(RolloutError::from)?;
     floor_graph.upload(gpu.stream())?;
     let mut floor = Vec::new();
     let mut rollout_fps = Vec::new();

@@ -13,7 +13,7 @@ use super::timing::timed_seconds;
 use crate::cuda::{Gpu, Graph, NvtxRange};
 use crate::env::{Rollout, RolloutError, RolloutStage};
 use crate::motion::ReferenceMotion;
-use crate::plan::{PlanStore, Simulation, SimulationError};
+use crate::plan::{PlanStore, SimulationError};
 use crate::ppo::GaussianPolicy;
 use crate::train::TrainConfig;
 
@@ -67,17 +67,15 @@ pub fn time_floor_from_rollout_states(
     Ok(frames_per_launch as f64 * f64::from(launches) / seconds)
 }
 
-/// The physics-only floor: `horizon` control steps of `substeps` step-plan replays each, in one
-/// graph. Returns the graph (the caller times it next to the rollout's).
-pub fn physics_only_graph(
-    sim: &Simulation,
-    substeps: u32,
-    horizon: u32,
-) -> Result<Graph, SimulationError> {
+/// The physics-only floor: `horizon` control steps of `substeps` replays each of the rollout's
+/// step plan, in one graph. Returns the graph (the caller times it next to the rollout's).
+pub fn physics_only_graph(rollout: &Rollout) -> Result<Graph, SimulationError> {
     let _range = NvtxRange::push("capture physics-only rollout");
+    let sim = rollout.simulation();
+    let replays = rollout.horizon() as u64 * rollout.substeps() as u64;
     sim.gpu().stream().capture(|s| {
-        for _ in 0..u64::from(horizon) * u64::from(substeps) {
-            sim.record("step", s)?;
+        for _ in 0..replays {
+            sim.record(rollout.step_plan(), s)?;
         }
         Ok::<(), SimulationError>(())
     })
@@ -142,11 +140,7 @@ pub fn bench_rollout(
     let (graph, _) = rollout.capture(&policy, false)?;
     let (timed_graph, events) = rollout.capture(&policy, true)?;
     let events = events.ok_or_else(|| RolloutError::Setup("no stage events".to_owned()))?;
-    let floor = physics_only_graph(
-        rollout.simulation(),
-        rollout.substeps() as u32,
-        rollout.horizon() as u32,
-    )?;
+    let floor = physics_only_graph(&rollout)?;
     floor.upload(gpu.stream())?;
     let graph_nodes = graph.node_counts()?;
     gpu.synchronize()?;

@@ -58,6 +58,30 @@ pub struct EnvConfig {
     /// Warp's kinematics plan over every world (for a character with chains deeper than the
     /// fused kernel composes).
     pub body_kinematics: BodyKinematics,
+    /// The physics step of the training rollouts: the plan set's `training_step`, captured with
+    /// fewer Newton and line-search iterations (the default, where the plans have one for
+    /// `num_envs` worlds; else the evaluation's step), or the evaluation's step. The
+    /// evaluation always steps with the plan set's full solver settings (docs/env.md, "The
+    /// training step"). Left out of written configurations at the default.
+    #[serde(skip_serializing_if = "TrainingSolver::is_reduced")]
+    pub training_solver: TrainingSolver,
+}
+
+/// `env.training_solver`.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum TrainingSolver {
+    /// The plan set's `training_step` where it has one, else its `step`.
+    #[default]
+    Reduced,
+    /// The plan set's `step`, as the evaluation.
+    Full,
+}
+
+impl TrainingSolver {
+    fn is_reduced(&self) -> bool {
+        *self == TrainingSolver::Reduced
+    }
 }
 
 /// `env.body_kinematics` (kernels_py/env/kinematics.py).
@@ -113,6 +137,7 @@ impl Default for EnvConfig {
             phase_share: PhaseShare::Resets,
             clip_base_share: None,
             body_kinematics: BodyKinematics::Fused,
+            training_solver: TrainingSolver::Reduced,
         }
     }
 }

@@ -52,7 +52,8 @@ pub use reader::MAX_NESTING_DEPTH;
 pub use replay::ReplayOrder;
 pub use simulation::{Buffer, Simulation, SimulationError};
 pub use store::{
-    EMBEDDED_CHARACTERS_DIR, MANIFEST_PATH, MJWARP_PTX_DIR, PLANS_DIR, PlanEntry, PlanManifest,
-    PlanSource, PlanStore, SimulatedModel, ptx_file_name,
+    EMBEDDED_CHARACTERS_DIR, KINEMATICS_PLAN, MANIFEST_PATH, MJWARP_PTX_DIR, PLANS_DIR, PlanEntry,
+    PlanManifest, PlanSource, PlanStore, STEP_PLAN, SimulatedModel, TRAINING_STEP_PLAN,
+    ptx_file_name,
 };
 pub use summary::{BindingSummary, PlanSummary};

@@ -35,6 +35,16 @@ pub const EMBEDDED_CHARACTERS_DIR: &str = "characters";
 /// The plan manifest, relative to the store's root.
 pub const MANIFEST_PATH: &str = "plans/manifest.json";
 
+/// MuJoCo Warp's step with the physics options of the plan set's manifest: the evaluation's, and
+/// every other simulation's but the training rollout's (`kernels_py/physics.py` PLAN_NAMES).
+pub const STEP_PLAN: &str = "step";
+/// The step captured with the manifest's training solver iterations (`training_iterations`,
+/// `training_ls_iterations`): fewer Newton and line-search iterations, for the training
+/// rollouts only (`env.training_solver`). A plan set captured without them has none.
+pub const TRAINING_STEP_PLAN: &str = "training_step";
+/// The kinematics a reset needs before observations are built.
+pub const KINEMATICS_PLAN: &str = "kinematics";
+
 /// `plans/manifest.json`, as `kernels_py/capture.py` writes it.
 #[derive(Clone, Debug, Deserialize)]
 pub struct PlanManifest {
@@ -221,6 +231,15 @@ impl PlanStore {
                 self.describe()
             ))
         })
+    }
+
+    /// Whether the manifest lists a `name` plan for `nworld` worlds.
+    pub fn has_plan(&self, name: &str, nworld: u32) -> Result<bool, PlanError> {
+        Ok(self
+            .manifest()?
+            .plans
+            .iter()
+            .any(|p| p.name == name && p.nworld == nworld))
     }
 
     /// The plan `name` captured for `nworld` worlds (kept after the first request when the

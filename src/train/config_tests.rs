@@ -614,6 +614,27 @@ fn phase_share_is_resets_unless_the_config_says_frames_and_written_only_then() {
 }
 
 #[test]
+fn training_solver_is_reduced_unless_the_config_says_full_and_written_only_then() {
+    use crate::env::TrainingSolver;
+    let mut c = TrainConfig::with_motion("backflip");
+    assert_eq!(c.env.training_solver, TrainingSolver::Reduced);
+    assert!(!c.to_toml().unwrap().contains("training_solver"));
+    c.env.training_solver = TrainingSolver::Full;
+    let on = c.to_toml().unwrap();
+    assert!(on.contains("training_solver = \"full\""), "{on}");
+    let back = TrainConfig::from_toml(&on, "on.toml").unwrap();
+    assert_eq!(back.env.training_solver, TrainingSolver::Full);
+    let bad = on.replace("\"full\"", "\"fast\"");
+    let e = TrainConfig::from_toml(&bad, "bad.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("training_solver") && e.contains("expected `reduced` or `full`"),
+        "{e}"
+    );
+}
+
+#[test]
 fn body_kinematics_takes_plan_or_fused_and_names_the_key_otherwise() {
     use crate::env::BodyKinematics;
     let set = TrainConfig::with_motion("walk")

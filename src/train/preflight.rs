@@ -14,12 +14,13 @@ use crate::env::layout::{JointLayout, ObservationCounts};
 use crate::motion::find::{MotionSource, ResolvedMotion, resolve_motion};
 use crate::motion::{Character, LoopMode, MotionClip, ReferenceMotion, ReferenceTable};
 use crate::nn::mlp_layout;
-use crate::plan::{PlanStore, SimulatedModel};
+use crate::plan::{KINEMATICS_PLAN, PlanStore, STEP_PLAN, SimulatedModel};
 use crate::run::checkpoint::tensor_names;
 use crate::run::evaluation::evaluation_steps;
 
-/// The plans a run replays: physics steps, and the kinematics a reset needs.
-pub const RUN_PLANS: [&str; 2] = ["step", "kinematics"];
+/// The plans a run needs: physics steps, and the kinematics a reset needs (a plan set's
+/// `training_step` is optional: training steps with `step` where it is missing).
+pub const RUN_PLANS: [&str; 2] = [STEP_PLAN, KINEMATICS_PLAN];
 
 /// Sizes of the networks of a configuration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

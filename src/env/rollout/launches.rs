@@ -4,6 +4,7 @@
 
 use crate::cuda::Stream;
 use crate::kernels::Yardstick;
+use crate::plan::KINEMATICS_PLAN;
 
 use super::super::evaluation::EpisodeScores;
 use super::super::storage::RolloutStorage;
@@ -234,7 +235,7 @@ impl Rollout {
         after_reset: bool,
     ) -> Result<(), RolloutError> {
         match &self.body_kinematics {
-            None => self.sim.record("kinematics", s)?,
+            None => self.sim.record(KINEMATICS_PLAN, s)?,
             Some(model) => model.record(
                 &self.kernels,
                 s,

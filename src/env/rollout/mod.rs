@@ -18,11 +18,15 @@ use std::sync::Arc;
 use crate::cuda::{Communicator, Gpu, Graph, Stream};
 use crate::motion::MotionLibrary;
 use crate::motion::table::TableLayout;
-use crate::plan::{PlanStore, Simulation};
+use crate::plan::{
+    KINEMATICS_PLAN, PlanStore, STEP_PLAN, Simulation, SimulationError, TRAINING_STEP_PLAN,
+};
 
 use super::DeviceReferenceTable;
 use super::body_model::{BodyModel, DeviceBodyModel};
-use super::config::{ActionMode, BodyKinematics, RolloutConfig, TaskConfig};
+use super::config::{
+    ActionMode, BodyKinematics, EnvConfig, RolloutConfig, TaskConfig, TrainingSolver,
+};
 use super::error::RolloutError;
 use super::evaluation::{ClipEvaluation, EpisodeScores, clip_evaluation, yardstick};
 use super::goal::{
@@ -77,6 +81,8 @@ pub struct EpisodeState {
 pub struct Rollout {
     gpu: Gpu,
     sim: Simulation,
+    /// The plan of each physics substep ([`Rollout::step_plan`]).
+    step_plan: &'static str,
     kernels: Arc<EnvKernels>,
     /// The clips on the host (the library of one for a single clip) and on the device; the
     /// evaluation rollout shares both with its training rollout.
@@ -183,8 +189,17 @@ impl Rollout {
     ) -> Result<Rollout, RolloutError> {
         let n = config.env.num_envs as usize;
         let substeps = config.env.substeps as usize;
-        let sim = Simulation::load(gpu, store, config.env.num_envs, &["step", "kinematics"])?;
-        let physics_dt = physics_timestep(&sim)?;
+        let step_plan = match source {
+            Source::Training(_) => training_step_plan(store, &config.env)?,
+            Source::Evaluation(_) => STEP_PLAN,
+        };
+        let sim = Simulation::load(
+            gpu,
+            store,
+            config.env.num_envs,
+            &[step_plan, KINEMATICS_PLAN],
+        )?;
+        let physics_dt = physics_timestep(&sim, step_plan)?;
         let control_dt = physics_dt * f64::from(config.env.substeps);
         let (library, table, character, layout, bodies, sizes) = match source {
             Source::Training(motion) => {
@@ -347,6 +362,7 @@ impl Rollout {
         Ok(Rollout {
             gpu: gpu.clone(),
             sim,
+            step_plan,
             kernels,
             library,
             table,
@@ -452,6 +468,11 @@ impl Rollout {
 
     pub fn simulation(&self) -> &Simulation {
         &self.sim
+    }
+
+    /// The plan its physics substeps replay: `training_step` or `step` (`env.training_solver`).
+    pub fn step_plan(&self) -> &'static str {
+        self.step_plan
     }
 
     /// Puts every env at a reference state (all envs marked done, then the masked reset, the
@@ -702,7 +723,9 @@ impl Rollout {
             for _ in 0..self.substeps {
                 stages.stage(gpu, s, RolloutStage::Control, |s| self.record_pd_control(s))?;
                 stages.stage(gpu, s, RolloutStage::Physics, |s| {
-                    self.sim.record("step", s).map_err(RolloutError::from)
+                    self.sim
+                        .record(self.step_plan, s)
+                        .map_err(RolloutError::from)
                 })?;
             }
             stages.stage(gpu, s, RolloutStage::Kinematics, |s| {
@@ -779,9 +802,24 @@ impl Rollout {
     }
 }
 
+/// The step plan of a training rollout: `env.training_solver` where the plan set has a
+/// training step for its world count, else the evaluation's.
+fn training_step_plan(store: &PlanStore, env: &EnvConfig) -> Result<&'static str, RolloutError> {
+    Ok(match env.training_solver {
+        TrainingSolver::Reduced
+            if store
+                .has_plan(TRAINING_STEP_PLAN, env.num_envs)
+                .map_err(SimulationError::from)? =>
+        {
+            TRAINING_STEP_PLAN
+        }
+        TrainingSolver::Reduced | TrainingSolver::Full => STEP_PLAN,
+    })
+}
+
 /// The step plan's physics timestep (s), from the options it was captured with.
-fn physics_timestep(sim: &Simulation) -> Result<f64, RolloutError> {
-    sim.plan_info("step")
+fn physics_timestep(sim: &Simulation, step_plan: &str) -> Result<f64, RolloutError> {
+    sim.plan_info(step_plan)
         .and_then(|info| info.physics.get("config"))
         .and_then(|config| config.get("timestep"))
         .and_then(serde_json::Value::as_f64)
@@ -792,4 +830,45 @@ fn physics_timestep(sim: &Simulation) -> Result<f64, RolloutError> {
                     .to_owned(),
             )
         })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{EnvConfig, TrainingSolver, training_step_plan};
+    use crate::plan::{PlanStore, STEP_PLAN, TRAINING_STEP_PLAN};
+
+    fn env(num_envs: u32, training_solver: TrainingSolver) -> EnvConfig {
+        EnvConfig {
+            num_envs,
+            training_solver,
+            ..EnvConfig::default()
+        }
+    }
+
+    /// The committed plans have a training step at both world counts; a count without one and
+    /// a plan set without any (the G1's) train with the evaluation's step, as `full` does.
+    #[test]
+    fn training_rollouts_take_the_training_step_where_the_plans_have_one() {
+        let humanoid = PlanStore::new(None);
+        for n in [32, 4096] {
+            assert_eq!(
+                training_step_plan(&humanoid, &env(n, TrainingSolver::Reduced)).unwrap(),
+                TRAINING_STEP_PLAN
+            );
+            assert_eq!(
+                training_step_plan(&humanoid, &env(n, TrainingSolver::Full)).unwrap(),
+                STEP_PLAN
+            );
+        }
+        assert_eq!(
+            training_step_plan(&humanoid, &env(2048, TrainingSolver::Reduced)).unwrap(),
+            STEP_PLAN
+        );
+        let g1 = PlanStore::embedded("characters/g1");
+        assert!(g1.has_plan(STEP_PLAN, 4096).unwrap());
+        assert_eq!(
+            training_step_plan(&g1, &env(4096, TrainingSolver::Reduced)).unwrap(),
+            STEP_PLAN
+        );
+    }
 }
