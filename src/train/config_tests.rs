@@ -593,45 +593,64 @@ fn min_log_std_is_written_only_when_set_and_stays_at_or_below_the_initial_log_st
     }
 }
 
-#[test]
-fn phase_share_is_resets_unless_the_config_says_frames_and_written_only_then() {
+/// An `[env]` key left out of written configs at its default: `set` gives it `value`, which is
+/// written as `key = "value"` and read back; `bad` in its place is refused, naming the key and
+/// the `expected` variants.
+fn assert_written_only_off_default(
+    key: &str,
+    set: fn(&mut TrainConfig),
+    value: &str,
+    bad: &str,
+    expected: &str,
+) {
     let mut c = TrainConfig::with_motion("walk");
-    assert_eq!(c.env.phase_share, crate::env::PhaseShare::Resets);
-    assert!(!c.to_toml().unwrap().contains("phase_share"));
-    c.env.phase_share = crate::env::PhaseShare::Frames;
+    assert!(!c.to_toml().unwrap().contains(key));
+    set(&mut c);
     let on = c.to_toml().unwrap();
-    assert!(on.contains("phase_share = \"frames\""), "{on}");
+    assert!(on.contains(&format!("{key} = \"{value}\"")), "{on}");
     let back = TrainConfig::from_toml(&on, "on.toml").unwrap();
-    assert_eq!(back.env.phase_share, crate::env::PhaseShare::Frames);
-    let bad = on.replace("\"frames\"", "\"steps\"");
+    assert_eq!(back.env, c.env);
+    let bad = on.replace(&format!("\"{value}\""), &format!("\"{bad}\""));
     let e = TrainConfig::from_toml(&bad, "bad.toml")
         .unwrap_err()
         .to_string();
-    assert!(
-        e.contains("phase_share") && e.contains("expected `resets` or `frames`"),
-        "{e}"
-    );
+    assert!(e.contains(key) && e.contains(expected), "{e}");
 }
 
+/// `env.phase_share` is "resets" and `env.training_solver` "reduced" unless the config says
+/// otherwise, and each is written only then.
 #[test]
-fn training_solver_is_reduced_unless_the_config_says_full_and_written_only_then() {
-    use crate::env::TrainingSolver;
-    let mut c = TrainConfig::with_motion("backflip");
-    assert_eq!(c.env.training_solver, TrainingSolver::Reduced);
-    assert!(!c.to_toml().unwrap().contains("training_solver"));
-    c.env.training_solver = TrainingSolver::Full;
-    let on = c.to_toml().unwrap();
-    assert!(on.contains("training_solver = \"full\""), "{on}");
-    let back = TrainConfig::from_toml(&on, "on.toml").unwrap();
-    assert_eq!(back.env.training_solver, TrainingSolver::Full);
-    let bad = on.replace("\"full\"", "\"fast\"");
-    let e = TrainConfig::from_toml(&bad, "bad.toml")
-        .unwrap_err()
-        .to_string();
-    assert!(
-        e.contains("training_solver") && e.contains("expected `reduced` or `full`"),
-        "{e}"
+fn env_keys_at_their_default_are_left_out_of_written_configs() {
+    use crate::env::{PhaseShare, TrainingSolver};
+    let defaults = TrainConfig::with_motion("walk").env;
+    assert_eq!(defaults.phase_share, PhaseShare::Resets);
+    assert_eq!(defaults.training_solver, TrainingSolver::Reduced);
+    type Case = (
+        &'static str,
+        fn(&mut TrainConfig),
+        &'static str,
+        &'static str,
+        &'static str,
     );
+    let cases: [Case; 2] = [
+        (
+            "phase_share",
+            |c| c.env.phase_share = PhaseShare::Frames,
+            "frames",
+            "steps",
+            "expected `resets` or `frames`",
+        ),
+        (
+            "training_solver",
+            |c| c.env.training_solver = TrainingSolver::Full,
+            "full",
+            "fast",
+            "expected `reduced` or `full`",
+        ),
+    ];
+    for (key, set, value, bad, expected) in cases {
+        assert_written_only_off_default(key, set, value, bad, expected);
+    }
 }
 
 #[test]
