@@ -52,7 +52,7 @@ pub use goal::{GoalCounter, GoalRates, GoalRecord, GoalTally};
 pub use physics_state::{PhysicsSizes, PhysicsState, PhysicsStateError};
 pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;
-pub use rollout::{EpisodeState, Rollout};
+pub use rollout::{EpisodeState, Rollout, training_solver_note};
 pub use stages::{RolloutStage, Stage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 pub use storage::{ActStorage, RolloutStorage};

@@ -15,7 +15,7 @@ use super::latent_setup::{distillation_config, load_teacher};
 use super::ppo_trainer::{new_trainer, trainer_config};
 use super::preflight::Preflight;
 use crate::cuda::Gpu;
-use crate::env::{TrackedMotion, TrainMotion};
+use crate::env::{TrackedMotion, TrainMotion, training_solver_note};
 use crate::latent::LatentTrainer;
 use crate::motion::{Character, ReferenceMotion};
 use crate::plan::PlanStore;
@@ -121,6 +121,7 @@ pub fn train_with<'a>(
         config.task_evaluates(),
     )?;
     let mut notes = vec![format!("GEMMs: {}", trainer.gemm().describe())];
+    notes.extend(training_solver_note(store, &config.env)?);
     if let Some(goal) = config.goal.as_ref().filter(|g| !g.decoder.is_empty()) {
         notes.push(format!(
             "goal policy in the latent action space of {} (decoder, prior and observation statistics frozen; docs/goal.md)",
@@ -163,13 +164,14 @@ fn train_latent_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
         &setup.config.run,
         false,
     )?;
-    let notes = vec![
+    let mut notes = vec![
         format!("GEMMs: {}", trainer.gemm().describe()),
         format!(
             "latent controller distilled from {} (its observation statistics frozen; the student acts, the teacher labels)",
             teacher.source
         ),
     ];
+    notes.extend(training_solver_note(&setup.store, &setup.config.env)?);
     Ok(run_loop(
         session,
         &mut trainer,
@@ -224,6 +226,7 @@ pub fn train_on_gpus<'a>(
     let trainer_config = trainer_config(session.config(), motion.character())?;
     let mut replicas = Replicas::start(&devices, &trainer_config, motion, store)?;
     let mut notes = vec![format!("GEMMs: {} (every GPU)", replicas.gemm())];
+    notes.extend(training_solver_note(store, &trainer_config.rollout.env)?);
     notes.extend(replicas.take_notes());
     let scorer = match motion {
         TrackedMotion::Clip(clip) => Scorer::for_clip(clip, &session.config().run),

@@ -12,7 +12,7 @@ use super::error::TrainError;
 use super::gpu_loop::{RunStart, TrainSetup, library_note};
 use super::ppo_trainer::trainer_config;
 use crate::cuda::{Communicator, Gpu, nccl_version};
-use crate::env::TrackedMotion;
+use crate::env::{TrackedMotion, training_solver_note};
 use crate::ppo::{Followed, RankReplica, Trainer, TrainerConfig};
 use crate::run::{Checkpoint, RunDir, RunSummary, Scorer, run_loop};
 use crate::world::{Control, Host, Watch, WorldError, WorldSpec, join};
@@ -133,6 +133,7 @@ fn lead(
     let (trainer, watch) =
         watched_replica(&gpu, setup, motion, &config, &communicator, &control, world)?;
     let mut notes = vec![format!("GEMMs: {} (every rank)", trainer.gemm().describe())];
+    notes.extend(training_solver_note(&setup.store, &config.rollout.env)?);
     if let Ok((version, library)) = nccl_version() {
         notes.push(format!(
             "world of {} processes ({}): {} envs each, {} in all; NCCL {version} ({library}); rank 0 on GPU {}",

@@ -817,6 +817,32 @@ fn training_step_plan(store: &PlanStore, env: &EnvConfig) -> Result<&'static str
     })
 }
 
+/// The line a run prints when its training rollouts step with the plans' `training_step`: the
+/// solver iterations of training and of the evaluation, from the plans' manifest.
+pub fn training_solver_note(
+    store: &PlanStore,
+    env: &EnvConfig,
+) -> Result<Option<String>, RolloutError> {
+    if training_step_plan(store, env)? != TRAINING_STEP_PLAN {
+        return Ok(None);
+    }
+    let manifest = store.manifest().map_err(SimulationError::from)?;
+    let config = &manifest.physics["config"];
+    let count = |key: &str| {
+        config[key]
+            .as_u64()
+            .map_or("?".to_owned(), |n| n.to_string())
+    };
+    Ok(Some(format!(
+        "solver: training rollouts {} Newton and {} line-search iterations, evaluations {} and {} \
+         (env.training_solver = \"full\" trains with the evaluation's; docs/env.md, \"The training step\")",
+        count("training_iterations"),
+        count("training_ls_iterations"),
+        count("iterations"),
+        count("ls_iterations")
+    )))
+}
+
 /// The step plan's physics timestep (s), from the options it was captured with.
 fn physics_timestep(sim: &Simulation, step_plan: &str) -> Result<f64, RolloutError> {
     sim.plan_info(step_plan)
@@ -834,7 +860,7 @@ fn physics_timestep(sim: &Simulation, step_plan: &str) -> Result<f64, RolloutErr
 
 #[cfg(test)]
 mod tests {
-    use super::{EnvConfig, TrainingSolver, training_step_plan};
+    use super::{EnvConfig, TrainingSolver, training_solver_note, training_step_plan};
     use crate::plan::{PlanStore, STEP_PLAN, TRAINING_STEP_PLAN};
 
     fn env(num_envs: u32, training_solver: TrainingSolver) -> EnvConfig {
@@ -869,6 +895,33 @@ mod tests {
         assert_eq!(
             training_step_plan(&g1, &env(4096, TrainingSolver::Reduced)).unwrap(),
             STEP_PLAN
+        );
+    }
+
+    /// A run on the training step says so, with the iterations of both steps from the
+    /// manifest; a run on the evaluation's step prints nothing.
+    #[test]
+    fn the_training_solver_note_names_both_solvers_iterations() {
+        let humanoid = PlanStore::new(None);
+        let note = training_solver_note(&humanoid, &env(4096, TrainingSolver::Reduced))
+            .unwrap()
+            .expect("a note");
+        assert!(
+            note.contains(
+                "training rollouts 3 Newton and 6 line-search iterations, evaluations 10 and 20"
+            ),
+            "{note}"
+        );
+        assert!(
+            training_solver_note(&humanoid, &env(4096, TrainingSolver::Full))
+                .unwrap()
+                .is_none()
+        );
+        let g1 = PlanStore::embedded("characters/g1");
+        assert!(
+            training_solver_note(&g1, &env(4096, TrainingSolver::Reduced))
+                .unwrap()
+                .is_none()
         );
     }
 }
