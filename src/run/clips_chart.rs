@@ -161,6 +161,7 @@ mod tests {
             robotics_rule_passed: 0,
             robotics_rule_rate: 0.0,
             clip_start_robotics_rule: false,
+            clip_start_completed: false,
             episode_steps: 30,
             mean_episode_steps: 20.0,
             pose_error_m: 0.05,

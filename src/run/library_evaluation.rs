@@ -146,6 +146,7 @@ impl LibraryPlan {
             .iter()
             .take(clips)
             .all(EnvEvaluation::passes_robotics_rule);
+        total.clip_start_completed = episodes.iter().take(clips).all(|e| e.completed);
         total.episode_steps = self.longest_steps();
         total.library = Some(LibraryEvaluation {
             clips: scores,
@@ -191,6 +192,7 @@ fn summarize_mixed(episodes: &[EnvEvaluation]) -> EvaluationSummary {
         robotics_rule_passed,
         robotics_rule_rate: f64::from(robotics_rule_passed) / n,
         clip_start_robotics_rule: false,
+        clip_start_completed: false,
         episode_steps: 0,
         mean_episode_steps: steps as f64 / n,
         pose_error_m: mean(&|e| e.pose_error_sum),

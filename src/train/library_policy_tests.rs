@@ -252,6 +252,7 @@ fn summary() -> EvaluationSummary {
         robotics_rule_passed: 0,
         robotics_rule_rate: 0.0,
         clip_start_robotics_rule: false,
+        clip_start_completed: false,
         episode_steps: 300,
         mean_episode_steps: 50.0,
         pose_error_m: 0.04,
