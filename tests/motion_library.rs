@@ -7,6 +7,7 @@ use std::path::Path;
 use instantmimic::motion::built_in::BUILT_IN_CLIPS;
 use instantmimic::motion::character::HUMANOID_JSON;
 use instantmimic::motion::find::MotionSource;
+use instantmimic::motion::flight::ReferenceFlight;
 use instantmimic::motion::library_config::{clip_name_of_file, library_entries_at, load_library};
 use instantmimic::motion::table::HEADER_LEN;
 use instantmimic::motion::{
@@ -273,7 +274,14 @@ fn a_config_lists_clips_by_name_or_path() {
     assert_eq!(entries[1].key, "motion_library.clips[1]");
     assert!(matches!(entries[1].resolved.source, MotionSource::File(_)));
     assert!(entries.iter().all(|e| e.weight == 1.0));
-    let (library, _) = load_library(&origin, &entries, &humanoid(), CONTROL_DT).expect("loads");
+    let (library, _) = load_library(
+        &origin,
+        &entries,
+        &humanoid(),
+        CONTROL_DT,
+        ReferenceFlight::Recorded,
+    )
+    .expect("loads");
     assert_eq!(library.num_clips(), 3);
     assert_eq!(library.clips()[1].loop_mode, LoopMode::Wrap);
     assert_eq!(library.clips()[2].loop_mode, LoopMode::Clamp);
@@ -306,7 +314,14 @@ fn a_directory_library_reads_every_txt_file_sorted() {
         let (origin, entries) = library_entries_at(at, None).expect("entries");
         let names: Vec<&str> = entries.iter().map(|e| e.name.as_str()).collect();
         assert_eq!(names, ["alpha", "mid", "zeta"], "{origin}");
-        let (library, _) = load_library(&origin, &entries, &humanoid(), CONTROL_DT).expect("loads");
+        let (library, _) = load_library(
+            &origin,
+            &entries,
+            &humanoid(),
+            CONTROL_DT,
+            ReferenceFlight::Recorded,
+        )
+        .expect("loads");
         let frames: Vec<usize> = library.clips().iter().map(|c| c.frames).collect();
         assert_eq!(frames, [40, 30, 20]);
     }
@@ -337,7 +352,14 @@ fn a_manifest_gives_weights_and_names() {
         .map(|e| (e.name.as_str(), e.weight))
         .collect();
     assert_eq!(got, [("walk", 3.0), ("synth", 1.0), ("walk_again", 0.5)]);
-    let (library, _) = load_library(&origin, &entries, &humanoid(), CONTROL_DT).expect("loads");
+    let (library, _) = load_library(
+        &origin,
+        &entries,
+        &humanoid(),
+        CONTROL_DT,
+        ReferenceFlight::Recorded,
+    )
+    .expect("loads");
     let fractions = library.weight_fractions();
     assert!((fractions[0] - 3.0 / 4.5).abs() < 1e-15);
     // The same clip under two names: the same rows.
@@ -456,7 +478,14 @@ fn bad_clips_in_a_directory_fail_naming_the_clip() {
         let bad = d.join(file);
         std::fs::write(&bad, bytes).expect("write");
         let (origin, entries) = library_entries_at(d, None).expect("entries");
-        let err = load_library(&origin, &entries, &character, CONTROL_DT).expect_err("refused");
+        let err = load_library(
+            &origin,
+            &entries,
+            &character,
+            CONTROL_DT,
+            ReferenceFlight::Recorded,
+        )
+        .expect_err("refused");
         let line = err.to_string();
         let name = file.trim_end_matches(".txt");
         assert!(

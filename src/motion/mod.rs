@@ -39,6 +39,7 @@ pub mod clip;
 pub mod deepmimic;
 pub mod error;
 pub mod find;
+pub mod flight;
 pub mod format;
 pub mod holosoma;
 pub mod import;
