@@ -294,6 +294,29 @@ fn inspect_reads_every_built_in_clip_by_name() {
     }
 }
 
+/// `motion inspect` says where a clip flies and how close it comes to its mirror image: the
+/// backflip has one flight and is nearly its own mirror image; the walk has no flight and is its
+/// mirror image half a cycle later.
+#[test]
+fn inspect_names_the_flights_and_the_mirror_image() {
+    let flip = run(&["motion", "inspect", "backflip"], None);
+    let text = succeeded(&flip, "backflip");
+    assert!(
+        text.contains("flight               0.688 .. 1.188 s (key frames 11-19)")
+            && text
+                .contains("env.reference_flight = \"ballistic\" moves the root by up to 0.096 m")
+            && text.contains("mirror image         the clip 0.000 s later, 0.098 m apart"),
+        "{text}"
+    );
+    let walk = run(&["motion", "inspect", "walk"], None);
+    let text = succeeded(&walk, "walk");
+    assert!(
+        text.contains("flights              none")
+            && text.contains("mirror image         the clip 0.633 s later, 0.000 m apart"),
+        "{text}"
+    );
+}
+
 /// DeepMimic's long clips (3.6 MB each) stay out of the repository: they are checked when
 /// INSTANTMIMIC_MOTIONS names a directory with `long/` (../shared/data/motions on CI).
 #[test]

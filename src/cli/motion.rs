@@ -8,6 +8,7 @@ use clap::{Args, Subcommand};
 
 use crate::motion::character::DEFAULT_CHARACTER;
 use crate::motion::find::{MOTIONS_ENV, ResolvedMotion, resolve_motion};
+use crate::motion::flight::{FLIGHT_CLEARANCE_M, GRAVITY_M_S2};
 use crate::motion::retarget::ScaledSource;
 use crate::motion::summary::JointRange;
 use crate::motion::{Character, ClipSummary, ReferenceMotion};
@@ -317,6 +318,35 @@ fn inspect_report(s: &ClipSummary) -> String {
         norms.count,
         norms.beyond_rounding
     );
+    if s.flights.is_empty() {
+        let _ = writeln!(
+            out,
+            "flights              none (no key frame more than {FLIGHT_CLEARANCE_M} m off the ground between two on it)"
+        );
+    }
+    for f in &s.flights {
+        let (low, high) = f.recorded_vertical_acceleration;
+        let _ = writeln!(
+            out,
+            "flight               {:.3} .. {:.3} s (key frames {}-{}): centre of mass {low:+.1} .. {high:+.1} m/s² vertically (gravity -{GRAVITY_M_S2}); env.reference_flight = \"ballistic\" moves the root by up to {:.3} m",
+            f.take_off_s, f.landing_s, f.flight.take_off, f.flight.landing, f.largest_shift_m
+        );
+    }
+    match &s.mirror_image {
+        Some(m) => {
+            let _ = writeln!(
+                out,
+                "mirror image         the clip {:.3} s later, {:.3} m apart (root-relative body positions, mean)",
+                m.shift_s, m.mean_distance_m
+            );
+        }
+        None => {
+            let _ = writeln!(
+                out,
+                "mirror image         (the character has no left-right mirror image)"
+            );
+        }
+    }
     let _ = writeln!(
         out,
         "joint ranges (degrees; ball joints: rotation vector x, y, z and largest angle)"

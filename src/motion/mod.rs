@@ -45,6 +45,7 @@ pub mod holosoma;
 pub mod import;
 pub mod kinematics;
 pub mod library_config;
+pub mod mirror;
 pub mod mjlab;
 pub mod motion_library;
 pub mod npy;

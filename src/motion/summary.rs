@@ -5,6 +5,8 @@ use nalgebra::Vector3;
 
 use super::character::JointType;
 use super::clip::{LoopMode, QuaternionNorms};
+use super::flight::{FlightRefit, ballistic_refit};
+use super::mirror::{ClipSymmetry, Mirror, clip_symmetry};
 use super::reference::ReferenceMotion;
 use super::rotation::{quat_from_wxyz, quat_to_rotation_vector, read_wxyz};
 
@@ -56,7 +58,14 @@ pub struct ClipSummary {
     pub joints: Vec<JointSummary>,
     pub lowest_foot: Option<LowestPoint>,
     pub quaternion_norms: QuaternionNorms,
+    /// The clip's flights and what `env.reference_flight = "ballistic"` would do to them.
+    pub flights: Vec<FlightRefit>,
+    /// How close the clip comes to its own mirror image (None: the character has none).
+    pub mirror_image: Option<ClipSymmetry>,
 }
+
+/// Sample times (and shifts) of [`ClipSummary::mirror_image`].
+const MIRROR_SAMPLES: usize = 64;
 
 impl ClipSummary {
     /// Summarizes `motion` over its key frames.
@@ -148,6 +157,13 @@ impl ClipSummary {
             joints,
             lowest_foot,
             quaternion_norms: clip.quaternion_norms(),
+            // Forward kinematics of the clip's own frames cannot fail here.
+            flights: ballistic_refit(clip, character)
+                .map(|(_, refits)| refits)
+                .unwrap_or_default(),
+            mirror_image: Mirror::of_character(character)
+                .ok()
+                .and_then(|m| clip_symmetry(clip, character, &m, MIRROR_SAMPLES).ok()),
         }
     }
 }
