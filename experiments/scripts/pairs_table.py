@@ -1,5 +1,6 @@
 """Medians of a lanes.sh call's runs, grouped by name without the seed (`NAME_sSEED`): active
-time to success (spread), from the clip start, wall time to success from the command's start
+time to success (spread), from the clip start, by the paper's rule (env 0 from the clip start
+completes the full horizon; builds from a4e46b2 on), frames to success, wall time to success from the command's start
 and after setup, wall over active, and the evaluations' count and seconds (the run's `wall`
 line). Usage: python3 pairs_table.py RUNS_DIR (the unpacked logs.txz's runs/)."""
 
@@ -29,6 +30,8 @@ for summary in sorted(runs.glob("*/summary.json")):
             "seed": seed,
             "t": s.get("time_to_success_s"),
             "clip": s.get("time_to_clip_start_success_s"),
+            "paper": s.get("time_to_clip_start_completion_s"),
+            "frames": (s.get("frames_to_success") or 0) / 1e6 or None,
             "wall": s.get("wall_time_to_success_s"),
             "after": s.get("wall_time_to_success_after_setup_s"),
             "setup": s.get("wall_setup_s"),
@@ -51,12 +54,12 @@ def ratio(rows, key):
     return f"{statistics.median(values):.2f}" if values else "n/a"
 
 
-print("| runs | seeds | time to success (s) | clip start (s) | wall to success (s) | after setup (s) | wall / active | after setup / active | evaluations | evaluation s | stopped early |")
-print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+print("| runs | seeds | time to success (s) | clip start (s) | paper's rule (s) | frames (M) | wall to success (s) | after setup (s) | wall / active | after setup / active | evaluations | evaluation s | stopped early |")
+print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 for group, rows in groups.items():
     seeds = " ".join(str(r["seed"]) for r in sorted(rows, key=lambda r: r["seed"]))
     print(
-        f"| {group} | {seeds} | {med(rows, 't')} | {med(rows, 'clip')} | {med(rows, 'wall')} | "
+        f"| {group} | {seeds} | {med(rows, 't')} | {med(rows, 'clip')} | {med(rows, 'paper')} | {med(rows, 'frames')} | {med(rows, 'wall')} | "
         f"{med(rows, 'after')} | {ratio(rows, 'wall')} | {ratio(rows, 'after')} | {med(rows, 'evals')} | {med(rows, 'eval_s')} | "
         f"{med(rows, 'stopped')} |"
     )
