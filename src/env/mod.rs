@@ -18,6 +18,7 @@ mod error;
 mod evaluation;
 mod goal;
 pub mod layout;
+pub mod mirror;
 mod normalizer;
 mod phases;
 mod physics_state;
