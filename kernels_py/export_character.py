@@ -7,7 +7,7 @@ the character file adds anything to the model (motors, damping, armature, contac
 floor), this script writes the simulation model `simulation_mjcf`; the physics plans are
 captured from that file. It then writes `<name>.json`, the description the binary reads: bodies
 (tree, offsets, inertial frames, masses), joints (type, addresses, axes, ranges, damping), geoms,
-actuators, `qpos0`, the default pose, each actuated joint's control and the body lists.
+actuators, `qpos0`, the default pose, gravity, each actuated joint's control and the body lists.
 
 The output is deterministic (sorted keys, fixed float formatting) so that CI can check that the
 committed files match their sources (docs/characters.md):
@@ -160,6 +160,7 @@ def character_facts(m, xml_path, character):
         "nbody": int(m.nbody),
         "njnt": int(m.njnt),
         "total_mass": float(sum(m.body_mass)),
+        "gravity": vec(m.opt.gravity),
         "qpos0": vec(m.qpos0),
         "default_qpos": default_qpos(m, character),
         "bodies": bodies,

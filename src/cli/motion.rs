@@ -8,7 +8,7 @@ use clap::{Args, Subcommand};
 
 use crate::motion::character::DEFAULT_CHARACTER;
 use crate::motion::find::{MOTIONS_ENV, ResolvedMotion, resolve_motion};
-use crate::motion::flight::{FLIGHT_CLEARANCE_M, GRAVITY_M_S2};
+use crate::motion::flight::FLIGHT_CLEARANCE_M;
 use crate::motion::retarget::ScaledSource;
 use crate::motion::summary::JointRange;
 use crate::motion::{Character, ClipSummary, ReferenceMotion};
@@ -318,19 +318,31 @@ fn inspect_report(s: &ClipSummary) -> String {
         norms.count,
         norms.beyond_rounding
     );
-    if s.flights.is_empty() {
-        let _ = writeln!(
-            out,
-            "flights              none (no key frame more than {FLIGHT_CLEARANCE_M} m off the ground between two on it)"
-        );
-    }
-    for f in &s.flights {
-        let (low, high) = f.recorded_vertical_acceleration;
-        let _ = writeln!(
-            out,
-            "flight               {:.3} .. {:.3} s (key frames {}-{}): centre of mass {low:+.1} .. {high:+.1} m/s² vertically (gravity -{GRAVITY_M_S2}); env.reference_flight = \"ballistic\" moves the root by up to {:.3} m",
-            f.take_off_s, f.landing_s, f.flight.take_off, f.flight.landing, f.largest_shift_m
-        );
+    match &s.flights {
+        Ok(flights) if flights.is_empty() => {
+            let _ = writeln!(
+                out,
+                "flights              none (no key frame more than {FLIGHT_CLEARANCE_M} m off the ground between two on it)"
+            );
+        }
+        Ok(flights) => {
+            for f in flights {
+                let (low, high) = f.recorded_vertical_acceleration;
+                let _ = writeln!(
+                    out,
+                    "flight               {:.3} .. {:.3} s (key frames {}-{}): centre of mass {low:+.1} .. {high:+.1} m/s² vertically (gravity {:+.2}); env.reference_flight = \"ballistic\" moves the root by up to {:.3} m",
+                    f.take_off_s,
+                    f.landing_s,
+                    f.flight.take_off,
+                    f.flight.landing,
+                    f.gravity.z,
+                    f.largest_shift_m
+                );
+            }
+        }
+        Err(why) => {
+            let _ = writeln!(out, "flights              not refit: {why}");
+        }
     }
     match &s.mirror_image {
         Some(m) => {

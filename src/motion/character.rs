@@ -219,6 +219,7 @@ pub struct Character {
     end_effectors: Vec<usize>,
     feet: Vec<usize>,
     total_mass: f64,
+    gravity: Option<Vector3<f64>>,
 }
 
 #[derive(Deserialize)]
@@ -239,6 +240,10 @@ struct CharacterFile {
     tracked_bodies: Vec<String>,
     end_effectors: Vec<String>,
     feet: Vec<String>,
+    /// The compiled model's gravity (m/s²); descriptions exported before it was recorded have
+    /// none.
+    #[serde(default)]
+    gravity: Option<[f64; 3]>,
 }
 
 #[derive(Deserialize)]
@@ -449,6 +454,12 @@ impl Character {
     }
 
     /// Sum of the body masses (kg).
+    /// The compiled model's gravity (m/s², world frame), as the description records it: `None`
+    /// for a description exported before it was recorded.
+    pub fn gravity(&self) -> Option<Vector3<f64>> {
+        self.gravity
+    }
+
     pub fn total_mass(&self) -> f64 {
         self.total_mass
     }
@@ -701,6 +712,9 @@ fn build(file: CharacterFile, source_name: &str) -> Result<Character, String> {
     }
     finite("default_qpos", &file.default_qpos)?;
     let control = joint_control(file.control, &joints)?;
+    if let Some(g) = &file.gravity {
+        finite("gravity", g)?;
+    }
     let total_mass = bodies.iter().map(|b| b.mass).sum::<f64>();
     if total_mass <= 0.0 {
         return Err("the bodies have no mass".into());
@@ -724,6 +738,7 @@ fn build(file: CharacterFile, source_name: &str) -> Result<Character, String> {
         end_effectors,
         feet,
         total_mass,
+        gravity: file.gravity.map(Vector3::from),
     })
 }
 

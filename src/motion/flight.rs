@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use super::character::Character;
 use super::clip::MotionClip;
+use super::error::CharacterError;
 use super::error::MotionError;
 use super::kinematics::forward_kinematics;
 
@@ -21,10 +22,6 @@ use super::kinematics::forward_kinematics;
 /// moves between key frames (the shipped clips' contact frames lie within 0.03 m of their
 /// ground), and below the first airborne frame of a jump (the backflip's rises 0.38 m).
 pub const FLIGHT_CLEARANCE_M: f64 = 0.1;
-
-/// Gravity's acceleration (m/s², along world -z): MuJoCo's default, which every shipped
-/// character's model keeps.
-pub const GRAVITY_M_S2: f64 = 9.81;
 
 /// `env.reference_flight`: the reference's airborne key frames as recorded (the default), or
 /// refit so that the centre of mass flies ballistically between take-off and landing.
@@ -59,6 +56,8 @@ pub struct FlightRefit {
     pub landing_s: f64,
     pub largest_shift_m: f64,
     pub recorded_vertical_acceleration: (f64, f64),
+    /// The gravity the centre of mass now falls with (the character's model's, m/s²).
+    pub gravity: Vector3<f64>,
 }
 
 impl FlightRefit {
@@ -145,10 +144,17 @@ pub fn ballistic_refit(
 ) -> Result<(MotionClip, Vec<FlightRefit>), MotionError> {
     let heights = key_frame_heights(clip, character)?;
     let times = clip.frame_times();
-    let gravity = Vector3::new(0.0, 0.0, -GRAVITY_M_S2);
+    let found = flights_of(&heights);
+    if found.is_empty() {
+        return Ok((clip.clone(), Vec::new()));
+    }
+    let gravity = character.gravity().ok_or_else(|| CharacterError::Invalid {
+        source_name: character.source_name().to_string(),
+        problem: "the description records no gravity, which a ballistic refit needs".to_string(),
+    })?;
     let mut shifts = Vec::new();
     let mut refits = Vec::new();
-    for flight in flights_of(&heights) {
+    for flight in found {
         let (a, b) = (flight.take_off, flight.landing);
         let (com_a, com_b) = (heights[a].0, heights[b].0);
         let duration = times[b] - times[a];
@@ -169,6 +175,7 @@ pub fn ballistic_refit(
             landing_s: times[b],
             largest_shift_m,
             recorded_vertical_acceleration: vertical_accelerations(&heights, times, a, b),
+            gravity,
         });
     }
     Ok((clip.with_root_shifts(&shifts), refits))
@@ -245,7 +252,7 @@ mod tests {
             let v1 = (heights[k + 1].0 - heights[k].0) / dt1;
             let acceleration = (v1 - v0) / (0.5 * (dt0 + dt1));
             assert!(
-                (acceleration - Vector3::new(0.0, 0.0, -GRAVITY_M_S2)).norm() < 1e-9,
+                (acceleration - h.gravity().unwrap()).norm() < 1e-9,
                 "key frame {k}: {acceleration:?}"
             );
         }
@@ -268,6 +275,28 @@ mod tests {
             refit.describe().contains("key frames 11-19"),
             "{}",
             refit.describe()
+        );
+    }
+
+    #[test]
+    fn a_description_without_gravity_refits_nothing_and_says_to_regenerate_it() {
+        let mut json: serde_json::Value =
+            serde_json::from_str(crate::motion::character::HUMANOID_JSON).unwrap();
+        json.as_object_mut().unwrap().remove("gravity");
+        let old = Character::from_json(&json.to_string(), "old.json").unwrap();
+        assert_eq!(old.gravity(), None);
+        let clip = built_in("backflip");
+        let e = ballistic_refit(&clip, &old).unwrap_err().to_string();
+        assert!(
+            e.contains("old.json") && e.contains("no gravity") && e.contains("export_character.py"),
+            "{e}"
+        );
+        // Without a flight, nothing needs gravity.
+        assert!(
+            ballistic_refit(&built_in("walk"), &old)
+                .unwrap()
+                .1
+                .is_empty()
         );
     }
 

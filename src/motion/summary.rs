@@ -58,8 +58,9 @@ pub struct ClipSummary {
     pub joints: Vec<JointSummary>,
     pub lowest_foot: Option<LowestPoint>,
     pub quaternion_norms: QuaternionNorms,
-    /// The clip's flights and what `env.reference_flight = "ballistic"` would do to them.
-    pub flights: Vec<FlightRefit>,
+    /// The clip's flights and what `env.reference_flight = "ballistic"` would do to them, or
+    /// why they cannot be refit.
+    pub flights: Result<Vec<FlightRefit>, String>,
     /// How close the clip comes to its own mirror image (None: the character has none).
     pub mirror_image: Option<ClipSymmetry>,
 }
@@ -157,10 +158,9 @@ impl ClipSummary {
             joints,
             lowest_foot,
             quaternion_norms: clip.quaternion_norms(),
-            // Forward kinematics of the clip's own frames cannot fail here.
             flights: ballistic_refit(clip, character)
                 .map(|(_, refits)| refits)
-                .unwrap_or_default(),
+                .map_err(|e| e.to_string()),
             mirror_image: Mirror::of_character(character)
                 .ok()
                 .and_then(|m| clip_symmetry(clip, character, &m, MIRROR_SAMPLES).ok()),
