@@ -50,6 +50,19 @@ struct Entry {
     hinge: bool,
 }
 
+/// `v` with coordinate `axis` negated: `M v`.
+fn reflect_across(axis: usize, v: &Vector3<f64>) -> Vector3<f64> {
+    let mut out = *v;
+    out[axis] = -out[axis];
+    out
+}
+
+/// `M R M` as a quaternion, `(w, -M v)`, for the reflection negating coordinate `axis`.
+fn reflect_rotation_across(axis: usize, q: &UnitQuaternion<f64>) -> UnitQuaternion<f64> {
+    let v = -reflect_across(axis, &q.vector().into_owned());
+    UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(q.w, v.x, v.y, v.z))
+}
+
 /// Entry `target` of a mirrored state reads `source` with `sign`.
 fn put(list: &mut [Option<Entry>], target: usize, source: usize, sign: f64, hinge: bool) {
     list[target] = Some(Entry {
@@ -88,9 +101,7 @@ impl Mirror {
 
     /// `M v`.
     pub fn reflect(&self, v: &Vector3<f64>) -> Vector3<f64> {
-        let mut out = *v;
-        out[self.axis] = -out[self.axis];
-        out
+        reflect_across(self.axis, v)
     }
 
     /// `-M ω`: an angular velocity or a rotation's axis.
@@ -100,8 +111,7 @@ impl Mirror {
 
     /// `M R M` as a quaternion: `(w, -M v)`.
     pub fn reflect_rotation(&self, q: &UnitQuaternion<f64>) -> UnitQuaternion<f64> {
-        let v = self.reflect_axial(&q.vector().into_owned());
-        UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(q.w, v.x, v.y, v.z))
+        reflect_rotation_across(self.axis, q)
     }
 
     /// The mirrored state's qpos.
@@ -131,15 +141,8 @@ impl Mirror {
     }
 
     fn across(character: &Character, axis: usize) -> Result<Mirror, String> {
-        let reflect = |v: &Vector3<f64>| {
-            let mut out = *v;
-            out[axis] = -out[axis];
-            out
-        };
-        let reflect_rotation = |q: &UnitQuaternion<f64>| {
-            let v = -reflect(&q.vector().into_owned());
-            UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(q.w, v.x, v.y, v.z))
-        };
+        let reflect = |v: &Vector3<f64>| reflect_across(axis, v);
+        let reflect_rotation = |q: &UnitQuaternion<f64>| reflect_rotation_across(axis, q);
         let bodies = character.bodies();
         let joints = character.joints();
         let joints_of = |b: usize| -> Vec<usize> {
