@@ -64,10 +64,11 @@ fn all_checks(fixture: &Fixture) -> Vec<Check> {
 /// device by tests/ppo_kernels_cpu.rs (kernels_py/checks/ppo_*.py) and on the GPU by
 /// tests/gpu_ppo.rs; the latent controller's likewise by tests/latent_kernels_cpu.rs
 /// (kernels_py/checks/latent.py) and tests/gpu_latent.rs.
-const PPO_MODULES: [&str; 8] = [
+const PPO_MODULES: [&str; 9] = [
     "gae",
     "latent",
     "minibatch",
+    "mirror",
     "mlp_backward",
     "optimizer",
     "ppo_loss",

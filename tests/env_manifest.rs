@@ -24,7 +24,7 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 49] = [
+const EXPECTED_KERNELS: [(&str, &str); 50] = [
     ("control", "pd_control"),
     ("control", "pd_targets"),
     ("evaluate", "evaluation_accumulate"),
@@ -48,6 +48,7 @@ const EXPECTED_KERNELS: [(&str, &str); 49] = [
     ("latent", "latent_prior_residual"),
     ("minibatch", "shuffle_indices"),
     ("minibatch", "gather_minibatch"),
+    ("mirror", "mirror_minibatch"),
     ("mlp_backward", "linear_backward_weight"),
     ("mlp_backward", "linear_backward_input_elu"),
     ("observe", "observe"),

@@ -12,7 +12,8 @@
 //!   loss at the rollout's parameters (also with value normalization, whose targets are then
 //!   normalized, and the actor and critic norms clipped separately); with 3 epochs x 4
 //!   minibatches two replays each lower the PPO loss of the fixed batch, and the statistics
-//!   count the updates.
+//!   count the updates. With mirror augmentation the 1 x 1 gradients are those of the batch and
+//!   its mirror image.
 //! - The baseline's update (4096 envs, horizon 32, 5 x 4 minibatches): replay time and FLOP
 //!   rate, printed.
 //!
@@ -24,6 +25,7 @@ mod ppo_support;
 use std::sync::Arc;
 
 use instantmimic::cuda::Gpu;
+use instantmimic::env::SignedPermutation;
 use instantmimic::kernels::ScheduleParams;
 use instantmimic::kernels::{DeviceArray, DeviceArray2, EnvKernels, PpoLossParams};
 use instantmimic::nn::adam::{AdamMoments, AdamStep, adam_params};
@@ -37,7 +39,7 @@ use instantmimic::nn::{GemmSetting, LayerShape};
 use instantmimic::ppo::batch::{Advantages, Minibatch, ValueNormalization};
 use instantmimic::ppo::loss::{LOSS_TERMS, LossGradients};
 use instantmimic::ppo::schedule::record_schedule;
-use instantmimic::ppo::{GaussianPolicy, PpoUpdate};
+use instantmimic::ppo::{GaussianPolicy, MinibatchMirror, PpoUpdate};
 use instantmimic::train::TrainConfig;
 use ppo_support::*;
 use rand::SeedableRng;
@@ -751,6 +753,106 @@ fn one_update_step_has_the_float64_gradients_of_the_ppo_loss() {
         stats.learning_rate == 5e-4 || stats.learning_rate == 7.5e-4,
         "the first step keeps the rate or raises it by 1.5 (KL ~ 0): {}",
         stats.learning_rate
+    );
+}
+
+/// A signed permutation of `size` columns that is its own inverse, as a mirror's: neighbours
+/// swapped (one sign for both), every third column its own image, negated.
+fn signed_involution(size: usize) -> SignedPermutation {
+    let mut source: Vec<usize> = (0..size).collect();
+    let mut sign = vec![1.0f32; size];
+    let mut i = 0;
+    while i < size {
+        if i % 3 == 0 && i + 1 < size {
+            source.swap(i, i + 1);
+            let s = if (i / 3) % 2 == 0 { 1.0 } else { -1.0 };
+            (sign[i], sign[i + 1]) = (s, s);
+            i += 2;
+        } else {
+            sign[i] = -1.0;
+            i += 1;
+        }
+    }
+    SignedPermutation { source, sign }
+}
+
+/// Mirror augmentation (`ppo::mirror`): with 1 epoch x 1 minibatch the update's gradients are
+/// the float64 gradients of the PPO loss over the batch and its mirror image: each observation
+/// column unnormalized with its source column's running statistics, signed, normalized with
+/// its own and clipped; the actions signed copies; the log-probabilities, values, advantages
+/// and returns those of the sample. The image changes the gradients (the batch's own differ).
+#[test]
+fn a_mirror_augmented_step_has_the_float64_gradients_of_the_batch_and_its_image() {
+    let (gpu, kernels, policy, plain, rollout, config) = small_setup(1, 1, 9);
+    let (d, a) = (policy.observation_size(), policy.action_size());
+    let (observation, action) = (signed_involution(d), signed_involution(a));
+    let count = [1000.0f64, 1000.0];
+    let mean: Vec<f64> = (0..d).map(|i| ((i * 7) % 5) as f64 * 0.3 - 0.6).collect();
+    let m2: Vec<f64> = (0..d)
+        .map(|i| (0.6 + 0.1 * (i % 9) as f64).powi(2) * count[1])
+        .collect();
+    let upload = |x: &[f64]| DeviceArray::from_slice(&gpu, [x.len()], x).expect("upload");
+    let (count_d, mean_d, m2_d) = (upload(&count), upload(&mean), upload(&m2));
+    let clip = 5.0f32;
+    let mirror = MinibatchMirror::new(
+        &gpu,
+        &observation,
+        &action,
+        [&count_d, &mean_d, &m2_d],
+        clip,
+    )
+    .expect("mirror");
+    let update = PpoUpdate::mirrored(
+        &gpu,
+        kernels.clone(),
+        &policy,
+        &config.ppo,
+        config.env.num_envs as usize,
+        config.seed,
+        Some(mirror),
+    )
+    .expect("update");
+    assert_eq!(update.sizes().0, 2 * plain.sizes().0, "minibatch rows");
+
+    let host = host_policy(&policy);
+    let (obs, targets, c, _) = host_targets(&rollout, &host, &config);
+    let rows = obs.len() / d;
+    let deviation = |k: usize| (m2[k] / count[1] + 1e-8).sqrt();
+    let mut all_obs = obs.clone();
+    for row in obs.chunks(d) {
+        for col in 0..d {
+            let s = observation.source[col];
+            let raw = row[s] * deviation(s) + mean[s];
+            let x = (f64::from(observation.sign[col]) * raw - mean[col]) / deviation(col);
+            all_obs.push(x.clamp(-f64::from(clip), f64::from(clip)));
+        }
+    }
+    let mut actions = targets.actions.clone();
+    for row in targets.actions.chunks(a) {
+        actions.extend((0..a).map(|col| f64::from(action.sign[col]) * row[action.source[col]]));
+    }
+    let twice = |x: &[f64]| [x, x].concat();
+    let all_targets = LossTargets {
+        actions,
+        old_log_probs: twice(&targets.old_log_probs),
+        old_values: twice(&targets.old_values),
+        advantages: twice(&targets.advantages),
+        returns: twice(&targets.returns),
+        action_size: a,
+    };
+    let (ref_actor, ref_critic) = host.gradients(&all_obs, 2 * rows, &all_targets, &c);
+
+    run_one_update(&gpu, &update, &rollout);
+    let (actor_grads, critic_grads) = update.gradients();
+    let (ga, gc) = (download(&actor_grads.flat), download(&critic_grads.flat));
+    check("mirror-augmented actor gradient", &ga, &ref_actor);
+    check("mirror-augmented critic gradient", &gc, &ref_critic);
+
+    let (plain_actor, _) = host.gradients(&obs, rows, &targets, &c);
+    let gap = relative_error(&plain_actor, &ref_actor);
+    assert!(
+        gap > 1e-2,
+        "the batch's own actor gradient is within {gap:.2e} of the augmented one: the image changes nothing"
     );
 }
 

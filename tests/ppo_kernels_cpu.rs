@@ -18,9 +18,10 @@ use instantmimic::nn::{linear_backward, reduce};
 use instantmimic::ppo::PpoStatistics;
 use instantmimic::ppo::{batch, loss};
 
-const CHECKS: [&str; 5] = [
+const CHECKS: [&str; 6] = [
     "kernels_py/checks/ppo_gae.py",
     "kernels_py/checks/ppo_minibatch.py",
+    "kernels_py/checks/ppo_mirror.py",
     "kernels_py/checks/ppo_loss.py",
     "kernels_py/checks/ppo_backward.py",
     "kernels_py/checks/ppo_optimizer.py",

@@ -3,8 +3,8 @@
 //! character's mirror map (`motion::mirror`) and the observation's blocks
 //! (`layout::observation_blocks`). The mirrored row is what `observe` writes for the mirrored
 //! state tracking the mirrored reference (tests/env_mirror.rs checks it against the f64
-//! reference of `observe`). The augmentation that feeds mirrored samples to the update is not
-//! built yet.
+//! reference of `observe`). The update's mirror augmentation (`ppo::mirror`) applies them to
+//! each minibatch.
 //!
 //! In the heading frame, which mirrors with the state, a position or linear velocity takes `M`
 //! (the plane's normal coordinate negated), an angular velocity `-M`, and a rotation matrix
@@ -14,6 +14,7 @@
 use super::config::ObsConfig;
 use super::layout::{JointLayout, observation_blocks};
 use crate::kernels::EnvError;
+use crate::motion::Character;
 use crate::motion::mirror::Mirror;
 
 /// `mirrored[i] = sign[i] * row[source[i]]`.
@@ -97,6 +98,25 @@ fn six_d_signs(mirror: &Mirror) -> [f64; 6] {
         column(1) * m[1],
         column(1) * m[2],
     ]
+}
+
+/// The mirror images of an observation row (with `obs`) and of an action of `character`'s
+/// rollout (`ppo.mirror_augmentation`).
+pub fn mirror_images(
+    character: &Character,
+    obs: &ObsConfig,
+) -> Result<(SignedPermutation, SignedPermutation), EnvError> {
+    let mirror = Mirror::of_character(character).map_err(|e| {
+        not_mirrored(format!(
+            "{e}; leave ppo.mirror_augmentation off for {}",
+            character.name()
+        ))
+    })?;
+    let layout = JointLayout::for_character(character)?;
+    Ok((
+        observation_mirror(obs, &layout, &mirror)?,
+        action_mirror(&layout, &mirror)?,
+    ))
 }
 
 /// The mirror image of an action (one per motor, motor `a` on dof `a + 6`).
@@ -208,7 +228,6 @@ pub fn observation_mirror(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::motion::Character;
 
     fn setup(name: &str) -> (JointLayout, Mirror) {
         let c = Character::find(name).expect("built in");

@@ -51,6 +51,7 @@ pub use goal::{
     GOAL_OBSERVATION, goal_episode_steps, goal_observation_config, goal_observation_size,
 };
 pub use goal::{GoalCounter, GoalRates, GoalRecord, GoalTally};
+pub use mirror::{SignedPermutation, mirror_images};
 pub use physics_state::{PhysicsSizes, PhysicsState, PhysicsStateError};
 pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;

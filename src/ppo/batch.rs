@@ -256,6 +256,29 @@ impl Minibatch {
         self.observations.shape()[0]
     }
 
+    /// Observations of a row (without the alignment's zeros).
+    pub fn observation_size(&self) -> usize {
+        self.observation_size
+    }
+
+    /// Rows `start..start + rows` of this minibatch, sharing its memory (the gathered and the
+    /// mirrored half of a mirror-augmented minibatch).
+    pub fn rows_of(&self, start: usize, rows: usize) -> Result<Minibatch, PpoError> {
+        let width = |a: &DeviceArray2<f32>| a.shape()[1];
+        let (w, a) = (width(&self.observations), width(&self.actions));
+        let flat = |x: &DeviceArray<f32>| x.view(start, [rows]);
+        Ok(Minibatch {
+            observations: self.observations.view(start * w, [rows, w])?,
+            observation_size: self.observation_size,
+            actions: self.actions.view(start * a, [rows, a])?,
+            means: self.means.view(start * a, [rows, a])?,
+            log_probs: flat(&self.log_probs)?,
+            values: flat(&self.values)?,
+            advantages: flat(&self.advantages)?,
+            returns: flat(&self.returns)?,
+        })
+    }
+
     /// Queues the gather of samples `permutation[start..start + M]` of `batch` (with its
     /// advantages and returns) into this minibatch; `advantage_moments` holds the sum and sum
     /// of squares of all the batch's advantages (`reduce::record_sum_and_squares`).

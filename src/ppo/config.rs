@@ -93,6 +93,12 @@ pub struct PpoConfig {
     /// 0.9 (BENCHMARKS.md, "The evaluation on an average of the actor").
     #[serde(skip_serializing_if = "Option::is_none")]
     pub evaluation_average: Option<f32>,
+    /// Mirror augmentation: every minibatch step also trains on the mirror image of its
+    /// samples (the mirrored state tracking the mirrored reference, the mirrored action, the
+    /// same advantage), the character's mirror derived from its body tree (docs/ppo.md,
+    /// "Mirror augmentation"). Left out of written configurations when off.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub mirror_augmentation: bool,
 }
 
 impl Default for PpoConfig {
@@ -117,6 +123,7 @@ impl Default for PpoConfig {
             concurrent_networks: true,
             min_log_std: None,
             evaluation_average: None,
+            mirror_augmentation: false,
             max_grad_norm: 1.0,
         }
     }

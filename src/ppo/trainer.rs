@@ -27,13 +27,16 @@ use std::sync::Arc;
 use crate::cuda::{Communicator, DeviceRange, Gpu, Graph, Readback};
 use crate::env::{
     EpisodeScores, Rollout, RolloutPolicy, StageEvents, StageRecorder, TaskRecord, TrackedMotion,
-    Trajectory,
+    Trajectory, mirror_images,
 };
 use crate::kernels::DeviceArray;
 use crate::latent::LatentDecoder;
+use crate::motion::Character;
 use crate::nn::PolicyGemm;
 use crate::plan::PlanStore;
-use crate::ppo::{GaussianPolicy, PpoBatch, PpoOptimizerState, PpoUpdate, UpdateStage};
+use crate::ppo::{
+    GaussianPolicy, MinibatchMirror, PpoBatch, PpoOptimizerState, PpoUpdate, UpdateStage,
+};
 
 use super::device_report::{REPORT_BYTES, read_report, record_parameter_squares, record_report};
 use super::trainer_error::TrainerError;
@@ -178,6 +181,7 @@ impl Trainer {
                 "goal.decoder: a latent goal run trains on one GPU, rollout then update".to_owned(),
             ));
         }
+        let character = motion.character();
         let mut rollout = Rollout::new(gpu, store, motion, &rollout_config)?;
         if let Some(replicas) = replicas {
             rollout = rollout.merging_over(replicas)?;
@@ -242,13 +246,19 @@ impl Trainer {
             }
             None => None,
         };
-        let mut update = PpoUpdate::new(
+        let mirror = if config.ppo.mirror_augmentation {
+            Some(minibatch_mirror(gpu, &rollout, &rollout_config, character)?)
+        } else {
+            None
+        };
+        let mut update = PpoUpdate::mirrored(
             gpu,
             rollout.kernels().clone(),
             &policy,
             &config.ppo,
             rollout.num_envs(),
             run_seed,
+            mirror,
         )?;
         if let Some(replicas) = replicas {
             update = update.averaging_over(replicas);
@@ -686,6 +696,28 @@ impl Iteration {
 
 /// Stored flat (`[len]`): the start statistics `[clips, bins]` of a single clip are then the
 /// `[bins]` tensors they were before motion libraries.
+/// The update's mirror augmentation for `rollout` of `character`'s clips with `config`.
+fn minibatch_mirror(
+    gpu: &Gpu,
+    rollout: &Rollout,
+    config: &RolloutConfig,
+    character: &Character,
+) -> Result<MinibatchMirror, TrainerError> {
+    if rollout.is_goal_task() {
+        return Err(TrainerError::Setup(
+            "ppo.mirror_augmentation: the goal task's observation has no mirror image (its goal blocks); leave the key out for a goal run".to_owned(),
+        ));
+    }
+    let (observation, action) = mirror_images(character, &config.obs)?;
+    Ok(MinibatchMirror::new(
+        gpu,
+        &observation,
+        &action,
+        rollout.normalizer_moments(),
+        config.obs.clip,
+    )?)
+}
+
 fn put_f32<const N: usize>(
     c: &mut Checkpoint,
     name: &str,

@@ -57,6 +57,7 @@ use super::config::{KlMeasure, PpoConfig};
 use super::error::PpoError;
 use super::flops::UpdateFlops;
 use super::loss::{LOSS_TERMS, LossGradients, PpoStatistics};
+use super::mirror::MinibatchMirror;
 use super::policy::GaussianPolicy;
 use super::schedule::{LEARNING_RATE_MAX, LEARNING_RATE_MIN};
 use super::update_stages::UpdateStage;
@@ -153,6 +154,10 @@ pub struct PpoUpdate {
     statistics: DeviceArray<f32>,
     /// The other GPUs' replicas the update averages over (none: this GPU only).
     replicas: Option<Communicator>,
+    /// Samples gathered per minibatch step: the minibatch's rows, or half of them with mirror
+    /// augmentation (the other half the image of these).
+    gathered_rows: usize,
+    mirror: Option<MinibatchMirror>,
 }
 
 impl PpoUpdate {
@@ -168,12 +173,40 @@ impl PpoUpdate {
         envs: usize,
         seed: u64,
     ) -> Result<PpoUpdate, PpoError> {
+        PpoUpdate::mirrored(gpu, kernels, policy, config, envs, seed, None)
+    }
+
+    /// [`PpoUpdate::new`] with each minibatch followed by its mirror image (`mirror`: mirror
+    /// augmentation, `ppo::mirror`; none: as `new`): the networks' steps see twice the rows.
+    pub fn mirrored(
+        gpu: &Gpu,
+        kernels: Arc<EnvKernels>,
+        policy: &GaussianPolicy,
+        config: &PpoConfig,
+        envs: usize,
+        seed: u64,
+        mirror: Option<MinibatchMirror>,
+    ) -> Result<PpoUpdate, PpoError> {
         let q = config;
         let horizon = q.horizon as usize;
         let (epochs, minibatches) = (q.epochs as usize, q.minibatches as usize);
         let samples = horizon * envs;
-        let rows = minibatch_rows(horizon, envs, epochs, minibatches).map_err(PpoError::Shape)?;
+        let gathered_rows =
+            minibatch_rows(horizon, envs, epochs, minibatches).map_err(PpoError::Shape)?;
         let (d, a) = (policy.observation_size(), policy.action_size());
+        if let Some(m) = &mirror
+            && m.sizes() != (d, a)
+        {
+            return Err(PpoError::Shape(format!(
+                "mirror augmentation of {:?} (observation, action) columns for a policy of {d} observations and {a} actions",
+                m.sizes()
+            )));
+        }
+        let rows = if mirror.is_some() {
+            2 * gathered_rows
+        } else {
+            gathered_rows
+        };
         let actor_shapes = policy.actor_layers().to_vec();
         let critic_shapes = policy.critic_layers().to_vec();
         let share = |p: &DeviceArray<f32>| p.view(0, [p.len()]);
@@ -303,6 +336,8 @@ impl PpoUpdate {
             statistics: DeviceArray::zeros(gpu, [PpoStatistics::LEN])?,
             kernels,
             replicas: None,
+            gathered_rows,
+            mirror,
         })
     }
 
@@ -570,10 +605,11 @@ impl PpoUpdate {
 
     /// Floating-point operations of one update.
     pub fn flops(&self) -> UpdateFlops {
+        let images = if self.mirror.is_some() { 2 } else { 1 };
         UpdateFlops::of(
             &self.actor_shapes,
             &self.critic_shapes,
-            self.horizon * self.envs,
+            images * self.horizon * self.envs,
             self.epochs,
             self.envs,
         )

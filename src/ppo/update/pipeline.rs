@@ -43,7 +43,9 @@ impl PpoUpdate {
         }
     }
 
-    /// Queues the shuffle (first minibatch of an epoch) and the gather of step `slot`.
+    /// Queues the shuffle (first minibatch of an epoch) and the gather of step `slot`; with
+    /// mirror augmentation, the gather into the buffer's first half and its mirror image into
+    /// the second.
     pub(super) fn record_gather_of(
         &self,
         stream: &Stream,
@@ -62,7 +64,13 @@ impl PpoUpdate {
                 &self.permutation,
             )?;
         }
-        self.minibatch_of(slot).record_gather(
+        let buffer = self.minibatch_of(slot);
+        let rows = self.gathered_rows;
+        let gathered = match &self.mirror {
+            Some(_) => buffer.rows_of(0, rows)?,
+            None => buffer.rows_of(0, buffer.rows())?,
+        };
+        gathered.record_gather(
             k,
             stream,
             batch,
@@ -70,8 +78,12 @@ impl PpoUpdate {
             &self.advantage_moments,
             &self.value_normalization,
             &self.permutation,
-            mb * self.minibatch.rows(),
-        )
+            mb * rows,
+        )?;
+        if let Some(mirror) = &self.mirror {
+            mirror.record(k, stream, &gathered, &buffer.rows_of(rows, rows)?)?;
+        }
+        Ok(())
     }
 
     /// Every epoch's minibatch steps as the module docs say; the capture's frontier joins
