@@ -31,7 +31,6 @@ use crate::env::{
 };
 use crate::kernels::DeviceArray;
 use crate::latent::LatentDecoder;
-use crate::motion::Character;
 use crate::nn::PolicyGemm;
 use crate::plan::PlanStore;
 use crate::ppo::{
@@ -181,7 +180,6 @@ impl Trainer {
                 "goal.decoder: a latent goal run trains on one GPU, rollout then update".to_owned(),
             ));
         }
-        let character = motion.character();
         let mut rollout = Rollout::new(gpu, store, motion, &rollout_config)?;
         if let Some(replicas) = replicas {
             rollout = rollout.merging_over(replicas)?;
@@ -247,7 +245,7 @@ impl Trainer {
             None => None,
         };
         let mirror = if config.ppo.mirror_augmentation {
-            Some(minibatch_mirror(gpu, &rollout, &rollout_config, character)?)
+            Some(minibatch_mirror(gpu, &rollout, &rollout_config, motion)?)
         } else {
             None
         };
@@ -696,19 +694,19 @@ impl Iteration {
 
 /// Stored flat (`[len]`): the start statistics `[clips, bins]` of a single clip are then the
 /// `[bins]` tensors they were before motion libraries.
-/// The update's mirror augmentation for `rollout` of `character`'s clips with `config`.
+/// The update's mirror augmentation for `rollout` of `motion` with `config`.
 fn minibatch_mirror(
     gpu: &Gpu,
     rollout: &Rollout,
     config: &RolloutConfig,
-    character: &Character,
+    motion: TrackedMotion<'_>,
 ) -> Result<MinibatchMirror, TrainerError> {
     if rollout.is_goal_task() {
         return Err(TrainerError::Setup(
             "ppo.mirror_augmentation: the goal task's observation has no mirror image (its goal blocks); leave the key out for a goal run".to_owned(),
         ));
     }
-    let (observation, action) = mirror_images(character, &config.obs)?;
+    let (observation, action) = mirror_images(motion.character(), &config.obs)?;
     Ok(MinibatchMirror::new(
         gpu,
         &observation,
