@@ -24,7 +24,7 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 50] = [
+const EXPECTED_KERNELS: [(&str, &str); 51] = [
     ("control", "pd_control"),
     ("control", "pd_targets"),
     ("evaluate", "evaluation_accumulate"),
@@ -48,7 +48,8 @@ const EXPECTED_KERNELS: [(&str, &str); 50] = [
     ("latent", "latent_prior_residual"),
     ("minibatch", "shuffle_indices"),
     ("minibatch", "gather_minibatch"),
-    ("mirror", "mirror_minibatch"),
+    ("mirror", "mirror_rows"),
+    ("mirror", "mirror_log_probs"),
     ("mlp_backward", "linear_backward_weight"),
     ("mlp_backward", "linear_backward_input_elu"),
     ("observe", "observe"),

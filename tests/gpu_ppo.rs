@@ -39,7 +39,7 @@ use instantmimic::nn::{GemmSetting, LayerShape};
 use instantmimic::ppo::batch::{Advantages, Minibatch, ValueNormalization};
 use instantmimic::ppo::loss::{LOSS_TERMS, LossGradients};
 use instantmimic::ppo::schedule::record_schedule;
-use instantmimic::ppo::{GaussianPolicy, MinibatchMirror, PpoUpdate};
+use instantmimic::ppo::{BatchMirror, GaussianPolicy, PpoUpdate};
 use instantmimic::train::TrainConfig;
 use ppo_support::*;
 use rand::SeedableRng;
@@ -779,8 +779,9 @@ fn signed_involution(size: usize) -> SignedPermutation {
 /// Mirror augmentation (`ppo::mirror`): with 1 epoch x 1 minibatch the update's gradients are
 /// the float64 gradients of the PPO loss over the batch and its mirror image: each observation
 /// column unnormalized with its source column's running statistics, signed, normalized with
-/// its own and clipped; the actions signed copies; the log-probabilities, values, advantages
-/// and returns those of the sample. The image changes the gradients (the batch's own differ).
+/// its own and clipped; the actions signed copies; the log-probabilities the rollout policy's
+/// at the image; the values, advantages and returns those of the sample. The image changes the
+/// gradients (the batch's own differ).
 #[test]
 fn a_mirror_augmented_step_has_the_float64_gradients_of_the_batch_and_its_image() {
     let (gpu, kernels, policy, plain, rollout, config) = small_setup(1, 1, 9);
@@ -794,7 +795,7 @@ fn a_mirror_augmented_step_has_the_float64_gradients_of_the_batch_and_its_image(
     let upload = |x: &[f64]| DeviceArray::from_slice(&gpu, [x.len()], x).expect("upload");
     let (count_d, mean_d, m2_d) = (upload(&count), upload(&mean), upload(&m2));
     let clip = 5.0f32;
-    let mirror = MinibatchMirror::new(
+    let mirror = BatchMirror::new(
         &gpu,
         &observation,
         &action,
@@ -831,10 +832,26 @@ fn a_mirror_augmented_step_has_the_float64_gradients_of_the_batch_and_its_image(
     for row in targets.actions.chunks(a) {
         actions.extend((0..a).map(|col| f64::from(action.sign[col]) * row[action.source[col]]));
     }
+    // The images' log-probabilities: the rollout policy's at the image.
+    let image_obs = &all_obs[rows * d..];
+    let image_means = mlp_forward(&host.actor_layers, &host.actor, image_obs, rows);
+    let image_means = image_means.last().expect("layers");
+    let log_std = &host.actor[host.actor_layers.last().expect("layers").end()..][..a];
+    let mut old_log_probs = targets.old_log_probs.clone();
+    for (mean, act) in image_means.chunks(a).zip(actions[rows * a..].chunks(a)) {
+        old_log_probs.push(
+            (0..a)
+                .map(|j| {
+                    let z = (act[j] - mean[j]) / log_std[j].exp();
+                    -0.5 * z * z - log_std[j] - 0.5 * (2.0 * std::f64::consts::PI).ln()
+                })
+                .sum(),
+        );
+    }
     let twice = |x: &[f64]| [x, x].concat();
     let all_targets = LossTargets {
         actions,
-        old_log_probs: twice(&targets.old_log_probs),
+        old_log_probs,
         old_values: twice(&targets.old_values),
         advantages: twice(&targets.advantages),
         returns: twice(&targets.returns),

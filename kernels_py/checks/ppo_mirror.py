@@ -1,12 +1,12 @@
-"""Check the mirror image of a minibatch (env/mirror.py) on Warp's CPU device.
+"""Check the mirror image of the batch (env/mirror.py) on Warp's CPU device.
 
-- `mirror_minibatch` against numpy float64: each observation column unnormalized with its source
+- `mirror_rows` against numpy float64: each observation column unnormalized with its source
   column's statistics, signed, normalized with its own and clipped (observe.py's epsilon and
-  clip); actions and rollout means signed copies; the row's scalars copied; the cuBLAS padding
-  columns of the mirrored rows left as they were. Before any statistics (count 0) the
-  normalization is the identity and the image a plain signed permutation.
-- Mirroring twice gives back the minibatch (the permutations are involutions), up to float32
+  clip); the actions signed copies. Before any statistics (count 0) the normalization is the
+  identity and the image a plain signed permutation.
+- Mirroring twice gives back the rows (the permutations are involutions), up to float32
   rounding, wherever nothing was clipped.
+- `mirror_log_probs`: the diagonal Gaussian's log-density against numpy float64.
 
     python kernels_py/checks/ppo_mirror.py
 """
@@ -37,7 +37,7 @@ def signed_involution(rng, size):
     return source.astype(np.int32), sign
 
 
-def reference(obs, act, means, src_o, sign_o, src_a, sign_a, count, mean, m2):
+def reference(obs, act, src_o, sign_o, src_a, sign_a, count, mean, m2):
     if count[1] > 0.0:
         mu, sd = mean, np.sqrt(m2 / count[1] + EPSILON)
     else:
@@ -45,57 +45,61 @@ def reference(obs, act, means, src_o, sign_o, src_a, sign_a, count, mean, m2):
     d = len(src_o)
     raw = obs[:, :d] * sd + mu
     image = np.clip((sign_o * raw[:, src_o] - mu) / sd, -CLIP, CLIP)
-    return image, sign_a * act[:, src_a], sign_a * means[:, src_a]
+    return image, sign_a * act[:, src_a]
 
 
-def launch(inputs, rows, d, width, a, src_o, sign_o, src_a, sign_a, count, mean, m2, fill):
-    outs = [array(np.full((rows, width), fill)), zeros((rows, a)), zeros((rows, a)), zeros(rows), zeros(rows), zeros(rows), zeros(rows)]
+def launch(inputs, rows, d, a, src_o, sign_o, src_a, sign_a, count, mean, m2):
+    outs = [zeros((rows, d)), zeros((rows, a))]
     stats = [array(src_o), array(sign_o, dtype=wp.float32), array(src_a), array(sign_a, dtype=wp.float32)]
     moments = [array(count, dtype=wp.float64), array(mean, dtype=wp.float64), array(m2, dtype=wp.float64)]
-    wp.launch(mirror.mirror_minibatch, dim=rows * max(d, a), inputs=[*inputs, *stats, *moments, CLIP, *outs], device="cpu")
+    wp.launch(mirror.mirror_rows, dim=rows * max(d, a), inputs=[*inputs, *stats, *moments, CLIP, *outs], device="cpu")
     return [o.numpy() for o in outs]
 
 
 def check_mirror(v: Verdict, rng):
-    for rows, d, pad, a in [(7, 11, 1, 5), (64, 9, 7, 13), (300, 197, 3, 28)]:
-        width = d + pad
-        obs = f32(rng.standard_normal((rows, width)) * 2.0)
-        obs[:, d:] = 0.0
+    for rows, d, a in [(7, 11, 5), (64, 9, 13), (300, 197, 28)]:
+        obs = f32(rng.standard_normal((rows, d)))
         act = f32(rng.standard_normal((rows, a)))
-        means = f32(rng.standard_normal((rows, a)))
-        scalars = [f32(rng.standard_normal(rows)) for _ in range(4)]
         src_o, sign_o = signed_involution(rng, d)
         src_a, sign_a = signed_involution(rng, a)
         mean = rng.standard_normal(d)
         m2 = (rng.uniform(0.5, 2.0, d) ** 2) * 1000.0
         for count, mode in [(np.array([1000.0, 1000.0]), "with statistics"), (np.array([0.0, 0.0]), "before any statistics")]:
-            what = f"M={rows} D={d} (+{pad}) A={a}, {mode}"
-            inputs = [array(obs), array(act), array(means), *[array(s) for s in scalars]]
-            got = launch(inputs, rows, d, width, a, src_o, sign_o, src_a, sign_a, count, mean, m2, fill=7.0)
-            ref_obs, ref_act, ref_means = reference(obs, act, means, src_o, sign_o, src_a, sign_a, count, mean, m2)
-            v.error(f"mirrored observations, {what}", got[0][:, :d], ref_obs)
-            v.check(f"padding columns untouched, {what}", np.all(got[0][:, d:] == 7.0))
+            what = f"M={rows} D={d} A={a}, {mode}"
+            got = launch([array(obs), array(act)], rows, d, a, src_o, sign_o, src_a, sign_a, count, mean, m2)
+            ref_obs, ref_act = reference(obs, act, src_o, sign_o, src_a, sign_a, count, mean, m2)
+            v.error(f"mirrored observations, {what}", got[0], ref_obs)
             v.error(f"mirrored actions, {what}", got[1], ref_act, limit=0.0)
-            v.error(f"mirrored rollout means, {what}", got[2], ref_means, limit=0.0)
-            for k, name in enumerate(["log-probs", "values", "advantages", "returns"]):
-                v.error(f"{name} copied, {what}", got[3 + k], scalars[k], limit=0.0)
             if count[1] > 0.0:
                 v.check(f"the normalization matters, {what}", np.max(np.abs(ref_obs - sign_o * obs[:, src_o])) > 0.5)
-                again = launch([array(got[0]), array(got[1]), array(got[2]), *[array(s) for s in scalars]], rows, d, width, a, src_o, sign_o, src_a, sign_a, count, mean, m2, fill=0.0)
+                again = launch([array(got[0]), array(got[1])], rows, d, a, src_o, sign_o, src_a, sign_a, count, mean, m2)
                 # Column c of the second image reads column source[c] of the first: it comes
                 # back wherever that one was not clipped.
-                keep = (np.abs(ref_obs[:, src_o]) < CLIP) & (np.abs(obs[:, :d]) < CLIP)
+                keep = (np.abs(ref_obs[:, src_o]) < CLIP) & (np.abs(obs) < CLIP)
                 v.check(f"most values unclipped by the mirror, {what}", np.mean(keep) > 0.9, f"{np.mean(keep):.3f}")
-                v.error(f"mirrored twice, the observations back, {what}", again[0][:, :d][keep], obs[:, :d][keep])
+                v.error(f"mirrored twice, the observations back, {what}", again[0][keep], obs[keep])
                 v.error(f"mirrored twice, the actions back, {what}", again[1], act, limit=0.0)
             else:
-                v.error(f"a signed permutation before any statistics, {what}", got[0][:, :d], np.clip(sign_o * obs[:, src_o], -CLIP, CLIP))
+                v.error(f"a signed permutation before any statistics, {what}", got[0], np.clip(sign_o * obs[:, src_o], -CLIP, CLIP))
+
+
+def check_log_probs(v: Verdict, rng):
+    for rows, a in [(5, 3), (300, 28)]:
+        means = f32(rng.standard_normal((rows, a)))
+        act = f32(means + rng.standard_normal((rows, a)) * 0.3)
+        log_std = f32(rng.uniform(-2.0, 0.0, a))
+        out = zeros(rows)
+        wp.launch(mirror.mirror_log_probs, dim=rows, inputs=[array(means), array(act), array(log_std), out], device="cpu")
+        z = (act - means) / np.exp(log_std)
+        ref = np.sum(-0.5 * z * z - log_std - 0.5 * np.log(2.0 * np.pi), axis=1)
+        v.error(f"log-probabilities, M={rows} A={a}", out.numpy(), ref)
 
 
 def main() -> int:
     rng = np.random.default_rng(11)
     v = Verdict("ppo_mirror")
     check_mirror(v, rng)
+    check_log_probs(v, rng)
     return v.finish()
 
 

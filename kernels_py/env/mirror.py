@@ -1,12 +1,12 @@
-"""Mirror augmentation of the PPO update: the mirror image of a gathered minibatch.
+"""Mirror augmentation of the PPO update: the mirror image of the rollout's batch.
 
-A minibatch row is a normalized observation, an action and the rollout's mean of it, and the
-sample's log-probability, value, advantage and return. Its mirror image is the same sample seen
-in the sagittal mirror: the mirrored state tracking the mirrored reference (the observation's
-signed permutation, `env::mirror::observation_mirror`) taking the mirrored action
-(`action_mirror`); the reward, and so the value, advantage and return, are the same, and the
-log-probability is the original's (rsl_rl's symmetry augmentation makes the same
-approximation: the rollout's policy is taken to be symmetric).
+A sample's mirror image is the same sample seen in the sagittal mirror: the mirrored state
+tracking the mirrored reference (the observation's signed permutation,
+`env::mirror::observation_mirror`) taking the mirrored action (`action_mirror`). Its reward, and
+so its value, advantage and return, are the sample's. Its log-probability is the rollout
+policy's at the image (the actor's forward pass over the mirrored observations, before the
+update's first step, then `mirror_log_probs`), so that the update's ratio starts at 1 on the
+images as on the samples whether or not the policy is symmetric.
 
 The observations are stored normalized by statistics that are not themselves symmetric, so the
 image is taken of the raw row: each column is unnormalized with its source column's statistics
@@ -17,6 +17,7 @@ clip). A value clipped in the rollout stays at the clip's raw value.
 import warp as wp
 
 from env.observe import VARIANCE_EPSILON
+from env.ppo_loss import HALF_LOG_TWO_PI
 
 wp.set_module_options({"enable_backward": False})
 
@@ -34,14 +35,9 @@ def normalization(count: wp.array(dtype=wp.float64), mean: wp.array(dtype=wp.flo
 
 
 @wp.kernel
-def mirror_minibatch(
+def mirror_rows(
     observations: wp.array2d(dtype=wp.float32),
     actions: wp.array2d(dtype=wp.float32),
-    means: wp.array2d(dtype=wp.float32),
-    log_probs: wp.array(dtype=wp.float32),
-    values: wp.array(dtype=wp.float32),
-    advantages: wp.array(dtype=wp.float32),
-    returns: wp.array(dtype=wp.float32),
     observation_source: wp.array(dtype=wp.int32),
     observation_sign: wp.array(dtype=wp.float32),
     action_source: wp.array(dtype=wp.int32),
@@ -52,17 +48,11 @@ def mirror_minibatch(
     clip: wp.float32,
     mirrored_observations: wp.array2d(dtype=wp.float32),
     mirrored_actions: wp.array2d(dtype=wp.float32),
-    mirrored_means: wp.array2d(dtype=wp.float32),
-    mirrored_log_probs: wp.array(dtype=wp.float32),
-    mirrored_values: wp.array(dtype=wp.float32),
-    mirrored_advantages: wp.array(dtype=wp.float32),
-    mirrored_returns: wp.array(dtype=wp.float32),
 ):
     """Thread (i, c) of a 1-D launch of M * C threads, C = max(D, A) (D =
     len(observation_source), A = len(action_source)): column c of row i's mirror image. The
-    observation column c (c < D) is `sign[c] * raw[source[c]]` normalized again; the action and
-    mean columns (c < A) `sign[c] * x[source[c]]`; thread c = 0 copies the row's scalars. The
-    observation rows may be wider than D (cuBLAS padding); those columns are left as they are."""
+    observation column c (c < D) is `sign[c] * raw[source[c]]` normalized again; the action
+    column (c < A) `sign[c] * action[source[c]]`."""
     tid = wp.tid()
     d = observation_source.shape[0]
     a = action_source.shape[0]
@@ -77,14 +67,24 @@ def mirror_minibatch(
         x = wp.float32((wp.float64(observation_sign[c]) * raw - own[0]) / own[1])
         mirrored_observations[i, c] = wp.clamp(x, -clip, clip)
     if c < a:
-        s = action_source[c]
-        mirrored_actions[i, c] = action_sign[c] * actions[i, s]
-        mirrored_means[i, c] = action_sign[c] * means[i, s]
-    if c == 0:
-        mirrored_log_probs[i] = log_probs[i]
-        mirrored_values[i] = values[i]
-        mirrored_advantages[i] = advantages[i]
-        mirrored_returns[i] = returns[i]
+        mirrored_actions[i, c] = action_sign[c] * actions[i, action_source[c]]
+
+
+@wp.kernel
+def mirror_log_probs(
+    means: wp.array2d(dtype=wp.float32),
+    actions: wp.array2d(dtype=wp.float32),
+    log_std: wp.array(dtype=wp.float32),
+    log_probs: wp.array(dtype=wp.float32),
+):
+    """One thread per row i: the log-probability of `actions[i]` under the Gaussian of mean
+    `means[i]` and log standard deviation `log_std` (ppo_loss.py's formula)."""
+    i = wp.tid()
+    log_prob = float(0.0)
+    for j in range(means.shape[1]):
+        z = (actions[i, j] - means[i, j]) * wp.exp(-log_std[j])
+        log_prob += -0.5 * z * z - log_std[j] - HALF_LOG_TWO_PI
+    log_probs[i] = log_prob
 
 # Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
 # dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
@@ -92,20 +92,15 @@ def mirror_minibatch(
 # Kept at the end of the file: Warp's generated CUDA quotes source line numbers, so lines added
 # above a kernel would change its PTX.
 LAUNCH = {
-    "mirror_minibatch": (
-        "dim == len(mirrored_log_probs) * max(len(observation_source), len(action_source))",
+    "mirror_rows": (
+        "dim == extent(mirrored_observations, 0) * max(len(observation_source), len(action_source))",
         "dim <= extent(observations, 0) * max(len(observation_source), len(action_source))",
         "dim <= extent(actions, 0) * max(len(observation_source), len(action_source))",
-        "dim <= extent(means, 0) * max(len(observation_source), len(action_source))",
-        "dim <= len(log_probs) * max(len(observation_source), len(action_source))",
-        "dim <= len(values) * max(len(observation_source), len(action_source))",
-        "dim <= len(advantages) * max(len(observation_source), len(action_source))",
-        "dim <= len(returns) * max(len(observation_source), len(action_source))",
-        "dim <= extent(mirrored_observations, 0) * max(len(observation_source), len(action_source))",
         "dim <= extent(mirrored_actions, 0) * max(len(observation_source), len(action_source))",
-        "dim <= extent(mirrored_means, 0) * max(len(observation_source), len(action_source))",
-        "dim <= len(mirrored_values) * max(len(observation_source), len(action_source))",
-        "dim <= len(mirrored_advantages) * max(len(observation_source), len(action_source))",
-        "dim <= len(mirrored_returns) * max(len(observation_source), len(action_source))",
+    ),
+    "mirror_log_probs": (
+        "dim == len(log_probs)",
+        "dim <= extent(means, 0)",
+        "dim <= extent(actions, 0)",
     ),
 }

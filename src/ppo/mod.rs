@@ -6,8 +6,8 @@
 //!   gradient clipping, Adam, KL-adaptive learning rate, statistics) recorded onto a stream with
 //!   no host work, for capture into a CUDA graph (`kernels_py/env/{gae, minibatch, ppo_loss,
 //!   mlp_backward, reduce, optimizer, ppo_statistics}.py`).
-//! - [`MinibatchMirror`]: mirror augmentation, each minibatch followed by its mirror image
-//!   (`kernels_py/env/mirror.py`).
+//! - [`BatchMirror`]: mirror augmentation, each minibatch followed by the mirror images of its
+//!   samples (`kernels_py/env/mirror.py`).
 //! - The parts, each with the shape checks its kernels cannot do: [`batch`] (what the rollout
 //!   hands over, GAE, value normalization, gather), [`loss`] (loss gradients, the statistics
 //!   layout), [`schedule`] (the KL-adaptive learning rate).
@@ -43,7 +43,7 @@ pub use device_report::{read_report, read_totals};
 pub use error::PpoError;
 pub use flops::UpdateFlops;
 pub use loss::PpoStatistics;
-pub use mirror::MinibatchMirror;
+pub use mirror::BatchMirror;
 pub use policy::{GaussianPolicy, PolicyError};
 pub use rank_replica::{Followed, RankReplica};
 pub use replicas::Replicas;

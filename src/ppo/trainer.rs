@@ -34,7 +34,7 @@ use crate::latent::LatentDecoder;
 use crate::nn::PolicyGemm;
 use crate::plan::PlanStore;
 use crate::ppo::{
-    GaussianPolicy, MinibatchMirror, PpoBatch, PpoOptimizerState, PpoUpdate, UpdateStage,
+    BatchMirror, GaussianPolicy, PpoBatch, PpoOptimizerState, PpoUpdate, UpdateStage,
 };
 
 use super::device_report::{REPORT_BYTES, read_report, record_parameter_squares, record_report};
@@ -245,7 +245,7 @@ impl Trainer {
             None => None,
         };
         let mirror = if config.ppo.mirror_augmentation {
-            Some(minibatch_mirror(gpu, &rollout, &rollout_config, motion)?)
+            Some(batch_mirror(gpu, &rollout, &rollout_config, motion)?)
         } else {
             None
         };
@@ -695,19 +695,19 @@ impl Iteration {
 /// Stored flat (`[len]`): the start statistics `[clips, bins]` of a single clip are then the
 /// `[bins]` tensors they were before motion libraries.
 /// The update's mirror augmentation for `rollout` of `motion` with `config`.
-fn minibatch_mirror(
+fn batch_mirror(
     gpu: &Gpu,
     rollout: &Rollout,
     config: &RolloutConfig,
     motion: TrackedMotion<'_>,
-) -> Result<MinibatchMirror, TrainerError> {
+) -> Result<BatchMirror, TrainerError> {
     if rollout.is_goal_task() {
         return Err(TrainerError::Setup(
             "ppo.mirror_augmentation: the goal task's observation has no mirror image (its goal blocks); leave the key out for a goal run".to_owned(),
         ));
     }
     let (observation, action) = mirror_images(motion.character(), &config.obs)?;
-    Ok(MinibatchMirror::new(
+    Ok(BatchMirror::new(
         gpu,
         &observation,
         &action,

@@ -57,7 +57,7 @@ use super::config::{KlMeasure, PpoConfig};
 use super::error::PpoError;
 use super::flops::UpdateFlops;
 use super::loss::{LOSS_TERMS, LossGradients, PpoStatistics};
-use super::mirror::MinibatchMirror;
+use super::mirror::{BatchMirror, MirroredBatch};
 use super::policy::GaussianPolicy;
 use super::schedule::{LEARNING_RATE_MAX, LEARNING_RATE_MIN};
 use super::update_stages::UpdateStage;
@@ -157,7 +157,8 @@ pub struct PpoUpdate {
     /// Samples gathered per minibatch step: the minibatch's rows, or half of them with mirror
     /// augmentation (the other half the image of these).
     gathered_rows: usize,
-    mirror: Option<MinibatchMirror>,
+    /// The batch's mirror images (mirror augmentation).
+    mirror: Option<MirroredBatch>,
 }
 
 impl PpoUpdate {
@@ -176,8 +177,9 @@ impl PpoUpdate {
         PpoUpdate::mirrored(gpu, kernels, policy, config, envs, seed, None)
     }
 
-    /// [`PpoUpdate::new`] with each minibatch followed by its mirror image (`mirror`: mirror
-    /// augmentation, `ppo::mirror`; none: as `new`): the networks' steps see twice the rows.
+    /// [`PpoUpdate::new`] with each minibatch followed by the mirror images of its samples
+    /// (`mirror`: mirror augmentation, `ppo::mirror`; none: as `new`): the networks' steps see
+    /// twice the rows.
     pub fn mirrored(
         gpu: &Gpu,
         kernels: Arc<EnvKernels>,
@@ -185,7 +187,7 @@ impl PpoUpdate {
         config: &PpoConfig,
         envs: usize,
         seed: u64,
-        mirror: Option<MinibatchMirror>,
+        mirror: Option<BatchMirror>,
     ) -> Result<PpoUpdate, PpoError> {
         let q = config;
         let horizon = q.horizon as usize;
@@ -240,6 +242,18 @@ impl PpoUpdate {
                 None,
                 gemm.clone(),
             )
+        };
+        let mirror = match mirror {
+            Some(m) => Some(MirroredBatch::new(
+                gpu,
+                m,
+                &actor_shapes,
+                share(&actor_params)?,
+                gemm.clone(),
+                horizon,
+                envs,
+            )?),
+            None => None,
         };
         Ok(PpoUpdate {
             gpu: gpu.clone(),
@@ -462,6 +476,11 @@ impl PpoUpdate {
         )?;
         self.value_normalization
             .record_update(k, stream, &self.advantages.returns)?;
+        if let Some(mirrored) = &self.mirror {
+            // Before the first step: the images' means and log-probabilities are the rollout
+            // policy's.
+            mirrored.record(k, stream, batch, &self.old_log_std)?;
+        }
         let flat_advantages = self.advantages.advantages.view(0, [t * n])?;
         record_sum_and_squares(k, stream, &flat_advantages, &self.advantage_moments)?;
         if let Some(replicas) = &self.replicas {

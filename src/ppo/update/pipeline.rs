@@ -44,8 +44,8 @@ impl PpoUpdate {
     }
 
     /// Queues the shuffle (first minibatch of an epoch) and the gather of step `slot`; with
-    /// mirror augmentation, the gather into the buffer's first half and its mirror image into
-    /// the second.
+    /// mirror augmentation, the samples into the buffer's first half and their mirror images
+    /// (the same rows of the mirrored batch) into the second.
     pub(super) fn record_gather_of(
         &self,
         stream: &Stream,
@@ -66,24 +66,25 @@ impl PpoUpdate {
         }
         let buffer = self.minibatch_of(slot);
         let rows = self.gathered_rows;
-        let gathered = match &self.mirror {
-            Some(_) => buffer.rows_of(0, rows)?,
-            None => buffer.rows_of(0, buffer.rows())?,
+        let gather = |into: &Minibatch, from: &PpoBatch<'_>| {
+            into.record_gather(
+                k,
+                stream,
+                from,
+                &self.advantages,
+                &self.advantage_moments,
+                &self.value_normalization,
+                &self.permutation,
+                mb * rows,
+            )
         };
-        gathered.record_gather(
-            k,
-            stream,
-            batch,
-            &self.advantages,
-            &self.advantage_moments,
-            &self.value_normalization,
-            &self.permutation,
-            mb * rows,
-        )?;
-        if let Some(mirror) = &self.mirror {
-            mirror.record(k, stream, &gathered, &buffer.rows_of(rows, rows)?)?;
+        match &self.mirror {
+            None => gather(buffer, batch),
+            Some(mirrored) => {
+                gather(&buffer.rows_of(0, rows)?, batch)?;
+                gather(&buffer.rows_of(rows, rows)?, &mirrored.batch(batch))
+            }
         }
-        Ok(())
     }
 
     /// Every epoch's minibatch steps as the module docs say; the capture's frontier joins
