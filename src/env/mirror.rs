@@ -268,4 +268,25 @@ mod tests {
             assert!(a.source.iter().enumerate().any(|(i, &s)| i != s), "{name}");
         }
     }
+
+    #[test]
+    fn a_character_without_a_mirror_image_says_to_leave_the_key_off() {
+        let text = crate::motion::character::HUMANOID_JSON;
+        let mut json: serde_json::Value = serde_json::from_str(text).expect("json");
+        let bodies = json["bodies"].as_array_mut().expect("bodies");
+        let moved = bodies
+            .iter()
+            .position(|b| b["pos"][1].as_f64().is_some_and(|y| y.abs() > 0.05))
+            .expect("a body off the plane");
+        let y = bodies[moved]["pos"][1].as_f64().expect("y");
+        bodies[moved]["pos"][1] = serde_json::json!(y * 1.3);
+        let c = Character::from_json(&json.to_string(), "moved.json").expect("character");
+        let e = mirror_images(&c, &ObsConfig::default())
+            .expect_err("no mirror image")
+            .to_string();
+        assert!(e.contains("leave ppo.mirror_augmentation off"), "{e}");
+        let humanoid = Character::find("humanoid").expect("built in");
+        let (obs, action) = mirror_images(&humanoid, &ObsConfig::default()).expect("mirrors");
+        assert!(!obs.is_empty() && !action.is_empty());
+    }
 }

@@ -593,6 +593,19 @@ fn min_log_std_is_written_only_when_set_and_stays_at_or_below_the_initial_log_st
     }
 }
 
+#[test]
+fn mirror_augmentation_is_written_only_when_on() {
+    let mut c = TrainConfig::with_motion("walk");
+    assert!(!c.ppo.mirror_augmentation);
+    assert!(!c.to_toml().unwrap().contains("mirror_augmentation"));
+    c.ppo.mirror_augmentation = true;
+    let on = c.to_toml().unwrap();
+    assert!(on.contains("mirror_augmentation = true"), "{on}");
+    let back = TrainConfig::from_toml(&on, "on.toml").unwrap();
+    assert!(back.ppo.mirror_augmentation);
+    assert_eq!(back, c);
+}
+
 /// An `[env]` key left out of written configs at its default: `set` gives it `value`, which is
 /// written as `key = "value"` and read back; `bad` in its place is refused, naming the key and
 /// the `expected` variants.
