@@ -4,7 +4,7 @@
 //! (`layout::observation_blocks`). The mirrored row is what `observe` writes for the mirrored
 //! state tracking the mirrored reference (tests/env_mirror.rs checks it against the f64
 //! reference of `observe`). The update's mirror augmentation (`ppo::mirror`) applies them to
-//! each minibatch.
+//! the rollout's batch.
 //!
 //! In the heading frame, which mirrors with the state, a position or linear velocity takes `M`
 //! (the plane's normal coordinate negated), an angular velocity `-M`, and a rotation matrix

@@ -256,14 +256,9 @@ impl Minibatch {
         self.observations.shape()[0]
     }
 
-    /// Observations of a row (without the alignment's zeros).
-    pub fn observation_size(&self) -> usize {
-        self.observation_size
-    }
-
     /// Rows `start..start + rows` of this minibatch, sharing its memory (the gathered and the
     /// mirrored half of a mirror-augmented minibatch).
-    pub fn rows_of(&self, start: usize, rows: usize) -> Result<Minibatch, PpoError> {
+    pub(super) fn rows_of(&self, start: usize, rows: usize) -> Result<Minibatch, PpoError> {
         let width = |a: &DeviceArray2<f32>| a.shape()[1];
         let (w, a) = (width(&self.observations), width(&self.actions));
         let flat = |x: &DeviceArray<f32>| x.view(start, [rows]);

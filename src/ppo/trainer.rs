@@ -29,7 +29,7 @@ use crate::env::{
     EpisodeScores, Rollout, RolloutPolicy, StageEvents, StageRecorder, TaskRecord, TrackedMotion,
     Trajectory, mirror_images,
 };
-use crate::kernels::DeviceArray;
+use crate::kernels::{DeviceArray, EnvError};
 use crate::latent::LatentDecoder;
 use crate::nn::PolicyGemm;
 use crate::plan::PlanStore;
@@ -706,7 +706,14 @@ fn batch_mirror(
             "ppo.mirror_augmentation: the goal task's observation has no mirror image (its goal blocks); leave the key out for a goal run".to_owned(),
         ));
     }
-    let (observation, action) = mirror_images(motion.character(), &config.obs)?;
+    // The env layer's setup errors are shapeless array errors; this one is the user's to fix.
+    let (observation, action) =
+        mirror_images(motion.character(), &config.obs).map_err(|e| match e {
+            EnvError::ArrayShape { shape, reason } if shape.is_empty() => {
+                TrainerError::Setup(reason)
+            }
+            other => other.into(),
+        })?;
     Ok(BatchMirror::new(
         gpu,
         &observation,
