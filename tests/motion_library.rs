@@ -7,32 +7,16 @@ use std::path::Path;
 use instantmimic::motion::built_in::BUILT_IN_CLIPS;
 use instantmimic::motion::character::HUMANOID_JSON;
 use instantmimic::motion::find::MotionSource;
-use instantmimic::motion::flight::ReferenceFlight;
 use instantmimic::motion::library_config::{clip_name_of_file, library_entries_at, load_library};
 use instantmimic::motion::table::HEADER_LEN;
 use instantmimic::motion::{
-    Character, LibraryConfig, LibraryEntry, LoopMode, MotionLibrary, MotionLibraryBuilder,
-    MotionLibraryError, ReferenceMotion, ReferenceTable, SyntheticMotion,
+    Character, LibraryConfig, LoopMode, MotionLibrary, MotionLibraryBuilder, MotionLibraryError,
+    ReferenceMotion, ReferenceTable, SyntheticMotion,
 };
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
 const CONTROL_DT: f64 = 1.0 / 30.0;
-
-/// [`load_library`] at the tests' control rate, flights as recorded.
-fn load_recorded(
-    origin: &str,
-    entries: &[LibraryEntry],
-    character: &Character,
-) -> Result<(MotionLibrary, Vec<String>), MotionLibraryError> {
-    load_library(
-        origin,
-        entries,
-        character,
-        CONTROL_DT,
-        ReferenceFlight::Recorded,
-    )
-}
 
 fn humanoid() -> Character {
     Character::humanoid().expect("the embedded humanoid loads")
@@ -289,7 +273,7 @@ fn a_config_lists_clips_by_name_or_path() {
     assert_eq!(entries[1].key, "motion_library.clips[1]");
     assert!(matches!(entries[1].resolved.source, MotionSource::File(_)));
     assert!(entries.iter().all(|e| e.weight == 1.0));
-    let (library, _) = load_recorded(&origin, &entries, &humanoid()).expect("loads");
+    let (library, _) = load_library(&origin, &entries, &humanoid(), CONTROL_DT).expect("loads");
     assert_eq!(library.num_clips(), 3);
     assert_eq!(library.clips()[1].loop_mode, LoopMode::Wrap);
     assert_eq!(library.clips()[2].loop_mode, LoopMode::Clamp);
@@ -297,45 +281,6 @@ fn a_config_lists_clips_by_name_or_path() {
         clip_name_of_file(Path::new("long/humanoid3d_long_walk1.txt")),
         "long_walk1"
     );
-}
-
-/// `env.reference_flight = "ballistic"` refits each clip of a library and names it in a notice;
-/// a clip without a flight is left as it is.
-#[test]
-fn a_library_refits_each_clips_flights_and_names_the_clip() {
-    let dir = tempfile::tempdir().expect("temporary directory");
-    let path = write(
-        dir.path(),
-        "library.toml",
-        "[motion_library]\nclips = [\"backflip\", \"walk\"]\n",
-    );
-    let (origin, entries) = library_entries_at(&path, None).expect("entries");
-    let (recorded, notices) = load_recorded(&origin, &entries, &humanoid()).expect("loads");
-    assert!(notices.iter().all(|n| !n.contains("reference_flight")));
-    let (refit, notices) = load_library(
-        &origin,
-        &entries,
-        &humanoid(),
-        CONTROL_DT,
-        ReferenceFlight::Ballistic,
-    )
-    .expect("loads");
-    // The quaternion warning, as recorded, then one line for the backflip's flight.
-    let flights: Vec<&String> = notices
-        .iter()
-        .filter(|n| n.contains("reference_flight"))
-        .collect();
-    assert_eq!(flights.len(), 1, "{notices:?}");
-    assert!(
-        flights[0]
-            .starts_with("backflip: env.reference_flight = \"ballistic\": flight from 0.688 s"),
-        "{notices:?}"
-    );
-    // In its flight the backflip's reference moved; the walk's did not.
-    let row = |library: &MotionLibrary, clip: usize, t: f64| library.lookup(clip, t).expect("row");
-    assert_ne!(row(&recorded, 0, 0.9), row(&refit, 0, 0.9));
-    assert_eq!(row(&recorded, 0, 0.2), row(&refit, 0, 0.2));
-    assert_eq!(row(&recorded, 1, 0.5), row(&refit, 1, 0.5));
 }
 
 #[test]
@@ -361,7 +306,7 @@ fn a_directory_library_reads_every_txt_file_sorted() {
         let (origin, entries) = library_entries_at(at, None).expect("entries");
         let names: Vec<&str> = entries.iter().map(|e| e.name.as_str()).collect();
         assert_eq!(names, ["alpha", "mid", "zeta"], "{origin}");
-        let (library, _) = load_recorded(&origin, &entries, &humanoid()).expect("loads");
+        let (library, _) = load_library(&origin, &entries, &humanoid(), CONTROL_DT).expect("loads");
         let frames: Vec<usize> = library.clips().iter().map(|c| c.frames).collect();
         assert_eq!(frames, [40, 30, 20]);
     }
@@ -392,7 +337,7 @@ fn a_manifest_gives_weights_and_names() {
         .map(|e| (e.name.as_str(), e.weight))
         .collect();
     assert_eq!(got, [("walk", 3.0), ("synth", 1.0), ("walk_again", 0.5)]);
-    let (library, _) = load_recorded(&origin, &entries, &humanoid()).expect("loads");
+    let (library, _) = load_library(&origin, &entries, &humanoid(), CONTROL_DT).expect("loads");
     let fractions = library.weight_fractions();
     assert!((fractions[0] - 3.0 / 4.5).abs() < 1e-15);
     // The same clip under two names: the same rows.
@@ -511,7 +456,7 @@ fn bad_clips_in_a_directory_fail_naming_the_clip() {
         let bad = d.join(file);
         std::fs::write(&bad, bytes).expect("write");
         let (origin, entries) = library_entries_at(d, None).expect("entries");
-        let err = load_recorded(&origin, &entries, &character).expect_err("refused");
+        let err = load_library(&origin, &entries, &character, CONTROL_DT).expect_err("refused");
         let line = err.to_string();
         let name = file.trim_end_matches(".txt");
         assert!(

@@ -326,22 +326,21 @@ fn inspect_report(s: &ClipSummary) -> String {
             );
         }
         Ok(flights) => {
+            let gravity = match s.gravity {
+                Some(g) => format!("gravity {:+.2}", g.z),
+                None => "the character's description records no gravity".to_owned(),
+            };
             for f in flights {
-                let (low, high) = f.recorded_vertical_acceleration;
+                let (low, high) = f.vertical_acceleration;
                 let _ = writeln!(
                     out,
-                    "flight               {:.3} .. {:.3} s (key frames {}-{}): centre of mass {low:+.1} .. {high:+.1} m/s² vertically (gravity {:+.2}); env.reference_flight = \"ballistic\" moves the root by up to {:.3} m",
-                    f.take_off_s,
-                    f.landing_s,
-                    f.flight.take_off,
-                    f.flight.landing,
-                    f.gravity.z,
-                    f.largest_shift_m
+                    "flight               {:.3} .. {:.3} s (key frames {}-{}): centre of mass {low:+.1} .. {high:+.1} m/s² vertically ({gravity})",
+                    f.take_off_s, f.landing_s, f.flight.take_off, f.flight.landing
                 );
             }
         }
         Err(why) => {
-            let _ = writeln!(out, "flights              not refit: {why}");
+            let _ = writeln!(out, "flights              not found: {why}");
         }
     }
     match &s.mirror_image {

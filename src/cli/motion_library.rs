@@ -7,7 +7,6 @@ use anyhow::{Result, bail};
 
 use crate::motion::Character;
 use crate::motion::MotionLibrary;
-use crate::motion::flight::ReferenceFlight;
 use crate::motion::library_config::{library_entries_at, load_library};
 
 /// Loads the library at `path` (a library file or a directory) for `character`, resampled at
@@ -25,13 +24,7 @@ pub fn inspect_library(
     }
     // The errors name the library's file, the clip and the key: no context to add.
     let (origin, entries) = library_entries_at(path, motions_dir)?;
-    let (library, notices) = load_library(
-        &origin,
-        &entries,
-        character,
-        1.0 / control_rate,
-        ReferenceFlight::Recorded,
-    )?;
+    let (library, notices) = load_library(&origin, &entries, character, 1.0 / control_rate)?;
     super::notices::print_notices(&notices);
     Ok(library_report(&library, control_rate))
 }

@@ -6,8 +6,6 @@
 
 use serde::{Deserialize, Serialize};
 
-pub use crate::motion::flight::ReferenceFlight;
-
 /// `[env]`: episodes, actions and termination (docs/env.md).
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
@@ -67,12 +65,6 @@ pub struct EnvConfig {
     /// training step"). Left out of written configurations at the default.
     #[serde(skip_serializing_if = "TrainingSolver::is_reduced")]
     pub training_solver: TrainingSolver,
-    /// The reference's airborne key frames: as recorded (the default), or refit so that the
-    /// centre of mass flies under gravity between take-off and landing, for training and
-    /// evaluation alike (docs/env.md, "Ballistic flights"). Left out of written configurations
-    /// at the default.
-    #[serde(skip_serializing_if = "ReferenceFlight::is_recorded")]
-    pub reference_flight: ReferenceFlight,
 }
 
 /// `env.training_solver`.
@@ -146,7 +138,6 @@ impl Default for EnvConfig {
             clip_base_share: None,
             body_kinematics: BodyKinematics::Fused,
             training_solver: TrainingSolver::Reduced,
-            reference_flight: ReferenceFlight::Recorded,
         }
     }
 }

@@ -453,13 +453,13 @@ impl Character {
         &self.feet
     }
 
-    /// Sum of the body masses (kg).
     /// The compiled model's gravity (m/s², world frame), as the description records it: `None`
     /// for a description exported before it was recorded.
     pub fn gravity(&self) -> Option<Vector3<f64>> {
         self.gravity
     }
 
+    /// Sum of the body masses (kg).
     pub fn total_mass(&self) -> f64 {
         self.total_mass
     }

@@ -405,20 +405,6 @@ impl MotionClip {
         self.root_position
     }
 
-    /// The clip with the root of some key frames moved: `(frame, by)` pairs (`super::flight`'s
-    /// refit). Quaternions, times and the cycle's displacement are unchanged, so a shifted frame
-    /// must not be the first or the last.
-    pub(crate) fn with_root_shifts(&self, shifts: &[(usize, Vector3<f64>)]) -> MotionClip {
-        let mut clip = self.clone();
-        for &(frame, by) in shifts {
-            let start = frame * self.nq + self.root_position;
-            if let Some(root) = clip.qpos.get_mut(start..start + 3) {
-                root.iter_mut().zip(by.iter()).for_each(|(p, d)| *p += d);
-            }
-        }
-        clip
-    }
-
     /// The qpos of key frame `frame`.
     pub fn frame_qpos(&self, frame: usize) -> Option<&[f64]> {
         self.qpos.get(frame * self.nq..(frame + 1) * self.nq)

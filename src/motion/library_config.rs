@@ -21,10 +21,8 @@ use serde::{Deserialize, Serialize};
 use super::character::Character;
 use super::error::{MotionError, MotionLibraryError};
 use super::find::{MotionSource, ResolvedMotion, directory_clips, resolve_motion};
-use super::flight::{ReferenceFlight, ballistic_refit};
 use super::format::strip_motion_extension;
 use super::motion_library::{MotionLibrary, MotionLibraryBuilder};
-use super::reference::ReferenceMotion;
 use crate::files::messages::toml_error_line;
 
 /// The `[motion_library]` section: exactly one of the three keys.
@@ -439,29 +437,19 @@ pub fn load_library(
     entries: &[LibraryEntry],
     character: &Character,
     control_dt: f64,
-    flight: ReferenceFlight,
 ) -> Result<(MotionLibrary, Notices), MotionLibraryError> {
     let mut builder = MotionLibraryBuilder::new(origin, control_dt);
     let mut notices = Vec::new();
     for entry in entries {
-        let clip_error = |error| MotionLibraryError::Clip {
-            origin: origin.to_string(),
-            name: entry.name.clone(),
-            error: Box::new(error),
-        };
-        let mut motion = entry.resolved.load(character).map_err(clip_error)?;
+        let motion = entry
+            .resolved
+            .load(character)
+            .map_err(|error| MotionLibraryError::Clip {
+                origin: origin.to_string(),
+                name: entry.name.clone(),
+                error: Box::new(error),
+            })?;
         notices.extend(entry.resolved.notices(motion.clip()));
-        if flight == ReferenceFlight::Ballistic {
-            let (clip, refits) = ballistic_refit(motion.clip(), character).map_err(clip_error)?;
-            notices.extend(refits.iter().map(|r| {
-                format!(
-                    "{}: env.reference_flight = \"ballistic\": {}",
-                    entry.name,
-                    r.describe()
-                )
-            }));
-            motion = ReferenceMotion::new(clip, character).map_err(clip_error)?;
-        }
         builder.push(
             &entry.name,
             &entry.resolved.source.label(),

@@ -1,11 +1,11 @@
-//! A summary of a reference motion for people: timing, looping, joint ranges and foot clearance
-//! (what `instantmimic motion inspect` prints).
+//! A summary of a reference motion for people: timing, looping, joint ranges, foot clearance,
+//! flights and mirror image (what `instantmimic motion inspect` prints).
 
 use nalgebra::Vector3;
 
 use super::character::JointType;
 use super::clip::{LoopMode, QuaternionNorms};
-use super::flight::{FlightRefit, ballistic_refit};
+use super::flight::{FlightSummary, flight_summaries};
 use super::mirror::{ClipSymmetry, Mirror, clip_symmetry};
 use super::reference::ReferenceMotion;
 use super::rotation::{quat_from_wxyz, quat_to_rotation_vector, read_wxyz};
@@ -58,9 +58,11 @@ pub struct ClipSummary {
     pub joints: Vec<JointSummary>,
     pub lowest_foot: Option<LowestPoint>,
     pub quaternion_norms: QuaternionNorms,
-    /// The clip's flights and what `env.reference_flight = "ballistic"` would do to them, or
-    /// why they cannot be refit.
-    pub flights: Result<Vec<FlightRefit>, String>,
+    /// The clip's flights, or why they could not be found.
+    pub flights: Result<Vec<FlightSummary>, String>,
+    /// The character's gravity (m/s², world frame), which a flight's vertical acceleration is
+    /// compared with; None: its description records none.
+    pub gravity: Option<Vector3<f64>>,
     /// How close the clip comes to its own mirror image (None: the character has none).
     pub mirror_image: Option<ClipSymmetry>,
 }
@@ -158,9 +160,8 @@ impl ClipSummary {
             joints,
             lowest_foot,
             quaternion_norms: clip.quaternion_norms(),
-            flights: ballistic_refit(clip, character)
-                .map(|(_, refits)| refits)
-                .map_err(|e| e.to_string()),
+            flights: flight_summaries(clip, character).map_err(|e| e.to_string()),
+            gravity: character.gravity(),
             mirror_image: Mirror::of_character(character)
                 .ok()
                 .and_then(|m| clip_symmetry(clip, character, &m, MIRROR_SAMPLES).ok()),

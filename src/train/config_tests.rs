@@ -630,15 +630,14 @@ fn assert_written_only_off_default(
     assert!(e.contains(key) && e.contains(expected), "{e}");
 }
 
-/// `env.phase_share` is "resets", `env.training_solver` "reduced" and `env.reference_flight`
-/// "recorded" unless the config says otherwise, and each is written only then.
+/// `env.phase_share` is "resets" and `env.training_solver` "reduced" unless the config says
+/// otherwise, and each is written only then.
 #[test]
 fn env_keys_at_their_default_are_left_out_of_written_configs() {
-    use crate::env::{PhaseShare, ReferenceFlight, TrainingSolver};
+    use crate::env::{PhaseShare, TrainingSolver};
     let defaults = TrainConfig::with_motion("walk").env;
     assert_eq!(defaults.phase_share, PhaseShare::Resets);
     assert_eq!(defaults.training_solver, TrainingSolver::Reduced);
-    assert_eq!(defaults.reference_flight, ReferenceFlight::Recorded);
     type Case = (
         &'static str,
         fn(&mut TrainConfig),
@@ -646,7 +645,7 @@ fn env_keys_at_their_default_are_left_out_of_written_configs() {
         &'static str,
         &'static str,
     );
-    let cases: [Case; 3] = [
+    let cases: [Case; 2] = [
         (
             "phase_share",
             |c| c.env.phase_share = PhaseShare::Frames,
@@ -661,17 +660,34 @@ fn env_keys_at_their_default_are_left_out_of_written_configs() {
             "fast",
             "expected `reduced` or `full`",
         ),
-        (
-            "reference_flight",
-            |c| c.env.reference_flight = ReferenceFlight::Ballistic,
-            "ballistic",
-            "parabolic",
-            "expected `recorded` or `ballistic`",
-        ),
     ];
     for (key, set, value, bad, expected) in cases {
         assert_written_only_off_default(key, set, value, bad, expected);
     }
+}
+
+/// `env.reference_flight` (the ballistic refit, measured and rejected: BENCHMARKS.md) is gone:
+/// no written configuration held it at its default, so a file or --set that names it fails as
+/// any unknown key does.
+#[test]
+fn reference_flight_is_an_unknown_key() {
+    let text = "motion = \"walk\"\n[env]\nreference_flight = \"ballistic\"\n";
+    let e = TrainConfig::from_toml(text, "old.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("old.toml: line 3, column 1")
+            && e.contains("unknown field `reference_flight`"),
+        "{e}"
+    );
+    let e = TrainConfig::with_motion("walk")
+        .with_overrides(
+            &[("env.reference_flight".to_owned(), "ballistic".to_owned())],
+            "walk with --set",
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("unknown field `reference_flight`"), "{e}");
 }
 
 #[test]

@@ -47,14 +47,8 @@ fn preflight_library(
     let entries = library_config
         .entries(origin, None, motions_dir)
         .map_err(library_error)?;
-    let (library, notices) = load_library(
-        origin,
-        &entries,
-        &character,
-        control_dt,
-        config.env.reference_flight,
-    )
-    .map_err(library_error)?;
+    let (library, notices) =
+        load_library(origin, &entries, &character, control_dt).map_err(library_error)?;
     let clips = library.num_clips();
     if (config.run.eval_envs as usize) < clips {
         return Err(TrainError::Setup(format!(

@@ -10,10 +10,8 @@ use std::path::Path;
 use super::character::{ChosenCharacter, check_model, check_plan_model};
 use super::config::TrainConfig;
 use super::error::TrainError;
-use crate::env::ReferenceFlight;
 use crate::env::layout::{JointLayout, ObservationCounts};
 use crate::motion::find::{MotionSource, ResolvedMotion, resolve_motion};
-use crate::motion::flight::ballistic_refit;
 use crate::motion::{Character, LoopMode, MotionClip, ReferenceMotion, ReferenceTable};
 use crate::nn::mlp_layout;
 use crate::plan::{KINEMATICS_PLAN, PlanStore, STEP_PLAN, SimulatedModel};
@@ -113,16 +111,15 @@ pub fn load_motion(
     motions_dir: Option<&Path>,
 ) -> Result<(ResolvedMotion, ReferenceMotion), TrainError> {
     let character = ChosenCharacter::of_config(config)?.into_character();
-    let (resolved, motion, _) = load_motion_of(config, character, motions_dir)?;
-    Ok((resolved, motion))
+    load_motion_of(config, character, motions_dir)
 }
 
-/// [`load_motion`] for `character`, with a line for each flight `env.reference_flight` refit.
+/// [`load_motion`] for `character`.
 fn load_motion_of(
     config: &TrainConfig,
     character: Character,
     motions_dir: Option<&Path>,
-) -> Result<(ResolvedMotion, ReferenceMotion, Vec<String>), TrainError> {
+) -> Result<(ResolvedMotion, ReferenceMotion), TrainError> {
     if config.motion_library.is_some() {
         return Err(TrainError::Setup(
             "motion_library: this takes a configuration of one clip (`motion`) for now; a motion library trains with `train` (docs/library.md)".to_owned(),
@@ -130,21 +127,7 @@ fn load_motion_of(
     }
     let resolved = resolve_motion(&config.motion, motions_dir)?;
     let motion = resolved.load(&character)?;
-    match config.env.reference_flight {
-        ReferenceFlight::Recorded => Ok((resolved, motion, Vec::new())),
-        ReferenceFlight::Ballistic => {
-            let (clip, refits) = ballistic_refit(motion.clip(), &character)?;
-            let notes = if refits.is_empty() {
-                vec!["env.reference_flight = \"ballistic\": the clip has no flight (no key frame off the ground between two on it); nothing refit".to_owned()]
-            } else {
-                refits
-                    .iter()
-                    .map(|r| format!("env.reference_flight = \"ballistic\": {}", r.describe()))
-                    .collect()
-            };
-            Ok((resolved, ReferenceMotion::new(clip, &character)?, notes))
-        }
-    }
+    Ok((resolved, motion))
 }
 
 /// Checks that `store` has the run's plans for `nworld` worlds, captured from `character`'s
@@ -212,13 +195,13 @@ pub fn preflight(
     // The plans first: plans of another character are the mistake to report, whatever the
     // motion.
     let (plans, physics_dt, control_dt) = physics_checks(config, store, &character)?;
-    let (resolved, motion, flight_notes) = load_motion_of(config, character, motions_dir)?;
+    let (resolved, motion) = load_motion_of(config, character, motions_dir)?;
     let table = ReferenceTable::build(&motion, control_dt)?;
     let clip = motion.clip();
     let checks = Preflight {
         character: character_line(motion.character(), store),
         motion_source: resolved.source.label(),
-        motion_notices: [clip_notices(&resolved, clip), flight_notes].concat(),
+        motion_notices: clip_notices(&resolved, clip),
         clip_frames: clip.num_frames(),
         clip_duration_s: clip.duration(),
         loop_mode: clip.loop_mode(),
