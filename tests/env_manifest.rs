@@ -24,9 +24,10 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 51] = [
+const EXPECTED_KERNELS: [(&str, &str); 52] = [
     ("control", "pd_control"),
     ("control", "pd_targets"),
+    ("control", "root_assist"),
     ("evaluate", "evaluation_accumulate"),
     ("gae", "gae_advantages"),
     ("gae", "value_statistics_update"),

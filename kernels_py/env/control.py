@@ -29,7 +29,7 @@ with the implicit `-Kd v'` the net torque is DeepMimic's clamped PD, `clamp(P - 
 
 import warp as wp
 
-from env.reference import clip_base, reference_locate, reference_quat_wxyz, reference_value
+from env.reference import clip_base, reference_locate, reference_position, reference_quat_wxyz, reference_value, reference_vec3
 from env.rotation import qconj, qexp, qlog, qmul
 
 wp.set_module_options({"enable_backward": False})
@@ -120,6 +120,55 @@ def pd_targets(
             base = reference_value(table, at, a)
         targets[n, j, 0] = base + s * actions[n, m]
 
+
+@wp.kernel
+def root_assist(
+    qpos: wp.array2d(dtype=wp.float32),
+    qvel: wp.array2d(dtype=wp.float32),
+    table: wp.array(dtype=wp.float32),
+    clip_offsets: wp.array(dtype=wp.int32),
+    clip_id: wp.array(dtype=wp.int32),
+    ref_time: wp.array(dtype=wp.float32),
+    reference_qvel: wp.int32,
+    lead: wp.float32,
+    iteration: wp.array(dtype=wp.int32),
+    anneal_iterations: wp.int32,
+    linear_stiffness: wp.float32,
+    linear_damping: wp.float32,
+    angular_stiffness: wp.float32,
+    angular_damping: wp.float32,
+    qfrc_applied: wp.array2d(dtype=wp.float32),
+):
+    """qfrc_applied[n, 0:6] for every env n, once per control step (held over its substeps): a
+    training-only force and torque on the root's free joint toward the reference root of the
+    env's clip at `ref_time[n] + lead` (docs/env.md, "The assist force"), scaled by `1 -
+    iteration[0] / anneal_iterations`, zero once that reaches 0. The force (world frame) is
+    `linear_stiffness (p_ref - p) + linear_damping (v_ref - v)`, the torque (in the root's frame,
+    as MuJoCo's free-joint dofs) `angular_stiffness qlog(conj(q) q_ref) + angular_damping (w_ref -
+    w)`; `reference_qvel` is where the table's rows keep qvel. Launch N threads."""
+    n = wp.tid()
+    scale = wp.float32(0.0)
+    if anneal_iterations > 0:
+        scale = 1.0 - wp.float32(iteration[0]) / wp.float32(anneal_iterations)
+    if scale <= 0.0:
+        for i in range(6):
+            qfrc_applied[n, i] = 0.0
+        return
+    at = reference_locate(table, clip_base(clip_offsets, clip_id[n]), ref_time[n] + lead)
+    p = wp.vec3(qpos[n, 0], qpos[n, 1], qpos[n, 2])
+    q = wp.vec4(qpos[n, 3], qpos[n, 4], qpos[n, 5], qpos[n, 6])
+    v = wp.vec3(qvel[n, 0], qvel[n, 1], qvel[n, 2])
+    w = wp.vec3(qvel[n, 3], qvel[n, 4], qvel[n, 5])
+    force = linear_stiffness * (reference_position(table, at, 0) - p) + linear_damping * (
+        reference_vec3(table, at, reference_qvel) - v
+    )
+    torque = angular_stiffness * qlog(qmul(qconj(q), reference_quat_wxyz(table, at, 3))) + angular_damping * (
+        reference_vec3(table, at, reference_qvel + 3) - w
+    )
+    for i in range(3):
+        qfrc_applied[n, i] = scale * force[i]
+        qfrc_applied[n, 3 + i] = scale * torque[i]
+
 # Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
 # dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
 # writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
@@ -137,5 +186,12 @@ LAUNCH = {
         "dim <= extent(actions, 0) * extent(joint_kind, 0)",
         "dim <= len(clip_id) * extent(joint_kind, 0)",
         "dim <= len(ref_time) * extent(joint_kind, 0)",
+    ),
+    "root_assist": (
+        "dim == extent(qfrc_applied, 0)",
+        "dim <= extent(qpos, 0)",
+        "dim <= extent(qvel, 0)",
+        "dim <= len(clip_id)",
+        "dim <= len(ref_time)",
     ),
 }

@@ -12,11 +12,11 @@
 use super::compare::{Report, wide};
 use super::physics::Shape;
 use super::program::{Arg, Program, Scalar};
-use super::quat::{Quat, qexp, qlog, quat, quat_at, quat_at64, wxyz};
+use super::quat::{Quat, qexp, qlog, quat, quat_at, quat_at64, vec3, vec3_64, wxyz};
 use super::rng::Sampler;
 use super::{Check, Clip, Fixture, nan_f32};
 use instantmimic::env::layout::{BALL, JointLayout};
-use instantmimic::kernels::{PD_CONTROL, PD_TARGETS};
+use instantmimic::kernels::{PD_CONTROL, PD_TARGETS, ROOT_ASSIST};
 
 /// The control step of the residual cases (s): targets are the reference at `ref_time + DT`.
 const DT: f32 = 1.0 / 30.0;
@@ -300,6 +300,127 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, residual: Option<&Clip>, seed
     })
 }
 
+/// The assist's gains in the cases: the humanoid's at 2 Hz, roughly (N/m, N s/m, N m/rad,
+/// N m s/rad).
+const ASSIST_GAINS: [f32; 4] = [7100.0, 1130.0, 790.0, 125.0];
+
+/// Where the reference of the assist is taken: half a control step ahead.
+const LEAD: f32 = DT / 2.0;
+
+/// `root_assist` at iteration `iteration` of `anneal` on clips `tracked`: every env's root
+/// about 0.25 m, up to 1.2 rad and a few m/s from its reference. Reference: per env, the force
+/// `k (p_ref - p) + d (v_ref - v)` and the torque `k' qlog(conj(q) q_ref) + d' (w_ref - w)`
+/// (f64, the reference at `ref_time + LEAD`, `MotionLibrary::lookup`), times `max(0, 1 -
+/// iteration / anneal)`; the applied forces' other columns untouched.
+fn assist_case(
+    fx: &Fixture,
+    n: usize,
+    tracked: &Clip,
+    iteration: i32,
+    anneal: i32,
+    seed: u64,
+) -> Check {
+    let mut rng = Sampler::new(seed);
+    let shape = fx.shape.clone();
+    let (nq, nv) = (shape.nq(), shape.nv());
+    let clip_id = tracked.clip_ids(n, &mut rng);
+    let ref_time: Vec<f32> = (0..n)
+        .map(|e| rng.uniform(0.0, 3.0 * tracked.duration(clip_id[e] as usize)) as f32)
+        .collect();
+    let rows: Vec<Vec<f64>> = ref_time
+        .iter()
+        .zip(&clip_id)
+        .map(|(&t, &c)| tracked.lookup(c as usize, f64::from(t + LEAD)))
+        .collect();
+    let qvel_at = tracked.segment(0).layout().qvel;
+    let mut qpos = vec![0.0f32; n * nq];
+    let mut qvel = vec![0.0f32; n * nv];
+    for e in 0..n {
+        let row = &rows[e];
+        let offset = rng.normal3(0.25);
+        for c in 0..3 {
+            qpos[e * nq + c] = (row[c] + offset[c]) as f32;
+        }
+        let r = rng.normal3(1.0);
+        let len = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+        let angle = rng.uniform(0.0, 1.2);
+        let q = quat_at64(row, 3) * qexp(r.map(|x| x * angle / len));
+        for (c, v) in wxyz(&q).iter().enumerate() {
+            qpos[e * nq + 3 + c] = *v as f32;
+        }
+        for v in &mut qvel[e * nv..(e + 1) * nv] {
+            *v = (3.0 * rng.normal()) as f32;
+        }
+    }
+    // Columns past the root's six hold a mark the kernel must leave; the root's NaN.
+    let mark = 0.25f32;
+    let applied: Vec<f32> = (0..n * nv)
+        .map(|k| if k % nv < 6 { f32::NAN } else { mark })
+        .collect();
+    let mut p = Program::new(format!(
+        "root_assist: {n} envs on {}, iteration {iteration} of {anneal}",
+        tracked.name
+    ));
+    let (table, offsets) = (tracked.data(), tracked.offsets());
+    let [ks, kd, ka, kda] = ASSIST_GAINS;
+    let args = vec![
+        p.f32("qpos", &[n, nq], qpos),
+        p.f32("qvel", &[n, nv], qvel),
+        p.f32("table", &[table.len()], table),
+        p.i32("clip_offsets", &[offsets.len()], offsets),
+        p.i32("clip_id", &[n], clip_id),
+        p.f32("ref_time", &[n], ref_time),
+        Arg::Scalar(Scalar::I32(qvel_at as i32)),
+        Arg::Scalar(Scalar::F32(LEAD)),
+        p.i32("iteration", &[1], vec![iteration]),
+        Arg::Scalar(Scalar::I32(anneal)),
+        Arg::Scalar(Scalar::F32(ks)),
+        Arg::Scalar(Scalar::F32(kd)),
+        Arg::Scalar(Scalar::F32(ka)),
+        Arg::Scalar(Scalar::F32(kda)),
+        p.f32("qfrc_applied", &[n, nv], applied),
+    ];
+    p.launch(&ROOT_ASSIST, n, args);
+    Check::new(p, move |p, out| {
+        let mut r = Report::new(&p.name);
+        let (qpos, qvel) = (p.input_f32("qpos"), p.input_f32("qvel"));
+        let scale = (1.0 - f64::from(iteration) / f64::from(anneal)).max(0.0);
+        let [ks, kd, ka, kda] = ASSIST_GAINS.map(f64::from);
+        let mut expected = vec![0.0; n * 6];
+        for (e, row) in rows.iter().enumerate() {
+            let force = ks * (vec3_64(row, 0) - vec3(qpos, e * nq))
+                + kd * (vec3_64(row, qvel_at) - vec3(qvel, e * nv));
+            let rotation = qlog(&(quat_at(qpos, e * nq + 3).inverse() * quat_at64(row, 3)));
+            let torque = ka * rotation + kda * (vec3_64(row, qvel_at + 3) - vec3(qvel, e * nv + 3));
+            for c in 0..3 {
+                expected[e * 6 + c] = scale * force[c];
+                expected[e * 6 + 3 + c] = scale * torque[c];
+            }
+        }
+        let got = out.f32("qfrc_applied");
+        let root: Vec<f64> = (0..n)
+            .flat_map(|e| got[e * nv..e * nv + 6].iter().map(|&x| f64::from(x)))
+            .collect();
+        if scale > 0.0 {
+            r.relative("qfrc_applied (the root's six dofs)", &root, &expected);
+        } else {
+            r.check(
+                root.iter().all(|&x| x == 0.0),
+                "qfrc_applied: zero on the root once the assist has faded",
+            );
+        }
+        let rest: Vec<f32> = (0..n)
+            .flat_map(|e| got[e * nv + 6..(e + 1) * nv].iter().copied())
+            .collect();
+        r.bitwise_f32(
+            "qfrc_applied (the other dofs, untouched)",
+            &rest,
+            &vec![mark; rest.len()],
+        );
+        r
+    })
+}
+
 pub fn checks(fx: &Fixture) -> Vec<Check> {
     vec![
         case(fx, 64, 1.0, None, 11),
@@ -307,5 +428,8 @@ pub fn checks(fx: &Fixture) -> Vec<Check> {
         case(fx, 64, 0.875, Some(&fx.main), 13),
         case(fx, 37, 1.0, Some(&fx.clamped), 14),
         case(fx, 80, 0.875, Some(&fx.library), 15),
+        assist_case(fx, 64, &fx.main, 0, 50, 16),
+        assist_case(fx, 37, &fx.library, 30, 120, 17),
+        assist_case(fx, 33, &fx.clamped, 60, 50, 18),
     ]
 }
