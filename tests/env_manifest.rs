@@ -27,7 +27,7 @@ use serde_json::{Value, json};
 const EXPECTED_KERNELS: [(&str, &str); 52] = [
     ("control", "pd_control"),
     ("control", "pd_targets"),
-    ("control", "root_assist"),
+    ("control", "assist_forces"),
     ("evaluate", "evaluation_accumulate"),
     ("gae", "gae_advantages"),
     ("gae", "value_statistics_update"),

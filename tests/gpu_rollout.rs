@@ -301,7 +301,7 @@ fn assisted_rollouts(assist_frequency: f32) -> (f64, usize, bool, bool) {
 
 /// A root PD toward the reference (3 Hz, the first of its 100 fading iterations) holds a fresh
 /// policy's backflip closer to the clip: more reward over 4 x 8 steps of 32 envs and fewer
-/// failures. Were `d.qfrc_applied` not read by the step plan, both runs would be alike.
+/// failures. Were `d.xfrc_applied` not read by the step plan, both runs would be alike.
 #[test]
 fn the_assist_force_holds_a_fresh_policy_to_the_backflip() {
     let (reward, failed, has, evaluation_has) = assisted_rollouts(0.0);

@@ -1,6 +1,6 @@
-//! The assist force (docs/env.md, "The assist force"): in training rollouts only, a force and a
-//! torque on the root toward the reference root, weakened every iteration until it is gone
-//! (kernels_py/env/control.py `root_assist`). After A2CF (arXiv 2506.23125), whose assist
+//! The assist force (docs/env.md, "The assist force"): in training rollouts only, an
+//! acceleration field over the whole body toward the reference root, weakened every iteration
+//! until it is gone (kernels_py/env/control.py `assist_forces`). After A2CF (arXiv 2506.23125), whose assist
 //! forces a policy learns; here they are a fixed PD. A fresh policy then follows the whole clip
 //! from its first iterations, flights included, and learns to carry itself as the help fades.
 //! The evaluation never has it: success is scored without help, once it is gone.
@@ -8,65 +8,46 @@
 use std::f64::consts::TAU;
 
 use crate::cuda::Stream;
-use crate::kernels::{DeviceArray, DeviceArray2, EnvKernels};
+use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
 use crate::motion::Character;
 use crate::motion::character::JointType;
-use crate::motion::kinematics::forward_kinematics;
 use crate::motion::table::TableLayout;
 use crate::plan::Simulation;
 
 use super::config::EnvConfig;
 use super::error::RolloutError;
 
-/// The root PD's gains: a critically damped spring of `env.assist_frequency` for the whole
-/// body's mass (force) and for its moment of inertia about the centre of mass (torque).
+/// The assist's gains, in accelerations: a critically damped spring of `env.assist_frequency`
+/// (`w = 2 pi f`), per unit of displacement (1/s², `w²`) and of velocity (1/s, `2 w`). As an
+/// acceleration field over every body they need no mass or inertia.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AssistGains {
-    /// N/m and N s/m.
-    pub linear_stiffness: f64,
-    pub linear_damping: f64,
-    /// N m/rad and N m s/rad.
-    pub angular_stiffness: f64,
-    pub angular_damping: f64,
+    pub stiffness: f64,
+    pub damping: f64,
 }
 
 impl AssistGains {
-    /// The gains of a spring of `frequency` Hz on `character`: its total mass, and the moment
-    /// of its bodies' masses (points at their centres of mass, the default pose) about the
-    /// centre of mass averaged over the three axes (2/3 of the sum of m r²). The character
-    /// records no inertia tensors, and a spring needs only the scale.
-    pub fn of(character: &Character, frequency: f64) -> Result<AssistGains, RolloutError> {
-        let body = forward_kinematics(character, character.default_qpos()).map_err(|e| {
-            RolloutError::Setup(format!(
-                "the assist force's gains: {e} (a bug: the character's default pose)"
-            ))
-        })?;
-        let moment: f64 = character
-            .bodies()
-            .iter()
-            .zip(&body.xipos)
-            .map(|(b, x)| b.mass * (x - body.com).norm_squared())
-            .sum::<f64>()
-            * (2.0 / 3.0);
-        let mass = character.total_mass();
+    /// The gains of a spring of `frequency` Hz.
+    pub fn of(frequency: f64) -> AssistGains {
         let omega = TAU * frequency;
-        Ok(AssistGains {
-            linear_stiffness: mass * omega * omega,
-            linear_damping: 2.0 * mass * omega,
-            angular_stiffness: moment * omega * omega,
-            angular_damping: 2.0 * moment * omega,
-        })
+        AssistGains {
+            stiffness: omega * omega,
+            damping: 2.0 * omega,
+        }
     }
 }
 
-/// A training rollout's assist force: its gains, its annealing and the physics' applied forces
-/// (`d.qfrc_applied`, which the step plan adds to the root's six dofs).
+/// A training rollout's assist force: its gains, its fade, the character's body masses and
+/// centres of mass (in each body's frame), and the physics' applied forces (`d.xfrc_applied`,
+/// a force and a torque per body, which the step plan maps onto the dofs).
 pub(super) struct RootAssist {
     gains: AssistGains,
     anneal_iterations: i32,
     /// Where the reference table's rows keep qvel.
     reference_qvel: i32,
-    qfrc_applied: DeviceArray2<f32>,
+    body_mass: DeviceArray<f32>,
+    body_ipos: DeviceArray2<f32>,
+    xfrc_applied: DeviceArray3<f32>,
 }
 
 impl RootAssist {
@@ -85,23 +66,36 @@ impl RootAssist {
             }
             _ => {
                 return Err(RolloutError::Setup(format!(
-                    "env.assist_frequency: {} has no free root joint for the assist force to push \
+                    "env.assist_frequency: {} has no free root joint for the assist force to pull \
                      (leave the key at 0)",
                     character.name()
                 )));
             }
         }
+        let gpu = sim.gpu();
+        let bodies = character.bodies();
+        let mass: Vec<f32> = bodies.iter().map(|b| b.mass as f32).collect();
+        let ipos: Vec<f32> = bodies
+            .iter()
+            .flat_map(|b| [b.ipos.x as f32, b.ipos.y as f32, b.ipos.z as f32])
+            .collect();
         let n = sim.nworld() as usize;
         Ok(Some(RootAssist {
-            gains: AssistGains::of(character, f64::from(config.assist_frequency))?,
+            gains: AssistGains::of(f64::from(config.assist_frequency)),
             anneal_iterations: i32::try_from(config.assist_iterations).unwrap_or(i32::MAX),
             reference_qvel: TableLayout::for_character(character).qvel as i32,
-            qfrc_applied: DeviceArray::from_simulation(sim, "d.qfrc_applied", [n, character.nv()])?,
+            body_mass: DeviceArray::from_slice(gpu, [bodies.len()], &mass)?,
+            body_ipos: DeviceArray::from_slice(gpu, [bodies.len(), 3], &ipos)?,
+            xfrc_applied: DeviceArray::from_simulation(
+                sim,
+                "d.xfrc_applied",
+                [n, bodies.len(), 6],
+            )?,
         }))
     }
 
-    /// This control step's force and torque, from the state the step starts in and the
-    /// reference `lead` seconds later (the force holds over the step's substeps).
+    /// This control step's forces, from the state the step starts in and the reference `lead`
+    /// seconds later (the forces hold over the step's substeps).
     #[allow(clippy::too_many_arguments)]
     pub(super) fn record(
         &self,
@@ -109,6 +103,8 @@ impl RootAssist {
         s: &Stream,
         qpos: &DeviceArray2<f32>,
         qvel: &DeviceArray2<f32>,
+        xpos: &DeviceArray3<f32>,
+        xquat: &DeviceArray3<f32>,
         table: &DeviceArray<f32>,
         clip_offsets: &DeviceArray<i32>,
         clip_id: &DeviceArray<i32>,
@@ -116,12 +112,15 @@ impl RootAssist {
         lead: f32,
         iteration: &DeviceArray<i32>,
     ) -> Result<(), RolloutError> {
-        let g = &self.gains;
-        kernels.root_assist(
+        kernels.assist_forces(
             s,
-            self.qfrc_applied.shape()[0],
+            self.xfrc_applied.shape()[0],
             qpos,
             qvel,
+            xpos,
+            xquat,
+            &self.body_mass,
+            &self.body_ipos,
             table,
             clip_offsets,
             clip_id,
@@ -130,27 +129,20 @@ impl RootAssist {
             lead,
             iteration,
             self.anneal_iterations,
-            g.linear_stiffness as f32,
-            g.linear_damping as f32,
-            g.angular_stiffness as f32,
-            g.angular_damping as f32,
-            &self.qfrc_applied,
+            self.gains.stiffness as f32,
+            self.gains.damping as f32,
+            &self.xfrc_applied,
         )?;
         Ok(())
     }
 
     /// The line a run prints: the gains and how long the help lasts.
     pub(super) fn note(&self) -> String {
-        let g = &self.gains;
         format!(
-            "assist force: a root PD of {:.0} N/m, {:.0} N s/m, {:.0} N m/rad, {:.0} N m s/rad in \
-             training rollouts, fading to zero over {} iterations (env.assist_frequency; docs/env.md, \
-             \"The assist force\")",
-            g.linear_stiffness,
-            g.linear_damping,
-            g.angular_stiffness,
-            g.angular_damping,
-            self.anneal_iterations
+            "assist force: every body pulled toward the reference root at {:.0} /s² per metre or \
+             radian and {:.1} /s per m/s or rad/s in training rollouts, fading to zero over {} \
+             iterations (env.assist_frequency; docs/env.md, \"The assist force\")",
+            self.gains.stiffness, self.gains.damping, self.anneal_iterations
         )
     }
 }
@@ -158,22 +150,16 @@ impl RootAssist {
 #[cfg(test)]
 mod tests {
     use super::AssistGains;
-    use crate::motion::Character;
 
-    /// The humanoid's gains at 1 Hz: its 45 kg in the force, a moment of a few kg m² (a
-    /// 1.6-m body's masses 0.2-0.4 m from its centre) in the torque.
+    /// A spring of f Hz: w² and 2 w, critically damped (d² = 4 k).
     #[test]
-    fn the_gains_scale_with_the_bodys_mass_and_moment() {
-        let humanoid = Character::humanoid().expect("the embedded humanoid");
-        let one = AssistGains::of(&humanoid, 1.0).unwrap();
+    fn the_gains_are_a_critically_damped_spring_of_the_frequency() {
+        let one = AssistGains::of(1.0);
         let omega = std::f64::consts::TAU;
-        assert!((one.linear_stiffness / (omega * omega) - humanoid.total_mass()).abs() < 1e-9);
-        let moment = one.angular_stiffness / (omega * omega);
-        assert!((1.0..8.0).contains(&moment), "moment {moment} kg m²");
-        // Critical damping: d = 2 sqrt(k m).
-        assert!((one.angular_damping - 2.0 * (one.angular_stiffness * moment).sqrt()).abs() < 1e-9);
-        let two = AssistGains::of(&humanoid, 2.0).unwrap();
-        assert!((two.linear_stiffness / one.linear_stiffness - 4.0).abs() < 1e-12);
-        assert!((two.linear_damping / one.linear_damping - 2.0).abs() < 1e-12);
+        assert!((one.stiffness - omega * omega).abs() < 1e-12);
+        assert!((one.damping * one.damping - 4.0 * one.stiffness).abs() < 1e-9);
+        let two = AssistGains::of(2.0);
+        assert!((two.stiffness / one.stiffness - 4.0).abs() < 1e-12);
+        assert!((two.damping / one.damping - 2.0).abs() < 1e-12);
     }
 }

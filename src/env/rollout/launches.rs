@@ -89,6 +89,8 @@ impl Rollout {
             s,
             &p.qpos,
             &p.qvel,
+            &p.xpos,
+            &p.xquat,
             self.table.table(),
             self.table.clip_offsets(),
             &st.clip_id,
