@@ -24,10 +24,9 @@ use instantmimic::motion::table::{
 use serde_json::{Value, json};
 
 /// The kernels this build must have, by module. Adding a kernel means adding it here.
-const EXPECTED_KERNELS: [(&str, &str); 52] = [
+const EXPECTED_KERNELS: [(&str, &str); 51] = [
     ("control", "pd_control"),
     ("control", "pd_targets"),
-    ("control", "assist_forces"),
     ("evaluate", "evaluation_accumulate"),
     ("gae", "gae_advantages"),
     ("gae", "value_statistics_update"),

@@ -29,8 +29,8 @@ with the implicit `-Kd v'` the net torque is DeepMimic's clamped PD, `clamp(P - 
 
 import warp as wp
 
-from env.reference import clip_base, reference_locate, reference_position, reference_quat_wxyz, reference_value, reference_vec3
-from env.rotation import qconj, qexp, qlog, qmul, qrotate
+from env.reference import clip_base, reference_locate, reference_quat_wxyz, reference_value
+from env.rotation import qconj, qexp, qlog, qmul
 
 wp.set_module_options({"enable_backward": False})
 
@@ -120,82 +120,6 @@ def pd_targets(
             base = reference_value(table, at, a)
         targets[n, j, 0] = base + s * actions[n, m]
 
-
-@wp.kernel
-def assist_forces(
-    qpos: wp.array2d(dtype=wp.float32),
-    qvel: wp.array2d(dtype=wp.float32),
-    xpos: wp.array3d(dtype=wp.float32),
-    xquat: wp.array3d(dtype=wp.float32),
-    body_mass: wp.array(dtype=wp.float32),
-    body_ipos: wp.array2d(dtype=wp.float32),
-    table: wp.array(dtype=wp.float32),
-    clip_offsets: wp.array(dtype=wp.int32),
-    clip_id: wp.array(dtype=wp.int32),
-    ref_time: wp.array(dtype=wp.float32),
-    reference_qvel: wp.int32,
-    lead: wp.float32,
-    iteration: wp.array(dtype=wp.int32),
-    anneal_iterations: wp.int32,
-    stiffness: wp.float32,
-    damping: wp.float32,
-    xfrc_applied: wp.array3d(dtype=wp.float32),
-):
-    """xfrc_applied[n, b, :] for every env n and body b, once per control step (held over its
-    substeps): a training-only pull of the whole body toward the reference root of the env's
-    clip at `ref_time[n] + lead` (docs/env.md, "The assist force"), scaled by `1 - iteration[0]
-    / anneal_iterations` and zero once that reaches 0. The root's errors set an acceleration
-    `a = stiffness (p_ref - p) + damping (v_ref - v)` and an angular acceleration `alpha =
-    stiffness qlog(q_ref conj(q)) + damping (w_ref - w)` (world frame), which every body b gets as
-    the force `m_b (a + alpha x (c_b - c))` at its centre of mass c_b (c the body's centre of
-    mass): an acceleration field over the whole body, which moves it as a rigid whole and leaves
-    its joints alone (a force on the root alone, against the joints' PDs, set the light pelvis
-    oscillating). Bodies' centres from `xpos`, `xquat` (w, x, y, z) and `body_ipos`; torques 0;
-    body 0 (the world) gets nothing. `reference_qvel` is where the table's rows keep qvel.
-    Launch N threads."""
-    n = wp.tid()
-    nbody = body_mass.shape[0]
-    scale = wp.float32(0.0)
-    if anneal_iterations > 0:
-        scale = 1.0 - wp.float32(iteration[0]) / wp.float32(anneal_iterations)
-    if scale <= 0.0:
-        for b in range(nbody):
-            for i in range(6):
-                xfrc_applied[n, b, i] = 0.0
-        return
-    at = reference_locate(table, clip_base(clip_offsets, clip_id[n]), ref_time[n] + lead)
-    p = wp.vec3(qpos[n, 0], qpos[n, 1], qpos[n, 2])
-    q = wp.vec4(qpos[n, 3], qpos[n, 4], qpos[n, 5], qpos[n, 6])
-    q_ref = reference_quat_wxyz(table, at, 3)
-    # qvel keeps the root's angular velocity in its own frame (MuJoCo's free joint).
-    w = qrotate(q, wp.vec3(qvel[n, 3], qvel[n, 4], qvel[n, 5]))
-    w_ref = qrotate(q_ref, reference_vec3(table, at, reference_qvel + 3))
-    v = wp.vec3(qvel[n, 0], qvel[n, 1], qvel[n, 2])
-    a = stiffness * (reference_position(table, at, 0) - p) + damping * (reference_vec3(table, at, reference_qvel) - v)
-    alpha = stiffness * qlog(qmul(q_ref, qconj(q))) + damping * (w_ref - w)
-    mass = wp.float32(0.0)
-    c = wp.vec3()
-    for b in range(1, nbody):
-        qb = wp.vec4(xquat[n, b, 0], xquat[n, b, 1], xquat[n, b, 2], xquat[n, b, 3])
-        cb = wp.vec3(xpos[n, b, 0], xpos[n, b, 1], xpos[n, b, 2]) + qrotate(
-            qb, wp.vec3(body_ipos[b, 0], body_ipos[b, 1], body_ipos[b, 2])
-        )
-        c += body_mass[b] * cb
-        mass += body_mass[b]
-    if mass > 0.0:
-        c = c / mass
-    for i in range(6):
-        xfrc_applied[n, 0, i] = 0.0
-    for b in range(1, nbody):
-        qb = wp.vec4(xquat[n, b, 0], xquat[n, b, 1], xquat[n, b, 2], xquat[n, b, 3])
-        cb = wp.vec3(xpos[n, b, 0], xpos[n, b, 1], xpos[n, b, 2]) + qrotate(
-            qb, wp.vec3(body_ipos[b, 0], body_ipos[b, 1], body_ipos[b, 2])
-        )
-        force = scale * body_mass[b] * (a + wp.cross(alpha, cb - c))
-        for i in range(3):
-            xfrc_applied[n, b, i] = force[i]
-            xfrc_applied[n, b, 3 + i] = 0.0
-
 # Launch contracts (docs/kernels.md, "Launch contracts"): for each kernel, what its launch
 # dimension must equal (==), not exceed (<=) or reach (>=) in terms of its array parameters. env_build.py
 # writes them into ptx/env/manifest.json and the Rust launchers check every launch against them.
@@ -213,14 +137,5 @@ LAUNCH = {
         "dim <= extent(actions, 0) * extent(joint_kind, 0)",
         "dim <= len(clip_id) * extent(joint_kind, 0)",
         "dim <= len(ref_time) * extent(joint_kind, 0)",
-    ),
-    "assist_forces": (
-        "dim == extent(xfrc_applied, 0)",
-        "dim <= extent(qpos, 0)",
-        "dim <= extent(qvel, 0)",
-        "dim <= extent(xpos, 0)",
-        "dim <= extent(xquat, 0)",
-        "dim <= len(clip_id)",
-        "dim <= len(ref_time)",
     ),
 }

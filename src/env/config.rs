@@ -65,27 +65,6 @@ pub struct EnvConfig {
     /// training step"). Left out of written configurations at the default.
     #[serde(skip_serializing_if = "TrainingSolver::is_reduced")]
     pub training_solver: TrainingSolver,
-    /// In training rollouts only, a force and a torque on the root toward the reference root: a
-    /// critically damped spring of this frequency (Hz) for the body's mass and moment, fading
-    /// linearly to zero over `assist_iterations` iterations (docs/env.md, "The assist force").
-    /// 0, the default: none. Left out of written configurations when 0.
-    #[serde(skip_serializing_if = "is_zero")]
-    pub assist_frequency: f32,
-    /// Iterations over which the assist force fades to zero. Left out of written
-    /// configurations at the default.
-    #[serde(skip_serializing_if = "is_default_assist_iterations")]
-    pub assist_iterations: u32,
-}
-
-/// `env.assist_iterations` when a configuration leaves it out.
-pub const DEFAULT_ASSIST_ITERATIONS: u32 = 100;
-
-fn is_zero(value: &f32) -> bool {
-    *value == 0.0
-}
-
-fn is_default_assist_iterations(value: &u32) -> bool {
-    *value == DEFAULT_ASSIST_ITERATIONS
 }
 
 /// `env.training_solver`.
@@ -159,8 +138,6 @@ impl Default for EnvConfig {
             clip_base_share: None,
             body_kinematics: BodyKinematics::Fused,
             training_solver: TrainingSolver::Reduced,
-            assist_frequency: 0.0,
-            assist_iterations: DEFAULT_ASSIST_ITERATIONS,
         }
     }
 }

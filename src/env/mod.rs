@@ -12,7 +12,6 @@
 //! - [`config`]: the task's configuration sections and [`RolloutConfig`], what a rollout is
 //!   built from.
 
-mod assist;
 pub mod body_model;
 pub mod config;
 mod error;
@@ -34,7 +33,6 @@ mod task_sections;
 mod tracked;
 mod trajectory;
 
-pub use assist::AssistGains;
 pub use body_model::{BodyModel, DeviceBodyModel};
 pub use config::{
     ActionMode, BodyKinematics, EndEffectorFrame, EnvConfig, EvalStart, EvaluationProtocol,

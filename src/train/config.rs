@@ -506,20 +506,6 @@ impl TrainConfig {
                 "must be in [0, 1] (the part of each clip's share set by its weight alone)"
             );
         }
-        // Held over a control step, a stiffer spring overshoots its target (4 Hz at 30 Hz
-        // control: 0.84 rad of the spring's cycle per step).
-        check!(
-            (0.0..=4.0).contains(&e.assist_frequency),
-            "env.assist_frequency",
-            e.assist_frequency,
-            "must be in [0, 4] Hz (0: no assist force)"
-        );
-        check!(
-            e.assist_iterations >= 1,
-            "env.assist_iterations",
-            e.assist_iterations,
-            "must be at least 1"
-        );
         check!(
             e.phase_decay > 0.0 && e.phase_decay <= 1.0,
             "env.phase_decay",

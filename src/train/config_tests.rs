@@ -885,36 +885,3 @@ fn the_evaluation_average_is_a_decay_in_the_open_unit_interval_and_written_only_
     .expect("backflip config");
     assert_eq!(backflip.ppo.evaluation_average, Some(0.9));
 }
-
-#[test]
-fn the_assist_force_is_off_by_default_written_only_when_on_and_kept_in_range() {
-    let mut c = TrainConfig::with_motion("backflip");
-    assert_eq!(c.env.assist_frequency, 0.0);
-    let off = c.to_toml().unwrap();
-    assert!(!off.contains("assist_"), "{off}");
-    c.env.assist_frequency = 2.0;
-    c.env.assist_iterations = 60;
-    let on = c.to_toml().unwrap();
-    assert!(
-        on.contains("assist_frequency = 2.0") && on.contains("assist_iterations = 60"),
-        "{on}"
-    );
-    let back = TrainConfig::from_toml(&on, "on.toml").unwrap();
-    assert_eq!(
-        (back.env.assist_frequency, back.env.assist_iterations),
-        (2.0, 60)
-    );
-    for (bad, key) in [
-        ("assist_frequency = 2.0", "assist_frequency = -1.0"),
-        ("assist_frequency = 2.0", "assist_frequency = 5.0"),
-        ("assist_frequency = 2.0", "assist_frequency = nan"),
-        ("assist_iterations = 60", "assist_iterations = 0"),
-    ] {
-        let text = on.replace(bad, key);
-        let e = TrainConfig::from_toml(&text, "bad.toml")
-            .unwrap_err()
-            .to_string();
-        let name = key.split(' ').next().unwrap();
-        assert!(e.contains(&format!("env.{name}")), "{key}: {e}");
-    }
-}

@@ -122,7 +122,6 @@ pub fn train_with<'a>(
     )?;
     let mut notes = vec![format!("GEMMs: {}", trainer.gemm().describe())];
     notes.extend(training_solver_note(store, &config.env)?);
-    notes.extend(trainer.training_rollout().0.assist_note());
     if let Some(goal) = config.goal.as_ref().filter(|g| !g.decoder.is_empty()) {
         notes.push(format!(
             "goal policy in the latent action space of {} (decoder, prior and observation statistics frozen; docs/goal.md)",
@@ -228,7 +227,6 @@ pub fn train_on_gpus<'a>(
     let mut replicas = Replicas::start(&devices, &trainer_config, motion, store)?;
     let mut notes = vec![format!("GEMMs: {} (every GPU)", replicas.gemm())];
     notes.extend(training_solver_note(store, &trainer_config.rollout.env)?);
-    notes.extend(replicas.on_rank0(|t| Ok(t.training_rollout().0.assist_note()))?);
     notes.extend(replicas.take_notes());
     let scorer = match motion {
         TrackedMotion::Clip(clip) => Scorer::for_clip(clip, &session.config().run),

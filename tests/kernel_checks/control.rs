@@ -12,11 +12,11 @@
 use super::compare::{Report, wide};
 use super::physics::Shape;
 use super::program::{Arg, Program, Scalar};
-use super::quat::{Quat, qexp, qlog, quat, quat_at, quat_at64, vec3, vec3_64, wxyz};
+use super::quat::{Quat, qexp, qlog, quat, quat_at, quat_at64, wxyz};
 use super::rng::Sampler;
 use super::{Check, Clip, Fixture, nan_f32};
 use instantmimic::env::layout::{BALL, JointLayout};
-use instantmimic::kernels::{ASSIST_FORCES, PD_CONTROL, PD_TARGETS};
+use instantmimic::kernels::{PD_CONTROL, PD_TARGETS};
 
 /// The control step of the residual cases (s): targets are the reference at `ref_time + DT`.
 const DT: f32 = 1.0 / 30.0;
@@ -300,153 +300,6 @@ fn case(fx: &Fixture, n: usize, action_scale: f32, residual: Option<&Clip>, seed
     })
 }
 
-/// The assist's gains in the cases: a 2-Hz spring's (1/s², 1/s).
-const ASSIST_STIFFNESS: f32 = 157.9;
-const ASSIST_DAMPING: f32 = 25.13;
-
-/// Where the assist's reference is taken: half a control step ahead.
-const LEAD: f32 = DT / 2.0;
-
-/// `assist_forces` at iteration `iteration` of `anneal` on clips `tracked`: every env's root
-/// about 0.25 m, up to 1.2 rad and a few m/s from its reference, its bodies anywhere (random
-/// frames: the kernel reads them as they are). Reference (f64): per env, the acceleration
-/// `a = k (p_ref - p) + d (v_ref - v)` and the angular acceleration `alpha = k qlog(q_ref
-/// conj(q)) + d (R_ref w_ref - R w)` (the reference at `ref_time + LEAD`,
-/// `MotionLibrary::lookup`), and per body b the force `m_b (a + alpha x (c_b - c))` at its
-/// centre of mass `c_b = xpos_b + R_b ipos_b` (c their mass-weighted mean), times `max(0, 1 -
-/// iteration / anneal)`; every torque and the world body's force 0.
-fn assist_case(
-    fx: &Fixture,
-    n: usize,
-    tracked: &Clip,
-    iteration: i32,
-    anneal: i32,
-    seed: u64,
-) -> Check {
-    let mut rng = Sampler::new(seed);
-    let shape = fx.shape.clone();
-    let (nq, nv) = (shape.nq(), shape.nv());
-    let bodies = fx.character.bodies();
-    let nbody = bodies.len();
-    let clip_id = tracked.clip_ids(n, &mut rng);
-    let ref_time: Vec<f32> = (0..n)
-        .map(|e| rng.uniform(0.0, 3.0 * tracked.duration(clip_id[e] as usize)) as f32)
-        .collect();
-    let rows: Vec<Vec<f64>> = ref_time
-        .iter()
-        .zip(&clip_id)
-        .map(|(&t, &c)| tracked.lookup(c as usize, f64::from(t + LEAD)))
-        .collect();
-    let qvel_at = tracked.segment(0).layout().qvel;
-    let mut qpos = vec![0.0f32; n * nq];
-    let mut qvel = vec![0.0f32; n * nv];
-    let mut xpos = vec![0.0f32; n * nbody * 3];
-    let mut xquat = vec![0.0f32; n * nbody * 4];
-    for e in 0..n {
-        let row = &rows[e];
-        let offset = rng.normal3(0.25);
-        for c in 0..3 {
-            qpos[e * nq + c] = (row[c] + offset[c]) as f32;
-        }
-        let r = rng.normal3(1.0);
-        let len = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
-        let angle = rng.uniform(0.0, 1.2);
-        let q = quat_at64(row, 3) * qexp(r.map(|x| x * angle / len));
-        for (c, v) in wxyz(&q).iter().enumerate() {
-            qpos[e * nq + 3 + c] = *v as f32;
-        }
-        for v in &mut qvel[e * nv..(e + 1) * nv] {
-            *v = (3.0 * rng.normal()) as f32;
-        }
-        for b in 0..nbody {
-            let at = (e * nbody + b) * 3;
-            for c in 0..3 {
-                xpos[at + c] = (row[c] + rng.uniform(-0.8, 0.8)) as f32;
-            }
-            let qb = quat([rng.normal(), rng.normal(), rng.normal(), rng.normal()]);
-            for (c, v) in wxyz(&qb).iter().enumerate() {
-                xquat[(e * nbody + b) * 4 + c] = *v as f32;
-            }
-        }
-    }
-    let mass: Vec<f32> = bodies.iter().map(|b| b.mass as f32).collect();
-    let ipos: Vec<f32> = bodies
-        .iter()
-        .flat_map(|b| [b.ipos.x as f32, b.ipos.y as f32, b.ipos.z as f32])
-        .collect();
-    let mut p = Program::new(format!(
-        "assist_forces: {n} envs on {}, iteration {iteration} of {anneal}",
-        tracked.name
-    ));
-    let (table, offsets) = (tracked.data(), tracked.offsets());
-    let args = vec![
-        p.f32("qpos", &[n, nq], qpos),
-        p.f32("qvel", &[n, nv], qvel),
-        p.f32("xpos", &[n, nbody, 3], xpos),
-        p.f32("xquat", &[n, nbody, 4], xquat),
-        p.f32("body_mass", &[nbody], mass),
-        p.f32("body_ipos", &[nbody, 3], ipos),
-        p.f32("table", &[table.len()], table),
-        p.i32("clip_offsets", &[offsets.len()], offsets),
-        p.i32("clip_id", &[n], clip_id),
-        p.f32("ref_time", &[n], ref_time),
-        Arg::Scalar(Scalar::I32(qvel_at as i32)),
-        Arg::Scalar(Scalar::F32(LEAD)),
-        p.i32("iteration", &[1], vec![iteration]),
-        Arg::Scalar(Scalar::I32(anneal)),
-        Arg::Scalar(Scalar::F32(ASSIST_STIFFNESS)),
-        Arg::Scalar(Scalar::F32(ASSIST_DAMPING)),
-        p.f32("xfrc_applied", &[n, nbody, 6], nan_f32(n * nbody * 6)),
-    ];
-    p.launch(&ASSIST_FORCES, n, args);
-    Check::new(p, move |p, out| {
-        let mut r = Report::new(&p.name);
-        let (qpos, qvel) = (p.input_f32("qpos"), p.input_f32("qvel"));
-        let (xpos, xquat) = (p.input_f32("xpos"), p.input_f32("xquat"));
-        let (mass, ipos) = (p.input_f32("body_mass"), p.input_f32("body_ipos"));
-        let scale = (1.0 - f64::from(iteration) / f64::from(anneal)).max(0.0);
-        let (k, d) = (f64::from(ASSIST_STIFFNESS), f64::from(ASSIST_DAMPING));
-        let mut expected = vec![0.0; n * nbody * 6];
-        for (e, row) in rows.iter().enumerate() {
-            let q = quat_at(qpos, e * nq + 3);
-            let q_ref = quat_at64(row, 3);
-            let a = k * (vec3_64(row, 0) - vec3(qpos, e * nq))
-                + d * (vec3_64(row, qvel_at) - vec3(qvel, e * nv));
-            let alpha = k * qlog(&(q_ref * q.inverse()))
-                + d * (q_ref * vec3_64(row, qvel_at + 3) - q * vec3(qvel, e * nv + 3));
-            let centre = |b: usize| {
-                vec3(xpos, (e * nbody + b) * 3)
-                    + quat_at(xquat, (e * nbody + b) * 4) * vec3(ipos, b * 3)
-            };
-            let total: f64 = (1..nbody).map(|b| f64::from(mass[b])).sum();
-            let c = (1..nbody)
-                .map(|b| f64::from(mass[b]) * centre(b))
-                .sum::<nalgebra::Vector3<f64>>()
-                / total;
-            for b in 1..nbody {
-                let force = scale * f64::from(mass[b]) * (a + alpha.cross(&(centre(b) - c)));
-                for i in 0..3 {
-                    expected[(e * nbody + b) * 6 + i] = force[i];
-                }
-            }
-        }
-        let got = wide(out.f32("xfrc_applied"));
-        if scale > 0.0 {
-            r.relative(
-                "xfrc_applied (every body's force and torque)",
-                &got,
-                &expected,
-            );
-        } else {
-            r.check(
-                got.iter().all(|&x| x == 0.0),
-                "xfrc_applied: zero everywhere once the assist has faded",
-            );
-        }
-        r
-    })
-}
-
 pub fn checks(fx: &Fixture) -> Vec<Check> {
     vec![
         case(fx, 64, 1.0, None, 11),
@@ -454,8 +307,5 @@ pub fn checks(fx: &Fixture) -> Vec<Check> {
         case(fx, 64, 0.875, Some(&fx.main), 13),
         case(fx, 37, 1.0, Some(&fx.clamped), 14),
         case(fx, 80, 0.875, Some(&fx.library), 15),
-        assist_case(fx, 64, &fx.main, 0, 50, 16),
-        assist_case(fx, 37, &fx.library, 30, 120, 17),
-        assist_case(fx, 33, &fx.clamped, 60, 50, 18),
     ]
 }

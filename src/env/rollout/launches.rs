@@ -77,30 +77,6 @@ impl Rollout {
         Ok(())
     }
 
-    /// The assist force of this control step, where the rollout has one (held over its
-    /// substeps: nothing else writes the applied forces).
-    pub(super) fn record_assist(&self, s: &Stream) -> Result<(), RolloutError> {
-        let Some(assist) = &self.assist else {
-            return Ok(());
-        };
-        let (p, st) = (&self.physics, &self.state);
-        assist.record(
-            &self.kernels,
-            s,
-            &p.qpos,
-            &p.qvel,
-            &p.xpos,
-            &p.xquat,
-            self.table.table(),
-            self.table.clip_offsets(),
-            &st.clip_id,
-            &st.ref_time,
-            // The reference halfway through the step the force holds over.
-            (0.5 * self.control_dt) as f32,
-            &self.phase_statistics.iteration,
-        )
-    }
-
     /// The torques of one substep, from the targets [`Rollout::record_pd_targets`] left.
     pub(super) fn record_pd_control(&self, s: &Stream) -> Result<(), RolloutError> {
         let j = &self.joints;

@@ -23,7 +23,6 @@ use crate::plan::{
 };
 
 use super::DeviceReferenceTable;
-use super::assist::RootAssist;
 use super::body_model::{BodyModel, DeviceBodyModel};
 use super::config::{
     ActionMode, BodyKinematics, EnvConfig, RolloutConfig, TaskConfig, TrainingSolver,
@@ -98,8 +97,6 @@ pub struct Rollout {
     bodies: BodyModel,
     body_kinematics: Option<DeviceBodyModel>,
     physics: PhysicsState,
-    /// The assist force of a training rollout with `env.assist_frequency` (docs/env.md).
-    assist: Option<RootAssist>,
     pub state: EpisodeState,
     pub storage: RolloutStorage,
     joints: DeviceJointLayout,
@@ -204,17 +201,9 @@ impl Rollout {
         )?;
         let physics_dt = physics_timestep(&sim, step_plan)?;
         let control_dt = physics_dt * f64::from(config.env.substeps);
-        let (library, table, character, layout, bodies, sizes, assist) = match source {
+        let (library, table, character, layout, bodies, sizes) = match source {
             Source::Training(motion) => {
                 let character = motion.character();
-                if config.env.assist_frequency > 0.0 && matches!(config.task, TaskConfig::Goal(_)) {
-                    return Err(RolloutError::Setup(
-                        "env.assist_frequency pulls the root toward a reference, and the goal task \
-                         has none: leave the key at 0 for goal runs"
-                            .to_owned(),
-                    ));
-                }
-                let assist = RootAssist::new(&sim, character, &config.env)?;
                 let library = motion.library(control_dt)?;
                 let expected = TableLayout::for_character(character);
                 if library.layout() != expected {
@@ -238,7 +227,6 @@ impl Rollout {
                     layout,
                     bodies,
                     PhysicsSizes::of(character),
-                    assist,
                 )
             }
             Source::Evaluation(training) => (
@@ -248,8 +236,6 @@ impl Rollout {
                 training.layout.clone(),
                 training.bodies.clone(),
                 training.physics.sizes,
-                // The evaluation scores the policy on its own.
-                None,
             ),
         };
         let body_kinematics = match config.env.body_kinematics {
@@ -385,7 +371,6 @@ impl Rollout {
             bodies,
             body_kinematics,
             physics,
-            assist,
             state,
             storage,
             joints,
@@ -587,12 +572,6 @@ impl Rollout {
         }
     }
 
-    /// The line a run prints when this training rollout has an assist force (docs/env.md, "The
-    /// assist force"): its gains and how long it lasts.
-    pub fn assist_note(&self) -> Option<String> {
-        self.assist.as_ref().map(RootAssist::note)
-    }
-
     /// The clips this rollout tracks (the library of one for a single clip).
     pub fn library(&self) -> &MotionLibrary {
         &self.library
@@ -740,10 +719,7 @@ impl Rollout {
             stages.stage(gpu, s, RolloutStage::Policy, |s| {
                 self.record_policy(s, policy, storage, t)
             })?;
-            stages.stage(gpu, s, RolloutStage::Control, |s| {
-                self.record_pd_targets(s)?;
-                self.record_assist(s)
-            })?;
+            stages.stage(gpu, s, RolloutStage::Control, |s| self.record_pd_targets(s))?;
             for _ in 0..self.substeps {
                 stages.stage(gpu, s, RolloutStage::Control, |s| self.record_pd_control(s))?;
                 stages.stage(gpu, s, RolloutStage::Physics, |s| {
