@@ -8,7 +8,7 @@
 use anyhow::{Context, Result};
 use instantmimic::bench::bench_physics;
 use instantmimic::cuda::Gpu;
-use instantmimic::plan::{PlanStore, ReplayOrder};
+use instantmimic::plan::{PlanStore, ReplayOrder, STEP_PLAN, SolverLoop};
 
 fn main() -> Result<()> {
     let gpu = Gpu::open(0)?;
@@ -24,8 +24,16 @@ fn main() -> Result<()> {
             println!("{nworld} worlds: no committed step plan");
             continue;
         }
-        let r = bench_physics(&gpu, &store, nworld, 1000, 200, ReplayOrder::Dag)
-            .with_context(|| format!("physics benchmark at {nworld} worlds"))?;
+        let r = bench_physics(
+            &gpu,
+            &store,
+            STEP_PLAN,
+            nworld,
+            (1000, 200),
+            ReplayOrder::Dag,
+            SolverLoop::Conditional,
+        )
+        .with_context(|| format!("physics benchmark at {nworld} worlds"))?;
         println!(
             "{nworld} worlds: {:.3} M steps/s ({} steps in {:.3} s, load {:.2} s)",
             r.steps_per_s / 1e6,

@@ -12,15 +12,19 @@ use serde::Serialize;
 
 use super::timing::timed_seconds;
 use crate::cuda::Gpu;
-use crate::plan::{PlanStore, ReplayOrder, Simulation, SimulationError};
+use crate::plan::{PlanStore, ReplayOrder, Simulation, SimulationError, SolverLoop};
 
 /// The result of [`bench_physics`].
 #[derive(Clone, Debug, Serialize)]
 pub struct PhysicsBench {
     pub gpu: String,
+    /// The plan timed (`step` or `training_step`).
+    pub plan: String,
     pub nworld: u32,
     /// Operation order of the step graph (`Dag` or `Linear`).
     pub order: String,
+    /// The solver loop (`Conditional` or `Unrolled`).
+    pub solver_loop: String,
     pub steps: u32,
     pub warmup: u32,
     /// Loading the plan (allocation, upload, module JIT, graph capture and instantiation).
@@ -31,26 +35,30 @@ pub struct PhysicsBench {
     pub graph_nodes: BTreeMap<String, usize>,
 }
 
-/// Times `steps` replays of the `step` plan for `nworld` worlds after `warmup` replays.
+/// Times `steps` replays of the step plan `plan` for `nworld` worlds after `warmup` replays
+/// (`(steps, warmup)`).
 pub fn bench_physics(
     gpu: &Gpu,
     store: &PlanStore,
+    plan: &str,
     nworld: u32,
-    steps: u32,
-    warmup: u32,
+    (steps, warmup): (u32, u32),
     order: ReplayOrder,
+    solver_loop: SolverLoop,
 ) -> Result<PhysicsBench, SimulationError> {
     let started = Instant::now();
-    let sim = Simulation::load_with_order(gpu, store, nworld, &["step"], order)?;
+    let sim = Simulation::load_with(gpu, store, nworld, &[plan], order, solver_loop)?;
     gpu.stream().synchronize()?;
     let load_seconds = started.elapsed().as_secs_f64();
-    let graph_nodes = sim.graph("step")?.node_counts()?;
+    let graph_nodes = sim.graph(plan)?.node_counts()?;
 
-    let seconds = timed_seconds(gpu, "physics", warmup, steps, || sim.run("step"))?;
+    let seconds = timed_seconds(gpu, "physics", warmup, steps, || sim.run(plan))?;
     Ok(PhysicsBench {
         gpu: gpu.info().name.clone(),
+        plan: plan.to_owned(),
         nworld,
         order: format!("{order:?}"),
+        solver_loop: format!("{solver_loop:?}"),
         steps,
         warmup,
         load_seconds,

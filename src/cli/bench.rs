@@ -15,7 +15,7 @@ use crate::cuda::Gpu;
 use crate::motion::ReferenceMotion;
 use crate::motion::character::DEFAULT_CHARACTER;
 use crate::motion::find::resolve_motion;
-use crate::plan::{PlanStore, ReplayOrder};
+use crate::plan::{PlanStore, ReplayOrder, STEP_PLAN, SolverLoop, TRAINING_STEP_PLAN};
 use crate::train::library::single_clip_only;
 use crate::train::{
     ChosenCharacter, GemmSetting, PolicyShapes, TrainConfig, check_plan_model, preflight,
@@ -179,6 +179,24 @@ enum Order {
     Linear,
 }
 
+/// `--solver-loop`: the solver's WHILE loop as a conditional node or unrolled.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum SolverLoopArg {
+    /// A CUDA conditional node that stops when every world converged (the default).
+    Conditional,
+    /// The loop body once per solver iteration: kernels only.
+    Unrolled,
+}
+
+/// `--plan`: which step plan is timed.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum StepPlanArg {
+    /// The step with the solver iterations of the evaluation.
+    Step,
+    /// The training rollouts' step (`training_iterations`), where the plans have one.
+    TrainingStep,
+}
+
 #[derive(Args, Debug)]
 pub struct BenchArgs {
     #[command(subcommand)]
@@ -324,6 +342,12 @@ struct PhysicsArgs {
     /// Operation order of the step graph.
     #[arg(long, value_enum, default_value_t = Order::Dag)]
     order: Order,
+    /// The solver loop of the step graph.
+    #[arg(long, value_enum, default_value_t = SolverLoopArg::Conditional)]
+    solver_loop: SolverLoopArg,
+    /// The step plan timed.
+    #[arg(long, value_enum, default_value_t = StepPlanArg::Step)]
+    plan: StepPlanArg,
     /// Print the result as JSON.
     #[arg(long)]
     json: bool,
@@ -513,8 +537,24 @@ fn physics(args: PhysicsArgs) -> Result<()> {
         Order::Dag => ReplayOrder::Dag,
         Order::Linear => ReplayOrder::Linear,
     };
-    let result = bench_physics(&gpu, &store, args.envs, args.steps, args.warmup, order)
-        .with_context(|| format!("physics benchmark with {} worlds", args.envs))?;
+    let solver_loop = match args.solver_loop {
+        SolverLoopArg::Conditional => SolverLoop::Conditional,
+        SolverLoopArg::Unrolled => SolverLoop::Unrolled,
+    };
+    let plan = match args.plan {
+        StepPlanArg::Step => STEP_PLAN,
+        StepPlanArg::TrainingStep => TRAINING_STEP_PLAN,
+    };
+    let result = bench_physics(
+        &gpu,
+        &store,
+        plan,
+        args.envs,
+        (args.steps, args.warmup),
+        order,
+        solver_loop,
+    )
+    .with_context(|| format!("physics benchmark of `{plan}` with {} worlds", args.envs))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&result)?);
         return Ok(());
@@ -526,9 +566,11 @@ fn physics(args: PhysicsArgs) -> Result<()> {
         .collect();
     println!("GPU: {}", result.gpu);
     println!(
-        "plan: step, {} worlds, {} order; loaded in {:.2} s; graph nodes: {}",
+        "plan: {}, {} worlds, {} order, solver loop {}; loaded in {:.2} s; graph nodes: {}",
+        result.plan,
         result.nworld,
         result.order,
+        result.solver_loop,
         result.load_seconds,
         nodes.join(", ")
     );
