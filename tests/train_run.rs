@@ -490,6 +490,7 @@ fn curve_record(i: u64) -> IterationRecord {
         divergence: None,
         task: None,
         wall_s: None,
+        evaluated: None,
     }
 }
 

@@ -167,6 +167,7 @@ mod tests {
             }),
             task: None,
             wall_s: None,
+            evaluated: None,
         };
         let line = serde_json::to_string(&record).unwrap();
         assert!(line.contains("\"divergence\":{\"cause\":\"KL\""), "{line}");

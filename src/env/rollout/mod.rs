@@ -112,6 +112,8 @@ pub struct Rollout {
     start_spread: DeviceArray<f32>,
     observation: ObservationParams,
     normalizer: ObservationNormalizer,
+    /// An evaluation rollout's view of the training statistics (a training rollout: Shared).
+    statistics_source: EvaluationStatistics,
     phase_statistics: PhaseStatistics,
     statistics: RolloutStatistics,
     purpose: Purpose,
@@ -142,7 +144,17 @@ enum Purpose {
 /// evaluation rollout evaluates (its clips, layout, kernels and normalization).
 enum Source<'a> {
     Training(TrackedMotion<'a>),
-    Evaluation(&'a Rollout),
+    Evaluation(&'a Rollout, EvaluationStatistics),
+}
+
+/// How an evaluation rollout sees its training rollout's observation statistics.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EvaluationStatistics {
+    /// The training rollout's own buffers: every update is seen at once.
+    Shared,
+    /// Copies of its own, which [`Rollout::copy_statistics_from`] takes: for an evaluation that
+    /// runs on another stream while training updates the statistics.
+    Snapshot,
 }
 
 impl Rollout {
@@ -176,10 +188,32 @@ impl Rollout {
         store: &PlanStore,
         config: &RolloutConfig,
     ) -> Result<Rollout, RolloutError> {
+        Rollout::evaluation_with(training, store, config, EvaluationStatistics::Shared)
+    }
+
+    /// [`Rollout::evaluation`], seeing the training rollout's statistics as `statistics` says.
+    pub fn evaluation_with(
+        training: &Rollout,
+        store: &PlanStore,
+        config: &RolloutConfig,
+        statistics: EvaluationStatistics,
+    ) -> Result<Rollout, RolloutError> {
         let mut config = config.clone();
         config.env.num_envs = config.evaluation.envs;
         config.env.motion_noise_std = 0.0;
-        Rollout::build(&training.gpu, store, &config, Source::Evaluation(training))
+        let source = Source::Evaluation(training, statistics);
+        Rollout::build(&training.gpu, store, &config, source)
+    }
+
+    /// Queues on the main stream the copy of `training`'s observation statistics into this
+    /// evaluation rollout's snapshot ([`EvaluationStatistics::Snapshot`]; a shared one needs
+    /// none).
+    pub fn copy_statistics_from(&self, training: &Rollout) -> Result<(), RolloutError> {
+        if self.statistics_source == EvaluationStatistics::Snapshot {
+            self.normalizer
+                .copy_statistics_from(&training.normalizer, self.gpu.stream())?;
+        }
+        Ok(())
     }
 
     fn build(
@@ -190,9 +224,13 @@ impl Rollout {
     ) -> Result<Rollout, RolloutError> {
         let n = config.env.num_envs as usize;
         let substeps = config.env.substeps as usize;
+        let statistics_source = match source {
+            Source::Evaluation(_, statistics) => statistics,
+            Source::Training(_) => EvaluationStatistics::Shared,
+        };
         let step_plan = match source {
             Source::Training(_) => training_step_plan(store, &config.env)?,
-            Source::Evaluation(_) => STEP_PLAN,
+            Source::Evaluation(..) => STEP_PLAN,
         };
         let sim = Simulation::load_with(
             gpu,
@@ -232,7 +270,7 @@ impl Rollout {
                     PhysicsSizes::of(character),
                 )
             }
-            Source::Evaluation(training) => (
+            Source::Evaluation(training, _) => (
                 Arc::clone(&training.library),
                 Arc::clone(&training.table),
                 training.character.clone(),
@@ -283,7 +321,7 @@ impl Rollout {
                 config.horizon as usize,
                 Purpose::Training,
             ),
-            Source::Evaluation(training) if goal.is_some() => {
+            Source::Evaluation(training, statistics) if goal.is_some() => {
                 if training.observation_size() != obs_size {
                     return Err(RolloutError::Setup(format!(
                         "the evaluation's observation size {obs_size} differs from the training rollout's {}",
@@ -296,12 +334,12 @@ impl Rollout {
                 reset.horizon = steps as i32;
                 (
                     Arc::clone(&training.kernels),
-                    ObservationNormalizer::frozen(gpu, &training.normalizer, n)?,
+                    evaluation_normalizer(gpu, &training.normalizer, n, statistics)?,
                     steps,
                     Purpose::GoalEvaluation,
                 )
             }
-            Source::Evaluation(training) => {
+            Source::Evaluation(training, statistics) => {
                 if training.observation_size() != obs_size {
                     return Err(RolloutError::Setup(format!(
                         "the evaluation's observation size {obs_size} differs from the training rollout's {}",
@@ -333,7 +371,7 @@ impl Rollout {
                 let clip_steps: Vec<i32> = plan.iter().map(|c| c.steps as i32).collect();
                 (
                     Arc::clone(&training.kernels),
-                    ObservationNormalizer::frozen(gpu, &training.normalizer, n)?,
+                    evaluation_normalizer(gpu, &training.normalizer, n, statistics)?,
                     steps,
                     Purpose::Evaluation(
                         EpisodeScores::zeros(gpu, n, &clip_steps)?,
@@ -384,6 +422,7 @@ impl Rollout {
             start_spread: DeviceArray::from_slice(gpu, [clips], &start_spread)?,
             observation,
             normalizer,
+            statistics_source,
             phase_statistics,
             statistics: RolloutStatistics::new(gpu, n)?,
             purpose,
@@ -859,6 +898,19 @@ fn physics_timestep(sim: &Simulation, step_plan: &str) -> Result<f64, RolloutErr
                     .to_owned(),
             )
         })
+}
+
+/// An evaluation rollout's normalizer of `source`'s statistics, shared or a snapshot.
+fn evaluation_normalizer(
+    gpu: &Gpu,
+    source: &ObservationNormalizer,
+    n: usize,
+    statistics: EvaluationStatistics,
+) -> Result<ObservationNormalizer, crate::kernels::EnvError> {
+    match statistics {
+        EvaluationStatistics::Shared => ObservationNormalizer::frozen(gpu, source, n),
+        EvaluationStatistics::Snapshot => ObservationNormalizer::snapshot(gpu, source, n),
+    }
 }
 
 #[cfg(test)]
