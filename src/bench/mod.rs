@@ -12,6 +12,6 @@ mod train_gpus;
 
 pub use full::{FullBench, LoopCase, bench_full};
 pub use gemm::{GemmBench, GemmCase, bench_gemm};
-pub use physics::{PhysicsBench, bench_physics};
+pub use physics::{PhysicsBench, PhysicsBesideBench, bench_physics, bench_physics_beside};
 pub use rollout::{RolloutBench, bench_rollout};
 pub use train_gpus::{GpuCountCase, TrainGpusBench, bench_train_gpus, default_counts};

@@ -67,3 +67,91 @@ pub fn bench_physics(
         graph_nodes,
     })
 }
+
+/// The result of [`bench_physics_beside`]: a step plan timed alone and beside another world
+/// count's step on a second stream (the evaluation beside training, physics only).
+#[derive(Clone, Debug, Serialize)]
+pub struct PhysicsBesideBench {
+    pub gpu: String,
+    pub plan: String,
+    pub nworld: u32,
+    pub beside_nworld: u32,
+    pub solver_loop: String,
+    pub steps: u32,
+    /// `steps` launches of `plan` alone, and of the evaluation's step alone (s).
+    pub alone_seconds: f64,
+    pub beside_alone_seconds: f64,
+    /// Both queued at once, each on its stream: each one's span, and from the first start to
+    /// the last end (s).
+    pub together_seconds: f64,
+    pub beside_together_seconds: f64,
+    pub span_seconds: f64,
+    /// The share of the evaluation's time hidden: (alone + beside alone - span) / beside alone.
+    pub hidden: f64,
+}
+
+/// Times `steps` launches of `plan` at `nworld` worlds on the main stream, `steps` launches of
+/// the evaluation's `step` at `beside_nworld` worlds on a second stream, each alone and then
+/// both queued at once: whether the GPU runs the small step beside the large one.
+pub fn bench_physics_beside(
+    gpu: &Gpu,
+    store: &PlanStore,
+    plan: &str,
+    (nworld, beside_nworld): (u32, u32),
+    steps: u32,
+    solver_loop: SolverLoop,
+) -> Result<PhysicsBesideBench, SimulationError> {
+    let order = ReplayOrder::default();
+    let main = Simulation::load_with(gpu, store, nworld, &[plan], order, solver_loop)?;
+    let beside = Simulation::load_with(gpu, store, beside_nworld, &["step"], order, solver_loop)?;
+    let (main_graph, beside_graph) = (main.graph(plan)?, beside.graph("step")?);
+    let second = gpu.new_stream()?;
+    beside_graph.upload(&second)?;
+    let span = |run_main: bool, run_beside: bool| -> Result<(f64, f64, f64), SimulationError> {
+        gpu.synchronize()?;
+        let events = [
+            gpu.new_event()?,
+            gpu.new_event()?,
+            gpu.new_event()?,
+            gpu.new_event()?,
+        ];
+        events[0].record(gpu.stream())?;
+        events[2].record(&second)?;
+        if run_beside {
+            for _ in 0..steps {
+                beside_graph.launch(&second)?;
+            }
+        }
+        if run_main {
+            for _ in 0..steps {
+                main_graph.launch(gpu.stream())?;
+            }
+        }
+        events[1].record(gpu.stream())?;
+        events[3].record(&second)?;
+        gpu.synchronize()?;
+        let ms = |a: usize, b: usize| events[a].elapsed_ms(&events[b]).map(f64::from);
+        let first = if ms(0, 2)? >= 0.0 { 0 } else { 2 };
+        let last = ms(1, 3)?.max(0.0) + ms(first, 1)?;
+        Ok((ms(0, 1)? / 1e3, ms(2, 3)? / 1e3, last / 1e3))
+    };
+    // Warm both up, then time each alone and both together.
+    span(true, true)?;
+    let (alone, _, _) = span(true, false)?;
+    let (_, beside_alone, _) = span(false, true)?;
+    let (together, beside_together, span_seconds) = span(true, true)?;
+    Ok(PhysicsBesideBench {
+        gpu: gpu.info().name.clone(),
+        plan: plan.to_owned(),
+        nworld,
+        beside_nworld,
+        solver_loop: format!("{solver_loop:?}"),
+        steps,
+        alone_seconds: alone,
+        beside_alone_seconds: beside_alone,
+        together_seconds: together,
+        beside_together_seconds: beside_together,
+        span_seconds,
+        hidden: (alone + beside_alone - span_seconds) / beside_alone,
+    })
+}

@@ -8,8 +8,8 @@ use clap::{Args, Subcommand, ValueEnum};
 use std::fmt::Write as _;
 
 use crate::bench::{
-    GemmBench, RolloutBench, TrainGpusBench, bench_gemm, bench_physics, bench_rollout,
-    bench_train_gpus, default_counts,
+    GemmBench, RolloutBench, TrainGpusBench, bench_gemm, bench_physics, bench_physics_beside,
+    bench_rollout, bench_train_gpus, default_counts,
 };
 use crate::cuda::Gpu;
 use crate::motion::ReferenceMotion;
@@ -348,6 +348,10 @@ struct PhysicsArgs {
     /// The step plan timed.
     #[arg(long, value_enum, default_value_t = StepPlanArg::Step)]
     plan: StepPlanArg,
+    /// Time the plan alone and beside the evaluation's step at this many worlds on a second
+    /// stream (as an evaluation beside training would run): how much of the latter is hidden.
+    #[arg(long)]
+    beside_envs: Option<u32>,
     /// Print the result as JSON.
     #[arg(long)]
     json: bool,
@@ -545,6 +549,38 @@ fn physics(args: PhysicsArgs) -> Result<()> {
         StepPlanArg::Step => STEP_PLAN,
         StepPlanArg::TrainingStep => TRAINING_STEP_PLAN,
     };
+    if let Some(beside_envs) = args.beside_envs {
+        let r = bench_physics_beside(
+            &gpu,
+            &store,
+            plan,
+            (args.envs, beside_envs),
+            args.steps,
+            solver_loop,
+        )
+        .with_context(|| format!("physics of `{plan}` beside `step` at {beside_envs} worlds"))?;
+        if args.json {
+            println!("{}", serde_json::to_string_pretty(&r)?);
+            return Ok(());
+        }
+        println!("GPU: {}", r.gpu);
+        println!(
+            "beside: {} x {} ({} worlds) and step x {} ({} worlds), solver loop {}: alone {:.1} and {:.1} ms; together {:.1} and {:.1} ms, span {:.1} ms; {:.0}% of the second hidden",
+            r.plan,
+            r.steps,
+            r.nworld,
+            r.steps,
+            r.beside_nworld,
+            r.solver_loop,
+            r.alone_seconds * 1e3,
+            r.beside_alone_seconds * 1e3,
+            r.together_seconds * 1e3,
+            r.beside_together_seconds * 1e3,
+            r.span_seconds * 1e3,
+            r.hidden * 100.0
+        );
+        return Ok(());
+    }
     let result = bench_physics(
         &gpu,
         &store,
