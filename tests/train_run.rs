@@ -490,7 +490,6 @@ fn curve_record(i: u64) -> IterationRecord {
         divergence: None,
         task: None,
         wall_s: None,
-        evaluated: None,
     }
 }
 

@@ -53,13 +53,6 @@ impl Event {
         .check("cuEventRecordWithFlags(EXTERNAL)")
     }
 
-    /// Whether the recorded work has finished, without waiting (an event never recorded has).
-    pub fn is_complete(&self) -> Result<bool, CudaError> {
-        self.inner
-            .try_is_complete()
-            .map_err(from_cudarc("cuEventQuery"))
-    }
-
     /// Waits for the recorded work to finish.
     pub fn synchronize(&self) -> Result<(), CudaError> {
         self.inner

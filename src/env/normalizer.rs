@@ -92,35 +92,6 @@ impl ObservationNormalizer {
         })
     }
 
-    /// A normalizer for `n` envs with statistics of its own that only
-    /// [`ObservationNormalizer::copy_statistics_from`] changes: a snapshot of `source`'s for an
-    /// evaluation that runs while training updates them.
-    pub(super) fn snapshot(
-        gpu: &Gpu,
-        source: &ObservationNormalizer,
-        n: usize,
-    ) -> Result<Self, EnvError> {
-        let mut snapshot = ObservationNormalizer::new(gpu, n, source.size, source.clip)?;
-        snapshot.frozen = true;
-        Ok(snapshot)
-    }
-
-    /// Queues on `stream` the copy of `source`'s statistics into this normalizer's.
-    pub(super) fn copy_statistics_from(
-        &self,
-        source: &ObservationNormalizer,
-        stream: &Stream,
-    ) -> Result<(), EnvError> {
-        for (dst, src) in [
-            (&self.count, &source.count),
-            (&self.mean, &source.mean),
-            (&self.m2, &source.m2),
-        ] {
-            dst.copy_from(stream, src, 0..src.len(), 0)?;
-        }
-        Ok(())
-    }
-
     /// Sets the statistics to `count [2]`, `mean [D]`, `m2 [D]` (a checkpoint's) and freezes
     /// them: the latent controller's student sees the observations normalized exactly as its
     /// teacher was trained to (docs/latent.md). Synchronous upload; not inside a capture.

@@ -26,12 +26,6 @@ impl Learner for Trainer {
     fn evaluate_until(&mut self, stop: &EarlyStop) -> Result<EvaluationEpisodes, RunError> {
         Trainer::evaluate_until(self, stop).map_err(learner_error)
     }
-    fn start_evaluation(&mut self) -> Result<bool, RunError> {
-        Trainer::start_evaluation(self).map_err(learner_error)
-    }
-    fn finished_evaluation(&mut self, wait: bool) -> Result<Option<Vec<EnvEvaluation>>, RunError> {
-        Trainer::finished_evaluation(self, wait).map_err(learner_error)
-    }
     fn evaluation_steps(&self) -> u32 {
         Trainer::evaluation_steps(self)
     }

@@ -132,6 +132,9 @@ impl GaussianPolicy {
         batch: usize,
         actor_params: &DeviceArray<f32>,
     ) -> Result<GaussianPolicy, PolicyError> {
+        if batch == 0 {
+            return Err(PolicyError::Shape("batch must be positive".to_owned()));
+        }
         if actor_params.len() != self.actor.params.len() {
             return Err(PolicyError::Shape(format!(
                 "{} actor parameters for an actor of {}",
@@ -140,70 +143,25 @@ impl GaussianPolicy {
             )));
         }
         let share = |a: &DeviceArray<f32>| a.view(0, [a.len()]);
-        let actor = share(actor_params)?;
-        let critic = share(&self.critic.params)?;
-        self.with_parameters(gpu, batch, actor, critic, self.gemm.clone())
-    }
-
-    /// The same networks with parameters of their own, which
-    /// [`GaussianPolicy::copy_parameters_from`] fills, activations for `batch` envs and GEMMs
-    /// on a cuBLAS handle (a workspace) of their own: a snapshot for an evaluation that runs on
-    /// another stream while training updates this policy's parameters. Not inside a capture.
-    pub fn snapshot_with_batch(
-        &self,
-        gpu: &Gpu,
-        batch: usize,
-    ) -> Result<GaussianPolicy, PolicyError> {
-        let actor = DeviceArray::zeros(gpu, [self.actor.params.len()])?;
-        let critic = DeviceArray::zeros(gpu, [self.critic.params.len()])?;
-        let gemm = self.gemm.separate(gpu).map_err(NnError::from)?;
-        self.with_parameters(gpu, batch, actor, critic, gemm)
-    }
-
-    /// Queues on `stream` the copy of `actor` and `critic` (flat parameters in this policy's
-    /// layout: e.g. the training policy's, or the average of its actor and its critic) into
-    /// this policy's (a snapshot's).
-    pub fn copy_parameters_from(
-        &self,
-        actor: &DeviceArray<f32>,
-        critic: &DeviceArray<f32>,
-        stream: &Stream,
-    ) -> Result<(), PolicyError> {
-        for (dst, src) in [(&self.actor.params, actor), (&self.critic.params, critic)] {
-            if dst.len() != src.len() {
-                return Err(PolicyError::Shape(format!(
-                    "a snapshot of {} parameters cannot take {}",
-                    dst.len(),
-                    src.len()
-                )));
-            }
-            dst.copy_from(stream, src, 0..src.len(), 0)?;
-        }
-        Ok(())
-    }
-
-    fn with_parameters(
-        &self,
-        gpu: &Gpu,
-        batch: usize,
-        actor_params: DeviceArray<f32>,
-        critic_params: DeviceArray<f32>,
-        gemm: PolicyGemm,
-    ) -> Result<GaussianPolicy, PolicyError> {
-        if batch == 0 {
-            return Err(PolicyError::Shape("batch must be positive".to_owned()));
-        }
+        let actor_params = share(actor_params)?;
         let log_std = actor_params.view(
             self.actor_shapes.last().map_or(0, LayerShape::end),
             [self.action_size],
         )?;
+        let gemm = || self.gemm.clone();
         Ok(GaussianPolicy {
-            actor: Mlp::new(gpu, &self.actor_shapes, actor_params, batch, gemm.clone())?,
-            critic: Mlp::new(gpu, &self.critic_shapes, critic_params, batch, gemm.clone())?,
+            actor: Mlp::new(gpu, &self.actor_shapes, actor_params, batch, gemm())?,
+            critic: Mlp::new(
+                gpu,
+                &self.critic_shapes,
+                share(&self.critic.params)?,
+                batch,
+                gemm(),
+            )?,
             actor_shapes: self.actor_shapes.clone(),
             critic_shapes: self.critic_shapes.clone(),
             log_std,
-            gemm,
+            gemm: self.gemm.clone(),
             observation_size: self.observation_size,
             action_size: self.action_size,
             batch,

@@ -6,9 +6,7 @@
 //! the rollout's statistics and the update's into one small report. The host launches it,
 //! queues one asynchronous copy of the report, and reads the report when the iteration is done:
 //! nothing inside an iteration waits for the host. Evaluation is a second graph over the
-//! 32-world plans that reads the same policy parameters, or, with `run.overlap_evaluation`, a
-//! snapshot of them (and of the normalization) on a stream of its own, while training goes on
-//! ([`Trainer::start_evaluation`]).
+//! 32-world plans that reads the same policy parameters.
 //!
 //! The trainer owns the policy and lends it to the rollouts (which run it) and to the update
 //! (which changes its parameters in place); the rollouts own the observation normalization and
@@ -26,10 +24,10 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-use crate::cuda::{Communicator, DeviceRange, Event, Gpu, Graph, Readback, Stream};
+use crate::cuda::{Communicator, DeviceRange, Gpu, Graph, Readback};
 use crate::env::{
-    EpisodeScores, EvaluationStatistics, Rollout, RolloutPolicy, StageEvents, StageRecorder,
-    TaskConfig, TaskRecord, TrackedMotion, Trajectory, mirror_images,
+    EpisodeScores, Rollout, RolloutPolicy, StageEvents, StageRecorder, TaskRecord, TrackedMotion,
+    Trajectory, mirror_images,
 };
 use crate::kernels::{DeviceArray, EnvError};
 use crate::latent::LatentDecoder;
@@ -82,8 +80,6 @@ pub struct TrainerConfig {
     /// A goal run in a latent controller's action space: the frozen decoder the policy drives
     /// (its action is the latent residual).
     pub decoder: Option<GoalDecoder>,
-    /// Evaluate beside training (`run.overlap_evaluation`): on one GPU, for the tracking task.
-    pub overlap_evaluation: bool,
 }
 
 /// Everything on the GPU that a run trains and evaluates with.
@@ -93,9 +89,7 @@ pub struct Trainer {
     evaluation: Rollout,
     /// The policy the training rollout samples from and the update trains...
     policy: GaussianPolicy,
-    /// ...and the same parameters with the evaluation's batch (shared, not copied; the
-    /// average of the actor's where there is one), or, with `run.overlap_evaluation`, a
-    /// snapshot of them that [`Trainer::start_evaluation`] takes.
+    /// ...and the same parameters with the evaluation's batch (shared, not copied).
     evaluation_policy: GaussianPolicy,
     update: PpoUpdate,
     iteration: Iteration,
@@ -108,25 +102,6 @@ pub struct Trainer {
     /// A goal run in a latent controller's action space (`goal.decoder`): the frozen decoder
     /// the policy above (the head) drives; the graphs address its buffers.
     decoder: Option<DecoderNetworks>,
-    /// With `run.overlap_evaluation`: the evaluation's stream, and whether one runs there. The
-    /// evaluation policy and rollout then hold snapshots of the parameters and statistics.
-    overlap: Option<OverlappedEvaluation>,
-}
-
-/// An evaluation on a stream of its own, beside the training iterations on the main stream.
-struct OverlappedEvaluation {
-    stream: Stream,
-    /// Recorded after the evaluation graph on `stream`.
-    done: Event,
-    in_flight: std::cell::Cell<bool>,
-}
-
-impl Drop for Trainer {
-    /// An evaluation still running beside training reads buffers this trainer frees: it ends
-    /// first.
-    fn drop(&mut self) {
-        let _ = self.settle_evaluation();
-    }
 }
 
 /// The frozen decoder and prior of a latent goal run on the GPU: the training rollout's batch
@@ -229,19 +204,7 @@ impl Trainer {
             run_seed,
         )?
         .with_sampling_seed(own_seed);
-        // Beside training only where the evaluation reads nothing but the policy and the
-        // statistics: one GPU (rank 0 of several would make the others wait anyway), tracking.
-        let overlap = config.overlap_evaluation
-            && replicas.is_none()
-            && goal_decoder.is_none()
-            && matches!(rollout_config.task, TaskConfig::Tracking);
-        let statistics = if overlap {
-            EvaluationStatistics::Snapshot
-        } else {
-            EvaluationStatistics::Shared
-        };
-        let mut evaluation =
-            Rollout::evaluation_with(&rollout, store, &rollout_config, statistics)?;
+        let mut evaluation = Rollout::evaluation(&rollout, store, &rollout_config)?;
         if goal_decoder.is_some() {
             evaluation = evaluation.storing_actions_of(action_size)?;
         }
@@ -253,21 +216,9 @@ impl Trainer {
             )?),
             None => None,
         };
-        // Beside training the evaluation policy has parameters of its own, which
-        // `refresh_snapshot` copies from the average (or the actor) and the critic.
         let evaluation_policy = match &average {
-            _ if overlap => policy.snapshot_with_batch(gpu, evaluation.num_envs())?,
             Some(a) => policy.with_batch_reading(gpu, evaluation.num_envs(), a)?,
             None => policy.with_batch(gpu, evaluation.num_envs())?,
-        };
-        let overlap = if overlap {
-            Some(OverlappedEvaluation {
-                stream: gpu.new_stream()?,
-                done: gpu.new_event()?,
-                in_flight: std::cell::Cell::new(false),
-            })
-        } else {
-            None
         };
         let decoder = match goal_decoder {
             Some(loaded) => {
@@ -328,7 +279,7 @@ impl Trainer {
             None => evaluation.capture_in_chunks(&evaluation_policy, EVALUATION_CHUNK_STEPS)?,
         };
         rollout.reset_all()?;
-        let trainer = Trainer {
+        Ok(Trainer {
             gpu: gpu.clone(),
             rollout,
             evaluation,
@@ -339,11 +290,7 @@ impl Trainer {
             evaluation_chunks,
             average,
             decoder,
-            overlap,
-        };
-        trainer.refresh_snapshot()?;
-        trainer.gpu.stream().synchronize()?;
-        Ok(trainer)
+        })
     }
 
     /// Runs one training iteration (rollout and update) and returns its statistics. Waits for
@@ -368,83 +315,6 @@ impl Trainer {
     /// mean actions, fixed start states) and returns every env's episode.
     pub fn evaluate(&self) -> Result<Vec<EnvEvaluation>, TrainerError> {
         self.run_evaluation()?;
-        self.evaluation_episodes()
-    }
-
-    /// Starts evaluating the current policy on the evaluation's own stream and returns at once
-    /// (true), while the next iterations train: the evaluation runs on a snapshot of the
-    /// parameters and statistics taken now. False without `run.overlap_evaluation` (or where
-    /// it does not apply): [`Trainer::evaluate`] evaluates in place.
-    pub fn start_evaluation(&self) -> Result<bool, TrainerError> {
-        let Some(overlap) = &self.overlap else {
-            return Ok(false);
-        };
-        if overlap.in_flight.get() {
-            return Err(TrainerError::Internal(
-                "an evaluation was started while another was running".to_owned(),
-            ));
-        }
-        self.refresh_snapshot()?;
-        // On the main stream, which it synchronizes: the copies above are done after it.
-        self.evaluation.reset_all()?;
-        // Whole: nothing looks between the chunks (`run.eval_early_stop` applies in place).
-        for chunk in &self.evaluation_chunks {
-            chunk.launch(&overlap.stream)?;
-        }
-        overlap.done.record(&overlap.stream)?;
-        overlap.in_flight.set(true);
-        Ok(true)
-    }
-
-    /// The episodes of the evaluation [`Trainer::start_evaluation`] started, once it has
-    /// ended (`wait`: waits for it); None while it runs, or when none was started.
-    pub fn finished_evaluation(
-        &self,
-        wait: bool,
-    ) -> Result<Option<Vec<EnvEvaluation>>, TrainerError> {
-        let Some(overlap) = &self.overlap else {
-            return Ok(None);
-        };
-        if !overlap.in_flight.get() || (!wait && !overlap.done.is_complete()?) {
-            return Ok(None);
-        }
-        overlap.done.synchronize()?;
-        overlap.in_flight.set(false);
-        self.evaluation_episodes().map(Some)
-    }
-
-    /// Waits for an evaluation still running beside training (its results are dropped).
-    fn settle_evaluation(&self) -> Result<(), TrainerError> {
-        if let Some(overlap) = &self.overlap
-            && overlap.in_flight.get()
-        {
-            overlap.done.synchronize()?;
-            overlap.in_flight.set(false);
-        }
-        Ok(())
-    }
-
-    /// Queues on the main stream the copy of the training parameters and statistics into the
-    /// evaluation's snapshots (none without `run.overlap_evaluation`: it shares them).
-    fn refresh_snapshot(&self) -> Result<(), TrainerError> {
-        if self.overlap.is_some() {
-            // The evaluation runs the average of the actor where there is one.
-            let actor = self
-                .average
-                .as_ref()
-                .unwrap_or(self.policy.actor_parameters());
-            self.evaluation_policy.copy_parameters_from(
-                actor,
-                self.policy.critic_parameters(),
-                self.gpu.stream(),
-            )?;
-            self.evaluation.copy_statistics_from(&self.rollout)?;
-        }
-        Ok(())
-    }
-
-    /// Every evaluation env's episode of the evaluation run last.
-    fn evaluation_episodes(&self) -> Result<Vec<EnvEvaluation>, TrainerError> {
         let scores = self.tracking_scores()?.download()?;
         Ok(scores.iter().map(EnvEvaluation::from).collect())
     }
@@ -514,8 +384,6 @@ impl Trainer {
     /// states) and waits for it: its scores, or its task's tally, are then on the rollout
     /// ([`Trainer::evaluation_rollout`]).
     pub fn run_evaluation(&self) -> Result<(), TrainerError> {
-        self.settle_evaluation()?;
-        self.refresh_snapshot()?;
         self.evaluation.reset_all()?;
         for chunk in &self.evaluation_chunks {
             chunk.launch(self.gpu.stream())?;
@@ -529,8 +397,6 @@ impl Trainer {
     /// control steps run when it stopped early.
     pub fn evaluate_until(&self, stop: &EarlyStop) -> Result<EvaluationEpisodes, TrainerError> {
         let scores = self.tracking_scores()?;
-        self.settle_evaluation()?;
-        self.refresh_snapshot()?;
         self.evaluation.reset_all()?;
         let mut stopped_at_step = None;
         let last = self.evaluation_chunks.len().saturating_sub(1);
@@ -581,8 +447,7 @@ impl Trainer {
     pub fn save_into(&self, checkpoint: &mut Checkpoint) -> Result<(), TrainerError> {
         use super::checkpoint::ppo_tensor_names::*;
         use tensor_names::*;
-        // The main stream only: an evaluation beside training writes nothing saved here.
-        self.gpu.stream().synchronize()?;
+        self.gpu.synchronize()?;
         let policy = &self.policy;
         put_f32(checkpoint, ACTOR, policy.actor_parameters())?;
         put_f32(checkpoint, CRITIC, policy.critic_parameters())?;
@@ -679,9 +544,6 @@ impl Trainer {
             }
         }
         self.rollout.reset_all()?;
-        // What `replay` runs through `evaluation_rollout` without an evaluation first.
-        self.refresh_snapshot()?;
-        self.gpu.stream().synchronize()?;
         Ok(())
     }
 

@@ -54,11 +54,7 @@ pub fn clips_chart_png(
 ) -> Option<Result<Vec<u8>, RunError>> {
     let evaluations: Vec<(f64, &super::library_scores::LibraryEvaluation)> = records
         .iter()
-        .filter_map(|r| {
-            let library = r.evaluation.as_ref()?.library.as_ref()?;
-            // An evaluation beside training scored an earlier iteration's policy.
-            Some((r.evaluated_iteration().active_time_s, library))
-        })
+        .filter_map(|r| Some((r.active_time_s, r.evaluation.as_ref()?.library.as_ref()?)))
         .filter(|(t, _)| t.is_finite())
         .collect();
     let (_, last) = evaluations.last()?;
@@ -188,7 +184,6 @@ mod tests {
             divergence: None,
             task: None,
             wall_s: None,
-            evaluated: None,
         }
     }
 

@@ -66,11 +66,7 @@ pub fn clips_table(records: &[IterationRecord]) -> Option<String> {
     let evaluated = || {
         records.iter().filter_map(|r| {
             let e = r.evaluation.as_ref()?;
-            Some((
-                r.evaluated_iteration().active_time_s,
-                e,
-                e.library.as_ref()?,
-            ))
+            Some((r.active_time_s, e, e.library.as_ref()?))
         })
     };
     let (_, last, library) = evaluated().next_back()?;

@@ -93,12 +93,6 @@ pub struct RunConfig {
     /// 1, the default, is one process. Recorded so that a resume continues with as many.
     #[serde(default = "one_process", skip_serializing_if = "is_one_process")]
     pub processes: u32,
-    /// Evaluate on a stream of its own while training goes on (docs/train.md, "Evaluation
-    /// beside training"): the evaluation of iteration k runs on a snapshot of the policy and
-    /// the normalization while k+1, ... train, and is recorded when it ends, with k's active
-    /// time. One GPU and the tracking task only; elsewhere evaluations run in place.
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-    pub overlap_evaluation: bool,
 }
 
 fn one_process() -> u32 {
@@ -128,7 +122,6 @@ impl Default for RunConfig {
             replay: true,
             gpus: Vec::new(),
             processes: 1,
-            overlap_evaluation: false,
         }
     }
 }

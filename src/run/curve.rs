@@ -53,7 +53,7 @@ fn right_series(records: &[IterationRecord], axis: RightAxis) -> RightSeries {
                     .filter_map(|r| {
                         let e = r.evaluation.as_ref()?;
                         (e.stopped_at_step.is_some() == stopped)
-                            .then_some((r.evaluated_iteration().active_time_s, e.success_rate))
+                            .then_some((r.active_time_s, e.success_rate))
                     })
                     .filter(finite)
                     .collect()

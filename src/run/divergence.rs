@@ -167,7 +167,6 @@ mod tests {
             }),
             task: None,
             wall_s: None,
-            evaluated: None,
         };
         let line = serde_json::to_string(&record).unwrap();
         assert!(line.contains("\"divergence\":{\"cause\":\"KL\""), "{line}");

@@ -14,7 +14,7 @@ use super::evaluation::{
     EvaluationSummary, episode_rows, evaluation_start_times, summarize,
 };
 use super::library_evaluation::LibraryPlan;
-use super::metrics::{DivergenceEvent, EvaluatedIteration, IterationStats};
+use super::metrics::{DivergenceEvent, IterationStats};
 use super::session::RunSession;
 use super::summary::RunSummary;
 use crate::env::{Rollout, TaskRecord, TrackedMotion};
@@ -27,24 +27,12 @@ use crate::plan::PhysicsOverflow;
 /// its own go in [`RunError::Learner`].
 pub trait Learner {
     fn iterate(&mut self) -> Result<IterationStats, RunError>;
-    /// Evaluates the current policy in place (the loop waits for it).
     fn evaluate(&mut self) -> Result<Vec<EnvEvaluation>, RunError>;
     /// The evaluation, stopping early where `stop` finds it decided; a learner that cannot
     /// stop one runs it whole.
     fn evaluate_until(&mut self, stop: &EarlyStop) -> Result<EvaluationEpisodes, RunError> {
         let _ = stop;
         Ok(EvaluationEpisodes::whole(self.evaluate()?))
-    }
-    /// Starts evaluating the current policy beside training and returns at once: true when
-    /// it did (the loop then asks [`Learner::finished_evaluation`] after each iteration),
-    /// false when this learner evaluates in place only.
-    fn start_evaluation(&mut self) -> Result<bool, RunError> {
-        Ok(false)
-    }
-    /// The episodes of the evaluation [`Learner::start_evaluation`] started, once it has
-    /// ended (`wait`: waits for it); None while it runs.
-    fn finished_evaluation(&mut self, _wait: bool) -> Result<Option<Vec<EnvEvaluation>>, RunError> {
-        Ok(None)
     }
     fn evaluation_steps(&self) -> u32;
     /// The task's record of the iteration just run, with its evaluation when `evaluate` (None
@@ -195,17 +183,12 @@ pub fn run_loop<C: ResolvedConfig, L: Learner>(
         DivergenceGuard::new(initial, run.max_divergence_restores)?
     };
     let mut last_episodes = Vec::new();
-    // An evaluation running beside training (`Learner::start_evaluation`): the iteration whose
-    // policy it scores. One at a time; one that falls due meanwhile waits for it (`due_later`).
-    let mut beside: Option<EvaluatedIteration> = None;
-    let mut due_later = false;
     let mut wall = WallTime::starting(setup.elapsed().as_secs_f64());
     session.start_training();
     loop {
         session.start_iteration();
         let stats = trainer.iterate()?;
         let cause = non_finite_report(&stats);
-        let diverged = cause.is_some();
         let mut step = session.finish_iteration(stats);
         for note in trainer.notes() {
             session.progress().note(&note);
@@ -223,64 +206,29 @@ pub fn run_loop<C: ResolvedConfig, L: Learner>(
             }
             step.set_task(task);
         }
-        // An evaluation that ran beside training and has ended goes into this iteration's
-        // record, as an evaluation of the iteration it started at; at the run's last
-        // iteration the loop waits for it.
-        let mut evaluation = None;
-        if let Some(at) = beside {
+        let evaluation = if step.evaluate && !task_evaluates {
             let started = std::time::Instant::now();
-            if let Some(episodes) = trainer.finished_evaluation(step.last)? {
-                wall.waited(started);
-                beside = None;
-                let episodes = EvaluationEpisodes::whole(episodes);
-                evaluation = Some(score(trainer, scorer, &episodes, threshold)?);
-                step.evaluation_of(at);
-                last_episodes = episodes.episodes;
+            let EvaluationEpisodes {
+                episodes,
+                stopped_at_step,
+            } = match scorer.early_stop(&run, session.reached(), step.last) {
+                Some(stop) => trainer.evaluate_until(&stop)?,
+                None => EvaluationEpisodes::whole(trainer.evaluate()?),
+            };
+            wall.evaluation(started);
+            wall.stopped_early += u32::from(stopped_at_step.is_some());
+            let mut summary = scorer.summarize(&episodes, trainer.evaluation_steps(), threshold)?;
+            summary.stopped_at_step = stopped_at_step;
+            if let Some(library) = summary.library.as_mut()
+                && let Some(sampling) = trainer.clip_sampling()?
+            {
+                library.set_sampling(&sampling);
             }
-        }
-        // A diverged iteration (gone back to an earlier state) is not evaluated: one that fell
-        // due meanwhile waits for the next.
-        if (step.evaluate || (due_later && !diverged)) && !task_evaluates {
-            due_later = false;
-            let succeeded = evaluation.as_ref().is_some_and(|e| e.success);
-            if step.last {
-                // The last iteration is evaluated itself, in place (whole), unless the
-                // evaluation just recorded succeeded.
-                if !succeeded {
-                    let episodes = evaluate_in_place(
-                        trainer,
-                        scorer,
-                        &run,
-                        session.reached(),
-                        step.last,
-                        &mut wall,
-                    )?;
-                    evaluation = Some(score(trainer, scorer, &episodes, threshold)?);
-                    step.evaluation_of(step.point());
-                    last_episodes = episodes.episodes;
-                }
-            } else if beside.is_some() {
-                // One runs still: the first iteration after it ends starts the next.
-                due_later = true;
-            } else {
-                let started = std::time::Instant::now();
-                if trainer.start_evaluation()? {
-                    wall.started(started);
-                    beside = Some(step.point());
-                } else if evaluation.is_none() {
-                    let episodes = evaluate_in_place(
-                        trainer,
-                        scorer,
-                        &run,
-                        session.reached(),
-                        step.last,
-                        &mut wall,
-                    )?;
-                    evaluation = Some(score(trainer, scorer, &episodes, threshold)?);
-                    last_episodes = episodes.episodes;
-                }
-            }
-        }
+            last_episodes = episodes;
+            Some(summary)
+        } else {
+            None
+        };
         let started = std::time::Instant::now();
         let next = session.record(step, evaluation)?;
         if next.checkpoint_due {
@@ -298,10 +246,6 @@ pub fn run_loop<C: ResolvedConfig, L: Learner>(
         }
         wall.bookkeeping(started);
         if let Some(reason) = next.stop {
-            if beside.is_some() {
-                // Started before the stop, recorded nowhere: it only has to end.
-                trainer.finished_evaluation(true)?;
-            }
             let line = wall.describe(session.active_time_s());
             session.progress().note(&line);
             session
@@ -322,46 +266,6 @@ pub fn run_loop<C: ResolvedConfig, L: Learner>(
             return session.finish(reason);
         }
     }
-}
-
-/// Evaluates the current policy in place and waits for it, stopping early where the scorer
-/// says it may (`run.eval_early_stop`, given what the run has `reached`; never at its `last`
-/// evaluation).
-fn evaluate_in_place<L: Learner>(
-    trainer: &mut L,
-    scorer: &Scorer,
-    run: &RunConfig,
-    reached: Milestones,
-    last: bool,
-    wall: &mut WallTime,
-) -> Result<EvaluationEpisodes, RunError> {
-    let started = std::time::Instant::now();
-    let episodes = match scorer.early_stop(run, reached, last) {
-        Some(stop) => trainer.evaluate_until(&stop)?,
-        None => EvaluationEpisodes::whole(trainer.evaluate()?),
-    };
-    wall.evaluation(started);
-    wall.stopped_early += u32::from(episodes.stopped_at_step.is_some());
-    Ok(episodes)
-}
-
-/// The summary of an evaluation's `episodes`, with each clip's part in the reset sampler for a
-/// motion library.
-fn score<L: Learner>(
-    trainer: &mut L,
-    scorer: &Scorer,
-    episodes: &EvaluationEpisodes,
-    threshold: f64,
-) -> Result<EvaluationSummary, RunError> {
-    let mut summary =
-        scorer.summarize(&episodes.episodes, trainer.evaluation_steps(), threshold)?;
-    summary.stopped_at_step = episodes.stopped_at_step;
-    if let Some(library) = summary.library.as_mut()
-        && let Some(sampling) = trainer.clip_sampling()?
-    {
-        library.set_sampling(&sampling);
-    }
-    Ok(summary)
 }
 
 /// Restores the guard's last good state (learning rate halved) after `cause` was found not
@@ -413,16 +317,6 @@ impl WallTime {
     fn evaluation(&mut self, started: std::time::Instant) {
         self.evaluation_s += started.elapsed().as_secs_f64();
         self.evaluations += 1;
-    }
-
-    /// An evaluation started beside training: the start's own cost.
-    fn started(&mut self, started: std::time::Instant) {
-        self.evaluation(started);
-    }
-
-    /// Waiting for an evaluation beside training (at the run's end).
-    fn waited(&mut self, started: std::time::Instant) {
-        self.evaluation_s += started.elapsed().as_secs_f64();
     }
 
     fn bookkeeping(&mut self, started: std::time::Instant) {

@@ -160,7 +160,6 @@ fn the_clips_table_lists_each_clip_with_its_time_to_threshold() {
         divergence: None,
         task: None,
         wall_s: None,
-        evaluated: None,
     };
     assert!(clips_table(&[]).is_none());
     let records = [record(1, &[0, 3, 5]), record(2, &[5]), record(3, &[])];

@@ -156,31 +156,6 @@ pub struct IterationRecord {
     /// what a person waiting sees (absent in logs written before it was recorded).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wall_s: Option<f64>,
-    /// With an evaluation that ran beside training (`run.overlap_evaluation`): the iteration
-    /// whose policy it evaluated, an earlier one (absent: this one).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub evaluated: Option<EvaluatedIteration>,
-}
-
-/// Where the policy an evaluation scored was taken: its iteration, active time and frames.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct EvaluatedIteration {
-    pub iteration: u64,
-    #[serde(deserialize_with = "nan_from_null")]
-    pub active_time_s: f64,
-    pub frames: u64,
-}
-
-impl IterationRecord {
-    /// The iteration whose policy this record's evaluation scored: an earlier one when the
-    /// evaluation ran beside training, else this one. Times to success count from it.
-    pub fn evaluated_iteration(&self) -> EvaluatedIteration {
-        self.evaluated.unwrap_or(EvaluatedIteration {
-            iteration: self.iteration,
-            active_time_s: self.active_time_s,
-            frames: self.frames,
-        })
-    }
 }
 
 /// What the GPU reports about one iteration (the per-iteration statistics copy).
@@ -411,7 +386,6 @@ mod tests {
             divergence: None,
             task: None,
             wall_s: None,
-            evaluated: None,
         };
         let goal = IterationRecord {
             iteration: 2,

@@ -279,13 +279,6 @@ pub fn evaluation_line(record: &IterationRecord) -> String {
                 e.pose_error_m
             )),
         }
-        if let Some(at) = record.evaluated {
-            // Evaluated beside training: of an earlier iteration's policy.
-            line.push_str(&format!(
-                "  (of iteration {}, {:.2} s)",
-                at.iteration, at.active_time_s
-            ));
-        }
         if let Some(library) = &e.library {
             line.push_str(&format!(
                 "  clips at {} {}/{}",
@@ -355,7 +348,6 @@ mod tests {
             divergence: None,
             task: None,
             wall_s: None,
-            evaluated: None,
         }
     }
 

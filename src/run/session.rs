@@ -33,7 +33,7 @@ use super::config::ResolvedConfig;
 use super::error::RunError;
 use super::evaluation::EvaluationSummary;
 use super::metrics::DivergenceEvent;
-use super::metrics::{EvaluatedIteration, IterationRecord, IterationStats, MetricsLog};
+use super::metrics::{IterationRecord, IterationStats, MetricsLog};
 use super::progress::{Progress, ProgressMode};
 use super::run_dir::{ResumedRun, RunDir, check_same_gpu_count};
 use super::stop::StopFlag;
@@ -65,22 +65,6 @@ impl IterationStep {
     /// one ran).
     pub fn set_task(&mut self, task: TaskRecord) {
         self.record.task = Some(task);
-    }
-
-    /// Where this iteration's policy was taken: an evaluation started now and recorded later
-    /// scores it ([`IterationStep::evaluation_of`]).
-    pub fn point(&self) -> EvaluatedIteration {
-        EvaluatedIteration {
-            iteration: self.record.iteration,
-            active_time_s: self.record.active_time_s,
-            frames: self.record.frames,
-        }
-    }
-
-    /// This step's record carries an evaluation of the policy of `earlier` (an evaluation
-    /// that ran beside training): the times to success count from `earlier`.
-    pub fn evaluation_of(&mut self, earlier: EvaluatedIteration) {
-        self.record.evaluated = (earlier.iteration != self.iteration).then_some(earlier);
     }
 }
 
@@ -332,7 +316,6 @@ impl<C: ResolvedConfig> RunSession<C> {
             divergence: None,
             task: None,
             wall_s: None,
-            evaluated: None,
         };
         IterationStep {
             iteration,

@@ -76,11 +76,6 @@ pub struct LibraryTimes {
     pub time_to_every_clip_s: Option<f64>,
 }
 
-/// Active seconds at the iteration whose policy `record`'s evaluation scored.
-fn evaluated_time(record: &IterationRecord) -> f64 {
-    record.evaluated_iteration().active_time_s
-}
-
 impl RunSummary {
     /// The summary of a run whose log is `records`.
     pub fn from_records(
@@ -109,11 +104,11 @@ impl RunSummary {
                 time_to_episode_rate_s: first(&|e| {
                     e.library.as_ref().is_some_and(|l| l.episodes_pass)
                 })
-                .map(evaluated_time),
+                .map(|r| r.active_time_s),
                 time_to_every_clip_s: first(&|e| {
                     e.library.as_ref().is_some_and(|l| l.all_clips_pass)
                 })
-                .map(evaluated_time),
+                .map(|r| r.active_time_s),
             });
         let active_time_s = last.map_or(0.0, |r| r.active_time_s);
         let frames = last.map_or(0, |r| r.frames);
@@ -129,15 +124,13 @@ impl RunSummary {
             } else {
                 0.0
             },
-            // An evaluation beside training scored an earlier iteration's policy: the times
-            // are that iteration's (the wall time is when the result was known).
-            time_to_success_s: first_success.map(evaluated_time),
-            success_iteration: first_success.map(|r| r.evaluated_iteration().iteration),
-            frames_to_success: first_success.map(|r| r.evaluated_iteration().frames),
-            time_to_pose_error_s: pose.map(evaluated_time),
-            time_to_clip_start_success_s: clip_start.map(evaluated_time),
-            time_to_robotics_rule_success_s: robotics_rule.map(evaluated_time),
-            time_to_clip_start_completion_s: completion.map(evaluated_time),
+            time_to_success_s: first_success.map(|r| r.active_time_s),
+            success_iteration: first_success.map(|r| r.iteration),
+            frames_to_success: first_success.map(|r| r.frames),
+            time_to_pose_error_s: pose.map(|r| r.active_time_s),
+            time_to_clip_start_success_s: clip_start.map(|r| r.active_time_s),
+            time_to_robotics_rule_success_s: robotics_rule.map(|r| r.active_time_s),
+            time_to_clip_start_completion_s: completion.map(|r| r.active_time_s),
             last_evaluation: records.iter().rev().find_map(|r| r.evaluation.clone()),
             library,
             task_evaluation: records
@@ -286,7 +279,6 @@ pub(crate) mod test_records {
             task: None,
             // One wall second per iteration after a 2-s setup, evaluations included.
             wall_s: Some(2.0 + iteration as f64),
-            evaluated: None,
         }
     }
 

@@ -183,7 +183,6 @@ mod tests {
             divergence: None,
             task: None,
             wall_s: None,
-            evaluated: None,
         };
         let tags: Vec<String> = scalars(&record).into_iter().map(|(t, _)| t).collect();
         assert!(!tags.contains(&"train/return".to_string()), "{tags:?}");
@@ -218,7 +217,6 @@ mod tests {
             divergence: None,
             task: None,
             wall_s: None,
-            evaluated: None,
         };
         let tags = |r: &IterationRecord| -> Vec<String> {
             scalars(r).into_iter().map(|(t, _)| t).collect()

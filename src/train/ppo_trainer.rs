@@ -21,7 +21,6 @@ pub fn trainer_config(
         policy: config.policy.clone(),
         ppo: config.ppo.clone(),
         decoder: load_goal_decoder(config, character)?,
-        overlap_evaluation: config.run.overlap_evaluation,
     })
 }
 

@@ -112,8 +112,6 @@ pub struct Rollout {
     start_spread: DeviceArray<f32>,
     observation: ObservationParams,
     normalizer: ObservationNormalizer,
-    /// An evaluation rollout's view of the training statistics (a training rollout: Shared).
-    statistics_source: EvaluationStatistics,
     phase_statistics: PhaseStatistics,
     statistics: RolloutStatistics,
     purpose: Purpose,
@@ -144,17 +142,7 @@ enum Purpose {
 /// evaluation rollout evaluates (its clips, layout, kernels and normalization).
 enum Source<'a> {
     Training(TrackedMotion<'a>),
-    Evaluation(&'a Rollout, EvaluationStatistics),
-}
-
-/// How an evaluation rollout sees its training rollout's observation statistics.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum EvaluationStatistics {
-    /// The training rollout's own buffers: every update is seen at once.
-    Shared,
-    /// Copies of its own, which [`Rollout::copy_statistics_from`] takes: for an evaluation that
-    /// runs on another stream while training updates the statistics.
-    Snapshot,
+    Evaluation(&'a Rollout),
 }
 
 impl Rollout {
@@ -188,32 +176,10 @@ impl Rollout {
         store: &PlanStore,
         config: &RolloutConfig,
     ) -> Result<Rollout, RolloutError> {
-        Rollout::evaluation_with(training, store, config, EvaluationStatistics::Shared)
-    }
-
-    /// [`Rollout::evaluation`], seeing the training rollout's statistics as `statistics` says.
-    pub fn evaluation_with(
-        training: &Rollout,
-        store: &PlanStore,
-        config: &RolloutConfig,
-        statistics: EvaluationStatistics,
-    ) -> Result<Rollout, RolloutError> {
         let mut config = config.clone();
         config.env.num_envs = config.evaluation.envs;
         config.env.motion_noise_std = 0.0;
-        let source = Source::Evaluation(training, statistics);
-        Rollout::build(&training.gpu, store, &config, source)
-    }
-
-    /// Queues on the main stream the copy of `training`'s observation statistics into this
-    /// evaluation rollout's snapshot ([`EvaluationStatistics::Snapshot`]; a shared one needs
-    /// none).
-    pub fn copy_statistics_from(&self, training: &Rollout) -> Result<(), RolloutError> {
-        if self.statistics_source == EvaluationStatistics::Snapshot {
-            self.normalizer
-                .copy_statistics_from(&training.normalizer, self.gpu.stream())?;
-        }
-        Ok(())
+        Rollout::build(&training.gpu, store, &config, Source::Evaluation(training))
     }
 
     fn build(
@@ -224,13 +190,9 @@ impl Rollout {
     ) -> Result<Rollout, RolloutError> {
         let n = config.env.num_envs as usize;
         let substeps = config.env.substeps as usize;
-        let statistics_source = match source {
-            Source::Evaluation(_, statistics) => statistics,
-            Source::Training(_) => EvaluationStatistics::Shared,
-        };
         let step_plan = match source {
             Source::Training(_) => training_step_plan(store, &config.env)?,
-            Source::Evaluation(..) => STEP_PLAN,
+            Source::Evaluation(_) => STEP_PLAN,
         };
         let sim = Simulation::load_with(
             gpu,
@@ -270,7 +232,7 @@ impl Rollout {
                     PhysicsSizes::of(character),
                 )
             }
-            Source::Evaluation(training, _) => (
+            Source::Evaluation(training) => (
                 Arc::clone(&training.library),
                 Arc::clone(&training.table),
                 training.character.clone(),
@@ -321,7 +283,7 @@ impl Rollout {
                 config.horizon as usize,
                 Purpose::Training,
             ),
-            Source::Evaluation(training, statistics) if goal.is_some() => {
+            Source::Evaluation(training) if goal.is_some() => {
                 if training.observation_size() != obs_size {
                     return Err(RolloutError::Setup(format!(
                         "the evaluation's observation size {obs_size} differs from the training rollout's {}",
@@ -334,12 +296,12 @@ impl Rollout {
                 reset.horizon = steps as i32;
                 (
                     Arc::clone(&training.kernels),
-                    evaluation_normalizer(gpu, &training.normalizer, n, statistics)?,
+                    ObservationNormalizer::frozen(gpu, &training.normalizer, n)?,
                     steps,
                     Purpose::GoalEvaluation,
                 )
             }
-            Source::Evaluation(training, statistics) => {
+            Source::Evaluation(training) => {
                 if training.observation_size() != obs_size {
                     return Err(RolloutError::Setup(format!(
                         "the evaluation's observation size {obs_size} differs from the training rollout's {}",
@@ -371,7 +333,7 @@ impl Rollout {
                 let clip_steps: Vec<i32> = plan.iter().map(|c| c.steps as i32).collect();
                 (
                     Arc::clone(&training.kernels),
-                    evaluation_normalizer(gpu, &training.normalizer, n, statistics)?,
+                    ObservationNormalizer::frozen(gpu, &training.normalizer, n)?,
                     steps,
                     Purpose::Evaluation(
                         EpisodeScores::zeros(gpu, n, &clip_steps)?,
@@ -422,7 +384,6 @@ impl Rollout {
             start_spread: DeviceArray::from_slice(gpu, [clips], &start_spread)?,
             observation,
             normalizer,
-            statistics_source,
             phase_statistics,
             statistics: RolloutStatistics::new(gpu, n)?,
             purpose,
@@ -898,19 +859,6 @@ fn physics_timestep(sim: &Simulation, step_plan: &str) -> Result<f64, RolloutErr
                     .to_owned(),
             )
         })
-}
-
-/// An evaluation rollout's normalizer of `source`'s statistics, shared or a snapshot.
-fn evaluation_normalizer(
-    gpu: &Gpu,
-    source: &ObservationNormalizer,
-    n: usize,
-    statistics: EvaluationStatistics,
-) -> Result<ObservationNormalizer, crate::kernels::EnvError> {
-    match statistics {
-        EvaluationStatistics::Shared => ObservationNormalizer::frozen(gpu, source, n),
-        EvaluationStatistics::Snapshot => ObservationNormalizer::snapshot(gpu, source, n),
-    }
 }
 
 #[cfg(test)]
