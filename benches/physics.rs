@@ -8,7 +8,7 @@
 use anyhow::{Context, Result};
 use instantmimic::bench::bench_physics;
 use instantmimic::cuda::Gpu;
-use instantmimic::plan::{PlanStore, ReplayOrder, STEP_PLAN, SolverLoop};
+use instantmimic::plan::{PlanStore, ReplayOrder, STEP_PLAN};
 
 fn main() -> Result<()> {
     let gpu = Gpu::open(0)?;
@@ -31,7 +31,6 @@ fn main() -> Result<()> {
             nworld,
             (1000, 200),
             ReplayOrder::Dag,
-            SolverLoop::Conditional,
         )
         .with_context(|| format!("physics benchmark at {nworld} worlds"))?;
         println!(

@@ -30,9 +30,7 @@ use instantmimic::env::{
 };
 use instantmimic::kernels::{DeviceArray, EnvKernels};
 use instantmimic::motion::Character;
-use instantmimic::plan::{
-    PhysicsOverflow, PlanStore, ReplayOrder, Simulation, SolverLoop, TRAINING_STEP_PLAN,
-};
+use instantmimic::plan::{PhysicsOverflow, PlanStore, ReplayOrder, Simulation};
 
 fn read_f32(path: &Path) -> Vec<f32> {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
@@ -112,26 +110,8 @@ fn references() -> Vec<Reference> {
 }
 
 /// A simulation in a reference case's initial state.
-fn load_case(
-    gpu: &Gpu,
-    r: &Reference,
-    case: &serde_json::Value,
-    order: ReplayOrder,
-    solver_loop: SolverLoop,
-) -> Simulation {
-    load_plans_in_case(gpu, r, case, &["step", "kinematics"], order, solver_loop)
-}
-
-/// `plans` of `r` loaded in `case`'s initial state.
-fn load_plans_in_case(
-    gpu: &Gpu,
-    r: &Reference,
-    case: &serde_json::Value,
-    plans: &[&str],
-    order: ReplayOrder,
-    solver_loop: SolverLoop,
-) -> Simulation {
-    let sim = Simulation::load_with(gpu, &r.plans, r.nworld, plans, order, solver_loop)
+fn load_case(gpu: &Gpu, r: &Reference, case: &serde_json::Value, order: ReplayOrder) -> Simulation {
+    let sim = Simulation::load_with_order(gpu, &r.plans, r.nworld, &["step", "kinematics"], order)
         .unwrap_or_else(|e| panic!("loading plans: {e}"));
     for field in ["qpos", "qvel", "ctrl"] {
         let file = case["files"][format!("init_{field}")]
@@ -156,22 +136,14 @@ fn step_plan_matches_mujoco_warp() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-/// Replays every case of `r` in both orders, and with the solver loop unrolled; pushes each
-/// disagreement onto `failures`.
+/// Replays every case of `r` in both orders; pushes each disagreement onto `failures`.
 fn check_reference(gpu: &Gpu, r: &Reference, failures: &mut Vec<String>) {
     let deterministic = r.summary["deterministic"].as_bool().unwrap_or(false);
     let variant = r.dir.display();
-    for (order, solver_loop) in [
-        (ReplayOrder::Linear, SolverLoop::Conditional),
-        (ReplayOrder::Dag, SolverLoop::Conditional),
-        (ReplayOrder::Dag, SolverLoop::Unrolled),
-    ] {
-        // The messages name the replay: `{order:?}` below reads "Dag Unrolled" and the like.
-        let sim_of = |case| load_case(gpu, r, case, order, solver_loop);
-        let order = format!("{order:?} {solver_loop:?}");
+    for order in [ReplayOrder::Linear, ReplayOrder::Dag] {
         for case in r.summary["cases"].as_array().expect("cases") {
             let name = case["name"].as_str().expect("case name");
-            let sim = sim_of(case);
+            let sim = load_case(gpu, r, case, order);
             let mut done = 0u64;
             for checkpoint in case["checkpoints"].as_array().expect("checkpoints") {
                 let target = checkpoint["steps"].as_u64().expect("steps");
@@ -218,87 +190,6 @@ fn check_reference(gpu: &Gpu, r: &Reference, failures: &mut Vec<String>) {
     }
 }
 
-/// The training rollouts' step (`training_step`, fewer solver iterations) unrolled gives what
-/// its conditional loop gives, case by case, over 60 steps of falling into contact: bit for bit
-/// where the conditional loop repeats itself bit for bit, else after one step within twice what
-/// two runs of it differ by.
-#[test]
-fn unrolled_training_step_matches_its_conditional_loop() {
-    let gpu = Gpu::open(0).expect("a GPU");
-    let mut checked = 0;
-    for r in references() {
-        let has_training_step = r
-            .plans
-            .has_plan(TRAINING_STEP_PLAN, r.nworld)
-            .expect("the plan manifest");
-        if !has_training_step {
-            println!("{}: no training step plan", r.dir.display());
-            continue;
-        }
-        for case in r.summary["cases"].as_array().expect("cases") {
-            let name = case["name"].as_str().expect("case name");
-            let load = |solver_loop| {
-                load_plans_in_case(
-                    &gpu,
-                    &r,
-                    case,
-                    &[TRAINING_STEP_PLAN],
-                    ReplayOrder::Dag,
-                    solver_loop,
-                )
-            };
-            let [a, b, unrolled] = [
-                load(SolverLoop::Conditional),
-                load(SolverLoop::Conditional),
-                load(SolverLoop::Unrolled),
-            ];
-            for step in 1..=60 {
-                for sim in [&a, &b, &unrolled] {
-                    sim.run(TRAINING_STEP_PLAN).expect("step");
-                }
-                if ![1, 10, 60].contains(&step) {
-                    continue;
-                }
-                gpu.stream().synchronize().expect("synchronize");
-                for field in ["d.qpos", "d.qvel"] {
-                    let read = |sim: &Simulation| sim.buffer::<f32>(field).unwrap().read().unwrap();
-                    let (base, again, got) = (read(&a), read(&b), read(&unrolled));
-                    let (spread, _) = max_abs_diff(&again, &base);
-                    let (diff, at) = max_abs_diff(&got, &base);
-                    println!(
-                        "{} {name}: training step after {step} steps: max |{field} unrolled - conditional| = {diff:.3e} (element {at}); conditional against itself {spread:.3e}",
-                        r.dir.display()
-                    );
-                    // As the reference check: bit for bit where the conditional loop repeats
-                    // itself bit for bit; after one step within twice its own spread (contacts
-                    // summed with float atomics differ from run to run, and later steps amplify
-                    // that, so they are printed, not judged).
-                    if spread == 0.0 {
-                        let identical = got
-                            .iter()
-                            .zip(&base)
-                            .all(|(x, y)| x.to_bits() == y.to_bits());
-                        assert!(
-                            identical,
-                            "{} {name}: {field} after {step} steps: unrolled differs by {diff:e} where the conditional loop repeats itself bit for bit",
-                            r.dir.display()
-                        );
-                    } else if step == 1 {
-                        let limit = (2.0 * spread).max(1e-5);
-                        assert!(
-                            diff <= limit,
-                            "{} {name}: {field} after 1 step: unrolled differs by {diff:e} > {limit:e}",
-                            r.dir.display()
-                        );
-                    }
-                }
-            }
-            checked += 1;
-        }
-    }
-    assert!(checked > 0, "no reference has a training step plan");
-}
-
 /// The DAG order treats Model arrays as read-only: check that stepping with contacts leaves
 /// every `m.*` buffer unchanged.
 #[test]
@@ -311,7 +202,7 @@ fn stepping_leaves_model_arrays_unchanged() {
 
 fn model_arrays_unchanged(gpu: &Gpu, r: &Reference) {
     let case = &r.summary["cases"][0];
-    let sim = load_case(gpu, r, case, ReplayOrder::Linear, SolverLoop::Conditional);
+    let sim = load_case(gpu, r, case, ReplayOrder::Linear);
     let names: Vec<String> = sim
         .buffer_names()
         .filter(|n| n.starts_with("m."))
@@ -469,7 +360,7 @@ fn body_kinematics_matches(gpu: &Gpu, kernels: &EnvKernels, r: &Reference) -> us
     let n = r.nworld as usize;
     let mut checked = 0;
     for case in r.summary["cases"].as_array().expect("cases") {
-        let sim = load_case(gpu, r, case, ReplayOrder::Dag, SolverLoop::Conditional);
+        let sim = load_case(gpu, r, case, ReplayOrder::Dag);
         for _ in 0..5 {
             sim.run("step").expect("step");
         }

@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use super::timing::timed_seconds;
 use crate::cuda::Gpu;
-use crate::plan::{PlanStore, ReplayOrder, Simulation, SimulationError, SolverLoop};
+use crate::plan::{PlanStore, ReplayOrder, Simulation, SimulationError};
 
 /// The result of [`bench_physics`].
 #[derive(Clone, Debug, Serialize)]
@@ -23,8 +23,6 @@ pub struct PhysicsBench {
     pub nworld: u32,
     /// Operation order of the step graph (`Dag` or `Linear`).
     pub order: String,
-    /// The solver loop (`Conditional` or `Unrolled`).
-    pub solver_loop: String,
     pub steps: u32,
     pub warmup: u32,
     /// Loading the plan (allocation, upload, module JIT, graph capture and instantiation).
@@ -44,10 +42,9 @@ pub fn bench_physics(
     nworld: u32,
     (steps, warmup): (u32, u32),
     order: ReplayOrder,
-    solver_loop: SolverLoop,
 ) -> Result<PhysicsBench, SimulationError> {
     let started = Instant::now();
-    let sim = Simulation::load_with(gpu, store, nworld, &[plan], order, solver_loop)?;
+    let sim = Simulation::load_with_order(gpu, store, nworld, &[plan], order)?;
     gpu.stream().synchronize()?;
     let load_seconds = started.elapsed().as_secs_f64();
     let graph_nodes = sim.graph(plan)?.node_counts()?;
@@ -58,7 +55,6 @@ pub fn bench_physics(
         plan: plan.to_owned(),
         nworld,
         order: format!("{order:?}"),
-        solver_loop: format!("{solver_loop:?}"),
         steps,
         warmup,
         load_seconds,
@@ -76,7 +72,6 @@ pub struct PhysicsBesideBench {
     pub plan: String,
     pub nworld: u32,
     pub beside_nworld: u32,
-    pub solver_loop: String,
     pub steps: u32,
     /// `steps` launches of `plan` alone, and of the evaluation's step alone (s).
     pub alone_seconds: f64,
@@ -99,11 +94,9 @@ pub fn bench_physics_beside(
     plan: &str,
     (nworld, beside_nworld): (u32, u32),
     steps: u32,
-    solver_loop: SolverLoop,
 ) -> Result<PhysicsBesideBench, SimulationError> {
-    let order = ReplayOrder::default();
-    let main = Simulation::load_with(gpu, store, nworld, &[plan], order, solver_loop)?;
-    let beside = Simulation::load_with(gpu, store, beside_nworld, &["step"], order, solver_loop)?;
+    let main = Simulation::load(gpu, store, nworld, &[plan])?;
+    let beside = Simulation::load(gpu, store, beside_nworld, &["step"])?;
     let (main_graph, beside_graph) = (main.graph(plan)?, beside.graph("step")?);
     let second = gpu.new_stream()?;
     beside_graph.upload(&second)?;
@@ -145,7 +138,6 @@ pub fn bench_physics_beside(
         plan: plan.to_owned(),
         nworld,
         beside_nworld,
-        solver_loop: format!("{solver_loop:?}"),
         steps,
         alone_seconds: alone,
         beside_alone_seconds: beside_alone,

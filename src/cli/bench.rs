@@ -15,7 +15,7 @@ use crate::cuda::Gpu;
 use crate::motion::ReferenceMotion;
 use crate::motion::character::DEFAULT_CHARACTER;
 use crate::motion::find::resolve_motion;
-use crate::plan::{PlanStore, ReplayOrder, STEP_PLAN, SolverLoop, TRAINING_STEP_PLAN};
+use crate::plan::{PlanStore, ReplayOrder, STEP_PLAN, TRAINING_STEP_PLAN};
 use crate::train::library::single_clip_only;
 use crate::train::{
     ChosenCharacter, GemmSetting, PolicyShapes, TrainConfig, check_plan_model, preflight,
@@ -179,15 +179,6 @@ enum Order {
     Linear,
 }
 
-/// `--solver-loop`: the solver's WHILE loop as a conditional node or unrolled.
-#[derive(Clone, Copy, Debug, ValueEnum)]
-enum SolverLoopArg {
-    /// A CUDA conditional node that stops when every world converged (the default).
-    Conditional,
-    /// The loop body once per solver iteration: kernels only.
-    Unrolled,
-}
-
 /// `--plan`: which step plan is timed.
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum StepPlanArg {
@@ -342,9 +333,6 @@ struct PhysicsArgs {
     /// Operation order of the step graph.
     #[arg(long, value_enum, default_value_t = Order::Dag)]
     order: Order,
-    /// The solver loop of the step graph.
-    #[arg(long, value_enum, default_value_t = SolverLoopArg::Conditional)]
-    solver_loop: SolverLoopArg,
     /// The step plan timed.
     #[arg(long, value_enum, default_value_t = StepPlanArg::Step)]
     plan: StepPlanArg,
@@ -541,37 +529,27 @@ fn physics(args: PhysicsArgs) -> Result<()> {
         Order::Dag => ReplayOrder::Dag,
         Order::Linear => ReplayOrder::Linear,
     };
-    let solver_loop = match args.solver_loop {
-        SolverLoopArg::Conditional => SolverLoop::Conditional,
-        SolverLoopArg::Unrolled => SolverLoop::Unrolled,
-    };
     let plan = match args.plan {
         StepPlanArg::Step => STEP_PLAN,
         StepPlanArg::TrainingStep => TRAINING_STEP_PLAN,
     };
     if let Some(beside_envs) = args.beside_envs {
-        let r = bench_physics_beside(
-            &gpu,
-            &store,
-            plan,
-            (args.envs, beside_envs),
-            args.steps,
-            solver_loop,
-        )
-        .with_context(|| format!("physics of `{plan}` beside `step` at {beside_envs} worlds"))?;
+        let r = bench_physics_beside(&gpu, &store, plan, (args.envs, beside_envs), args.steps)
+            .with_context(|| {
+                format!("physics of `{plan}` beside `step` at {beside_envs} worlds")
+            })?;
         if args.json {
             println!("{}", serde_json::to_string_pretty(&r)?);
             return Ok(());
         }
         println!("GPU: {}", r.gpu);
         println!(
-            "beside: {} x {} ({} worlds) and step x {} ({} worlds), solver loop {}: alone {:.1} and {:.1} ms; together {:.1} and {:.1} ms, span {:.1} ms; {:.0}% of the second hidden",
+            "beside: {} x {} ({} worlds) and step x {} ({} worlds): alone {:.1} and {:.1} ms; together {:.1} and {:.1} ms, span {:.1} ms; {:.0}% of the second hidden",
             r.plan,
             r.steps,
             r.nworld,
             r.steps,
             r.beside_nworld,
-            r.solver_loop,
             r.alone_seconds * 1e3,
             r.beside_alone_seconds * 1e3,
             r.together_seconds * 1e3,
@@ -588,7 +566,6 @@ fn physics(args: PhysicsArgs) -> Result<()> {
         args.envs,
         (args.steps, args.warmup),
         order,
-        solver_loop,
     )
     .with_context(|| format!("physics benchmark of `{plan}` with {} worlds", args.envs))?;
     if args.json {
@@ -602,11 +579,10 @@ fn physics(args: PhysicsArgs) -> Result<()> {
         .collect();
     println!("GPU: {}", result.gpu);
     println!(
-        "plan: {}, {} worlds, {} order, solver loop {}; loaded in {:.2} s; graph nodes: {}",
+        "plan: {}, {} worlds, {} order; loaded in {:.2} s; graph nodes: {}",
         result.plan,
         result.nworld,
         result.order,
-        result.solver_loop,
         result.load_seconds,
         nodes.join(", ")
     );

@@ -6,8 +6,6 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::plan::SolverLoop;
-
 /// `[env]`: episodes, actions and termination (docs/env.md).
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
@@ -67,12 +65,6 @@ pub struct EnvConfig {
     /// training step"). Left out of written configurations at the default.
     #[serde(skip_serializing_if = "TrainingSolver::is_reduced")]
     pub training_solver: TrainingSolver,
-    /// The physics solver's loop in the rollouts' graphs, training and evaluation alike: a CUDA
-    /// conditional node that stops once every world converged (the default), or unrolled to
-    /// the plan's solver iterations, a graph of kernels only (docs/env.md, "The solver loop").
-    /// Left out of written configurations at the default.
-    #[serde(skip_serializing_if = "SolverLoop::is_conditional")]
-    pub solver_loop: SolverLoop,
 }
 
 /// `env.training_solver`.
@@ -146,7 +138,6 @@ impl Default for EnvConfig {
             clip_base_share: None,
             body_kinematics: BodyKinematics::Fused,
             training_solver: TrainingSolver::Reduced,
-            solver_loop: SolverLoop::Conditional,
         }
     }
 }

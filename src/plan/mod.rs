@@ -49,7 +49,7 @@ pub use pack::{
     load_plan_with_limit, pack,
 };
 pub use reader::MAX_NESTING_DEPTH;
-pub use replay::{ReplayOrder, SolverLoop};
+pub use replay::ReplayOrder;
 pub use simulation::{Buffer, Simulation, SimulationError};
 pub use store::{
     EMBEDDED_CHARACTERS_DIR, KINEMATICS_PLAN, MANIFEST_PATH, MJWARP_PTX_DIR, PLANS_DIR, PlanEntry,

@@ -40,29 +40,6 @@ pub enum ReplayOrder {
     Dag,
 }
 
-/// How a WHILE operation (MuJoCo Warp's solver loop, `wp.capture_while`) becomes graph nodes
-/// (`env.solver_loop`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SolverLoop {
-    /// A CUDA conditional node that stops once every world has converged, as Warp captures it.
-    #[default]
-    Conditional,
-    /// The body recorded once per solver iteration of the plan, as MuJoCo Warp's own
-    /// `graph_conditional = false` does: a graph of kernels only, which the GPU runs beside
-    /// other work (a branch holding a conditional node runs alone; BENCHMARKS.md, "Why the
-    /// evaluation cannot run beside training"). A world marks itself done at its last
-    /// iteration and every body kernel skips done worlds, so each world's result is the
-    /// conditional loop's.
-    Unrolled,
-}
-
-impl SolverLoop {
-    pub fn is_conditional(&self) -> bool {
-        *self == SolverLoop::Conditional
-    }
-}
-
 /// An operation ready to be queued, with the writable regions it touches.
 pub struct Prepared {
     pub op: PreparedOp,
@@ -106,8 +83,6 @@ pub enum PreparedOp {
     While {
         cond: DeviceRange,
         body: Vec<Prepared>,
-        /// `None`: a conditional node; `Some(n)`: the body recorded `n` times.
-        passes: Option<u32>,
     },
     If {
         cond: DeviceRange,
@@ -130,9 +105,6 @@ pub struct ReplayContext<'a> {
     pub alloc_pinned: &'a dyn Fn(usize) -> Result<PinnedHostMemory, CudaError>,
     /// Regions no operation writes (bound only to Model arrays): no ordering through them.
     pub read_only: &'a HashSet<u32>,
-    /// Passes of each WHILE body recorded in a row instead of a conditional node
-    /// ([`SolverLoop::Unrolled`]); `None` keeps the conditional node.
-    pub while_passes: Option<u32>,
 }
 
 impl ReplayContext<'_> {
@@ -245,11 +217,7 @@ pub fn prepare_ops(
                 let cond = ctx.range(&at, w.cond, 4)?;
                 let body = prepare_ops(ctx, &w.body, &format!("{at}: body "))?;
                 regions.extend(body.iter().flat_map(|p| p.regions.iter().copied()));
-                Some(PreparedOp::While {
-                    cond,
-                    body,
-                    passes: ctx.while_passes,
-                })
+                Some(PreparedOp::While { cond, body })
             }
             Op::If(c) => {
                 let cond = ctx.range(&at, c.cond, 4)?;
@@ -548,18 +516,9 @@ fn record_op(
             })?;
             stream.copy_from_pinned(dst, host, 0)
         }
-        PreparedOp::While {
-            cond,
-            body,
-            passes: None,
-        } => stream.capture_while(cond, |s| record_ops(body, s, pinned, order)),
-        // Each pass starts from the previous pass's leaves (record_ops leaves the frontier
-        // there), so the passes run one after another.
-        PreparedOp::While {
-            body,
-            passes: Some(passes),
-            ..
-        } => (0..*passes).try_for_each(|_| record_ops(body, stream, pinned, order)),
+        PreparedOp::While { cond, body } => {
+            stream.capture_while(cond, |s| record_ops(body, s, pinned, order))
+        }
         PreparedOp::If {
             cond,
             then,

@@ -21,9 +21,8 @@ use crate::cuda::{
 use super::error::PlanError;
 use super::format::DeviceType;
 use super::model::{Plan, PlanInfo};
-use super::ops::Op;
-use super::replay::{Prepared, ReplayContext, ReplayOrder, SolverLoop, prepare_ops, record_ops};
-use super::store::{PlanStore, TRAINING_STEP_PLAN};
+use super::replay::{Prepared, ReplayContext, ReplayOrder, prepare_ops, record_ops};
+use super::store::PlanStore;
 
 /// Errors of loading and running plans on a GPU.
 #[derive(Debug, Error)]
@@ -74,7 +73,6 @@ pub struct Simulation {
     functions: HashMap<(String, String), Function>,
     plans: BTreeMap<String, LoadedPlan>,
     order: ReplayOrder,
-    solver_loop: SolverLoop,
 }
 
 /// A named device buffer viewed as elements of `T`: any type every bit pattern of which is a
@@ -155,21 +153,8 @@ impl Simulation {
         names: &[&str],
         order: ReplayOrder,
     ) -> Result<Simulation, SimulationError> {
-        Simulation::load_with(gpu, store, nworld, names, order, SolverLoop::default())
-    }
-
-    /// [`Simulation::load_with_order`] with the form of the solver loop (see [`SolverLoop`]).
-    pub fn load_with(
-        gpu: &Gpu,
-        store: &PlanStore,
-        nworld: u32,
-        names: &[&str],
-        order: ReplayOrder,
-        solver_loop: SolverLoop,
-    ) -> Result<Simulation, SimulationError> {
         let mut sim = Simulation {
             order,
-            solver_loop,
             gpu: gpu.clone(),
             nworld,
             named: BTreeMap::new(),
@@ -398,10 +383,6 @@ impl Simulation {
             .filter(|(_, names)| names.iter().all(|n| n.starts_with("m.")))
             .map(|(&id, _)| id)
             .collect();
-        let while_passes = match self.solver_loop {
-            SolverLoop::Conditional => None,
-            SolverLoop::Unrolled => unrolled_passes(name, &plan).map_err(incompatible)?,
-        };
         let (major, minor) = self.gpu.info().compute_capability;
         let gpu = self.gpu.clone();
         let mut pinned = Vec::new();
@@ -416,7 +397,6 @@ impl Simulation {
                 pinned: &mut pinned,
                 alloc_pinned: &alloc_pinned,
                 read_only: &read_only,
-                while_passes,
             };
             prepare_ops(&mut ctx, &plan.ops, "")?
         };
@@ -435,80 +415,5 @@ impl Simulation {
             },
         );
         Ok(())
-    }
-}
-
-/// The passes an unrolled WHILE of plan `name` records: the solver iterations it was captured
-/// with (`training_iterations` for the training step, else `iterations`), or `None` for a plan
-/// without a loop. A plan with more than one loop has bounds this runtime does not know.
-fn unrolled_passes(name: &str, plan: &Plan) -> Result<Option<u32>, String> {
-    fn loops(ops: &[Op]) -> usize {
-        ops.iter()
-            .map(|op| {
-                usize::from(matches!(op, Op::While(_)))
-                    + op.branches().iter().map(|(_, b)| loops(b)).sum::<usize>()
-            })
-            .sum()
-    }
-    match loops(&plan.ops) {
-        0 => return Ok(None),
-        1 => {}
-        n => {
-            return Err(format!(
-                "it holds {n} WHILE loops; only a plan whose one loop is the solver's can be \
-                 unrolled (its bound is the solver iterations); keep the conditional loop"
-            ));
-        }
-    }
-    let key = if name == TRAINING_STEP_PLAN {
-        "training_iterations"
-    } else {
-        "iterations"
-    };
-    plan.info()
-        .and_then(|info| info.physics.get("config"))
-        .and_then(|config| config.get(key))
-        .and_then(serde_json::Value::as_u64)
-        .and_then(|n| u32::try_from(n).ok())
-        .map(Some)
-        .ok_or_else(|| {
-            format!(
-                "it does not record `{key}` among its physics options, the bound of an unrolled \
-                 solver loop (recapture it with kernels_py/capture.py, or keep the conditional loop)"
-            )
-        })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::unrolled_passes;
-    use crate::plan::{KINEMATICS_PLAN, PlanStore, STEP_PLAN, TRAINING_STEP_PLAN};
-
-    /// The committed plans: the step loops `iterations` times at most, the training step
-    /// `training_iterations`, the kinematics has no loop; a plan with two loops is refused.
-    #[test]
-    fn an_unrolled_loop_runs_the_plans_solver_iterations() {
-        let store = PlanStore::new(None);
-        let config = store.manifest().unwrap().physics["config"].clone();
-        let count = |key: &str| u32::try_from(config[key].as_u64().unwrap()).unwrap();
-        let passes = |name: &str| unrolled_passes(name, &store.plan(name, 32).unwrap());
-        assert_eq!(passes(STEP_PLAN), Ok(Some(count("iterations"))));
-        assert_eq!(
-            passes(TRAINING_STEP_PLAN),
-            Ok(Some(count("training_iterations")))
-        );
-        assert_ne!(count("iterations"), count("training_iterations"));
-        assert_eq!(passes(KINEMATICS_PLAN), Ok(None));
-
-        let mut twice = store.plan(STEP_PLAN, 32).unwrap();
-        let again = twice.ops.clone();
-        twice.ops.extend(again);
-        let error = unrolled_passes(STEP_PLAN, &twice).unwrap_err();
-        assert!(error.contains("2 WHILE loops"), "{error}");
-
-        let mut unrecorded = store.plan(STEP_PLAN, 32).unwrap();
-        unrecorded.info = None;
-        let error = unrolled_passes(STEP_PLAN, &unrecorded).unwrap_err();
-        assert!(error.contains("`iterations`"), "{error}");
     }
 }

@@ -630,16 +630,14 @@ fn assert_written_only_off_default(
     assert!(e.contains(key) && e.contains(expected), "{e}");
 }
 
-/// `env.phase_share` is "resets", `env.training_solver` "reduced" and `env.solver_loop`
-/// "conditional" unless the config says otherwise, and each is written only then.
+/// `env.phase_share` is "resets" and `env.training_solver` "reduced" unless the config says
+/// otherwise, and each is written only then.
 #[test]
 fn env_keys_at_their_default_are_left_out_of_written_configs() {
     use crate::env::{PhaseShare, TrainingSolver};
-    use crate::plan::SolverLoop;
     let defaults = TrainConfig::with_motion("walk").env;
     assert_eq!(defaults.phase_share, PhaseShare::Resets);
     assert_eq!(defaults.training_solver, TrainingSolver::Reduced);
-    assert_eq!(defaults.solver_loop, SolverLoop::Conditional);
     type Case = (
         &'static str,
         fn(&mut TrainConfig),
@@ -647,7 +645,7 @@ fn env_keys_at_their_default_are_left_out_of_written_configs() {
         &'static str,
         &'static str,
     );
-    let cases: [Case; 3] = [
+    let cases: [Case; 2] = [
         (
             "phase_share",
             |c| c.env.phase_share = PhaseShare::Frames,
@@ -661,13 +659,6 @@ fn env_keys_at_their_default_are_left_out_of_written_configs() {
             "full",
             "fast",
             "expected `reduced` or `full`",
-        ),
-        (
-            "solver_loop",
-            |c| c.env.solver_loop = SolverLoop::Unrolled,
-            "unrolled",
-            "unroled",
-            "expected `conditional` or `unrolled`",
         ),
     ];
     for (key, set, value, bad, expected) in cases {

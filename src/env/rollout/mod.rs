@@ -19,8 +19,7 @@ use crate::cuda::{Communicator, Gpu, Graph, Stream};
 use crate::motion::MotionLibrary;
 use crate::motion::table::TableLayout;
 use crate::plan::{
-    KINEMATICS_PLAN, PlanStore, ReplayOrder, STEP_PLAN, Simulation, SimulationError,
-    TRAINING_STEP_PLAN,
+    KINEMATICS_PLAN, PlanStore, STEP_PLAN, Simulation, SimulationError, TRAINING_STEP_PLAN,
 };
 
 use super::DeviceReferenceTable;
@@ -194,13 +193,11 @@ impl Rollout {
             Source::Training(_) => training_step_plan(store, &config.env)?,
             Source::Evaluation(_) => STEP_PLAN,
         };
-        let sim = Simulation::load_with(
+        let sim = Simulation::load(
             gpu,
             store,
             config.env.num_envs,
             &[step_plan, KINEMATICS_PLAN],
-            ReplayOrder::default(),
-            config.env.solver_loop,
         )?;
         let physics_dt = physics_timestep(&sim, step_plan)?;
         let control_dt = physics_dt * f64::from(config.env.substeps);
