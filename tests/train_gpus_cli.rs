@@ -220,3 +220,20 @@ fn bench_train_gpus_checks_its_counts_and_devices() {
         assert!(err.contains(expected), "{args:?}: {err}");
     }
 }
+
+/// `bench physics` refuses zero counts in one line, before it looks for a GPU.
+#[test]
+fn bench_physics_refuses_zero_counts() {
+    let ws = workspace();
+    for args in [
+        vec!["bench", "physics", "--envs", "0"],
+        vec!["bench", "physics", "--steps", "0"],
+        vec!["bench", "physics", "--beside-envs", "0"],
+    ] {
+        let err = one_line_error(&run(&args, None, ws.path()));
+        assert!(
+            err.contains("--envs, --steps and --beside-envs must be at least 1"),
+            "{args:?}: {err}"
+        );
+    }
+}

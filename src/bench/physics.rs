@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use super::timing::timed_seconds;
 use crate::cuda::Gpu;
-use crate::plan::{PlanStore, ReplayOrder, Simulation, SimulationError};
+use crate::plan::{PlanStore, ReplayOrder, STEP_PLAN, Simulation, SimulationError};
 
 /// The result of [`bench_physics`].
 #[derive(Clone, Debug, Serialize)]
@@ -86,21 +86,26 @@ pub struct PhysicsBesideBench {
 }
 
 /// Times `steps` launches of `plan` at `nworld` worlds on the main stream, `steps` launches of
-/// the evaluation's `step` at `beside_nworld` worlds on a second stream, each alone and then
-/// both queued at once: whether the GPU runs the small step beside the large one.
+/// the evaluation's step at `beside_nworld` worlds on a second stream, each alone and then
+/// both queued at once, after `warmup` launches of both: whether the GPU runs the small step
+/// beside the large one.
 pub fn bench_physics_beside(
     gpu: &Gpu,
     store: &PlanStore,
     plan: &str,
     (nworld, beside_nworld): (u32, u32),
-    steps: u32,
+    (steps, warmup): (u32, u32),
+    order: ReplayOrder,
 ) -> Result<PhysicsBesideBench, SimulationError> {
-    let main = Simulation::load(gpu, store, nworld, &[plan])?;
-    let beside = Simulation::load(gpu, store, beside_nworld, &["step"])?;
-    let (main_graph, beside_graph) = (main.graph(plan)?, beside.graph("step")?);
+    let main = Simulation::load_with_order(gpu, store, nworld, &[plan], order)?;
+    let beside = Simulation::load_with_order(gpu, store, beside_nworld, &[STEP_PLAN], order)?;
+    let (main_graph, beside_graph) = (main.graph(plan)?, beside.graph(STEP_PLAN)?);
     let second = gpu.new_stream()?;
     beside_graph.upload(&second)?;
-    let span = |run_main: bool, run_beside: bool| -> Result<(f64, f64, f64), SimulationError> {
+    let span = |run_main: bool,
+                run_beside: bool,
+                steps: u32|
+     -> Result<(f64, f64, f64), SimulationError> {
         gpu.synchronize()?;
         let events = [
             gpu.new_event()?,
@@ -129,10 +134,10 @@ pub fn bench_physics_beside(
         Ok((ms(0, 1)? / 1e3, ms(2, 3)? / 1e3, last / 1e3))
     };
     // Warm both up, then time each alone and both together.
-    span(true, true)?;
-    let (alone, _, _) = span(true, false)?;
-    let (_, beside_alone, _) = span(false, true)?;
-    let (together, beside_together, span_seconds) = span(true, true)?;
+    span(true, true, warmup)?;
+    let (alone, _, _) = span(true, false, steps)?;
+    let (_, beside_alone, _) = span(false, true, steps)?;
+    let (together, beside_together, span_seconds) = span(true, true, steps)?;
     Ok(PhysicsBesideBench {
         gpu: gpu.info().name.clone(),
         plan: plan.to_owned(),

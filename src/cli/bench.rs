@@ -338,6 +338,7 @@ struct PhysicsArgs {
     plan: StepPlanArg,
     /// Time the plan alone and beside the evaluation's step at this many worlds on a second
     /// stream (as an evaluation beside training would run): how much of the latter is hidden.
+    /// `--steps` launches of each, after `--warmup` launches of both.
     #[arg(long)]
     beside_envs: Option<u32>,
     /// Print the result as JSON.
@@ -518,8 +519,8 @@ fn gemm_report(r: &GemmBench) -> String {
 }
 
 fn physics(args: PhysicsArgs) -> Result<()> {
-    if args.envs == 0 || args.steps == 0 {
-        bail!("--envs and --steps must be at least 1");
+    if args.envs == 0 || args.steps == 0 || args.beside_envs == Some(0) {
+        bail!("--envs, --steps and --beside-envs must be at least 1");
     }
     let chosen = ChosenCharacter::resolve(args.character.as_deref().unwrap_or(DEFAULT_CHARACTER))?;
     let store = chosen.plan_store(args.assets.as_deref());
@@ -534,10 +535,15 @@ fn physics(args: PhysicsArgs) -> Result<()> {
         StepPlanArg::TrainingStep => TRAINING_STEP_PLAN,
     };
     if let Some(beside_envs) = args.beside_envs {
-        let r = bench_physics_beside(&gpu, &store, plan, (args.envs, beside_envs), args.steps)
-            .with_context(|| {
-                format!("physics of `{plan}` beside `step` at {beside_envs} worlds")
-            })?;
+        let r = bench_physics_beside(
+            &gpu,
+            &store,
+            plan,
+            (args.envs, beside_envs),
+            (args.steps, args.warmup),
+            order,
+        )
+        .with_context(|| format!("physics of `{plan}` beside `step` at {beside_envs} worlds"))?;
         if args.json {
             println!("{}", serde_json::to_string_pretty(&r)?);
             return Ok(());
