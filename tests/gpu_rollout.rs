@@ -11,6 +11,7 @@
 //!   alike (on the deterministic physics, `ptx/deterministic`); resets draw clips by their
 //!   weights; the evaluation plays clip i mod C from its spread starts and each env completes
 //!   its own clip's episode.
+//! - Several snapshots in one evaluation: each group of 32 envs plays as its snapshot alone.
 #![cfg(feature = "gpu")]
 
 mod skip_support;
@@ -19,10 +20,11 @@ use std::path::Path;
 
 use instantmimic::cuda::{Gpu, Graph};
 use instantmimic::env::{Rollout, TrackedMotion};
+use instantmimic::kernels::DeviceArray;
 use instantmimic::motion::find::resolve_motion;
 use instantmimic::motion::{Character, MotionLibrary, MotionLibraryBuilder, ReferenceMotion};
 use instantmimic::plan::PlanStore;
-use instantmimic::ppo::GaussianPolicy;
+use instantmimic::ppo::{GaussianPolicy, SnapshotPolicies};
 use instantmimic::run::LibraryPlan;
 use instantmimic::train::TrainConfig;
 
@@ -407,6 +409,149 @@ fn an_evaluation_in_chunks_plays_the_same_episodes_as_the_whole_graph() {
     }
     // A training rollout ends its last step with bookkeeping: it is captured whole only.
     assert!(training.capture_in_chunks(&policy, chunk_steps).is_err());
+}
+
+/// Several snapshots in one evaluation (`run.eval_snapshots`, `Rollout::snapshot_evaluation`):
+/// 8 groups of 32 envs at 256 worlds, two different actors and normalizations among them, play
+/// each group as the 32-world evaluation plays that snapshot: every env's outcome, step count and
+/// start time equal, error sums within 5% (the physics' float atomics sum in another order at
+/// another world count, and a falling character amplifies it).
+#[test]
+fn a_snapshot_evaluation_plays_each_group_as_its_snapshot_alone() {
+    let motion = motion();
+    let EvaluationSetup {
+        gpu,
+        config,
+        training,
+        policy,
+        evaluation,
+        ..
+    } = evaluation_setup(&motion);
+    let store = PlanStore::new(None);
+    let rollout_config = config.rollout_config();
+    let groups = 8;
+    // Statistics of one training rollout: snapshot A normalizes with them, B with none yet.
+    let (rollout_graph, _) = training.capture(&policy, false).expect("training capture");
+    rollout_graph
+        .launch(gpu.stream())
+        .expect("training rollout");
+    gpu.synchronize().expect("training rollout");
+    let statistics: Vec<Vec<f64>> = training
+        .normalizer_moments()
+        .iter()
+        .map(|m| m.download().expect("moments"))
+        .collect();
+    assert!(statistics[0][1] > 0.0, "the rollout counted observations");
+    let actor_a = policy.actor_parameters().download().expect("actor");
+    let actor_b: Vec<f32> = actor_a.iter().map(|w| 0.7 * w).collect();
+
+    let wide = Rollout::snapshot_evaluation(&training, &store, &rollout_config, groups)
+        .expect("a snapshot evaluation at 256 worlds (committed plans)");
+    assert_eq!((wide.snapshot_groups(), wide.group_envs()), (groups, 32));
+    let policies = SnapshotPolicies::new(&gpu, &policy, groups, 32, wide.horizon())
+        .expect("snapshot policies");
+    let b_groups = [1usize, 6];
+    for g in 0..groups {
+        let b = b_groups.contains(&g);
+        policies
+            .slot(g)
+            .expect("a slot")
+            .upload(if b { &actor_b } else { &actor_a })
+            .expect("slot upload");
+        for (to, from) in wide
+            .snapshot_moments(g)
+            .expect("moments")
+            .iter()
+            .zip(&statistics)
+        {
+            let values = if b {
+                vec![0.0; from.len()]
+            } else {
+                from.clone()
+            };
+            to.upload(&values).expect("moments upload");
+        }
+    }
+    let chunks = wide.capture_in_chunks(&policies, 4).expect("capture");
+    wide.reset_all().expect("reset");
+    let starts = wide.state.ref_time.download().expect("ref_time");
+    for chunk in &chunks {
+        chunk.launch(gpu.stream()).expect("launch");
+    }
+    gpu.synchronize().expect("snapshot evaluation");
+    let together = wide
+        .episode_scores()
+        .expect("scores")
+        .download()
+        .expect("scores");
+
+    // Each snapshot alone, on the 32-world evaluation.
+    let play = |actor: &[f32], moments: &[Vec<f64>]| {
+        let parameters = DeviceArray::from_slice(&gpu, [actor.len()], actor).expect("actor");
+        let alone = policy
+            .with_batch_reading(&gpu, evaluation.num_envs(), &parameters)
+            .expect("policy");
+        for (to, from) in training.normalizer_moments().iter().zip(moments) {
+            to.upload(from).expect("moments");
+        }
+        let (graph, _) = evaluation.capture(&alone, false).expect("capture");
+        evaluation.reset_all().expect("reset");
+        let starts = evaluation.state.ref_time.download().expect("ref_time");
+        graph.launch(gpu.stream()).expect("launch");
+        gpu.synchronize().expect("evaluation");
+        let scores = evaluation
+            .episode_scores()
+            .expect("scores")
+            .download()
+            .expect("scores");
+        (starts, scores)
+    };
+    let none: Vec<Vec<f64>> = statistics.iter().map(|m| vec![0.0; m.len()]).collect();
+    let (starts_a, alone_a) = play(&actor_a, &statistics);
+    let (_, alone_b) = play(&actor_b, &none);
+    let differs = alone_a
+        .iter()
+        .zip(&alone_b)
+        .any(|(a, b)| a.steps != b.steps || (a.mpjpe_sum - b.mpjpe_sum).abs() > 1e-3);
+    assert!(
+        differs,
+        "the two snapshots must play differently for the check to mean anything"
+    );
+    let mut largest = 0.0f64;
+    for g in 0..groups {
+        let alone = if b_groups.contains(&g) {
+            &alone_b
+        } else {
+            &alone_a
+        };
+        let group = &together[g * 32..(g + 1) * 32];
+        assert_eq!(
+            &starts[g * 32..(g + 1) * 32],
+            &starts_a[..],
+            "group {g}'s start times"
+        );
+        for (env, (a, b)) in alone.iter().zip(group).enumerate() {
+            assert_eq!(
+                (a.completed, a.failed, a.steps),
+                (b.completed, b.failed, b.steps),
+                "group {g} env {env}: alone {a:?}, together {b:?}"
+            );
+            for (x, y) in [
+                (a.pose_error_sum, b.pose_error_sum),
+                (a.mpjpe_sum, b.mpjpe_sum),
+                (a.ee_position_error_sum, b.ee_position_error_sum),
+            ] {
+                largest = largest.max((x - y).abs() / x.abs().max(1.0));
+            }
+        }
+    }
+    eprintln!("largest relative difference of an error sum, together against alone: {largest:.3e}");
+    // The physics' float atomics sum in another order at 256 worlds than at 32, and a falling
+    // character amplifies the difference over its episode: outcomes and lengths stay equal.
+    assert!(
+        largest <= 0.05,
+        "error sums differ by {largest:.3e} (relative)"
+    );
 }
 
 /// Every float the rollout stored, as bits: observations, actions, log-probabilities, rewards,

@@ -95,6 +95,38 @@ impl ObservationNormalizer {
     /// Sets the statistics to `count [2]`, `mean [D]`, `m2 [D]` (a checkpoint's) and freezes
     /// them: the latent controller's student sees the observations normalized exactly as its
     /// teacher was trained to (docs/latent.md). Synchronous upload; not inside a capture.
+    /// Rows `first..first + rows` of `main`'s observation, normalized with statistics of its
+    /// own (zeros: filled by the caller through [`ObservationNormalizer::moments`]), never
+    /// updated: one group of a snapshot evaluation (`rollout/groups.rs`).
+    pub(super) fn group(
+        gpu: &Gpu,
+        main: &ObservationNormalizer,
+        first: usize,
+        rows: usize,
+    ) -> Result<Self, EnvError> {
+        let size = main.size;
+        let (batch_moments, batch_sum, batch_sum_sq) = batch_moments(gpu, size)?;
+        Ok(ObservationNormalizer {
+            raw: main.raw.view(first * size, [rows, size])?,
+            normalized: main.normalized.view(first * size, [rows, size])?,
+            batch_moments,
+            batch_sum,
+            batch_sum_sq,
+            count: DeviceArray::zeros(gpu, [2])?,
+            mean: DeviceArray::zeros(gpu, [size])?,
+            m2: DeviceArray::zeros(gpu, [size])?,
+            clip: main.clip,
+            size,
+            replicas: None,
+            frozen: true,
+        })
+    }
+
+    /// The statistics `count [2]`, `mean [D]`, `m2 [D]` it normalizes with.
+    pub(super) fn moments(&self) -> [&DeviceArray<f64>; 3] {
+        [&self.count, &self.mean, &self.m2]
+    }
+
     pub(super) fn freeze_at(
         &mut self,
         count: &[f64],

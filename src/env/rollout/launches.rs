@@ -182,6 +182,37 @@ impl Rollout {
         let (p, st) = (&self.physics, &self.state);
         // One thread per env and lane: a lane per qpos and per qvel entry, and one for the rest.
         let lanes = p.qpos.shape()[1] + p.qvel.shape()[1] + 1;
+        if let Some(groups) = &self.groups {
+            // Per group, on its rows: the kernel spreads env n's start by n of its `done`.
+            for group in &groups.groups {
+                let g = &group.state;
+                self.kernels.reset_masked(
+                    s,
+                    groups.envs * lanes,
+                    &g.done,
+                    self.table.table(),
+                    self.table.layout(),
+                    self.table.clip_offsets(),
+                    self.joints.root_quat,
+                    &self.joints.kind,
+                    &self.joints.qpos,
+                    &self.phase_statistics.cdf,
+                    &self.start_spread,
+                    &self.phase_statistics.iteration,
+                    t,
+                    &self.reset,
+                    &g.qpos,
+                    &g.qvel,
+                    &g.ctrl,
+                    &g.qacc_warmstart,
+                    &g.clip_id,
+                    &g.ref_time,
+                    &g.episode_step,
+                    &g.actions,
+                )?;
+            }
+            return Ok(());
+        }
         self.kernels.reset_masked(
             s,
             self.num_envs * lanes,
@@ -290,7 +321,10 @@ impl Rollout {
                 &norm.raw,
             )?;
         }
-        norm.record(&self.kernels, s, &storage.observations, row, update)?;
+        match &self.groups {
+            Some(groups) => groups.record_normalize(&self.kernels, s, row)?,
+            None => norm.record(&self.kernels, s, &storage.observations, row, update)?,
+        }
         Ok(())
     }
 }

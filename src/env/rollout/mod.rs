@@ -10,11 +10,13 @@
 //! A rollout tracks a motion library ([`TrackedMotion`]): each env carries a clip id beside its
 //! time, and a single clip is the library of one, so both run the same kernels.
 
+mod groups;
 mod launches;
 mod recording;
 
 use std::sync::Arc;
 
+use self::groups::EvaluationGroups;
 use crate::cuda::{Communicator, Gpu, Graph, Stream};
 use crate::motion::MotionLibrary;
 use crate::motion::table::TableLayout;
@@ -111,6 +113,8 @@ pub struct Rollout {
     start_spread: DeviceArray<f32>,
     observation: ObservationParams,
     normalizer: ObservationNormalizer,
+    /// A snapshot evaluation's groups, each run by its own snapshot ([`Rollout::snapshot_evaluation`]).
+    groups: Option<EvaluationGroups>,
     phase_statistics: PhaseStatistics,
     statistics: RolloutStatistics,
     purpose: Purpose,
@@ -179,6 +183,61 @@ impl Rollout {
         config.env.num_envs = config.evaluation.envs;
         config.env.motion_noise_std = 0.0;
         Rollout::build(&training.gpu, store, &config, Source::Evaluation(training))
+    }
+
+    /// The evaluation rollout of `training` for `snapshots` policy snapshots at once: `snapshots`
+    /// groups of `evaluation.envs` envs (a step plan for `snapshots * evaluation.envs` worlds must
+    /// exist), group g playing exactly the episodes of [`Rollout::evaluation`] with the
+    /// observation statistics of [`Rollout::snapshot_moments`]`(g)`. Tracking of one clip only.
+    /// Lend it a policy of batch `snapshots * evaluation.envs` whose rows of group g act as
+    /// snapshot g (`ppo::SnapshotPolicies`).
+    pub fn snapshot_evaluation(
+        training: &Rollout,
+        store: &PlanStore,
+        config: &RolloutConfig,
+        snapshots: usize,
+    ) -> Result<Rollout, RolloutError> {
+        if training.is_goal_task() || training.library.num_clips() != 1 || snapshots == 0 {
+            return Err(RolloutError::Setup(format!(
+                "a snapshot evaluation tracks one clip with one or more snapshots (this is a bug: {snapshots} snapshots, {} clips, goal task {})",
+                training.library.num_clips(),
+                training.is_goal_task()
+            )));
+        }
+        let envs = config.evaluation.envs as usize;
+        let mut config = config.clone();
+        config.env.num_envs = u32::try_from(envs * snapshots).map_err(|_| {
+            RolloutError::Setup(format!("{snapshots} snapshots of {envs} envs are too many"))
+        })?;
+        config.env.motion_noise_std = 0.0;
+        let mut rollout =
+            Rollout::build(&training.gpu, store, &config, Source::Evaluation(training))?;
+        rollout.groups = Some(EvaluationGroups::new(
+            &rollout.gpu,
+            &rollout.state,
+            &rollout.physics,
+            &rollout.normalizer,
+            rollout.horizon,
+            envs,
+            snapshots,
+        )?);
+        Ok(rollout)
+    }
+
+    /// Groups of a snapshot evaluation (1 for any other rollout).
+    pub fn snapshot_groups(&self) -> usize {
+        self.groups.as_ref().map_or(1, |g| g.groups.len())
+    }
+
+    /// Envs per group of a snapshot evaluation (every env for any other rollout).
+    pub fn group_envs(&self) -> usize {
+        self.groups.as_ref().map_or(self.num_envs, |g| g.envs)
+    }
+
+    /// The observation statistics group `g` of a snapshot evaluation normalizes with
+    /// (`count [2]`, `mean [D]`, `m2 [D]`), which its snapshot's are copied into.
+    pub fn snapshot_moments(&self, g: usize) -> Option<[&DeviceArray<f64>; 3]> {
+        self.groups.as_ref().and_then(|groups| groups.moments(g))
     }
 
     fn build(
@@ -381,6 +440,7 @@ impl Rollout {
             start_spread: DeviceArray::from_slice(gpu, [clips], &start_spread)?,
             observation,
             normalizer,
+            groups: None,
             phase_statistics,
             statistics: RolloutStatistics::new(gpu, n)?,
             purpose,
@@ -580,8 +640,7 @@ impl Rollout {
     /// The policy's observation normalization: running count, mean and M2 (float64 device
     /// buffers), for checkpoints.
     pub fn normalizer_moments(&self) -> [&DeviceArray<f64>; 3] {
-        let n = &self.normalizer;
-        [&n.count, &n.mean, &n.m2]
+        self.normalizer.moments()
     }
 
     /// The adaptive start statistics (visits, failures, CDF, each `[clips, phase bins]`) and

@@ -1,0 +1,122 @@
+//! An evaluation rollout of several policy snapshots at once (`run.eval_snapshots`): G groups
+//! of E envs, group g run by snapshot g (docs/train.md, "Several snapshots in one
+//! evaluation"). At E = 32 worlds the physics is latency-bound, so 8 groups cost about 1.25x
+//! what one does (BENCHMARKS.md).
+//!
+//! Each group is the E-env evaluation exactly: the reset and the normalization are launched per
+//! group on views of its rows, so a group's start times (the reset kernel spreads env n's start
+//! by n of `done`'s length) and its observation statistics are those of a one-group rollout. The
+//! other stages are per env already.
+
+use crate::cuda::{Gpu, Stream};
+use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels};
+
+use super::super::normalizer::ObservationNormalizer;
+use super::super::physics_state::PhysicsState;
+use super::EpisodeState;
+
+/// The per-env arrays the reset writes, as views of one group's rows.
+pub(super) struct GroupState {
+    pub(super) done: DeviceArray<i32>,
+    pub(super) qpos: DeviceArray2<f32>,
+    pub(super) qvel: DeviceArray2<f32>,
+    pub(super) ctrl: DeviceArray2<f32>,
+    pub(super) qacc_warmstart: DeviceArray2<f32>,
+    pub(super) clip_id: DeviceArray<i32>,
+    pub(super) ref_time: DeviceArray<f32>,
+    pub(super) episode_step: DeviceArray<i32>,
+    pub(super) actions: DeviceArray2<f32>,
+}
+
+/// Rows `first..first + rows` of a `[N, C]` array.
+fn rows_of<T: crate::kernels::Element>(
+    a: &DeviceArray2<T>,
+    first: usize,
+    rows: usize,
+) -> Result<DeviceArray2<T>, EnvError> {
+    let columns = a.shape()[1];
+    a.view(first * columns, [rows, columns])
+}
+
+impl GroupState {
+    fn of(
+        state: &EpisodeState,
+        physics: &PhysicsState,
+        first: usize,
+        rows: usize,
+    ) -> Result<GroupState, EnvError> {
+        Ok(GroupState {
+            done: state.done.view(first, [rows])?,
+            qpos: rows_of(&physics.qpos, first, rows)?,
+            qvel: rows_of(&physics.qvel, first, rows)?,
+            ctrl: rows_of(&physics.ctrl, first, rows)?,
+            qacc_warmstart: rows_of(&physics.qacc_warmstart, first, rows)?,
+            clip_id: state.clip_id.view(first, [rows])?,
+            ref_time: state.ref_time.view(first, [rows])?,
+            episode_step: state.episode_step.view(first, [rows])?,
+            actions: rows_of(&state.actions, first, rows)?,
+        })
+    }
+}
+
+/// One group: its reset's views, its normalization (its snapshot's statistics) and the storage
+/// rows that normalization writes (never read: the evaluation keeps no batch).
+pub(super) struct Group {
+    pub(super) state: GroupState,
+    pub(super) normalizer: ObservationNormalizer,
+    pub(super) observations: DeviceArray3<f32>,
+}
+
+/// The groups of a snapshot evaluation rollout.
+pub(super) struct EvaluationGroups {
+    /// Envs per group (`run.eval_envs`).
+    pub(super) envs: usize,
+    pub(super) groups: Vec<Group>,
+}
+
+impl EvaluationGroups {
+    /// `count` groups of `envs` envs over the rollout's `state` and `physics`, normalizing with
+    /// statistics of their own (zeros until [`EvaluationGroups::moments`]' arrays are filled).
+    pub(super) fn new(
+        gpu: &Gpu,
+        state: &EpisodeState,
+        physics: &PhysicsState,
+        normalizer: &ObservationNormalizer,
+        horizon: usize,
+        envs: usize,
+        count: usize,
+    ) -> Result<EvaluationGroups, EnvError> {
+        let groups = (0..count)
+            .map(|g| {
+                let first = g * envs;
+                Ok(Group {
+                    state: GroupState::of(state, physics, first, envs)?,
+                    normalizer: ObservationNormalizer::group(gpu, normalizer, first, envs)?,
+                    observations: DeviceArray::zeros(gpu, [horizon + 1, envs, normalizer.size])?,
+                })
+            })
+            .collect::<Result<Vec<Group>, EnvError>>()?;
+        Ok(EvaluationGroups { envs, groups })
+    }
+
+    /// Group g's observation statistics `count [2]`, `mean [D]`, `m2 [D]`, which its
+    /// snapshot's are copied into.
+    pub(super) fn moments(&self, g: usize) -> Option<[&DeviceArray<f64>; 3]> {
+        self.groups.get(g).map(|group| group.normalizer.moments())
+    }
+
+    /// Every group's normalization of the observation into its storage row `row`.
+    pub(super) fn record_normalize(
+        &self,
+        kernels: &EnvKernels,
+        s: &Stream,
+        row: usize,
+    ) -> Result<(), EnvError> {
+        for group in &self.groups {
+            group
+                .normalizer
+                .record(kernels, s, &group.observations, row, false)?;
+        }
+        Ok(())
+    }
+}
