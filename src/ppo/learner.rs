@@ -42,7 +42,26 @@ impl Learner for Trainer {
         Trainer::physics_overflow(self).map_err(learner_error)
     }
     fn notes(&mut self) -> Vec<String> {
-        Vec::new()
+        self.take_notes()
+    }
+    fn evaluation_snapshots(&self) -> usize {
+        Trainer::evaluation_snapshots(self)
+    }
+    fn keep_snapshot(&mut self) -> Result<usize, RunError> {
+        Trainer::keep_snapshot(self).map_err(learner_error)
+    }
+    fn evaluate_snapshots(
+        &mut self,
+        stops: &[Option<EarlyStop>],
+    ) -> Result<Vec<EvaluationEpisodes>, RunError> {
+        Trainer::evaluate_snapshots(self, stops).map_err(learner_error)
+    }
+    fn save_snapshot_into(
+        &mut self,
+        slot: usize,
+        checkpoint: &mut Checkpoint,
+    ) -> Result<(), RunError> {
+        Trainer::save_snapshot_into(self, slot, checkpoint).map_err(learner_error)
     }
     fn clip_sampling(&mut self) -> Result<Option<Vec<ClipSampling>>, RunError> {
         Trainer::clip_sampling(self)

@@ -32,12 +32,13 @@ use crate::env::{
 use crate::kernels::{DeviceArray, EnvError};
 use crate::latent::LatentDecoder;
 use crate::nn::PolicyGemm;
-use crate::plan::PlanStore;
+use crate::plan::{KINEMATICS_PLAN, PlanStore, STEP_PLAN};
 use crate::ppo::{
     BatchMirror, GaussianPolicy, PpoBatch, PpoOptimizerState, PpoUpdate, UpdateStage,
 };
 
 use super::device_report::{REPORT_BYTES, read_report, record_parameter_squares, record_report};
+use super::snapshots::SnapshotEvaluation;
 use super::trainer_error::TrainerError;
 use super::{PolicyConfig, PpoConfig};
 use crate::env::RolloutConfig;
@@ -80,6 +81,8 @@ pub struct TrainerConfig {
     /// A goal run in a latent controller's action space: the frozen decoder the policy drives
     /// (its action is the latent residual).
     pub decoder: Option<GoalDecoder>,
+    /// Policy snapshots one evaluation may take (`run.eval_snapshots`; 1: each evaluates alone).
+    pub evaluation_snapshots: usize,
 }
 
 /// Everything on the GPU that a run trains and evaluates with.
@@ -94,8 +97,14 @@ pub struct Trainer {
     update: PpoUpdate,
     iteration: Iteration,
     /// The evaluation rollout as consecutive graphs of [`EVALUATION_CHUNK_STEPS`] control
-    /// steps: [`Trainer::evaluate_until`] may stop between two of them.
-    evaluation_chunks: Vec<Graph>,
+    /// steps: [`Trainer::evaluate_until`] may stop between two of them. Captured at the first
+    /// evaluation: a run that evaluates several snapshots together never needs them.
+    evaluation_chunks: std::cell::OnceCell<Vec<Graph>>,
+    /// Several snapshots in one evaluation (`run.eval_snapshots` > 1, where a plan exists for
+    /// their worlds; one clip's tracking on one GPU).
+    snapshots: Option<SnapshotEvaluation>,
+    /// Lines for the run's output ([`Trainer::take_notes`]).
+    notes: Vec<String>,
     /// The moving average of the actor's parameters that the evaluation runs
     /// (`ppo.evaluation_average`), updated after every update inside the iteration's graph.
     average: Option<DeviceArray<f32>>,
@@ -271,12 +280,33 @@ impl Trainer {
             }
             None => Iteration::capture(gpu, &rollout, &policy, &policy, &update, averaging)?,
         };
-        let evaluation_chunks = match &decoder {
-            Some(d) => evaluation.capture_in_chunks(
-                &d.evaluation.driven_by(&evaluation_policy)?,
-                EVALUATION_CHUNK_STEPS,
-            )?,
-            None => evaluation.capture_in_chunks(&evaluation_policy, EVALUATION_CHUNK_STEPS)?,
+        let mut notes = Vec::new();
+        let snapshots = match config.evaluation_snapshots {
+            0 | 1 => None,
+            _ if decoder.is_none()
+                && replicas.is_none()
+                && !rollout.is_goal_task()
+                && rollout.library().num_clips() == 1 =>
+            {
+                let groups = config.evaluation_snapshots;
+                let worlds = groups * evaluation.num_envs();
+                let planned = [STEP_PLAN, KINEMATICS_PLAN]
+                    .iter()
+                    .map(|name| store.has_plan(name, worlds as u32))
+                    .collect::<Result<Vec<bool>, _>>()
+                    .map_err(|e| TrainerError::Setup(e.to_string()))?;
+                if planned.iter().all(|&p| p) {
+                    let wide =
+                        Rollout::snapshot_evaluation(&rollout, store, &rollout_config, groups)?;
+                    Some(SnapshotEvaluation::new(gpu, wide, &policy)?)
+                } else {
+                    notes.push(format!(
+                        "evaluation: one snapshot at a time (run.eval_snapshots = {groups} needs step and kinematics plans for {worlds} worlds, which this plan set lacks)"
+                    ));
+                    None
+                }
+            }
+            _ => None,
         };
         rollout.reset_all()?;
         Ok(Trainer {
@@ -287,7 +317,9 @@ impl Trainer {
             evaluation_policy,
             update,
             iteration,
-            evaluation_chunks,
+            evaluation_chunks: std::cell::OnceCell::new(),
+            snapshots,
+            notes,
             average,
             decoder,
         })
@@ -380,12 +412,30 @@ impl Trainer {
         self.evaluation.horizon() as u32
     }
 
+    /// The evaluation's graphs (`evaluation_chunks`), captured on first use.
+    fn evaluation_chunks(&self) -> Result<&[Graph], TrainerError> {
+        if let Some(chunks) = self.evaluation_chunks.get() {
+            return Ok(chunks);
+        }
+        let chunks = match &self.decoder {
+            Some(d) => self.evaluation.capture_in_chunks(
+                &d.evaluation.driven_by(&self.evaluation_policy)?,
+                EVALUATION_CHUNK_STEPS,
+            )?,
+            None => self
+                .evaluation
+                .capture_in_chunks(&self.evaluation_policy, EVALUATION_CHUNK_STEPS)?,
+        };
+        Ok(self.evaluation_chunks.get_or_init(|| chunks))
+    }
+
     /// Runs the evaluation rollout once from a reset (the policy's mean actions, fixed start
     /// states) and waits for it: its scores, or its task's tally, are then on the rollout
     /// ([`Trainer::evaluation_rollout`]).
     pub fn run_evaluation(&self) -> Result<(), TrainerError> {
+        let chunks = self.evaluation_chunks()?;
         self.evaluation.reset_all()?;
-        for chunk in &self.evaluation_chunks {
+        for chunk in chunks {
             chunk.launch(self.gpu.stream())?;
         }
         self.gpu.synchronize()?;
@@ -397,10 +447,11 @@ impl Trainer {
     /// control steps run when it stopped early.
     pub fn evaluate_until(&self, stop: &EarlyStop) -> Result<EvaluationEpisodes, TrainerError> {
         let scores = self.tracking_scores()?;
+        let chunks = self.evaluation_chunks()?;
         self.evaluation.reset_all()?;
         let mut stopped_at_step = None;
-        let last = self.evaluation_chunks.len().saturating_sub(1);
-        for (i, chunk) in self.evaluation_chunks.iter().enumerate() {
+        let last = chunks.len().saturating_sub(1);
+        for (i, chunk) in chunks.iter().enumerate() {
             chunk.launch(self.gpu.stream())?;
             // The status column's download waits for the chunk: microseconds against its
             // milliseconds.
@@ -414,6 +465,142 @@ impl Trainer {
             episodes,
             stopped_at_step,
         })
+    }
+
+    /// Snapshots one evaluation takes ([`Trainer::keep_snapshot`]; 1: each evaluates alone).
+    pub fn evaluation_snapshots(&self) -> usize {
+        self.snapshots
+            .as_ref()
+            .map_or(1, SnapshotEvaluation::capacity)
+    }
+
+    /// Keeps what the evaluation runs now (the actor's parameters, or their average with
+    /// `ppo.evaluation_average`, and the observation statistics) for the next
+    /// [`Trainer::evaluate_snapshots`]; returns its slot. A bug to call with no slot left.
+    pub fn keep_snapshot(&mut self) -> Result<usize, TrainerError> {
+        let stream = self.gpu.stream();
+        let source = self
+            .average
+            .as_ref()
+            .unwrap_or_else(|| self.policy.actor_parameters());
+        let moments = self.rollout.normalizer_moments();
+        let snapshots = self.snapshots.as_mut().ok_or_else(|| {
+            TrainerError::Internal("a snapshot kept with run.eval_snapshots = 1".to_owned())
+        })?;
+        let slot = snapshots.kept;
+        let (Some(parameters), Some(statistics)) = (
+            snapshots.policies.slot(slot),
+            snapshots.rollout.snapshot_moments(slot),
+        ) else {
+            return Err(TrainerError::Internal(format!(
+                "snapshot {slot} kept with {} slots",
+                snapshots.capacity()
+            )));
+        };
+        parameters.copy_from(stream, source, 0..source.len(), 0)?;
+        for (to, from) in statistics.iter().zip(moments) {
+            to.copy_from(stream, from, 0..from.len(), 0)?;
+        }
+        snapshots.kept += 1;
+        Ok(slot)
+    }
+
+    /// Evaluates the snapshots kept since the last call together (the paper's protocol for
+    /// each, as [`Trainer::evaluate_until`]): each snapshot's episodes, in the order kept.
+    /// Stops once every snapshot's evaluation is decided by its `stops` entry (None: it runs
+    /// whole).
+    pub fn evaluate_snapshots(
+        &mut self,
+        stops: &[Option<EarlyStop>],
+    ) -> Result<Vec<EvaluationEpisodes>, TrainerError> {
+        let stream = self.gpu.stream();
+        let Some(snapshots) = self.snapshots.as_mut() else {
+            return Err(TrainerError::Internal(
+                "snapshots evaluated with run.eval_snapshots = 1".to_owned(),
+            ));
+        };
+        let kept = std::mem::take(&mut snapshots.kept);
+        if stops.len() != kept {
+            return Err(TrainerError::Internal(format!(
+                "{} early stops for {kept} snapshots",
+                stops.len()
+            )));
+        }
+        let rollout = &snapshots.rollout;
+        let envs = rollout.group_envs();
+        let scores = rollout.episode_scores().ok_or_else(|| {
+            TrainerError::Internal("the snapshot evaluation keeps no scores".to_owned())
+        })?;
+        rollout.reset_all()?;
+        let chunks = snapshots.chunks();
+        let last = chunks.len().saturating_sub(1);
+        let mut stopped_at_step = None;
+        for (i, chunk) in chunks.iter().enumerate() {
+            chunk.launch(stream)?;
+            if i < last && stops.iter().any(Option::is_some) {
+                let statuses = scores.statuses()?;
+                let decided = stops.iter().enumerate().all(|(g, stop)| {
+                    stop.as_ref().is_some_and(|stop| {
+                        statuses
+                            .get(g * envs..(g + 1) * envs)
+                            .is_some_and(|group| stop.decided(group))
+                    })
+                });
+                if decided {
+                    stopped_at_step = Some(((i + 1) * EVALUATION_CHUNK_STEPS) as u32);
+                    break;
+                }
+            }
+        }
+        let episodes: Vec<EnvEvaluation> =
+            scores.download()?.iter().map(EnvEvaluation::from).collect();
+        Ok(episodes
+            .chunks(envs)
+            .take(kept)
+            .map(|group| EvaluationEpisodes {
+                episodes: group.to_vec(),
+                stopped_at_step,
+            })
+            .collect())
+    }
+
+    /// [`Trainer::save_into`] with snapshot `slot`'s policy and observation statistics in
+    /// place of today's (the state after the iteration it was kept at otherwise): what a run
+    /// saves when that snapshot's evaluation succeeded. A bug to ask for a slot never kept.
+    pub fn save_snapshot_into(
+        &self,
+        slot: usize,
+        checkpoint: &mut Checkpoint,
+    ) -> Result<(), TrainerError> {
+        use super::checkpoint::ppo_tensor_names::*;
+        use tensor_names::*;
+        self.save_into(checkpoint)?;
+        let snapshots = self.snapshots.as_ref().ok_or_else(|| {
+            TrainerError::Internal("a snapshot saved with run.eval_snapshots = 1".to_owned())
+        })?;
+        let (Some(parameters), Some([count, mean, m2])) = (
+            snapshots.policies.slot(slot),
+            snapshots.rollout.snapshot_moments(slot),
+        ) else {
+            return Err(TrainerError::Internal(format!(
+                "no snapshot {slot} to save"
+            )));
+        };
+        let evaluated = if self.average.is_some() {
+            ACTOR_AVERAGE
+        } else {
+            ACTOR
+        };
+        put_f32(checkpoint, evaluated, parameters)?;
+        put_f64(checkpoint, OBS_COUNT, count)?;
+        put_f64(checkpoint, OBS_MEAN, mean)?;
+        put_f64(checkpoint, OBS_M2, m2)?;
+        Ok(())
+    }
+
+    /// Lines for the run's output since the last call.
+    pub fn take_notes(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.notes)
     }
 
     /// The evaluation rollout captured as the evaluation runs it (the policy's mean actions,
