@@ -48,6 +48,11 @@ fn a_short_run_trains_evaluates_checkpoints_and_its_checkpoint_evaluates() {
             "backflip",
             "--progress",
             "lines",
+            // One snapshot per evaluation, so that each may stop early on its own: with several
+            // (the default), the six iterations' three evaluations are one batch, which holds
+            // the run's last and so runs whole.
+            "--set",
+            "run.eval_snapshots=1",
             "--config",
         ])
         .arg(&config)

@@ -6,6 +6,7 @@
 use super::checkpoint::Checkpoint;
 use super::clip_sampling::ClipSampling;
 use super::clock::Milestones;
+use super::clock::StopReason;
 use super::config::{ResolvedConfig, RunConfig};
 use super::divergence::{DivergenceGuard, non_finite_report};
 use super::error::RunError;
@@ -15,7 +16,7 @@ use super::evaluation::{
 };
 use super::library_evaluation::LibraryPlan;
 use super::metrics::{DivergenceEvent, IterationStats};
-use super::session::RunSession;
+use super::session::{IterationStep, RunSession};
 use super::summary::RunSummary;
 use crate::env::{Rollout, TaskRecord, TrackedMotion};
 use crate::motion::ReferenceMotion;
@@ -47,6 +48,40 @@ pub trait Learner {
     /// learner does not say).
     fn clip_sampling(&mut self) -> Result<Option<Vec<ClipSampling>>, RunError> {
         Ok(None)
+    }
+    /// Snapshots one evaluation takes (`run.eval_snapshots`): above 1, the loop keeps one at
+    /// each evaluation iteration ([`Learner::keep_snapshot`]) and evaluates them together
+    /// ([`Learner::evaluate_snapshots`]). A learner that cannot says 1.
+    fn evaluation_snapshots(&self) -> usize {
+        1
+    }
+    /// Keeps what the evaluation would run now; returns its slot.
+    fn keep_snapshot(&mut self) -> Result<usize, RunError> {
+        Err(RunError::Internal(
+            "a snapshot kept by a learner that evaluates one at a time".to_owned(),
+        ))
+    }
+    /// Evaluates the snapshots kept since the last call, each stopping as its `stops` entry
+    /// says: their episodes, in the order kept.
+    fn evaluate_snapshots(
+        &mut self,
+        stops: &[Option<EarlyStop>],
+    ) -> Result<Vec<EvaluationEpisodes>, RunError> {
+        let _ = stops;
+        Err(RunError::Internal(
+            "snapshots evaluated by a learner that evaluates one at a time".to_owned(),
+        ))
+    }
+    /// [`Learner::save_into`] with snapshot `slot`'s policy.
+    fn save_snapshot_into(
+        &mut self,
+        slot: usize,
+        checkpoint: &mut Checkpoint,
+    ) -> Result<(), RunError> {
+        let _ = (slot, checkpoint);
+        Err(RunError::Internal(
+            "a snapshot saved by a learner that evaluates one at a time".to_owned(),
+        ))
     }
 }
 
@@ -184,6 +219,10 @@ pub fn run_loop<C: ResolvedConfig, L: Learner>(
     };
     let mut last_episodes = Vec::new();
     let mut wall = WallTime::starting(setup.elapsed().as_secs_f64());
+    // `run.eval_snapshots`: iterations wait here for the evaluation of their snapshots.
+    let snapshots = trainer.evaluation_snapshots();
+    let batched = snapshots > 1;
+    let mut waiting: Vec<Waiting> = Vec::new();
     session.start_training();
     loop {
         session.start_iteration();
@@ -202,9 +241,66 @@ pub fn run_loop<C: ResolvedConfig, L: Learner>(
         let task_evaluates = task.is_some();
         if let Some(task) = task {
             if step.evaluate {
-                wall.evaluation(started);
+                wall.evaluation(started, 1);
             }
             step.set_task(task);
+        }
+        if batched && !task_evaluates && (step.evaluate || !waiting.is_empty()) {
+            // Several snapshots in one evaluation: this iteration waits, unrecorded, for the
+            // evaluation of the snapshots kept up to it (a success among them ends the run
+            // there).
+            let slot = if step.evaluate {
+                Some(trainer.keep_snapshot()?)
+            } else {
+                None
+            };
+            let flush = slot.is_some_and(|slot| slot + 1 == snapshots)
+                || step.last
+                || session.stop_requested();
+            waiting.push(Waiting { step, slot });
+            if !flush {
+                continue;
+            }
+            let evaluations = evaluate_waiting(
+                trainer,
+                scorer,
+                &run,
+                session.reached(),
+                &waiting,
+                &mut wall,
+            )?;
+            let count = waiting.len();
+            let mut checkpoint_due = false;
+            for (i, (waited, evaluation)) in waiting.drain(..).zip(evaluations).enumerate() {
+                let newest = i + 1 == count;
+                let summary = evaluation.map(|(summary, episodes)| {
+                    last_episodes = episodes;
+                    summary
+                });
+                let started = std::time::Instant::now();
+                let mut next = session.record(waited.step, summary)?;
+                wall.bookkeeping(started);
+                if next.stop == Some(StopReason::Interrupted) && !newest {
+                    // A stop request ends the run at the newest iteration, with its state.
+                    next.stop = None;
+                }
+                if let Some(reason) = next.stop {
+                    let state = match waited.slot {
+                        Some(slot) if !newest => SavedState::Snapshot(slot),
+                        _ => SavedState::Current,
+                    };
+                    wall.unrecorded = (count - i - 1) as u64;
+                    save_state(trainer, &mut session, &mut guard, state)?;
+                    return stop_run(session, trainer, &wall, scorer, &last_episodes, reason);
+                }
+                checkpoint_due |= next.checkpoint_due;
+            }
+            if checkpoint_due {
+                let started = std::time::Instant::now();
+                save_state(trainer, &mut session, &mut guard, SavedState::Current)?;
+                wall.bookkeeping(started);
+            }
+            continue;
         }
         let evaluation = if step.evaluate && !task_evaluates {
             let started = std::time::Instant::now();
@@ -215,15 +311,10 @@ pub fn run_loop<C: ResolvedConfig, L: Learner>(
                 Some(stop) => trainer.evaluate_until(&stop)?,
                 None => EvaluationEpisodes::whole(trainer.evaluate()?),
             };
-            wall.evaluation(started);
+            wall.evaluation(started, 1);
             wall.stopped_early += u32::from(stopped_at_step.is_some());
-            let mut summary = scorer.summarize(&episodes, trainer.evaluation_steps(), threshold)?;
-            summary.stopped_at_step = stopped_at_step;
-            if let Some(library) = summary.library.as_mut()
-                && let Some(sampling) = trainer.clip_sampling()?
-            {
-                library.set_sampling(&sampling);
-            }
+            let summary =
+                summarize_episodes(trainer, scorer, &episodes, stopped_at_step, threshold)?;
             last_episodes = episodes;
             Some(summary)
         } else {
@@ -232,40 +323,152 @@ pub fn run_loop<C: ResolvedConfig, L: Learner>(
         let started = std::time::Instant::now();
         let next = session.record(step, evaluation)?;
         if next.checkpoint_due {
-            let mut checkpoint = session.new_checkpoint()?;
-            trainer.save_into(&mut checkpoint)?;
-            match guard.keep(&checkpoint) {
-                None => session.save_checkpoint(&checkpoint)?,
-                // The report was finite but a saved tensor is not (the normalizer's or the
-                // optimizer's state): not saved; training goes back instead.
-                Some(cause) => {
-                    let iteration = session.iteration();
-                    go_back(&mut guard, trainer, &mut session, iteration, &cause)?;
-                }
-            }
+            save_state(trainer, &mut session, &mut guard, SavedState::Current)?;
         }
         wall.bookkeeping(started);
         if let Some(reason) = next.stop {
-            let line = wall.describe(session.active_time_s());
-            session.progress().note(&line);
-            session
-                .run_dir()
-                .write_last_evaluation(&scorer.rows(&last_episodes))?;
-            // Iteration limits no longer print from the kernels (kernels_py/physics.py); the
-            // flags they set are summed here, once, outside the timed loop.
-            match trainer.physics_overflow() {
-                Ok(overflow) => {
-                    if let Some(line) = overflow.describe() {
-                        session.progress().note(&line);
-                    }
-                }
-                Err(e) => session.progress().note(&format!(
-                    "warning: could not read the physics' overflow flags: {e}"
-                )),
-            }
-            return session.finish(reason);
+            return stop_run(session, trainer, &wall, scorer, &last_episodes, reason);
         }
     }
+}
+
+/// An iteration trained and not yet recorded: it waits for the evaluation of the snapshots
+/// kept up to it (`run.eval_snapshots`); `slot`: the snapshot kept after it.
+struct Waiting {
+    step: IterationStep,
+    slot: Option<usize>,
+}
+
+/// An evaluation's summary and its episodes.
+type Evaluated = (EvaluationSummary, Vec<EnvEvaluation>);
+
+/// Evaluates the snapshots of `waiting` together: per waiting iteration, its evaluation's
+/// summary and episodes (None where it kept no snapshot).
+fn evaluate_waiting<L: Learner>(
+    trainer: &mut L,
+    scorer: &Scorer,
+    run: &RunConfig,
+    reached: Milestones,
+    waiting: &[Waiting],
+    wall: &mut WallTime,
+) -> Result<Vec<Option<Evaluated>>, RunError> {
+    let stops: Vec<Option<EarlyStop>> = waiting
+        .iter()
+        .filter(|w| w.slot.is_some())
+        .map(|w| scorer.early_stop(run, reached, w.step.last))
+        .collect();
+    let mut results = if stops.is_empty() {
+        Vec::new()
+    } else {
+        let started = std::time::Instant::now();
+        let results = trainer.evaluate_snapshots(&stops)?;
+        wall.evaluation(started, results.len() as u32);
+        results
+    }
+    .into_iter();
+    waiting
+        .iter()
+        .map(|w| match w.slot {
+            None => Ok(None),
+            Some(_) => {
+                let EvaluationEpisodes {
+                    episodes,
+                    stopped_at_step,
+                } = results.next().ok_or_else(|| {
+                    RunError::Internal("a snapshot evaluation returned too few results".to_owned())
+                })?;
+                wall.stopped_early += u32::from(stopped_at_step.is_some());
+                let summary = summarize_episodes(
+                    trainer,
+                    scorer,
+                    &episodes,
+                    stopped_at_step,
+                    run.success_rate,
+                )?;
+                Ok(Some((summary, episodes)))
+            }
+        })
+        .collect()
+}
+
+/// The evaluation's summary of `episodes`, with a library's per-clip sampling.
+fn summarize_episodes<L: Learner>(
+    trainer: &mut L,
+    scorer: &Scorer,
+    episodes: &[EnvEvaluation],
+    stopped_at_step: Option<u32>,
+    threshold: f64,
+) -> Result<EvaluationSummary, RunError> {
+    let mut summary = scorer.summarize(episodes, trainer.evaluation_steps(), threshold)?;
+    summary.stopped_at_step = stopped_at_step;
+    if let Some(library) = summary.library.as_mut()
+        && let Some(sampling) = trainer.clip_sampling()?
+    {
+        library.set_sampling(&sampling);
+    }
+    Ok(summary)
+}
+
+/// Which state a checkpoint holds: the learner's now, or a snapshot's policy (the state now
+/// otherwise) whose evaluation ended the run.
+enum SavedState {
+    Current,
+    Snapshot(usize),
+}
+
+/// Saves a checkpoint of the recorded iteration; a tensor found not finite is not saved and
+/// training goes back instead.
+fn save_state<C: ResolvedConfig, L: Learner>(
+    trainer: &mut L,
+    session: &mut RunSession<C>,
+    guard: &mut DivergenceGuard,
+    state: SavedState,
+) -> Result<(), RunError> {
+    let mut checkpoint = session.new_checkpoint()?;
+    match state {
+        SavedState::Current => trainer.save_into(&mut checkpoint)?,
+        SavedState::Snapshot(slot) => trainer.save_snapshot_into(slot, &mut checkpoint)?,
+    }
+    match guard.keep(&checkpoint) {
+        None => session.save_checkpoint(&checkpoint)?,
+        // The report was finite but a saved tensor is not (the normalizer's or the
+        // optimizer's state): not saved; training goes back instead.
+        Some(cause) => {
+            let iteration = session.iteration();
+            go_back(guard, trainer, session, iteration, &cause)?;
+        }
+    }
+    Ok(())
+}
+
+/// Ends the run for `reason`: what the wall time went to, the last evaluation's episodes, the
+/// physics' overflow flags, and the summary.
+fn stop_run<C: ResolvedConfig, L: Learner>(
+    mut session: RunSession<C>,
+    trainer: &mut L,
+    wall: &WallTime,
+    scorer: &Scorer,
+    last_episodes: &[EnvEvaluation],
+    reason: StopReason,
+) -> Result<RunSummary, RunError> {
+    let line = wall.describe(session.active_time_s());
+    session.progress().note(&line);
+    session
+        .run_dir()
+        .write_last_evaluation(&scorer.rows(last_episodes))?;
+    // Iteration limits no longer print from the kernels (kernels_py/physics.py); the
+    // flags they set are summed here, once, outside the timed loop.
+    match trainer.physics_overflow() {
+        Ok(overflow) => {
+            if let Some(line) = overflow.describe() {
+                session.progress().note(&line);
+            }
+        }
+        Err(e) => session.progress().note(&format!(
+            "warning: could not read the physics' overflow flags: {e}"
+        )),
+    }
+    session.finish(reason)
 }
 
 /// Restores the guard's last good state (learning rate halved) after `cause` was found not
@@ -299,6 +502,11 @@ struct WallTime {
     evaluations: u32,
     /// Evaluations that stopped once decided (`run.eval_early_stop`).
     stopped_early: u32,
+    /// Evaluation rollouts run (fewer than evaluations with `run.eval_snapshots`).
+    rollouts: u32,
+    /// Iterations trained after the one whose snapshot's evaluation ended the run, and so not
+    /// recorded (`run.eval_snapshots`).
+    unrecorded: u64,
     bookkeeping_s: f64,
 }
 
@@ -310,13 +518,17 @@ impl WallTime {
             evaluation_s: 0.0,
             evaluations: 0,
             stopped_early: 0,
+            rollouts: 0,
+            unrecorded: 0,
             bookkeeping_s: 0.0,
         }
     }
 
-    fn evaluation(&mut self, started: std::time::Instant) {
+    /// One evaluation rollout, of `snapshots` policies, started at `started`.
+    fn evaluation(&mut self, started: std::time::Instant, snapshots: u32) {
         self.evaluation_s += started.elapsed().as_secs_f64();
-        self.evaluations += 1;
+        self.evaluations += snapshots;
+        self.rollouts += 1;
     }
 
     fn bookkeeping(&mut self, started: std::time::Instant) {
@@ -334,8 +546,21 @@ impl WallTime {
         } else {
             String::new()
         };
+        let together = if self.rollouts < self.evaluations {
+            format!(" in {} rollouts", self.rollouts)
+        } else {
+            String::new()
+        };
+        let unrecorded = if self.unrecorded > 0 {
+            format!(
+                "; {} iterations trained after the successful snapshot's were not recorded",
+                self.unrecorded
+            )
+        } else {
+            String::new()
+        };
         format!(
-            "wall {:.2} s after setup {:.2} s: active {active_s:.2} s, {} evaluations {:.2} s ({:.3} s each{stopped}), metrics/curve/checkpoints {:.2} s",
+            "wall {:.2} s after setup {:.2} s: active {active_s:.2} s, {} evaluations{together} {:.2} s ({:.3} s each{stopped}), metrics/curve/checkpoints {:.2} s{unrecorded}",
             self.start.elapsed().as_secs_f64(),
             self.setup_s,
             self.evaluations,

@@ -92,8 +92,13 @@ pub struct RunSession<C: ResolvedConfig> {
     rule: StopRule,
     clock: ActiveClock,
     progress: Progress,
+    /// The last iteration recorded, and the frames up to it.
     iteration: u64,
     frames: u64,
+    /// The last iteration trained, and the frames up to it: ahead of the recorded while
+    /// iterations wait for their snapshots' evaluation (`run.eval_snapshots`).
+    trained_iteration: u64,
+    trained_frames: u64,
     /// Active seconds when the current iteration started.
     iteration_start_s: f64,
     /// When `curve.png` was last drawn (redrawn at most every [`CURVE_REDRAW_S`]).
@@ -227,6 +232,8 @@ impl<C: ResolvedConfig> RunSession<C> {
             progress,
             iteration,
             frames,
+            trained_iteration: iteration,
+            trained_frames: frames,
             iteration_start_s: active,
             curve_drawn: None,
             reached,
@@ -293,7 +300,7 @@ impl<C: ResolvedConfig> RunSession<C> {
     pub fn finish_iteration(&mut self, stats: IterationStats) -> IterationStep {
         self.clock.pause();
         let active = self.clock.seconds();
-        let iteration = self.iteration + 1;
+        let iteration = self.trained_iteration + 1;
         // Every GPU's envs (each runs env.num_envs).
         // Every replica's envs: `run.gpus`'s, or a world of processes'.
         let frames_now =
@@ -302,7 +309,7 @@ impl<C: ResolvedConfig> RunSession<C> {
         let record = IterationRecord {
             iteration,
             active_time_s: active,
-            frames: self.frames + frames_now,
+            frames: self.trained_frames + frames_now,
             frames_per_s: if elapsed > 0.0 {
                 frames_now as f64 / elapsed
             } else {
@@ -317,6 +324,8 @@ impl<C: ResolvedConfig> RunSession<C> {
             task: None,
             wall_s: None,
         };
+        self.trained_iteration = iteration;
+        self.trained_frames = record.frames;
         IterationStep {
             iteration,
             evaluate: self.rule.evaluates_after(iteration, active),
@@ -379,12 +388,15 @@ impl<C: ResolvedConfig> RunSession<C> {
     /// An empty checkpoint of the current iteration with its metadata filled in; the loop
     /// adds the tensors.
     pub fn new_checkpoint(&self) -> Result<Checkpoint, RunError> {
-        let mut meta = CheckpointMeta::new(
-            &self.config,
-            self.iteration,
-            self.clock.seconds(),
-            self.frames,
-        )?;
+        // The recorded iteration's active time: the clock's, unless later iterations trained
+        // unrecorded (`run.eval_snapshots`: a run that ends at an earlier snapshot).
+        let active_time_s = self
+            .records
+            .last()
+            .filter(|r| r.iteration == self.iteration)
+            .map_or_else(|| self.clock.seconds(), |r| r.active_time_s);
+        let mut meta =
+            CheckpointMeta::new(&self.config, self.iteration, active_time_s, self.frames)?;
         meta.character = self.character.clone();
         Ok(Checkpoint::new(meta))
     }
@@ -412,6 +424,11 @@ impl<C: ResolvedConfig> RunSession<C> {
         self.dir.write_summary(&summary)?;
         self.progress.finish();
         Ok(summary)
+    }
+
+    /// Whether a stop was requested (SIGINT or SIGTERM): the run ends at its next record.
+    pub fn stop_requested(&self) -> bool {
+        self.stop.is_requested()
     }
 
     /// What the run's evaluations have reached so far.

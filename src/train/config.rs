@@ -667,6 +667,12 @@ impl TrainConfig {
             run.eval_envs,
             "must be 1 to 65536"
         );
+        check!(
+            (1..=64).contains(&run.eval_snapshots),
+            "run.eval_snapshots",
+            run.eval_snapshots,
+            "must be 1 to 64 (1: each evaluation alone)"
+        );
         if let Some(steps) = run.eval_steps {
             check!(
                 (1..=1 << 20).contains(&steps),

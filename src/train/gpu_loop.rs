@@ -313,6 +313,8 @@ pub fn evaluation_trainer(
 ) -> Result<Trainer, TrainError> {
     let mut small = config.clone();
     small.env.num_envs = config.run.eval_envs;
+    // One policy to evaluate: no snapshot evaluation to build.
+    small.run.eval_snapshots = 1;
     let mut trainer = new_trainer(gpu, store, motion, &small)?;
     trainer.restore(checkpoint)?;
     Ok(trainer)

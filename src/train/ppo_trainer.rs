@@ -21,6 +21,7 @@ pub fn trainer_config(
         policy: config.policy.clone(),
         ppo: config.ppo.clone(),
         decoder: load_goal_decoder(config, character)?,
+        evaluation_snapshots: config.run.eval_snapshots as usize,
     })
 }
 
