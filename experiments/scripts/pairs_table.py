@@ -23,7 +23,8 @@ for summary in sorted(runs.glob("*/summary.json")):
     if log.exists():
         lines = [l for l in log.read_text().splitlines() if l.startswith("wall ") and " evaluations " in l]
         wall_line = lines[-1] if lines else ""
-    ev = re.search(r"(\d+) evaluations ([\d.]+) s", wall_line)
+    # "N evaluations X s", or with run.eval_snapshots "N evaluations in M rollouts X s".
+    ev = re.search(r"(\d+) evaluations(?: in \d+ rollouts)? ([\d.]+) s", wall_line)
     stopped = re.search(r"(\d+) of them stopped", wall_line)
     groups[group].append(
         {
