@@ -15,8 +15,9 @@ use super::super::normalizer::ObservationNormalizer;
 use super::super::physics_state::PhysicsState;
 use super::EpisodeState;
 
-/// The per-env arrays the reset writes, as views of one group's rows.
-pub(super) struct GroupState {
+/// The per-env arrays the reset writes, as views of some of the rollout's rows (a group's, or
+/// all of them).
+pub(super) struct ResetRows {
     pub(super) done: DeviceArray<i32>,
     pub(super) qpos: DeviceArray2<f32>,
     pub(super) qvel: DeviceArray2<f32>,
@@ -38,14 +39,15 @@ fn rows_of<T: crate::kernels::Element>(
     a.view(first * columns, [rows, columns])
 }
 
-impl GroupState {
-    fn of(
+impl ResetRows {
+    /// Rows `first..first + rows` of `state` and `physics`.
+    pub(super) fn of(
         state: &EpisodeState,
         physics: &PhysicsState,
         first: usize,
         rows: usize,
-    ) -> Result<GroupState, EnvError> {
-        Ok(GroupState {
+    ) -> Result<ResetRows, EnvError> {
+        Ok(ResetRows {
             done: state.done.view(first, [rows])?,
             qpos: rows_of(&physics.qpos, first, rows)?,
             qvel: rows_of(&physics.qvel, first, rows)?,
@@ -62,7 +64,7 @@ impl GroupState {
 /// One group: its reset's views, its normalization (its snapshot's statistics) and the storage
 /// rows that normalization writes (never read: the evaluation keeps no batch).
 pub(super) struct Group {
-    pub(super) state: GroupState,
+    pub(super) rows: ResetRows,
     pub(super) normalizer: ObservationNormalizer,
     pub(super) observations: DeviceArray3<f32>,
 }
@@ -90,7 +92,7 @@ impl EvaluationGroups {
             .map(|g| {
                 let first = g * envs;
                 Ok(Group {
-                    state: GroupState::of(state, physics, first, envs)?,
+                    rows: ResetRows::of(state, physics, first, envs)?,
                     normalizer: ObservationNormalizer::group(gpu, normalizer, first, envs)?,
                     observations: DeviceArray::zeros(gpu, [horizon + 1, envs, normalizer.size])?,
                 })

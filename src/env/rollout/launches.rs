@@ -9,6 +9,7 @@ use crate::plan::KINEMATICS_PLAN;
 use super::super::evaluation::EpisodeScores;
 use super::super::storage::RolloutStorage;
 use super::super::task::Task;
+use super::groups::ResetRows;
 use super::{Rollout, RolloutError};
 use crate::env::config::ActionMode;
 use crate::env::layout::{TRACKING_LANES, observe_threads_per_env};
@@ -182,61 +183,42 @@ impl Rollout {
         let (p, st) = (&self.physics, &self.state);
         // One thread per env and lane: a lane per qpos and per qvel entry, and one for the rest.
         let lanes = p.qpos.shape()[1] + p.qvel.shape()[1] + 1;
-        if let Some(groups) = &self.groups {
-            // Per group, on its rows: the kernel spreads env n's start by n of its `done`.
-            for group in &groups.groups {
-                let g = &group.state;
-                self.kernels.reset_masked(
-                    s,
-                    groups.envs * lanes,
-                    &g.done,
-                    self.table.table(),
-                    self.table.layout(),
-                    self.table.clip_offsets(),
-                    self.joints.root_quat,
-                    &self.joints.kind,
-                    &self.joints.qpos,
-                    &self.phase_statistics.cdf,
-                    &self.start_spread,
-                    &self.phase_statistics.iteration,
-                    t,
-                    &self.reset,
-                    &g.qpos,
-                    &g.qvel,
-                    &g.ctrl,
-                    &g.qacc_warmstart,
-                    &g.clip_id,
-                    &g.ref_time,
-                    &g.episode_step,
-                    &g.actions,
-                )?;
+        // A snapshot evaluation resets per group, on its rows: the kernel spreads env n's start
+        // by n of its `done`.
+        let whole;
+        let targets: Vec<&ResetRows> = match &self.groups {
+            Some(groups) => groups.groups.iter().map(|g| &g.rows).collect(),
+            None => {
+                whole = ResetRows::of(st, p, 0, self.num_envs)?;
+                vec![&whole]
             }
-            return Ok(());
+        };
+        for g in targets {
+            self.kernels.reset_masked(
+                s,
+                g.done.len() * lanes,
+                &g.done,
+                self.table.table(),
+                self.table.layout(),
+                self.table.clip_offsets(),
+                self.joints.root_quat,
+                &self.joints.kind,
+                &self.joints.qpos,
+                &self.phase_statistics.cdf,
+                &self.start_spread,
+                &self.phase_statistics.iteration,
+                t,
+                &self.reset,
+                &g.qpos,
+                &g.qvel,
+                &g.ctrl,
+                &g.qacc_warmstart,
+                &g.clip_id,
+                &g.ref_time,
+                &g.episode_step,
+                &g.actions,
+            )?;
         }
-        self.kernels.reset_masked(
-            s,
-            self.num_envs * lanes,
-            &st.done,
-            self.table.table(),
-            self.table.layout(),
-            self.table.clip_offsets(),
-            self.joints.root_quat,
-            &self.joints.kind,
-            &self.joints.qpos,
-            &self.phase_statistics.cdf,
-            &self.start_spread,
-            &self.phase_statistics.iteration,
-            t,
-            &self.reset,
-            &p.qpos,
-            &p.qvel,
-            &p.ctrl,
-            &p.qacc_warmstart,
-            &st.clip_id,
-            &st.ref_time,
-            &st.episode_step,
-            &st.actions,
-        )?;
         // The goal task starts at rest with a new goal around the new root.
         if let Task::Goal(goal) = &self.task {
             self.kernels.goal_reset(
