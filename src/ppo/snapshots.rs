@@ -9,7 +9,6 @@ use crate::env::{ActStorage, Rollout, RolloutError, RolloutPolicy};
 use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
 
 use super::policy::{GaussianPolicy, PolicyError};
-use super::trainer::EVALUATION_CHUNK_STEPS;
 use super::trainer_error::TrainerError;
 
 /// The storage rows one group's policy writes (never read: an evaluation keeps no batch).
@@ -134,11 +133,12 @@ pub struct SnapshotEvaluation {
 
 impl SnapshotEvaluation {
     /// `rollout` ([`Rollout::snapshot_evaluation`]) run by snapshots of `policy`'s actor,
-    /// captured in chunks of [`EVALUATION_CHUNK_STEPS`] control steps.
+    /// captured in chunks of `chunk_steps` control steps.
     pub fn new(
         gpu: &Gpu,
         rollout: Rollout,
         policy: &GaussianPolicy,
+        chunk_steps: usize,
     ) -> Result<SnapshotEvaluation, TrainerError> {
         let policies = SnapshotPolicies::new(
             gpu,
@@ -147,7 +147,7 @@ impl SnapshotEvaluation {
             rollout.group_envs(),
             rollout.horizon(),
         )?;
-        let chunks = rollout.capture_in_chunks(&policies, EVALUATION_CHUNK_STEPS)?;
+        let chunks = rollout.capture_in_chunks(&policies, chunk_steps)?;
         Ok(SnapshotEvaluation {
             chunks,
             rollout,

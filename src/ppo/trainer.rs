@@ -298,7 +298,12 @@ impl Trainer {
                 if planned.iter().all(|&p| p) {
                     let wide =
                         Rollout::snapshot_evaluation(&rollout, store, &rollout_config, groups)?;
-                    Some(SnapshotEvaluation::new(gpu, wide, &policy)?)
+                    Some(SnapshotEvaluation::new(
+                        gpu,
+                        wide,
+                        &policy,
+                        EVALUATION_CHUNK_STEPS,
+                    )?)
                 } else {
                     notes.push(format!(
                         "evaluation: one snapshot at a time (run.eval_snapshots = {groups} needs step and kinematics plans for {worlds} worlds, which this plan set lacks)"

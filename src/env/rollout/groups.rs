@@ -12,8 +12,6 @@ use crate::cuda::{Gpu, Stream};
 use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels};
 
 use super::super::normalizer::ObservationNormalizer;
-use super::super::physics_state::PhysicsState;
-use super::EpisodeState;
 
 /// The per-env arrays the reset writes, as views of some of the rollout's rows (a group's, or
 /// all of them).
@@ -30,35 +28,13 @@ pub(super) struct ResetRows {
 }
 
 /// Rows `first..first + rows` of a `[N, C]` array.
-fn rows_of<T: crate::kernels::Element>(
+pub(super) fn rows_of<T: crate::kernels::Element>(
     a: &DeviceArray2<T>,
     first: usize,
     rows: usize,
 ) -> Result<DeviceArray2<T>, EnvError> {
     let columns = a.shape()[1];
     a.view(first * columns, [rows, columns])
-}
-
-impl ResetRows {
-    /// Rows `first..first + rows` of `state` and `physics`.
-    pub(super) fn of(
-        state: &EpisodeState,
-        physics: &PhysicsState,
-        first: usize,
-        rows: usize,
-    ) -> Result<ResetRows, EnvError> {
-        Ok(ResetRows {
-            done: state.done.view(first, [rows])?,
-            qpos: rows_of(&physics.qpos, first, rows)?,
-            qvel: rows_of(&physics.qvel, first, rows)?,
-            ctrl: rows_of(&physics.ctrl, first, rows)?,
-            qacc_warmstart: rows_of(&physics.qacc_warmstart, first, rows)?,
-            clip_id: state.clip_id.view(first, [rows])?,
-            ref_time: state.ref_time.view(first, [rows])?,
-            episode_step: state.episode_step.view(first, [rows])?,
-            actions: rows_of(&state.actions, first, rows)?,
-        })
-    }
 }
 
 /// One group: its reset's views, its normalization (its snapshot's statistics) and the storage
@@ -77,23 +53,23 @@ pub(super) struct EvaluationGroups {
 }
 
 impl EvaluationGroups {
-    /// `count` groups of `envs` envs over the rollout's `state` and `physics`, normalizing with
-    /// statistics of their own (zeros until [`EvaluationGroups::moments`]' arrays are filled).
+    /// A group of `envs` envs for each of `rows` (the reset's views of its rows, in order),
+    /// normalizing with statistics of its own (zeros until [`EvaluationGroups::moments`]'
+    /// arrays are filled).
     pub(super) fn new(
         gpu: &Gpu,
-        state: &EpisodeState,
-        physics: &PhysicsState,
+        rows: Vec<ResetRows>,
         normalizer: &ObservationNormalizer,
         horizon: usize,
         envs: usize,
-        count: usize,
     ) -> Result<EvaluationGroups, EnvError> {
-        let groups = (0..count)
-            .map(|g| {
-                let first = g * envs;
+        let groups = rows
+            .into_iter()
+            .enumerate()
+            .map(|(g, rows)| {
                 Ok(Group {
-                    rows: ResetRows::of(state, physics, first, envs)?,
-                    normalizer: ObservationNormalizer::group(gpu, normalizer, first, envs)?,
+                    rows,
+                    normalizer: ObservationNormalizer::group(gpu, normalizer, g * envs, envs)?,
                     observations: DeviceArray::zeros(gpu, [horizon + 1, envs, normalizer.size])?,
                 })
             })

@@ -10,7 +10,7 @@ use super::super::evaluation::EpisodeScores;
 use super::super::storage::RolloutStorage;
 use super::super::task::Task;
 use super::groups::ResetRows;
-use super::{Rollout, RolloutError};
+use super::{Rollout, RolloutError, reset_rows};
 use crate::env::config::ActionMode;
 use crate::env::layout::{TRACKING_LANES, observe_threads_per_env};
 
@@ -189,7 +189,7 @@ impl Rollout {
         let targets: Vec<&ResetRows> = match &self.groups {
             Some(groups) => groups.groups.iter().map(|g| &g.rows).collect(),
             None => {
-                whole = ResetRows::of(st, p, 0, self.num_envs)?;
+                whole = reset_rows(st, p, 0, self.num_envs)?;
                 vec![&whole]
             }
         };

@@ -16,7 +16,7 @@ mod recording;
 
 use std::sync::Arc;
 
-use self::groups::EvaluationGroups;
+use self::groups::{EvaluationGroups, ResetRows, rows_of};
 use crate::cuda::{Communicator, Gpu, Graph, Stream};
 use crate::motion::MotionLibrary;
 use crate::motion::table::TableLayout;
@@ -50,7 +50,8 @@ use super::task::{Task, TaskRecord};
 use super::tracked::TrackedMotion;
 use super::trajectory::Trajectory;
 use crate::kernels::{
-    DeviceArray, DeviceArray2, DeviceArray3, EnvKernels, ObservationParams, ResetParams, Yardstick,
+    DeviceArray, DeviceArray2, DeviceArray3, EnvError, EnvKernels, ObservationParams, ResetParams,
+    Yardstick,
 };
 
 /// Per-env episode state.
@@ -212,14 +213,15 @@ impl Rollout {
         config.env.motion_noise_std = 0.0;
         let mut rollout =
             Rollout::build(&training.gpu, store, &config, Source::Evaluation(training))?;
+        let rows = (0..snapshots)
+            .map(|g| reset_rows(&rollout.state, &rollout.physics, g * envs, envs))
+            .collect::<Result<Vec<ResetRows>, EnvError>>()?;
         rollout.groups = Some(EvaluationGroups::new(
             &rollout.gpu,
-            &rollout.state,
-            &rollout.physics,
+            rows,
             &rollout.normalizer,
             rollout.horizon,
             envs,
-            snapshots,
         )?);
         Ok(rollout)
     }
@@ -859,6 +861,26 @@ impl Rollout {
         )?;
         Ok(())
     }
+}
+
+/// Rows `first..first + rows` of the arrays the reset writes (`state`'s and `physics`').
+fn reset_rows(
+    state: &EpisodeState,
+    physics: &PhysicsState,
+    first: usize,
+    rows: usize,
+) -> Result<ResetRows, EnvError> {
+    Ok(ResetRows {
+        done: state.done.view(first, [rows])?,
+        qpos: rows_of(&physics.qpos, first, rows)?,
+        qvel: rows_of(&physics.qvel, first, rows)?,
+        ctrl: rows_of(&physics.ctrl, first, rows)?,
+        qacc_warmstart: rows_of(&physics.qacc_warmstart, first, rows)?,
+        clip_id: state.clip_id.view(first, [rows])?,
+        ref_time: state.ref_time.view(first, [rows])?,
+        episode_step: state.episode_step.view(first, [rows])?,
+        actions: rows_of(&state.actions, first, rows)?,
+    })
 }
 
 /// The step plan of a training rollout: `env.training_solver` where the plan set has a
