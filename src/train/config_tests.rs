@@ -108,6 +108,8 @@ fn run_errors_name_the_key() {
         ("eval_interval = 0", "`run.eval_interval` = 0"),
         ("eval_envs = 0", "`run.eval_envs` = 0"),
         ("eval_steps = 0", "`run.eval_steps` = 0"),
+        ("eval_snapshots = 0", "`run.eval_snapshots` = 0"),
+        ("eval_snapshots = 65", "`run.eval_snapshots` = 65"),
         ("success_rate = 1.5", "`run.success_rate` = 1.5"),
         ("success_rate = 0.0", "`run.success_rate` = 0"),
         ("time_budget_s = -1.0", "`run.time_budget_s` = -1"),
