@@ -36,7 +36,8 @@ mod trajectory;
 pub use body_model::{BodyModel, DeviceBodyModel};
 pub use config::{
     ActionMode, BodyKinematics, EndEffectorFrame, EnvConfig, EvalStart, EvaluationProtocol,
-    GoalConfig, ObsConfig, PhaseShare, RewardConfig, RolloutConfig, TaskConfig, TrainingSolver,
+    FlightStarts, GoalConfig, ObsConfig, PhaseShare, RewardConfig, RolloutConfig, TaskConfig,
+    TrainingSolver,
 };
 pub use error::RolloutError;
 pub use evaluation::{
