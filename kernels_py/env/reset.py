@@ -85,21 +85,6 @@ def start_in_bin(
 
 
 @wp.func
-def before_flight(t0: wp.float32, start_flights: wp.array3d(dtype=wp.float32), clip: wp.int32) -> wp.float32:
-    """A start t0 strictly inside one of the clip's flight windows `start_flights[clip, k]` =
-    (from, until) moves to the window's `from` (`env.flight_starts = "take_off"`: a body in the
-    air at the reference's velocities is rarely a state it can reach, so the flight is played
-    from before its take-off instead). Unused windows are (-1, -1); a clip past the array's
-    rows has none."""
-    start = t0
-    if clip < start_flights.shape[0]:
-        for k in range(start_flights.shape[1]):
-            if t0 > start_flights[clip, k, 0] and t0 < start_flights[clip, k, 1]:
-                start = start_flights[clip, k, 0]
-    return start
-
-
-@wp.func
 def skip_normals(state: wp.uint32, count: wp.int32) -> wp.uint32:
     """The stream `state` after `count` draws of `wp.randn` (two uniform draws each): where a
     lane of `reset_masked` finds its own normals among those the serial reset drew in order."""
@@ -120,7 +105,6 @@ def reset_masked(
     joint_qpos: wp.array(dtype=wp.int32),
     phase_cdf: wp.array2d(dtype=wp.float32),
     start_spread: wp.array(dtype=wp.float32),
-    start_flights: wp.array3d(dtype=wp.float32),
     iteration: wp.array(dtype=wp.int32),
     t: wp.int32,
     params: ResetParams,
@@ -135,9 +119,8 @@ def reset_masked(
 ):
     """For every env n with done[n] != 0: a clip c and a start time t0 in it, from the cell
     (clip, phase bin) where the adaptive CDF `phase_cdf` `[clips, bins]` first exceeds a uniform
-    draw, then uniform within the bin and moved out of the clip's flights ([`before_flight`]; or,
-    when `params.start_time` is not negative, clip n mod C from
-    `start_time + start_spread[c] * k / K`, k = n div C, K = ceil(N / C)); qpos = the
+    draw, then uniform within the bin (or, when `params.start_time` is not negative, clip n mod C
+    from `start_time + start_spread[c] * k / K`, k = n div C, K = ceil(N / C)); qpos = the
     clip's reference qpos at t0 with noise (root orientation and ball joints
     `q * qexp(sigma g)`, hinges `theta + sigma g`, root position exact), qvel = reference qvel +
     10 sigma g, ctrl, warm start and last action zeroed, clip_id = c, ref_time = t0,
@@ -178,7 +161,6 @@ def reset_masked(
         bins = phase_cdf.shape[1]
         clip = cell // bins
         t0 = start_in_bin(cell - clip * bins, v, bins, table, clip_base(clip_offsets, clip), params.dt)
-        t0 = before_flight(t0, start_flights, clip)
     if lane == nq + nv:
         for m in range(ctrl.shape[1]):
             ctrl[n, m] = 0.0

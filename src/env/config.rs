@@ -65,38 +65,6 @@ pub struct EnvConfig {
     /// training step"). Left out of written configurations at the default.
     #[serde(skip_serializing_if = "TrainingSolver::is_reduced")]
     pub training_solver: TrainingSolver,
-    /// Training starts drawn inside a clip's flights (airborne stretches between a take-off and
-    /// a landing, found in the clip's reference): kept where drawn, or moved before the
-    /// take-off (docs/env.md, "Starts before flights"). Left out of written configurations at
-    /// the default.
-    #[serde(skip_serializing_if = "FlightStarts::is_anywhere")]
-    pub flight_starts: FlightStarts,
-    /// With `flight_starts = "take_off"`: how long before the take-off (s) the moved starts
-    /// begin, and from where on starts move (0: at the take-off). Left out at 0.
-    #[serde(skip_serializing_if = "is_zero")]
-    pub flight_start_lead: f32,
-}
-
-fn is_zero(x: &f32) -> bool {
-    *x == 0.0
-}
-
-/// `env.flight_starts` (kernels_py/env/reset.py `before_flight`).
-#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum FlightStarts {
-    /// Starts anywhere in the clip, flights included: the reference's state in the air.
-    #[default]
-    Anywhere,
-    /// A start drawn after `flight_start_lead` s before a flight's take-off and before its
-    /// landing starts there instead, so that the body enters the flight by its own motion.
-    TakeOff,
-}
-
-impl FlightStarts {
-    fn is_anywhere(&self) -> bool {
-        *self == FlightStarts::Anywhere
-    }
 }
 
 /// `env.training_solver`.
@@ -170,8 +138,6 @@ impl Default for EnvConfig {
             clip_base_share: None,
             body_kinematics: BodyKinematics::Fused,
             training_solver: TrainingSolver::Reduced,
-            flight_starts: FlightStarts::Anywhere,
-            flight_start_lead: 0.0,
         }
     }
 }

@@ -36,8 +36,7 @@ mod trajectory;
 pub use body_model::{BodyModel, DeviceBodyModel};
 pub use config::{
     ActionMode, BodyKinematics, EndEffectorFrame, EnvConfig, EvalStart, EvaluationProtocol,
-    FlightStarts, GoalConfig, ObsConfig, PhaseShare, RewardConfig, RolloutConfig, TaskConfig,
-    TrainingSolver,
+    GoalConfig, ObsConfig, PhaseShare, RewardConfig, RolloutConfig, TaskConfig, TrainingSolver,
 };
 pub use error::RolloutError;
 pub use evaluation::{

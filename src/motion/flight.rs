@@ -8,13 +8,12 @@
 //! of the root onto the parabola under gravity was measured and rejected: BENCHMARKS.md,
 //! "Ballistic flights and mirror augmentation, trained".)
 
-use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use nalgebra::Vector3;
 
 use super::character::Character;
 use super::clip::MotionClip;
 use super::error::MotionError;
 use super::kinematics::forward_kinematics;
-use super::table::TableSegment;
 
 /// A key frame is airborne when the character's lowest geom point is more than this above the
 /// clip's ground (its lowest point over all key frames). Well above how far a foot in contact
@@ -84,48 +83,6 @@ pub fn flight_summaries(
             ),
         })
         .collect())
-}
-
-/// The flights of one clip of a resampled table (a single clip's table, or one clip of a
-/// motion library), as (take-off, landing) times in s: the same rule as [`flight_summaries`]
-/// over the table's rows instead of the clip's key frames, from the body frames the rows hold
-/// (what a rollout has of every clip it trains on). A row too short for its layout ends the
-/// scan there.
-pub fn segment_flights(segment: &TableSegment<'_>, character: &Character) -> Vec<(f64, f64)> {
-    let layout = segment.layout();
-    let at = |row: &[f32], i: usize| f64::from(row[i]);
-    let heights: Vec<(Vector3<f64>, f64)> = (0..segment.num_rows())
-        .map_while(|r| segment.row(r))
-        .map(|row| {
-            let lowest = character
-                .geoms()
-                .iter()
-                // Table bodies exclude the world (row body b is body id b + 1).
-                .filter(|g| g.body >= 1 && g.body <= layout.nbody)
-                .filter_map(|g| {
-                    let p = layout.body_pos + 3 * (g.body - 1);
-                    let q = layout.body_quat + 4 * (g.body - 1);
-                    let pos = Vector3::new(at(row, p), at(row, p + 1), at(row, p + 2));
-                    let quat = UnitQuaternion::from_quaternion(Quaternion::new(
-                        at(row, q),
-                        at(row, q + 1),
-                        at(row, q + 2),
-                        at(row, q + 3),
-                    ));
-                    g.lowest_z(&pos, &quat)
-                })
-                .fold(f64::INFINITY, f64::min);
-            let c = layout.com_pos;
-            (
-                Vector3::new(at(row, c), at(row, c + 1), at(row, c + 2)),
-                lowest,
-            )
-        })
-        .collect();
-    flights_of(&heights)
-        .into_iter()
-        .map(|f| (segment.row_time(f.take_off), segment.row_time(f.landing)))
-        .collect()
 }
 
 fn flights_of(heights: &[(Vector3<f64>, f64)]) -> Vec<Flight> {
@@ -210,25 +167,6 @@ mod tests {
         let (low, high) = flip.vertical_acceleration;
         assert!(low < -15.0 && high > 0.0, "{low} {high}");
         assert!(flight_summaries(&built_in("walk"), &h).unwrap().is_empty());
-    }
-
-    #[test]
-    fn a_tables_rows_give_the_flights_of_its_key_frames() {
-        let h = humanoid();
-        let table = |name: &str| {
-            let motion = crate::motion::ReferenceMotion::new(built_in(name), &h).unwrap();
-            crate::motion::table::ReferenceTable::build(&motion, 1.0 / 30.0).unwrap()
-        };
-        let backflip = table("backflip");
-        let flights = segment_flights(&backflip.segment(), &h);
-        assert_eq!(flights.len(), 1, "{flights:?}");
-        // Key frames every 0.0625 s (take-off 0.6875, landing 1.1875); rows every 1/30 s
-        // between them: the rows' take-off and landing lie within a key frame of those.
-        let (take_off, landing) = flights[0];
-        assert!((take_off - 0.6875).abs() <= 0.0625, "{take_off}");
-        assert!((landing - 1.1875).abs() <= 0.0625, "{landing}");
-        assert!(take_off < landing);
-        assert!(segment_flights(&table("walk").segment(), &h).is_empty());
     }
 
     #[test]

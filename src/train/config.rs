@@ -507,12 +507,6 @@ impl TrainConfig {
             );
         }
         check!(
-            (0.0..=10.0).contains(&e.flight_start_lead),
-            "env.flight_start_lead",
-            e.flight_start_lead,
-            "must be 0 to 10 s (how long before a flight's take-off the moved starts begin)"
-        );
-        check!(
             e.phase_decay > 0.0 && e.phase_decay <= 1.0,
             "env.phase_decay",
             e.phase_decay,

@@ -266,25 +266,10 @@ fn new_failure_keys_are_off_by_default_and_checked() {
         ("min_reward = 1.0", "`env.min_reward` = 1"),
         ("min_reward = nan", "`env.min_reward` = NaN"),
         ("mean_tracking_distance = -1", "mean_tracking_distance"),
-        ("flight_start_lead = -0.1", "`env.flight_start_lead` = -0.1"),
-        ("flight_start_lead = nan", "`env.flight_start_lead` = NaN"),
-        ("flight_starts = \"landing\"", "take_off"),
     ] {
         let e = err(text);
         assert!(e.contains(key), "{text}: {e}");
     }
-    // Written configurations leave both keys out at their defaults (older builds read them).
-    let written = toml::to_string(&TrainConfig::with_motion("walk")).unwrap();
-    assert!(!written.contains("flight_start"), "{written}");
-    let on = TrainConfig::from_toml(
-        "motion = \"walk\"\n[env]\nflight_starts = \"take_off\"\nflight_start_lead = 0.1",
-        "c.toml",
-    )
-    .unwrap();
-    assert_eq!(
-        (on.env.flight_starts, on.env.flight_start_lead),
-        (crate::env::FlightStarts::TakeOff, 0.1)
-    );
     let e = TrainConfig::from_toml("motion = \"w\"\n[reward]\nee_frame = \"local\"", "c.toml")
         .unwrap_err()
         .to_string();

@@ -61,19 +61,8 @@ pub struct ResetState {
     pub bin: usize,
 }
 
-/// A start inside one of its clip's flight windows (from, until), strictly, moves to the
-/// window's start (reset.py `before_flight`, f32 comparisons as the kernel).
-pub fn before_flight(t0: f32, windows: &[(f32, f32)]) -> f32 {
-    windows
-        .iter()
-        .filter(|&&(from, until)| t0 > from && t0 < until)
-        .map(|&(from, _)| from)
-        .last()
-        .unwrap_or(t0)
-}
-
 /// The f64 reference of a reset env drawing from `rng`; `spread`: each clip's spread of the
-/// evaluation's start times; `flights`: each clip's flight windows (training starts only).
+/// evaluation's start times.
 #[allow(clippy::too_many_arguments)]
 pub fn reference_reset(
     clip: &Clip,
@@ -83,7 +72,6 @@ pub fn reference_reset(
     bins: usize,
     params: &ResetParams,
     spread: &[f32],
-    flights: &[Vec<(f32, f32)>],
     env: (usize, usize),
     rng: &mut WarpRandom,
 ) -> ResetState {
@@ -100,8 +88,6 @@ pub fn reference_reset(
         c = e % clips;
         let (k, starts) = (e / clips, n.div_ceil(clips));
         t0 = params.start_time + spread[c] * k as f32 / starts as f32;
-    } else {
-        t0 = before_flight(t0, &flights[c]);
     }
     let row = clip.lookup(c, f64::from(t0));
     let sigma = f64::from(params.noise_std);
@@ -171,9 +157,6 @@ struct ResetCase {
     /// K = ceil(n / C) (evaluation; a single clip: t + spread e / n), else from the CDF
     /// (training).
     fixed_start: Option<(f32, Spread)>,
-    /// Some((a, b)): every clip has the flight window [a, b] x its span (and an unused second
-    /// window), else no window.
-    flight: Option<(f32, f32)>,
 }
 
 fn rows_of(v: &[f32], width: usize, envs: &[usize]) -> Vec<f32> {
@@ -217,31 +200,6 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
             Some((_, Spread::All(s))) => s,
             Some((_, Spread::Cycles)) if clip.wraps(k) => clip.duration(k) as f32,
             _ => 0.0,
-        })
-        .collect();
-    let span_of = |k: usize| {
-        let d = clip.header(k)[HEADER_DURATION];
-        if clip.wraps(k) {
-            d
-        } else {
-            (d - super::CONTROL_DT as f32).max(0.0)
-        }
-    };
-    let flights: Vec<Vec<(f32, f32)>> = (0..clips)
-        .map(|k| match c.flight {
-            Some((a, b)) => vec![(a * span_of(k), b * span_of(k))],
-            None => Vec::new(),
-        })
-        .collect();
-    // [clips, windows, 2], unused windows (-1, -1): two windows when there is a flight.
-    let windows = if c.flight.is_some() { 2 } else { 1 };
-    let flight_table: Vec<f32> = flights
-        .iter()
-        .flat_map(|w| {
-            (0..windows).flat_map(move |i| {
-                let (from, until) = w.get(i).copied().unwrap_or((-1.0, -1.0));
-                [from, until]
-            })
         })
         .collect();
     let params = ResetParams {
@@ -296,11 +254,8 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         .collect();
 
     let j = layout.num_joints();
-    let flight_note = c.flight.map_or(String::new(), |(a, b)| {
-        format!(", a flight window over {a}-{b} of each clip's span")
-    });
     let mut p = Program::new(format!(
-        "reset_masked: {clip_name}, {n} envs, {:.0}% done, noise {}, {}{flight_note}",
+        "reset_masked: {clip_name}, {n} envs, {:.0}% done, noise {}, {}",
         100.0 * c.done_fraction,
         c.noise_std,
         match (c.fixed_start, c.one_bin) {
@@ -326,7 +281,6 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
         p.i32("joint_qpos", &[j], layout.qpos.clone()),
         p.f32("phase_cdf", &[clips, c.bins], cdf.clone()),
         p.f32("start_spread", &[clips], spread.clone()),
-        p.f32("start_flights", &[clips, windows, 2], flight_table),
         p.i32("iteration", &[1], vec![c.iteration]),
         Arg::Scalar(Scalar::I32(c.t)),
         Arg::Struct(StructArg::Reset(params)),
@@ -408,7 +362,6 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
                         c.bins,
                         &params,
                         &spread,
-                        &flights,
                         (e, n),
                         &mut WarpRandom::new(params.seed, offset, order),
                     )
@@ -471,23 +424,6 @@ fn case(fx: &Fixture, c: ResetCase) -> Check {
                 exact,
                 format!(
                     "every env e plays clip e mod {clips} from {start} s + its clip's spread {spread:?} s x (e div {clips}) / ceil({n} / {clips})"
-                ),
-            );
-        } else if c.flight.is_some() {
-            let outside = got_t0.iter().zip(&got_clip).all(|(&t, &k)| {
-                let (from, until) = flights[k as usize][0];
-                !(t > from && t < until)
-            });
-            let moved = got_t0
-                .iter()
-                .zip(&got_clip)
-                .filter(|&(&t, &k)| t == flights[k as usize][0].0)
-                .count();
-            r.check(
-                outside && moved > 0,
-                format!(
-                    "no start inside its clip's flight window {:?} s; {moved} moved to the window's start",
-                    flights[0][0]
                 ),
             );
         } else if let Some(cell) = c.one_bin {
@@ -831,7 +767,6 @@ pub fn reset_checks(fx: &Fixture) -> Vec<Check> {
         t: 5,
         seed: 31,
         fixed_start: None,
-        flight: None,
     };
     vec![
         case(fx, base),
@@ -877,41 +812,6 @@ pub fn reset_checks(fx: &Fixture) -> Vec<Check> {
                 iteration: 77,
                 t: 17,
                 seed: 35,
-                ..base
-            },
-        ),
-        // Flights: the starts drawn inside a window start at its beginning, in one clip and in a
-        // library; an evaluation ignores them.
-        case(
-            fx,
-            ResetCase {
-                done_fraction: 1.0,
-                seed: 42,
-                flight: Some((0.3, 0.6)),
-                ..base
-            },
-        ),
-        case(
-            fx,
-            ResetCase {
-                clip_index: 2,
-                n: 512,
-                done_fraction: 1.0,
-                seed: 43,
-                flight: Some((0.5, 0.9)),
-                ..base
-            },
-        ),
-        case(
-            fx,
-            ResetCase {
-                done_fraction: 1.0,
-                noise_std: 0.0,
-                iteration: 0,
-                t: 0,
-                seed: 44,
-                fixed_start: Some((0.0, Spread::All(fx.main.duration(0) as f32))),
-                flight: Some((0.3, 0.6)),
                 ..base
             },
         ),

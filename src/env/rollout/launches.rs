@@ -206,7 +206,6 @@ impl Rollout {
                 &self.joints.qpos,
                 &self.phase_statistics.cdf,
                 &self.start_spread,
-                &self.start_flights,
                 &self.phase_statistics.iteration,
                 t,
                 &self.reset,

@@ -18,8 +18,8 @@ use std::sync::Arc;
 
 use self::groups::{EvaluationGroups, ResetRows, rows_of};
 use crate::cuda::{Communicator, Gpu, Graph, Stream};
+use crate::motion::MotionLibrary;
 use crate::motion::table::TableLayout;
-use crate::motion::{Character, MotionLibrary, flight};
 use crate::plan::{
     KINEMATICS_PLAN, PlanStore, STEP_PLAN, Simulation, SimulationError, TRAINING_STEP_PLAN,
 };
@@ -27,7 +27,7 @@ use crate::plan::{
 use super::DeviceReferenceTable;
 use super::body_model::{BodyModel, DeviceBodyModel};
 use super::config::{
-    ActionMode, BodyKinematics, EnvConfig, FlightStarts, RolloutConfig, TaskConfig, TrainingSolver,
+    ActionMode, BodyKinematics, EnvConfig, RolloutConfig, TaskConfig, TrainingSolver,
 };
 use super::error::RolloutError;
 use super::evaluation::{ClipEvaluation, EpisodeScores, clip_evaluation, yardstick};
@@ -112,9 +112,6 @@ pub struct Rollout {
     /// Per clip, the spread of the evaluation's start times (`reset_masked`; zeros for
     /// training, whose starts come from the adaptive CDF).
     start_spread: DeviceArray<f32>,
-    /// Per clip, the windows (from, until) of the training's starts moved out of its flights
-    /// (`reset_masked`, `env.flight_starts`; `[clips, windows, 2]`, unused windows (-1, -1)).
-    start_flights: DeviceArray3<f32>,
     observation: ObservationParams,
     normalizer: ObservationNormalizer,
     /// A snapshot evaluation's groups, each run by its own snapshot ([`Rollout::snapshot_evaluation`]).
@@ -337,12 +334,6 @@ impl Rollout {
         };
         let mut reset = reset_params(config, control_dt);
         let mut start_spread = vec![0.0f32; clips];
-        let flights = match (&source, config.env.flight_starts) {
-            (Source::Training(motion), FlightStarts::TakeOff) => {
-                flight_windows(&library, motion.character(), config.env.flight_start_lead)?
-            }
-            _ => vec![Vec::new(); clips],
-        };
         let (kernels, normalizer, horizon, purpose) = match source {
             Source::Training(_) => (
                 Arc::new(EnvKernels::load(gpu)?),
@@ -449,7 +440,6 @@ impl Rollout {
             task,
             reset,
             start_spread: DeviceArray::from_slice(gpu, [clips], &start_spread)?,
-            start_flights: upload_flight_windows(gpu, &flights)?,
             observation,
             normalizer,
             groups: None,
@@ -874,50 +864,6 @@ impl Rollout {
 }
 
 /// Rows `first..first + rows` of the arrays the reset writes (`state`'s and `physics`').
-/// Each clip's flight windows for `env.flight_starts = "take_off"`: (take-off - `lead`,
-/// landing) in s, the start clamped at the clip's start ([`flight::segment_flights`]).
-fn flight_windows(
-    library: &MotionLibrary,
-    character: &Character,
-    lead: f32,
-) -> Result<Vec<Vec<(f32, f32)>>, RolloutError> {
-    (0..library.num_clips())
-        .map(|c| {
-            let segment = library
-                .segment(c)
-                .ok_or_else(|| RolloutError::Setup(format!("the library has no clip {c}")))?;
-            Ok(flight::segment_flights(&segment, character)
-                .into_iter()
-                .map(|(take_off, landing)| {
-                    let from = (take_off - f64::from(lead)).max(0.0);
-                    (from as f32, landing as f32)
-                })
-                .collect())
-        })
-        .collect()
-}
-
-/// The flight windows as `reset_masked` reads them: `[clips, max(1, most windows), 2]`, the
-/// unused ones (-1, -1), which no start lies inside.
-fn upload_flight_windows(
-    gpu: &Gpu,
-    windows: &[Vec<(f32, f32)>],
-) -> Result<DeviceArray3<f32>, RolloutError> {
-    let width = windows.iter().map(Vec::len).max().unwrap_or(0).max(1);
-    let mut values = Vec::with_capacity(windows.len() * width * 2);
-    for clip in windows {
-        for k in 0..width {
-            let (from, until) = clip.get(k).copied().unwrap_or((-1.0, -1.0));
-            values.extend([from, until]);
-        }
-    }
-    Ok(DeviceArray::from_slice(
-        gpu,
-        [windows.len(), width, 2],
-        &values,
-    )?)
-}
-
 fn reset_rows(
     state: &EpisodeState,
     physics: &PhysicsState,
