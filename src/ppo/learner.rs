@@ -44,6 +44,12 @@ impl Learner for Trainer {
     fn notes(&mut self) -> Vec<String> {
         self.take_notes()
     }
+    fn setup_parts(&self) -> Vec<(String, f64)> {
+        Trainer::setup_parts(self)
+            .iter()
+            .map(|&(part, s)| (part.to_owned(), s))
+            .collect()
+    }
     fn evaluation_snapshots(&self) -> usize {
         Trainer::evaluation_snapshots(self)
     }

@@ -105,6 +105,8 @@ pub struct Trainer {
     snapshots: Option<SnapshotEvaluation>,
     /// Lines for the run's output ([`Trainer::take_notes`]).
     notes: Vec<String>,
+    /// What building this trainer spent its time on, in order ([`Trainer::setup_parts`]).
+    setup_parts: Vec<(&'static str, f64)>,
     /// The moving average of the actor's parameters that the evaluation runs
     /// (`ppo.evaluation_average`), updated after every update inside the iteration's graph.
     average: Option<DeviceArray<f32>>,
@@ -177,6 +179,7 @@ impl Trainer {
         config: &TrainerConfig,
         replicas: Option<&Communicator>,
     ) -> Result<Trainer, TrainerError> {
+        let mut parts = SetupParts::started();
         let rank = replicas.map_or(0, Communicator::rank);
         let run_seed = config.rollout.seed;
         let own_seed = replica_seed(run_seed, rank);
@@ -193,6 +196,7 @@ impl Trainer {
         if let Some(replicas) = replicas {
             rollout = rollout.merging_over(replicas)?;
         }
+        parts.mark("training rollout");
         // A latent goal run: the observation is normalized by the decoder's frozen statistics
         // (docs/goal.md), and the storage keeps the head's latent residuals.
         let mut action_size = rollout.action_size();
@@ -213,10 +217,12 @@ impl Trainer {
             run_seed,
         )?
         .with_sampling_seed(own_seed);
+        parts.mark("policy");
         let mut evaluation = Rollout::evaluation(&rollout, store, &rollout_config)?;
         if goal_decoder.is_some() {
             evaluation = evaluation.storing_actions_of(action_size)?;
         }
+        parts.mark("evaluation rollout");
         let average = match config.ppo.evaluation_average {
             Some(_) => Some(DeviceArray::from_slice(
                 gpu,
@@ -272,6 +278,7 @@ impl Trainer {
             // NCCL's first collectives outside the capture, every rank at this point.
             replicas.warm_up(gpu)?;
         }
+        parts.mark("update");
         let averaging = average.as_ref().zip(config.ppo.evaluation_average);
         let iteration = match &decoder {
             Some(d) => {
@@ -280,6 +287,7 @@ impl Trainer {
             }
             None => Iteration::capture(gpu, &rollout, &policy, &policy, &update, averaging)?,
         };
+        parts.mark("training graph");
         let mut notes = Vec::new();
         let snapshots = match config.evaluation_snapshots {
             0 | 1 => None,
@@ -298,12 +306,11 @@ impl Trainer {
                 if planned.iter().all(|&p| p) {
                     let wide =
                         Rollout::snapshot_evaluation(&rollout, store, &rollout_config, groups)?;
-                    Some(SnapshotEvaluation::new(
-                        gpu,
-                        wide,
-                        &policy,
-                        EVALUATION_CHUNK_STEPS,
-                    )?)
+                    parts.mark("snapshot rollout");
+                    let snapshots =
+                        SnapshotEvaluation::new(gpu, wide, &policy, EVALUATION_CHUNK_STEPS)?;
+                    parts.mark("snapshot graphs");
+                    Some(snapshots)
                 } else {
                     notes.push(format!(
                         "evaluation: one snapshot at a time (run.eval_snapshots = {groups} needs step and kinematics plans for {worlds} worlds, which this plan set lacks)"
@@ -314,6 +321,7 @@ impl Trainer {
             _ => None,
         };
         rollout.reset_all()?;
+        parts.mark("reset");
         Ok(Trainer {
             gpu: gpu.clone(),
             rollout,
@@ -325,6 +333,7 @@ impl Trainer {
             evaluation_chunks: std::cell::OnceCell::new(),
             snapshots,
             notes,
+            setup_parts: parts.parts,
             average,
             decoder,
         })
@@ -604,6 +613,12 @@ impl Trainer {
     }
 
     /// Lines for the run's output since the last call.
+    /// What building this trainer spent its time on (s), in order: its rollouts, networks and
+    /// graphs (what the run's `setup` line breaks down).
+    pub fn setup_parts(&self) -> &[(&'static str, f64)] {
+        &self.setup_parts
+    }
+
     pub fn take_notes(&mut self) -> Vec<String> {
         std::mem::take(&mut self.notes)
     }
@@ -881,6 +896,29 @@ impl Iteration {
             TrainerError::Internal("the iteration report was not queued".to_owned())
         })?;
         Ok(bytes.to_vec())
+    }
+}
+
+/// Host time between marks while a trainer is built.
+struct SetupParts {
+    since: std::time::Instant,
+    parts: Vec<(&'static str, f64)>,
+}
+
+impl SetupParts {
+    fn started() -> SetupParts {
+        SetupParts {
+            since: std::time::Instant::now(),
+            parts: Vec::new(),
+        }
+    }
+
+    /// The time since the last mark is `part`'s.
+    fn mark(&mut self, part: &'static str) {
+        let now = std::time::Instant::now();
+        self.parts
+            .push((part, now.duration_since(self.since).as_secs_f64()));
+        self.since = now;
     }
 }
 

@@ -44,6 +44,11 @@ pub trait Learner {
     fn physics_overflow(&mut self) -> Result<PhysicsOverflow, RunError>;
     /// Lines for the run's output since the last call.
     fn notes(&mut self) -> Vec<String>;
+    /// What building the learner spent its time on (part, s), in order; the run's `setup` line
+    /// breaks its time down by them (none where the learner does not say).
+    fn setup_parts(&self) -> Vec<(String, f64)> {
+        Vec::new()
+    }
     /// Each clip's part in the reset sampler, for a library's evaluation (none where the
     /// learner does not say).
     fn clip_sampling(&mut self) -> Result<Option<Vec<ClipSampling>>, RunError> {
@@ -195,9 +200,9 @@ pub fn run_loop<C: ResolvedConfig, L: Learner>(
 ) -> Result<RunSummary, RunError> {
     let run = session.config().run().clone();
     // Outside the active time; printed so that a user (or a search) sees what a run costs.
-    session.progress().note(&format!(
-        "setup {:.2} s (plans, kernels, CUDA graphs; not active time)",
-        setup.elapsed().as_secs_f64()
+    session.progress().note(&setup_line(
+        setup.elapsed().as_secs_f64(),
+        &trainer.setup_parts(),
     ));
     for note in &notes {
         session.progress().note(note);
@@ -330,6 +335,22 @@ pub fn run_loop<C: ResolvedConfig, L: Learner>(
             return stop_run(session, trainer, &wall, scorer, &last_episodes, reason);
         }
     }
+}
+
+/// The run's `setup` line: its time and, where the learner says, what it went to ("other": the
+/// rest, such as the evaluation's scorer).
+fn setup_line(total_s: f64, parts: &[(String, f64)]) -> String {
+    let line = format!("setup {total_s:.2} s (plans, kernels, CUDA graphs; not active time)");
+    if parts.is_empty() {
+        return line;
+    }
+    let rest = (total_s - parts.iter().map(|(_, s)| s).sum::<f64>()).max(0.0);
+    let listed: Vec<String> = parts
+        .iter()
+        .map(|(part, s)| format!("{part} {s:.2}"))
+        .chain(std::iter::once(format!("other {rest:.2}")))
+        .collect();
+    format!("{line}: {}", listed.join(", "))
 }
 
 /// An iteration trained and not yet recorded: it waits for the evaluation of the snapshots
@@ -607,5 +628,24 @@ mod tests {
             ..RunConfig::default()
         };
         assert_eq!(clip_scorer().early_stop(&whole, none_yet, false), None);
+    }
+
+    #[test]
+    fn the_setup_line_breaks_the_time_down_by_the_learners_parts() {
+        let plain = setup_line(2.0, &[]);
+        assert_eq!(
+            plain,
+            "setup 2.00 s (plans, kernels, CUDA graphs; not active time)"
+        );
+        let parts = [
+            ("training rollout".to_owned(), 0.5),
+            ("snapshot graphs".to_owned(), 0.75),
+        ];
+        assert_eq!(
+            setup_line(2.0, &parts),
+            format!("{plain}: training rollout 0.50, snapshot graphs 0.75, other 0.75")
+        );
+        // Parts measured past the total (clock granularity) leave no negative rest.
+        assert!(setup_line(1.0, &parts).ends_with(", other 0.00"));
     }
 }
