@@ -56,6 +56,29 @@ impl GaussianPolicy {
         batch: usize,
         seed: u64,
     ) -> Result<GaussianPolicy, PolicyError> {
+        let gemm = PolicyGemm::open(gpu, config.gemm).map_err(EnvError::from)?;
+        GaussianPolicy::with_gemm(
+            gpu,
+            config,
+            observation_size,
+            action_size,
+            batch,
+            seed,
+            gemm,
+        )
+    }
+
+    /// [`GaussianPolicy::new`] with its GEMMs already opened (`PolicyGemm::open` of
+    /// `config.gemm`): a trainer opens them while its rollout loads.
+    pub fn with_gemm(
+        gpu: &Gpu,
+        config: &PolicyConfig,
+        observation_size: usize,
+        action_size: usize,
+        batch: usize,
+        seed: u64,
+        gemm: PolicyGemm,
+    ) -> Result<GaussianPolicy, PolicyError> {
         if observation_size == 0 || action_size == 0 || batch == 0 {
             return Err(PolicyError::Shape(format!(
                 "observation size {observation_size}, action size {action_size} and batch {batch} must be positive"
@@ -78,7 +101,6 @@ impl GaussianPolicy {
         let actor_params = DeviceArray::from_slice(gpu, [actor_values.len()], &actor_values)?;
         let critic_params = DeviceArray::from_slice(gpu, [critic_values.len()], &critic_values)?;
         let log_std = actor_params.view(log_std_offset, [action_size])?;
-        let gemm = PolicyGemm::open(gpu, config.gemm).map_err(EnvError::from)?;
         Ok(GaussianPolicy {
             actor: Mlp::new(gpu, &actor_shapes, actor_params, batch, gemm.clone())?,
             critic: Mlp::new(gpu, &critic_shapes, critic_params, batch, gemm.clone())?,

@@ -192,7 +192,16 @@ impl Trainer {
                 "goal.decoder: a latent goal run trains on one GPU, rollout then update".to_owned(),
             ));
         }
-        let mut rollout = Rollout::new(gpu, store, motion, &rollout_config)?;
+        // cuBLAS loads and creates its handle (about 0.15 s on an H200) on a thread of its own
+        // while the rollout loads its kernels and plans.
+        let (gemm, rollout) = std::thread::scope(|scope| {
+            let gemm = scope.spawn(|| PolicyGemm::open(gpu, config.policy.gemm));
+            let rollout = Rollout::new(gpu, store, motion, &rollout_config);
+            (gemm.join(), rollout)
+        });
+        let gemm =
+            gemm.map_err(|_| TrainerError::Internal("opening the GEMMs panicked".to_owned()))??;
+        let mut rollout = rollout?;
         if let Some(replicas) = replicas {
             rollout = rollout.merging_over(replicas)?;
         }
@@ -208,13 +217,14 @@ impl Trainer {
         }
         // The run's seed initializes the parameters (the same on every replica); the
         // replica's own seed draws its actions.
-        let policy = GaussianPolicy::new(
+        let policy = GaussianPolicy::with_gemm(
             gpu,
             &config.policy,
             rollout.observation_size(),
             action_size,
             rollout.num_envs(),
             run_seed,
+            gemm,
         )?
         .with_sampling_seed(own_seed);
         parts.mark("policy");
