@@ -19,7 +19,7 @@ mod skip_support;
 use std::path::Path;
 
 use instantmimic::cuda::{Gpu, Graph};
-use instantmimic::env::{Rollout, TrackedMotion};
+use instantmimic::env::{EpisodeScore, Rollout, TrackedMotion};
 use instantmimic::kernels::DeviceArray;
 use instantmimic::motion::find::resolve_motion;
 use instantmimic::motion::{Character, MotionLibrary, MotionLibraryBuilder, ReferenceMotion};
@@ -97,6 +97,23 @@ fn evaluation_setup(motion: &ReferenceMotion) -> EvaluationSetup {
         evaluation,
         evaluation_policy,
     }
+}
+
+/// Resets `rollout`, launches `graphs` in order on the main stream and waits: each env's start
+/// time and its episode.
+fn play_episodes(gpu: &Gpu, rollout: &Rollout, graphs: &[&Graph]) -> (Vec<f32>, Vec<EpisodeScore>) {
+    rollout.reset_all().expect("reset");
+    let starts = rollout.state.ref_time.download().expect("ref_time");
+    for graph in graphs {
+        graph.launch(gpu.stream()).expect("launch");
+    }
+    gpu.synchronize().expect("the rollout's graphs");
+    let scores = rollout
+        .episode_scores()
+        .expect("an evaluation rollout has scores")
+        .download()
+        .expect("scores");
+    (starts, scores)
 }
 
 #[test]
@@ -291,8 +308,7 @@ fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
     assert_eq!(nodes.get("host").copied().unwrap_or(0), 0, "{nodes:?}");
     let horizon = evaluation.horizon() as u32;
     for round in 0..2 {
-        evaluation.reset_all().expect("reset");
-        let start = evaluation.state.ref_time.download().expect("ref_time");
+        let (start, scores) = play_episodes(&gpu, &evaluation, &[&graph]);
         let cycle = motion.clip().duration() as f32;
         for (i, t) in start.iter().enumerate() {
             // The default `run.eval_start` spreads the envs over a looping clip's cycle.
@@ -302,13 +318,6 @@ fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
                 "env {i} starts at {t}, expected {expected}"
             );
         }
-        graph.launch(gpu.stream()).expect("launch");
-        gpu.synchronize().expect("evaluation replay");
-        let scores = evaluation
-            .episode_scores()
-            .expect("an evaluation rollout has scores")
-            .download()
-            .expect("scores");
         eprintln!(
             "round {round}: {} of {} completed, steps {:?}",
             scores.iter().filter(|s| s.completed).count(),
@@ -351,7 +360,8 @@ fn evaluation_scores_one_episode_per_env_with_the_training_policy() {
 /// The evaluation rollout captured in chunks of a few control steps (what `Trainer::evaluate_until`
 /// launches, looking between two of them whether the evaluation is decided), launched one after
 /// the other, plays the same episodes as the whole graph: every env's outcome and step count
-/// equal, its error sums equal to float rounding. A training rollout is refused.
+/// equal, its error sums equal to float rounding; its full chunks are one graph. A training
+/// rollout is refused.
 #[test]
 fn an_evaluation_in_chunks_plays_the_same_episodes_as_the_whole_graph() {
     let motion = motion();
@@ -376,20 +386,15 @@ fn an_evaluation_in_chunks_plays_the_same_episodes_as_the_whole_graph() {
         horizon.div_ceil(chunk_steps),
         "horizon {horizon}"
     );
-    let play = |graphs: &[&Graph]| {
-        evaluation.reset_all().expect("reset");
-        for g in graphs {
-            g.launch(gpu.stream()).expect("launch");
-        }
-        gpu.synchronize().expect("evaluation");
-        evaluation
-            .episode_scores()
-            .expect("an evaluation rollout has scores")
-            .download()
-            .expect("scores")
-    };
-    let by_whole = play(&[&whole]);
-    let by_chunks = play(&chunks.iter().collect::<Vec<_>>());
+    // Every full chunk is one graph (its storage rows from 0), the shorter last one another.
+    let distinct = if horizon % chunk_steps == 0 { 1 } else { 2 };
+    assert_eq!(
+        chunks.graphs(),
+        distinct.min(chunks.len()),
+        "horizon {horizon}"
+    );
+    let (_, by_whole) = play_episodes(&gpu, &evaluation, &[&whole]);
+    let (_, by_chunks) = play_episodes(&gpu, &evaluation, &chunks.iter().collect::<Vec<_>>());
     for (env, (a, b)) in by_whole.iter().zip(&by_chunks).enumerate() {
         assert_eq!(
             (a.completed, a.failed, a.steps),
@@ -474,17 +479,7 @@ fn a_snapshot_evaluation_plays_each_group_as_its_snapshot_alone() {
         }
     }
     let chunks = wide.capture_in_chunks(&policies, 4).expect("capture");
-    wide.reset_all().expect("reset");
-    let starts = wide.state.ref_time.download().expect("ref_time");
-    for chunk in &chunks {
-        chunk.launch(gpu.stream()).expect("launch");
-    }
-    gpu.synchronize().expect("snapshot evaluation");
-    let together = wide
-        .episode_scores()
-        .expect("scores")
-        .download()
-        .expect("scores");
+    let (starts, together) = play_episodes(&gpu, &wide, &chunks.iter().collect::<Vec<_>>());
 
     // Each snapshot alone, on the 32-world evaluation.
     let play = |actor: &[f32], moments: &[Vec<f64>]| {
@@ -496,16 +491,7 @@ fn a_snapshot_evaluation_plays_each_group_as_its_snapshot_alone() {
             to.upload(from).expect("moments");
         }
         let (graph, _) = evaluation.capture(&alone, false).expect("capture");
-        evaluation.reset_all().expect("reset");
-        let starts = evaluation.state.ref_time.download().expect("ref_time");
-        graph.launch(gpu.stream()).expect("launch");
-        gpu.synchronize().expect("evaluation");
-        let scores = evaluation
-            .episode_scores()
-            .expect("scores")
-            .download()
-            .expect("scores");
-        (starts, scores)
+        play_episodes(&gpu, &evaluation, &[&graph])
     };
     let none: Vec<Vec<f64>> = statistics.iter().map(|m| vec![0.0; m.len()]).collect();
     let (starts_a, alone_a) = play(&actor_a, &statistics);

@@ -4,8 +4,8 @@
 //! `run.eval_envs` envs evaluates them together, group g run by snapshot g
 //! ([`Rollout::snapshot_evaluation`]).
 
-use crate::cuda::{Gpu, Graph, Stream};
-use crate::env::{ActStorage, Rollout, RolloutError, RolloutPolicy};
+use crate::cuda::{Gpu, Stream};
+use crate::env::{ActStorage, EvaluationChunks, Rollout, RolloutError, RolloutPolicy};
 use crate::kernels::{DeviceArray, DeviceArray2, DeviceArray3, EnvKernels};
 
 use super::policy::{GaussianPolicy, PolicyError};
@@ -124,7 +124,7 @@ impl RolloutPolicy for SnapshotPolicies {
 /// snapshots wait for it.
 pub struct SnapshotEvaluation {
     /// Declared first, dropped first: the graphs read the buffers below.
-    chunks: Vec<Graph>,
+    chunks: EvaluationChunks,
     pub(super) rollout: Rollout,
     pub(super) policies: SnapshotPolicies,
     /// Snapshots kept since the last evaluation (slots `0..kept`).
@@ -161,7 +161,7 @@ impl SnapshotEvaluation {
         self.rollout.snapshot_groups()
     }
 
-    pub(super) fn chunks(&self) -> &[Graph] {
+    pub(super) fn chunks(&self) -> &EvaluationChunks {
         &self.chunks
     }
 }

@@ -41,7 +41,7 @@ use super::device_report::{REPORT_BYTES, read_report, record_parameter_squares, 
 use super::snapshots::SnapshotEvaluation;
 use super::trainer_error::TrainerError;
 use super::{PolicyConfig, PpoConfig};
-use crate::env::RolloutConfig;
+use crate::env::{EvaluationChunks, RolloutConfig};
 use crate::latent::{DECODER_DIGEST, GoalDecoder, decoder_digest};
 use crate::plan::PhysicsOverflow;
 use crate::run::IterationReport;
@@ -99,7 +99,7 @@ pub struct Trainer {
     /// The evaluation rollout as consecutive graphs of [`EVALUATION_CHUNK_STEPS`] control
     /// steps: [`Trainer::evaluate_until`] may stop between two of them. Captured at the first
     /// evaluation: a run that evaluates several snapshots together never needs them.
-    evaluation_chunks: std::cell::OnceCell<Vec<Graph>>,
+    evaluation_chunks: std::cell::OnceCell<EvaluationChunks>,
     /// Several snapshots in one evaluation (`run.eval_snapshots` > 1, where a plan exists for
     /// their worlds; one clip's tracking on one GPU).
     snapshots: Option<SnapshotEvaluation>,
@@ -437,7 +437,7 @@ impl Trainer {
     }
 
     /// The evaluation's graphs (`evaluation_chunks`), captured on first use.
-    fn evaluation_chunks(&self) -> Result<&[Graph], TrainerError> {
+    fn evaluation_chunks(&self) -> Result<&EvaluationChunks, TrainerError> {
         if let Some(chunks) = self.evaluation_chunks.get() {
             return Ok(chunks);
         }
@@ -459,7 +459,7 @@ impl Trainer {
     pub fn run_evaluation(&self) -> Result<(), TrainerError> {
         let chunks = self.evaluation_chunks()?;
         self.evaluation.reset_all()?;
-        for chunk in chunks {
+        for chunk in chunks.iter() {
             chunk.launch(self.gpu.stream())?;
         }
         self.gpu.synchronize()?;

@@ -10,12 +10,14 @@
 //! A rollout tracks a motion library ([`TrackedMotion`]): each env carries a clip id beside its
 //! time, and a single clip is the library of one, so both run the same kernels.
 
+mod chunks;
 mod groups;
 mod launches;
 mod recording;
 
 use std::sync::Arc;
 
+pub use self::chunks::EvaluationChunks;
 use self::groups::{EvaluationGroups, ResetRows, rows_of};
 use crate::cuda::{Communicator, Gpu, Graph, Stream};
 use crate::motion::MotionLibrary;
@@ -676,7 +678,7 @@ impl Rollout {
             } else {
                 StageRecorder::untimed()
             };
-            self.record_rollout(s, policy, &self.storage, &mut stages, None, 0..self.horizon)?;
+            self.record_rollout(s, policy, &mut stages, None, 0..self.horizon, 0)?;
             events = stages.into_events();
             Ok::<(), RolloutError>(())
         })?;
@@ -690,10 +692,10 @@ impl Rollout {
         self.record_rollout(
             s,
             policy,
-            &self.storage,
             &mut StageRecorder::untimed(),
             None,
             0..self.horizon,
+            0,
         )
     }
 
@@ -702,36 +704,57 @@ impl Rollout {
     /// episode as [`Rollout::capture`]'s one graph, and between two of them the caller may read
     /// the scores and stop early (`Trainer::evaluate_until`). The graphs read and write
     /// `policy`'s buffers at each launch: keep the policy alive as long as them.
+    ///
+    /// A tracking evaluation's chunks of one length are one graph, launched once per chunk:
+    /// each chunk writes the storage rows from 0, which nothing reads across steps, so they
+    /// differ in nothing else (the reset's random draws, which do repeat, start only episodes
+    /// after an env's first, which the yardstick no longer scores). Instantiating the graphs
+    /// was most of the setup (0.4-0.9 s for 14 chunks of a snapshot evaluation on an H200).
+    /// The goal task's evaluation scores every episode, and keeps a graph per chunk.
     pub fn capture_in_chunks(
         &self,
         policy: &dyn RolloutPolicy,
         chunk_steps: usize,
-    ) -> Result<Vec<Graph>, RolloutError> {
+    ) -> Result<EvaluationChunks, RolloutError> {
         if self.is_training() {
             return Err(RolloutError::Setup(
                 "a training rollout is captured whole (its bookkeeping ends the last step)"
                     .to_owned(),
             ));
         }
+        let reuse = matches!(self.purpose, Purpose::Evaluation(..));
+        let chunk_steps = chunk_steps.max(1);
         let stream = self.gpu.stream();
-        let starts = (0..self.horizon).step_by(chunk_steps.max(1));
-        starts
-            .map(|start| {
-                let steps = start..(start + chunk_steps.max(1)).min(self.horizon);
-                let graph = stream.capture(|s| {
-                    self.record_rollout(
-                        s,
-                        policy,
-                        &self.storage,
-                        &mut StageRecorder::untimed(),
-                        None,
-                        steps,
-                    )
-                })?;
-                graph.upload(stream)?;
-                Ok(graph)
-            })
-            .collect()
+        let mut chunks = EvaluationChunks {
+            graphs: Vec::new(),
+            order: Vec::new(),
+        };
+        // (the steps of a chunk, its graph's index)
+        let mut captured: Vec<(usize, usize)> = Vec::new();
+        for start in (0..self.horizon).step_by(chunk_steps) {
+            let steps = start..(start + chunk_steps).min(self.horizon);
+            let length = steps.len();
+            if reuse && let Some(&(_, graph)) = captured.iter().find(|(l, _)| *l == length) {
+                chunks.order.push(graph);
+                continue;
+            }
+            let first_row = if reuse { start } else { 0 };
+            let graph = stream.capture(|s| {
+                self.record_rollout(
+                    s,
+                    policy,
+                    &mut StageRecorder::untimed(),
+                    None,
+                    steps,
+                    first_row,
+                )
+            })?;
+            graph.upload(stream)?;
+            captured.push((length, chunks.graphs.len()));
+            chunks.order.push(chunks.graphs.len());
+            chunks.graphs.push(graph);
+        }
+        Ok(chunks)
     }
 
     /// The loaded kernels (shared with the PPO update).
@@ -739,17 +762,18 @@ impl Rollout {
         &self.kernels
     }
 
-    /// The rollout into `storage`.
+    /// The rollout into `storage`: steps `steps`, step t into storage row `t - first_row`.
     fn record_rollout(
         &self,
         s: &Stream,
         policy: &dyn RolloutPolicy,
-        storage: &RolloutStorage,
         stages: &mut StageRecorder,
         trajectory: Option<&Trajectory>,
         steps: std::ops::Range<usize>,
+        first_row: usize,
     ) -> Result<(), RolloutError> {
         let gpu = &self.gpu;
+        let storage = &self.storage;
         let wanted = (self.num_envs, self.observation_size(), self.action_size());
         let lent = (
             policy.batch(),
@@ -776,9 +800,11 @@ impl Rollout {
                 .copy_into(s, &storage.observations, 0)?;
         }
         for t in steps {
-            let t32 = t as i32;
+            // Step t's storage row: t but in a chunk that starts its rows at 0.
+            let row = t - first_row;
+            let row32 = row as i32;
             stages.stage(gpu, s, RolloutStage::Policy, |s| {
-                self.record_policy(s, policy, storage, t)
+                self.record_policy(s, policy, storage, row)
             })?;
             stages.stage(gpu, s, RolloutStage::Control, |s| self.record_pd_targets(s))?;
             for _ in 0..self.substeps {
@@ -793,10 +819,10 @@ impl Rollout {
                 self.record_kinematics(s, false)
             })?;
             stages.stage(gpu, s, RolloutStage::Reward, |s| {
-                self.record_reward(s, storage, t32)?;
+                self.record_reward(s, storage, row32)?;
                 match &self.purpose {
                     Purpose::Evaluation(scores, yardstick, _) => {
-                        self.record_scores(s, storage, scores, yardstick, t32)?
+                        self.record_scores(s, storage, scores, yardstick, row32)?
                     }
                     // The goal evaluation's scores are the goal counters, which the task's
                     // reward kernel keeps.
@@ -804,7 +830,7 @@ impl Rollout {
                     Purpose::Training => self.statistics.record_step(
                         &self.kernels,
                         s,
-                        t32,
+                        row32,
                         storage,
                         &self.state.episode_step,
                         &self.state.failure,
@@ -815,12 +841,12 @@ impl Rollout {
                 }
                 Ok::<(), RolloutError>(())
             })?;
-            stages.stage(gpu, s, RolloutStage::Reset, |s| self.record_reset(s, t32))?;
+            stages.stage(gpu, s, RolloutStage::Reset, |s| self.record_reset(s, row32))?;
             stages.stage(gpu, s, RolloutStage::Kinematics, |s| {
                 self.record_kinematics(s, true)
             })?;
             stages.stage(gpu, s, RolloutStage::Observation, |s| {
-                self.record_observation(s, storage, t + 1, self.is_training())
+                self.record_observation(s, storage, row + 1, self.is_training())
             })?;
         }
         if !last || !self.is_training() {

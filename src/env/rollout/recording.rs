@@ -49,10 +49,10 @@ impl Rollout {
             self.record_rollout(
                 s,
                 policy,
-                &self.storage,
                 &mut StageRecorder::untimed(),
                 Some(trajectory),
                 0..self.horizon,
+                0,
             )
         })?;
         graph.upload(stream)?;
