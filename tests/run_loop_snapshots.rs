@@ -155,15 +155,7 @@ fn run(dir: &Path, config: &TrainConfig, learner: &mut Scripted) -> (RunSummary,
     let scorer = Scorer::Clip {
         start_times: vec![0.0; 32],
     };
-    let summary = run_loop(
-        session,
-        learner,
-        None,
-        &scorer,
-        std::time::Instant::now(),
-        Vec::new(),
-    )
-    .expect("the run");
+    let summary = run_loop(session, learner, None, &scorer, Vec::new()).expect("the run");
     let newest = std::fs::read_dir(dir.join("checkpoints"))
         .expect("checkpoints")
         .map(|e| e.expect("entry").path())

@@ -45,8 +45,11 @@ fn dry_run_checks_everything_and_prints_the_resolved_config() {
         "run directory runs/synth-seed7 (new)",
         "humanoid3d_synth.txt (31 frames, 1.0000 s, loop wrap)",
         "control       0.033333 s (4 physics steps of 0.008333 s)",
-        "plan          step for 32 worlds (41 modules, PTX present)",
+        "plan          training_step for 32 worlds (41 modules, PTX present)",
         "plan          kinematics for 32 worlds (1 module, PTX present)",
+        "plan          step for 32 worlds (41 modules, PTX present)",
+        "plan          step for 256 worlds (41 modules, PTX present)",
+        "plan          kinematics for 256 worlds (1 module, PTX present)",
         "policy        observation 362, action 28",
         "iteration     32 envs x 16 steps = 512 frames; 3 epochs x 4 minibatches",
         "evaluation    every 2 iterations: 32 envs x 30 steps (1.000 s), success at 0.9",
@@ -56,8 +59,9 @@ fn dry_run_checks_everything_and_prints_the_resolved_config() {
     ] {
         assert!(text.contains(expected), "missing {expected:?} in\n{text}");
     }
-    // The training and evaluation world counts are the same: one set of plans listed.
-    assert_eq!(text.matches("plan          ").count(), 2, "{text}");
+    // Each plan the run loads, once: the training step and the evaluation's step share the
+    // kinematics of their 32 worlds; the snapshot evaluation's 8 x 32 worlds have their own.
+    assert_eq!(text.matches("plan          ").count(), 5, "{text}");
     let config = resolved_config(&text);
     let (_, default) = TrainConfig::general_default("synth");
     let mut expected = default.unwrap();
@@ -390,7 +394,7 @@ fn every_committed_config_passes_the_dry_run_with_its_built_in_clip() {
             "{name}: {text}"
         );
         assert!(
-            text.contains("plan          step for 4096 worlds"),
+            text.contains("plan          training_step for 4096 worlds"),
             "{text}"
         );
         assert_eq!(

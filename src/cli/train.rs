@@ -16,20 +16,20 @@ use clap::{Args, ValueEnum};
 use super::library_eval::{LibraryReplayJob, replay_library};
 use super::replay::{ReplayJob, write_replay};
 use super::stopped::Stopped;
-use crate::cuda::nccl_version;
+use crate::cuda::{Gpu, nccl_version};
 use crate::motion::LibraryConfig;
 use crate::plan::PlanStore;
 use crate::replay::DEFAULT_EPISODES;
 use crate::run::run_dir::{CHECKPOINTS_DIR, REPLAY_DIR, REPLAY_FILE};
 use crate::run::{
-    Checkpoint, CheckpointDir, ProgressMode, RunDir, RunSummary, StopFlag, StopReason, StopSignal,
-    check_same_gpu_count,
+    Checkpoint, CheckpointDir, ProgressMode, RunDir, RunSummary, SetupClock, StopFlag, StopReason,
+    StopSignal, check_same_gpu_count,
 };
 use crate::train::goal_latent::{describe_decoder, head_shapes, load_goal_decoder};
 use crate::train::latent_setup::{latent_shapes, load_teacher};
 use crate::train::{
     ChosenCharacter, RankOutcome, RunStart, TrainConfig, TrainSetup, WorldRun,
-    check_trained_character, check_world_config, default_run_dir, preflight_training,
+    check_trained_character, check_world_config, default_run_dir, preflight_training, run_plans,
     train_as_rank, train_on_gpu,
 };
 use crate::world::{WorldFlags, WorldSource, WorldSpec};
@@ -371,7 +371,7 @@ pub(super) fn parse_override(text: &str) -> Result<(String, String), String> {
 
 /// Runs `train`.
 pub fn run(args: TrainArgs) -> Result<()> {
-    let started = std::time::Instant::now();
+    let mut clock = SetupClock::starting_now();
     let motions_dir = super::output::motions_dir(args.motions_dir.as_deref())?;
     let progress = match args.progress {
         ProgressArg::Auto => ProgressMode::for_stdout(),
@@ -443,8 +443,17 @@ pub fn run(args: TrainArgs) -> Result<()> {
             (config, label, start, line, None, world)
         }
     };
-    // The plans follow the character (--assets replaces them).
+    // One GPU: it opens on a thread of its own while the inputs are read and checked.
+    let opening = (!args.dry_run && world.is_none() && !config.run.data_parallel())
+        .then(|| Gpu::open_beside(args.first_device(&config)));
+    // The plans follow the character (--assets replaces them); the run's are decoded on
+    // threads of their own from here, checked in place, and loaded by the trainer. A plan set
+    // whose list cannot be made is left to the checks, which say what is wrong.
     let store = ChosenCharacter::of_config(&config)?.plan_store(args.assets.as_deref());
+    let store = match run_plans(&config, &store) {
+        Ok(plans) => store.prefetching(&plans),
+        Err(_) => store,
+    };
     let (mut checks, motion) = preflight_training(&config, motions_dir.as_deref(), &store)?;
     super::notices::print_notices(&checks.motion_notices);
     // A latent goal run's decoder must fit the run; its head acts in the latent space.
@@ -559,6 +568,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
     let keep = config.run.keep_checkpoints;
     let device = args.first_device(&config);
     let stop = StopFlag::on_signals().context("cannot handle SIGINT and SIGTERM")?;
+    clock.lap("inputs and checks");
     let setup = TrainSetup {
         config,
         motion,
@@ -568,7 +578,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
         progress,
         device: args.device,
         stop: stop.clone(),
-        started,
+        clock,
+        opening,
     };
     let summary = match &world {
         None => train_on_gpu(setup)?,

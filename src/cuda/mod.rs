@@ -44,7 +44,7 @@ pub use conditional::{
     Branch, GRAPH_CONDITIONAL_ENTRIES, GRAPH_CONDITIONAL_MODULE, GRAPH_CONDITIONAL_PTX,
     SET_FROM_NEGATION_ENTRY, SET_FROM_VALUE_ENTRY, SET_PAIR_ENTRY,
 };
-pub use context::{Gpu, GpuInfo, MIN_DRIVER_VERSION, driver_library_present};
+pub use context::{Gpu, GpuInfo, GpuOpening, MIN_DRIVER_VERSION, driver_library_present};
 pub use error::CudaError;
 pub use event::Event;
 pub use frontier::CaptureNodes;

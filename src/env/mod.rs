@@ -54,7 +54,9 @@ pub use mirror::{SignedPermutation, mirror_images};
 pub use physics_state::{PhysicsSizes, PhysicsState, PhysicsStateError};
 pub use policy::RolloutPolicy;
 pub use reference::DeviceReferenceTable;
-pub use rollout::{EpisodeState, EvaluationChunks, Rollout, training_solver_note};
+pub use rollout::{
+    EpisodeState, EvaluationChunks, Rollout, training_solver_note, training_step_plan,
+};
 pub use stages::{RolloutStage, Stage, StageEvents, StageRecorder};
 pub use statistics::{FailureCause, RolloutStatistics, RolloutTotals, TOTALS};
 pub use storage::{ActStorage, RolloutStorage};

@@ -19,6 +19,7 @@ mod model;
 mod ops;
 mod overflow;
 mod pack;
+mod prefetch;
 mod reader;
 pub mod replay;
 mod simulation;

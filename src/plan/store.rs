@@ -24,6 +24,7 @@ use serde::Deserialize;
 use super::error::PlanError;
 use super::model::Plan;
 use super::pack::load_plan;
+use super::prefetch::PrefetchedPlans;
 
 /// Directory of MuJoCo Warp module PTX, relative to the store's root.
 pub const MJWARP_PTX_DIR: &str = "mjwarp";
@@ -132,6 +133,8 @@ pub enum PlanSource {
 pub struct PlanStore {
     source: PlanSource,
     decoded: Option<Arc<Mutex<DecodedPlans>>>,
+    /// Plans being decoded ahead of their use ([`PlanStore::prefetching`]).
+    prefetched: Option<Arc<PrefetchedPlans>>,
 }
 
 /// Decoded plans by name and world count.
@@ -159,6 +162,7 @@ impl PlanStore {
         PlanStore {
             source,
             decoded: None,
+            prefetched: None,
         }
     }
 
@@ -168,6 +172,45 @@ impl PlanStore {
             decoded: Some(Arc::default()),
             ..self
         }
+    }
+
+    /// This store, with each of `plans` (name, world count) being decoded on a thread of its
+    /// own from now on: [`PlanStore::inspect_plan`] waits for one and looks at it in place, and
+    /// the first [`PlanStore::plan`] for it takes it. A plan the manifest does not list is left
+    /// to that request, which says so.
+    pub fn prefetching(self, plans: &[(&str, u32)]) -> PlanStore {
+        let prefetched = self.prefetched.clone().unwrap_or_default();
+        let listed = self.manifest().map(|m| m.plans).unwrap_or_default();
+        for &(name, nworld) in plans {
+            if !listed.iter().any(|p| p.name == name && p.nworld == nworld) {
+                continue;
+            }
+            let plain = PlanStore::from_source(self.source.clone());
+            let owned = name.to_owned();
+            prefetched.start(name, nworld, move || plain.decode(&owned, nworld));
+        }
+        PlanStore {
+            prefetched: Some(prefetched),
+            ..self
+        }
+    }
+
+    /// `inspect` on the plan `name` for `nworld` worlds: a prefetched plan stays for the
+    /// simulation that loads it; any other is decoded for this look and dropped.
+    pub fn inspect_plan<T>(
+        &self,
+        name: &str,
+        nworld: u32,
+        inspect: impl FnOnce(&Plan) -> T,
+    ) -> Result<T, PlanError> {
+        let inspect = match &self.prefetched {
+            Some(prefetched) => match prefetched.inspect(name, nworld, inspect) {
+                Ok(looked) => return looked,
+                Err(inspect) => inspect,
+            },
+            None => inspect,
+        };
+        Ok(inspect(&self.plan(name, nworld)?))
     }
 
     pub fn source(&self) -> &PlanSource {
@@ -245,15 +288,21 @@ impl PlanStore {
     /// The plan `name` captured for `nworld` worlds (kept after the first request when the
     /// store keeps decoded plans: a directory's plan file is then read once).
     pub fn plan(&self, name: &str, nworld: u32) -> Result<Plan, PlanError> {
+        let key = (name.to_string(), nworld);
         let Some(decoded) = &self.decoded else {
+            if let Some(plan) = self.prefetched.as_ref().and_then(|p| p.take(name, nworld)) {
+                return plan;
+            }
             return self.decode(name, nworld);
         };
-        let key = (name.to_string(), nworld);
         // A poisoned lock only means another thread panicked while inserting: decode again.
         if let Some(plan) = decoded.lock().ok().and_then(|d| d.get(&key).cloned()) {
             return Ok(plan);
         }
-        let plan = self.decode(name, nworld)?;
+        let plan = match self.prefetched.as_ref().and_then(|p| p.take(name, nworld)) {
+            Some(plan) => plan?,
+            None => self.decode(name, nworld)?,
+        };
         if let Ok(mut decoded) = decoded.lock() {
             decoded.insert(key, plan.clone());
         }
@@ -334,7 +383,40 @@ pub fn ptx_file_name(binary_filename: &str) -> Result<String, PlanError> {
 
 #[cfg(test)]
 mod tests {
-    use super::ptx_file_name;
+    use super::{KINEMATICS_PLAN, PlanStore, STEP_PLAN, ptx_file_name};
+
+    #[test]
+    fn a_prefetched_plan_is_inspected_in_place_then_handed_over_once() {
+        let plain = PlanStore::new(None);
+        let decoded = plain
+            .plan(KINEMATICS_PLAN, 32)
+            .expect("the kinematics plan for 32");
+        let store = PlanStore::new(None).prefetching(&[
+            (KINEMATICS_PLAN, 32),
+            // Not in the manifest: left to the request, which says so.
+            (STEP_PLAN, 3),
+        ]);
+        let looked = store
+            .inspect_plan(KINEMATICS_PLAN, 32, |p| (p.modules.len(), p.regions.len()))
+            .expect("inspected");
+        assert_eq!(looked, (decoded.modules.len(), decoded.regions.len()));
+        // Still there after the look: the simulation takes the same plan.
+        assert_eq!(store.plan(KINEMATICS_PLAN, 32).expect("taken"), decoded);
+        // Taken once; a second request decodes it again, to the same plan.
+        assert_eq!(store.plan(KINEMATICS_PLAN, 32).expect("decoded"), decoded);
+        let missing = store.plan(STEP_PLAN, 3).expect_err("no plan for 3 worlds");
+        assert!(
+            missing.to_string().contains("no `step` plan for 3 worlds"),
+            "{missing}"
+        );
+        let missing = store
+            .inspect_plan(STEP_PLAN, 3, |_| ())
+            .expect_err("no plan for 3 worlds");
+        assert!(
+            missing.to_string().contains("no `step` plan for 3 worlds"),
+            "{missing}"
+        );
+    }
 
     #[test]
     fn module_binary_names_map_to_arch_free_ptx_names() {

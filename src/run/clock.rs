@@ -75,6 +75,46 @@ impl ActiveClock {
     }
 }
 
+/// The command's start, and the parts of its setup before the trainer is built (reading its
+/// inputs, waiting for the GPU, the run directory), each the wall time since the one before on
+/// the command's thread: the run's `setup` line lists them before the trainer's own.
+#[derive(Clone, Debug)]
+pub struct SetupClock {
+    started: Instant,
+    lap: Instant,
+    parts: Vec<(String, f64)>,
+}
+
+impl SetupClock {
+    /// A clock started now (the command's start).
+    pub fn starting_now() -> SetupClock {
+        let now = Instant::now();
+        SetupClock {
+            started: now,
+            lap: now,
+            parts: Vec::new(),
+        }
+    }
+
+    /// When the command started: a run's wall times count from here.
+    pub fn started(&self) -> Instant {
+        self.started
+    }
+
+    /// Records the wall time since the previous part (or the start) as `part`.
+    pub fn lap(&mut self, part: &str) {
+        let now = Instant::now();
+        self.parts
+            .push((part.to_owned(), now.duration_since(self.lap).as_secs_f64()));
+        self.lap = now;
+    }
+
+    /// The parts recorded, in order, with their seconds.
+    pub fn parts(&self) -> &[(String, f64)] {
+        &self.parts
+    }
+}
+
 /// Why a run stopped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -212,6 +252,23 @@ mod tests {
             library: None,
             stopped_at_step: None,
         }
+    }
+
+    #[test]
+    fn the_setup_clock_records_each_part_since_the_one_before() {
+        let mut clock = SetupClock::starting_now();
+        std::thread::sleep(Duration::from_millis(20));
+        clock.lap("inputs");
+        clock.lap("GPU");
+        std::thread::sleep(Duration::from_millis(10));
+        clock.lap("run directory");
+        let parts = clock.parts();
+        let names: Vec<&str> = parts.iter().map(|(p, _)| p.as_str()).collect();
+        assert_eq!(names, ["inputs", "GPU", "run directory"]);
+        assert!(parts[0].1 >= 0.02 && parts[2].1 >= 0.01, "{parts:?}");
+        assert!(parts[1].1 < parts[0].1, "{parts:?}");
+        let sum: f64 = parts.iter().map(|(_, s)| s).sum();
+        assert!(sum <= clock.started().elapsed().as_secs_f64(), "{parts:?}");
     }
 
     #[test]

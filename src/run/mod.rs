@@ -33,7 +33,7 @@ pub use checkpoint::{
     CHECKPOINT_FORMAT_VERSION, Checkpoint, CheckpointDir, CheckpointError, CheckpointMeta,
     CheckpointScan, Tensor, TensorData,
 };
-pub use clock::{ActiveClock, StopReason, StopRule};
+pub use clock::{ActiveClock, SetupClock, StopReason, StopRule};
 pub use config::{BoxedError, ResolvedConfig, RunConfig};
 pub use divergence::DivergenceGuard;
 pub use error::RunError;

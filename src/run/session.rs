@@ -28,7 +28,7 @@ use std::path::Path;
 use super::character_record::CharacterRecord;
 use super::checkpoint::{Checkpoint, CheckpointDir, CheckpointMeta};
 use super::clips_table::clips_table;
-use super::clock::{ActiveClock, Milestones, StopReason, StopRule};
+use super::clock::{ActiveClock, Milestones, SetupClock, StopReason, StopRule};
 use super::config::ResolvedConfig;
 use super::error::RunError;
 use super::evaluation::EvaluationSummary;
@@ -111,11 +111,13 @@ pub struct RunSession<C: ResolvedConfig> {
     /// and their readers take the configuration's).
     character: Option<CharacterRecord>,
     /// Where the wall clock of the records starts: the command's start when the caller gives it
-    /// ([`RunSession::measure_wall_from`]), else this session's creation.
+    /// ([`RunSession::measure_setup_from`]), else this session's creation.
     wall_origin: std::time::Instant,
     /// Wall seconds before this command's first iteration, and that iteration
     /// ([`RunSession::start_training`]).
     setup: Option<(f64, u64)>,
+    /// The setup's parts before the trainer ([`RunSession::measure_setup_from`]).
+    setup_parts: Vec<(String, f64)>,
 }
 
 /// Wall seconds between redraws of `curve.png` during a run (and once at its end): drawing
@@ -241,6 +243,7 @@ impl<C: ResolvedConfig> RunSession<C> {
             character: None,
             wall_origin: std::time::Instant::now(),
             setup: None,
+            setup_parts: Vec::new(),
         }
     }
 
@@ -250,10 +253,17 @@ impl<C: ResolvedConfig> RunSession<C> {
         self.stop = flag;
     }
 
-    /// Measures the records' wall seconds from `origin` (the command's start) instead of this
-    /// session's creation.
-    pub fn measure_wall_from(&mut self, origin: std::time::Instant) {
-        self.wall_origin = origin;
+    /// Measures the records' wall seconds from the command's start on `clock` instead of this
+    /// session's creation, and keeps the setup's parts it recorded for the `setup` line.
+    pub fn measure_setup_from(&mut self, clock: &SetupClock) {
+        self.wall_origin = clock.started();
+        self.setup_parts = clock.parts().to_vec();
+    }
+
+    /// Wall seconds since the records' origin, and the setup's parts recorded before the
+    /// trainer ([`RunSession::measure_setup_from`]; none otherwise).
+    pub fn setup_so_far(&self) -> (f64, &[(String, f64)]) {
+        (self.wall_origin.elapsed().as_secs_f64(), &self.setup_parts)
     }
 
     /// Marks the end of setup: the next iteration is this command's first.

@@ -14,7 +14,7 @@ use super::error::TrainError;
 use super::latent_setup::{distillation_config, load_teacher};
 use super::ppo_trainer::{new_trainer, trainer_config};
 use super::preflight::Preflight;
-use crate::cuda::Gpu;
+use crate::cuda::{Gpu, GpuOpening};
 use crate::env::{TrackedMotion, TrainMotion, training_solver_note};
 use crate::latent::LatentTrainer;
 use crate::motion::{Character, ReferenceMotion};
@@ -23,7 +23,7 @@ use crate::ppo::{Replicas, Trainer};
 use crate::run::ResolvedConfig as _;
 use crate::run::{
     CharacterRecord, Checkpoint, EnvEvaluation, EvaluationSummary, LibraryPlan, ProgressMode,
-    RunSession, RunSummary, Scorer, StopFlag, run_loop, summarize,
+    RunSession, RunSummary, Scorer, SetupClock, StopFlag, run_loop, summarize,
 };
 
 /// Where a run writes: a new directory, or one to continue.
@@ -53,8 +53,12 @@ pub struct TrainSetup {
     /// Stops the run after the current iteration, with a checkpoint (`train` connects it to
     /// SIGINT and SIGTERM; src/run/stop.rs).
     pub stop: StopFlag,
-    /// When the command started: the records' and the summary's wall times count from here.
-    pub started: std::time::Instant,
+    /// When the command started, and its setup's parts so far: the records' and the summary's
+    /// wall times count from its start.
+    pub clock: SetupClock,
+    /// The GPU, being opened on a thread of its own while the command read its inputs (None:
+    /// opened when the run needs it).
+    pub opening: Option<GpuOpening>,
 }
 
 /// Trains on the GPU until the session says stop (success, time or iteration budget, or
@@ -63,7 +67,7 @@ pub struct TrainSetup {
 /// resumed run, then iterates: one graph replay per iteration, an evaluation every
 /// `run.eval_interval` iterations, checkpoints at `run.checkpoint_interval` and at the end.
 /// With `run.gpus` naming several devices, trains on all of them ([`train_on_gpus`]).
-pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
+pub fn train_on_gpu(mut setup: TrainSetup) -> Result<RunSummary, TrainError> {
     if setup.config.latent.is_some() {
         return train_latent_on_gpu(setup);
     }
@@ -76,11 +80,10 @@ pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
             &setup.start,
             setup.progress,
             &setup.stop,
-            Some(setup.started),
+            Some(&setup.clock),
         );
     }
-    let device = run.gpus.first().map_or(setup.device, |&d| d as usize);
-    let gpu = Gpu::open(device)?;
+    let gpu = setup.open_gpu()?;
     train_with(
         &gpu,
         &setup.config,
@@ -89,7 +92,7 @@ pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
         &setup.start,
         setup.progress,
         &setup.stop,
-        Some(setup.started),
+        Some(&setup.clock),
     )
 }
 
@@ -97,7 +100,7 @@ pub fn train_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
 /// one): `config` is the resolved configuration (for a resumed run, its `[run]` section
 /// replaces the run directory's). `run.gpus` is not read: this is one GPU. `stop` ends the run
 /// after the iteration it is requested in (stop reason `interrupted`). Wall times count from
-/// `started` (the command's start), else from the run directory's opening.
+/// `clock`'s start (the command's), else from the run directory's opening.
 #[allow(clippy::too_many_arguments)]
 pub fn train_with<'a>(
     gpu: &Gpu,
@@ -107,12 +110,11 @@ pub fn train_with<'a>(
     start: &RunStart,
     progress: ProgressMode,
     stop: &StopFlag,
-    started: Option<std::time::Instant>,
+    clock: Option<&SetupClock>,
 ) -> Result<RunSummary, TrainError> {
     let motion = motion.into();
     let (session, checkpoint) =
-        open_session(config, motion.character(), start, progress, stop, started)?;
-    let setup = std::time::Instant::now();
+        open_session(config, motion.character(), start, progress, stop, clock)?;
     let mut trainer = new_trainer(gpu, store, motion, session.config())?;
     let scorer = Scorer::new(
         trainer.evaluation_rollout().0,
@@ -131,31 +133,17 @@ pub fn train_with<'a>(
     if let Scorer::Library(plan) = &scorer {
         notes.push(library_note(plan));
     }
-    Ok(run_loop(
-        session,
-        &mut trainer,
-        checkpoint,
-        &scorer,
-        setup,
-        notes,
-    )?)
+    Ok(run_loop(session, &mut trainer, checkpoint, &scorer, notes)?)
 }
 
 /// A run with a `[latent]` section (docs/latent.md): the latent controller distilled from the
 /// teacher `latent.teacher` names, on one GPU, through the same loop (run directory,
 /// metrics, curve, checkpoints, resume, library evaluation with the student deterministic).
-fn train_latent_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
+fn train_latent_on_gpu(mut setup: TrainSetup) -> Result<RunSummary, TrainError> {
     let teacher = load_teacher(&setup.config, &setup.preflight.policy)?;
-    let device = setup
-        .config
-        .run
-        .gpus
-        .first()
-        .map_or(setup.device, |&d| d as usize);
-    let gpu = Gpu::open(device)?;
+    let gpu = setup.open_gpu()?;
     let motion = setup.motion.tracked();
     let (session, checkpoint) = setup.open_session(motion.character())?;
-    let started = std::time::Instant::now();
     let distillation = distillation_config(session.config())?;
     let mut trainer = LatentTrainer::new(&gpu, &setup.store, motion, &distillation, &teacher)?;
     let scorer = Scorer::new(
@@ -172,14 +160,7 @@ fn train_latent_on_gpu(setup: TrainSetup) -> Result<RunSummary, TrainError> {
         ),
     ];
     notes.extend(training_solver_note(&setup.store, &setup.config.env)?);
-    Ok(run_loop(
-        session,
-        &mut trainer,
-        checkpoint,
-        &scorer,
-        started,
-        notes,
-    )?)
+    Ok(run_loop(session, &mut trainer, checkpoint, &scorer, notes)?)
 }
 
 /// The library note of a run's output.
@@ -210,11 +191,11 @@ pub fn train_on_gpus<'a>(
     start: &RunStart,
     progress: ProgressMode,
     stop: &StopFlag,
-    started: Option<std::time::Instant>,
+    clock: Option<&SetupClock>,
 ) -> Result<RunSummary, TrainError> {
     let motion = motion.into();
     let (session, checkpoint) =
-        open_session(config, motion.character(), start, progress, stop, started)?;
+        open_session(config, motion.character(), start, progress, stop, clock)?;
     let devices: Vec<usize> = session
         .config()
         .run
@@ -222,7 +203,6 @@ pub fn train_on_gpus<'a>(
         .iter()
         .map(|&d| d as usize)
         .collect();
-    let setup = std::time::Instant::now();
     let trainer_config = trainer_config(session.config(), motion.character())?;
     let mut replicas = Replicas::start(&devices, &trainer_config, motion, store)?;
     let mut notes = vec![format!("GEMMs: {} (every GPU)", replicas.gemm())];
@@ -243,12 +223,28 @@ pub fn train_on_gpus<'a>(
         &mut replicas,
         checkpoint,
         &scorer,
-        setup,
         notes,
     )?)
 }
 
 impl TrainSetup {
+    /// The run's GPU (the first of `run.gpus`, else `device`): the one being opened beside the
+    /// setup when it is that device, else opened now. Its wait is the setup's `GPU` part.
+    fn open_gpu(&mut self) -> Result<Gpu, TrainError> {
+        let device = self
+            .config
+            .run
+            .gpus
+            .first()
+            .map_or(self.device, |&d| d as usize);
+        let gpu = match self.opening.take() {
+            Some(opening) if opening.ordinal() == device => opening.wait()?,
+            _ => Gpu::open(device)?,
+        };
+        self.clock.lap("GPU");
+        Ok(gpu)
+    }
+
     /// The run's session, new or resumed as this setup says, for `character`.
     pub(super) fn open_session(
         &self,
@@ -260,21 +256,22 @@ impl TrainSetup {
             &self.start,
             self.progress,
             &self.stop,
-            Some(self.started),
+            Some(&self.clock),
         )
     }
 }
 
 /// Opens the run directory (new or resumed), connects the stop request, records `character`
 /// in the checkpoints (a resumed run's checkpoint must be of it) and prints the resume's
-/// warnings. Wall times count from `started` when given (the command's start).
+/// warnings. Wall times count from `clock`'s start when given (the command's), and the setup's
+/// parts it recorded, with the run directory's, go to the `setup` line.
 pub(super) fn open_session(
     config: &TrainConfig,
     character: &Character,
     start: &RunStart,
     progress: ProgressMode,
     stop: &StopFlag,
-    started: Option<std::time::Instant>,
+    clock: Option<&SetupClock>,
 ) -> Result<(RunSession<TrainConfig>, Option<Checkpoint>), TrainError> {
     let (mut session, checkpoint, warnings) = match start {
         RunStart::New { root, overwrite } => (
@@ -292,8 +289,10 @@ pub(super) fn open_session(
     }
     session.record_character(CharacterRecord::of(character));
     session.stop_on(stop.clone());
-    if let Some(started) = started {
-        session.measure_wall_from(started);
+    if let Some(clock) = clock {
+        let mut clock = clock.clone();
+        clock.lap("run directory");
+        session.measure_setup_from(&clock);
     }
     for warning in &warnings {
         session.progress().note(&format!("warning: {warning}"));

@@ -44,5 +44,5 @@ pub use gpu_loop::{
 };
 pub use library::preflight_training;
 pub use ppo_trainer::{new_trainer, trainer_config};
-pub use preflight::{PolicyShapes, Preflight, check_plans, load_motion, preflight};
+pub use preflight::{PolicyShapes, Preflight, check_plans, load_motion, preflight, run_plans};
 pub use world_run::{RankOutcome, WorldRun, check_world_config, train_as_rank, world_fingerprint};

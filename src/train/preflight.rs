@@ -11,6 +11,7 @@ use super::character::{ChosenCharacter, check_model, check_plan_model};
 use super::config::TrainConfig;
 use super::error::TrainError;
 use crate::env::layout::{JointLayout, ObservationCounts};
+use crate::env::training_step_plan;
 use crate::motion::find::{MotionSource, ResolvedMotion, resolve_motion};
 use crate::motion::{Character, LoopMode, MotionClip, ReferenceMotion, ReferenceTable};
 use crate::nn::mlp_layout;
@@ -138,50 +139,111 @@ pub fn check_plans(
     nworld: u32,
 ) -> Result<Vec<PlanCheck>, TrainError> {
     check_plan_model(store, character)?;
-    let mut checks = Vec::new();
-    for name in RUN_PLANS {
-        let plan = store.plan(name, nworld)?;
-        let info = plan.info.as_ref().ok_or_else(|| {
+    RUN_PLANS
+        .iter()
+        .map(|name| check_plan(store, character, name, nworld))
+        .collect()
+}
+
+/// The plans a run loads, each once, in the order it loads them: its training rollout's step
+/// (`env.training_solver`) and kinematics, its evaluation's, and its snapshot evaluation's
+/// (`run.eval_snapshots`) where the plan set has them for that many worlds.
+pub fn run_plans(
+    config: &TrainConfig,
+    store: &PlanStore,
+) -> Result<Vec<(&'static str, u32)>, TrainError> {
+    let training =
+        training_step_plan(store, &config.env).map_err(|e| TrainError::Setup(e.to_string()))?;
+    let (envs, eval_envs) = (config.env.num_envs, config.run.eval_envs);
+    let mut plans = vec![
+        (training, envs),
+        (KINEMATICS_PLAN, envs),
+        (STEP_PLAN, eval_envs),
+        (KINEMATICS_PLAN, eval_envs),
+    ];
+    // The trainer evaluates several snapshots at once when it tracks one clip on one GPU with
+    // PPO (`ppo::Trainer`), and one at a time where the plans are missing.
+    let snapshots = config.run.eval_snapshots;
+    if snapshots > 1
+        && config.goal.is_none()
+        && config.latent.is_none()
+        && config.motion_library.is_none()
+        && !config.run.data_parallel()
+        && let Some(worlds) = eval_envs.checked_mul(snapshots)
+    {
+        let wide = [(STEP_PLAN, worlds), (KINEMATICS_PLAN, worlds)];
+        if wide
+            .iter()
+            .all(|&(name, n)| store.has_plan(name, n).unwrap_or(false))
+        {
+            plans.extend(wide);
+        }
+    }
+    let mut once = Vec::with_capacity(plans.len());
+    for plan in plans {
+        if !once.contains(&plan) {
+            once.push(plan);
+        }
+    }
+    Ok(once)
+}
+
+/// Checks the plan `name` for `nworld` worlds of `store`: captured for that many worlds from
+/// `character`'s model, with a physics timestep and the PTX of every module it launches. A
+/// prefetched plan is looked at where it is, for the simulation that loads it.
+fn check_plan(
+    store: &PlanStore,
+    character: &Character,
+    name: &str,
+    nworld: u32,
+) -> Result<PlanCheck, TrainError> {
+    let (info, modules) = store.inspect_plan(name, nworld, |plan| {
+        let modules: Vec<String> = plan
+            .modules
+            .iter()
+            .map(|m| m.binary_filename.clone())
+            .collect();
+        (plan.info.clone(), modules)
+    })?;
+    let info = info.ok_or_else(|| {
+        TrainError::Setup(format!(
+            "the `{name}` plan for {nworld} worlds has no plan-info section (pack it with `instantmimic plan pack`)"
+        ))
+    })?;
+    // A plan file that records its model must agree with the manifest's character too.
+    if let Some(model) = SimulatedModel::from_physics(&info.physics) {
+        let plans = format!(
+            "the `{name}` plan for {nworld} worlds in {}",
+            store.describe()
+        );
+        check_model(&plans, &model, character)?;
+    }
+    if info.nworld != nworld {
+        return Err(TrainError::Setup(format!(
+            "the `{name}` plan listed for {nworld} worlds was captured for {}",
+            info.nworld
+        )));
+    }
+    let physics_dt = info
+        .physics
+        .get("config")
+        .and_then(|c| c.get("timestep"))
+        .and_then(serde_json::Value::as_f64)
+        .filter(|dt| *dt > 0.0 && dt.is_finite())
+        .ok_or_else(|| {
             TrainError::Setup(format!(
-                "the `{name}` plan for {nworld} worlds has no plan-info section (pack it with `instantmimic plan pack`)"
+                "the `{name}` plan for {nworld} worlds records no physics timestep"
             ))
         })?;
-        // A plan file that records its model must agree with the manifest's character too.
-        if let Some(model) = SimulatedModel::from_physics(&info.physics) {
-            let plans = format!(
-                "the `{name}` plan for {nworld} worlds in {}",
-                store.describe()
-            );
-            check_model(&plans, &model, character)?;
-        }
-        if info.nworld != nworld {
-            return Err(TrainError::Setup(format!(
-                "the `{name}` plan listed for {nworld} worlds was captured for {}",
-                info.nworld
-            )));
-        }
-        let physics_dt = info
-            .physics
-            .get("config")
-            .and_then(|c| c.get("timestep"))
-            .and_then(serde_json::Value::as_f64)
-            .filter(|dt| *dt > 0.0 && dt.is_finite())
-            .ok_or_else(|| {
-                TrainError::Setup(format!(
-                    "the `{name}` plan for {nworld} worlds records no physics timestep"
-                ))
-            })?;
-        for module in &plan.modules {
-            store.module_ptx(&module.binary_filename)?;
-        }
-        checks.push(PlanCheck {
-            name: name.to_string(),
-            nworld,
-            modules: plan.modules.len(),
-            physics_dt,
-        });
+    for module in &modules {
+        store.module_ptx(module)?;
     }
-    Ok(checks)
+    Ok(PlanCheck {
+        name: name.to_string(),
+        nworld,
+        modules: modules.len(),
+        physics_dt,
+    })
 }
 
 /// Runs every check a run can make without a GPU; returns what it found and the motion (one
@@ -216,17 +278,18 @@ pub fn preflight(
     Ok((checks, motion))
 }
 
-/// The plans of `character` for the training and evaluation world counts, and the physics and
+/// The plans of `character` a run loads ([`run_plans`]), checked, and the physics and
 /// control timesteps they fix (s).
 pub fn physics_checks(
     config: &TrainConfig,
     store: &PlanStore,
     character: &Character,
 ) -> Result<(Vec<PlanCheck>, f64, f64), TrainError> {
-    let mut plans = check_plans(store, character, config.env.num_envs)?;
-    if config.run.eval_envs != config.env.num_envs {
-        plans.extend(check_plans(store, character, config.run.eval_envs)?);
-    }
+    check_plan_model(store, character)?;
+    let plans = run_plans(config, store)?
+        .into_iter()
+        .map(|(name, nworld)| check_plan(store, character, name, nworld))
+        .collect::<Result<Vec<PlanCheck>, TrainError>>()?;
     let physics_dt = plans.first().map_or(0.0, |p| p.physics_dt);
     if let Some(other) = plans.iter().find(|p| p.physics_dt != physics_dt) {
         return Err(TrainError::Setup(format!(
@@ -364,5 +427,51 @@ pub fn clip_notices(resolved: &ResolvedMotion, clip: &MotionClip) -> Vec<String>
     match resolved.source {
         MotionSource::BuiltIn(_) => Vec::new(),
         MotionSource::File(_) => resolved.notices(clip),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::run_plans;
+    use crate::plan::{KINEMATICS_PLAN, PlanStore, STEP_PLAN, TRAINING_STEP_PLAN};
+    use crate::train::TrainConfig;
+
+    #[test]
+    fn a_run_loads_each_of_its_plans_once() {
+        let store = PlanStore::new(None);
+        let backflip = TrainConfig::committed("backflip")
+            .expect("a committed backflip config")
+            .1
+            .expect("it parses");
+        assert_eq!(
+            run_plans(&backflip, &store).expect("plans"),
+            [
+                (TRAINING_STEP_PLAN, 4096),
+                (KINEMATICS_PLAN, 4096),
+                (STEP_PLAN, 32),
+                (KINEMATICS_PLAN, 32),
+                (STEP_PLAN, 256),
+                (KINEMATICS_PLAN, 256),
+            ]
+        );
+        // One snapshot at a time: no wide evaluation.
+        let mut one = backflip.clone();
+        one.run.eval_snapshots = 1;
+        assert_eq!(run_plans(&one, &store).expect("plans").len(), 4);
+        // 16 snapshots of 32 worlds: the plan set has none for 512, so one at a time.
+        one.run.eval_snapshots = 16;
+        assert_eq!(run_plans(&one, &store).expect("plans").len(), 4);
+        // Training at the evaluation's world count shares its kinematics.
+        let mut small = backflip.clone();
+        small.env.num_envs = 32;
+        small.run.eval_snapshots = 1;
+        assert_eq!(
+            run_plans(&small, &store).expect("plans"),
+            [
+                (TRAINING_STEP_PLAN, 32),
+                (KINEMATICS_PLAN, 32),
+                (STEP_PLAN, 32)
+            ]
+        );
     }
 }

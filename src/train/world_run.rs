@@ -5,7 +5,7 @@
 //! its GPU at the same time, and the ranks train in step ([`RankReplica`]): rank 0 runs the
 //! harness (evaluation, checkpoints, metrics) and the others follow it.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use super::config::TrainConfig;
 use super::error::TrainError;
@@ -113,7 +113,6 @@ fn lead(
         world.timeout,
     )?;
     let (session, checkpoint) = setup.open_session(motion.character())?;
-    let started = Instant::now();
     let opened = checkpoint.as_ref().map(|c| c.source().to_owned());
     let file = |p: &Option<String>| {
         p.as_ref()
@@ -154,7 +153,7 @@ fn lead(
         notes.push(library_note(plan));
     }
     let mut replica = RankReplica::new(trainer, control, watch, world.timeout, setup.stop.clone());
-    let result = run_loop(session, &mut replica, checkpoint, &scorer, started, notes);
+    let result = run_loop(session, &mut replica, checkpoint, &scorer, notes);
     match &result {
         Ok(_) => replica.finish(None)?,
         Err(e) => replica.finish(Some(&e.to_string()))?,

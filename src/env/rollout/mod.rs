@@ -911,7 +911,10 @@ fn reset_rows(
 
 /// The step plan of a training rollout: `env.training_solver` where the plan set has a
 /// training step for its world count, else the evaluation's.
-fn training_step_plan(store: &PlanStore, env: &EnvConfig) -> Result<&'static str, RolloutError> {
+pub fn training_step_plan(
+    store: &PlanStore,
+    env: &EnvConfig,
+) -> Result<&'static str, RolloutError> {
     Ok(match env.training_solver {
         TrainingSolver::Reduced
             if store
