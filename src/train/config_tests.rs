@@ -182,10 +182,12 @@ fn committed_configs_are_the_tuned_baseline_with_their_run_settings() {
         let (label, config) = TrainConfig::committed(name).unwrap();
         let config = config.unwrap_or_else(|e| panic!("{label}: {e}"));
         assert_eq!(config.motion, name);
-        // Issue 37: the backflip evaluates an average of its actor (BENCHMARKS.md).
+        // Issue 37: the backflip evaluates an average of its actor, and its GAE lambda is the
+        // baseline's (BENCHMARKS.md).
         let mut tuned = issue16.clone();
         if name == "backflip" {
             tuned.ppo.evaluation_average = Some(0.9);
+            tuned.ppo.lambda = 0.95;
         }
         let tuned = &tuned;
         assert_eq!(
@@ -213,16 +215,19 @@ fn committed_configs_are_the_tuned_baseline_with_their_run_settings() {
         assert_eq!(config.run.time_budget_s, budget, "{name}");
     }
     assert!(TrainConfig::committed("moonwalk").is_none());
-    // The general default is the backflip's configuration, for any motion.
+    // The general default is the backflip's configuration, for any motion ...
     let (_, default) = TrainConfig::general_default("moonwalk");
     let default = default.unwrap();
     let (_, backflip) = TrainConfig::committed("backflip").unwrap();
     let backflip = backflip.unwrap();
     assert_eq!(default.motion, "moonwalk");
-    // ... but for the average of the actor, which lags the fast clips (BENCHMARKS.md).
+    // ... but for the average of the actor, which lags the fast clips, and GAE lambda, mixed on
+    // the shipped clips without a config (BENCHMARKS.md).
     let mut backflip = backflip;
     assert_eq!(backflip.ppo.evaluation_average, Some(0.9));
+    assert_eq!((backflip.ppo.lambda, default.ppo.lambda), (0.95, 0.99));
     backflip.ppo.evaluation_average = None;
+    backflip.ppo.lambda = default.ppo.lambda;
     assert_eq!(
         TrainConfig {
             motion: "backflip".to_owned(),
