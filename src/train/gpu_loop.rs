@@ -245,6 +245,25 @@ impl TrainSetup {
         Ok(gpu)
     }
 
+    /// [`TrainSetup::open_session`] after a wait of the setup's own (`part`, e.g. the world's
+    /// rendezvous), which the `setup` line names.
+    pub(super) fn open_session_after(
+        &self,
+        part: &str,
+        character: &Character,
+    ) -> Result<(RunSession<TrainConfig>, Option<Checkpoint>), TrainError> {
+        let mut clock = self.clock.clone();
+        clock.lap(part);
+        open_session(
+            &self.config,
+            character,
+            &self.start,
+            self.progress,
+            &self.stop,
+            Some(&clock),
+        )
+    }
+
     /// The run's session, new or resumed as this setup says, for `character`.
     pub(super) fn open_session(
         &self,

@@ -112,7 +112,8 @@ fn lead(
         &shared_bytes(&world_id, resume.as_deref()),
         world.timeout,
     )?;
-    let (session, checkpoint) = setup.open_session(motion.character())?;
+    let (session, checkpoint) =
+        setup.open_session_after("the world's rendezvous", motion.character())?;
     let opened = checkpoint.as_ref().map(|c| c.source().to_owned());
     let file = |p: &Option<String>| {
         p.as_ref()
