@@ -288,25 +288,27 @@ impl PlanStore {
     /// The plan `name` captured for `nworld` worlds (kept after the first request when the
     /// store keeps decoded plans: a directory's plan file is then read once).
     pub fn plan(&self, name: &str, nworld: u32) -> Result<Plan, PlanError> {
-        let key = (name.to_string(), nworld);
         let Some(decoded) = &self.decoded else {
-            if let Some(plan) = self.prefetched.as_ref().and_then(|p| p.take(name, nworld)) {
-                return plan;
-            }
-            return self.decode(name, nworld);
+            return self.take_or_decode(name, nworld);
         };
+        let key = (name.to_string(), nworld);
         // A poisoned lock only means another thread panicked while inserting: decode again.
         if let Some(plan) = decoded.lock().ok().and_then(|d| d.get(&key).cloned()) {
             return Ok(plan);
         }
-        let plan = match self.prefetched.as_ref().and_then(|p| p.take(name, nworld)) {
-            Some(plan) => plan?,
-            None => self.decode(name, nworld)?,
-        };
+        let plan = self.take_or_decode(name, nworld)?;
         if let Ok(mut decoded) = decoded.lock() {
             decoded.insert(key, plan.clone());
         }
         Ok(plan)
+    }
+
+    /// The prefetched plan, taken out, else the plan decoded now.
+    fn take_or_decode(&self, name: &str, nworld: u32) -> Result<Plan, PlanError> {
+        match self.prefetched.as_ref().and_then(|p| p.take(name, nworld)) {
+            Some(plan) => plan,
+            None => self.decode(name, nworld),
+        }
     }
 
     fn decode(&self, name: &str, nworld: u32) -> Result<Plan, PlanError> {
